@@ -1,0 +1,26 @@
+// Small helpers shared by the tests.
+#pragma once
+
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+#include <string>
+
+namespace neurosim::testing {
+
+// Root of the source tree (scenes/, tests/data/, ../shared reference files).
+inline std::filesystem::path source_dir() { return NEUROSIM_SOURCE_DIR; }
+// Where the built programs are (build/bin).
+inline std::filesystem::path bin_dir() { return NEUROSIM_BIN_DIR; }
+
+// A fresh, empty temporary directory unique to this process and tag.
+inline std::filesystem::path temp_dir(const std::string& tag) {
+  std::random_device rd;
+  auto dir = std::filesystem::temp_directory_path() /
+             ("neurosim_" + tag + "_" + std::to_string(rd()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+}  // namespace neurosim::testing
