@@ -1,0 +1,149 @@
+#include "idl/wire/recording_io.hpp"
+
+#include <google/protobuf/io/zero_copy_stream_impl.h>
+#include <google/protobuf/util/delimited_message_util.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fcntl.h>
+#include <stdexcept>
+#include <string>
+#include <unistd.h>
+
+namespace neurosim::wire {
+
+namespace {
+
+std::string sys_error() { return std::strerror(errno); }
+
+void check_finite(double v, const std::string& where, const char* field) {
+  if (!std::isfinite(v)) throw std::invalid_argument(where + ": " + field + " is not finite");
+}
+
+}  // namespace
+
+void check_sample(const recording::Sample& s, double previous_time_s, const std::string& where) {
+  check_finite(s.time_s(), where, "time_s");
+  if (s.time_s() < previous_time_s)
+    throw std::invalid_argument(where + ": time_s " + std::to_string(s.time_s()) +
+                                " goes back from " + std::to_string(previous_time_s));
+  const auto& p = s.position_m();
+  const auto& q = s.orientation();
+  const auto& f = s.force_n();
+  const auto& v = s.velocity_m_per_s();
+  for (double x : {p.x(), p.y(), p.z()}) check_finite(x, where, "position_m");
+  for (double x : {q.w(), q.x(), q.y(), q.z()}) check_finite(x, where, "orientation");
+  for (double x : {f.x(), f.y(), f.z()}) check_finite(x, where, "force_n");
+  for (double x : {v.x(), v.y(), v.z()}) check_finite(x, where, "velocity_m_per_s");
+}
+
+// ---------------------------------------------------------------------------------------------
+struct RecordingWriter::Impl {
+  std::string file;
+  int fd = -1;
+  std::unique_ptr<google::protobuf::io::FileOutputStream> out;
+};
+
+RecordingWriter::RecordingWriter(const std::filesystem::path& file, recording::Header header)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->file = file.string();
+  impl_->fd = ::open(impl_->file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (impl_->fd < 0)
+    throw std::runtime_error("recording " + impl_->file + ": cannot create: " + sys_error());
+  impl_->out = std::make_unique<google::protobuf::io::FileOutputStream>(impl_->fd);
+  impl_->out->SetCloseOnDelete(true);
+  header.set_format(kRecordingFormat);
+  if (!google::protobuf::util::SerializeDelimitedToZeroCopyStream(header, impl_->out.get()))
+    throw std::runtime_error("recording " + impl_->file + ": cannot write header: " +
+                             std::strerror(impl_->out->GetErrno()));
+}
+
+RecordingWriter::~RecordingWriter() {
+  try {
+    close();
+  } catch (...) {  // destructor: close() reports errors to callers who ask
+  }
+}
+
+void RecordingWriter::write(const recording::Sample& sample) {
+  if (!impl_->out) throw std::logic_error("recording " + impl_->file + ": write after close");
+  check_sample(sample, last_time_s_,
+               "recording " + impl_->file + ": sample " + std::to_string(count_));
+  if (!google::protobuf::util::SerializeDelimitedToZeroCopyStream(sample, impl_->out.get()))
+    throw std::runtime_error("recording " + impl_->file + ": cannot write sample " +
+                             std::to_string(count_) + ": " +
+                             std::strerror(impl_->out->GetErrno()));
+  last_time_s_ = sample.time_s();
+  ++count_;
+}
+
+void RecordingWriter::close() {
+  if (!impl_ || !impl_->out) return;
+  auto out = std::move(impl_->out);
+  const bool ok = out->Close();
+  const int err = out->GetErrno();
+  out->SetCloseOnDelete(false);
+  if (!ok)
+    throw std::runtime_error("recording " + impl_->file + ": cannot close: " + std::strerror(err));
+}
+
+// ---------------------------------------------------------------------------------------------
+struct RecordingReader::Impl {
+  std::string file;
+  std::unique_ptr<google::protobuf::io::FileInputStream> in;
+};
+
+RecordingReader::RecordingReader(const std::filesystem::path& file)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->file = file.string();
+  const int fd = ::open(impl_->file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw std::runtime_error("recording " + impl_->file + ": cannot open: " + sys_error());
+  impl_->in = std::make_unique<google::protobuf::io::FileInputStream>(fd);
+  impl_->in->SetCloseOnDelete(true);
+  bool clean_eof = false;
+  if (!google::protobuf::util::ParseDelimitedFromZeroCopyStream(&header_, impl_->in.get(),
+                                                                &clean_eof))
+    throw std::runtime_error("recording " + impl_->file +
+                             (clean_eof ? ": empty file, no header"
+                                        : ": header is truncated or corrupt"));
+  if (header_.format() != kRecordingFormat)
+    throw std::runtime_error("recording " + impl_->file + ": not a neurosim recording (format '" +
+                             header_.format() + "', expected '" + kRecordingFormat + "')");
+}
+
+RecordingReader::~RecordingReader() = default;
+
+bool RecordingReader::next(recording::Sample& sample) {
+  const auto offset = impl_->in->ByteCount();
+  sample.Clear();  // the delimited parser merges into what is there
+  bool clean_eof = false;
+  if (!google::protobuf::util::ParseDelimitedFromZeroCopyStream(&sample, impl_->in.get(),
+                                                                &clean_eof)) {
+    if (clean_eof) return false;
+    throw std::runtime_error("recording " + impl_->file + ": sample " + std::to_string(count_) +
+                             " (byte offset " + std::to_string(offset) +
+                             ") is truncated or corrupt; " + std::to_string(count_) +
+                             " samples before it are good");
+  }
+  try {
+    check_sample(sample, last_time_s_,
+                 "recording " + impl_->file + ": sample " + std::to_string(count_));
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(std::string(e.what()) + " (byte offset " + std::to_string(offset) + ")");
+  }
+  last_time_s_ = sample.time_s();
+  ++count_;
+  return true;
+}
+
+Recording read_recording(const std::filesystem::path& file) {
+  RecordingReader r(file);
+  Recording rec;
+  rec.header = r.header();
+  recording::Sample s;
+  while (r.next(s)) rec.samples.push_back(s);
+  return rec;
+}
+
+}  // namespace neurosim::wire
