@@ -62,17 +62,20 @@ void WriterBase::write_raw(const void* sample, dds_time_t source_time) const {
 }
 
 void WriterBase::dispose_raw(const void* key_sample) const {
-  check(dds_dispose(e_.get(), key_sample), "dispose instance of " + topic_);
+  const dds_return_t rc = dds_dispose(e_.get(), key_sample);
+  if (rc < 0) throw_dds_error(rc, "dispose instance of " + topic_);
 }
 
 void WriterBase::unregister_raw(const void* key_sample) const {
-  check(dds_unregister_instance(e_.get(), key_sample), "unregister instance of " + topic_);
+  const dds_return_t rc = dds_unregister_instance(e_.get(), key_sample);
+  if (rc < 0) throw_dds_error(rc, "unregister instance of " + topic_);
 }
 
 std::uint32_t WriterBase::matched_readers() const {
   dds_publication_matched_status_t st{};
-  check(dds_get_publication_matched_status(e_.get(), &st),
-        "get publication matched status of " + topic_);
+  // No message string unless it fails: this is polled from the step loop.
+  const dds_return_t rc = dds_get_publication_matched_status(e_.get(), &st);
+  if (rc < 0) throw_dds_error(rc, "get publication matched status of " + topic_);
   return st.current_count;
 }
 
@@ -97,8 +100,8 @@ std::size_t ReaderBase::take_raw(void** samples, dds_sample_info_t* infos, std::
 
 std::uint32_t ReaderBase::matched_writers() const {
   dds_subscription_matched_status_t st{};
-  check(dds_get_subscription_matched_status(e_.get(), &st),
-        "get subscription matched status of " + topic_);
+  const dds_return_t rc = dds_get_subscription_matched_status(e_.get(), &st);
+  if (rc < 0) throw_dds_error(rc, "get subscription matched status of " + topic_);
   return st.current_count;
 }
 
@@ -109,8 +112,8 @@ bool ReaderBase::wait_for_writers(std::uint32_t n, dds_duration_t timeout) const
 
 Liveliness ReaderBase::liveliness() const {
   dds_liveliness_changed_status_t st{};
-  check(dds_get_liveliness_changed_status(e_.get(), &st),
-        "get liveliness changed status of " + topic_);
+  const dds_return_t rc = dds_get_liveliness_changed_status(e_.get(), &st);
+  if (rc < 0) throw_dds_error(rc, "get liveliness changed status of " + topic_);
   Liveliness l;
   l.alive_count = st.alive_count;
   l.not_alive_count = st.not_alive_count;

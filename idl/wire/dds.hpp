@@ -269,6 +269,9 @@ class Reader : public ReaderBase {
     const std::size_t n = take_raw(ptrs_.data(), infos_.data(), ptrs_.size());
     return Batch<T>(samples_.data(), infos_.data(), n);
   }
+  // take() and keep only the newest valid sample of `key` (any key if empty), or null. Use
+  // take() instead when instance changes (disposed, no writers) matter.
+  const T* take_newest(std::string_view key = {}) { return take().newest(key); }
 
  private:
   std::vector<T> samples_;  // value-initialised: empty strings and sequences
