@@ -1,0 +1,146 @@
+// fusion_bench: the paper's Table 3 (time to define the new boundary, cylinder inside cube)
+// reproduced with Algorithm 1 as written (brute force, once) and the fast version (median of
+// several runs), then a brain-sized pair. Single-threaded.
+//
+//   fusion_bench [--csv] [--max-vertices N] [--repeats R] [--no-brain] [--table PATH]
+#include "server/fusion/inclusion.hpp"
+#include "server/fusion/paper_models.hpp"
+
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <exception>
+#include <iostream>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace neurosim;
+using Clock = std::chrono::steady_clock;
+
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+bool same(const fusion::NewBoundary& a, const fusion::NewBoundary& b) {
+  return a.triangles == b.triangles && a.source_tet == b.source_tet &&
+         a.stats.intersected_faces == b.stats.intersected_faces &&
+         a.stats.intersected_tets == b.stats.intersected_tets &&
+         a.stats.partial_tets == b.stats.partial_tets;
+}
+
+struct Row {
+  std::string label;
+  std::size_t vertices{0}, tets{0}, embedded_tets{0}, s_prime{0}, inside{0};
+  double paper_ms{-1}, brute_ms{0}, fast_ms{0}, fast_min_ms{0};
+  bool agree{false};
+  std::size_t bvh_bytes{0}, tets_checked{0}, face_queries{0}, point_queries{0};
+};
+
+Row measure(const std::string& label, const fusion::MeshPair& pair, double paper_ms, int repeats) {
+  const fusion::TriangleSurface b = fusion::TriangleSurface::of(pair.embedded, "embedded");
+  Row r;
+  r.label = label;
+  r.vertices = pair.host.num_vertices();
+  r.tets = pair.host.num_tets();
+  r.embedded_tets = pair.embedded.num_tets();
+  r.paper_ms = paper_ms;
+  auto t0 = Clock::now();
+  const fusion::NewBoundary brute = fusion::find_new_boundary_bruteforce(pair.host, b);
+  r.brute_ms = ms_since(t0);
+  std::vector<double> times;
+  fusion::NewBoundary fast;
+  for (int i = 0; i < repeats; ++i) {
+    t0 = Clock::now();
+    fast = fusion::find_new_boundary(pair.host, b);
+    times.push_back(ms_since(t0));
+  }
+  std::sort(times.begin(), times.end());
+  r.fast_ms = times[times.size() / 2];
+  r.fast_min_ms = times.front();
+  r.agree = same(brute, fast);
+  r.s_prime = fast.triangles.size();
+  r.inside = fast.stats.inside_triangles;
+  r.bvh_bytes = fast.stats.bvh_bytes;
+  r.tets_checked = fast.stats.tets_checked;
+  r.face_queries = fast.stats.face_queries;
+  r.point_queries = fast.stats.point_queries;
+  return r;
+}
+
+long peak_rss_kb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss;  // kB on Linux
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    bool csv = false, brain = true;
+    int max_vertices = 1 << 30, repeats = 21;
+    std::string table = std::string(NEUROSIM_SOURCE_DIR) + "/bench/data/paper_table3.csv";
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto value = [&]() -> std::string {
+        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--csv") csv = true;
+      else if (a == "--no-brain") brain = false;
+      else if (a == "--max-vertices") max_vertices = std::stoi(value());
+      else if (a == "--repeats") repeats = std::max(1, std::stoi(value()));
+      else if (a == "--table") table = value();
+      else {
+        std::cerr << "usage: fusion_bench [--csv] [--max-vertices N] [--repeats R] [--no-brain] "
+                     "[--table PATH]\n";
+        return 2;
+      }
+    }
+    std::vector<Row> rows;
+    for (const fusion::PaperRow& p : fusion::read_paper_table3(table)) {
+      if (p.cube_vertices > max_vertices) continue;
+      const fusion::MeshPair pair = fusion::make_cube_cylinder(p.cube_vertices);
+      rows.push_back(measure(std::to_string(pair.host.num_vertices()), pair, p.time_ms, repeats));
+      std::cerr << "cube " << p.cube_vertices << " (paper) -> " << pair.description << "\n";
+    }
+    if (brain) {
+      const fusion::MeshPair pair = fusion::make_brain_like();
+      rows.push_back(measure("brain_like", pair, -1.0, repeats));
+      std::cerr << "brain_like: " << pair.description << "\n";
+    }
+    if (csv) {
+      std::printf("cube_vertices,cube_tets,new_boundary_triangles,inside_triangles,paper_ms,brute_ms,"
+                  "fast_ms,agree\n");
+      for (const Row& r : rows) {
+        std::printf("%s,%zu,%zu,%zu,%s,%.1f,%.4f,%d\n", r.label.c_str(), r.tets, r.s_prime, r.inside,
+                    r.paper_ms > 0 ? std::to_string(r.paper_ms).substr(0, std::to_string(r.paper_ms).find('.') + 2).c_str() : "nan",
+                    r.brute_ms, r.fast_ms, r.agree ? 1 : 0);
+      }
+    } else {
+      std::printf("%-12s %7s %9s %6s %8s %9s %10s %9s %9s %5s %8s %7s %7s %7s\n", "host_verts", "tets",
+                  "emb_tets", "S'", "inside", "paper_ms", "brute_ms", "fast_ms", "fast_min", "agree",
+                  "bvh_kB", "checked", "faces", "points");
+      for (const Row& r : rows) {
+        std::printf("%-12s %7zu %9zu %6zu %8zu %9.1f %10.1f %9.4f %9.4f %5d %8.1f %7zu %7zu %7zu\n",
+                    r.label.c_str(), r.tets, r.embedded_tets, r.s_prime, r.inside, r.paper_ms,
+                    r.brute_ms, r.fast_ms, r.fast_min_ms, r.agree ? 1 : 0, r.bvh_bytes / 1024.0,
+                    r.tets_checked, r.face_queries, r.point_queries);
+      }
+    }
+    for (const Row& r : rows) {
+      std::cerr << "memory " << r.label << ": hierarchy over B " << r.bvh_bytes << " bytes\n";
+    }
+    std::cerr << "peak RSS " << peak_rss_kb() << " kB (whole process, meshing included)\n";
+    bool all = true;
+    for (const Row& r : rows) all = all && r.agree;
+    return all ? 0 : 1;
+  } catch (const std::exception& e) {
+    std::cerr << "fusion_bench: " << e.what() << "\n";
+    return 1;
+  }
+}
