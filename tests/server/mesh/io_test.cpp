@@ -87,7 +87,9 @@ TEST(MeshIo, MeditCube) {
   EXPECT_EQ(m.triangles[1], (Tri{1, 4, 2}));
   EXPECT_EQ(m.triangle_labels, (std::vector<int>{7, 7}));
 
+  ::testing::internal::CaptureStderr();
   const TetMesh t = load_tet_mesh(data("cube.mesh"), 1e-3);
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
   EXPECT_EQ(t.num_vertices(), 8u);
   EXPECT_EQ(t.source_vertex_ids()[0], 1);
   EXPECT_EQ(t.tet_labels(), m.tet_labels);
@@ -128,7 +130,10 @@ TEST(MeshIo, TetgenZeroBasedCube) {
 }
 
 TEST(MeshIo, TetgenRealOutput) {
+  ::testing::internal::CaptureStderr();
   const TetMesh m = load_tet_mesh(data("box.1.ele"));
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");  // TetGen's orientation is ours
+  EXPECT_EQ(m.inverted_fixed(), 0);
   EXPECT_EQ(m.num_vertices(), 50u);
   EXPECT_EQ(m.num_tets(), 68u);
   for (int label : m.tet_labels()) EXPECT_EQ(label, 7);

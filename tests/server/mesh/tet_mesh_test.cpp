@@ -86,7 +86,9 @@ TEST(MeshBuild, SingleTetSurface) {
 
 TEST(MeshBuild, TwoTetsShareOneFace) {
   std::vector<Vec3> v{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1), Vec3(1, 1, 1)};
+  ::testing::internal::CaptureStderr();
   const TetMesh m = TetMesh::build(v, {Tet{0, 1, 2, 3}, Tet{2, 1, 3, 4}});
+  EXPECT_NE(::testing::internal::GetCapturedStderr().find("reoriented 1 inverted"), std::string::npos);
   EXPECT_EQ(m.inverted_fixed(), 1);  // the second is negative as given
   EXPECT_EQ(m.surface().size(), 6u);
   EXPECT_EQ(m.neighbours()[0][0], 1);  // across face (1,2,3)
