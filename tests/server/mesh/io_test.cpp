@@ -7,7 +7,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -96,6 +98,29 @@ TEST(MeshIo, MeditCube) {
   EXPECT_EQ(t.inverted_fixed(), 0);
   EXPECT_EQ(t.source(), data("cube.mesh"));
   EXPECT_NEAR(testing::enclosed_volume(t.vertices(), t.surface()), 8e-9, 1e-22);
+}
+
+TEST(MeshIo, MeditFromCgal) {
+  const MeshData d = read_medit(data("cgal_ball.mesh"));
+  ::testing::internal::CaptureStderr();
+  const TetMesh m = load_tet_mesh(data("cgal_ball.mesh"));
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");  // CGAL cells are positive
+  EXPECT_EQ(m.num_tets(), 187u);
+  // CGAL lists each boundary facet in both orientations; ours has each once, outward.
+  EXPECT_EQ(2 * m.surface().size(), d.triangles.size());
+  std::set<std::array<int, 3>> file_faces;
+  for (const Tri& t : d.triangles) file_faces.insert({t[0], t[1], t[2]});
+  for (const Tri& t : m.surface()) {
+    const int a = m.source_vertex_ids()[t[0]], b = m.source_vertex_ids()[t[1]],
+              c = m.source_vertex_ids()[t[2]];
+    EXPECT_TRUE(file_faces.count({a, b, c}) || file_faces.count({b, c, a}) || file_faces.count({c, a, b}))
+        << "surface face not in CGAL's list";
+  }
+  double volume = 0.0;
+  for (std::size_t t = 0; t < m.num_tets(); ++t) volume += m.tet_volume(int(t));
+  EXPECT_NEAR(testing::enclosed_volume(m.vertices(), m.surface()), volume, 1e-9 * volume);
+  EXPECT_GT(volume, 0.8 * 4.0 / 3.0 * std::acos(-1.0) * 1000.0);  // inscribed in the radius-10 ball
+  EXPECT_LT(volume, 4.0 / 3.0 * std::acos(-1.0) * 1000.0);
 }
 
 TEST(MeshIo, GmshV2Cube) {
