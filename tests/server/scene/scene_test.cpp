@@ -1,0 +1,136 @@
+// Scene files: parsing errors name file, line and field; regions; generated meshes.
+#include "server/scene/scene.hpp"
+
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+namespace neurosim::scene {
+namespace {
+
+const char* kMinimal = R"(
+name: "t"
+meshes {
+  id: "box"
+  generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.02 y: 0.01 z: 0.01 } } target_vertices: 60 seed: 3 }
+  material { youngs_modulus_pa: 3000 poisson_ratio: 0.45 }
+  fixed { half_space { point_m { x: 1e-9 } normal { x: 1 } } }
+}
+)";
+
+std::string message_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Scene, BundledSceneParsesAndValidates) {
+  const auto path = testing::source_dir() / "scenes" / "cube_cylinder.scene";
+  const Scene s = read_scene(path);
+  EXPECT_EQ(s.name(), "cube_cylinder");
+  ASSERT_EQ(s.meshes_size(), 2);
+  EXPECT_EQ(s.couplings(0).host(), "cube");
+  EXPECT_GT(s.meshes(1).priority(), s.meshes(0).priority());  // vessel-like over host
+}
+
+TEST(Scene, SyntaxErrorNamesFileLineAndColumn) {
+  const std::string text = std::string(kMinimal) + "meshes { id: \"x\" bogus_field: 3 }\n";
+  const std::string msg = message_of([&] { parse_scene(text, "bad.scene"); });
+  EXPECT_NE(msg.find("bad.scene:9:29:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("bogus_field"), std::string::npos) << msg;
+}
+
+TEST(Scene, InvalidMaterialNamesTheField) {
+  std::string text = kMinimal;
+  text.replace(text.find("0.45"), 4, "0.5");
+  const std::string msg = message_of([&] { parse_scene(text, "m.scene"); });
+  EXPECT_NE(msg.find("m.scene"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("meshes[0].material"), std::string::npos) << msg;
+}
+
+TEST(Scene, NonFiniteValuesAreRefused) {
+  for (const char* bad : {"nan", "inf", "-inf"}) {
+    std::string text = kMinimal;
+    text.replace(text.find("3000"), 4, bad);
+    EXPECT_THROW(parse_scene(text, "n.scene"), std::runtime_error) << bad;
+    std::string t2 = kMinimal;
+    t2.replace(t2.find("x: 0.02"), 7, std::string("x: ") + bad);
+    const std::string msg = message_of([&] { parse_scene(t2, "n.scene"); });
+    EXPECT_NE(msg.find("meshes[0].generate.box.max_m"), std::string::npos) << msg;
+  }
+}
+
+TEST(Scene, DanglingReferencesAndDuplicatesAreRefused) {
+  std::string text = std::string(kMinimal) + "couplings { host: \"box\" embedded: \"vessel\" }\n";
+  std::string msg = message_of([&] { parse_scene(text, "c.scene"); });
+  EXPECT_NE(msg.find("couplings[0].embedded"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("vessel"), std::string::npos) << msg;
+
+  std::string dup = std::string(kMinimal) + std::string(kMinimal).substr(std::string(kMinimal).find("meshes"));
+  msg = message_of([&] { parse_scene(dup, "d.scene"); });
+  EXPECT_NE(msg.find("meshes[1].id"), std::string::npos) << msg;
+
+  msg = message_of([&] { parse_scene("name: \"empty\"", "e.scene"); });
+  EXPECT_NE(msg.find("e.scene: meshes"), std::string::npos) << msg;
+}
+
+TEST(Scene, MissingFileIsNamed) {
+  const std::string msg = message_of([] { read_scene("/nonexistent/x.scene"); });
+  EXPECT_NE(msg.find("/nonexistent/x.scene"), std::string::npos) << msg;
+}
+
+TEST(Scene, GeneratedMeshAndFixedRegion) {
+  const Scene s = parse_scene(kMinimal, "min.scene");
+  const LoadedMesh m = load_mesh(s.meshes(0), ".", "min.scene");
+  EXPECT_GT(m.mesh.num_vertices(), 30u);
+  EXPECT_EQ(m.mesh.inverted_fixed(), 0);
+  ASSERT_FALSE(m.fixed_nodes.empty());
+  for (int n : m.fixed_nodes) EXPECT_LE(m.mesh.vertices()[n].x(), 1e-9);
+  // Every vertex on the x = 0 face is fixed, none elsewhere.
+  std::size_t on_face = 0;
+  for (const auto& x : m.mesh.vertices()) on_face += x.x() <= 1e-9;
+  EXPECT_EQ(on_face, m.fixed_nodes.size());
+  EXPECT_DOUBLE_EQ(m.material.youngs_modulus_pa, 3000.0);
+}
+
+TEST(Scene, RegionThatSelectsNothingIsAnError) {
+  std::string text = kMinimal;
+  text.replace(text.find("point_m { x: 1e-9 }"), 19, "point_m { x: -1 }");
+  const Scene s = parse_scene(text, "r.scene");
+  const std::string msg = message_of([&] { load_mesh(s.meshes(0), ".", "r.scene"); });
+  EXPECT_NE(msg.find("fixed[0]"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("selects no node"), std::string::npos) << msg;
+}
+
+TEST(Scene, MeshFileRelativeToSceneAndUnits) {
+  const auto dir = testing::temp_dir("scene_file");
+  {
+    std::ofstream mesh(dir / "tet.mesh");
+    mesh << "MeshVersionFormatted 1\nDimension 3\nVertices\n5\n0 0 0 1\n10 0 0 1\n0 10 0 1\n"
+            "0 0 10 1\n50 50 50 1\nTetrahedra\n1\n1 2 3 4 7\nEnd\n";
+  }
+  const std::string text = R"(meshes { id: "t" file: "tet.mesh" file_unit_m: 0.001
+    material { youngs_modulus_pa: 1e6 poisson_ratio: 0.3 }
+    fixed { nodes { ids: 0 ids: 1 ids: 2 } } })";
+  const Scene s = parse_scene(text, (dir / "t.scene").string());
+  const LoadedMesh m = load_mesh(s.meshes(0), dir, (dir / "t.scene").string());
+  EXPECT_EQ(m.mesh.num_vertices(), 4u);  // the unused vertex is dropped
+  EXPECT_NEAR(m.mesh.vertices()[1].x(), 0.01, 1e-15);  // mm -> m
+  EXPECT_EQ(m.mesh.tet_labels().at(0), 7);
+  EXPECT_EQ(m.fixed_nodes, (std::vector<int>{0, 1, 2}));
+
+  const std::string bad = R"(meshes { id: "t" file: "tet.mesh"
+    material { youngs_modulus_pa: 1e6 poisson_ratio: 0.3 } fixed { nodes { ids: 99 } } })";
+  const Scene s2 = parse_scene(bad, "b.scene");
+  const std::string msg = message_of([&] { load_mesh(s2.meshes(0), dir, "b.scene"); });
+  EXPECT_NE(msg.find("node id 99"), std::string::npos) << msg;
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace neurosim::scene
