@@ -1,0 +1,78 @@
+// The simulation Model the server steps: meshes, factorizations, coupling operators and tool
+// contact, built once from a scene; a step solves every station's tool contact together.
+//
+// CONTRACT between the interaction component (implements it) and the service (calls it).
+// Extend freely; do not change the meaning of what is here without telling the lead.
+#pragma once
+
+#include "scene.pb.h"
+#include "server/mesh/tet_mesh.hpp"
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace neurosim::interaction {
+
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
+
+// Pose of one tool (from a station's ToolState), unit m.
+struct ToolPose {
+  Vec3 tip_m{Vec3::Zero()};   // centre of the spherical tip
+  Vec3 axis{Vec3::UnitZ()};   // unit vector from the tip towards the handle (shaft direction)
+};
+
+// What a step returns for one tool.
+struct ToolContact {
+  bool in_contact{false};
+  Vec3 force_n{Vec3::Zero()};            // reaction force on the tool, unit N
+  Mat3 stiffness_n_per_m{Mat3::Zero()};  // d(force)/d(tip position) at this pose, unit N/m
+  Vec3 normal{Vec3::Zero()};             // contact normal (unit, pointing out of the tissue)
+  Vec3 reference_tip_m{Vec3::Zero()};    // the pose the force and stiffness refer to (x0)
+  double validity_radius_m{0.0};         // the linear model holds within this distance of x0
+  int mesh{-1};                          // mesh index of the (main) contact
+  std::vector<int> nodes;                // contact nodes on that mesh
+  bool converged{true};                  // the contact LCP met its tolerance
+  int iterations{0};
+};
+
+struct StepStats {
+  double solve_us{0.0};  // wall time of the step, unit us
+  int contact_rows{0};
+  bool converged{true};
+};
+
+// Options the scene does not give (limits, tolerances), with defaults.
+struct SimulationOptions {
+  int max_contact_nodes_per_tool{32};
+  int lcp_max_iterations{200};
+  double lcp_tolerance{1e-10};           // relative
+  std::string compliance_cache_dir{};    // empty: no disk cache
+};
+
+class Simulation {
+ public:
+  // Builds only what scene.effects() asks for (no coupling → no inclusion decision, ...).
+  // Throws std::runtime_error naming the scene file and the mesh/coupling on bad input.
+  static std::unique_ptr<Simulation> build(const scene::Scene& scene, const std::string& scene_path,
+                                           const SimulationOptions& options = {});
+  virtual ~Simulation() = default;
+
+  virtual int num_meshes() const = 0;
+  virtual const std::string& mesh_id(int mesh) const = 0;
+  virtual const mesh::TetMesh& mesh(int mesh) const = 0;
+
+  // One step for all tools at once (several stations feel each other): poses in, one result
+  // per tool out (contacts.size() == poses.size()). No allocation once warmed up.
+  virtual void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts,
+                    StepStats& stats) = 0;
+
+  // Displacement of every vertex of `mesh` for the last step's contact and coupling forces
+  // (3N, unit m); one sparse solve per mesh, only when someone asks.
+  virtual void displacements(int mesh, Eigen::VectorXd& u_m) const = 0;
+};
+
+}  // namespace neurosim::interaction
