@@ -1,0 +1,52 @@
+// External reference export: the same problem written as a CalculiX (ccx) input deck, ccx run
+// in a directory, and its .dat output (nodal U and RF) read back. Used by verification tests.
+#pragma once
+
+#include "server/fem/material.hpp"
+#include "server/mesh/tet_mesh.hpp"
+
+#include <Eigen/Core>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace neurosim::fem {
+
+// Boundary conditions and loads of one linear static step.
+struct CalculixLoads {
+  std::vector<int> fixed_nodes;                  // u = 0 in x, y, z
+  std::vector<int> prescribed_nodes;             // u given in x, y, z
+  Eigen::VectorXd prescribed_displacements_m;    // 3 per prescribed node, node-major, unit m
+  Eigen::VectorXd forces_n;                      // empty or 3N nodal forces, unit N
+};
+
+// Writes a C3D4 deck: *NODE (id = node + 1), *ELEMENT per material (ELSET Ek, id = tet + 1),
+// *MATERIAL Mk / *ELASTIC and *SOLID SECTION per used material, then one *STATIC step with
+// *BOUNDARY, *CLOAD, *NODE PRINT U (all nodes) and RF (fixed + prescribed nodes, set NRF).
+// Numbers are written with 17 significant digits. Throws on non-finite or out-of-range input.
+void write_calculix_input(const std::filesystem::path& inp_file, const mesh::TetMesh& mesh,
+                          const MaterialMap& materials, const CalculixLoads& loads);
+
+struct CalculixResult {
+  Eigen::VectorXd displacement_m;  // 3N, unit m
+  Eigen::VectorXd reaction_n;      // 3N, unit N; zero where ccx printed none
+  std::vector<char> has_reaction;  // per node: ccx printed RF for it
+};
+
+// Reads the displacements and the reaction forces printed by *NODE PRINT into a .dat file.
+// Throws std::runtime_error naming the file and line on a malformed or incomplete file.
+CalculixResult read_calculix_dat(const std::filesystem::path& dat_file, std::size_t num_nodes);
+
+struct CalculixRunOptions {
+  std::string executable{"ccx"};
+  double timeout_s{300.0};  // wall clock, unit s; ccx is killed after it
+};
+
+// Writes <work_dir>/<job>.inp, runs `ccx -i <job>` with cwd work_dir (bounded by timeout_s,
+// one thread), reads <job>.dat. Throws std::runtime_error with the tail of ccx's log on failure.
+CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::string& job, const mesh::TetMesh& mesh,
+                            const MaterialMap& materials, const CalculixLoads& loads,
+                            const CalculixRunOptions& options = {});
+
+}  // namespace neurosim::fem

@@ -1,0 +1,475 @@
+#include "server/fem/static_solver.hpp"
+
+#include <Eigen/CholmodSupport>
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <Eigen/Cholesky>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <numeric>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+namespace neurosim::fem {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Eigen's supernodal LL^T with access to CHOLMOD's factor and common (for solve2, memory, rcond).
+class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> {
+ public:
+  cholmod_factor* factor() const { return this->m_cholmodFactor; }
+  cholmod_common& common() const { return const_cast<SupernodalFactor*>(this)->cholmod(); }
+};
+
+cholmod_dense dense_view(double* data, std::size_t rows, std::size_t cols) {
+  cholmod_dense d{};
+  d.nrow = rows;
+  d.ncol = cols;
+  d.nzmax = rows * cols;
+  d.d = rows;
+  d.x = data;
+  d.z = nullptr;
+  d.xtype = CHOLMOD_REAL;
+  d.dtype = CHOLMOD_DOUBLE;
+  return d;
+}
+
+// Union-find over nodes joined by tetrahedra: connected parts of the mesh.
+std::vector<int> connected_parts(const mesh::TetMesh& mesh, int& num_parts) {
+  const int n = static_cast<int>(mesh.num_vertices());
+  std::vector<int> parent(n);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (const auto& t : mesh.tets())
+    for (int a = 1; a < 4; ++a) {
+      const int r0 = find(t[0]), r1 = find(t[a]);
+      if (r0 != r1) parent[std::max(r0, r1)] = std::min(r0, r1);
+    }
+  std::vector<int> part(n, -1), root_part(n, -1);
+  num_parts = 0;
+  for (int v = 0; v < n; ++v) {
+    const int r = find(v);
+    if (root_part[r] < 0) root_part[r] = num_parts++;
+    part[v] = root_part[r];
+  }
+  return part;
+}
+
+}  // namespace
+
+struct StaticSolver::Impl {
+  SupernodalFactor llt;
+  std::mutex mutex;  // CHOLMOD common and workspace are shared by all solves
+  cholmod_dense* x1{nullptr};
+  cholmod_dense* y1{nullptr};
+  cholmod_dense* e1{nullptr};
+  cholmod_dense* xm{nullptr};
+  cholmod_dense* ym{nullptr};
+  cholmod_dense* em{nullptr};
+  Eigen::VectorXd rhs;   // reduced right-hand side, num_free_dofs
+  Eigen::VectorXd full;  // 3N scratch (residual check)
+
+  ~Impl() {
+    cholmod_common& c = llt.common();
+    for (cholmod_dense** d : {&x1, &y1, &e1, &xm, &ym, &em})
+      if (*d) cholmod_free_dense(d, &c);
+  }
+
+  // x := K_ff^-1 b for b (n x m), reusing workspace `x`, `y`, `e`.
+  void solve(const double* b_data, std::size_t n, std::size_t m, cholmod_dense** x, cholmod_dense** y,
+             cholmod_dense** e) {
+    cholmod_dense b = dense_view(const_cast<double*>(b_data), n, m);
+    if (!cholmod_solve2(CHOLMOD_A, llt.factor(), &b, nullptr, x, nullptr, y, e, &llt.common())) {
+      throw std::runtime_error("StaticSolver: CHOLMOD solve failed (status " +
+                               std::to_string(llt.common().status) + ")");
+    }
+  }
+};
+
+StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materials,
+                           const std::vector<int>& fixed_nodes, const SolverOptions& options)
+    : impl_(std::make_unique<Impl>()), options_(options), num_nodes_(static_cast<int>(mesh.num_vertices())) {
+  const std::string where = "StaticSolver (mesh '" + mesh.source() + "')";
+  if (num_nodes_ == 0 || mesh.num_tets() == 0) throw std::invalid_argument(where + ": empty mesh");
+  if (!(options_.residual_tolerance > 0.0) || !std::isfinite(options_.min_rcond)) {
+    throw std::invalid_argument(where + ": SolverOptions residual_tolerance must be > 0, min_rcond finite");
+  }
+  materials.validate(mesh.num_tets());
+
+  // Fixed nodes: in range, deduplicated.
+  for (int v : fixed_nodes) {
+    if (v < 0 || v >= num_nodes_) {
+      throw std::invalid_argument(where + ": fixed node " + std::to_string(v) + " out of range [0, " +
+                                  std::to_string(num_nodes_) + ")");
+    }
+  }
+  fixed_nodes_ = fixed_nodes;
+  std::sort(fixed_nodes_.begin(), fixed_nodes_.end());
+  fixed_nodes_.erase(std::unique(fixed_nodes_.begin(), fixed_nodes_.end()), fixed_nodes_.end());
+  std::vector<char> is_fixed(num_nodes_, 0);
+  for (int v : fixed_nodes_) is_fixed[v] = 1;
+
+  // A free node that no tetrahedron holds has a zero row in K.
+  std::vector<char> used(num_nodes_, 0);
+  for (const auto& t : mesh.tets())
+    for (int a : t) used[a] = 1;
+  for (int v = 0; v < num_nodes_; ++v) {
+    if (!used[v] && !is_fixed[v]) {
+      throw std::invalid_argument(where + ": node " + std::to_string(v) +
+                                  " belongs to no tetrahedron and is not fixed: the stiffness is singular");
+    }
+  }
+
+  // Rigid-body modes: every connected part needs >= 3 non-collinear fixed nodes.
+  if (options_.check_rigid_modes) {
+    int num_parts = 0;
+    const std::vector<int> part = connected_parts(mesh, num_parts);
+    std::vector<std::vector<int>> part_fixed(num_parts);
+    std::vector<int> part_size(num_parts, 0), part_first(num_parts, -1);
+    for (int v = 0; v < num_nodes_; ++v) {
+      if (!used[v]) continue;
+      ++part_size[part[v]];
+      if (part_first[part[v]] < 0) part_first[part[v]] = v;
+      if (is_fixed[v]) part_fixed[part[v]].push_back(v);
+    }
+    const auto& x = mesh.vertices();
+    for (int p = 0; p < num_parts; ++p) {
+      if (part_size[p] == 0) continue;
+      const auto& fx = part_fixed[p];
+      std::string problem;
+      if (fx.empty()) {
+        problem = "has no fixed node (6 rigid-body modes)";
+      } else {
+        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+        for (int v : fx) mean += x[v];
+        mean /= static_cast<double>(fx.size());
+        Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+        for (int v : fx) cov += (x[v] - mean) * (x[v] - mean).transpose();
+        const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();
+        if (fx.size() == 1) {
+          problem = "has only 1 fixed node (3 rotations free)";
+        } else if (!(ev(1) > 1e-12 * ev(2))) {
+          problem = "has only collinear fixed nodes (" + std::to_string(fx.size()) +
+                    "): rotation about their line is free";
+        }
+      }
+      if (!problem.empty()) {
+        throw std::invalid_argument(where + ": insufficient fixed nodes, the stiffness is singular: connected part " +
+                                    std::to_string(p) + " (" + std::to_string(part_size[p]) +
+                                    " nodes, first node " + std::to_string(part_first[p]) + ") " + problem +
+                                    "; fix at least 3 non-collinear nodes of every part");
+      }
+    }
+  }
+
+  // Assembly (pattern + values).
+  auto t0 = Clock::now();
+  StiffnessAssembler(mesh).assemble(mesh, materials, k_);
+  info_.assembly_s = seconds_since(t0);
+
+  // Dof numbering of the reduced system (keeps the original order, so rows stay sorted).
+  const int ndof = 3 * num_nodes_;
+  reduced_index_.assign(ndof, -1);
+  free_dofs_.clear();
+  for (int d = 0; d < ndof; ++d) {
+    if (!is_fixed[d / 3]) {
+      reduced_index_[d] = static_cast<int>(free_dofs_.size());
+      free_dofs_.push_back(d);
+    }
+  }
+  const int nf = static_cast<int>(free_dofs_.size());
+  info_.num_dofs = ndof;
+  info_.num_free_dofs = nf;
+  info_.stiffness_nnz = k_.nonZeros();
+  impl_->rhs.resize(nf);
+  impl_->full.resize(ndof);
+  if (nf == 0) return;  // everything fixed: u = 0, nothing to factor
+
+  // Lower triangle of K_ff, built column by column (elimination of fixed dofs).
+  SparseMatrix kff(nf, nf);
+  {
+    std::vector<int> outer(nf + 1, 0);
+    std::vector<int> inner;
+    std::vector<double> values;
+    inner.reserve(k_.nonZeros() / 2 + nf);
+    values.reserve(k_.nonZeros() / 2 + nf);
+    for (int jr = 0; jr < nf; ++jr) {
+      for (SparseMatrix::InnerIterator it(k_, free_dofs_[jr]); it; ++it) {
+        const int ir = reduced_index_[it.row()];
+        if (ir >= jr) {
+          inner.push_back(ir);
+          values.push_back(it.value());
+        }
+      }
+      outer[jr + 1] = static_cast<int>(inner.size());
+    }
+    kff.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+    std::copy(outer.begin(), outer.end(), kff.outerIndexPtr());
+    std::copy(inner.begin(), inner.end(), kff.innerIndexPtr());
+    std::copy(values.begin(), values.end(), kff.valuePtr());
+  }
+
+  auto& llt = impl_->llt;
+  cholmod_common& c = llt.common();
+  c.print = options_.cholmod_verbose ? 3 : 0;
+  t0 = Clock::now();
+  llt.analyzePattern(kff);
+  info_.analyze_s = seconds_since(t0);
+  if (llt.info() != Eigen::Success || !llt.factor()) {
+    throw std::runtime_error(where + ": CHOLMOD analysis failed (status " + std::to_string(c.status) + ")");
+  }
+  t0 = Clock::now();
+  llt.factorize(kff);
+  info_.factorize_s = seconds_since(t0);
+  const cholmod_factor* l = llt.factor();
+  if (llt.info() != Eigen::Success) {
+    std::string msg = where + ": stiffness K_ff is singular or indefinite (CHOLMOD stopped at column " +
+                      std::to_string(l->minor) + " of " + std::to_string(nf);
+    if (l->minor < static_cast<std::size_t>(nf)) {
+      const int dof = free_dofs_[static_cast<int*>(l->Perm)[l->minor]];
+      msg += ", node " + std::to_string(dof / 3) + " axis " + std::to_string(dof % 3);
+    }
+    throw std::runtime_error(msg + "): too few fixed nodes (rigid-body modes) or bad materials?");
+  }
+  info_.rcond = cholmod_rcond(llt.factor(), &c);
+  if (!(info_.rcond >= options_.min_rcond)) {
+    std::ostringstream msg;
+    msg << where << ": stiffness K_ff is numerically singular (CHOLMOD rcond " << info_.rcond << " < "
+        << options_.min_rcond << "): are there enough fixed nodes in every part of the mesh?";
+    throw std::runtime_error(msg.str());
+  }
+  info_.supernodal = l->is_super != 0;
+  info_.factor_nnz = static_cast<long long>(c.lnz);
+  info_.factor_entries = static_cast<long long>(l->is_super ? l->xsize : l->nzmax);
+  info_.factor_bytes = info_.factor_entries * sizeof(double) + l->ssize * sizeof(int) +
+                       3 * (l->nsuper + 1) * sizeof(int) + 2 * l->n * sizeof(int);
+}
+
+StaticSolver::~StaticSolver() = default;
+StaticSolver::StaticSolver(StaticSolver&&) noexcept = default;
+StaticSolver& StaticSolver::operator=(StaticSolver&&) noexcept = default;
+
+void StaticSolver::check_forces(const Eigen::VectorXd& forces_n, const char* what) const {
+  if (forces_n.size() != num_dofs()) {
+    throw std::invalid_argument(std::string("StaticSolver: ") + what + " has " + std::to_string(forces_n.size()) +
+                                " entries, expected 3N = " + std::to_string(num_dofs()));
+  }
+  for (Eigen::Index i = 0; i < forces_n.size(); ++i) {
+    if (!std::isfinite(forces_n[i])) {
+      throw std::invalid_argument(std::string("StaticSolver: ") + what + ": non-finite value at node " +
+                                  std::to_string(i / 3) + " axis " + std::to_string(i % 3));
+    }
+  }
+}
+
+void StaticSolver::check_residual(const Eigen::VectorXd& u_m, const Eigen::VectorXd& forces_n,
+                                  const std::vector<char>* constrained) const {
+  Eigen::VectorXd& r = impl_->full;
+  r.noalias() = k_ * u_m;
+  double res2 = 0.0, ref2 = 0.0, ku2 = 0.0;
+  for (int d = 0; d < num_dofs(); ++d) {
+    if (reduced_index_[d] < 0 || (constrained && (*constrained)[d])) continue;
+    const double f = forces_n.size() ? forces_n[d] : 0.0;
+    res2 += (r[d] - f) * (r[d] - f);
+    ref2 += f * f;
+    ku2 += r[d] * r[d];
+  }
+  const double scale = std::sqrt(std::max(ref2, ku2));
+  if (std::sqrt(res2) > options_.residual_tolerance * scale) {
+    std::ostringstream msg;
+    msg << "StaticSolver: residual check failed: ||K u - f|| = " << std::sqrt(res2) << " N > "
+        << options_.residual_tolerance << " * " << scale << " N (ill-conditioned stiffness?)";
+    throw std::runtime_error(msg.str());
+  }
+}
+
+void StaticSolver::solve(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m) const {
+  check_forces(forces_n, "forces");
+  u_m.setZero(num_dofs());
+  const int nf = num_free_dofs();
+  if (nf == 0) return;
+  {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    for (int r = 0; r < nf; ++r) impl_->rhs[r] = forces_n[free_dofs_[r]];
+    impl_->solve(impl_->rhs.data(), nf, 1, &impl_->x1, &impl_->y1, &impl_->e1);
+    const double* x = static_cast<const double*>(impl_->x1->x);
+    for (int r = 0; r < nf; ++r) u_m[free_dofs_[r]] = x[r];
+    if (!u_m.allFinite()) throw std::runtime_error("StaticSolver: solve produced non-finite displacements");
+    if (options_.check_residual) check_residual(u_m, forces_n, nullptr);
+  }
+}
+
+Eigen::VectorXd StaticSolver::solve(const Eigen::VectorXd& forces_n) const {
+  Eigen::VectorXd u;
+  solve(forces_n, u);
+  return u;
+}
+
+void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const {
+  const int nf = num_free_dofs();
+  if (b.rows() != nf) {
+    throw std::invalid_argument("StaticSolver::solve_reduced: right-hand side has " + std::to_string(b.rows()) +
+                                " rows, expected " + std::to_string(nf) + " free dofs");
+  }
+  if (!b.allFinite()) throw std::invalid_argument("StaticSolver::solve_reduced: non-finite right-hand side");
+  x.resize(nf, b.cols());
+  if (nf == 0 || b.cols() == 0) return;
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  impl_->solve(b.data(), nf, b.cols(), &impl_->xm, &impl_->ym, &impl_->em);
+  std::copy_n(static_cast<const double*>(impl_->xm->x), x.size(), x.data());
+  if (!x.allFinite()) throw std::runtime_error("StaticSolver::solve_reduced: non-finite solution");
+}
+
+PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes, const Eigen::VectorXd& displacements_m,
+                                                  const Eigen::VectorXd& forces_n) const {
+  const int ndof = num_dofs();
+  if (displacements_m.size() != 3 * static_cast<Eigen::Index>(nodes.size())) {
+    throw std::invalid_argument("StaticSolver::solve_prescribed: " + std::to_string(displacements_m.size()) +
+                                " displacement values for " + std::to_string(nodes.size()) + " nodes (need 3 each)");
+  }
+  if (forces_n.size() != 0) check_forces(forces_n, "forces");
+  std::vector<char> constrained(ndof, 0);  // fixed or prescribed dofs
+  for (int v : fixed_nodes_)
+    for (int a = 0; a < 3; ++a) constrained[3 * v + a] = 1;
+  Eigen::VectorXd u = Eigen::VectorXd::Zero(ndof);
+  std::vector<char> prescribed(num_nodes_, 0);
+  std::vector<int> free_prescribed;  // prescribed nodes that are free in the factor
+  for (std::size_t k = 0; k < nodes.size(); ++k) {
+    const int v = nodes[k];
+    if (v < 0 || v >= num_nodes_) {
+      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) + " out of range [0, " +
+                                  std::to_string(num_nodes_) + ")");
+    }
+    if (prescribed[v]) {
+      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) + " given twice");
+    }
+    prescribed[v] = 1;
+    for (int a = 0; a < 3; ++a) {
+      const double value = displacements_m[3 * k + a];
+      if (!std::isfinite(value)) {
+        throw std::invalid_argument("StaticSolver::solve_prescribed: non-finite displacement at node " +
+                                    std::to_string(v) + " axis " + std::to_string(a));
+      }
+      u[3 * v + a] = value;
+      constrained[3 * v + a] = 1;
+    }
+    if (!is_fixed_node(v)) free_prescribed.push_back(static_cast<int>(k));
+  }
+
+  // Eliminated part: K_ff u0 = f_f - K_fc u_c with u_c the values at fixed nodes.
+  const int nf = num_free_dofs();
+  Eigen::VectorXd uc = Eigen::VectorXd::Zero(ndof);
+  for (int v : fixed_nodes_) uc.segment<3>(3 * v) = u.segment<3>(3 * v);
+  const Eigen::VectorXd kuc = k_ * uc;
+  Eigen::MatrixXd b(nf, 1), u0;
+  for (int r = 0; r < nf; ++r) b(r, 0) = (forces_n.size() ? forces_n[free_dofs_[r]] : 0.0) - kuc[free_dofs_[r]];
+  solve_reduced(b, u0);
+
+  if (!free_prescribed.empty()) {
+    // Prescribed free nodes: multipliers lam (their reaction forces) with
+    // (E^T K_ff^-1 E) lam = ubar - E^T u0, then u_f = u0 + K_ff^-1 E lam.
+    const int m = 3 * static_cast<int>(free_prescribed.size());
+    Eigen::MatrixXd e = Eigen::MatrixXd::Zero(nf, m), g;
+    Eigen::VectorXd target(m);
+    std::vector<int> rows(m);
+    for (int c = 0; c < m; ++c) {
+      const int v = nodes[free_prescribed[c / 3]];
+      rows[c] = reduced_index_[3 * v + c % 3];
+      e(rows[c], c) = 1.0;
+      target[c] = u[3 * v + c % 3] - u0(rows[c], 0);
+    }
+    solve_reduced(e, g);
+    Eigen::MatrixXd s(m, m);
+    for (int c = 0; c < m; ++c) s.row(c) = g.row(rows[c]);
+    s = 0.5 * (s + s.transpose()).eval();
+    Eigen::LLT<Eigen::MatrixXd> schur(s);
+    if (schur.info() != Eigen::Success) {
+      throw std::runtime_error("StaticSolver::solve_prescribed: compliance block of the prescribed nodes is not "
+                               "positive definite");
+    }
+    const Eigen::VectorXd lam = schur.solve(target);
+    u0.col(0) += g * lam;
+  }
+  for (int r = 0; r < nf; ++r) {
+    const int d = free_dofs_[r];
+    if (!constrained[d]) u[d] = u0(r, 0);
+  }
+
+  PrescribedSolution out;
+  out.reaction_n = k_ * u;
+  if (forces_n.size()) out.reaction_n -= forces_n;
+  for (int d = 0; d < ndof; ++d)
+    if (!constrained[d]) out.reaction_n[d] = 0.0;
+  if (!u.allFinite() || !out.reaction_n.allFinite()) {
+    throw std::runtime_error("StaticSolver::solve_prescribed: non-finite result");
+  }
+  if (options_.check_residual) {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    check_residual(u, forces_n, &constrained);
+  }
+  out.displacement_m = std::move(u);
+  return out;
+}
+
+ConditionEstimate StaticSolver::estimate_condition(int max_iterations, double tolerance) const {
+  ConditionEstimate est;
+  est.rcond_cholmod = info_.rcond;
+  const int nf = num_free_dofs();
+  if (nf == 0) return est;
+  std::mt19937 rng(12345);
+  std::uniform_real_distribution<double> dist(-1.0, 1.0);
+  Eigen::VectorXd v(nf);
+  for (int r = 0; r < nf; ++r) v[r] = dist(rng);
+  v.normalize();
+  Eigen::VectorXd full = Eigen::VectorXd::Zero(num_dofs()), kv(num_dofs());
+  // Power iteration: lambda_max of K_ff.
+  double lambda = 0.0;
+  Eigen::VectorXd w(nf);
+  for (int it = 0; it < max_iterations; ++it) {
+    for (int r = 0; r < nf; ++r) full[free_dofs_[r]] = v[r];
+    kv.noalias() = k_ * full;
+    for (int r = 0; r < nf; ++r) w[r] = kv[free_dofs_[r]];
+    const double next = v.dot(w);
+    v = w.normalized();
+    est.iterations = it + 1;
+    if (std::abs(next - lambda) <= tolerance * std::abs(next)) {
+      lambda = next;
+      break;
+    }
+    lambda = next;
+  }
+  est.lambda_max = lambda;
+  // Inverse iteration: 1 / lambda_min is the largest eigenvalue of K_ff^-1.
+  for (int r = 0; r < nf; ++r) v[r] = dist(rng);
+  v.normalize();
+  Eigen::MatrixXd x;
+  double mu = 0.0;
+  for (int it = 0; it < max_iterations; ++it) {
+    solve_reduced(v, x);
+    const double next = v.dot(x.col(0));
+    v = x.col(0).normalized();
+    if (std::abs(next - mu) <= tolerance * std::abs(next)) {
+      mu = next;
+      break;
+    }
+    mu = next;
+  }
+  est.lambda_min = 1.0 / mu;
+  est.condition = est.lambda_max / est.lambda_min;
+  return est;
+}
+
+}  // namespace neurosim::fem

@@ -1,0 +1,123 @@
+// Linear static solver: K u = f with fixed nodes eliminated, factored once with CHOLMOD
+// (supernodal LL^T). The factor is Model (built once); solves reuse CHOLMOD workspace.
+#pragma once
+
+#include "server/fem/assembly.hpp"
+#include "server/fem/material.hpp"
+#include "server/mesh/tet_mesh.hpp"
+
+#include <Eigen/Core>
+
+#include <cstddef>
+#include <memory>
+#include <vector>
+
+namespace neurosim::fem {
+
+struct SolverOptions {
+  // After every solve, check ||K u - f|| on the free dofs against residual_tolerance * ||f||.
+  bool check_residual{false};
+  double residual_tolerance{1e-8};  // relative, dimensionless
+  // Before factoring, check that the fixed nodes of every connected part of the mesh are at
+  // least three non-collinear nodes (otherwise K_ff keeps rigid-body modes and is singular).
+  bool check_rigid_modes{true};
+  // A factor whose CHOLMOD rcond (min diag(L) / max diag(L))^2 is below this is singular.
+  double min_rcond{1e-15};
+  // Let CHOLMOD print its own warnings to stdout (errors become exceptions either way).
+  bool cholmod_verbose{false};
+};
+
+// What the factorization cost and holds (reported by benchmarks and Compliance).
+struct FactorInfo {
+  int num_dofs{0};                   // 3N
+  int num_free_dofs{0};              // 3N minus fixed dofs: size of the factored system
+  long long stiffness_nnz{0};        // stored entries of the full K (both triangles)
+  long long factor_nnz{0};           // nnz(L), CHOLMOD's lnz
+  long long factor_entries{0};       // stored values of the supernodal L (with padding)
+  std::size_t factor_bytes{0};       // values + integer structure of L, unit byte
+  bool supernodal{false};
+  double rcond{0.0};                 // CHOLMOD's rough reciprocal condition estimate
+  double assembly_s{0.0};            // wall time of pattern + assembly, unit s
+  double analyze_s{0.0};             // symbolic analysis (ordering), unit s
+  double factorize_s{0.0};           // numeric factorization, unit s
+};
+
+// Extreme eigenvalues of K_ff by power / inverse power iteration (unit N/m).
+struct ConditionEstimate {
+  double lambda_max{0.0};
+  double lambda_min{0.0};
+  double condition{0.0};  // lambda_max / lambda_min
+  int iterations{0};
+  double rcond_cholmod{0.0};  // same as FactorInfo::rcond, for side-by-side reporting
+};
+
+struct PrescribedSolution {
+  Eigen::VectorXd displacement_m;  // 3N, unit m
+  // 3N, unit N: force the supports exert on the body, r = K u - f, at fixed and prescribed
+  // nodes; exactly zero elsewhere.
+  Eigen::VectorXd reaction_n;
+};
+
+class StaticSolver {
+ public:
+  // Assembles K (one material, or one per tetrahedron), eliminates the fixed nodes (u = 0
+  // there), analyses and factors K_ff. Throws std::invalid_argument for bad input (material,
+  // element, node id out of range, nodes in no tetrahedron, too few fixed nodes: the message
+  // says which part of the mesh is free to move) and std::runtime_error if CHOLMOD fails or
+  // the factor is numerically singular. The mesh is not referenced after construction.
+  StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materials, const std::vector<int>& fixed_nodes,
+               const SolverOptions& options = {});
+  ~StaticSolver();
+  StaticSolver(StaticSolver&&) noexcept;
+  StaticSolver& operator=(StaticSolver&&) noexcept;
+  StaticSolver(const StaticSolver&) = delete;
+  StaticSolver& operator=(const StaticSolver&) = delete;
+
+  // Displacements u (3N, m) for nodal forces f (3N, N); u = 0 at fixed nodes, forces there
+  // go into the supports. Throws on non-finite forces or a wrong size. The overload with an
+  // output argument does not allocate once `u_m` has size 3N (CHOLMOD workspace is reused).
+  Eigen::VectorXd solve(const Eigen::VectorXd& forces_n) const;
+  void solve(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m) const;
+
+  // Displacements prescribed on `nodes` (displacements_m: 3|nodes|, node-major x,y,z), plus
+  // optional forces (empty or 3N). Prescribed nodes that are fixed nodes are eliminated;
+  // others are imposed through the Schur complement of the factor (one block solve of
+  // 3 x (prescribed free nodes) columns), so no refactorization is ever needed.
+  PrescribedSolution solve_prescribed(const std::vector<int>& nodes, const Eigen::VectorXd& displacements_m,
+                                      const Eigen::VectorXd& forces_n = Eigen::VectorXd()) const;
+
+  // Reduced (free-dof) system, for Compliance and coupling code.
+  // X = K_ff^-1 B for a dense B (num_free_dofs x m): all columns in one CHOLMOD call.
+  void solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const;
+  int num_nodes() const { return num_nodes_; }
+  int num_dofs() const { return 3 * num_nodes_; }
+  int num_free_dofs() const { return static_cast<int>(free_dofs_.size()); }
+  const std::vector<int>& free_dofs() const { return free_dofs_; }          // reduced -> dof
+  const std::vector<int>& reduced_index() const { return reduced_index_; }  // dof -> reduced or -1
+  const std::vector<int>& fixed_nodes() const { return fixed_nodes_; }      // sorted, unique
+  bool is_fixed_node(int node) const { return reduced_index_[3 * node] < 0; }
+
+  const SparseMatrix& stiffness() const { return k_; }  // full K (3N x 3N), unit N/m
+  const FactorInfo& factor_info() const { return info_; }
+  const SolverOptions& options() const { return options_; }
+
+  // Power iteration on K_ff and inverse iteration with the factor.
+  ConditionEstimate estimate_condition(int max_iterations = 300, double tolerance = 1e-6) const;
+
+ private:
+  struct Impl;  // CHOLMOD factor and workspace (kept out of the header)
+  std::unique_ptr<Impl> impl_;
+  SolverOptions options_;
+  int num_nodes_{0};
+  SparseMatrix k_;
+  std::vector<int> fixed_nodes_;
+  std::vector<int> free_dofs_;
+  std::vector<int> reduced_index_;
+  FactorInfo info_;
+
+  void check_forces(const Eigen::VectorXd& forces_n, const char* what) const;
+  void check_residual(const Eigen::VectorXd& u_m, const Eigen::VectorXd& forces_n,
+                      const std::vector<char>* constrained) const;
+};
+
+}  // namespace neurosim::fem

@@ -1,0 +1,185 @@
+// Static solver: patch test, equilibrium of reactions, prescribed displacements through
+// elimination and through the Schur complement, singular and non-finite input.
+#include "server/fem/static_solver.hpp"
+#include "fem_test_meshes.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+namespace neurosim::fem {
+namespace {
+
+using testing::BoxSpec;
+using testing::box_mesh;
+using testing::nodes_where;
+
+const Material kBrain{1.0e6, 0.4, "brain"};
+
+// Linear field u = A x + c (m).
+Eigen::VectorXd linear_field(const mesh::TetMesh& m) {
+  Eigen::Matrix3d a;
+  a << 1e-3, -2e-3, 0.5e-3, 0.7e-3, 1.5e-3, -1e-3, 2e-3, 0.3e-3, -0.8e-3;
+  const Eigen::Vector3d c(1e-4, -2e-4, 3e-4);
+  Eigen::VectorXd u(3 * m.num_vertices());
+  for (std::size_t v = 0; v < m.num_vertices(); ++v) u.segment<3>(3 * v) = a * m.vertices()[v] + c;
+  return u;
+}
+
+Eigen::VectorXd values_at(const Eigen::VectorXd& u, const std::vector<int>& nodes) {
+  Eigen::VectorXd out(3 * nodes.size());
+  for (std::size_t k = 0; k < nodes.size(); ++k) out.segment<3>(3 * k) = u.segment<3>(3 * nodes[k]);
+  return out;
+}
+
+TEST(FemStaticSolver, PatchTestIrregularMesh) {
+  // Irregular mesh: interior nodes jittered by up to 30 % of a cell.
+  const auto m = box_mesh(BoxSpec{5, 4, 4, {0, 0, 0}, {0.05, 0.04, 0.04}, 0.3, 11});
+  const Eigen::VectorXd exact = linear_field(m);
+  const std::vector<int>& boundary = m.surface_vertices();
+  ASSERT_LT(boundary.size(), m.num_vertices());
+  // (a) Boundary nodes eliminated (fixed in the factor), values imposed per solve.
+  const StaticSolver solver(m, MaterialMap::uniform(kBrain), boundary);
+  const auto sol = solver.solve_prescribed(boundary, values_at(exact, boundary));
+  const double err = testing::rel_max_diff(sol.displacement_m, exact);
+  std::printf("patch test (eliminated boundary): max rel error %.3e\n", err);
+  EXPECT_LE(err, 1e-12);
+  // Interior nodes carry no reaction: a linear field is in equilibrium without body forces.
+  for (std::size_t v = 0; v < m.num_vertices(); ++v)
+    if (!std::binary_search(boundary.begin(), boundary.end(), static_cast<int>(v))) {
+      EXPECT_EQ(sol.reaction_n.segment<3>(3 * v).norm(), 0.0);
+    }
+
+  // (b) Only the x = 0 face eliminated; the rest of the boundary prescribed through the Schur
+  // complement of the factor (no refactorization).
+  const auto face = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-9; });
+  const StaticSolver partial(m, MaterialMap::uniform(kBrain), face);
+  const auto sol_b = partial.solve_prescribed(boundary, values_at(exact, boundary));
+  const double err_b = testing::rel_max_diff(sol_b.displacement_m, exact);
+  std::printf("patch test (Schur-complement boundary): max rel error %.3e\n", err_b);
+  EXPECT_LE(err_b, 1e-12);
+  EXPECT_LE((sol_b.reaction_n - sol.reaction_n).cwiseAbs().maxCoeff(), 1e-9 * sol.reaction_n.cwiseAbs().maxCoeff());
+}
+
+TEST(FemStaticSolver, ReactionsBalanceLoadsAndResidualIsSmall) {
+  const auto m = box_mesh(BoxSpec{4, 4, 4, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, 3});
+  const auto bottom = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
+  SolverOptions opt;
+  opt.check_residual = true;
+  opt.residual_tolerance = 1e-10;
+  const StaticSolver solver(m, MaterialMap::uniform(kBrain), bottom, opt);
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
+  const auto top = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-9; });
+  for (int v : top) f.segment<3>(3 * v) = Eigen::Vector3d(0.2, -0.1, -1.0);  // N
+  const auto sol = solver.solve_prescribed({}, Eigen::VectorXd(), f);
+  const Eigen::VectorXd u = solver.solve(f);
+  EXPECT_LE((u - sol.displacement_m).cwiseAbs().maxCoeff(), 1e-14 * u.cwiseAbs().maxCoeff());
+  for (int v : bottom) EXPECT_EQ(u.segment<3>(3 * v).norm(), 0.0);
+  // Force and moment balance: sum(f) + sum(r) = 0, sum(x × (f + r)) = 0.
+  Eigen::Vector3d force = Eigen::Vector3d::Zero(), moment = Eigen::Vector3d::Zero();
+  for (std::size_t v = 0; v < m.num_vertices(); ++v) {
+    const Eigen::Vector3d t = f.segment<3>(3 * v) + sol.reaction_n.segment<3>(3 * v);
+    force += t;
+    moment += m.vertices()[v].cross(t);
+  }
+  const double total = f.cwiseAbs().sum();
+  EXPECT_LE(force.norm(), 1e-10 * total);
+  EXPECT_LE(moment.norm(), 1e-10 * total * 0.1);
+  // The top moves down under a downward load.
+  EXPECT_LT(u[3 * top[0] + 2], 0.0);
+}
+
+TEST(FemStaticSolver, ConditionEstimateMatchesDenseEigenvalues) {
+  const auto m = box_mesh(BoxSpec{3, 2, 2, {0, 0, 0}, {0.03, 0.02, 0.02}, 0.2, 4});
+  const auto fixed = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-9; });
+  const StaticSolver solver(m, MaterialMap::uniform(kBrain), fixed);
+  const ConditionEstimate est = solver.estimate_condition(2000, 1e-12);
+  Eigen::MatrixXd kff(solver.num_free_dofs(), solver.num_free_dofs());
+  const Eigen::MatrixXd k(solver.stiffness());
+  for (int i = 0; i < kff.rows(); ++i)
+    for (int j = 0; j < kff.cols(); ++j) kff(i, j) = k(solver.free_dofs()[i], solver.free_dofs()[j]);
+  const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(kff).eigenvalues();
+  std::printf("lambda_max %.6e (dense %.6e), lambda_min %.6e (dense %.6e), cond %.3e, cholmod rcond %.3e\n",
+              est.lambda_max, ev(ev.size() - 1), est.lambda_min, ev(0), est.condition, est.rcond_cholmod);
+  EXPECT_NEAR(est.lambda_max, ev(ev.size() - 1), 1e-3 * ev(ev.size() - 1));
+  EXPECT_NEAR(est.lambda_min, ev(0), 1e-3 * ev(0));
+  const FactorInfo& info = solver.factor_info();
+  EXPECT_TRUE(info.supernodal);
+  EXPECT_GT(info.factor_nnz, 0);
+  EXPECT_GE(info.factor_bytes, static_cast<std::size_t>(info.factor_nnz) * sizeof(double));
+}
+
+void expect_message(const std::function<void()>& f, const std::string& needle) {
+  try {
+    f();
+    FAIL() << "no exception; expected one mentioning '" << needle << "'";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+  }
+}
+
+TEST(FemStaticSolver, InsufficientFixedNodesAreReported) {
+  const auto m = box_mesh(BoxSpec{3, 3, 3});
+  const MaterialMap mat = MaterialMap::uniform(kBrain);
+  expect_message([&] { StaticSolver(m, mat, {}); }, "no fixed node");
+  expect_message([&] { StaticSolver(m, mat, {5}); }, "only 1 fixed node");
+  // Nodes 0, 1, 2, 3 lie on the line y = z = 0.
+  expect_message([&] { StaticSolver(m, mat, {0, 1, 2, 3}); }, "collinear");
+  expect_message([&] { StaticSolver(m, mat, {0, 1, 1000}); }, "fixed node 1000 out of range");
+  // Without the geometric check, CHOLMOD's factor is what catches it.
+  SolverOptions no_check;
+  no_check.check_rigid_modes = false;
+  expect_message([&] { StaticSolver(m, mat, {}, no_check); }, "singular");
+  // Three non-collinear nodes are enough.
+  EXPECT_NO_THROW(StaticSolver(m, mat, {0, 3, 12}));
+}
+
+TEST(FemStaticSolver, NonFiniteInputIsRefused) {
+  const auto m = box_mesh(BoxSpec{2, 2, 2});
+  const auto fixed = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
+  const double nan = std::nan(""), inf = std::numeric_limits<double>::infinity();
+  expect_message([&] { StaticSolver(m, MaterialMap::uniform({nan, 0.3, "gel"}), fixed); }, "gel");
+  expect_message([&] { StaticSolver(m, MaterialMap::uniform({1e6, inf, "gel"}), fixed); }, "gel");
+  const StaticSolver solver(m, MaterialMap::uniform(kBrain), fixed);
+  for (double bad : {nan, inf, -inf}) {
+    Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
+    f[3 * 20 + 1] = bad;
+    expect_message([&] { solver.solve(f); }, "node 20 axis 1");
+    expect_message([&] { solver.solve_prescribed({}, Eigen::VectorXd(), f); }, "node 20 axis 1");
+    Eigen::VectorXd d = Eigen::VectorXd::Zero(3);
+    d[2] = bad;
+    expect_message([&] { solver.solve_prescribed({22}, d); }, "node 22 axis 2");
+    expect_message([&] { solver.solve_prescribed({fixed[0]}, d); }, "non-finite displacement");
+  }
+  expect_message([&] { solver.solve(Eigen::VectorXd::Zero(5)); }, "expected 3N");
+  expect_message([&] { solver.solve_prescribed({1, 1}, Eigen::VectorXd::Zero(6)); }, "given twice");
+  // Non-finite coordinates never reach the solver: the mesh refuses them.
+  std::vector<mesh::Vec3> x{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, nan}};
+  EXPECT_THROW(mesh::TetMesh::build(x, {{0, 1, 2, 3}}), std::invalid_argument);
+}
+
+TEST(FemStaticSolver, PrescribedFreeNodesMatchEliminatedOnes) {
+  const auto m = box_mesh(BoxSpec{4, 3, 3, {0, 0, 0}, {0.04, 0.03, 0.03}, 0.2, 9});
+  const auto left = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-9; });
+  const auto right = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() > 0.04 - 1e-9; });
+  Eigen::VectorXd d(3 * right.size());
+  for (std::size_t k = 0; k < right.size(); ++k) d.segment<3>(3 * k) = Eigen::Vector3d(1e-3, 2e-4, -5e-4);
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * m.num_vertices());
+  f[3 * 30 + 2] = -0.5;
+  // Right face eliminated in the factor vs imposed through the Schur complement.
+  std::vector<int> both = left;
+  both.insert(both.end(), right.begin(), right.end());
+  const StaticSolver eliminated(m, MaterialMap::uniform(kBrain), both);
+  const StaticSolver schur(m, MaterialMap::uniform(kBrain), left);
+  const auto a = eliminated.solve_prescribed(right, d, f);
+  const auto b = schur.solve_prescribed(right, d, f);
+  EXPECT_LE(testing::rel_max_diff(b.displacement_m, a.displacement_m), 1e-10);
+  EXPECT_LE(testing::rel_max_diff(b.reaction_n, a.reaction_n), 1e-8);
+  for (int v : right) EXPECT_LE((b.displacement_m.segment<3>(3 * v) - d.segment<3>(0)).norm(), 1e-15);
+}
+
+}  // namespace
+}  // namespace neurosim::fem
