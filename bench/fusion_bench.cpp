@@ -2,7 +2,8 @@
 // reproduced with Algorithm 1 as written (brute force, once) and the fast version (median of
 // several runs), then a brain-sized pair. Single-threaded.
 //
-//   fusion_bench [--csv] [--max-vertices N] [--repeats R] [--no-brain] [--table PATH]
+//   fusion_bench [--csv] [--min-vertices N] [--max-vertices N] [--repeats R] [--no-brain]
+//                [--no-brute] [--table PATH]
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/paper_models.hpp"
 
@@ -13,6 +14,7 @@
 #include <cstdio>
 #include <exception>
 #include <iostream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -36,11 +38,13 @@ struct Row {
   std::string label;
   std::size_t vertices{0}, tets{0}, embedded_tets{0}, s_prime{0}, inside{0};
   double paper_ms{-1}, brute_ms{0}, fast_ms{0}, fast_min_ms{0};
+  double no_validate_ms{0}, no_cull_ms{0};  // fast variants: B trusted as closed; no BVH culling
   bool agree{false};
   std::size_t bvh_bytes{0}, tets_checked{0}, face_queries{0}, point_queries{0};
 };
 
-Row measure(const std::string& label, const fusion::MeshPair& pair, double paper_ms, int repeats) {
+Row measure(const std::string& label, const fusion::MeshPair& pair, double paper_ms, int repeats,
+            bool run_brute) {
   const fusion::TriangleSurface b = fusion::TriangleSurface::of(pair.embedded, "embedded");
   Row r;
   r.label = label;
@@ -49,8 +53,9 @@ Row measure(const std::string& label, const fusion::MeshPair& pair, double paper
   r.embedded_tets = pair.embedded.num_tets();
   r.paper_ms = paper_ms;
   auto t0 = Clock::now();
-  const fusion::NewBoundary brute = fusion::find_new_boundary_bruteforce(pair.host, b);
-  r.brute_ms = ms_since(t0);
+  fusion::NewBoundary brute;
+  if (run_brute) brute = fusion::find_new_boundary_bruteforce(pair.host, b);
+  r.brute_ms = run_brute ? ms_since(t0) : 0.0;
   std::vector<double> times;
   fusion::NewBoundary fast;
   for (int i = 0; i < repeats; ++i) {
@@ -61,7 +66,26 @@ Row measure(const std::string& label, const fusion::MeshPair& pair, double paper
   std::sort(times.begin(), times.end());
   r.fast_ms = times[times.size() / 2];
   r.fast_min_ms = times.front();
-  r.agree = same(brute, fast);
+  // Where the time goes: without B's validation (closedness sort, collinearity), and without
+  // the per-tetrahedron hierarchy box test.
+  auto median_of = [&](const fusion::InclusionOptions& o) {
+    std::vector<double> t;
+    for (int i = 0; i < repeats; ++i) {
+      const auto s0 = Clock::now();
+      const fusion::NewBoundary v = fusion::find_new_boundary(pair.host, b, o);
+      t.push_back(ms_since(s0));
+      if (v.triangles != fast.triangles) throw std::logic_error(label + ": option changed S'");
+    }
+    std::sort(t.begin(), t.end());
+    return t[t.size() / 2];
+  };
+  fusion::InclusionOptions o;
+  o.validate_embedded = false;
+  r.no_validate_ms = median_of(o);
+  o = {};
+  o.cull_by_hierarchy = false;
+  r.no_cull_ms = median_of(o);
+  r.agree = run_brute && same(brute, fast);
   r.s_prime = fast.triangles.size();
   r.inside = fast.stats.inside_triangles;
   r.bvh_bytes = fast.stats.bvh_bytes;
@@ -81,8 +105,8 @@ long peak_rss_kb() {
 
 int main(int argc, char** argv) {
   try {
-    bool csv = false, brain = true;
-    int max_vertices = 1 << 30, repeats = 21;
+    bool csv = false, brain = true, brute = true;
+    int min_vertices = 0, max_vertices = 1 << 30, repeats = 21;
     std::string table = std::string(NEUROSIM_SOURCE_DIR) + "/bench/data/paper_table3.csv";
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
@@ -92,43 +116,47 @@ int main(int argc, char** argv) {
       };
       if (a == "--csv") csv = true;
       else if (a == "--no-brain") brain = false;
+      else if (a == "--no-brute") brute = false;  // for profiling the fast path only
       else if (a == "--max-vertices") max_vertices = std::stoi(value());
+      else if (a == "--min-vertices") min_vertices = std::stoi(value());
       else if (a == "--repeats") repeats = std::max(1, std::stoi(value()));
       else if (a == "--table") table = value();
       else {
-        std::cerr << "usage: fusion_bench [--csv] [--max-vertices N] [--repeats R] [--no-brain] "
-                     "[--table PATH]\n";
+        std::cerr << "usage: fusion_bench [--csv] [--min-vertices N] [--max-vertices N] [--repeats R] "
+                     "[--no-brain] [--no-brute] [--table PATH]\n";
         return 2;
       }
     }
     std::vector<Row> rows;
     for (const fusion::PaperRow& p : fusion::read_paper_table3(table)) {
-      if (p.cube_vertices > max_vertices) continue;
+      if (p.cube_vertices > max_vertices || p.cube_vertices < min_vertices) continue;
       const fusion::MeshPair pair = fusion::make_cube_cylinder(p.cube_vertices);
-      rows.push_back(measure(std::to_string(pair.host.num_vertices()), pair, p.time_ms, repeats));
+      rows.push_back(measure(std::to_string(pair.host.num_vertices()), pair, p.time_ms, repeats, brute));
       std::cerr << "cube " << p.cube_vertices << " (paper) -> " << pair.description << "\n";
     }
     if (brain) {
       const fusion::MeshPair pair = fusion::make_brain_like();
-      rows.push_back(measure("brain_like", pair, -1.0, repeats));
+      rows.push_back(measure("brain_like", pair, -1.0, repeats, brute));
       std::cerr << "brain_like: " << pair.description << "\n";
     }
     if (csv) {
       std::printf("cube_vertices,cube_tets,new_boundary_triangles,inside_triangles,paper_ms,brute_ms,"
                   "fast_ms,agree\n");
       for (const Row& r : rows) {
+        char paper[32] = "nan";  // the paper has no time for the brain-sized pair
+        if (r.paper_ms > 0) std::snprintf(paper, sizeof paper, "%.1f", r.paper_ms);
         std::printf("%s,%zu,%zu,%zu,%s,%.1f,%.4f,%d\n", r.label.c_str(), r.tets, r.s_prime, r.inside,
-                    r.paper_ms > 0 ? std::to_string(r.paper_ms).substr(0, std::to_string(r.paper_ms).find('.') + 2).c_str() : "nan",
-                    r.brute_ms, r.fast_ms, r.agree ? 1 : 0);
+                    paper, r.brute_ms, r.fast_ms, r.agree ? 1 : 0);
       }
     } else {
-      std::printf("%-12s %7s %9s %6s %8s %9s %10s %9s %9s %5s %8s %7s %7s %7s\n", "host_verts", "tets",
-                  "emb_tets", "S'", "inside", "paper_ms", "brute_ms", "fast_ms", "fast_min", "agree",
-                  "bvh_kB", "checked", "faces", "points");
+      std::printf("%-12s %7s %9s %6s %8s %9s %10s %9s %9s %9s %9s %5s %8s %7s %7s %7s\n", "host_verts",
+                  "tets", "emb_tets", "S'", "inside", "paper_ms", "brute_ms", "fast_ms", "fast_min",
+                  "no_valid", "no_cull", "agree", "bvh_kB", "checked", "faces", "points");
       for (const Row& r : rows) {
-        std::printf("%-12s %7zu %9zu %6zu %8zu %9.1f %10.1f %9.4f %9.4f %5d %8.1f %7zu %7zu %7zu\n",
+        std::printf("%-12s %7zu %9zu %6zu %8zu %9.1f %10.1f %9.4f %9.4f %9.4f %9.4f %5d %8.1f %7zu %7zu %7zu\n",
                     r.label.c_str(), r.tets, r.embedded_tets, r.s_prime, r.inside, r.paper_ms,
-                    r.brute_ms, r.fast_ms, r.fast_min_ms, r.agree ? 1 : 0, r.bvh_bytes / 1024.0,
+                    r.brute_ms, r.fast_ms, r.fast_min_ms, r.no_validate_ms, r.no_cull_ms,
+                    r.agree ? 1 : 0, r.bvh_bytes / 1024.0,
                     r.tets_checked, r.face_queries, r.point_queries);
       }
     }

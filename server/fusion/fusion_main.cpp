@@ -2,7 +2,9 @@
 //
 //   neurosim-fusion --figure11 [--out DIR]        paper Figure 11: cube of 195 and 1521 vertices
 //   neurosim-fusion --cube-vertices N [--out DIR] one cube/cylinder pair (Figure 8c placement)
+//   neurosim-fusion --brain-like [--out DIR]      brain-sized stand-in pair (fusion_bench's row)
 //   neurosim-fusion --host A.mesh --embedded B.mesh [--unit-m U] [--out DIR]
+// --save-meshes also writes the generated pairs as Medit files (PREFIX_host.mesh, ...).
 #include "server/fusion/coupling_map.hpp"
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/paper_models.hpp"
@@ -25,12 +27,19 @@ int usage() {
   std::cerr << "usage:\n"
                "  neurosim-fusion --figure11 [--out DIR]\n"
                "  neurosim-fusion --cube-vertices N [--out DIR]\n"
+               "  neurosim-fusion --brain-like [--out DIR]\n"
+               "  (generated pairs: --save-meshes writes them as Medit .mesh too)\n"
                "  neurosim-fusion --host A.mesh --embedded B.mesh [--unit-m U] [--out DIR]\n"
                "writes PREFIX_host.vtu, PREFIX_embedded_surface.vtu, PREFIX_new_boundary.vtu\n";
   return 2;
 }
 
-void run(const mesh::TetMesh& host, const mesh::TetMesh& embedded, const std::string& prefix) {
+void run(const mesh::TetMesh& host, const mesh::TetMesh& embedded, const std::string& prefix,
+         bool save_meshes) {
+  if (save_meshes) {
+    mesh::write_medit(prefix + "_host.mesh", mesh::to_mesh_data(host));
+    mesh::write_medit(prefix + "_embedded.mesh", mesh::to_mesh_data(embedded));
+  }
   const fusion::TriangleSurface b = fusion::TriangleSurface::of(embedded, "embedded");
   const auto t0 = std::chrono::steady_clock::now();
   const fusion::NewBoundary s = fusion::find_new_boundary(host, b);
@@ -64,6 +73,7 @@ int main(int argc, char** argv) {
     std::string out = ".", host_path, embedded_path;
     std::vector<int> cubes;
     double unit_m = 1.0;
+    bool brain_like = false, save_meshes = false;
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
       auto value = [&]() -> std::string {
@@ -75,6 +85,10 @@ int main(int argc, char** argv) {
         cubes.push_back(1521);
       } else if (a == "--cube-vertices") {
         cubes.push_back(std::stoi(value()));
+      } else if (a == "--brain-like") {
+        brain_like = true;
+      } else if (a == "--save-meshes") {
+        save_meshes = true;
       } else if (a == "--host") {
         host_path = value();
       } else if (a == "--embedded") {
@@ -87,20 +101,28 @@ int main(int argc, char** argv) {
         return usage();
       }
     }
-    if (cubes.empty() == (host_path.empty() && embedded_path.empty())) return usage();
+    const int modes = (cubes.empty() ? 0 : 1) + (brain_like ? 1 : 0) +
+                      (host_path.empty() && embedded_path.empty() ? 0 : 1);
+    if (modes != 1) return usage();
     std::filesystem::create_directories(out);
     if (!host_path.empty()) {
       if (embedded_path.empty()) return usage();
       const mesh::TetMesh a = mesh::load_tet_mesh(host_path, unit_m);
       const mesh::TetMesh b = mesh::load_tet_mesh(embedded_path, unit_m);
-      run(a, b, (std::filesystem::path(out) / "fusion").string());
+      run(a, b, (std::filesystem::path(out) / "fusion").string(), false);
+      return 0;
+    }
+    if (brain_like) {
+      const fusion::MeshPair pair = fusion::make_brain_like();
+      std::printf("%s\n", pair.description.c_str());
+      run(pair.host, pair.embedded, (std::filesystem::path(out) / "brain_like").string(), save_meshes);
       return 0;
     }
     for (int n : cubes) {
       const fusion::MeshPair pair = fusion::make_cube_cylinder(n);
       std::printf("%s\n", pair.description.c_str());
       run(pair.host, pair.embedded,
-          (std::filesystem::path(out) / ("figure11_cube" + std::to_string(n))).string());
+          (std::filesystem::path(out) / ("figure11_cube" + std::to_string(n))).string(), save_meshes);
     }
     return 0;
   } catch (const std::exception& e) {
