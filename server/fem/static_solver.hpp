@@ -58,6 +58,8 @@ struct PrescribedSolution {
   Eigen::VectorXd reaction_n;
 };
 
+// Thread safety: const members may be called from several threads; solves share CHOLMOD's
+// workspace and are serialized by an internal mutex.
 class StaticSolver {
  public:
   // Assembles K (one material, or one per tetrahedron), eliminates the fixed nodes (u = 0

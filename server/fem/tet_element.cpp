@@ -34,9 +34,10 @@ TetGeometry tet_geometry(const TetNodes& x, int element_id) {
   j.col(2) = x[3] - x[0];
   const double det = j.determinant();
   const double volume = det / 6.0;
-  double longest = 0.0;
+  double longest2 = 0.0;
   for (int a = 0; a < 4; ++a)
-    for (int b = a + 1; b < 4; ++b) longest = std::max(longest, (x[a] - x[b]).norm());
+    for (int b = a + 1; b < 4; ++b) longest2 = std::max(longest2, (x[a] - x[b]).squaredNorm());
+  const double longest = std::sqrt(longest2);
   if (!(volume > kDegenerateVolumeRatio * longest * longest * longest)) {
     std::ostringstream msg;
     msg << element_label(element_id) << ": " << (volume < 0.0 ? "inverted" : "degenerate")
