@@ -1,0 +1,125 @@
+#include "haptic_client/dds_link.hpp"
+
+#include "idl/wire/dds.hpp"
+
+#include <time.h>
+
+namespace neurosim::haptic {
+
+namespace {
+std::int64_t realtime_ns() {
+  timespec t{};
+  clock_gettime(CLOCK_REALTIME, &t);
+  return static_cast<std::int64_t>(t.tv_sec) * 1000000000LL + t.tv_nsec;
+}
+constexpr dds_attach_t kModels = 1, kStatus = 2, kStatusLiveliness = 3;
+}  // namespace
+
+struct DdsLink::Impl {
+  DdsLinkOptions opt;
+  wire::Participant pp;
+  wire::Topic<neurosim_ToolState> tool_topic;
+  wire::Writer<neurosim_ToolState> tools;
+  wire::Topic<neurosim_ContactModel> model_topic;
+  wire::Reader<neurosim_ContactModel> models;
+  wire::Topic<neurosim_SimStatus> status_topic;
+  wire::Reader<neurosim_SimStatus> status;
+  wire::Waitset ws;
+  wire::Sample<neurosim_ToolState> sample;
+
+  explicit Impl(const DdsLinkOptions& o)
+      : opt(o),
+        tool_topic(pp, o.tool_topic),
+        tools(pp, tool_topic),
+        model_topic(pp, o.model_topic),
+        models(pp, model_topic),
+        status_topic(pp, o.status_topic),
+        status(pp, status_topic),
+        ws(pp) {
+    wire::set_string(sample->station_id, o.station_id, "station_id");
+    wire::set_string(sample->tool_id, o.tool_id, "tool_id");
+    ws.attach_data(models, kModels);
+    ws.attach_data(status, kStatus);
+    ws.attach_liveliness(status, kStatusLiveliness);
+  }
+};
+
+DdsLink::DdsLink(const DdsLinkOptions& options) {
+  if (options.station_id.empty()) throw std::invalid_argument("haptic DDS link: empty station id");
+  impl_ = std::make_unique<Impl>(options);
+  thread_ = std::thread([this] { run(); });
+}
+
+DdsLink::~DdsLink() {
+  stop_ = true;
+  if (impl_) impl_->ws.wake();
+  if (thread_.joinable()) thread_.join();
+}
+
+void DdsLink::publish(const ToolSample& s) {
+  neurosim_ToolState& t = *impl_->sample;
+  for (int i = 0; i < 3; ++i) {
+    t.position_m[i] = s.position_m[i];
+    t.velocity_m_per_s[i] = s.velocity_m_per_s[i];
+  }
+  for (int i = 0; i < 4; ++i) t.orientation[i] = s.orientation[i];
+  t.buttons = s.buttons;
+  t.sequence_number = s.sequence_number;
+  t.source_time_ns = s.source_time_ns;
+  impl_->tools.write(t, s.source_time_ns);
+}
+
+DdsLinkCounters DdsLink::counters() const {
+  DdsLinkCounters c;
+  c.models_received = models_.load();
+  c.models_rejected = rejected_.load();
+  c.server_lost = lost_.load();
+  c.server_seen = seen_.load();
+  return c;
+}
+
+bool DdsLink::wait_for_server(double timeout_s) const {
+  return impl_->models.wait_for_writers(1, static_cast<dds_duration_t>(timeout_s * 1e9));
+}
+
+void DdsLink::run() {
+  Impl& im = *impl_;
+  ContactModelData m;
+  bool had_writer = false;
+  while (!stop_.load()) {
+    const auto r = im.ws.wait(DDS_MSECS(20));
+    if (stop_.load()) break;
+    if (const neurosim_ContactModel* c = im.models.take_newest(im.opt.station_id)) {
+      m.tool_sequence = c->tool_sequence;
+      // Age is measured against the pose the model answers (same machine clock); fall back to
+      // arrival time if the server did not echo it.
+      m.reference_time_ns = c->tool_source_time_ns > 0 ? c->tool_source_time_ns : realtime_ns();
+      for (int i = 0; i < 3; ++i) {
+        m.x0_m[i] = c->x0_position_m[i];
+        m.f0_n[i] = c->f0_n[i];
+        m.normal[i] = c->normal[i];
+      }
+      for (int i = 0; i < 9; ++i) m.k_n_per_m(i / 3, i % 3) = c->stiffness_n_per_m[i];
+      m.in_contact = c->in_contact;
+      m.validity_radius_m = c->validity_radius_m;
+      m.server_step = c->server_step;
+      if (c->tool_sample_rejected) rejected_.fetch_add(1);
+      models_.fetch_add(1);
+      slot_.write(m);
+    }
+    if (r.has(kStatus)) im.status.take();  // content not needed here: liveliness tells us
+    if (r.has(kStatusLiveliness) || r.timed_out()) {
+      const wire::Liveliness l = im.status.liveliness();
+      if (l.alive_count > 0) {
+        if (!had_writer || !alive_.load()) seen_.fetch_add(1);
+        had_writer = true;
+        alive_.store(true, std::memory_order_release);
+      } else if (had_writer && alive_.load()) {
+        alive_.store(false, std::memory_order_release);  // server gone: loop zeroes the force
+        lost_.fetch_add(1);
+      }
+    }
+  }
+}
+
+}  // namespace neurosim::haptic

@@ -1,0 +1,58 @@
+// The haptic client's DDS side: ToolState writer (called from the loop thread), and a DDS thread
+// that takes this station's newest ContactModel into a lock-free slot and follows the server's
+// SimStatus liveliness (server gone / back).
+#pragma once
+
+#include "haptic_client/latest_slot.hpp"
+#include "haptic_client/link.hpp"
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+
+namespace neurosim::haptic {
+
+struct DdsLinkOptions {
+  std::string station_id;
+  std::string tool_id = "probe";
+  // Topic names (defaults: the wire contract); tests use unique names.
+  std::string tool_topic = "neurosim_ToolState";
+  std::string model_topic = "neurosim_ContactModel";
+  std::string status_topic = "neurosim_SimStatus";
+};
+
+struct DdsLinkCounters {
+  std::uint64_t models_received = 0;   // for this station
+  std::uint64_t models_rejected = 0;   // tool_sample_rejected set by the server
+  std::uint64_t server_lost = 0;       // SimStatus writers went from alive to none
+  std::uint64_t server_seen = 0;       // SimStatus writers appeared (first time or reconnect)
+};
+
+class DdsLink : public Link {
+ public:
+  explicit DdsLink(const DdsLinkOptions& options);  // starts the DDS thread
+  ~DdsLink() override;                               // stops it
+  DdsLink(const DdsLink&) = delete;
+  DdsLink& operator=(const DdsLink&) = delete;
+
+  void publish(const ToolSample& s) override;
+  bool take_model(ContactModelData& out) override { return slot_.take(out); }
+  bool server_alive() override { return alive_.load(std::memory_order_acquire); }
+  DdsLinkCounters counters() const;
+  // Blocks until a ContactModel writer (the server) is matched or the timeout passes.
+  bool wait_for_server(double timeout_s) const;
+
+ private:
+  void run();
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  LatestSlot<ContactModelData> slot_;
+  std::atomic<bool> alive_{true};
+  std::atomic<bool> stop_{false};
+  std::atomic<std::uint64_t> models_{0}, rejected_{0}, lost_{0}, seen_{0};
+  std::thread thread_;
+};
+
+}  // namespace neurosim::haptic

@@ -1,0 +1,191 @@
+#include "haptic_client/force_model.hpp"
+
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace neurosim::haptic {
+
+namespace {
+
+void require(bool ok, const char* field, double value, const char* rule) {
+  if (!ok)
+    throw std::invalid_argument(std::string("haptic force model: ") + field + " = " +
+                                std::to_string(value) + " must be " + rule);
+}
+
+bool finite(const ContactModelData& m) {
+  return m.x0_m.allFinite() && m.f0_n.allFinite() && m.k_n_per_m.allFinite() &&
+         m.normal.allFinite() && std::isfinite(m.validity_radius_m);
+}
+
+}  // namespace
+
+void ForceModelConfig::validate() const {
+  auto pos = [](double v) { return std::isfinite(v) && v > 0; };
+  auto nonneg = [](double v) { return std::isfinite(v) && v >= 0; };
+  require(pos(period_s), "period_s", period_s, "finite and > 0");
+  require(pos(max_force_n), "max_force_n", max_force_n, "finite and > 0");
+  require(pos(max_stiffness_n_per_m), "max_stiffness_n_per_m", max_stiffness_n_per_m, "finite and > 0");
+  require(nonneg(max_damping_n_s_per_m), "max_damping_n_s_per_m", max_damping_n_s_per_m, "finite and >= 0");
+  require(std::isfinite(damping_n_s_per_m), "damping_n_s_per_m", damping_n_s_per_m, "finite");
+  require(pos(passivity_margin), "passivity_margin", passivity_margin, "finite and > 0");
+  require(pos(force_scale), "force_scale", force_scale, "finite and > 0");
+  require(pos(workspace_scale), "workspace_scale", workspace_scale, "finite and > 0");
+  require(nonneg(blend_s), "blend_s", blend_s, "finite and >= 0");
+  require(nonneg(ramp_in_s), "ramp_in_s", ramp_in_s, "finite and >= 0");
+  require(pos(model_timeout_s), "model_timeout_s", model_timeout_s, "finite and > 0");
+  require(nonneg(fade_s), "fade_s", fade_s, "finite and >= 0");
+  require(pos(max_force_step_n), "max_force_step_n", max_force_step_n, "finite and > 0");
+}
+
+ForceModel::ForceModel(const ForceModelConfig& config) : cfg_(config) {
+  cfg_.validate();
+  const double T = cfg_.period_s;
+  // Virtual damping b (device side): enough for K < 2b/T with margin, within what the device can render.
+  damping_ = cfg_.damping_n_s_per_m >= 0
+                 ? cfg_.damping_n_s_per_m
+                 : std::min(cfg_.max_damping_n_s_per_m,
+                            cfg_.passivity_margin * cfg_.max_stiffness_n_per_m * T / 2);
+  double k_device = cfg_.max_stiffness_n_per_m;
+  if (cfg_.enforce_passivity)
+    k_device = std::min(k_device, 2 * damping_ / (T * cfg_.passivity_margin));
+  // Device stiffness = force_scale * K_scene * workspace_scale.
+  k_limit_scene_ = k_device / (cfg_.force_scale * cfg_.workspace_scale);
+}
+
+void ForceModel::reset() {
+  has_current_ = false;
+  blend_offset_.setZero();
+  blend_rate_ = 0;
+  gain_ = 0;
+  stale_ = false;
+  last_force_.setZero();
+}
+
+Eigen::Vector3d ForceModel::extrapolate(const ContactModelData& m, const Eigen::Vector3d& x) {
+  if (!m.in_contact) return Eigen::Vector3d::Zero();
+  Eigen::Vector3d d = x - m.x0_m;
+  const double r = m.validity_radius_m;
+  const double dn = d.norm();
+  if (r > 0 && dn > r) d *= r / dn;  // extrapolate only within the validity radius
+  Eigen::Vector3d f = m.f0_n + m.k_n_per_m * d;
+  // Unilateral: tissue pushes, never pulls the tool in.
+  if (m.normal.squaredNorm() > 0 && f.dot(m.normal) < 0) return Eigen::Vector3d::Zero();
+  return f;
+}
+
+bool ForceModel::accept(const ContactModelData& m, const Eigen::Vector3d& x) {
+  if (!finite(m) || m.validity_radius_m < 0) {
+    ++counters_.nan_models;
+    return false;
+  }
+  ContactModelData next = m;
+  const double nn = next.normal.norm();
+  if (nn > 0) next.normal /= nn;
+  // Passivity: the rendered stiffness may not exceed the limit (operator norm, scene frame).
+  const double k = next.k_n_per_m.operatorNorm();
+  if (k > k_limit_scene_) {
+    next.k_n_per_m *= k_limit_scene_ / k;
+    ++counters_.stiffness_limited;
+  }
+  if (has_current_ && cfg_.blend_s > 0 && x.allFinite()) {
+    // Keep rendering what we rendered: the jump becomes an offset that fades out.
+    blend_offset_ += extrapolate(current_, x) - extrapolate(next, x);
+    blend_rate_ = std::max(blend_rate_, blend_offset_.norm() / cfg_.blend_s);
+  }
+  current_ = next;
+  has_current_ = true;
+  ++counters_.models_accepted;
+  return true;
+}
+
+ForceOutput ForceModel::step(const ForceInput& in) {
+  ForceOutput out;
+  // Elapsed loop time (not ticks): late ticks still fade within fade_s of wall time.
+  const double T = have_last_now_
+                       ? std::clamp(1e-9 * static_cast<double>(in.now_ns - last_now_ns_), 0.0, 0.1)
+                       : cfg_.period_s;
+  last_now_ns_ = in.now_ns;
+  have_last_now_ = true;
+  // Blend offset shrinks linearly (rate fixed at the latest jump, never slower).
+  const double off = blend_offset_.norm();
+  if (off > 0) {
+    const double left = std::max(0.0, off - blend_rate_ * T);
+    blend_offset_ *= left / off;
+    if (left == 0) blend_rate_ = 0;
+  }
+  if (in.new_model != nullptr) accept(*in.new_model, in.position_m);
+
+  // Server gone (liveliness): the model is treated as stale at once, so the force fades to zero
+  // within fade_s with bounded steps; then the model is dropped and a returning server ramps in.
+  if (!in.server_alive && !server_gone_) ++counters_.server_lost;
+  server_gone_ = !in.server_alive;
+
+  if (!in.position_m.allFinite() || !in.velocity_m_per_s.allFinite()) {
+    ++counters_.nan_inputs;
+    gain_ = 0;  // ramp in again once inputs are sane: no kick
+    last_force_.setZero();
+    out.has_model = has_current_;
+    return out;
+  }
+
+  double age = 0;
+  if (has_current_) age = std::max(0.0, 1e-9 * static_cast<double>(in.now_ns - current_.reference_time_ns));
+  const bool stale = !has_current_ || age > cfg_.model_timeout_s || server_gone_;
+  if (stale && has_current_ && !stale_) ++counters_.timeouts;
+  stale_ = stale;
+  // One gain for ramp-in and watchdog fade: up over ramp_in_s, down over fade_s.
+  if (stale)
+    gain_ = cfg_.fade_s > 0 ? gain_ - T / cfg_.fade_s : 0;
+  else
+    gain_ = cfg_.ramp_in_s > 0 ? gain_ + T / cfg_.ramp_in_s : 1;
+  gain_ = std::clamp(gain_, 0.0, 1.0);
+  if (gain_ < 1e-9) gain_ = 0;  // rounding of the fade steps must not leave a residue
+
+  out.has_model = has_current_;
+  out.gain = gain_;
+  if (!has_current_ || gain_ <= 0) {
+    if (server_gone_) reset();
+    last_force_.setZero();
+    out.model_age_s = age;
+    out.model_sequence = has_current_ ? current_.tool_sequence : 0;
+    return out;
+  }
+  out.model_age_s = age;
+  out.model_sequence = current_.tool_sequence;
+  out.in_contact = current_.in_contact;
+
+  // Extrapolate the newest model; blend offset from the model change (issue 6 "blend").
+  const Eigen::Vector3d f = extrapolate(current_, in.position_m) + blend_offset_;
+  Eigen::Vector3d fd = cfg_.force_scale * f;
+  const Eigen::Vector3d& n = current_.normal;
+  if (current_.in_contact && n.squaredNorm() > 0 && fd.squaredNorm() > 0) {
+    // Virtual-coupling damping along the normal (device velocity = scene velocity / scale).
+    const double vn = in.velocity_m_per_s.dot(n) / cfg_.workspace_scale;
+    fd -= damping_ * vn * n;
+    const double fn = fd.dot(n);
+    if (fn < 0) fd -= fn * n;  // still unilateral
+  }
+  fd *= gain_;
+  const double mag = fd.norm();
+  if (mag > cfg_.max_force_n) fd *= cfg_.max_force_n / mag;
+  if (!fd.allFinite()) {
+    ++counters_.nan_outputs;
+    gain_ = 0;
+    last_force_.setZero();
+    return out;
+  }
+  // Bound the tick-to-tick step (blend and ramp normally keep well below it).
+  const Eigen::Vector3d delta = fd - last_force_;
+  const double dm = delta.norm();
+  if (dm > cfg_.max_force_step_n) fd = last_force_ + delta * (cfg_.max_force_step_n / dm);
+  last_force_ = fd;
+  out.force_n = fd;
+  return out;
+}
+
+}  // namespace neurosim::haptic

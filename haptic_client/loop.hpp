@@ -1,0 +1,95 @@
+// The 1 kHz haptic loop (issue 6 "The loop"): each tick read the device, publish the ToolState,
+// take the newest ContactModel without blocking, compute the force (ForceModel), command it,
+// record the sample, update the metrics. run_realtime() paces ticks with clock_nanosleep on
+// absolute deadlines; run_simulated() calls the same tick with simulated time (tests).
+#pragma once
+
+#include "haptic_client/device.hpp"
+#include "haptic_client/force_model.hpp"
+#include "haptic_client/link.hpp"
+#include "haptic_client/metrics.hpp"
+#include "haptic_client/recorder.hpp"
+
+#include <Eigen/Core>
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace neurosim::haptic {
+
+struct LoopConfig {
+  ForceModelConfig force;  // force.period_s is the loop period
+  // Device → scene: x_scene = origin + workspace_scale * R x_device, R turns device +z into
+  // `up` (the scripts' surface normal). Not applied to replays (already scene frame).
+  Eigen::Vector3d workspace_origin_m = Eigen::Vector3d::Zero();  // unit m
+  Eigen::Vector3d workspace_up = Eigen::Vector3d::UnitZ();
+  bool realtime_priority = true;  // try SCHED_FIFO (warn and continue if not permitted)
+  int rt_priority = 80;
+  std::size_t trace_capacity = 0;  // ticks kept in trace() (allocated up front)
+};
+
+// One tick as seen by tests and the demo's force trace.
+struct TickTrace {
+  std::int64_t now_ns = 0;
+  double t_s = 0;
+  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();  // scene frame
+  Eigen::Vector3d force_n = Eigen::Vector3d::Zero();     // device force, scene axes
+  double model_age_s = -1;                               // < 0: no model
+  double gain = 0;
+  bool in_contact = false;
+  bool server_alive = true;
+  std::uint64_t model_sequence = 0;
+};
+
+struct RealtimeInfo {
+  bool sched_fifo = false;       // SCHED_FIFO was granted
+  std::string warning;           // why not, if requested
+  std::uint64_t resyncs = 0;     // deadline re-anchored after falling > 100 ms behind
+};
+
+class HapticLoop {
+ public:
+  // link and recorder may be null (no server / no recording). All must outlive the loop.
+  HapticLoop(const LoopConfig& config, Device& device, Link* link, Recorder* recorder);
+
+  // One tick at loop time now_ns (model ages use this clock), nominal time t_s since start.
+  void tick(std::int64_t now_ns, double t_s, double period_s, double lateness_s);
+  // Ticks at simulated times start_ns + k T (no sleeping); stops early when a replay ends.
+  void run_simulated(std::size_t ticks, std::int64_t start_ns = 0);
+  // Real time for duration_s (<= 0: until stop), or until *stop becomes true / a replay ends.
+  RealtimeInfo run_realtime(double duration_s, const std::atomic<bool>* stop = nullptr);
+
+  const ForceModel& force_model() const { return fm_; }
+  LoopSummary summary() const { return metrics_.summary(); }
+  const std::vector<TickTrace>& trace() const { return trace_; }
+  // Safe to call from other threads while run_realtime() runs.
+  std::uint64_t ticks() const { return ticks_done_.load(std::memory_order_acquire); }
+  double last_force_norm() const { return last_force_norm_.load(std::memory_order_acquire); }
+  std::uint64_t recorder_dropped() const;
+  const Eigen::Vector3d& last_force() const { return last_force_; }
+
+ private:
+  LoopConfig cfg_;
+  Device& device_;
+  Link* link_;
+  Recorder* recorder_;
+  ForceModel fm_;
+  LoopMetrics metrics_;
+  Eigen::Matrix3d r_;  // device → scene rotation
+  ContactModelData model_buf_{};
+  std::uint64_t seq_ = 0;
+  Eigen::Vector3d last_force_ = Eigen::Vector3d::Zero();
+  std::vector<TickTrace> trace_;
+  std::atomic<std::uint64_t> ticks_done_{0};
+  std::atomic<double> last_force_norm_{0};
+};
+
+// Recording header for a session of this loop (format set by the writer).
+recording::Header session_header(const LoopConfig& config, const Device& device,
+                                 const std::string& station_id, const std::string& tool_id,
+                                 const std::string& scene_name, const std::string& scene_file,
+                                 const std::string& label, std::int64_t start_time_unix_ns);
+
+}  // namespace neurosim::haptic

@@ -1,0 +1,182 @@
+// neurosim-haptic: one haptic station (issue 6).
+//   neurosim-haptic --station ID --device SPEC [--duration SECONDS] [--summary FILE.json]
+//                   [--record FILE]
+//   extra: [--scene FILE] (haptics factors, scene name) [--tool ID] [--origin X,Y,Z]
+//          [--up X,Y,Z] [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]
+// SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract) | hand:SCRIPT
+#include "haptic_client/dds_link.hpp"
+#include "haptic_client/loop.hpp"
+
+#include "scene.pb.h"
+
+#include <google/protobuf/text_format.h>
+
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <time.h>
+
+namespace nh = neurosim::haptic;
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+void on_signal(int) { g_stop = true; }
+
+const char* kUsage =
+    "usage: neurosim-haptic --station ID --device SPEC [--duration SECONDS] [--summary FILE.json]\n"
+    "                       [--record FILE] [--scene FILE] [--tool ID] [--origin X,Y,Z] [--up X,Y,Z]\n"
+    "                       [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]\n"
+    "  SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, circle,\n"
+    "        retract). Scripts press along device -z onto a surface at device z = 0; --origin puts\n"
+    "        that point in the scene (m) and --up is the surface's outward normal there.\n";
+
+Eigen::Vector3d parse_vec(const std::string& opt, const std::string& s) {
+  Eigen::Vector3d v;
+  char c1 = 0, c2 = 0;
+  std::istringstream is(s);
+  if (!(is >> v.x() >> c1 >> v.y() >> c2 >> v.z()) || c1 != ',' || c2 != ',' || !v.allFinite())
+    throw std::invalid_argument(opt + ": expected X,Y,Z (finite numbers), got '" + s + "'");
+  return v;
+}
+
+double parse_double(const std::string& opt, const std::string& s) {
+  std::size_t pos = 0;
+  double v = 0;
+  try {
+    v = std::stod(s, &pos);
+  } catch (...) {
+    pos = 0;
+  }
+  if (pos != s.size() || !std::isfinite(v)) throw std::invalid_argument(opt + ": not a number: '" + s + "'");
+  return v;
+}
+
+std::int64_t realtime_ns() {
+  timespec t{};
+  clock_gettime(CLOCK_REALTIME, &t);
+  return static_cast<std::int64_t>(t.tv_sec) * 1000000000LL + t.tv_nsec;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string station, spec, summary_file, record_file, scene_file, tool = "probe", label;
+  double duration = 0, wait_server = 5;
+  bool use_server = true;
+  nh::LoopConfig cfg;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto val = [&]() -> std::string {
+        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--station") station = val();
+      else if (a == "--device") spec = val();
+      else if (a == "--duration") duration = parse_double(a, val());
+      else if (a == "--summary") summary_file = val();
+      else if (a == "--record") record_file = val();
+      else if (a == "--scene") scene_file = val();
+      else if (a == "--tool") tool = val();
+      else if (a == "--origin") cfg.workspace_origin_m = parse_vec(a, val());
+      else if (a == "--up") cfg.workspace_up = parse_vec(a, val());
+      else if (a == "--label") label = val();
+      else if (a == "--no-server") use_server = false;
+      else if (a == "--no-rt") cfg.realtime_priority = false;
+      else if (a == "--wait-server") wait_server = parse_double(a, val());
+      else if (a == "-h" || a == "--help") {
+        std::cout << kUsage;
+        return 0;
+      } else throw std::invalid_argument("unknown option " + a);
+    }
+    if (station.empty() || spec.empty()) throw std::invalid_argument("--station and --device are required");
+    if (duration < 0) throw std::invalid_argument("--duration must be >= 0");
+  } catch (const std::exception& e) {
+    std::cerr << "neurosim-haptic: " << e.what() << "\n" << kUsage;
+    return 2;
+  }
+
+  try {
+    std::string scene_name;
+    if (!scene_file.empty()) {
+      std::ifstream f(scene_file);
+      if (!f) throw std::runtime_error(scene_file + ": cannot open scene file");
+      std::stringstream ss;
+      ss << f.rdbuf();
+      neurosim::scene::Scene scene;
+      if (!google::protobuf::TextFormat::ParseFromString(ss.str(), &scene))
+        throw std::runtime_error(scene_file + ": not a valid scene (protobuf text format)");
+      scene_name = scene.name();
+      const auto& h = scene.haptics();
+      if (h.force_scale() > 0) cfg.force.force_scale = h.force_scale();
+      if (h.workspace_scale() > 0) cfg.force.workspace_scale = h.workspace_scale();
+      if (h.max_force_n() > 0) cfg.force.max_force_n = h.max_force_n();
+    }
+    std::unique_ptr<nh::Device> device = nh::make_device(spec);
+    cfg.force.max_force_n = std::min(cfg.force.max_force_n, device->max_force_n());
+
+    std::unique_ptr<nh::DdsLink> link;
+    if (use_server) {
+      nh::DdsLinkOptions o;
+      o.station_id = station;
+      o.tool_id = tool;
+      link = std::make_unique<nh::DdsLink>(o);
+      if (wait_server > 0 && !link->wait_for_server(wait_server))
+        std::cerr << "neurosim-haptic: no server seen within " << wait_server
+                  << " s; running anyway (force stays zero until one answers)\n";
+    }
+    std::unique_ptr<nh::Recorder> recorder;
+    if (!record_file.empty()) {
+      if (label.empty()) label = "made with " + device->kind() + " by neurosim-haptic";
+      recorder = std::make_unique<nh::Recorder>(
+          record_file, nh::session_header(cfg, *device, station, tool, scene_name, scene_file, label, realtime_ns()));
+    }
+    std::signal(SIGINT, on_signal);
+    std::signal(SIGTERM, on_signal);
+
+    cfg.trace_capacity = 0;
+    nh::HapticLoop loop(cfg, *device, link.get(), recorder.get());
+    // Warning printed before the run (the loop itself never prints).
+    const nh::RealtimeInfo rt = [&] {
+      return loop.run_realtime(duration, &g_stop);
+    }();
+    if (recorder) recorder->close();
+    if (!rt.warning.empty()) std::cerr << "neurosim-haptic: warning: " << rt.warning << "\n";
+
+    const nh::LoopSummary s = loop.summary();
+    const auto& c = loop.force_model().counters();
+    std::printf("neurosim-haptic %s: %llu ticks, period p50 %.1f us p99 %.1f us max %.1f us, "
+                "%llu ticks > 1 ms late, sched %s\n",
+                station.c_str(), static_cast<unsigned long long>(s.samples), s.period_p50_us, s.period_p99_us,
+                s.period_max_us, static_cast<unsigned long long>(s.misses_over_1ms),
+                rt.sched_fifo ? "SCHED_FIFO" : "normal");
+    if (s.model_age_p99_ms >= 0)
+      std::printf("  model age p99 %.2f ms, models accepted %llu\n", s.model_age_p99_ms,
+                  static_cast<unsigned long long>(c.models_accepted));
+    else
+      std::printf("  no ContactModel received\n");
+    std::printf("  max force step %.4f N, errors: nan inputs %llu, nan models %llu, timeouts %llu, "
+                "server lost %llu, stiffness limited %llu\n",
+                s.max_force_step_n, static_cast<unsigned long long>(c.nan_inputs),
+                static_cast<unsigned long long>(c.nan_models), static_cast<unsigned long long>(c.timeouts),
+                static_cast<unsigned long long>(c.server_lost),
+                static_cast<unsigned long long>(c.stiffness_limited));
+    if (recorder)
+      std::printf("  recorded %llu samples to %s (%llu dropped)\n",
+                  static_cast<unsigned long long>(recorder->written()), record_file.c_str(),
+                  static_cast<unsigned long long>(recorder->dropped()));
+    if (!summary_file.empty()) nh::write_summary_json(summary_file, s);
+  } catch (const std::exception& e) {
+    std::cerr << "neurosim-haptic: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,211 @@
+// The haptic loop in simulated time (no DDS, no sleeping): the simulated hand against a stiff
+// half-space does not oscillate, recordings replay to the identical ToolState sequence, the
+// bundled script recordings replay, the summary JSON has the keys.
+#include "haptic_client/loop.hpp"
+#include "fake_server.hpp"
+#include "idl/wire/recording_io.hpp"
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+
+namespace nh = neurosim::haptic;
+namespace fs = std::filesystem;
+using Eigen::Vector3d;
+
+namespace {
+
+// Energy of the hand + stylus + tissue spring relative to their static equilibrium (>= 0).
+struct EnergyProbe {
+  nh::HandParams hand;
+  double k_wall;
+  double target_z;
+  double operator()(const nh::HandDevice& d) const {
+    const Vector3d x = d.position();
+    const Vector3d v = d.velocity();
+    const double z_eq = hand.stiffness_n_per_m * target_z / (hand.stiffness_n_per_m + k_wall);
+    auto potential = [&](const Vector3d& p) {
+      const double pen = std::max(0.0, -p.z());
+      return 0.5 * hand.stiffness_n_per_m * (Vector3d(0, 0, target_z) - p).squaredNorm() +
+             0.5 * k_wall * pen * pen;
+    };
+    return 0.5 * hand.mass_kg * v.squaredNorm() + potential(x) - potential(Vector3d(0, 0, z_eq));
+  }
+};
+
+struct HandRun {
+  std::vector<double> max_energy_per_second;  // max over each simulated second
+  double velocity_rms_last_second = 0;
+};
+
+// 10 s of the hand pressing into a half-space of stiffness k (server answer 2 ticks late).
+HandRun run_hand(const nh::ForceModelConfig& force, nh::HandParams hand, double k_wall) {
+  const double target_z = -0.004;
+  auto dev = nh::HandDevice(std::make_unique<nh::ConstantScript>(Vector3d(0, 0, target_z)), hand);
+  dev.set_state(Vector3d(0, 0, 0.002), Vector3d::Zero());  // starts 2 mm above the surface
+  nh::testing::FakeLink link;
+  link.tissue.k_n_per_m = k_wall;
+  nh::LoopConfig cfg;
+  cfg.force = force;
+  nh::HapticLoop loop(cfg, dev, &link, nullptr);
+  const EnergyProbe energy{hand, k_wall, target_z};
+  HandRun r;
+  double v2 = 0;
+  const int ticks_per_s = 1000;
+  for (int s = 0; s < 10; ++s) {
+    double emax = 0;
+    for (int k = 0; k < ticks_per_s; ++k) {
+      const std::int64_t tick = static_cast<std::int64_t>(s) * ticks_per_s + k;
+      loop.tick(tick * 1000000, 1e-3 * static_cast<double>(tick), 1e-3, 0);
+      emax = std::max(emax, energy(dev));
+      if (s == 9) v2 += dev.velocity().squaredNorm();
+    }
+    r.max_energy_per_second.push_back(emax);
+  }
+  r.velocity_rms_last_second = std::sqrt(v2 / ticks_per_s);
+  return r;
+}
+
+}  // namespace
+
+TEST(haptic_loop, SimulatedHandAgainstStiffnessDoesNotOscillate) {
+  nh::ForceModelConfig force;  // Phantom Omni defaults: 700 N/m limit, passive damping
+  nh::HandParams hand;         // 0.15 kg, grip 300 N/m, 3 N s/m
+  const HandRun r = run_hand(force, hand, 700);
+  // After ramp-in (1st s), the energy above equilibrium never grows from one second to the next.
+  for (std::size_t s = 2; s < r.max_energy_per_second.size(); ++s)
+    EXPECT_LE(r.max_energy_per_second[s], r.max_energy_per_second[s - 1] * 1.001 + 1e-12)
+        << "second " << s;
+  EXPECT_LT(r.max_energy_per_second.back(), 1e-3 * r.max_energy_per_second[1] + 1e-9);
+  EXPECT_LT(r.velocity_rms_last_second, 1e-4);  // m/s: at rest
+}
+
+TEST(haptic_loop, UnsafeStiffnessWithoutPassivityLimitDoesOscillate) {
+  // Negative control (the test above can fail): K far above 2b/T, no damping, no limits.
+  nh::ForceModelConfig force;
+  force.enforce_passivity = false;
+  force.max_stiffness_n_per_m = 1e5;
+  force.damping_n_s_per_m = 0;
+  force.max_force_n = 1e3;
+  force.max_force_step_n = 1e3;
+  nh::HandParams hand;
+  hand.damping_n_s_per_m = 0.5;
+  const HandRun r = run_hand(force, hand, 2e4);
+  // Sustained (limit cycle at the force clamp) instead of decaying as in the test above.
+  EXPECT_GT(r.max_energy_per_second.back(), 0.5 * r.max_energy_per_second[2]);
+  EXPECT_GT(r.velocity_rms_last_second, 1e-3);
+}
+
+TEST(haptic_loop, ReplayGivesIdenticalToolStateSequence) {
+  const fs::path dir = neurosim::testing::temp_dir("haptic_replay");
+  const fs::path first = dir / "stroke.rec", second = dir / "replayed.rec";
+  nh::LoopConfig cfg;
+  cfg.workspace_origin_m = Vector3d(0.1, 0.05, 0.05);
+  cfg.workspace_up = Vector3d(1, 0, 0);  // the cube scene's right face
+  nh::testing::FakeLink link1, link2;
+  link1.tissue.surface_z_m = -1;  // (z is not the normal here: no contact, just the trajectory)
+  link2.tissue.surface_z_m = -1;
+  {
+    nh::ScriptDevice dev(nh::make_script("stroke"));
+    nh::Recorder rec(first.string(), nh::session_header(cfg, dev, "st", "probe", "", "", "test", 0), true);
+    nh::HapticLoop loop(cfg, dev, &link1, &rec);
+    loop.run_simulated(3000, 1000000000);
+    rec.close();
+    EXPECT_EQ(rec.written(), 3000u);
+  }
+  {
+    nh::ReplayDevice dev(first.string());
+    EXPECT_EQ(dev.size(), 3000u);
+    nh::Recorder rec(second.string(), nh::session_header(cfg, dev, "st", "probe", "", "", "replay", 0), true);
+    nh::HapticLoop loop(cfg, dev, &link2, &rec);
+    loop.run_simulated(5000, 1000000000);  // stops by itself at the end of the recording
+    rec.close();
+  }
+  ASSERT_EQ(link1.published.size(), 3000u);
+  ASSERT_EQ(link2.published.size(), link1.published.size());
+  for (std::size_t i = 0; i < link1.published.size(); ++i) {
+    const auto& a = link1.published[i];
+    const auto& b = link2.published[i];
+    ASSERT_EQ(a.sequence_number, b.sequence_number);
+    ASSERT_EQ(a.source_time_ns, b.source_time_ns);
+    ASSERT_EQ(a.position_m, b.position_m) << "tick " << i;
+    ASSERT_EQ(a.orientation, b.orientation) << "tick " << i;
+    ASSERT_EQ(a.velocity_m_per_s, b.velocity_m_per_s) << "tick " << i;
+    ASSERT_EQ(a.buttons, b.buttons) << "tick " << i;
+  }
+  // The stroke really moved (a constant trajectory would pass trivially).
+  EXPECT_GT((link1.published.front().position_m - link1.published.back().position_m).norm(), 1e-3);
+  const auto r1 = neurosim::wire::read_recording(first);
+  const auto r2 = neurosim::wire::read_recording(second);
+  EXPECT_EQ(r1.header.device().kind(), "script:stroke");
+  EXPECT_EQ(r2.header.device().kind(), "replay:" + first.string());
+  ASSERT_EQ(r1.samples.size(), r2.samples.size());
+  for (std::size_t i = 0; i < r1.samples.size(); ++i)
+    ASSERT_EQ(r1.samples[i].position_m().SerializeAsString(), r2.samples[i].position_m().SerializeAsString());
+  fs::remove_all(dir);
+}
+
+TEST(haptic_loop, BundledScriptRecordingsReplayExactly) {
+  const fs::path dir = neurosim::testing::source_dir() / "tests/data/recordings";
+  int found = 0;
+  for (const char* name : {"press", "stroke", "circle", "retract"}) {
+    const fs::path f = dir / (std::string("script_") + name + ".rec");
+    ASSERT_TRUE(fs::exists(f)) << f;
+    ++found;
+    const auto rec = neurosim::wire::read_recording(f);
+    EXPECT_EQ(rec.header.device().kind(), std::string("script:") + name);
+    EXPECT_NE(rec.header.label().find("script"), std::string::npos) << "labelled as made with a script";
+    nh::ReplayDevice dev(f.string());
+    nh::testing::FakeLink link;
+    nh::LoopConfig cfg;
+    nh::HapticLoop loop(cfg, dev, &link, nullptr);
+    loop.run_simulated(rec.samples.size() + 100);
+    ASSERT_EQ(link.published.size(), rec.samples.size()) << f;
+    for (std::size_t i = 0; i < rec.samples.size(); ++i) {
+      const auto& p = rec.samples[i].position_m();
+      ASSERT_EQ(link.published[i].position_m, Vector3d(p.x(), p.y(), p.z())) << f << " sample " << i;
+    }
+  }
+  EXPECT_EQ(found, 4);
+}
+
+TEST(haptic_loop, MetricsAndSummaryJson) {
+  nh::ScriptDevice dev(nh::make_script("press"));
+  nh::testing::FakeLink link;
+  nh::LoopConfig cfg;
+  nh::HapticLoop loop(cfg, dev, &link, nullptr);
+  loop.run_simulated(4000);
+  const nh::LoopSummary s = loop.summary();
+  EXPECT_EQ(s.samples, 4000u);
+  EXPECT_NEAR(s.period_p50_us, 1000, 1.0);
+  EXPECT_NEAR(s.period_max_us, 1000, 1e-6);
+  EXPECT_EQ(s.misses_over_1ms, 0u);
+  EXPECT_NEAR(s.model_age_p99_ms, 2.0, 0.011);  // the fake answers 2 ticks late
+  EXPECT_GT(s.max_force_step_n, 0);
+  EXPECT_LE(s.max_force_step_n, cfg.force.max_force_step_n + 1e-12);
+  const std::string json = nh::summary_json(s);
+  for (const char* key : {"period_p50_us", "period_p99_us", "period_max_us", "misses_over_1ms",
+                          "model_age_p99_ms", "max_force_step_n", "samples"})
+    EXPECT_NE(json.find(std::string("\"") + key + "\": "), std::string::npos) << key;
+  EXPECT_EQ(std::count(json.begin(), json.end(), ':'), 7) << json;
+}
+
+TEST(haptic_loop, DeviceSpecs) {
+  EXPECT_EQ(nh::make_device("script:circle")->kind(), "script:circle");
+  EXPECT_EQ(nh::make_device("hand:press")->kind(), "simulated_hand:press");
+  EXPECT_THROW(nh::make_device("script:nope"), std::invalid_argument);
+  EXPECT_THROW(nh::make_device("bogus"), std::invalid_argument);
+  EXPECT_THROW(nh::make_device("replay:/nonexistent/file.rec"), std::runtime_error);
+  if (!nh::omni_supported()) {
+    try {
+      nh::make_device("omni");
+      FAIL() << "omni must not be available without OpenHaptics";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("not built in"), std::string::npos) << e.what();
+    }
+  }
+}
