@@ -30,7 +30,9 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
 
 struct CalculixResult {
   Eigen::VectorXd displacement_m;  // 3N, unit m
-  Eigen::VectorXd reaction_n;      // 3N, unit N; zero where ccx printed none
+  // 3N, unit N; zero where ccx printed none. ccx's RF is (K u) at the node: a load applied on a
+  // constrained dof is not subtracted, so compare with StaticSolver's reaction_n + forces_n.
+  Eigen::VectorXd reaction_n;
   std::vector<char> has_reaction;  // per node: ccx printed RF for it
 };
 
