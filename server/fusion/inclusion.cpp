@@ -217,6 +217,22 @@ struct BoxHit {
   }
 };
 
+// Collects the triangles of B whose boxes overlap a tetrahedron's box: the candidates for all
+// four of its faces, found in one descent.
+struct BoxCollect {
+  const Prepared* b;
+  std::vector<int>* out;
+  bool go_further() const { return true; }
+  void intersection(const CGAL::Bbox_3& box, const Primitive& prim) {
+    const std::size_t i = static_cast<std::size_t>(prim.id() - b->tris.begin());
+    if (CGAL::do_overlap(box, b->boxes[i])) out->push_back(static_cast<int>(i));
+  }
+  template <class Node>
+  bool do_intersect(const CGAL::Bbox_3& box, const Node& node) const {
+    return CGAL::do_overlap(box, node.bbox());
+  }
+};
+
 bool outside_tree(const P3& p, const Prepared& b, const Tree& tree) {
   if (b.empty || !inside_box(p, b.box)) return true;
   for (int attempt = 0; attempt < kMaxAttempts; ++attempt) {
@@ -354,6 +370,8 @@ NewBoundary find_new_boundary(const mesh::TetMesh& host, const TriangleSurface& 
   std::vector<std::uint8_t> face_state(4 * tets.size(), 0);
   // Per vertex of A: 0 unknown, 1 outside B, 2 inside B.
   std::vector<std::uint8_t> vertex_side(verts.size(), 0);
+  std::vector<int> candidates;
+  candidates.reserve(64);
   auto partner = [&](std::size_t t, int k) -> std::size_t {
     const int n = nbr[t][k];
     if (n < 0) return static_cast<std::size_t>(-1);
@@ -378,13 +396,19 @@ NewBoundary find_new_boundary(const mesh::TetMesh& host, const TriangleSurface& 
       ++st.tets_culled;
       continue;
     }
-    if (options.cull_by_hierarchy) {
+    if (options.candidates_per_tetrahedron) {
+      candidates.clear();
+      BoxCollect bc{&b, &candidates};
+      tree.traversal(tb, bc);
+    } else {
       BoxHit bh{&b};
       tree.traversal(tb, bh);
-      if (!bh.hit) {
-        ++st.tets_culled;
-        continue;
-      }
+      if (!bh.hit) candidates.clear();
+      else candidates.assign(1, -1);  // non-empty marker: query the tree per face below
+    }
+    if (candidates.empty()) {
+      ++st.tets_culled;
+      continue;
     }
     ++st.tets_checked;
     // Step 3 with a cache: a face shared by two tetrahedra is tested once.
@@ -396,7 +420,19 @@ NewBoundary find_new_boundary(const mesh::TetMesh& host, const TriangleSurface& 
         const P3 a = to_point(verts[f[0]]), bb = to_point(verts[f[1]]), c = to_point(verts[f[2]]);
         TriangleHit th{&b, T3(a, bb, c), box_of(a, bb, c)};
         ++st.face_queries;
-        tree.traversal(th.box, th);
+        if (options.candidates_per_tetrahedron) {
+          // The face lies in the tetrahedron's box: B's candidates for it are among the tet's.
+          for (int i : candidates) {
+            if (!CGAL::do_overlap(th.box, b.boxes[i])) continue;
+            ++th.tests;
+            if (CGAL::do_intersect(th.face, b.tris[i])) {
+              th.hit = true;
+              break;
+            }
+          }
+        } else {
+          tree.traversal(th.box, th);
+        }
         st.triangle_tests += th.tests;
         if (th.hit) ++st.intersected_faces;
         mark(t, k, th.hit ? 3 : 1);

@@ -51,8 +51,10 @@ struct InclusionOptions {
   // Check B (closed, finite, in range, no degenerate triangle) before use; throws
   // std::invalid_argument naming open edges / bad triangles.
   bool validate_embedded{true};
-  // Skip a tetrahedron whose box overlaps no box of B's triangles (hierarchy query).
-  bool cull_by_hierarchy{true};
+  // One hierarchy descent per tetrahedron collects B's triangles overlapping its box; its
+  // faces are tested against those only (false: one descent per face, for comparison).
+  // Either way a tetrahedron whose box overlaps no triangle box of B is skipped.
+  bool candidates_per_tetrahedron{true};
 };
 
 // Reference: Algorithm 1 as written — every face of every tetrahedron against every triangle of
