@@ -3,6 +3,7 @@
 //                   [--record FILE]
 //   extra: [--scene FILE] (haptics factors, scene name) [--tool ID] [--origin X,Y,Z]
 //          [--up X,Y,Z] [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]
+//          [--topic-prefix P]
 // SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract) | hand:SCRIPT
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
@@ -34,6 +35,7 @@ const char* kUsage =
     "usage: neurosim-haptic --station ID --device SPEC [--duration SECONDS] [--summary FILE.json]\n"
     "                       [--record FILE] [--scene FILE] [--tool ID] [--origin X,Y,Z] [--up X,Y,Z]\n"
     "                       [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]\n"
+    "                       [--topic-prefix P]  (P prepended to every topic name, as neurosim-server's)\n"
     "  SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, circle,\n"
     "        retract). Scripts press along device -z onto a surface at device z = 0; --origin puts\n"
     "        that point in the scene (m) and --up is the surface's outward normal there.\n";
@@ -68,7 +70,7 @@ std::int64_t realtime_ns() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string station, spec, summary_file, record_file, scene_file, tool = "probe", label;
+  std::string station, spec, summary_file, record_file, scene_file, tool = "probe", label, topic_prefix;
   double duration = 0, wait_server = 5;
   bool use_server = true;
   nh::LoopConfig cfg;
@@ -90,6 +92,7 @@ int main(int argc, char** argv) {
       else if (a == "--up") cfg.workspace_up = parse_vec(a, val());
       else if (a == "--label") label = val();
       else if (a == "--no-server") use_server = false;
+      else if (a == "--topic-prefix") topic_prefix = val();
       else if (a == "--no-rt") cfg.realtime_priority = false;
       else if (a == "--wait-server") wait_server = parse_double(a, val());
       else if (a == "-h" || a == "--help") {
@@ -128,6 +131,9 @@ int main(int argc, char** argv) {
       nh::DdsLinkOptions o;
       o.station_id = station;
       o.tool_id = tool;
+      o.tool_topic = topic_prefix + o.tool_topic;
+      o.model_topic = topic_prefix + o.model_topic;
+      o.status_topic = topic_prefix + o.status_topic;
       link = std::make_unique<nh::DdsLink>(o);
       if (wait_server > 0 && !link->wait_for_server(wait_server))
         std::cerr << "neurosim-haptic: no server seen within " << wait_server

@@ -1,0 +1,130 @@
+// haptic_bench (issue 6 "Benchmark"): the 1 kHz haptic loop for S seconds against a server,
+// once at normal priority and once with SCHED_FIFO (where permitted), printing the loop summary.
+//
+//   haptic_bench [--seconds S] [--modes normal,fifo] [--server PATH --scene FILE] [--csv]
+//                [--device SPEC] [--origin X,Y,Z] [--up X,Y,Z]
+// Without --server, the ContactModels come from the test-only in-process fake server (a DDS
+// thread answering with a half-space spring): the loop, DDS and scheduling are real, the physics
+// is not. With --server, neurosim-server is started on --scene with a private topic prefix.
+// CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml).
+#include "fake_dds_server.hpp"
+#include "haptic_client/dds_link.hpp"
+#include "haptic_client/loop.hpp"
+
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+extern char** environ;
+namespace nh = neurosim::haptic;
+
+namespace {
+
+Eigen::Vector3d vec(const std::string& s) {
+  Eigen::Vector3d v;
+  char c1 = 0, c2 = 0;
+  std::istringstream is(s);
+  if (!(is >> v.x() >> c1 >> v.y() >> c2 >> v.z())) throw std::invalid_argument("bad vector " + s);
+  return v;
+}
+
+pid_t spawn_server(const std::string& path, const std::string& scene, const std::string& prefix, double seconds) {
+  std::vector<std::string> args{path, "--scene", scene, "--topic-prefix", prefix, "--duration",
+                                std::to_string(seconds)};
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  if (posix_spawn(&pid, path.c_str(), nullptr, nullptr, argv.data(), environ) != 0)
+    throw std::runtime_error("cannot start " + path);
+  return pid;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  double seconds = 60;
+  std::string modes = "normal,fifo", server, scene, spec = "hand:press";
+  bool csv = false;
+  nh::LoopConfig base;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto val = [&] {
+        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+        return std::string(argv[++i]);
+      };
+      if (a == "--seconds") seconds = std::stod(val());
+      else if (a == "--modes") modes = val();
+      else if (a == "--server") server = val();
+      else if (a == "--scene") scene = val();
+      else if (a == "--device") spec = val();
+      else if (a == "--origin") base.workspace_origin_m = vec(val());
+      else if (a == "--up") base.workspace_up = vec(val());
+      else if (a == "--csv") csv = true;
+      else throw std::invalid_argument("unknown option " + a);
+    }
+    if (!server.empty() && scene.empty()) throw std::invalid_argument("--server needs --scene");
+  } catch (const std::exception& e) {
+    std::cerr << "haptic_bench: " << e.what() << "\n";
+    return 2;
+  }
+  std::printf(csv ? "mode,server,samples,period_p50_us,period_p99_us,period_max_us,misses_over_1ms,"
+                    "model_age_p99_ms,max_force_step_n,sched\n"
+                  : "%-7s %-6s %8s %9s %9s %10s %8s %12s %10s %s\n",
+              "mode", "server", "samples", "p50_us", "p99_us", "max_us", "misses", "age_p99_ms", "step_N", "sched");
+  std::stringstream ms(modes);
+  std::string mode;
+  int run = 0;
+  while (std::getline(ms, mode, ',')) {
+    try {
+      const std::string prefix = "hbench" + std::to_string(::getpid()) + "_" + std::to_string(run++) + "_";
+      nh::testing::Topics topics{prefix + "neurosim_ToolState", prefix + "neurosim_ContactModel",
+                                 prefix + "neurosim_SimStatus"};
+      std::unique_ptr<nh::testing::FakeDdsServer> fake;
+      pid_t pid = 0;
+      if (server.empty()) fake = std::make_unique<nh::testing::FakeDdsServer>(topics, nh::testing::HalfSpace{});
+      else pid = spawn_server(server, scene, prefix, seconds + 60);
+      nh::DdsLinkOptions o;
+      o.station_id = "bench";
+      o.tool_topic = topics.tool;
+      o.model_topic = topics.model;
+      o.status_topic = topics.status;
+      nh::DdsLink link(o);
+      if (!link.wait_for_server(60)) std::cerr << "haptic_bench: no server within 60 s\n";
+      auto device = nh::make_device(spec);
+      nh::LoopConfig cfg = base;
+      cfg.realtime_priority = mode == "fifo";
+      nh::HapticLoop loop(cfg, *device, &link, nullptr);
+      const nh::RealtimeInfo rt = loop.run_realtime(seconds);
+      if (pid > 0) {
+        kill(pid, SIGTERM);
+        waitpid(pid, nullptr, 0);
+      }
+      const nh::LoopSummary s = loop.summary();
+      const char* sched = rt.sched_fifo ? "SCHED_FIFO" : "normal";
+      const char* srv = server.empty() ? "fake" : "real";
+      if (csv)
+        std::printf("%s,%s,%llu,%.1f,%.1f,%.1f,%llu,%.3f,%.4f,%s\n", mode.c_str(), srv,
+                    static_cast<unsigned long long>(s.samples), s.period_p50_us, s.period_p99_us, s.period_max_us,
+                    static_cast<unsigned long long>(s.misses_over_1ms), s.model_age_p99_ms, s.max_force_step_n, sched);
+      else
+        std::printf("%-7s %-6s %8llu %9.1f %9.1f %10.1f %8llu %12.3f %10.4f %s\n", mode.c_str(), srv,
+                    static_cast<unsigned long long>(s.samples), s.period_p50_us, s.period_p99_us, s.period_max_us,
+                    static_cast<unsigned long long>(s.misses_over_1ms), s.model_age_p99_ms, s.max_force_step_n, sched);
+      if (!rt.warning.empty()) std::fprintf(stderr, "haptic_bench: %s\n", rt.warning.c_str());
+      std::fflush(stdout);
+    } catch (const std::exception& e) {
+      std::cerr << "haptic_bench (" << mode << "): " << e.what() << "\n";
+      return 1;
+    }
+  }
+  return 0;
+}
