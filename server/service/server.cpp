@@ -1,0 +1,754 @@
+#include "server/service/server.hpp"
+
+#include "idl/wire/deformation_codec.hpp"
+#include "idl/wire/dds.hpp"
+#include "server/scene/scene.hpp"
+#include "server/service/pose_handoff.hpp"
+#include "server/service/tool_filter.hpp"
+
+#include <time.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+#include <type_traits>
+#include <unordered_map>
+
+namespace neurosim::service {
+
+namespace wire = neurosim::wire;
+using interaction::ToolContact;
+using interaction::ToolPose;
+
+namespace {
+
+constexpr int kMaxStationsLimit = 64;  // SimStatus.stations is sequence<StationStatus, 64>
+constexpr double kDefaultMaxSpeed = 2.0;  // m/s, scene.proto Tool.max_speed_m_per_s default
+
+std::int64_t mono_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+timespec to_timespec(std::int64_t ns) {
+  timespec ts{};
+  ts.tv_sec = static_cast<time_t>(ns / 1000000000LL);
+  ts.tv_nsec = static_cast<long>(ns % 1000000000LL);
+  return ts;
+}
+
+double or_default(double v, double d) { return v > 0 ? v : d; }
+
+const char* tier_name(scene::Effects::Tier t) {
+  switch (t) {
+    case scene::Effects::LINEAR: return "linear";
+    case scene::Effects::COROTATIONAL: return "corotational";
+    case scene::Effects::NONLINEAR: return "nonlinear";
+    default: return "linear";
+  }
+}
+
+neurosim_Tier wire_tier(scene::Effects::Tier t) {
+  switch (t) {
+    case scene::Effects::COROTATIONAL: return neurosim_TIER_COROTATIONAL;
+    case scene::Effects::NONLINEAR: return neurosim_TIER_NONLINEAR;
+    default: return neurosim_TIER_LINEAR;
+  }
+}
+
+// ToolPose::tool (scene tool index) is being added by issue 4; set it when it is there.
+template <class P, class = void>
+struct HasToolIndex : std::false_type {};
+template <class P>
+struct HasToolIndex<P, std::void_t<decltype(std::declval<P&>().tool)>> : std::true_type {};
+template <class P>
+void set_tool_index(P& pose, int tool) {
+  if constexpr (HasToolIndex<P>::value) pose.tool = tool;
+  (void)pose;
+  (void)tool;
+}
+
+enum SlotState : int { kFree = 0, kActive = 1, kLeaving = 2 };
+
+// One station. The DDS thread owns join (Free → Active) and leave (Active → Leaving); the step
+// thread retires (Leaving → Free). Poses cross through the triple buffer.
+struct StationSlot {
+  std::atomic<int> state{kFree};
+  char station_id[neurosim_ID_MAX + 1]{};  // written by the DDS thread before state = Active
+  TripleBuffer<PoseSample> pose;
+  std::atomic<bool> last_rejected{false};
+  std::atomic<std::uint64_t> accepted{0}, rejected_nonfinite{0}, rejected_jump{0}, last_sequence{0};
+  std::atomic<bool> in_contact{false};  // written by the step thread
+  // DDS thread only.
+  ToolFilter filter;
+  int tool{0};
+  int logged_rejections{0};
+  // Step thread only.
+  bool step_joined{false};
+  bool step_has_pose{false};
+  bool model_written{false};
+};
+
+}  // namespace
+
+struct Server::Impl {
+  Impl(const scene::Scene& sc, std::unique_ptr<interaction::Simulation> s, ServerOptions o,
+       std::ostream& l)
+      : scene(sc), sim(std::move(s)), opt(std::move(o)), log_stream(l) {}
+
+  // ---- Model (built once) --------------------------------------------------------------------
+  scene::Scene scene;
+  std::unique_ptr<interaction::Simulation> sim;
+  ServerOptions opt;
+  std::ostream& log_stream;
+  std::mutex log_mutex;
+
+  double step_hz{1000}, viewer_hz{30}, status_hz{1};
+  std::int64_t period_ns{1000000};
+  std::uint64_t viewer_every{33}, status_every{1000};
+  int max_stations{8};
+  bool tool_contact{true};
+  bool deformation_output{false};
+  std::string effects_text;
+  std::vector<double> tool_max_speed;  // per scene tool, m/s
+  std::vector<std::string> tool_ids;
+
+  std::optional<wire::Participant> pp;
+  std::optional<wire::Topic<neurosim_ToolState>> tool_topic;
+  std::optional<wire::Topic<neurosim_ContactModel>> model_topic;
+  std::optional<wire::Topic<neurosim_Deformation>> deform_topic;
+  std::optional<wire::Topic<neurosim_MeshTopology>> topo_topic;
+  std::optional<wire::Topic<neurosim_SimStatus>> status_topic;
+  std::optional<wire::Reader<neurosim_ToolState>> tools;
+  std::optional<wire::Writer<neurosim_ContactModel>> models;
+  std::optional<wire::Writer<neurosim_Deformation>> deformations;
+  std::optional<wire::Writer<neurosim_MeshTopology>> topologies;
+  std::optional<wire::Writer<neurosim_SimStatus>> status_writer;
+  std::optional<wire::Waitset> waitset;
+
+  // ---- State ---------------------------------------------------------------------------------
+  std::vector<StationSlot> slots;
+  std::vector<wire::Sample<neurosim_ContactModel>> models_out;  // one per slot
+  std::vector<std::vector<ToolPose>> poses_by_count;            // [n] has n poses (no realloc)
+  std::vector<std::vector<ToolContact>> contacts_by_count;
+  std::vector<int> slot_of_pose;
+  std::vector<wire::DeformationEncoder> encoders;
+  std::vector<wire::Sample<neurosim_Deformation>> deform_out;
+  std::vector<bool> deform_written;
+  std::vector<Eigen::VectorXd> u_m;  // per mesh, 3N, unit m
+  std::uint32_t last_matched_viewers{0};
+  wire::Sample<neurosim_SimStatus> status;
+  std::vector<neurosim_StationStatus> station_status;
+  std::vector<double> step_us, step_us_sorted;  // this status period
+  std::size_t step_us_count{0};
+  std::int64_t start_mono_ns{0};
+  std::int64_t last_status_mono_ns{0};
+  std::uint64_t steps_at_last_status{0};
+
+  // DDS thread only.
+  std::unordered_map<std::string, int> slot_of_station;
+  std::set<std::string> refused;
+
+  std::atomic<bool> run{false};
+  std::atomic<bool> started{false};
+  std::atomic<bool> stopped{false};
+  mutable std::mutex error_mutex;
+  std::string error_text;
+  std::atomic<std::uint64_t> steps{0}, deadline_misses{0}, rejected_nonfinite{0}, rejected_jump{0},
+      stations_refused{0}, deformation_frames{0}, full_field_solves{0};
+  std::thread dds_thread, step_thread;
+
+  void log(const std::string& line) {
+    std::lock_guard<std::mutex> lk(log_mutex);
+    log_stream << "neurosim-server: " << line << '\n' << std::flush;
+  }
+  void fail(const std::string& where, const std::exception& e) {
+    {
+      std::lock_guard<std::mutex> lk(error_mutex);
+      if (error_text.empty()) error_text = where + ": " + e.what();
+    }
+    log("error in " + where + ": " + e.what());
+    run = false;
+    if (waitset) {
+      try {
+        waitset->wake();
+      } catch (...) {
+      }
+    }
+  }
+
+  void configure();
+  void create_entities();
+  void publish_topologies();
+  void dds_loop();
+  void handle_tool_sample(const wire::Received<neurosim_ToolState>& rx);
+  void leave(const std::string& key, const char* why);
+  void step_loop();
+  void one_step();
+  void retire(int i);
+  void publish_deformation(std::uint64_t step, std::int64_t now_ns);
+  void publish_status(std::int64_t now_mono);
+  void dispose_all();
+};
+
+// ---------------------------------------------------------------------------------------------
+void Server::Impl::configure() {
+  const auto& r = scene.rates();
+  step_hz = or_default(r.step_hz(), 1000.0);
+  viewer_hz = or_default(r.viewer_hz(), 30.0);
+  status_hz = or_default(r.status_hz(), 1.0);
+  if (!(std::isfinite(step_hz) && std::isfinite(viewer_hz) && std::isfinite(status_hz)))
+    throw std::runtime_error(opt.scene_path + ": rates: not finite");
+  period_ns = static_cast<std::int64_t>(std::llround(1e9 / step_hz));
+  if (period_ns < 1000) throw std::runtime_error(opt.scene_path + ": rates.step_hz: above 1 MHz");
+  viewer_every = std::max<std::uint64_t>(1, std::llround(step_hz / viewer_hz));
+  status_every = std::max<std::uint64_t>(1, std::llround(step_hz / status_hz));
+  max_stations = scene.max_stations() > 0 ? scene.max_stations() : 8;
+  if (max_stations > kMaxStationsLimit)
+    throw std::runtime_error(opt.scene_path + ": max_stations: " + std::to_string(max_stations) +
+                             " is above " + std::to_string(kMaxStationsLimit));
+  const auto& fx = scene.effects();
+  tool_contact = fx.tool_contact();
+  deformation_output = fx.deformation_output();
+  std::string e;
+  auto add = [&](bool on, const char* name) {
+    if (!on) return;
+    if (!e.empty()) e += ',';
+    e += name;
+  };
+  add(fx.tool_contact(), "contact");
+  add(fx.coupling(), "coupling");
+  add(fx.deformation_output(), "deformation");
+  effects_text = e;
+  for (const auto& t : scene.tools()) {
+    tool_ids.push_back(t.id());
+    tool_max_speed.push_back(or_default(t.max_speed_m_per_s(), kDefaultMaxSpeed));
+  }
+  if (sim == nullptr) throw std::runtime_error("Server: no simulation");
+  if (sim->num_meshes() != scene.meshes_size())
+    throw std::runtime_error(opt.scene_path + ": the simulation has " +
+                             std::to_string(sim->num_meshes()) + " meshes, the scene " +
+                             std::to_string(scene.meshes_size()));
+
+  std::ostringstream s;
+  s << "scene '" << scene.name() << "' (" << opt.scene_path << "): tier " << tier_name(fx.tier())
+    << ", effects [" << effects_text << "], step " << step_hz << " Hz, viewer " << viewer_hz
+    << " Hz, status " << status_hz << " Hz, max " << max_stations << " stations";
+  log(s.str());
+}
+
+void Server::Impl::create_entities() {
+  wire::ParticipantOptions po;
+  if (opt.domain >= 0) po.domain = static_cast<dds_domainid_t>(opt.domain);
+  pp.emplace(po);
+  const std::string& p = opt.topic_prefix;
+  topo_topic.emplace(*pp, p + wire::TopicTraits<neurosim_MeshTopology>::name);
+  topologies.emplace(*pp, *topo_topic);
+  status_topic.emplace(*pp, p + wire::TopicTraits<neurosim_SimStatus>::name);
+  status_writer.emplace(*pp, *status_topic);
+  waitset.emplace(*pp);
+  log("built: MeshTopology writer (" + std::to_string(sim->num_meshes()) +
+      " meshes), SimStatus writer");
+
+  if (tool_contact) {
+    tool_topic.emplace(*pp, p + wire::TopicTraits<neurosim_ToolState>::name);
+    model_topic.emplace(*pp, p + wire::TopicTraits<neurosim_ContactModel>::name);
+    tools.emplace(*pp, *tool_topic);
+    models.emplace(*pp, *model_topic);
+    waitset->attach_data(*tools, 1);
+    waitset->attach_liveliness(*tools, 2);
+    slots = std::vector<StationSlot>(static_cast<std::size_t>(max_stations));
+    models_out.resize(slots.size());
+    poses_by_count.resize(slots.size() + 1);
+    contacts_by_count.resize(slots.size() + 1);
+    for (std::size_t n = 0; n <= slots.size(); ++n) {
+      poses_by_count[n].resize(n);
+      contacts_by_count[n].resize(n);
+    }
+    slot_of_pose.resize(slots.size());
+    log("built: ToolState reader, ContactModel writer, " + std::to_string(max_stations) +
+        " station slots");
+  } else {
+    log("not built: stations (effects.tool_contact off): no ToolState reader, no ContactModel");
+  }
+
+  if (deformation_output) {
+    deform_topic.emplace(*pp, p + wire::TopicTraits<neurosim_Deformation>::name);
+    deformations.emplace(*pp, *deform_topic);
+    wire::DeformationEncoderOptions eo;
+    eo.full_frame_period = opt.full_frame_period;
+    for (int m = 0; m < sim->num_meshes(); ++m) {
+      encoders.emplace_back(sim->mesh_id(m), sim->mesh(m).num_vertices(), 1, eo);
+      deform_out.emplace_back();
+      u_m.emplace_back(Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(sim->mesh(m).num_vertices())));
+    }
+    deform_written.assign(static_cast<std::size_t>(sim->num_meshes()), false);
+    log("built: Deformation writer, " + std::to_string(sim->num_meshes()) + " encoders (" +
+        std::to_string(viewer_hz) + " Hz, FULL frame every " + std::to_string(opt.full_frame_period) +
+        " frames); full-field solves only while a viewer is matched");
+  } else {
+    log("not built: Deformation (effects.deformation_output off): no full-field solves");
+  }
+
+  // Status: strings and buffers set once.
+  wire::set_string(status->server_id, opt.server_id, "server_id");
+  wire::set_string(status->scene_name, scene.name());
+  wire::set_string(status->effects, effects_text);
+  status->tier = wire_tier(scene.effects().tier());
+  status->step_rate_target_hz = step_hz;
+  status->viewer_rate_hz = deformation_output ? viewer_hz : 0.0;
+  status->status_rate_hz = status_hz;
+  status->max_stations = static_cast<std::uint32_t>(max_stations);
+  station_status.resize(slots.size());
+  wire::reserve(status->stations, slots.size());
+  const std::size_t per_period = static_cast<std::size_t>(status_every) * 2 + 64;
+  step_us.assign(per_period, 0.0);
+  step_us_sorted.assign(per_period, 0.0);
+}
+
+void Server::Impl::publish_topologies() {
+  for (int m = 0; m < sim->num_meshes(); ++m) {
+    const auto& mesh = sim->mesh(m);
+    const auto& id = sim->mesh_id(m);
+    const int si = scene::find_mesh(scene, id);
+    wire::Sample<neurosim_MeshTopology> t;
+    wire::set_string(t->mesh_id, id, "mesh_id");
+    t->revision = 1;
+    wire::set_string(t->scene_name, scene.name());
+    std::vector<double> v;
+    v.reserve(3 * mesh.num_vertices());
+    for (const auto& x : mesh.vertices()) v.insert(v.end(), {x.x(), x.y(), x.z()});
+    wire::assign(t->rest_vertices_m, v);
+    std::vector<std::int32_t> tets;
+    tets.reserve(4 * mesh.num_tets());
+    for (const auto& te : mesh.tets()) tets.insert(tets.end(), te.begin(), te.end());
+    wire::assign(t->tetrahedra, tets);
+    std::vector<std::int32_t> tris;
+    tris.reserve(3 * mesh.surface().size());
+    for (const auto& tr : mesh.surface()) tris.insert(tris.end(), tr.begin(), tr.end());
+    wire::assign(t->surface_triangles, tris);
+    if (si >= 0) {
+      const auto& e = scene.meshes(si);
+      wire::set_string(t->material_name, e.material().name());
+      t->youngs_modulus_pa = e.material().youngs_modulus_pa();
+      t->poisson_ratio = e.material().poisson_ratio();
+      t->priority = e.priority();
+      wire::set_string(t->provenance, e.provenance());
+    } else {
+      wire::set_string(t->material_name, "");
+      wire::set_string(t->provenance, "");
+    }
+    std::string image = scene.image().file();
+    if (!image.empty() && std::filesystem::path(image).is_relative())
+      image = (std::filesystem::absolute(opt.scene_path).parent_path() / image).lexically_normal().string();
+    wire::set_string(t->volume_image_file, image);
+    t->volume_image_unit_m = scene.image().file_unit_m();
+    topologies->write(*t);
+    log("published MeshTopology '" + id + "': " + std::to_string(mesh.num_vertices()) +
+        " vertices, " + std::to_string(mesh.num_tets()) + " tetrahedra, " +
+        std::to_string(mesh.surface().size()) + " surface triangles");
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// DDS thread.
+void Server::Impl::dds_loop() {
+  try {
+    const std::size_t max_take = 64;  // wire::ReaderOptions default
+    while (run.load()) {
+      const auto r = waitset->wait(DDS_MSECS(100));
+      if (!run.load()) break;
+      if (!tools) continue;
+      for (;;) {
+        const auto batch = tools->take();
+        for (const auto& rx : batch) handle_tool_sample(rx);
+        if (batch.size() < max_take) break;
+      }
+      if (r.has(2)) {
+        const auto l = tools->liveliness();
+        if (l.not_alive_count_change > 0)
+          log("ToolState writers lost liveliness: " + std::to_string(l.not_alive_count_change) +
+              " (alive now " + std::to_string(l.alive_count) + ")");
+      }
+    }
+  } catch (const std::exception& e) {
+    fail("DDS thread", e);
+  }
+}
+
+void Server::Impl::leave(const std::string& key, const char* why) {
+  if (refused.erase(key) > 0) {
+    log("refused station '" + key + "' left (" + why + ")");
+    return;
+  }
+  const auto it = slot_of_station.find(key);
+  if (it == slot_of_station.end()) return;
+  slots[static_cast<std::size_t>(it->second)].state.store(kLeaving, std::memory_order_release);
+  log("station '" + key + "' left (" + why + "), slot " + std::to_string(it->second));
+  slot_of_station.erase(it);
+}
+
+void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& rx) {
+  const std::string key(rx.key());
+  if (!rx.valid()) {
+    if (rx.disposed()) leave(key, "disposed");
+    else if (rx.no_writers()) leave(key, "no writers / liveliness lost");
+    return;
+  }
+  if (key.empty()) return;
+  auto it = slot_of_station.find(key);
+  if (it == slot_of_station.end()) {
+    if (refused.count(key)) return;
+    int free_slot = -1;
+    for (std::size_t i = 0; i < slots.size(); ++i)
+      if (slots[i].state.load(std::memory_order_acquire) == kFree) {
+        free_slot = static_cast<int>(i);
+        break;
+      }
+    if (free_slot < 0) {
+      refused.insert(key);
+      ++stations_refused;
+      log("refused station '" + key + "': max_stations " + std::to_string(max_stations) +
+          " reached (" + std::to_string(slot_of_station.size()) + " active, some may be leaving)");
+      return;
+    }
+    auto& s = slots[static_cast<std::size_t>(free_slot)];
+    std::memcpy(s.station_id, rx.data.station_id, sizeof(s.station_id));
+    const std::string tool(rx.data.tool_id);
+    double vmax = kDefaultMaxSpeed;
+    std::string tool_note;
+    const auto ti = std::find(tool_ids.begin(), tool_ids.end(), tool);
+    if (ti != tool_ids.end()) {
+      vmax = tool_max_speed[static_cast<std::size_t>(ti - tool_ids.begin())];
+    } else if (!tool_ids.empty()) {
+      vmax = tool_max_speed[0];
+      tool_note = " (unknown tool '" + tool + "': using '" + tool_ids[0] + "')";
+    }
+    s.filter = ToolFilter(vmax);
+    s.tool = ti != tool_ids.end() ? static_cast<int>(ti - tool_ids.begin()) : 0;
+    s.logged_rejections = 0;
+    s.accepted = 0;
+    s.rejected_nonfinite = 0;
+    s.rejected_jump = 0;
+    s.last_sequence = 0;
+    s.last_rejected = false;
+    s.state.store(kActive, std::memory_order_release);
+    it = slot_of_station.emplace(key, free_slot).first;
+    std::ostringstream os;
+    os << "station '" << key << "' joined, slot " << free_slot << ", tool '" << tool
+       << "', max speed " << vmax << " m/s" << tool_note;
+    log(os.str());
+  }
+  auto& s = slots[static_cast<std::size_t>(it->second)];
+  const Verdict v = s.filter.check(rx.data);
+  if (v == Verdict::Accepted) {
+    PoseSample p;
+    p.sequence = rx.data.sequence_number;
+    p.source_time_ns = rx.data.source_time_ns;
+    p.tool = s.tool;
+    const double* q = rx.data.orientation;
+    const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int i = 0; i < 3; ++i) p.position_m[i] = rx.data.position_m[i];
+    for (int i = 0; i < 4; ++i) p.orientation[i] = q[i] / qn;
+    s.pose.publish(p);
+    s.accepted.fetch_add(1, std::memory_order_relaxed);
+    s.last_sequence.store(p.sequence, std::memory_order_relaxed);
+    s.last_rejected.store(false, std::memory_order_relaxed);
+    return;
+  }
+  s.last_rejected.store(true, std::memory_order_relaxed);
+  if (v == Verdict::NonFinite) {
+    s.rejected_nonfinite.fetch_add(1, std::memory_order_relaxed);
+    ++rejected_nonfinite;
+  } else {
+    s.rejected_jump.fetch_add(1, std::memory_order_relaxed);
+    ++rejected_jump;
+  }
+  // A station sending garbage must not flood the log.
+  if (s.logged_rejections < 5) {
+    ++s.logged_rejections;
+    log("station '" + key + "': rejected ToolState " + std::to_string(rx.data.sequence_number) +
+        " (" + to_string(v) + "), keeping the last good pose" +
+        (s.logged_rejections == 5 ? "; further rejections counted only" : ""));
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Step thread.
+void Server::Impl::step_loop() {
+  try {
+    start_mono_ns = mono_ns();
+    last_status_mono_ns = start_mono_ns;
+    std::int64_t next = start_mono_ns;
+    while (run.load(std::memory_order_relaxed)) {
+      next += period_ns;
+      const timespec ts = to_timespec(next);
+      while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+      }
+      if (!run.load(std::memory_order_relaxed)) break;
+      const std::int64_t t0 = mono_ns();
+      const std::int64_t late = t0 - next;
+      if (late > period_ns) {
+        ++deadline_misses;
+        // Far behind (e.g. the machine stalled): restart the schedule instead of bursting.
+        if (late > 20 * period_ns) next = t0;
+      }
+      one_step();
+      const std::int64_t t1 = mono_ns();
+      if (step_us_count < step_us.size()) step_us[step_us_count++] = 1e-3 * static_cast<double>(t1 - t0);
+      if (steps.load(std::memory_order_relaxed) % status_every == 0) publish_status(t1);
+    }
+  } catch (const std::exception& e) {
+    fail("step thread", e);
+  }
+}
+
+void Server::Impl::retire(int i) {
+  auto& s = slots[static_cast<std::size_t>(i)];
+  if (s.model_written) models->dispose(*models_out[static_cast<std::size_t>(i)]);
+  s.pose.consume();  // drop whatever the last session left
+  s.step_joined = false;
+  s.step_has_pose = false;
+  s.model_written = false;
+  s.in_contact.store(false, std::memory_order_relaxed);
+  s.state.store(kFree, std::memory_order_release);
+}
+
+void Server::Impl::one_step() {
+  const std::uint64_t step = steps.load(std::memory_order_relaxed) + 1;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < slots.size(); ++i) {
+    auto& s = slots[i];
+    const int st = s.state.load(std::memory_order_acquire);
+    if (st == kLeaving) {
+      retire(static_cast<int>(i));
+      continue;
+    }
+    if (st != kActive) continue;
+    if (!s.step_joined) {
+      s.step_joined = true;
+      std::memcpy(models_out[i]->station_id, s.station_id, sizeof(s.station_id));
+    }
+    if (s.pose.consume()) s.step_has_pose = true;
+    if (!s.step_has_pose) continue;
+    const PoseSample& p = s.pose.newest();
+    ToolPose& tp = poses_by_count[slots.size()][n];  // scratch: copied below
+    tp.tip_m = interaction::Vec3(p.position_m[0], p.position_m[1], p.position_m[2]);
+    // Shaft axis: the tool frame's +z rotated into the scene frame by q = (w, x, y, z).
+    const double w = p.orientation[0], x = p.orientation[1], y = p.orientation[2],
+                 z = p.orientation[3];
+    tp.axis = interaction::Vec3(2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y));
+    set_tool_index(tp, p.tool);
+    slot_of_pose[n++] = static_cast<int>(i);
+  }
+  if (n > 0) {
+    auto& poses = poses_by_count[n];
+    if (n != slots.size())
+      for (std::size_t k = 0; k < n; ++k) poses[k] = poses_by_count[slots.size()][k];
+    auto& contacts = contacts_by_count[n];
+    interaction::StepStats stats;
+    sim->step(poses, contacts, stats);
+    const std::int64_t now = dds_time();
+    for (std::size_t k = 0; k < n; ++k) {
+      const std::size_t i = static_cast<std::size_t>(slot_of_pose[k]);
+      auto& s = slots[i];
+      const PoseSample& p = s.pose.newest();
+      const ToolContact& c = contacts[k];
+      neurosim_ContactModel& cm = *models_out[i];
+      cm.tool_sequence = p.sequence;
+      cm.tool_source_time_ns = p.source_time_ns;
+      for (int d = 0; d < 3; ++d) {
+        cm.x0_position_m[d] = c.in_contact ? c.reference_tip_m[d] : p.position_m[d];
+        cm.f0_n[d] = c.in_contact ? c.force_n[d] : 0.0;
+        cm.normal[d] = c.in_contact ? c.normal[d] : 0.0;
+      }
+      for (int d = 0; d < 4; ++d) cm.x0_orientation[d] = p.orientation[d];
+      for (int r = 0; r < 3; ++r)
+        for (int q = 0; q < 3; ++q) cm.stiffness_n_per_m[3 * r + q] = c.in_contact ? c.stiffness_n_per_m(r, q) : 0.0;
+      cm.in_contact = c.in_contact;
+      cm.validity_radius_m = c.validity_radius_m;
+      cm.server_step = step;
+      cm.server_time_ns = now;
+      const char* mid = (c.in_contact && c.mesh >= 0 && c.mesh < sim->num_meshes())
+                            ? sim->mesh_id(c.mesh).c_str()
+                            : "";
+      std::strncpy(cm.contact_mesh_id, mid, neurosim_ID_MAX);
+      cm.contact_mesh_id[neurosim_ID_MAX] = '\0';
+      cm.tool_sample_rejected = s.last_rejected.load(std::memory_order_relaxed);
+      s.in_contact.store(c.in_contact, std::memory_order_relaxed);
+      models->write(cm);
+      s.model_written = true;
+    }
+  }
+  steps.store(step, std::memory_order_relaxed);
+  if (deformation_output && step % viewer_every == 0) publish_deformation(step, dds_time());
+}
+
+void Server::Impl::publish_deformation(std::uint64_t step, std::int64_t now_ns) {
+  const std::uint32_t matched = deformations->matched_readers();
+  // A viewer that just matched decodes from the next frame on.
+  if (matched > last_matched_viewers)
+    for (auto& e : encoders) e.force_full_next();
+  last_matched_viewers = matched;
+  if (matched == 0) return;
+  for (int m = 0; m < sim->num_meshes(); ++m) {
+    auto& u = u_m[static_cast<std::size_t>(m)];
+    sim->displacements(m, u);
+    ++full_field_solves;
+    auto& out = *deform_out[static_cast<std::size_t>(m)];
+    encoders[static_cast<std::size_t>(m)].encode(u.data(), static_cast<std::size_t>(u.size()), step,
+                                                 now_ns, out);
+    deformations->write(out);
+    deform_written[static_cast<std::size_t>(m)] = true;
+    ++deformation_frames;
+  }
+}
+
+void Server::Impl::publish_status(std::int64_t now_mono) {
+  const std::size_t n = step_us_count;
+  auto& st = *status;
+  if (n > 0) {
+    std::copy(step_us.begin(), step_us.begin() + static_cast<std::ptrdiff_t>(n), step_us_sorted.begin());
+    auto b = step_us_sorted.begin();
+    auto e = b + static_cast<std::ptrdiff_t>(n);
+    const auto at = [&](double q) {
+      auto k = b + static_cast<std::ptrdiff_t>(std::min(n - 1, static_cast<std::size_t>(q * static_cast<double>(n))));
+      std::nth_element(b, k, e);
+      return *k;
+    };
+    st.step_time_p50_us = at(0.5);
+    st.step_time_p99_us = at(0.99);
+    st.step_time_max_us = *std::max_element(b, e);
+  }
+  const std::uint64_t s_now = steps.load(std::memory_order_relaxed);
+  const double dt = 1e-9 * static_cast<double>(now_mono - last_status_mono_ns);
+  st.step_rate_measured_hz = dt > 0 ? static_cast<double>(s_now - steps_at_last_status) / dt : 0.0;
+  steps_at_last_status = s_now;
+  last_status_mono_ns = now_mono;
+  step_us_count = 0;
+  st.steps = s_now;
+  st.deadline_misses = deadline_misses.load();
+  st.server_time_ns = dds_time();
+  st.uptime_s = 1e-9 * static_cast<double>(now_mono - start_mono_ns);
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < slots.size(); ++i) {
+    auto& s = slots[i];
+    if (s.state.load(std::memory_order_acquire) != kActive) continue;
+    auto& ss = station_status[k++];
+    std::memcpy(ss.station_id, s.station_id, sizeof(ss.station_id));
+    ss.alive = true;
+    ss.in_contact = s.in_contact.load(std::memory_order_relaxed);
+    ss.samples_accepted = s.accepted.load(std::memory_order_relaxed);
+    ss.samples_rejected_nonfinite = s.rejected_nonfinite.load(std::memory_order_relaxed);
+    ss.samples_rejected_jump = s.rejected_jump.load(std::memory_order_relaxed);
+    ss.last_sequence = s.last_sequence.load(std::memory_order_relaxed);
+  }
+  wire::assign(st.stations, station_status.data(), k);
+  st.samples_rejected_nonfinite = rejected_nonfinite.load();
+  st.samples_rejected_jump = rejected_jump.load();
+  st.stations_refused = stations_refused.load();
+  status_writer->write(st);
+}
+
+void Server::Impl::dispose_all() {
+  // Clients see the server leave: every instance we wrote is disposed.
+  for (std::size_t i = 0; i < slots.size(); ++i)
+    if (slots[i].model_written) {
+      models->dispose(*models_out[i]);
+      slots[i].model_written = false;
+    }
+  for (std::size_t m = 0; m < deform_out.size(); ++m)
+    if (deform_written[m]) {
+      wire::set_string(deform_out[m]->mesh_id, sim->mesh_id(static_cast<int>(m)), "mesh_id");
+      deformations->dispose(*deform_out[m]);
+    }
+  if (topologies)
+    for (int m = 0; m < sim->num_meshes(); ++m) {
+      wire::Sample<neurosim_MeshTopology> k;
+      wire::set_string(k->mesh_id, sim->mesh_id(m), "mesh_id");
+      topologies->dispose(*k);
+    }
+  if (status_writer) status_writer->dispose(*status);
+}
+
+// ---------------------------------------------------------------------------------------------
+Server::Server(const scene::Scene& scene, std::unique_ptr<interaction::Simulation> sim,
+               ServerOptions options, std::ostream& log)
+    : impl_(std::make_unique<Impl>(scene, std::move(sim), std::move(options), log)) {
+  impl_->configure();
+}
+
+Server::~Server() {
+  try {
+    stop();
+  } catch (const std::exception& e) {
+    impl_->log(std::string("error while stopping: ") + e.what());
+  }
+}
+
+void Server::start() {
+  auto& d = *impl_;
+  if (d.started.exchange(true)) throw std::logic_error("Server::start called twice");
+  d.create_entities();
+  d.publish_topologies();
+  d.run = true;
+  d.publish_status(0);  // so SimStatus is readable before the first status period
+  d.step_us_count = 0;
+  d.dds_thread = std::thread([&d] { d.dds_loop(); });
+  d.step_thread = std::thread([&d] { d.step_loop(); });
+  d.log("serving (DDS domain " + (d.opt.domain >= 0 ? std::to_string(d.opt.domain) : std::string("default")) +
+        ", server id '" + d.opt.server_id + "')");
+}
+
+void Server::stop() {
+  auto& d = *impl_;
+  if (!d.started.load() || d.stopped.exchange(true)) return;
+  d.run = false;
+  if (d.waitset) d.waitset->wake();
+  if (d.dds_thread.joinable()) d.dds_thread.join();
+  if (d.step_thread.joinable()) d.step_thread.join();
+  try {
+    d.dispose_all();
+  } catch (const std::exception& e) {
+    d.log(std::string("error disposing instances: ") + e.what());
+  }
+  d.log("stopped after " + std::to_string(d.steps.load()) + " steps (" +
+        std::to_string(d.deadline_misses.load()) + " deadline misses, rejected " +
+        std::to_string(d.rejected_nonfinite.load()) + " non-finite + " +
+        std::to_string(d.rejected_jump.load()) + " jump samples, refused " +
+        std::to_string(d.stations_refused.load()) + " stations)");
+}
+
+bool Server::running() const { return impl_->run.load(); }
+
+std::string Server::error() const {
+  std::lock_guard<std::mutex> lk(impl_->error_mutex);
+  return impl_->error_text;
+}
+
+ServerCounters Server::counters() const {
+  const auto& d = *impl_;
+  ServerCounters c;
+  c.steps = d.steps.load();
+  c.deadline_misses = d.deadline_misses.load();
+  c.rejected_nonfinite = d.rejected_nonfinite.load();
+  c.rejected_jump = d.rejected_jump.load();
+  c.stations_refused = d.stations_refused.load();
+  c.deformation_frames = d.deformation_frames.load();
+  c.full_field_solves = d.full_field_solves.load();
+  return c;
+}
+
+}  // namespace neurosim::service

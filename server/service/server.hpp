@@ -1,0 +1,79 @@
+// neurosim-server core (issue 5 "Server"): a Simulation (Model built once) stepped at the
+// scene rate on its own thread with absolute deadlines, stations on DDS.
+//
+//   DDS thread : waitset on ToolState → join/leave stations, filter samples (NaN/inf, jumps),
+//                hand the newest good pose to the station's slot (triple buffer, never blocks).
+//   step thread: every period: newest pose of each station → Simulation::step → ContactModel
+//                per station; Deformation per mesh at the viewer rate while a viewer is matched;
+//                SimStatus at the status rate.
+//
+// Topics and QoS come from neurosim::wire (idl/wire/qos.cpp).
+#pragma once
+
+#include "scene.pb.h"
+#include "server/interaction/simulation.hpp"
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <ostream>
+#include <string>
+#include <vector>
+
+namespace neurosim::service {
+
+struct ServerOptions {
+  std::string scene_path;          // for messages and MeshTopology
+  std::string server_id{"neurosim-server"};  // SimStatus key
+  int domain{-1};                  // DDS domain id; -1: the configuration's default
+  std::string topic_prefix{};      // prepended to every topic name (test isolation); "" normally
+  std::uint32_t full_frame_period{30};  // Deformation FULL frame every this many frames
+};
+
+// Counters the server exposes to tests (also published in SimStatus).
+struct ServerCounters {
+  std::uint64_t steps{0};
+  std::uint64_t deadline_misses{0};
+  std::uint64_t rejected_nonfinite{0};
+  std::uint64_t rejected_jump{0};
+  std::uint64_t stations_refused{0};
+  std::uint64_t deformation_frames{0};  // all meshes
+  std::uint64_t full_field_solves{0};   // Simulation::displacements calls
+};
+
+class Server {
+ public:
+  // The simulation must have been built from `scene` (mesh ids in the same order). Logs what it
+  // builds to `log` (one line each). Throws std::runtime_error on a bad scene / DDS failure.
+  Server(const scene::Scene& scene, std::unique_ptr<interaction::Simulation> sim,
+         ServerOptions options, std::ostream& log);
+  ~Server();
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  // Creates the DDS entities, publishes MeshTopology, starts the DDS and step threads.
+  void start();
+  // Stops the threads, disposes every instance written (clients see the server leave). Idempotent.
+  void stop();
+  // True while running; false after stop() or when a thread died of an error (see error()).
+  bool running() const;
+  std::string error() const;
+  ServerCounters counters() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+using SimulationFactory = std::function<std::unique_ptr<interaction::Simulation>(
+    const scene::Scene& scene, const std::string& scene_path)>;
+
+// The neurosim-server command line:
+//   neurosim-server --scene FILE [--duration SECONDS] [--domain ID] [--server-id NAME]
+//                   [--topic-prefix P]
+// Sets OPENBLAS_NUM_THREADS=1 (unless set), installs SIGINT/SIGTERM handlers, builds the
+// simulation with `factory`, serves until a signal or the duration. Returns the exit status.
+int run_main(int argc, char** argv, const SimulationFactory& factory);
+
+}  // namespace neurosim::service

@@ -1,0 +1,98 @@
+// The service's DDS plumbing against the test-only FakeSimulation (analytic half-space spring),
+// through the real server code in a child process (service_test_fake_server): scripted path vs
+// the in-process fake, late joiner, rejected samples and refused stations, a station vanishing
+// mid-contact, effects (no viewer → no full-field solves; deformation off → not built), bad
+// scene, --duration. Each test starts its own server on a private DDS domain.
+#include "server/scene/scene.hpp"
+#include "tests/server/service/fake_simulation.hpp"
+#include "tests/server/service/service_scenarios.hpp"
+
+#include <fstream>
+#include <regex>
+
+namespace st = neurosim::service::testing;
+namespace nt = neurosim::testing;
+
+namespace {
+
+st::Setup fake_setup() {
+  st::Setup s;
+  s.exe = nt::bin_dir() / "service_test_fake_server";
+  s.scene = nt::source_dir() / "tests/server/service/data/fake_box.scene";
+  s.make_reference = [scene = s.scene] {
+    return st::make_fake(neurosim::scene::read_scene(scene));
+  };
+  s.startup_timeout_s = 20;
+  return s;
+}
+
+long displacement_calls(const std::string& log) {
+  std::smatch m;
+  const std::regex re("fake simulation: ([0-9]+) displacements calls");
+  if (!std::regex_search(log, m, re)) return -1;
+  return std::stol(m[1]);
+}
+
+}  // namespace
+
+TEST(service_fake, ScriptedPathMatchesInProcessAndLateJoinerGetsTopologyAndFullFrame) {
+  st::scripted_path_and_late_joiner(fake_setup());
+}
+
+TEST(service_fake, BadSamplesRejectedAndCountedExtraStationRefused) {
+  st::bad_samples(fake_setup(), 2);
+}
+
+TEST(service_fake, SurvivesStationVanishingMidContact) {
+  st::station_vanishes(fake_setup(), nt::bin_dir() / "service_test_station");
+}
+
+TEST(service_fake, NoViewerMeansNoFullFieldSolves) {
+  const auto setup = fake_setup();
+  st::Session ses(setup, "noviewer", 1.5);
+  ASSERT_TRUE(ses.wait_ready());
+  st::StationThread s(ses.client, "s", [&](double) {
+    return std::array<double, 3>{0.102, 0.05, 0.05};
+  }, 1.0);
+  s.wait_done();
+  EXPECT_EQ(ses.server.wait(15), 0) << "--duration must stop the server by itself\n" << ses.server.log();
+  const std::string log = ses.server.log();
+  EXPECT_EQ(displacement_calls(log), 0) << log;
+  EXPECT_NE(log.find("full-field solves only while a viewer is matched"), std::string::npos) << log;
+}
+
+TEST(service_fake, DeformationOffIsNotBuilt) {
+  const auto dir = nt::temp_dir("service_deform_off");
+  auto scene = neurosim::scene::read_scene(fake_setup().scene);
+  std::ifstream in(fake_setup().scene);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  text = std::regex_replace(text, std::regex("deformation_output: true"), "deformation_output: false");
+  const auto path = dir / "no_deformation.scene";
+  std::ofstream(path) << text;
+  auto setup = fake_setup();
+  setup.scene = path;
+  st::Session ses(setup, "deformoff", 1.0);
+  ASSERT_TRUE(ses.wait_ready());
+  // A viewer that subscribes anyway gets nothing.
+  neurosim::wire::Reader<neurosim_Deformation> viewer(ses.client.pp, ses.client.deform_topic);
+  EXPECT_EQ(ses.server.wait(15), 0) << ses.server.log();
+  const std::string log = ses.server.log();
+  EXPECT_NE(log.find("not built: Deformation"), std::string::npos) << log;
+  EXPECT_EQ(displacement_calls(log), 0) << log;
+  EXPECT_TRUE(viewer.take().empty());
+}
+
+TEST(service_fake, BadSceneExitsWithErrorNamingFileAndField) {
+  const auto dir = nt::temp_dir("service_bad_scene");
+  std::ifstream in(fake_setup().scene);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  text = std::regex_replace(text, std::regex("poisson_ratio: 0.4"), "poisson_ratio: 0.7");
+  const auto path = dir / "bad.scene";
+  std::ofstream(path) << text;
+  st::ChildProcess p(nt::bin_dir() / "service_test_fake_server", {"--scene", path.string(), "--duration", "5"},
+                     dir / "log.txt");
+  EXPECT_EQ(p.wait(20), 1);
+  const std::string log = p.log();
+  EXPECT_NE(log.find("bad.scene"), std::string::npos) << log;
+  EXPECT_NE(log.find("meshes[0].material"), std::string::npos) << log;
+}

@@ -1,0 +1,73 @@
+// Test-only Simulation with an analytic contact law, so the DDS plumbing of the service can be
+// tested without the physics of issue 4: every scene mesh becomes a small structured box mesh
+// over the mesh's generator box (or the unit cube), and the FIRST mesh's +x face is a half-space
+// spring: penetration d = (x_max + r_tip) - tip.x > 0 inside the face's y/z extent gives
+// force (k d, 0, 0) on the tool, stiffness -k e_x e_x^T, normal +x.
+// Stations feel each other: each tool's force is scaled by (1 + kCross * sum of the other
+// tools' penetrations / r_tip), so results depend on all poses of a step.
+#pragma once
+
+#include "server/interaction/simulation.hpp"
+
+#include <atomic>
+#include <memory>
+#include <string>
+#include <vector>
+
+// The issue 4 implementation extends the contract (setup_stats, body_of, ...); it ships
+// coupled_body.hpp alongside, which tells the two versions of simulation.hpp apart.
+#if __has_include("server/interaction/coupled_body.hpp")
+#define NEUROSIM_FAKE_EXTENDED_CONTRACT 1
+#else
+#define NEUROSIM_FAKE_EXTENDED_CONTRACT 0
+#endif
+
+namespace neurosim::service::testing {
+
+class FakeSimulation : public interaction::Simulation {
+ public:
+  static constexpr double kStiffness = 2000.0;  // N/m
+  static constexpr double kCross = 0.05;        // dimensionless
+
+  explicit FakeSimulation(const scene::Scene& scene);
+  ~FakeSimulation() override;
+
+  int num_meshes() const override { return static_cast<int>(meshes_.size()); }
+  const std::string& mesh_id(int m) const override { return ids_.at(static_cast<std::size_t>(m)); }
+  const mesh::TetMesh& mesh(int m) const override { return meshes_.at(static_cast<std::size_t>(m)); }
+  void step(const std::vector<interaction::ToolPose>& poses,
+            std::vector<interaction::ToolContact>& contacts,
+            interaction::StepStats& stats) override;
+  void displacements(int m, Eigen::VectorXd& u_m) const override;
+
+#if NEUROSIM_FAKE_EXTENDED_CONTRACT
+  bool mesh_active(int) const override { return true; }
+  double tie_residual_m() const override { return 0.0; }
+  const interaction::SetupStats& setup_stats() const override { return setup_; }
+  int num_tools() const override { return 1; }
+  const interaction::CoupledBody* body_of(int) const override { return nullptr; }
+  void last_contact_forces(int, std::vector<int>& slots,
+                           std::vector<interaction::Vec3>& forces_n) const override {
+    slots.clear();
+    forces_n.clear();
+  }
+#endif
+
+  long displacement_calls() const { return displacement_calls_.load(); }
+
+ private:
+  std::vector<std::string> ids_;
+  std::vector<mesh::TetMesh> meshes_;
+  double x_max_{1}, y_lo_{0}, y_hi_{1}, z_lo_{0}, z_hi_{1}, x_min_{0};
+  double tip_radius_m_{0.003};
+  double last_max_depth_m_{0};
+  std::vector<double> depth_;  // scratch, per tool
+  mutable std::atomic<long> displacement_calls_{0};
+#if NEUROSIM_FAKE_EXTENDED_CONTRACT
+  interaction::SetupStats setup_{};
+#endif
+};
+
+std::unique_ptr<interaction::Simulation> make_fake(const scene::Scene& scene);
+
+}  // namespace neurosim::service::testing
