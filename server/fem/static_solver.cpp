@@ -382,18 +382,24 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
     // Prescribed free nodes: multipliers lam (their reaction forces) with
     // (E^T K_ff^-1 E) lam = ubar - E^T u0, then u_f = u0 + K_ff^-1 E lam.
     const int m = 3 * static_cast<int>(free_prescribed.size());
-    Eigen::MatrixXd e = Eigen::MatrixXd::Zero(nf, m), g;
     Eigen::VectorXd target(m);
     std::vector<int> rows(m);
     for (int c = 0; c < m; ++c) {
       const int v = nodes[free_prescribed[c / 3]];
       rows[c] = reduced_index_[3 * v + c % 3];
-      e(rows[c], c) = 1.0;
       target[c] = u[3 * v + c % 3] - u0(rows[c], 0);
     }
-    solve_reduced(e, g);
-    Eigen::MatrixXd s(m, m);
-    for (int c = 0; c < m; ++c) s.row(c) = g.row(rows[c]);
+    // S = E^T K_ff^-1 E by block solves of kBlock unit columns (memory nf x kBlock, not nf x m).
+    constexpr int kBlock = 64;
+    Eigen::MatrixXd s(m, m), e, g;
+    for (int c0 = 0; c0 < m; c0 += kBlock) {
+      const int cols = std::min(kBlock, m - c0);
+      e.setZero(nf, cols);
+      for (int c = 0; c < cols; ++c) e(rows[c0 + c], c) = 1.0;
+      solve_reduced(e, g);
+      for (int c = 0; c < cols; ++c)
+        for (int r = 0; r < m; ++r) s(r, c0 + c) = g(rows[r], c);
+    }
     s = 0.5 * (s + s.transpose()).eval();
     Eigen::LLT<Eigen::MatrixXd> schur(s);
     if (schur.info() != Eigen::Success) {
@@ -401,7 +407,11 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
                                "positive definite");
     }
     const Eigen::VectorXd lam = schur.solve(target);
-    u0.col(0) += g * lam;
+    // u_f = u0 + K_ff^-1 E lam: one more solve.
+    e.setZero(nf, 1);
+    for (int c = 0; c < m; ++c) e(rows[c], 0) += lam[c];
+    solve_reduced(e, g);
+    u0.col(0) += g.col(0);
   }
   for (int r = 0; r < nf; ++r) {
     const int d = free_dofs_[r];
