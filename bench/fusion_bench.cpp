@@ -48,7 +48,7 @@ struct Row {
   std::string label;
   std::size_t vertices{0}, tets{0}, embedded_tets{0}, s_prime{0}, inside{0};
   double paper_ms{-1}, brute_ms{0}, fast_ms{0}, fast_min_ms{0};
-  double fast_wall_ms{0};  // median wall-clock time of the fast version
+  double fast_wall_ms{0};                   // median wall-clock time of the fast version
   double no_validate_ms{0}, no_cull_ms{0};  // fast variants: B trusted as closed; per-face descents
   bool agree{false};
   std::size_t bvh_bytes{0}, tets_checked{0}, face_queries{0}, point_queries{0};
@@ -131,16 +131,24 @@ int main(int argc, char** argv) {
         if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
         return argv[++i];
       };
-      if (a == "--csv") csv = true;
-      else if (a == "--no-brain") brain = false;
-      else if (a == "--no-brute") brute = false;  // for profiling the fast path only
-      else if (a == "--max-vertices") max_vertices = std::stoi(value());
-      else if (a == "--min-vertices") min_vertices = std::stoi(value());
-      else if (a == "--repeats") repeats = std::max(1, std::stoi(value()));
-      else if (a == "--table") table = value();
+      if (a == "--csv")
+        csv = true;
+      else if (a == "--no-brain")
+        brain = false;
+      else if (a == "--no-brute")
+        brute = false;  // for profiling the fast path only
+      else if (a == "--max-vertices")
+        max_vertices = std::stoi(value());
+      else if (a == "--min-vertices")
+        min_vertices = std::stoi(value());
+      else if (a == "--repeats")
+        repeats = std::max(1, std::stoi(value()));
+      else if (a == "--table")
+        table = value();
       else {
-        std::cerr << "usage: fusion_bench [--csv] [--min-vertices N] [--max-vertices N] [--repeats R] "
-                     "[--no-brain] [--no-brute] [--table PATH]\n";
+        std::cerr
+            << "usage: fusion_bench [--csv] [--min-vertices N] [--max-vertices N] [--repeats R] "
+               "[--no-brain] [--no-brute] [--table PATH]\n";
         return 2;
       }
     }
@@ -148,7 +156,8 @@ int main(int argc, char** argv) {
     for (const fusion::PaperRow& p : fusion::read_paper_table3(table)) {
       if (p.cube_vertices > max_vertices || p.cube_vertices < min_vertices) continue;
       const fusion::MeshPair pair = fusion::make_cube_cylinder(p.cube_vertices);
-      rows.push_back(measure(std::to_string(pair.host.num_vertices()), pair, p.time_ms, repeats, brute));
+      rows.push_back(
+          measure(std::to_string(pair.host.num_vertices()), pair, p.time_ms, repeats, brute));
       std::cerr << "cube " << p.cube_vertices << " (paper) -> " << pair.description << "\n";
     }
     if (brain) {
@@ -157,24 +166,27 @@ int main(int argc, char** argv) {
       std::cerr << "brain_like: " << pair.description << "\n";
     }
     if (csv) {
-      std::printf("cube_vertices,cube_tets,new_boundary_triangles,inside_triangles,paper_ms,brute_ms,"
-                  "fast_ms,agree\n");
+      std::printf(
+          "cube_vertices,cube_tets,new_boundary_triangles,inside_triangles,paper_ms,brute_ms,"
+          "fast_ms,agree\n");
       for (const Row& r : rows) {
         char paper[32] = "nan";  // the paper has no time for the brain-sized pair
         if (r.paper_ms > 0) std::snprintf(paper, sizeof paper, "%.1f", r.paper_ms);
-        std::printf("%s,%zu,%zu,%zu,%s,%.1f,%.4f,%d\n", r.label.c_str(), r.tets, r.s_prime, r.inside,
-                    paper, r.brute_ms, r.fast_ms, r.agree ? 1 : 0);
+        std::printf("%s,%zu,%zu,%zu,%s,%.1f,%.4f,%d\n", r.label.c_str(), r.tets, r.s_prime,
+                    r.inside, paper, r.brute_ms, r.fast_ms, r.agree ? 1 : 0);
       }
     } else {
-      std::printf("%-12s %7s %9s %6s %8s %9s %10s %9s %9s %9s %9s %9s %5s %8s %7s %7s %7s\n", "host_verts",
-                  "tets", "emb_tets", "S'", "inside", "paper_ms", "brute_ms", "fast_ms", "fast_min",
-                  "fast_wall", "no_valid", "per_face", "agree", "bvh_kB", "checked", "faces", "points");
+      std::printf("%-12s %7s %9s %6s %8s %9s %10s %9s %9s %9s %9s %9s %5s %8s %7s %7s %7s\n",
+                  "host_verts", "tets", "emb_tets", "S'", "inside", "paper_ms", "brute_ms",
+                  "fast_ms", "fast_min", "fast_wall", "no_valid", "per_face", "agree", "bvh_kB",
+                  "checked", "faces", "points");
       for (const Row& r : rows) {
-        std::printf("%-12s %7zu %9zu %6zu %8zu %9.1f %10.1f %9.4f %9.4f %9.4f %9.4f %9.4f %5d %8.1f %7zu %7zu %7zu\n",
-                    r.label.c_str(), r.tets, r.embedded_tets, r.s_prime, r.inside, r.paper_ms,
-                    r.brute_ms, r.fast_ms, r.fast_min_ms, r.fast_wall_ms, r.no_validate_ms, r.no_cull_ms,
-                    r.agree ? 1 : 0, r.bvh_bytes / 1024.0,
-                    r.tets_checked, r.face_queries, r.point_queries);
+        std::printf(
+            "%-12s %7zu %9zu %6zu %8zu %9.1f %10.1f %9.4f %9.4f %9.4f %9.4f %9.4f %5d %8.1f %7zu "
+            "%7zu %7zu\n",
+            r.label.c_str(), r.tets, r.embedded_tets, r.s_prime, r.inside, r.paper_ms, r.brute_ms,
+            r.fast_ms, r.fast_min_ms, r.fast_wall_ms, r.no_validate_ms, r.no_cull_ms,
+            r.agree ? 1 : 0, r.bvh_bytes / 1024.0, r.tets_checked, r.face_queries, r.point_queries);
       }
     }
     for (const Row& r : rows) {

@@ -24,12 +24,14 @@ P3 to_point(const Vec3& v) { return P3(v.x(), v.y(), v.z()); }
 
 // For each node, the closest point on the triangle set (tree finds the triangle, Ericson's
 // routine gives the weights).
-std::vector<SurfacePoint> closest_points(const std::vector<Vec3>& node_pos, const std::vector<int>& nodes,
+std::vector<SurfacePoint> closest_points(const std::vector<Vec3>& node_pos,
+                                         const std::vector<int>& nodes,
                                          const std::vector<Vec3>& tri_pos,
                                          const std::vector<Tri>& tris, DistanceSummary& summary) {
   std::vector<T3> kt;
   kt.reserve(tris.size());
-  for (const Tri& t : tris) kt.emplace_back(to_point(tri_pos[t[0]]), to_point(tri_pos[t[1]]), to_point(tri_pos[t[2]]));
+  for (const Tri& t : tris)
+    kt.emplace_back(to_point(tri_pos[t[0]]), to_point(tri_pos[t[1]]), to_point(tri_pos[t[2]]));
   Tree tree(kt.cbegin(), kt.cend());
   tree.accelerate_distance_queries();
   std::vector<SurfacePoint> out;
@@ -44,7 +46,8 @@ std::vector<SurfacePoint> closest_points(const std::vector<Vec3>& node_pos, cons
     SurfacePoint sp = closest_point_on_triangle(p, tri_pos[t[0]], tri_pos[t[1]], tri_pos[t[2]]);
     sp.triangle = ti;
     if (!std::isfinite(sp.distance_m)) {
-      throw std::runtime_error("coupling map: non-finite distance at node " + std::to_string(nodes[i]));
+      throw std::runtime_error("coupling map: non-finite distance at node " +
+                               std::to_string(nodes[i]));
     }
     sum += sp.distance_m;
     if (sp.distance_m > summary.max_m || summary.argmax < 0) {
@@ -108,10 +111,11 @@ SurfacePoint closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3&
   return set(1 - v - w, v, w);
 }
 
-CouplingMap build_coupling_map(const std::vector<Vec3>& host_vertices_m, const NewBoundary& boundary,
-                               const TriangleSurface& embedded) {
+CouplingMap build_coupling_map(const std::vector<Vec3>& host_vertices_m,
+                               const NewBoundary& boundary, const TriangleSurface& embedded) {
   if (boundary.triangles.empty()) {
-    throw std::invalid_argument("coupling map: the new boundary S' is empty (B does not overlap A)");
+    throw std::invalid_argument(
+        "coupling map: the new boundary S' is empty (B does not overlap A)");
   }
   if (embedded.triangles.empty()) {
     throw std::invalid_argument("coupling map: surface '" + embedded.name + "' has no triangles");
@@ -119,14 +123,16 @@ CouplingMap build_coupling_map(const std::vector<Vec3>& host_vertices_m, const N
   check_indices(boundary.triangles, host_vertices_m.size(), "new boundary");
   check_indices(embedded.triangles, embedded.vertices_m.size(), "surface '" + embedded.name + "'");
   CouplingMap map;
-  for (const Tri& t : embedded.triangles) map.embedded_nodes.insert(map.embedded_nodes.end(), t.begin(), t.end());
+  for (const Tri& t : embedded.triangles)
+    map.embedded_nodes.insert(map.embedded_nodes.end(), t.begin(), t.end());
   std::sort(map.embedded_nodes.begin(), map.embedded_nodes.end());
   map.embedded_nodes.erase(std::unique(map.embedded_nodes.begin(), map.embedded_nodes.end()),
                            map.embedded_nodes.end());
   map.boundary_nodes = boundary.vertices();
   for (int v : map.boundary_nodes) {
     if (!host_vertices_m[v].allFinite()) {
-      throw std::invalid_argument("coupling map: host vertex " + std::to_string(v) + " is not finite");
+      throw std::invalid_argument("coupling map: host vertex " + std::to_string(v) +
+                                  " is not finite");
     }
   }
   for (int v : map.embedded_nodes) {
@@ -135,10 +141,12 @@ CouplingMap build_coupling_map(const std::vector<Vec3>& host_vertices_m, const N
                                   embedded.name + "' is not finite");
     }
   }
-  map.embedded_on_boundary = closest_points(embedded.vertices_m, map.embedded_nodes, host_vertices_m,
-                                            boundary.triangles, map.embedded_to_boundary);
-  map.boundary_on_embedded = closest_points(host_vertices_m, map.boundary_nodes, embedded.vertices_m,
-                                            embedded.triangles, map.boundary_to_embedded);
+  map.embedded_on_boundary =
+      closest_points(embedded.vertices_m, map.embedded_nodes, host_vertices_m, boundary.triangles,
+                     map.embedded_to_boundary);
+  map.boundary_on_embedded =
+      closest_points(host_vertices_m, map.boundary_nodes, embedded.vertices_m, embedded.triangles,
+                     map.boundary_to_embedded);
   return map;
 }
 

@@ -12,10 +12,10 @@
 namespace neurosim::fusion {
 
 struct SurfacePoint {
-  int triangle{-1};                  // index into the target's triangle list
-  std::array<double, 3> weights{};   // barycentric, >= 0, sum 1, on the triangle's vertices
-  Vec3 point_m{Vec3::Zero()};        // closest point, unit m
-  double distance_m{0.0};            // |node - point|, unit m
+  int triangle{-1};                 // index into the target's triangle list
+  std::array<double, 3> weights{};  // barycentric, >= 0, sum 1, on the triangle's vertices
+  Vec3 point_m{Vec3::Zero()};       // closest point, unit m
+  double distance_m{0.0};           // |node - point|, unit m
 };
 
 struct DistanceSummary {
@@ -39,8 +39,8 @@ struct CouplingMap {
 
 // host_vertices_m: A's vertex positions (rest or current), unit m. Throws std::invalid_argument
 // if S' is empty (nothing to couple to) or an index is out of range.
-CouplingMap build_coupling_map(const std::vector<Vec3>& host_vertices_m, const NewBoundary& boundary,
-                               const TriangleSurface& embedded);
+CouplingMap build_coupling_map(const std::vector<Vec3>& host_vertices_m,
+                               const NewBoundary& boundary, const TriangleSurface& embedded);
 
 // Closest point of triangle abc to p (Ericson, Real-Time Collision Detection 5.1.5), with its
 // barycentric weights; triangle index left at -1.

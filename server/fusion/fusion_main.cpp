@@ -51,17 +51,18 @@ void run(const mesh::TetMesh& host, const mesh::TetMesh& embedded, const std::st
   std::printf("%s: host %zu vertices / %zu tets, embedded %zu vertices / %zu surface triangles\n",
               prefix.c_str(), host.num_vertices(), host.num_tets(), embedded.num_vertices(),
               embedded.surface().size());
-  std::printf("  S' %zu triangles, inside triangles %zu (%.1f %%), intersected faces %zu, %.3f ms\n",
-              s.triangles.size(), s.stats.inside_triangles,
-              100.0 * static_cast<double>(s.triangles.size()) /
-                  static_cast<double>(std::max<std::size_t>(1, s.stats.inside_triangles)),
-              s.stats.intersected_faces,
-              std::chrono::duration<double, std::milli>(t1 - t0).count());
+  std::printf(
+      "  S' %zu triangles, inside triangles %zu (%.1f %%), intersected faces %zu, %.3f ms\n",
+      s.triangles.size(), s.stats.inside_triangles,
+      100.0 * static_cast<double>(s.triangles.size()) /
+          static_cast<double>(std::max<std::size_t>(1, s.stats.inside_triangles)),
+      s.stats.intersected_faces, std::chrono::duration<double, std::milli>(t1 - t0).count());
   if (!s.triangles.empty()) {
     const fusion::CouplingMap m = fusion::build_coupling_map(host.vertices(), s, b);
-    std::printf("  B surface -> S': max %.4g m, mean %.4g m; S' -> B surface: max %.4g m, mean %.4g m\n",
-                m.embedded_to_boundary.max_m, m.embedded_to_boundary.mean_m,
-                m.boundary_to_embedded.max_m, m.boundary_to_embedded.mean_m);
+    std::printf(
+        "  B surface -> S': max %.4g m, mean %.4g m; S' -> B surface: max %.4g m, mean %.4g m\n",
+        m.embedded_to_boundary.max_m, m.embedded_to_boundary.mean_m, m.boundary_to_embedded.max_m,
+        m.boundary_to_embedded.mean_m);
   }
   std::printf("  wrote %s_{host,embedded_surface,new_boundary}.vtu\n", prefix.c_str());
 }
@@ -115,14 +116,16 @@ int main(int argc, char** argv) {
     if (brain_like) {
       const fusion::MeshPair pair = fusion::make_brain_like();
       std::printf("%s\n", pair.description.c_str());
-      run(pair.host, pair.embedded, (std::filesystem::path(out) / "brain_like").string(), save_meshes);
+      run(pair.host, pair.embedded, (std::filesystem::path(out) / "brain_like").string(),
+          save_meshes);
       return 0;
     }
     for (int n : cubes) {
       const fusion::MeshPair pair = fusion::make_cube_cylinder(n);
       std::printf("%s\n", pair.description.c_str());
       run(pair.host, pair.embedded,
-          (std::filesystem::path(out) / ("figure11_cube" + std::to_string(n))).string(), save_meshes);
+          (std::filesystem::path(out) / ("figure11_cube" + std::to_string(n))).string(),
+          save_meshes);
     }
     return 0;
   } catch (const std::exception& e) {

@@ -92,8 +92,8 @@ Crossing classify(const P3& p, const P3& q, const T3& t) {
   const CGAL::Orientation o2 = CGAL::orientation(p, q, c, a);
   const bool neg = o0 == CGAL::NEGATIVE || o1 == CGAL::NEGATIVE || o2 == CGAL::NEGATIVE;
   const bool pos = o0 == CGAL::POSITIVE || o1 == CGAL::POSITIVE || o2 == CGAL::POSITIVE;
-  if (neg && pos) return Crossing::kNone;  // X outside the triangle
-  if (sp == CGAL::COPLANAR) return Crossing::kOnSurface;  // X = p lies on the triangle
+  if (neg && pos) return Crossing::kNone;                  // X outside the triangle
+  if (sp == CGAL::COPLANAR) return Crossing::kOnSurface;   // X = p lies on the triangle
   if (sq == CGAL::COPLANAR) return Crossing::kDegenerate;  // cannot happen: q outside B's box
   if (o0 != CGAL::COPLANAR && o1 != CGAL::COPLANAR && o2 != CGAL::COPLANAR) {
     return Crossing::kProper;
@@ -111,8 +111,16 @@ P3 far_point(const P3& p, const CGAL::Bbox_3& box, int attempt) {
   bool up = true;
   double best = hi[0] - pc[0];
   for (int d = 0; d < 3; ++d) {
-    if (hi[d] - pc[d] < best) { best = hi[d] - pc[d]; axis = d; up = true; }
-    if (pc[d] - lo[d] < best) { best = pc[d] - lo[d]; axis = d; up = false; }
+    if (hi[d] - pc[d] < best) {
+      best = hi[d] - pc[d];
+      axis = d;
+      up = true;
+    }
+    if (pc[d] - lo[d] < best) {
+      best = pc[d] - lo[d];
+      axis = d;
+      up = false;
+    }
   }
   // Rotate the axis on later attempts so a bad plane is left behind.
   axis = (axis + attempt / 4) % 3;
@@ -152,7 +160,10 @@ bool outside_brute(const P3& p, const Prepared& b) {
       const Crossing c = classify(p, q, t);
       if (c == Crossing::kProper) ++crossings;
       if (c == Crossing::kOnSurface) throw_on_surface(p);
-      if (c == Crossing::kDegenerate) { retry = true; break; }
+      if (c == Crossing::kDegenerate) {
+        retry = true;
+        break;
+      }
     }
     if (!retry) return crossings % 2 == 0;
   }
@@ -294,7 +305,8 @@ bool outside_closed_surface(const Vec3& p_m, const TriangleSurface& surface) {
   return outside_brute(to_point(p_m), prepare(surface, true));
 }
 
-NewBoundary find_new_boundary_bruteforce(const mesh::TetMesh& host, const TriangleSurface& embedded) {
+NewBoundary find_new_boundary_bruteforce(const mesh::TetMesh& host,
+                                         const TriangleSurface& embedded) {
   const Prepared b = prepare(embedded, true);
   const std::vector<P3> pts = host_points(host);
   NewBoundary out;
@@ -360,9 +372,9 @@ NewBoundary find_new_boundary(const mesh::TetMesh& host, const TriangleSurface& 
   }
   Tree tree(b.tris.cbegin(), b.tris.cend());
   tree.do_not_accelerate_distance_queries();
-  st.bvh_bytes = b.tris.size() * (sizeof(T3) + sizeof(CGAL::Bbox_3) + sizeof(Primitive)) +
-                 (b.tris.size() > 0 ? b.tris.size() - 1 : 0) *
-                     (sizeof(CGAL::Bbox_3) + 2 * sizeof(void*));
+  st.bvh_bytes =
+      b.tris.size() * (sizeof(T3) + sizeof(CGAL::Bbox_3) + sizeof(Primitive)) +
+      (b.tris.size() > 0 ? b.tris.size() - 1 : 0) * (sizeof(CGAL::Bbox_3) + 2 * sizeof(void*));
 
   const auto& tets = host.tets();
   const auto& nbr = host.neighbours();
@@ -403,8 +415,10 @@ NewBoundary find_new_boundary(const mesh::TetMesh& host, const TriangleSurface& 
     } else {
       BoxHit bh{&b};
       tree.traversal(tb, bh);
-      if (!bh.hit) candidates.clear();
-      else candidates.assign(1, -1);  // non-empty marker: query the tree per face below
+      if (!bh.hit)
+        candidates.clear();
+      else
+        candidates.assign(1, -1);  // non-empty marker: query the tree per face below
     }
     if (candidates.empty()) {
       ++st.tets_culled;
@@ -451,7 +465,10 @@ NewBoundary find_new_boundary(const mesh::TetMesh& host, const TriangleSurface& 
       const mesh::Tri f = face_of(tet, k);
       int v = f[0];
       for (int i = 0; i < 3; ++i) {
-        if (vertex_side[f[i]] != 0) { v = f[i]; break; }
+        if (vertex_side[f[i]] != 0) {
+          v = f[i];
+          break;
+        }
       }
       if (vertex_side[v] == 0) {
         ++st.point_queries;

@@ -59,7 +59,8 @@ struct InclusionOptions {
 
 // Reference: Algorithm 1 as written — every face of every tetrahedron against every triangle of
 // B, inside/outside against every triangle. Only the whole-mesh box test of step 2 culls.
-NewBoundary find_new_boundary_bruteforce(const mesh::TetMesh& host, const TriangleSurface& embedded);
+NewBoundary find_new_boundary_bruteforce(const mesh::TetMesh& host,
+                                         const TriangleSurface& embedded);
 
 // Same result, fast: box culling of tetrahedra, an AABB tree over B's triangles, one exact
 // test per distinct face (shared faces are cached) and one parity test per vertex.

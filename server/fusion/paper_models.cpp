@@ -43,8 +43,8 @@ std::vector<PaperRow> read_paper_table3(const std::string& csv_path) {
     if (line.empty() || line[0] == '#') continue;
     if (!header_seen) {
       if (line.rfind("cube_vertices,new_boundary_triangles,inside_triangles,time_ms", 0) != 0) {
-        throw std::runtime_error(csv_path + ":" + std::to_string(line_no) + ": unexpected header '" +
-                                 line + "'");
+        throw std::runtime_error(csv_path + ":" + std::to_string(line_no) +
+                                 ": unexpected header '" + line + "'");
       }
       header_seen = true;
       continue;
@@ -52,10 +52,11 @@ std::vector<PaperRow> read_paper_table3(const std::string& csv_path) {
     std::istringstream s(line);
     PaperRow r;
     char c1 = 0, c2 = 0, c3 = 0;
-    if (!(s >> r.cube_vertices >> c1 >> r.new_boundary_triangles >> c2 >> r.inside_triangles >> c3 >>
-          r.time_ms) ||
+    if (!(s >> r.cube_vertices >> c1 >> r.new_boundary_triangles >> c2 >> r.inside_triangles >>
+          c3 >> r.time_ms) ||
         c1 != ',' || c2 != ',' || c3 != ',' || r.cube_vertices <= 0 || !(r.time_ms > 0.0)) {
-      throw std::runtime_error(csv_path + ":" + std::to_string(line_no) + ": bad row '" + line + "'");
+      throw std::runtime_error(csv_path + ":" + std::to_string(line_no) + ": bad row '" + line +
+                               "'");
     }
     rows.push_back(r);
   }
@@ -78,7 +79,8 @@ MeshPair make_brain_like(int host_vertices, int artery_vertices, unsigned seed) 
   mesh::GeneratedMesh art = mesh::generate_cylinder(a, b - a, 0.0025, art_opt);
   std::ostringstream d;
   d << "box 0.14 x 0.11 x 0.09 m (" << host.mesh.num_vertices() << " vertices, "
-    << host.mesh.num_tets() << " tets), tube r 2.5 mm from (0.025,0.03,0.03) to (0.12,0.08,0.06) m ("
+    << host.mesh.num_tets()
+    << " tets), tube r 2.5 mm from (0.025,0.03,0.03) to (0.12,0.08,0.06) m ("
     << art.mesh.num_vertices() << " vertices, " << art.mesh.num_tets() << " tets)";
   return {std::move(host.mesh), std::move(art.mesh), d.str()};
 }

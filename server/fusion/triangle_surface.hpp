@@ -13,8 +13,8 @@ using mesh::Tri;
 using mesh::Vec3;
 
 struct TriangleSurface {
-  std::vector<Vec3> vertices_m;  // unit m; may hold vertices no triangle uses
-  std::vector<Tri> triangles;    // indices into vertices_m
+  std::vector<Vec3> vertices_m;   // unit m; may hold vertices no triangle uses
+  std::vector<Tri> triangles;     // indices into vertices_m
   std::string name{"<surface>"};  // for messages
 
   // B's boundary faces on B's own vertex numbering (TetMesh::surface()).
@@ -24,7 +24,7 @@ struct TriangleSurface {
 // An edge used by an odd number of triangles (a hole's rim when the count is 1).
 struct OpenEdge {
   int v0{-1};
-  int v1{-1};      // v0 < v1, vertex ids of the surface
+  int v1{-1};        // v0 < v1, vertex ids of the surface
   int triangles{0};  // how many triangles use it
 };
 

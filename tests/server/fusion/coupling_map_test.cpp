@@ -15,19 +15,23 @@ using test::structured_box;
 
 TEST(fusion_coupling_map, ClosestPointOnTriangleRegions) {
   const Vec3 a(0, 0, 0), b(1, 0, 0), c(0, 1, 0);
-  struct Case { Vec3 p; Vec3 q; };
-  const Case cases[] = {{Vec3(0.2, 0.2, 0.5), Vec3(0.2, 0.2, 0)},   // face
-                        {Vec3(-1, -1, 0.3), a},                     // vertex a
-                        {Vec3(2, -0.5, 0), b},                      // vertex b
-                        {Vec3(-0.2, 3, -1), c},                     // vertex c
-                        {Vec3(0.5, -1, 0), Vec3(0.5, 0, 0)},        // edge ab
-                        {Vec3(1, 1, 2), Vec3(0.5, 0.5, 0)},         // edge bc
-                        {Vec3(-1, 0.25, 0), Vec3(0, 0.25, 0)}};     // edge ca
+  struct Case {
+    Vec3 p;
+    Vec3 q;
+  };
+  const Case cases[] = {{Vec3(0.2, 0.2, 0.5), Vec3(0.2, 0.2, 0)},  // face
+                        {Vec3(-1, -1, 0.3), a},                    // vertex a
+                        {Vec3(2, -0.5, 0), b},                     // vertex b
+                        {Vec3(-0.2, 3, -1), c},                    // vertex c
+                        {Vec3(0.5, -1, 0), Vec3(0.5, 0, 0)},       // edge ab
+                        {Vec3(1, 1, 2), Vec3(0.5, 0.5, 0)},        // edge bc
+                        {Vec3(-1, 0.25, 0), Vec3(0, 0.25, 0)}};    // edge ca
   for (const auto& k : cases) {
     const SurfacePoint s = closest_point_on_triangle(k.p, a, b, c);
     EXPECT_NEAR((s.point_m - k.q).norm(), 0.0, 1e-14) << k.p.transpose();
     EXPECT_NEAR(s.weights[0] + s.weights[1] + s.weights[2], 1.0, 1e-14);
-    EXPECT_NEAR((s.weights[0] * a + s.weights[1] * b + s.weights[2] * c - s.point_m).norm(), 0, 1e-14);
+    EXPECT_NEAR((s.weights[0] * a + s.weights[1] * b + s.weights[2] * c - s.point_m).norm(), 0,
+                1e-14);
     EXPECT_NEAR(s.distance_m, (k.p - k.q).norm(), 1e-14);
   }
 }
@@ -45,9 +49,11 @@ TEST(fusion_coupling_map, BothDirectionsMatchExhaustiveSearch) {
   ASSERT_EQ(m.boundary_nodes, s.vertices());
   ASSERT_EQ(m.embedded_on_boundary.size(), m.embedded_nodes.size());
   ASSERT_EQ(m.boundary_on_embedded.size(), m.boundary_nodes.size());
-  auto exhaustive = [](const Vec3& p, const std::vector<Vec3>& x, const std::vector<mesh::Tri>& tris) {
+  auto exhaustive = [](const Vec3& p, const std::vector<Vec3>& x,
+                       const std::vector<mesh::Tri>& tris) {
     double best = 1e300;
-    for (const auto& t : tris) best = std::min(best, closest_point_on_triangle(p, x[t[0]], x[t[1]], x[t[2]]).distance_m);
+    for (const auto& t : tris)
+      best = std::min(best, closest_point_on_triangle(p, x[t[0]], x[t[1]], x[t[2]]).distance_m);
     return best;
   };
   double max_d = 0, sum = 0;
@@ -69,7 +75,8 @@ TEST(fusion_coupling_map, BothDirectionsMatchExhaustiveSearch) {
   EXPECT_NEAR(m.embedded_to_boundary.mean_m, sum / m.embedded_nodes.size(), 1e-15);
   for (std::size_t i = 0; i < m.boundary_nodes.size(); ++i) {
     const Vec3& p = a.vertices()[m.boundary_nodes[i]];
-    EXPECT_NEAR(m.boundary_on_embedded[i].distance_m, exhaustive(p, b.vertices_m, b.triangles), 1e-12);
+    EXPECT_NEAR(m.boundary_on_embedded[i].distance_m, exhaustive(p, b.vertices_m, b.triangles),
+                1e-12);
     EXPECT_GT(m.boundary_on_embedded[i].distance_m, 0.0);  // S' never touches B
   }
   // S' lies within a couple of host cells (h = 1/6 m) of B and vice versa.

@@ -48,7 +48,8 @@ inline TetMesh structured_box(const Vec3& lo, const Vec3& hi, int nx, int ny, in
 }
 
 // x -> scale * R x + t, same connectivity.
-inline TetMesh transformed(const TetMesh& m, const Eigen::Matrix3d& r, double scale, const Vec3& t) {
+inline TetMesh transformed(const TetMesh& m, const Eigen::Matrix3d& r, double scale,
+                           const Vec3& t) {
   std::vector<Vec3> v;
   v.reserve(m.num_vertices());
   for (const Vec3& x : m.vertices()) v.push_back(scale * (r * x) + t);

@@ -46,7 +46,8 @@ NewBoundary both(const mesh::TetMesh& a, const TriangleSurface& b, const std::st
 
 TEST(fusion_inclusion, InsideTrianglesCountsInteriorFacesPerTetrahedron) {
   const auto a = structured_box(Vec3::Zero(), Vec3::Ones(), 3, 2, 2);
-  const auto b = TriangleSurface::of(structured_box(Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.7), 1, 1, 1));
+  const auto b =
+      TriangleSurface::of(structured_box(Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.7), 1, 1, 1));
   const NewBoundary s = find_new_boundary(a, b);
   // Each interior face belongs to two tetrahedra: 2 * (4T - S) / 2 == 4T - S.
   std::size_t interior_faces_twice = 0;
@@ -91,31 +92,36 @@ TEST(fusion_inclusion, RandomStructuredPairsAgree) {
 // B's faces lie on A's grid planes: coplanar faces, shared vertices and edges everywhere.
 TEST(fusion_inclusion, CoplanarSharedVerticesAndEdges) {
   const auto a = structured_box(Vec3::Zero(), Vec3::Ones(), 4, 4, 4);
-  const auto b = TriangleSurface::of(structured_box(Vec3(0.25, 0.25, 0.25), Vec3(0.75, 0.75, 0.75), 2, 2, 2));
+  const auto b =
+      TriangleSurface::of(structured_box(Vec3(0.25, 0.25, 0.25), Vec3(0.75, 0.75, 0.75), 2, 2, 2));
   const NewBoundary s = both(a, b, "aligned box");
   // Touching counts as intersecting: every A face on B's surface, or sharing a vertex with it.
   EXPECT_GT(s.stats.intersected_faces, 0u);
   // A face that touches B at one vertex only is intersected; its opposite face can be S'.
   EXPECT_GT(s.triangles.size(), 0u);
   // And half a cell off the grid (B's faces through A's cells' diagonals' vertices).
-  const auto b2 = TriangleSurface::of(structured_box(Vec3(0.25, 0.25, 0.25), Vec3(0.75, 0.625, 0.5), 2, 3, 2));
+  const auto b2 =
+      TriangleSurface::of(structured_box(Vec3(0.25, 0.25, 0.25), Vec3(0.75, 0.625, 0.5), 2, 3, 2));
   both(a, b2, "half-aligned box");
 }
 
 TEST(fusion_inclusion, EmbeddedTouchingHostOuterSurface) {
   const auto a = structured_box(Vec3::Zero(), Vec3::Ones(), 4, 4, 4);
   // x = 0 face of B on A's boundary plane.
-  const auto b = TriangleSurface::of(structured_box(Vec3(0, 0.31, 0.29), Vec3(0.47, 0.69, 0.71), 2, 2, 2));
+  const auto b =
+      TriangleSurface::of(structured_box(Vec3(0, 0.31, 0.29), Vec3(0.47, 0.69, 0.71), 2, 2, 2));
   EXPECT_GT(both(a, b, "touching outer surface").triangles.size(), 0u);
   // Touching from outside only: B's face on x = 1, B itself outside A.
-  const auto c = TriangleSurface::of(structured_box(Vec3(1, 0.31, 0.29), Vec3(1.4, 0.69, 0.71), 2, 2, 2));
+  const auto c =
+      TriangleSurface::of(structured_box(Vec3(1, 0.31, 0.29), Vec3(1.4, 0.69, 0.71), 2, 2, 2));
   const NewBoundary s = both(a, c, "touching from outside");
   EXPECT_GT(s.stats.intersected_faces, 0u);
 }
 
 TEST(fusion_inclusion, EmbeddedPartlyOutsideHost) {
   const auto a = structured_box(Vec3::Zero(), Vec3::Ones(), 5, 5, 5);
-  const auto b = TriangleSurface::of(structured_box(Vec3(-0.33, 0.31, 0.29), Vec3(0.47, 0.69, 0.71), 3, 2, 2));
+  const auto b =
+      TriangleSurface::of(structured_box(Vec3(-0.33, 0.31, 0.29), Vec3(0.47, 0.69, 0.71), 3, 2, 2));
   const NewBoundary s = both(a, b, "partly outside");
   EXPECT_GT(s.triangles.size(), 0u);
 }
@@ -130,7 +136,8 @@ TEST(fusion_inclusion, DisjointGivesEmptyBoundary) {
   // Boxes overlap but the meshes do not: B in a corner of the box of A turned 45 deg about z.
   const Eigen::Matrix3d rz = Eigen::AngleAxisd(M_PI / 4, Vec3::UnitZ()).toRotationMatrix();
   const auto a_rot = test::transformed(a, rz, 1.0, Vec3::Zero());
-  const auto c = TriangleSurface::of(structured_box(Vec3(0.5, 0.02, 0.3), Vec3(0.65, 0.12, 0.5), 1, 1, 1));
+  const auto c =
+      TriangleSurface::of(structured_box(Vec3(0.5, 0.02, 0.3), Vec3(0.65, 0.12, 0.5), 1, 1, 1));
   const NewBoundary s2 = both(a_rot, c, "boxes overlap, meshes disjoint");
   EXPECT_TRUE(s2.triangles.empty());
   EXPECT_EQ(s2.stats.intersected_faces, 0u);
@@ -146,7 +153,8 @@ TEST(fusion_inclusion, EmbeddedEnclosingHostOrInsideOneTetGivesEmptyBoundary) {
   const auto& t = a.tets()[17];
   Vec3 c = Vec3::Zero();
   for (int v : t) c += 0.25 * a.vertices()[v];
-  const auto tiny = TriangleSurface::of(structured_box(c - Vec3::Constant(1e-3), c + Vec3::Constant(1e-3), 1, 1, 1));
+  const auto tiny = TriangleSurface::of(
+      structured_box(c - Vec3::Constant(1e-3), c + Vec3::Constant(1e-3), 1, 1, 1));
   const NewBoundary s2 = both(a, tiny, "B inside one tetrahedron");
   EXPECT_TRUE(s2.triangles.empty());
   EXPECT_EQ(s2.stats.intersected_faces, 0u);
@@ -154,13 +162,16 @@ TEST(fusion_inclusion, EmbeddedEnclosingHostOrInsideOneTetGivesEmptyBoundary) {
 
 TEST(fusion_inclusion, OpenEmbeddedSurfaceIsAnErrorNamingItsEdges) {
   const auto a = structured_box(Vec3::Zero(), Vec3::Ones(), 2, 2, 2);
-  auto b = TriangleSurface::of(structured_box(Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.6), 1, 1, 1), "holed");
+  auto b = TriangleSurface::of(structured_box(Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.6), 1, 1, 1),
+                               "holed");
   const auto removed = b.triangles.back();
   b.triangles.pop_back();
   for (auto run : {0, 1}) {
     try {
-      if (run == 0) find_new_boundary(a, b);
-      else find_new_boundary_bruteforce(a, b);
+      if (run == 0)
+        find_new_boundary(a, b);
+      else
+        find_new_boundary_bruteforce(a, b);
       FAIL() << "open surface accepted";
     } catch (const std::invalid_argument& e) {
       const std::string msg = e.what();
@@ -179,7 +190,8 @@ TEST(fusion_inclusion, OpenEmbeddedSurfaceIsAnErrorNamingItsEdges) {
 
 TEST(fusion_inclusion, BadEmbeddedSurfaceIsRejected) {
   const auto a = structured_box(Vec3::Zero(), Vec3::Ones(), 2, 2, 2);
-  const auto good = TriangleSurface::of(structured_box(Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.6), 1, 1, 1));
+  const auto good =
+      TriangleSurface::of(structured_box(Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.6), 1, 1, 1));
   auto nan = good;
   nan.vertices_m[nan.triangles[0][1]].y() = std::nan("");
   EXPECT_THROW(find_new_boundary(a, nan), std::invalid_argument);
@@ -208,7 +220,8 @@ TEST(fusion_inclusion, OutsideTestMatchesAnalyticBox) {
   std::uniform_real_distribution<double> u(-1.5, 1.5);
   const Eigen::Matrix3d r = test::random_rotation(rng);
   const Vec3 t(0.1, -0.2, 0.3);
-  const auto b = TriangleSurface::of(test::transformed(structured_box(Vec3(-1, -0.5, -0.7), Vec3(1, 0.5, 0.7), 3, 2, 2), r, 1.0, t));
+  const auto b = TriangleSurface::of(test::transformed(
+      structured_box(Vec3(-1, -0.5, -0.7), Vec3(1, 0.5, 0.7), 3, 2, 2), r, 1.0, t));
   int inside = 0;
   for (int i = 0; i < 400; ++i) {
     const Vec3 p(u(rng), u(rng), u(rng));

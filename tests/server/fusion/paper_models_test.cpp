@@ -1,8 +1,8 @@
 // The paper's cube/cylinder (Figure 8c, Table 3) with CGAL-generated meshes: fast == brute
 // force on the cube series and on 200 random placements, S' surrounds B, and Figure 11.
+#include "server/fusion/paper_models.hpp"
 #include "server/fusion/coupling_map.hpp"
 #include "server/fusion/inclusion.hpp"
-#include "server/fusion/paper_models.hpp"
 #include "server/mesh/generate.hpp"
 #include "server/mesh/vtu.hpp"
 
@@ -35,12 +35,14 @@ TEST(fusion_paper_models, CubeSeriesFastEqualsBruteForce) {
   for (const PaperRow& r : rows) {
     const MeshPair pair = make_cube_cylinder(r.cube_vertices);
     // The generator aims within a few percent of the paper's vertex count.
-    EXPECT_NEAR(static_cast<double>(pair.host.num_vertices()), r.cube_vertices, 0.05 * r.cube_vertices + 2);
+    EXPECT_NEAR(static_cast<double>(pair.host.num_vertices()), r.cube_vertices,
+                0.05 * r.cube_vertices + 2);
     const auto b = TriangleSurface::of(pair.embedded);
     const NewBoundary fast = find_new_boundary(pair.host, b);
     const NewBoundary brute = find_new_boundary_bruteforce(pair.host, b);
-    EXPECT_TRUE(agree(fast, brute)) << "cube " << r.cube_vertices << ": fast " << fast.triangles.size()
-                                    << " vs brute " << brute.triangles.size() << " triangles";
+    EXPECT_TRUE(agree(fast, brute))
+        << "cube " << r.cube_vertices << ": fast " << fast.triangles.size() << " vs brute "
+        << brute.triangles.size() << " triangles";
     EXPECT_GT(fast.triangles.size(), 0u) << r.cube_vertices;
     // Same definition as the paper's "inside triangles" (4 tets - surface faces): within 20 %
     // of its count (the rest is the mesher: tets per vertex differ on coarse cubes).
@@ -58,16 +60,17 @@ TEST(fusion_paper_models, RandomPlacementsFastEqualsBruteForce) {
   o.seed = 4;
   const mesh::TetMesh cube = mesh::generate_box(Vec3::Zero(), Vec3::Ones(), o).mesh;
   o.target_vertices = 60;
-  const mesh::TetMesh cyl =
-      mesh::generate_cylinder(Vec3(0, 0, -0.5), Vec3(0, 0, 1), 0.3, o).mesh;
-  const mesh::TetMesh box = test::structured_box(Vec3(-0.5, -0.3, -0.2), Vec3(0.5, 0.3, 0.2), 2, 2, 1);
+  const mesh::TetMesh cyl = mesh::generate_cylinder(Vec3(0, 0, -0.5), Vec3(0, 0, 1), 0.3, o).mesh;
+  const mesh::TetMesh box =
+      test::structured_box(Vec3(-0.5, -0.3, -0.2), Vec3(0.5, 0.3, 0.2), 2, 2, 1);
   std::mt19937 rng(2024);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   int nonempty = 0;
   for (int i = 0; i < 200; ++i) {
     const mesh::TetMesh& base = (i % 3 == 2) ? box : cyl;
-    const mesh::TetMesh b_mesh = test::transformed(base, test::random_rotation(rng), 0.2 + 0.8 * u(rng),
-                                                   Vec3(u(rng), u(rng), u(rng)) * 1.2 - Vec3::Constant(0.1));
+    const mesh::TetMesh b_mesh =
+        test::transformed(base, test::random_rotation(rng), 0.2 + 0.8 * u(rng),
+                          Vec3(u(rng), u(rng), u(rng)) * 1.2 - Vec3::Constant(0.1));
     const auto b = TriangleSurface::of(b_mesh, "placement " + std::to_string(i));
     const NewBoundary fast = find_new_boundary(cube, b);
     const NewBoundary brute = find_new_boundary_bruteforce(cube, b);
@@ -95,7 +98,8 @@ TEST(fusion_paper_models, NewBoundarySurroundsEmbedded) {
           << m.embedded_on_boundary[i].distance_m << " m from S', local edge " << h << " m";
     }
     for (int v : s.vertices()) {
-      EXPECT_LT(test::winding_number(pair.host.vertices()[v], b), 0.5) << "cube " << n << " vertex " << v;
+      EXPECT_LT(test::winding_number(pair.host.vertices()[v], b), 0.5)
+          << "cube " << n << " vertex " << v;
     }
     // Every direction around the cylinder's axis has S' on it (it wraps around B).
     int sectors = 0;
@@ -104,7 +108,10 @@ TEST(fusion_paper_models, NewBoundarySurroundsEmbedded) {
       for (int v : s.vertices()) {
         const Vec3& x = pair.host.vertices()[v];
         const double ang = std::atan2(x.z() - 0.05, x.y() - 0.05);
-        if (ang >= a0 && ang < a1) { ++sectors; break; }
+        if (ang >= a0 && ang < a1) {
+          ++sectors;
+          break;
+        }
       }
     }
     EXPECT_EQ(sectors, 8) << "cube " << n;

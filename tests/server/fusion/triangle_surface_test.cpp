@@ -26,7 +26,8 @@ TEST(fusion_triangle_surface, HoleEdgesAreListed) {
   for (const auto& e : open) {
     EXPECT_LT(e.v0, e.v1);
     EXPECT_EQ(e.triangles, 1);
-    const bool in_t = std::count(t.begin(), t.end(), e.v0) == 1 && std::count(t.begin(), t.end(), e.v1) == 1;
+    const bool in_t =
+        std::count(t.begin(), t.end(), e.v0) == 1 && std::count(t.begin(), t.end(), e.v1) == 1;
     EXPECT_TRUE(in_t) << e.v0 << "," << e.v1;
   }
   EXPECT_THROW(validate_closed(s), std::invalid_argument);
