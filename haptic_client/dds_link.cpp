@@ -2,6 +2,9 @@
 
 #include "idl/wire/dds.hpp"
 
+#include <pthread.h>
+#include <sched.h>
+#include <semaphore.h>
 #include <time.h>
 
 namespace neurosim::haptic {
@@ -26,6 +29,7 @@ struct DdsLink::Impl {
   wire::Reader<neurosim_SimStatus> status;
   wire::Waitset ws;
   wire::Sample<neurosim_ToolState> sample;
+  sem_t pending;  // posted by publish() (async-signal-safe, no lock in the loop thread)
 
   explicit Impl(const DdsLinkOptions& o)
       : opt(o),
@@ -41,32 +45,59 @@ struct DdsLink::Impl {
     ws.attach_data(models, kModels);
     ws.attach_data(status, kStatus);
     ws.attach_liveliness(status, kStatusLiveliness);
+    sem_init(&pending, 0, 0);
   }
+  ~Impl() { sem_destroy(&pending); }
 };
 
 DdsLink::DdsLink(const DdsLinkOptions& options) {
   if (options.station_id.empty()) throw std::invalid_argument("haptic DDS link: empty station id");
   impl_ = std::make_unique<Impl>(options);
   thread_ = std::thread([this] { run(); });
+  publisher_ = std::thread([this] { run_publisher(); });
 }
 
 DdsLink::~DdsLink() {
   stop_ = true;
-  if (impl_) impl_->ws.wake();
+  if (impl_) {
+    impl_->ws.wake();
+    sem_post(&impl_->pending);
+  }
   if (thread_.joinable()) thread_.join();
+  if (publisher_.joinable()) publisher_.join();
 }
 
 void DdsLink::publish(const ToolSample& s) {
-  neurosim_ToolState& t = *impl_->sample;
-  for (int i = 0; i < 3; ++i) {
-    t.position_m[i] = s.position_m[i];
-    t.velocity_m_per_s[i] = s.velocity_m_per_s[i];
+  outgoing_.write(s);
+  sem_post(&impl_->pending);
+}
+
+void DdsLink::run_publisher() {
+  if (impl_->opt.publisher_rt_priority > 0) {
+    sched_param p{};
+    p.sched_priority = impl_->opt.publisher_rt_priority;
+    pthread_setschedparam(pthread_self(), SCHED_FIFO, &p);  // best effort: normal if refused
   }
-  for (int i = 0; i < 4; ++i) t.orientation[i] = s.orientation[i];
-  t.buttons = s.buttons;
-  t.sequence_number = s.sequence_number;
-  t.source_time_ns = s.source_time_ns;
-  impl_->tools.write(t, s.source_time_ns);
+  ToolSample s;
+  neurosim_ToolState& t = *impl_->sample;
+  while (!stop_.load()) {
+    if (sem_wait(&impl_->pending) != 0) continue;  // EINTR
+    if (stop_.load()) break;
+    if (!outgoing_.take(s)) continue;  // several posts, one newest sample: already sent
+    for (int i = 0; i < 3; ++i) {
+      t.position_m[i] = s.position_m[i];
+      t.velocity_m_per_s[i] = s.velocity_m_per_s[i];
+    }
+    for (int i = 0; i < 4; ++i) t.orientation[i] = s.orientation[i];
+    t.buttons = s.buttons;
+    t.sequence_number = s.sequence_number;
+    t.source_time_ns = s.source_time_ns;
+    try {
+      impl_->tools.write(t, s.source_time_ns);
+    } catch (const std::exception&) {
+      write_errors_.fetch_add(1);  // counted; the loop's watchdog handles missing answers
+    }
+  }
 }
 
 DdsLinkCounters DdsLink::counters() const {
@@ -75,6 +106,7 @@ DdsLinkCounters DdsLink::counters() const {
   c.models_rejected = rejected_.load();
   c.server_lost = lost_.load();
   c.server_seen = seen_.load();
+  c.write_errors = write_errors_.load();
   return c;
 }
 

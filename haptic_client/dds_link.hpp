@@ -21,6 +21,9 @@ struct DdsLinkOptions {
   std::string tool_topic = "neurosim_ToolState";
   std::string model_topic = "neurosim_ContactModel";
   std::string status_topic = "neurosim_SimStatus";
+  // ToolStates are written by a publisher thread (the loop only posts them lock-free), at this
+  // SCHED_FIFO priority where permitted (0: normal priority), so DDS locks never stall the loop.
+  int publisher_rt_priority = 70;
 };
 
 struct DdsLinkCounters {
@@ -28,6 +31,7 @@ struct DdsLinkCounters {
   std::uint64_t models_rejected = 0;   // tool_sample_rejected set by the server
   std::uint64_t server_lost = 0;       // SimStatus writers went from alive to none
   std::uint64_t server_seen = 0;       // SimStatus writers appeared (first time or reconnect)
+  std::uint64_t write_errors = 0;      // ToolState writes that failed
 };
 
 class DdsLink : public Link {
@@ -37,6 +41,7 @@ class DdsLink : public Link {
   DdsLink(const DdsLink&) = delete;
   DdsLink& operator=(const DdsLink&) = delete;
 
+  // Loop thread: lock-free hand-off to the publisher thread (never blocks).
   void publish(const ToolSample& s) override;
   bool take_model(ContactModelData& out) override { return slot_.take(out); }
   bool server_alive() override { return alive_.load(std::memory_order_acquire); }
@@ -46,13 +51,16 @@ class DdsLink : public Link {
 
  private:
   void run();
+  void run_publisher();
   struct Impl;
   std::unique_ptr<Impl> impl_;
   LatestSlot<ContactModelData> slot_;
+  LatestSlot<ToolSample> outgoing_;
   std::atomic<bool> alive_{true};
   std::atomic<bool> stop_{false};
-  std::atomic<std::uint64_t> models_{0}, rejected_{0}, lost_{0}, seen_{0};
+  std::atomic<std::uint64_t> models_{0}, rejected_{0}, lost_{0}, seen_{0}, write_errors_{0};
   std::thread thread_;
+  std::thread publisher_;
 };
 
 }  // namespace neurosim::haptic

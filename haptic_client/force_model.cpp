@@ -148,43 +148,42 @@ ForceOutput ForceModel::step(const ForceInput& in) {
 
   out.has_model = has_current_;
   out.gain = gain_;
-  if (!has_current_ || gain_ <= 0) {
-    if (server_gone_) reset();
-    last_force_.setZero();
-    out.model_age_s = age;
-    out.model_sequence = has_current_ ? current_.tool_sequence : 0;
-    return out;
-  }
   out.model_age_s = age;
-  out.model_sequence = current_.tool_sequence;
-  out.in_contact = current_.in_contact;
+  out.model_sequence = has_current_ ? current_.tool_sequence : 0;
+  out.in_contact = has_current_ && current_.in_contact;
 
-  // Extrapolate the newest model; blend offset from the model change (issue 6 "blend").
-  const Eigen::Vector3d f = extrapolate(current_, in.position_m) + blend_offset_;
-  Eigen::Vector3d fd = cfg_.force_scale * f;
-  const Eigen::Vector3d& n = current_.normal;
-  if (current_.in_contact && n.squaredNorm() > 0 && fd.squaredNorm() > 0) {
-    // Virtual-coupling damping along the normal (device velocity = scene velocity / scale).
-    const double vn = in.velocity_m_per_s.dot(n) / cfg_.workspace_scale;
-    fd -= damping_ * vn * n;
-    const double fn = fd.dot(n);
-    if (fn < 0) fd -= fn * n;  // still unilateral
+  Eigen::Vector3d fd = Eigen::Vector3d::Zero();
+  if (has_current_ && gain_ > 0) {
+    // Extrapolate the newest model; blend offset from the model change (issue 6 "blend").
+    const Eigen::Vector3d f = extrapolate(current_, in.position_m) + blend_offset_;
+    fd = cfg_.force_scale * f;
+    const Eigen::Vector3d& n = current_.normal;
+    if (current_.in_contact && n.squaredNorm() > 0 && fd.squaredNorm() > 0) {
+      // Virtual-coupling damping along the normal (device velocity = scene velocity / scale).
+      const double vn = in.velocity_m_per_s.dot(n) / cfg_.workspace_scale;
+      fd -= damping_ * vn * n;
+      const double fn = fd.dot(n);
+      if (fn < 0) fd -= fn * n;  // still unilateral
+    }
+    fd *= gain_;
+    const double mag = fd.norm();
+    if (mag > cfg_.max_force_n) fd *= cfg_.max_force_n / mag;
+    if (!fd.allFinite()) {
+      ++counters_.nan_outputs;
+      gain_ = 0;
+      last_force_.setZero();
+      out.force_n.setZero();
+      return out;
+    }
   }
-  fd *= gain_;
-  const double mag = fd.norm();
-  if (mag > cfg_.max_force_n) fd *= cfg_.max_force_n / mag;
-  if (!fd.allFinite()) {
-    ++counters_.nan_outputs;
-    gain_ = 0;
-    last_force_.setZero();
-    return out;
-  }
-  // Bound the tick-to-tick step (blend and ramp normally keep well below it).
+  // Bound the tick-to-tick step (ramp, blend and fade normally stay well below it; only a
+  // stalled loop, whose fade is then due at once, needs it). NaN is the one exception above.
   const Eigen::Vector3d delta = fd - last_force_;
   const double dm = delta.norm();
   if (dm > cfg_.max_force_step_n) fd = last_force_ + delta * (cfg_.max_force_step_n / dm);
   last_force_ = fd;
   out.force_n = fd;
+  if (server_gone_ && gain_ <= 0 && fd.squaredNorm() == 0) reset();  // drop the dead server's model
   return out;
 }
 
