@@ -91,19 +91,29 @@ void StiffnessAssembler::assemble(const mesh::TetMesh& mesh, const MaterialMap& 
   std::fill_n(values, k.nonZeros(), 0.0);
   const auto& tets = mesh.tets();
   const auto& x = mesh.vertices();
-  ElementMatrix ke;
+  double grad[4][3], kab[3][3];
   for (std::size_t e = 0; e < num_tets_; ++e) {
     const auto& t = tets[e];
     const TetGeometry g = tet_geometry({x[t[0]], x[t[1]], x[t[2]], x[t[3]]}, static_cast<int>(e));
     const int m = materials.tet_material.empty() ? 0 : materials.tet_material[e];
-    tet_stiffness(g, lambda[m], mu[m], ke);
-    const int* start = block_start_.data() + e * 48;
     for (int a = 0; a < 4; ++a)
-      for (int b = 0; b < 4; ++b)
+      for (int i = 0; i < 3; ++i) grad[a][i] = g.gradients(a, i);
+    const double vl = g.volume_m3 * lambda[m], vm = g.volume_m3 * mu[m];
+    const int* start = block_start_.data() + e * 48;
+    // Blocks (a, b), b >= a, scattered to (a, b) and transposed to (b, a): K_e is never formed.
+    for (int a = 0; a < 4; ++a)
+      for (int b = a; b < 4; ++b) {
+        tet_stiffness_block(grad[a], grad[b], vl, vm, kab);
         for (int j = 0; j < 3; ++j) {
           double* dst = values + start[(4 * a + b) * 3 + j];
-          for (int i = 0; i < 3; ++i) dst[i] += ke(3 * a + i, 3 * b + j);
+          for (int i = 0; i < 3; ++i) dst[i] += kab[i][j];
         }
+        if (b == a) continue;
+        for (int j = 0; j < 3; ++j) {
+          double* dst = values + start[(4 * b + a) * 3 + j];
+          for (int i = 0; i < 3; ++i) dst[i] += kab[j][i];
+        }
+      }
   }
 }
 

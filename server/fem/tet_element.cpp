@@ -71,18 +71,20 @@ Eigen::Matrix<double, 6, 12> strain_displacement(const TetGeometry& g) {
 }
 
 void tet_stiffness(const TetGeometry& g, double lambda_pa, double mu_pa, ElementMatrix& k) {
-  const double v = g.volume_m3;
-  for (int a = 0; a < 4; ++a) {
-    const Eigen::Vector3d ga = g.gradients.row(a).transpose();
+  double grad[4][3];
+  for (int a = 0; a < 4; ++a)
+    for (int i = 0; i < 3; ++i) grad[a][i] = g.gradients(a, i);
+  const double vl = g.volume_m3 * lambda_pa, vm = g.volume_m3 * mu_pa;
+  double kab[3][3];
+  for (int a = 0; a < 4; ++a)
     for (int b = a; b < 4; ++b) {
-      const Eigen::Vector3d gb = g.gradients.row(b).transpose();
-      Eigen::Matrix3d kab = lambda_pa * ga * gb.transpose() + mu_pa * gb * ga.transpose();
-      kab.diagonal().array() += mu_pa * ga.dot(gb);
-      kab *= v;
-      k.block<3, 3>(3 * a, 3 * b) = kab;
-      if (b != a) k.block<3, 3>(3 * b, 3 * a) = kab.transpose();
+      tet_stiffness_block(grad[a], grad[b], vl, vm, kab);
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+          k(3 * a + i, 3 * b + j) = kab[i][j];
+          k(3 * b + j, 3 * a + i) = kab[i][j];
+        }
     }
-  }
 }
 
 ElementMatrix tet_stiffness(const TetNodes& x, const Material& material, int element_id) {

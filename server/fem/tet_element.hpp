@@ -32,6 +32,16 @@ Eigen::Matrix<double, 6, 12> strain_displacement(const TetGeometry& g);
 // K_e = V B^T D B (unit N/m), written in the closed isotropic form
 // K_ab = V (lambda g_a g_b^T + mu g_b g_a^T + mu (g_a . g_b) I): no 6x6 products in assembly.
 void tet_stiffness(const TetGeometry& g, double lambda_pa, double mu_pa, ElementMatrix& k);
+
+// The 3x3 block K_ab of that formula: out[i][j] = vl ga_i gb_j + vm gb_i ga_j + vm (ga.gb) d_ij
+// with vl = V lambda, vm = V mu (unit N/m). Shared by tet_stiffness and the assembler's
+// scatter loop, which never forms the 12x12 matrix.
+inline void tet_stiffness_block(const double* ga, const double* gb, double vl, double vm, double out[3][3]) {
+  const double dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) out[i][j] = vl * ga[i] * gb[j] + vm * gb[i] * ga[j];
+  for (int i = 0; i < 3; ++i) out[i][i] += vm * dot;
+}
 ElementMatrix tet_stiffness(const TetNodes& x, const Material& material, int element_id = -1);
 
 // Strain energy 1/2 V eps^T D eps (unit J) for nodal displacements u (m), via B and D.
