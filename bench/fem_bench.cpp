@@ -23,7 +23,9 @@ namespace {
 using namespace neurosim;
 using Clock = std::chrono::steady_clock;
 
-double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
 
 // Best of `reps` runs of f, in ms.
 template <class F>
@@ -58,7 +60,8 @@ Row run(const Case& c) {
   r.name = c.name;
   r.nodes = c.mesh.num_vertices();
   r.tets = c.mesh.num_tets();
-  const fem::MaterialMap brain = fem::MaterialMap::uniform({1.0e6, 0.4, "brain"});  // paper, Table 2
+  const fem::MaterialMap brain =
+      fem::MaterialMap::uniform({1.0e6, 0.4, "brain"});  // paper, Table 2
   Eigen::Vector3d lo, hi;
   c.mesh.bounds(lo, hi);
   const double tol = 1e-9 * (hi - lo).norm();
@@ -117,8 +120,10 @@ Row run(const Case& c) {
 int main(int argc, char** argv) {
   bool csv = false, quick = false;
   for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--csv")) csv = true;
-    else if (!std::strcmp(argv[i], "--quick")) quick = true;
+    if (!std::strcmp(argv[i], "--csv"))
+      csv = true;
+    else if (!std::strcmp(argv[i], "--quick"))
+      quick = true;
     else {
       std::fprintf(stderr, "usage: fem_bench [--csv] [--quick]\n");
       return 2;
@@ -132,7 +137,8 @@ int main(int argc, char** argv) {
     cases.push_back({"grid " + std::to_string(n) + "^3", fem::testing::box_mesh(s)});
   }
 #ifdef NEUROSIM_HAVE_MESHGEN
-  // The paper's cube series (Table 3, 50..1812 vertices: a subset) and a brain-sized cube, CGAL Mesh_3.
+  // The paper's cube series (Table 3, 50..1812 vertices: a subset) and a brain-sized cube, CGAL
+  // Mesh_3.
   for (int target : {50, 207, 535, 1013, 1812, 5300}) {
     if (quick && target > 535) break;
     mesh::MeshingOptions o;
@@ -142,24 +148,29 @@ int main(int argc, char** argv) {
   }
 #endif
   if (csv) {
-    std::printf("mesh,nodes,tets,free_dofs,pattern_ms,assemble_ms,analyze_ms,factorize_ms,column_ms,columns,"
-                "singles_ms,block32_ms,block64_ms,block300_ms,factor_nnz,factor_MB\n");
+    std::printf(
+        "mesh,nodes,tets,free_dofs,pattern_ms,assemble_ms,analyze_ms,factorize_ms,column_ms,"
+        "columns,"
+        "singles_ms,block32_ms,block64_ms,block300_ms,factor_nnz,factor_MB\n");
   } else {
-    std::printf("%-11s %6s %6s %6s | %7s %8s %8s %9s | %7s %4s %9s %8s %8s %8s | %9s %7s\n", "mesh", "nodes", "tets",
-                "dofs", "patt ms", "assem ms", "anal ms", "factor ms", "col ms", "cols", "single ms", "blk32", "blk64",
-                "blk300", "nnz(L)", "L MB");
+    std::printf("%-11s %6s %6s %6s | %7s %8s %8s %9s | %7s %4s %9s %8s %8s %8s | %9s %7s\n", "mesh",
+                "nodes", "tets", "dofs", "patt ms", "assem ms", "anal ms", "factor ms", "col ms",
+                "cols", "single ms", "blk32", "blk64", "blk300", "nnz(L)", "L MB");
   }
   for (const Case& c : cases) {
     const Row r = run(c);
     if (csv) {
-      std::printf("%s,%zu,%zu,%d,%.3f,%.3f,%.3f,%.3f,%.4f,%d,%.3f,%.3f,%.3f,%.3f,%lld,%.3f\n", r.name.c_str(), r.nodes,
-                  r.tets, r.free_dofs, r.pattern_ms, r.assemble_ms, r.analyze_ms, r.factorize_ms, r.column_ms,
-                  r.columns, r.singles300_ms, r.block32_ms, r.block64_ms, r.block300_ms, r.factor_nnz, r.factor_mb);
+      std::printf("%s,%zu,%zu,%d,%.3f,%.3f,%.3f,%.3f,%.4f,%d,%.3f,%.3f,%.3f,%.3f,%lld,%.3f\n",
+                  r.name.c_str(), r.nodes, r.tets, r.free_dofs, r.pattern_ms, r.assemble_ms,
+                  r.analyze_ms, r.factorize_ms, r.column_ms, r.columns, r.singles300_ms,
+                  r.block32_ms, r.block64_ms, r.block300_ms, r.factor_nnz, r.factor_mb);
     } else {
-      std::printf("%-11s %6zu %6zu %6d | %7.2f %8.2f %8.2f %9.2f | %7.3f %4d %9.2f %8.2f %8.2f %8.2f | %9lld %7.2f\n",
-                  r.name.c_str(), r.nodes, r.tets, r.free_dofs, r.pattern_ms, r.assemble_ms, r.analyze_ms,
-                  r.factorize_ms, r.column_ms, r.columns, r.singles300_ms, r.block32_ms, r.block64_ms, r.block300_ms,
-                  r.factor_nnz, r.factor_mb);
+      std::printf(
+          "%-11s %6zu %6zu %6d | %7.2f %8.2f %8.2f %9.2f | %7.3f %4d %9.2f %8.2f %8.2f %8.2f | "
+          "%9lld %7.2f\n",
+          r.name.c_str(), r.nodes, r.tets, r.free_dofs, r.pattern_ms, r.assemble_ms, r.analyze_ms,
+          r.factorize_ms, r.column_ms, r.columns, r.singles300_ms, r.block32_ms, r.block64_ms,
+          r.block300_ms, r.factor_nnz, r.factor_mb);
     }
     std::fflush(stdout);
   }

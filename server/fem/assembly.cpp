@@ -74,9 +74,9 @@ StiffnessAssembler::StiffnessAssembler(const mesh::TetMesh& mesh)
 void StiffnessAssembler::assemble(const mesh::TetMesh& mesh, const MaterialMap& materials,
                                   SparseMatrix& k) const {
   if (mesh.num_vertices() != num_nodes_ || mesh.num_tets() != num_tets_) {
-    throw std::invalid_argument("StiffnessAssembler: mesh '" + mesh.source() + "' (" +
-                                std::to_string(mesh.num_vertices()) + " nodes, " +
-                                std::to_string(mesh.num_tets()) + " tets) is not the mesh of this pattern");
+    throw std::invalid_argument(
+        "StiffnessAssembler: mesh '" + mesh.source() + "' (" + std::to_string(mesh.num_vertices()) +
+        " nodes, " + std::to_string(mesh.num_tets()) + " tets) is not the mesh of this pattern");
   }
   materials.validate(num_tets_);
   std::vector<double> lambda(materials.materials.size()), mu(materials.materials.size());

@@ -1,12 +1,12 @@
 #include "server/fem/calculix.hpp"
 
-#include <cmath>
-#include <cctype>
-#include <cstdlib>
-#include <iterator>
 #include <sys/wait.h>
+#include <cctype>
+#include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <iomanip>
+#include <iterator>
 #include <sstream>
 #include <stdexcept>
 
@@ -22,8 +22,8 @@ std::string shell_quote(const std::string& s) {
 
 void check_node(int v, std::size_t n, const char* what) {
   if (v < 0 || static_cast<std::size_t>(v) >= n) {
-    throw std::invalid_argument(std::string("write_calculix_input: ") + what + " node " + std::to_string(v) +
-                                " out of range");
+    throw std::invalid_argument(std::string("write_calculix_input: ") + what + " node " +
+                                std::to_string(v) + " out of range");
   }
 }
 
@@ -42,8 +42,10 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
   materials.validate(mesh.num_tets());
   for (int v : loads.fixed_nodes) check_node(v, n, "fixed");
   for (int v : loads.prescribed_nodes) check_node(v, n, "prescribed");
-  if (loads.prescribed_displacements_m.size() != 3 * static_cast<Eigen::Index>(loads.prescribed_nodes.size())) {
-    throw std::invalid_argument("write_calculix_input: need 3 prescribed displacements per prescribed node");
+  if (loads.prescribed_displacements_m.size() !=
+      3 * static_cast<Eigen::Index>(loads.prescribed_nodes.size())) {
+    throw std::invalid_argument(
+        "write_calculix_input: need 3 prescribed displacements per prescribed node");
   }
   if (!loads.prescribed_displacements_m.allFinite()) {
     throw std::invalid_argument("write_calculix_input: non-finite prescribed displacement");
@@ -51,7 +53,8 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
   if (loads.forces_n.size() != 0 && loads.forces_n.size() != 3 * static_cast<Eigen::Index>(n)) {
     throw std::invalid_argument("write_calculix_input: forces must be empty or 3N");
   }
-  if (!loads.forces_n.allFinite()) throw std::invalid_argument("write_calculix_input: non-finite force");
+  if (!loads.forces_n.allFinite())
+    throw std::invalid_argument("write_calculix_input: non-finite force");
 
   std::ofstream out(inp_file);
   if (!out) throw std::runtime_error("write_calculix_input: cannot write " + inp_file.string());
@@ -60,27 +63,31 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
       << mesh.num_tets() << " C3D4\n*NODE, NSET=NALL\n";
   for (std::size_t v = 0; v < n; ++v) {
     const auto& x = mesh.vertices()[v];
-    if (!x.allFinite()) throw std::invalid_argument("write_calculix_input: non-finite coordinate at node " + std::to_string(v));
+    if (!x.allFinite())
+      throw std::invalid_argument("write_calculix_input: non-finite coordinate at node " +
+                                  std::to_string(v));
     out << v + 1 << ", " << x.x() << ", " << x.y() << ", " << x.z() << "\n";
   }
   const std::size_t nm = materials.materials.size();
   std::vector<std::vector<int>> tets_of(nm);
   for (std::size_t t = 0; t < mesh.num_tets(); ++t)
-    tets_of[materials.tet_material.empty() ? 0 : materials.tet_material[t]].push_back(static_cast<int>(t));
+    tets_of[materials.tet_material.empty() ? 0 : materials.tet_material[t]].push_back(
+        static_cast<int>(t));
   for (std::size_t m = 0; m < nm; ++m) {
     if (tets_of[m].empty()) continue;
     out << "*ELEMENT, TYPE=C3D4, ELSET=E" << m << "\n";
     for (int t : tets_of[m]) {
       const auto& tet = mesh.tets()[t];
-      out << t + 1 << ", " << tet[0] + 1 << ", " << tet[1] + 1 << ", " << tet[2] + 1 << ", " << tet[3] + 1 << "\n";
+      out << t + 1 << ", " << tet[0] + 1 << ", " << tet[1] + 1 << ", " << tet[2] + 1 << ", "
+          << tet[3] + 1 << "\n";
     }
   }
   for (std::size_t m = 0; m < nm; ++m) {
     if (tets_of[m].empty()) continue;
     const Material& mat = materials.materials[m];
     out << "** material " << m << ": " << mat.name << "\n*MATERIAL, NAME=M" << m << "\n*ELASTIC\n"
-        << mat.youngs_modulus_pa << ", " << mat.poisson_ratio << "\n*SOLID SECTION, ELSET=E" << m << ", MATERIAL=M"
-        << m << "\n";
+        << mat.youngs_modulus_pa << ", " << mat.poisson_ratio << "\n*SOLID SECTION, ELSET=E" << m
+        << ", MATERIAL=M" << m << "\n";
   }
   std::vector<int> rf_nodes = loads.fixed_nodes;
   rf_nodes.insert(rf_nodes.end(), loads.prescribed_nodes.begin(), loads.prescribed_nodes.end());
@@ -126,17 +133,22 @@ CalculixResult read_calculix_dat(const std::filesystem::path& dat_file, std::siz
   std::string line;
   int line_no = 0;
   auto fail = [&](const std::string& why) {
-    throw std::runtime_error(dat_file.string() + ":" + std::to_string(line_no) + ": " + why + ": '" + line + "'");
+    throw std::runtime_error(dat_file.string() + ":" + std::to_string(line_no) + ": " + why +
+                             ": '" + line + "'");
   };
   while (std::getline(in, line)) {
     ++line_no;
     const auto first = line.find_first_not_of(" \t\r");
     if (first == std::string::npos) continue;
     if (std::isalpha(static_cast<unsigned char>(line[first]))) {
-      // Block headers: " displacements (vx,vy,vz) for set NALL and time ..." / " forces (fx,fy,fz) ..."
-      if (line.compare(first, 13, "displacements") == 0) block = Block::kU;
-      else if (line.compare(first, 6, "forces") == 0) block = Block::kRF;
-      else block = Block::kNone;
+      // Block headers: " displacements (vx,vy,vz) for set NALL and time ..." / " forces (fx,fy,fz)
+      // ..."
+      if (line.compare(first, 13, "displacements") == 0)
+        block = Block::kU;
+      else if (line.compare(first, 6, "forces") == 0)
+        block = Block::kRF;
+      else
+        block = Block::kNone;
       continue;
     }
     if (block == Block::kNone) continue;
@@ -154,25 +166,26 @@ CalculixResult read_calculix_dat(const std::filesystem::path& dat_file, std::siz
   }
   for (std::size_t v = 0; v < num_nodes; ++v) {
     if (!has_u[v]) {
-      throw std::runtime_error(dat_file.string() + ": no displacement printed for node " + std::to_string(v + 1) +
-                               " (ccx id)");
+      throw std::runtime_error(dat_file.string() + ": no displacement printed for node " +
+                               std::to_string(v + 1) + " (ccx id)");
     }
   }
   return r;
 }
 
-CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::string& job, const mesh::TetMesh& mesh,
-                            const MaterialMap& materials, const CalculixLoads& loads,
-                            const CalculixRunOptions& options) {
+CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::string& job,
+                            const mesh::TetMesh& mesh, const MaterialMap& materials,
+                            const CalculixLoads& loads, const CalculixRunOptions& options) {
   std::filesystem::create_directories(work_dir);
   write_calculix_input(work_dir / (job + ".inp"), mesh, materials, loads);
   const auto dat = work_dir / (job + ".dat");
   std::filesystem::remove(dat);
   const auto log = work_dir / (job + ".log");
   std::ostringstream cmd;
-  cmd << "cd " << shell_quote(work_dir.string()) << " && OMP_NUM_THREADS=1 CCX_NPROC_EQUATION_SOLVER=1 timeout -k 5 "
-      << std::max(1.0, options.timeout_s) << " " << shell_quote(options.executable) << " -i " << shell_quote(job)
-      << " > " << shell_quote(log.string()) << " 2>&1";
+  cmd << "cd " << shell_quote(work_dir.string())
+      << " && OMP_NUM_THREADS=1 CCX_NPROC_EQUATION_SOLVER=1 timeout -k 5 "
+      << std::max(1.0, options.timeout_s) << " " << shell_quote(options.executable) << " -i "
+      << shell_quote(job) << " > " << shell_quote(log.string()) << " 2>&1";
   const int status = std::system(cmd.str().c_str());
   const int code = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : -1;
   auto log_tail = [&]() {
@@ -181,18 +194,21 @@ CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::st
     return all.size() > 1500 ? all.substr(all.size() - 1500) : all;
   };
   if (code == 124 || code == 137) {
-    throw std::runtime_error("run_calculix: ccx timed out after " + std::to_string(options.timeout_s) + " s in " +
-                             work_dir.string());
+    throw std::runtime_error("run_calculix: ccx timed out after " +
+                             std::to_string(options.timeout_s) + " s in " + work_dir.string());
   }
-  if (code == 127) throw std::runtime_error("run_calculix: '" + options.executable + "' not found (Debian: calculix-ccx)");
+  if (code == 127)
+    throw std::runtime_error("run_calculix: '" + options.executable +
+                             "' not found (Debian: calculix-ccx)");
   if (code != 0 || !std::filesystem::exists(dat)) {
-    throw std::runtime_error("run_calculix: ccx failed (exit " + std::to_string(code) + ") in " + work_dir.string() +
-                             ":\n" + log_tail());
+    throw std::runtime_error("run_calculix: ccx failed (exit " + std::to_string(code) + ") in " +
+                             work_dir.string() + ":\n" + log_tail());
   }
   // ccx exits 0 even on some input errors: they show up in the log.
   const std::string tail = log_tail();
   if (tail.find("*ERROR") != std::string::npos) {
-    throw std::runtime_error("run_calculix: ccx reported an error in " + work_dir.string() + ":\n" + tail);
+    throw std::runtime_error("run_calculix: ccx reported an error in " + work_dir.string() + ":\n" +
+                             tail);
   }
   return read_calculix_dat(dat, mesh.num_vertices());
 }

@@ -15,10 +15,10 @@ namespace neurosim::fem {
 
 // Boundary conditions and loads of one linear static step.
 struct CalculixLoads {
-  std::vector<int> fixed_nodes;                  // u = 0 in x, y, z
-  std::vector<int> prescribed_nodes;             // u given in x, y, z
-  Eigen::VectorXd prescribed_displacements_m;    // 3 per prescribed node, node-major, unit m
-  Eigen::VectorXd forces_n;                      // empty or 3N nodal forces, unit N
+  std::vector<int> fixed_nodes;                // u = 0 in x, y, z
+  std::vector<int> prescribed_nodes;           // u given in x, y, z
+  Eigen::VectorXd prescribed_displacements_m;  // 3 per prescribed node, node-major, unit m
+  Eigen::VectorXd forces_n;                    // empty or 3N nodal forces, unit N
 };
 
 // Writes a C3D4 deck: *NODE (id = node + 1), *ELEMENT per material (ELSET Ek, id = tet + 1),
@@ -47,8 +47,8 @@ struct CalculixRunOptions {
 
 // Writes <work_dir>/<job>.inp, runs `ccx -i <job>` with cwd work_dir (bounded by timeout_s,
 // one thread), reads <job>.dat. Throws std::runtime_error with the tail of ccx's log on failure.
-CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::string& job, const mesh::TetMesh& mesh,
-                            const MaterialMap& materials, const CalculixLoads& loads,
-                            const CalculixRunOptions& options = {});
+CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::string& job,
+                            const mesh::TetMesh& mesh, const MaterialMap& materials,
+                            const CalculixLoads& loads, const CalculixRunOptions& options = {});
 
 }  // namespace neurosim::fem

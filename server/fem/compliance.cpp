@@ -7,7 +7,10 @@
 namespace neurosim::fem {
 
 Compliance::Compliance(const StaticSolver& solver, const ComplianceOptions& options)
-    : solver_(solver), options_(options), slot_(solver.num_dofs(), -1), zero_(Eigen::VectorXd::Zero(solver.num_dofs())) {
+    : solver_(solver),
+      options_(options),
+      slot_(solver.num_dofs(), -1),
+      zero_(Eigen::VectorXd::Zero(solver.num_dofs())) {
   if (options_.block_columns < 1) {
     throw std::invalid_argument("Compliance: block_columns must be >= 1, got " +
                                 std::to_string(options_.block_columns));
@@ -53,7 +56,8 @@ void Compliance::precompute(const std::vector<int>& dofs) {
   const int nf = solver_.num_free_dofs();
   Eigen::MatrixXd rhs, x;
   for (std::size_t first = 0; first < missing.size(); first += options_.block_columns) {
-    const int m = static_cast<int>(std::min<std::size_t>(options_.block_columns, missing.size() - first));
+    const int m =
+        static_cast<int>(std::min<std::size_t>(options_.block_columns, missing.size() - first));
     // Unit right-hand sides: one CHOLMOD call solves all of them (BLAS-3 in the supernodes).
     rhs.setZero(nf, m);
     for (int c = 0; c < m; ++c) rhs(reduced[missing[first + c]], c) = 1.0;
@@ -86,8 +90,8 @@ void Compliance::block_from_cache(const std::vector<int>& nodes, Eigen::MatrixXd
   const Eigen::Index m = 3 * static_cast<Eigen::Index>(nodes.size());
   for (int v : nodes) {
     if (v < 0 || v >= solver_.num_nodes()) {
-      throw std::invalid_argument("Compliance::block: node " + std::to_string(v) + " out of range [0, " +
-                                  std::to_string(solver_.num_nodes()) + ")");
+      throw std::invalid_argument("Compliance::block: node " + std::to_string(v) +
+                                  " out of range [0, " + std::to_string(solver_.num_nodes()) + ")");
     }
   }
   if (out.rows() != m || out.cols() != m) out.resize(m, m);
@@ -95,8 +99,8 @@ void Compliance::block_from_cache(const std::vector<int>& nodes, Eigen::MatrixXd
     const int node_c = nodes[c / 3];
     const Eigen::VectorXd* col = find_column(3 * node_c + static_cast<int>(c % 3));
     if (!col) {
-      throw std::logic_error("Compliance::block_from_cache: column of node " + std::to_string(node_c) +
-                             " not cached (call precompute_nodes first)");
+      throw std::logic_error("Compliance::block_from_cache: column of node " +
+                             std::to_string(node_c) + " not cached (call precompute_nodes first)");
     }
     for (Eigen::Index r = 0; r < m; ++r) out(r, c) = (*col)[3 * nodes[r / 3] + r % 3];
   }

@@ -19,7 +19,8 @@ void Material::validate() const {
   }
   // nu = 0.5 is incompressible: lambda is infinite and the displacement formulation locks.
   if (!std::isfinite(poisson_ratio) || poisson_ratio <= -1.0 || poisson_ratio >= 0.5) {
-    throw std::invalid_argument(label(*this) + ": Poisson's ratio must be finite and in (-1, 0.5), got " +
+    throw std::invalid_argument(label(*this) +
+                                ": Poisson's ratio must be finite and in (-1, 0.5), got " +
                                 std::to_string(poisson_ratio));
   }
 }
@@ -28,7 +29,9 @@ double Material::lame_lambda_pa() const {
   return youngs_modulus_pa * poisson_ratio / ((1.0 + poisson_ratio) * (1.0 - 2.0 * poisson_ratio));
 }
 
-double Material::shear_modulus_pa() const { return youngs_modulus_pa / (2.0 * (1.0 + poisson_ratio)); }
+double Material::shear_modulus_pa() const {
+  return youngs_modulus_pa / (2.0 * (1.0 + poisson_ratio));
+}
 
 Eigen::Matrix<double, 6, 6> elasticity_matrix(const Material& material) {
   material.validate();
@@ -62,15 +65,15 @@ void MaterialMap::validate(std::size_t num_tets) const {
   if (tet_material.empty()) return;
   if (tet_material.size() != num_tets) {
     throw std::invalid_argument("MaterialMap: " + std::to_string(tet_material.size()) +
-                                " per-tetrahedron material ids for a mesh of " + std::to_string(num_tets) +
-                                " tetrahedra");
+                                " per-tetrahedron material ids for a mesh of " +
+                                std::to_string(num_tets) + " tetrahedra");
   }
   for (std::size_t t = 0; t < num_tets; ++t) {
     const int id = tet_material[t];
     if (id < 0 || static_cast<std::size_t>(id) >= materials.size()) {
-      throw std::invalid_argument("MaterialMap: tetrahedron " + std::to_string(t) + " has material id " +
-                                  std::to_string(id) + ", but only " + std::to_string(materials.size()) +
-                                  " materials exist");
+      throw std::invalid_argument("MaterialMap: tetrahedron " + std::to_string(t) +
+                                  " has material id " + std::to_string(id) + ", but only " +
+                                  std::to_string(materials.size()) + " materials exist");
     }
   }
 }

@@ -16,7 +16,7 @@ struct Material {
   // Throws std::invalid_argument naming the material if E <= 0, nu outside (-1, 0.5)
   // or either is non-finite.
   void validate() const;
-  double lame_lambda_pa() const;  // lambda = E nu / ((1 + nu)(1 - 2 nu)), unit Pa
+  double lame_lambda_pa() const;    // lambda = E nu / ((1 + nu)(1 - 2 nu)), unit Pa
   double shear_modulus_pa() const;  // mu = G = E / (2 (1 + nu)), unit Pa
 };
 

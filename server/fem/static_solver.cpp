@@ -1,9 +1,9 @@
 #include "server/fem/static_solver.hpp"
 
+#include <Eigen/Cholesky>
 #include <Eigen/CholmodSupport>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-#include <Eigen/Cholesky>
 
 #include <algorithm>
 #include <chrono>
@@ -89,8 +89,8 @@ struct StaticSolver::Impl {
   }
 
   // x := K_ff^-1 b for b (n x m), reusing workspace `x`, `y`, `e`.
-  void solve(const double* b_data, std::size_t n, std::size_t m, cholmod_dense** x, cholmod_dense** y,
-             cholmod_dense** e) {
+  void solve(const double* b_data, std::size_t n, std::size_t m, cholmod_dense** x,
+             cholmod_dense** y, cholmod_dense** e) {
     cholmod_dense b = dense_view(const_cast<double*>(b_data), n, m);
     if (!cholmod_solve2(CHOLMOD_A, llt.factor(), &b, nullptr, x, nullptr, y, e, &llt.common())) {
       throw std::runtime_error("StaticSolver: CHOLMOD solve failed (status " +
@@ -101,19 +101,22 @@ struct StaticSolver::Impl {
 
 StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materials,
                            const std::vector<int>& fixed_nodes, const SolverOptions& options)
-    : impl_(std::make_unique<Impl>()), options_(options), num_nodes_(static_cast<int>(mesh.num_vertices())) {
+    : impl_(std::make_unique<Impl>()),
+      options_(options),
+      num_nodes_(static_cast<int>(mesh.num_vertices())) {
   const std::string where = "StaticSolver (mesh '" + mesh.source() + "')";
   if (num_nodes_ == 0 || mesh.num_tets() == 0) throw std::invalid_argument(where + ": empty mesh");
   if (!(options_.residual_tolerance > 0.0) || !std::isfinite(options_.min_rcond)) {
-    throw std::invalid_argument(where + ": SolverOptions residual_tolerance must be > 0, min_rcond finite");
+    throw std::invalid_argument(where +
+                                ": SolverOptions residual_tolerance must be > 0, min_rcond finite");
   }
   materials.validate(mesh.num_tets());
 
   // Fixed nodes: in range, deduplicated.
   for (int v : fixed_nodes) {
     if (v < 0 || v >= num_nodes_) {
-      throw std::invalid_argument(where + ": fixed node " + std::to_string(v) + " out of range [0, " +
-                                  std::to_string(num_nodes_) + ")");
+      throw std::invalid_argument(where + ": fixed node " + std::to_string(v) +
+                                  " out of range [0, " + std::to_string(num_nodes_) + ")");
     }
   }
   fixed_nodes_ = fixed_nodes;
@@ -128,8 +131,9 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
     for (int a : t) used[a] = 1;
   for (int v = 0; v < num_nodes_; ++v) {
     if (!used[v] && !is_fixed[v]) {
-      throw std::invalid_argument(where + ": node " + std::to_string(v) +
-                                  " belongs to no tetrahedron and is not fixed: the stiffness is singular");
+      throw std::invalid_argument(
+          where + ": node " + std::to_string(v) +
+          " belongs to no tetrahedron and is not fixed: the stiffness is singular");
     }
   }
 
@@ -158,7 +162,8 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
         mean /= static_cast<double>(fx.size());
         Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
         for (int v : fx) cov += (x[v] - mean) * (x[v] - mean).transpose();
-        const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();
+        const Eigen::Vector3d ev =
+            Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();
         if (fx.size() == 1) {
           problem = "has only 1 fixed node (3 rotations free)";
         } else if (!(ev(1) > 1e-12 * ev(2))) {
@@ -167,10 +172,11 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
         }
       }
       if (!problem.empty()) {
-        throw std::invalid_argument(where + ": insufficient fixed nodes, the stiffness is singular: connected part " +
-                                    std::to_string(p) + " (" + std::to_string(part_size[p]) +
-                                    " nodes, first node " + std::to_string(part_first[p]) + ") " + problem +
-                                    "; fix at least 3 non-collinear nodes of every part");
+        throw std::invalid_argument(
+            where + ": insufficient fixed nodes, the stiffness is singular: connected part " +
+            std::to_string(p) + " (" + std::to_string(part_size[p]) + " nodes, first node " +
+            std::to_string(part_first[p]) + ") " + problem +
+            "; fix at least 3 non-collinear nodes of every part");
       }
     }
   }
@@ -229,14 +235,16 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   llt.analyzePattern(kff);
   info_.analyze_s = seconds_since(t0);
   if (llt.info() != Eigen::Success || !llt.factor()) {
-    throw std::runtime_error(where + ": CHOLMOD analysis failed (status " + std::to_string(c.status) + ")");
+    throw std::runtime_error(where + ": CHOLMOD analysis failed (status " +
+                             std::to_string(c.status) + ")");
   }
   t0 = Clock::now();
   llt.factorize(kff);
   info_.factorize_s = seconds_since(t0);
   const cholmod_factor* l = llt.factor();
   if (llt.info() != Eigen::Success) {
-    std::string msg = where + ": stiffness K_ff is singular or indefinite (CHOLMOD stopped at column " +
+    std::string msg = where +
+                      ": stiffness K_ff is singular or indefinite (CHOLMOD stopped at column " +
                       std::to_string(l->minor) + " of " + std::to_string(nf);
     if (l->minor < static_cast<std::size_t>(nf)) {
       const int dof = free_dofs_[static_cast<int*>(l->Perm)[l->minor]];
@@ -247,8 +255,9 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   info_.rcond = cholmod_rcond(llt.factor(), &c);
   if (!(info_.rcond >= options_.min_rcond)) {
     std::ostringstream msg;
-    msg << where << ": stiffness K_ff is numerically singular (CHOLMOD rcond " << info_.rcond << " < "
-        << options_.min_rcond << "): are there enough fixed nodes in every part of the mesh?";
+    msg << where << ": stiffness K_ff is numerically singular (CHOLMOD rcond " << info_.rcond
+        << " < " << options_.min_rcond
+        << "): are there enough fixed nodes in every part of the mesh?";
     throw std::runtime_error(msg.str());
   }
   info_.supernodal = l->is_super != 0;
@@ -264,13 +273,15 @@ StaticSolver& StaticSolver::operator=(StaticSolver&&) noexcept = default;
 
 void StaticSolver::check_forces(const Eigen::VectorXd& forces_n, const char* what) const {
   if (forces_n.size() != num_dofs()) {
-    throw std::invalid_argument(std::string("StaticSolver: ") + what + " has " + std::to_string(forces_n.size()) +
+    throw std::invalid_argument(std::string("StaticSolver: ") + what + " has " +
+                                std::to_string(forces_n.size()) +
                                 " entries, expected 3N = " + std::to_string(num_dofs()));
   }
   for (Eigen::Index i = 0; i < forces_n.size(); ++i) {
     if (!std::isfinite(forces_n[i])) {
-      throw std::invalid_argument(std::string("StaticSolver: ") + what + ": non-finite value at node " +
-                                  std::to_string(i / 3) + " axis " + std::to_string(i % 3));
+      throw std::invalid_argument(std::string("StaticSolver: ") + what +
+                                  ": non-finite value at node " + std::to_string(i / 3) + " axis " +
+                                  std::to_string(i % 3));
     }
   }
 }
@@ -307,7 +318,8 @@ void StaticSolver::solve(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m) 
     impl_->solve(impl_->rhs.data(), nf, 1, &impl_->x1, &impl_->y1, &impl_->e1);
     const double* x = static_cast<const double*>(impl_->x1->x);
     for (int r = 0; r < nf; ++r) u_m[free_dofs_[r]] = x[r];
-    if (!u_m.allFinite()) throw std::runtime_error("StaticSolver: solve produced non-finite displacements");
+    if (!u_m.allFinite())
+      throw std::runtime_error("StaticSolver: solve produced non-finite displacements");
     if (options_.check_residual) check_residual(u_m, forces_n, nullptr);
   }
 }
@@ -321,10 +333,12 @@ Eigen::VectorXd StaticSolver::solve(const Eigen::VectorXd& forces_n) const {
 void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const {
   const int nf = num_free_dofs();
   if (b.rows() != nf) {
-    throw std::invalid_argument("StaticSolver::solve_reduced: right-hand side has " + std::to_string(b.rows()) +
-                                " rows, expected " + std::to_string(nf) + " free dofs");
+    throw std::invalid_argument("StaticSolver::solve_reduced: right-hand side has " +
+                                std::to_string(b.rows()) + " rows, expected " + std::to_string(nf) +
+                                " free dofs");
   }
-  if (!b.allFinite()) throw std::invalid_argument("StaticSolver::solve_reduced: non-finite right-hand side");
+  if (!b.allFinite())
+    throw std::invalid_argument("StaticSolver::solve_reduced: non-finite right-hand side");
   x.resize(nf, b.cols());
   if (nf == 0 || b.cols() == 0) return;
   std::lock_guard<std::mutex> lock(impl_->mutex);
@@ -333,12 +347,14 @@ void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) c
   if (!x.allFinite()) throw std::runtime_error("StaticSolver::solve_reduced: non-finite solution");
 }
 
-PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes, const Eigen::VectorXd& displacements_m,
+PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
+                                                  const Eigen::VectorXd& displacements_m,
                                                   const Eigen::VectorXd& forces_n) const {
   const int ndof = num_dofs();
   if (displacements_m.size() != 3 * static_cast<Eigen::Index>(nodes.size())) {
-    throw std::invalid_argument("StaticSolver::solve_prescribed: " + std::to_string(displacements_m.size()) +
-                                " displacement values for " + std::to_string(nodes.size()) + " nodes (need 3 each)");
+    throw std::invalid_argument(
+        "StaticSolver::solve_prescribed: " + std::to_string(displacements_m.size()) +
+        " displacement values for " + std::to_string(nodes.size()) + " nodes (need 3 each)");
   }
   if (forces_n.size() != 0) check_forces(forces_n, "forces");
   std::vector<char> constrained(ndof, 0);  // fixed or prescribed dofs
@@ -350,18 +366,20 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
   for (std::size_t k = 0; k < nodes.size(); ++k) {
     const int v = nodes[k];
     if (v < 0 || v >= num_nodes_) {
-      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) + " out of range [0, " +
-                                  std::to_string(num_nodes_) + ")");
+      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) +
+                                  " out of range [0, " + std::to_string(num_nodes_) + ")");
     }
     if (prescribed[v]) {
-      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) + " given twice");
+      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) +
+                                  " given twice");
     }
     prescribed[v] = 1;
     for (int a = 0; a < 3; ++a) {
       const double value = displacements_m[3 * k + a];
       if (!std::isfinite(value)) {
-        throw std::invalid_argument("StaticSolver::solve_prescribed: non-finite displacement at node " +
-                                    std::to_string(v) + " axis " + std::to_string(a));
+        throw std::invalid_argument(
+            "StaticSolver::solve_prescribed: non-finite displacement at node " + std::to_string(v) +
+            " axis " + std::to_string(a));
       }
       u[3 * v + a] = value;
       constrained[3 * v + a] = 1;
@@ -375,7 +393,8 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
   for (int v : fixed_nodes_) uc.segment<3>(3 * v) = u.segment<3>(3 * v);
   const Eigen::VectorXd kuc = k_ * uc;
   Eigen::MatrixXd b(nf, 1), u0;
-  for (int r = 0; r < nf; ++r) b(r, 0) = (forces_n.size() ? forces_n[free_dofs_[r]] : 0.0) - kuc[free_dofs_[r]];
+  for (int r = 0; r < nf; ++r)
+    b(r, 0) = (forces_n.size() ? forces_n[free_dofs_[r]] : 0.0) - kuc[free_dofs_[r]];
   solve_reduced(b, u0);
 
   if (!free_prescribed.empty()) {
@@ -403,8 +422,9 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
     s = 0.5 * (s + s.transpose()).eval();
     Eigen::LLT<Eigen::MatrixXd> schur(s);
     if (schur.info() != Eigen::Success) {
-      throw std::runtime_error("StaticSolver::solve_prescribed: compliance block of the prescribed nodes is not "
-                               "positive definite");
+      throw std::runtime_error(
+          "StaticSolver::solve_prescribed: compliance block of the prescribed nodes is not "
+          "positive definite");
     }
     const Eigen::VectorXd lam = schur.solve(target);
     // u_f = u0 + K_ff^-1 E lam: one more solve.

@@ -29,17 +29,17 @@ struct SolverOptions {
 
 // What the factorization cost and holds (reported by benchmarks and Compliance).
 struct FactorInfo {
-  int num_dofs{0};                   // 3N
-  int num_free_dofs{0};              // 3N minus fixed dofs: size of the factored system
-  long long stiffness_nnz{0};        // stored entries of the full K (both triangles)
-  long long factor_nnz{0};           // nnz(L), CHOLMOD's lnz
-  long long factor_entries{0};       // stored values of the supernodal L (with padding)
-  std::size_t factor_bytes{0};       // values + integer structure of L, unit byte
+  int num_dofs{0};              // 3N
+  int num_free_dofs{0};         // 3N minus fixed dofs: size of the factored system
+  long long stiffness_nnz{0};   // stored entries of the full K (both triangles)
+  long long factor_nnz{0};      // nnz(L), CHOLMOD's lnz
+  long long factor_entries{0};  // stored values of the supernodal L (with padding)
+  std::size_t factor_bytes{0};  // values + integer structure of L, unit byte
   bool supernodal{false};
-  double rcond{0.0};                 // CHOLMOD's rough reciprocal condition estimate
-  double assembly_s{0.0};            // wall time of pattern + assembly, unit s
-  double analyze_s{0.0};             // symbolic analysis (ordering), unit s
-  double factorize_s{0.0};           // numeric factorization, unit s
+  double rcond{0.0};        // CHOLMOD's rough reciprocal condition estimate
+  double assembly_s{0.0};   // wall time of pattern + assembly, unit s
+  double analyze_s{0.0};    // symbolic analysis (ordering), unit s
+  double factorize_s{0.0};  // numeric factorization, unit s
 };
 
 // Extreme eigenvalues of K_ff by power / inverse power iteration (unit N/m).
@@ -67,8 +67,8 @@ class StaticSolver {
   // element, node id out of range, nodes in no tetrahedron, too few fixed nodes: the message
   // says which part of the mesh is free to move) and std::runtime_error if CHOLMOD fails or
   // the factor is numerically singular. The mesh is not referenced after construction.
-  StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materials, const std::vector<int>& fixed_nodes,
-               const SolverOptions& options = {});
+  StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materials,
+               const std::vector<int>& fixed_nodes, const SolverOptions& options = {});
   ~StaticSolver();
   StaticSolver(StaticSolver&&) noexcept;
   StaticSolver& operator=(StaticSolver&&) noexcept;
@@ -86,7 +86,8 @@ class StaticSolver {
   // others are imposed through the Schur complement of the factor, so no refactorization is
   // ever needed: cost 3|P| extra solves (in blocks of 64) and a dense 3|P| x 3|P| Cholesky, so
   // for large fixed-in-time sets (hundreds of nodes) pass them in fixed_nodes instead.
-  PrescribedSolution solve_prescribed(const std::vector<int>& nodes, const Eigen::VectorXd& displacements_m,
+  PrescribedSolution solve_prescribed(const std::vector<int>& nodes,
+                                      const Eigen::VectorXd& displacements_m,
                                       const Eigen::VectorXd& forces_n = Eigen::VectorXd()) const;
 
   // Reduced (free-dof) system, for Compliance and coupling code.

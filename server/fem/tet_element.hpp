@@ -9,7 +9,7 @@
 
 namespace neurosim::fem {
 
-using TetNodes = std::array<Eigen::Vector3d, 4>;    // rest positions, unit m
+using TetNodes = std::array<Eigen::Vector3d, 4>;      // rest positions, unit m
 using ElementMatrix = Eigen::Matrix<double, 12, 12>;  // unit N/m; dof 3*a+axis, a local node
 using ElementVector = Eigen::Matrix<double, 12, 1>;
 
@@ -36,7 +36,8 @@ void tet_stiffness(const TetGeometry& g, double lambda_pa, double mu_pa, Element
 // The 3x3 block K_ab of that formula: out[i][j] = vl ga_i gb_j + vm gb_i ga_j + vm (ga.gb) d_ij
 // with vl = V lambda, vm = V mu (unit N/m). Shared by tet_stiffness and the assembler's
 // scatter loop, which never forms the 12x12 matrix.
-inline void tet_stiffness_block(const double* ga, const double* gb, double vl, double vm, double out[3][3]) {
+inline void tet_stiffness_block(const double* ga, const double* gb, double vl, double vm,
+                                double out[3][3]) {
   const double dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) out[i][j] = vl * ga[i] * gb[j] + vm * gb[i] * ga[j];
@@ -50,10 +51,10 @@ double tet_strain_energy(const TetNodes& x, const Material& material, const Elem
 
 // Shape measures of one tetrahedron (no validity check: slivers and inverted ones are reported).
 struct TetQuality {
-  double volume_m3{0.0};             // signed
-  double mean_ratio{0.0};            // 6 sqrt(2) V / l_rms^3: 1 regular, -> 0 for slivers
-  double min_dihedral_deg{0.0};      // smallest dihedral angle, degrees
-  double max_dihedral_deg{0.0};      // largest dihedral angle, degrees
+  double volume_m3{0.0};         // signed
+  double mean_ratio{0.0};        // 6 sqrt(2) V / l_rms^3: 1 regular, -> 0 for slivers
+  double min_dihedral_deg{0.0};  // smallest dihedral angle, degrees
+  double max_dihedral_deg{0.0};  // largest dihedral angle, degrees
   double longest_edge_m{0.0};
   double shortest_edge_m{0.0};
 };

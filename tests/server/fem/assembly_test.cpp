@@ -1,28 +1,29 @@
 // Global stiffness: equals a plain triplet assembly of element matrices, symmetric, rigid
 // motions in its null space, per-tetrahedron materials, refill in place.
 #include "server/fem/assembly.hpp"
-#include "server/fem/tet_element.hpp"
 #include "fem_test_meshes.hpp"
+#include "server/fem/tet_element.hpp"
 
 #include <gtest/gtest.h>
 
 namespace neurosim::fem {
 namespace {
 
-using testing::BoxSpec;
 using testing::box_mesh;
+using testing::BoxSpec;
 
 SparseMatrix triplet_assembly(const mesh::TetMesh& m, const MaterialMap& mats) {
   std::vector<Eigen::Triplet<double>> trip;
   for (std::size_t t = 0; t < m.num_tets(); ++t) {
     const auto& tet = m.tets()[t];
-    const ElementMatrix k = tet_stiffness({m.vertices()[tet[0]], m.vertices()[tet[1]], m.vertices()[tet[2]],
-                                           m.vertices()[tet[3]]},
-                                          mats.of_tet(t), static_cast<int>(t));
+    const ElementMatrix k = tet_stiffness(
+        {m.vertices()[tet[0]], m.vertices()[tet[1]], m.vertices()[tet[2]], m.vertices()[tet[3]]},
+        mats.of_tet(t), static_cast<int>(t));
     for (int a = 0; a < 4; ++a)
       for (int b = 0; b < 4; ++b)
         for (int i = 0; i < 3; ++i)
-          for (int j = 0; j < 3; ++j) trip.emplace_back(3 * tet[a] + i, 3 * tet[b] + j, k(3 * a + i, 3 * b + j));
+          for (int j = 0; j < 3; ++j)
+            trip.emplace_back(3 * tet[a] + i, 3 * tet[b] + j, k(3 * a + i, 3 * b + j));
   }
   SparseMatrix k(3 * m.num_vertices(), 3 * m.num_vertices());
   k.setFromTriplets(trip.begin(), trip.end());
@@ -47,9 +48,11 @@ TEST(FemAssembly, RigidMotionsAreInTheNullSpace) {
   for (int mode = 0; mode < 6; ++mode) {
     Eigen::VectorXd u(3 * m.num_vertices());
     for (std::size_t v = 0; v < m.num_vertices(); ++v)
-      u.segment<3>(3 * v) = mode < 3 ? Eigen::Vector3d(Eigen::Vector3d::Unit(mode))
-                                     : Eigen::Vector3d(Eigen::Vector3d::Unit(mode - 3).cross(m.vertices()[v]));
-    EXPECT_LE((k * u).cwiseAbs().maxCoeff(), 1e-12 * scale * u.cwiseAbs().maxCoeff()) << "mode " << mode;
+      u.segment<3>(3 * v) =
+          mode < 3 ? Eigen::Vector3d(Eigen::Vector3d::Unit(mode))
+                   : Eigen::Vector3d(Eigen::Vector3d::Unit(mode - 3).cross(m.vertices()[v]));
+    EXPECT_LE((k * u).cwiseAbs().maxCoeff(), 1e-12 * scale * u.cwiseAbs().maxCoeff())
+        << "mode " << mode;
   }
 }
 

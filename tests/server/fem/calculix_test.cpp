@@ -2,13 +2,13 @@
 // solved by `ccx` in a temporary directory; nodal displacements agree to 1e-6 relative.
 // Hard cases: nu = 0.49 / 0.499, stiffness ratio 1e4, a sliver element.
 #include "server/fem/calculix.hpp"
+#include "fem_test_meshes.hpp"
 #include "server/fem/static_solver.hpp"
 #include "server/fem/tet_element.hpp"
-#include "fem_test_meshes.hpp"
 #include "test_support.hpp"
 
-#include <Eigen/Geometry>
 #include <gtest/gtest.h>
+#include <Eigen/Geometry>
 
 #include <cmath>
 #include <cstdio>
@@ -17,8 +17,8 @@
 namespace neurosim::fem {
 namespace {
 
-using testing::BoxSpec;
 using testing::box_mesh;
+using testing::BoxSpec;
 using testing::nodes_where;
 
 struct Comparison {
@@ -31,8 +31,9 @@ struct Comparison {
 Comparison compare_with_ccx(const std::string& tag, const mesh::TetMesh& m, const MaterialMap& mats,
                             const CalculixLoads& loads, ConditionEstimate* cond = nullptr) {
   const StaticSolver solver(m, mats, loads.fixed_nodes);
-  const auto ours = solver.solve_prescribed(loads.prescribed_nodes, loads.prescribed_displacements_m,
-                                            loads.forces_n.size() ? loads.forces_n : Eigen::VectorXd());
+  const auto ours =
+      solver.solve_prescribed(loads.prescribed_nodes, loads.prescribed_displacements_m,
+                              loads.forces_n.size() ? loads.forces_n : Eigen::VectorXd());
   if (cond) *cond = solver.estimate_condition(500, 1e-6);
   const auto dir = neurosim::testing::temp_dir("ccx_" + tag);
   const CalculixResult ccx = run_calculix(dir, tag, m, mats, loads, {"ccx", 240.0});
@@ -47,8 +48,8 @@ Comparison compare_with_ccx(const std::string& tag, const mesh::TetMesh& m, cons
       if (loads.forces_n.size()) rf_ours.segment<3>(3 * v) += loads.forces_n.segment<3>(3 * v);
     }
   c.rf_rel = testing::rel_max_diff(rf_ours, ccx.reaction_n);
-  std::printf("%-28s nodes %6zu tets %7zu  max|u| %.4e m  u rel diff %.3e  RF rel diff %.3e\n", tag.c_str(),
-              m.num_vertices(), m.num_tets(), c.max_u_m, c.u_rel, c.rf_rel);
+  std::printf("%-28s nodes %6zu tets %7zu  max|u| %.4e m  u rel diff %.3e  RF rel diff %.3e\n",
+              tag.c_str(), m.num_vertices(), m.num_tets(), c.max_u_m, c.u_rel, c.rf_rel);
   std::filesystem::remove_all(dir);
   return c;
 }
@@ -71,7 +72,8 @@ TEST(FemCalculix, DeckWriterAndDatReader) {
   // A malformed .dat names file and line.
   {
     std::ofstream bad(dir / "bad.dat");
-    bad << "\n displacements (vx,vy,vz) for set NALL and time  0.1000000E+01\n\n         1  0.0 0.0\n";
+    bad << "\n displacements (vx,vy,vz) for set NALL and time  0.1000000E+01\n\n         1  0.0 "
+           "0.0\n";
   }
   try {
     read_calculix_dat(dir / "bad.dat", m.num_vertices());
@@ -104,11 +106,14 @@ TEST(FemCalculix, CubeWithForcesAndPrescribedDisplacementsMatches) {
     return p.z() > 0.1 - 1e-12 && std::abs(p.x() - 0.05) < 0.021 && std::abs(p.y() - 0.05) < 0.021;
   });
   loads.prescribed_displacements_m = Eigen::VectorXd::Zero(3 * loads.prescribed_nodes.size());
-  for (std::size_t k = 0; k < loads.prescribed_nodes.size(); ++k) loads.prescribed_displacements_m[3 * k + 2] = -2e-3;
+  for (std::size_t k = 0; k < loads.prescribed_nodes.size(); ++k)
+    loads.prescribed_displacements_m[3 * k + 2] = -2e-3;
   loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
-  for (int v : nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-12 && p.z() > 0.05; }))
+  for (int v :
+       nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-12 && p.z() > 0.05; }))
     loads.forces_n[3 * v] = 0.3;
-  const Comparison c = compare_with_ccx("cube", m, MaterialMap::uniform({1e6, 0.4, "brain"}), loads);
+  const Comparison c =
+      compare_with_ccx("cube", m, MaterialMap::uniform({1e6, 0.4, "brain"}), loads);
   EXPECT_LE(c.u_rel, 1e-6);
   EXPECT_LE(c.rf_rel, 1e-6);
 }
@@ -118,16 +123,17 @@ TEST(FemCalculix, NearlyIncompressibleMatches) {
   CalculixLoads loads;
   loads.fixed_nodes = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
   loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
-  for (int v : nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-12 && p.x() < 0.05; }))
+  for (int v :
+       nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-12 && p.x() < 0.05; }))
     loads.forces_n.segment<3>(3 * v) = Eigen::Vector3d(0.05, 0.0, -0.2);
-  std::printf("%-8s %12s %12s %12s %12s %12s\n", "nu", "u rel diff", "lambda_min", "lambda_max", "cond(K_ff)",
-              "rcond(L)");
+  std::printf("%-8s %12s %12s %12s %12s %12s\n", "nu", "u rel diff", "lambda_min", "lambda_max",
+              "cond(K_ff)", "rcond(L)");
   for (double nu : {0.3, 0.49, 0.499}) {
     ConditionEstimate cond;
-    const Comparison c =
-        compare_with_ccx("nu" + std::to_string(nu).substr(0, 5), m, MaterialMap::uniform({1e6, nu, "gel"}), loads, &cond);
-    std::printf("%-8.3f %12.3e %12.4e %12.4e %12.4e %12.4e\n", nu, c.u_rel, cond.lambda_min, cond.lambda_max,
-                cond.condition, cond.rcond_cholmod);
+    const Comparison c = compare_with_ccx("nu" + std::to_string(nu).substr(0, 5), m,
+                                          MaterialMap::uniform({1e6, nu, "gel"}), loads, &cond);
+    std::printf("%-8.3f %12.3e %12.4e %12.4e %12.4e %12.4e\n", nu, c.u_rel, cond.lambda_min,
+                cond.lambda_max, cond.condition, cond.rcond_cholmod);
     EXPECT_LE(c.u_rel, 1e-6) << "nu = " << nu;
   }
 }
@@ -149,7 +155,8 @@ TEST(FemCalculix, TwoMaterialsWithStiffnessRatio1e4Match) {
     loads.forces_n.segment<3>(3 * v) = Eigen::Vector3d(0.1, 0.0, -0.5);
   ConditionEstimate cond;
   const Comparison c = compare_with_ccx("two_materials", m, mats, loads, &cond);
-  std::printf("two materials: cond(K_ff) %.3e, rcond(L) %.3e\n", cond.condition, cond.rcond_cholmod);
+  std::printf("two materials: cond(K_ff) %.3e, rcond(L) %.3e\n", cond.condition,
+              cond.rcond_cholmod);
   EXPECT_LE(c.u_rel, 1e-6);
   // The soft part deforms, the stiff part barely: a finite, non-trivial answer.
   EXPECT_GT(c.max_u_m, 0.0);
@@ -167,18 +174,21 @@ TEST(FemCalculix, SliverElementMatches) {
   const auto m = mesh::TetMesh::build(x, base.tets(), opt);
   double worst_ratio = 1.0, worst_dihedral = 180.0;
   for (const auto& t : m.tets()) {
-    const TetQuality q = tet_quality({m.vertices()[t[0]], m.vertices()[t[1]], m.vertices()[t[2]], m.vertices()[t[3]]});
+    const TetQuality q = tet_quality(
+        {m.vertices()[t[0]], m.vertices()[t[1]], m.vertices()[t[2]], m.vertices()[t[3]]});
     worst_ratio = std::min(worst_ratio, q.mean_ratio);
     worst_dihedral = std::min(worst_dihedral, q.min_dihedral_deg);
   }
-  std::printf("sliver mesh: worst mean ratio %.3e, smallest dihedral %.4f deg\n", worst_ratio, worst_dihedral);
+  std::printf("sliver mesh: worst mean ratio %.3e, smallest dihedral %.4f deg\n", worst_ratio,
+              worst_dihedral);
   EXPECT_LT(worst_ratio, 0.05);
   CalculixLoads loads;
   loads.fixed_nodes = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
   loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
   for (int v : nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.04 - 1e-12; }))
     loads.forces_n.segment<3>(3 * v) = Eigen::Vector3d(0.0, 0.02, -0.1);
-  const Comparison c = compare_with_ccx("sliver", m, MaterialMap::uniform({1e6, 0.4, "brain"}), loads);
+  const Comparison c =
+      compare_with_ccx("sliver", m, MaterialMap::uniform({1e6, 0.4, "brain"}), loads);
   EXPECT_LE(c.u_rel, 1e-6);
 }
 

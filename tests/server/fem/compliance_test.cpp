@@ -3,20 +3,21 @@
 #include "server/fem/compliance.hpp"
 #include "fem_test_meshes.hpp"
 
-#include <Eigen/Cholesky>
 #include <gtest/gtest.h>
+#include <Eigen/Cholesky>
 
 namespace neurosim::fem {
 namespace {
 
-using testing::BoxSpec;
 using testing::box_mesh;
+using testing::BoxSpec;
 using testing::nodes_where;
 
 class FemCompliance : public ::testing::Test {
  protected:
   mesh::TetMesh mesh_ = box_mesh(BoxSpec{4, 4, 3, {0, 0, 0}, {0.04, 0.04, 0.03}, 0.2, 21});
-  std::vector<int> bottom_ = nodes_where(mesh_, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
+  std::vector<int> bottom_ =
+      nodes_where(mesh_, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
   StaticSolver solver_{mesh_, MaterialMap::uniform({1e6, 0.4, "brain"}), bottom_};
 };
 

@@ -20,17 +20,20 @@
 namespace neurosim::fem::testing {
 
 struct BoxSpec {
-  int nx{1}, ny{1}, nz{1};                         // hexahedra per axis
-  Eigen::Vector3d lo{0, 0, 0}, hi{1, 1, 1};        // unit m
+  int nx{1}, ny{1}, nz{1};                   // hexahedra per axis
+  Eigen::Vector3d lo{0, 0, 0}, hi{1, 1, 1};  // unit m
   double jitter{0.0};  // interior nodes moved by up to jitter * cell size per axis
   unsigned seed{1};
 };
 
-inline int box_node(const BoxSpec& s, int i, int j, int k) { return i + (s.nx + 1) * (j + (s.ny + 1) * k); }
+inline int box_node(const BoxSpec& s, int i, int j, int k) {
+  return i + (s.nx + 1) * (j + (s.ny + 1) * k);
+}
 
 inline mesh::TetMesh box_mesh(const BoxSpec& s) {
   std::vector<mesh::Vec3> x;
-  const Eigen::Vector3d h((s.hi - s.lo).x() / s.nx, (s.hi - s.lo).y() / s.ny, (s.hi - s.lo).z() / s.nz);
+  const Eigen::Vector3d h((s.hi - s.lo).x() / s.nx, (s.hi - s.lo).y() / s.ny,
+                          (s.hi - s.lo).z() / s.nz);
   std::mt19937 rng(s.seed);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (int k = 0; k <= s.nz; ++k)
@@ -38,11 +41,13 @@ inline mesh::TetMesh box_mesh(const BoxSpec& s) {
       for (int i = 0; i <= s.nx; ++i) {
         Eigen::Vector3d p = s.lo + Eigen::Vector3d(i * h.x(), j * h.y(), k * h.z());
         const bool interior = i > 0 && i < s.nx && j > 0 && j < s.ny && k > 0 && k < s.nz;
-        if (interior && s.jitter > 0.0) p += s.jitter * Eigen::Vector3d(u(rng) * h.x(), u(rng) * h.y(), u(rng) * h.z());
+        if (interior && s.jitter > 0.0)
+          p += s.jitter * Eigen::Vector3d(u(rng) * h.x(), u(rng) * h.y(), u(rng) * h.z());
         x.push_back(p);
       }
   // Kuhn: one tetrahedron per axis permutation, path 000 -> 111 along the permuted axes.
-  static constexpr int kPerm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  static constexpr int kPerm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2},
+                                      {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
   std::vector<mesh::Tet> tets;
   for (int k = 0; k < s.nz; ++k)
     for (int j = 0; j < s.ny; ++j)
@@ -59,12 +64,14 @@ inline mesh::TetMesh box_mesh(const BoxSpec& s) {
           tets.push_back(t);
         }
   mesh::BuildOptions opt;
-  opt.source = "test box " + std::to_string(s.nx) + "x" + std::to_string(s.ny) + "x" + std::to_string(s.nz);
+  opt.source =
+      "test box " + std::to_string(s.nx) + "x" + std::to_string(s.ny) + "x" + std::to_string(s.nz);
   return mesh::TetMesh::build(std::move(x), std::move(tets), opt);
 }
 
 // Nodes with pred(position) true.
-inline std::vector<int> nodes_where(const mesh::TetMesh& m, const std::function<bool(const Eigen::Vector3d&)>& pred) {
+inline std::vector<int> nodes_where(const mesh::TetMesh& m,
+                                    const std::function<bool(const Eigen::Vector3d&)>& pred) {
   std::vector<int> out;
   for (std::size_t v = 0; v < m.num_vertices(); ++v)
     if (pred(m.vertices()[v])) out.push_back(static_cast<int>(v));

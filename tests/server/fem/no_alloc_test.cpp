@@ -1,8 +1,8 @@
 // Per-step paths allocate nothing once warmed up (Model vs State): StaticSolver::solve(f, u)
 // with a sized u, Compliance::find_column and block_from_cache into a sized matrix.
 // Counts every malloc/calloc/realloc in the process while the steps run.
-#include "server/fem/compliance.hpp"
 #include "fem_test_meshes.hpp"
+#include "server/fem/compliance.hpp"
 
 #include <gtest/gtest.h>
 
@@ -14,7 +14,8 @@ namespace {
 std::atomic<bool> g_counting{false};
 std::atomic<long> g_allocations{0};
 void note() {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (g_counting.load(std::memory_order_relaxed))
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
 }
 }  // namespace
 
@@ -43,7 +44,8 @@ namespace {
 
 TEST(FemNoAlloc, SolveAndCacheLookupsDoNotAllocate) {
   const auto m = testing::box_mesh(testing::BoxSpec{6, 6, 6, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, 3});
-  const auto bottom = testing::nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
+  const auto bottom =
+      testing::nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
   const StaticSolver solver(m, MaterialMap::uniform({1e6, 0.4, "brain"}), bottom);
   Compliance compliance(solver);
   const std::vector<int> s{300, 301, 302, 310, 320};

@@ -3,9 +3,9 @@
 #include "server/fem/static_solver.hpp"
 #include "fem_test_meshes.hpp"
 
+#include <gtest/gtest.h>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-#include <gtest/gtest.h>
 
 #include <cmath>
 #include <limits>
@@ -13,8 +13,8 @@
 namespace neurosim::fem {
 namespace {
 
-using testing::BoxSpec;
 using testing::box_mesh;
+using testing::BoxSpec;
 using testing::nodes_where;
 
 const Material kBrain{1.0e6, 0.4, "brain"};
@@ -61,7 +61,8 @@ TEST(FemStaticSolver, PatchTestIrregularMesh) {
   const double err_b = testing::rel_max_diff(sol_b.displacement_m, exact);
   std::printf("patch test (Schur-complement boundary): max rel error %.3e\n", err_b);
   EXPECT_LE(err_b, 1e-12);
-  EXPECT_LE((sol_b.reaction_n - sol.reaction_n).cwiseAbs().maxCoeff(), 1e-9 * sol.reaction_n.cwiseAbs().maxCoeff());
+  EXPECT_LE((sol_b.reaction_n - sol.reaction_n).cwiseAbs().maxCoeff(),
+            1e-9 * sol.reaction_n.cwiseAbs().maxCoeff());
 }
 
 TEST(FemStaticSolver, ReactionsBalanceLoadsAndResidualIsSmall) {
@@ -100,10 +101,12 @@ TEST(FemStaticSolver, ConditionEstimateMatchesDenseEigenvalues) {
   Eigen::MatrixXd kff(solver.num_free_dofs(), solver.num_free_dofs());
   const Eigen::MatrixXd k(solver.stiffness());
   for (int i = 0; i < kff.rows(); ++i)
-    for (int j = 0; j < kff.cols(); ++j) kff(i, j) = k(solver.free_dofs()[i], solver.free_dofs()[j]);
+    for (int j = 0; j < kff.cols(); ++j)
+      kff(i, j) = k(solver.free_dofs()[i], solver.free_dofs()[j]);
   const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(kff).eigenvalues();
-  std::printf("lambda_max %.6e (dense %.6e), lambda_min %.6e (dense %.6e), cond %.3e, cholmod rcond %.3e\n",
-              est.lambda_max, ev(ev.size() - 1), est.lambda_min, ev(0), est.condition, est.rcond_cholmod);
+  std::printf(
+      "lambda_max %.6e (dense %.6e), lambda_min %.6e (dense %.6e), cond %.3e, cholmod rcond %.3e\n",
+      est.lambda_max, ev(ev.size() - 1), est.lambda_min, ev(0), est.condition, est.rcond_cholmod);
   EXPECT_NEAR(est.lambda_max, ev(ev.size() - 1), 1e-3 * ev(ev.size() - 1));
   EXPECT_NEAR(est.lambda_min, ev(0), 1e-3 * ev(0));
   const FactorInfo& info = solver.factor_info();
@@ -166,7 +169,8 @@ TEST(FemStaticSolver, PrescribedFreeNodesMatchEliminatedOnes) {
   const auto left = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-9; });
   const auto right = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() > 0.04 - 1e-9; });
   Eigen::VectorXd d(3 * right.size());
-  for (std::size_t k = 0; k < right.size(); ++k) d.segment<3>(3 * k) = Eigen::Vector3d(1e-3, 2e-4, -5e-4);
+  for (std::size_t k = 0; k < right.size(); ++k)
+    d.segment<3>(3 * k) = Eigen::Vector3d(1e-3, 2e-4, -5e-4);
   Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * m.num_vertices());
   f[3 * 30 + 2] = -0.5;
   // Right face eliminated in the factor vs imposed through the Schur complement.
@@ -178,9 +182,9 @@ TEST(FemStaticSolver, PrescribedFreeNodesMatchEliminatedOnes) {
   const auto b = schur.solve_prescribed(right, d, f);
   EXPECT_LE(testing::rel_max_diff(b.displacement_m, a.displacement_m), 1e-10);
   EXPECT_LE(testing::rel_max_diff(b.reaction_n, a.reaction_n), 1e-8);
-  for (int v : right) EXPECT_LE((b.displacement_m.segment<3>(3 * v) - d.segment<3>(0)).norm(), 1e-15);
+  for (int v : right)
+    EXPECT_LE((b.displacement_m.segment<3>(3 * v) - d.segment<3>(0)).norm(), 1e-15);
 }
-
 
 // Two disconnected boxes in one TetMesh (two meshes' materials, stiffness ratio 1e4).
 TEST(FemStaticSolver, TwoPartsEachNeedSupportAndSolveIndependently) {
@@ -201,7 +205,8 @@ TEST(FemStaticSolver, TwoPartsEachNeedSupportAndSolveIndependently) {
   const auto fixed_a = nodes_where(a, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
   expect_message([&] { StaticSolver(both, mats, fixed_a); }, "connected part 1");
   std::vector<int> fixed = fixed_a;
-  for (int v : nodes_where(b, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; })) fixed.push_back(v + offset);
+  for (int v : nodes_where(b, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; }))
+    fixed.push_back(v + offset);
   const StaticSolver solver(both, mats, fixed);
   Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
   const auto top_a = nodes_where(a, [](const Eigen::Vector3d& p) { return p.z() > 0.03 - 1e-9; });
@@ -217,8 +222,8 @@ TEST(FemStaticSolver, TwoPartsEachNeedSupportAndSolveIndependently) {
   EXPECT_LE(testing::rel_max_diff(u.head(3 * a.num_vertices()), ua), 1e-12);
   const double soft_max = u.head(3 * a.num_vertices()).cwiseAbs().maxCoeff();
   const double stiff_max = u.tail(3 * b.num_vertices()).cwiseAbs().maxCoeff();
-  std::printf("two parts: soft max |u| %.3e m, stiff max |u| %.3e m, ratio %.3e\n", soft_max, stiff_max,
-              soft_max / stiff_max);
+  std::printf("two parts: soft max |u| %.3e m, stiff max |u| %.3e m, ratio %.3e\n", soft_max,
+              stiff_max, soft_max / stiff_max);
   EXPECT_GT(soft_max / stiff_max, 5e3);  // ~E ratio (Poisson ratios differ)
 }
 

@@ -1,11 +1,11 @@
 // Constant-strain tetrahedron: symmetry, rigid-body modes, agreement with B^T D B V and with
 // finite differences of the strain energy; bad elements and materials give clear errors.
-#include "server/fem/material.hpp"
 #include "server/fem/tet_element.hpp"
+#include "server/fem/material.hpp"
 
+#include <gtest/gtest.h>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-#include <gtest/gtest.h>
 
 #include <cmath>
 #include <limits>
@@ -44,8 +44,10 @@ TEST(FemElement, StiffnessIsSymmetricWithSixRigidModes) {
       ElementVector u;
       for (int a = 0; a < 4; ++a) {
         Eigen::Vector3d ua = Eigen::Vector3d::Zero();
-        if (mode < 3) ua(mode) = 1.0;
-        else ua = Eigen::Vector3d::Unit(mode - 3).cross(x[a]);
+        if (mode < 3)
+          ua(mode) = 1.0;
+        else
+          ua = Eigen::Vector3d::Unit(mode - 3).cross(x[a]);
         u.segment<3>(3 * a) = ua;
       }
       EXPECT_LE((k * u).norm(), 1e-12 * scale * u.norm()) << "rigid mode " << mode;
@@ -104,7 +106,8 @@ TEST(FemElement, LinearFieldGivesItsStrain) {
 }
 
 TEST(FemElement, BadElementsAreRefusedByName) {
-  TetNodes x{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 1, 0), Eigen::Vector3d(0, 0, 1)};
+  TetNodes x{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 1, 0),
+             Eigen::Vector3d(0, 0, 1)};
   EXPECT_NO_THROW(tet_geometry(x, 7));
   TetNodes inverted = x;
   std::swap(inverted[2], inverted[3]);
@@ -135,8 +138,8 @@ TEST(FemElement, SliverIsAcceptedAndReported) {
              Eigen::Vector3d(0, 1, eps)};
   if (tet_quality(x).volume_m3 < 0) std::swap(x[2], x[3]);
   const TetQuality q = tet_quality(x);
-  std::printf("sliver: volume %.3e m^3, mean ratio %.3e, dihedral [%.4f, %.4f] deg\n", q.volume_m3, q.mean_ratio,
-              q.min_dihedral_deg, q.max_dihedral_deg);
+  std::printf("sliver: volume %.3e m^3, mean ratio %.3e, dihedral [%.4f, %.4f] deg\n", q.volume_m3,
+              q.mean_ratio, q.min_dihedral_deg, q.max_dihedral_deg);
   EXPECT_LT(q.mean_ratio, 1e-2);
   EXPECT_GT(q.max_dihedral_deg, 179.0);
   const ElementMatrix k = tet_stiffness(x, brain());
@@ -146,14 +149,22 @@ TEST(FemElement, SliverIsAcceptedAndReported) {
              Eigen::Vector3d(-1, -1, 1)};
   if (tet_quality(r).volume_m3 < 0) std::swap(r[2], r[3]);
   EXPECT_NEAR(tet_quality(r).mean_ratio, 1.0, 1e-12);
-  EXPECT_NEAR(tet_quality(r).min_dihedral_deg, std::acos(1.0 / 3.0) * 180.0 / 3.14159265358979323846, 1e-9);
+  EXPECT_NEAR(tet_quality(r).min_dihedral_deg,
+              std::acos(1.0 / 3.0) * 180.0 / 3.14159265358979323846, 1e-9);
 }
 
 TEST(FemMaterial, InvalidMaterialsNameThemselves) {
   EXPECT_NO_THROW(brain().validate());
   const double nan = std::nan(""), inf = std::numeric_limits<double>::infinity();
-  for (auto [e, nu] : std::vector<std::pair<double, double>>{
-           {0.0, 0.3}, {-1.0, 0.3}, {nan, 0.3}, {inf, 0.3}, {1e6, 0.5}, {1e6, -1.0}, {1e6, 0.7}, {1e6, nan}, {1e6, -inf}}) {
+  for (auto [e, nu] : std::vector<std::pair<double, double>>{{0.0, 0.3},
+                                                             {-1.0, 0.3},
+                                                             {nan, 0.3},
+                                                             {inf, 0.3},
+                                                             {1e6, 0.5},
+                                                             {1e6, -1.0},
+                                                             {1e6, 0.7},
+                                                             {1e6, nan},
+                                                             {1e6, -inf}}) {
     Material m{e, nu, "skull"};
     try {
       m.validate();
