@@ -16,6 +16,8 @@
 
 namespace neurosim::interaction {
 
+class CoupledBody;  // server/interaction/coupled_body.hpp
+
 using Vec3 = Eigen::Vector3d;
 using Mat3 = Eigen::Matrix3d;
 
@@ -23,6 +25,7 @@ using Mat3 = Eigen::Matrix3d;
 struct ToolPose {
   Vec3 tip_m{Vec3::Zero()};   // centre of the spherical tip
   Vec3 axis{Vec3::UnitZ()};   // unit vector from the tip towards the handle (shaft direction)
+  int tool{0};                // index into scene.tools() (tip and shaft radii); added by issue 4
 };
 
 // What a step returns for one tool.
@@ -51,6 +54,31 @@ struct SimulationOptions {
   int lcp_max_iterations{200};
   double lcp_tolerance{1e-10};           // relative
   std::string compliance_cache_dir{};    // empty: no disk cache
+  // A tool part (tip or shaft) whose centre lies deeper than this below a surface node's patch
+  // does not push that node (so a tool that jumps through the body feels a bounded force, at
+  // most what this indentation gives), unit m. 0: 0.45 x the smallest extent of the host's
+  // bounding box.
+  double max_penetration_m{0.0};
+  // Candidate rows whose depth is above -candidate_margin x tip radius enter the LCP inactive,
+  // so a node the deformation would push into the tool is caught (dimensionless).
+  double candidate_margin{0.1};
+  // Compute the coupled compliance columns of every contactable node at load (else on first
+  // touch, a few ms each).
+  bool precompute_contact_columns{false};
+};
+
+// Load-time cost of build(), unit s.
+struct SetupStats {
+  double load_meshes_s{0.0};
+  double factor_s{0.0};
+  double fusion_s{0.0};     // inclusion decision + coupling map
+  double condense_s{0.0};   // Schur complements of embedded meshes
+  double boundary_s{0.0};   // host compliance columns at the new boundary
+  double operator_s{0.0};   // coupling operator G
+  double columns_s{0.0};    // precomputed contact columns
+  double total_s{0.0};
+  int boundary_nodes{0};    // host nodes on S' used by the ties (all couplings)
+  int tied_nodes{0};        // embedded nodes tied (all couplings)
 };
 
 class Simulation {
@@ -73,6 +101,20 @@ class Simulation {
   // Displacement of every vertex of `mesh` for the last step's contact and coupling forces
   // (3N, unit m); one sparse solve per mesh, only when someone asks.
   virtual void displacements(int mesh, Eigen::VectorXd& u_m) const = 0;
+
+  // --- added by issue 4 (interaction) ---
+  // Meshes that take part: a mesh with no fixed node that is not tied to a host (e.g. the
+  // embedded mesh with coupling off) is inert: never touched, displacement zero.
+  virtual bool mesh_active(int mesh) const = 0;
+  // Largest tie mismatch |sum w u_A - u_B| over every tied node for the last step, unit m
+  // (full-field solves: for tests and benchmarks).
+  virtual double tie_residual_m() const = 0;
+  virtual const SetupStats& setup_stats() const = 0;
+  virtual int num_tools() const = 0;
+  // The body (host + tied meshes) `mesh` belongs to, or nullptr if inert; and the last good
+  // step's contact forces on it (contact slots, unit N). For benchmarks and the baseline.
+  virtual const CoupledBody* body_of(int mesh) const = 0;
+  virtual void last_contact_forces(int mesh, std::vector<int>& slots, std::vector<Vec3>& forces_n) const = 0;
 };
 
 }  // namespace neurosim::interaction

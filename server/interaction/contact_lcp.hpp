@@ -1,0 +1,56 @@
+// Small dense LCP of the unilateral tool contact: find lambda >= 0 with
+//   w = W lambda - delta >= 0,  lambda . w = 0
+// (W: effective contact compliance on the candidate rows, unit m/N, symmetric positive
+// definite; delta: penetration depth per row, unit m; lambda: normal force per row, unit N).
+// Solved exactly by principal pivoting (Murty's least-index rule, finite for P-matrices) with a
+// Cholesky factor of the active block; no allocation once reserve() has sized the workspace.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <vector>
+
+namespace neurosim::interaction {
+
+struct LcpResult {
+  bool converged{false};
+  int iterations{0};   // pivots (each one Cholesky of the active block)
+  int active{0};       // rows with lambda > 0
+  double max_violation{0.0};  // max(-w, -lambda, 0) relative to max |delta|
+  bool dependent_rows{false};  // a row of the active block was (numerically) dependent
+};
+
+class ContactLcp {
+ public:
+  // Sizes the workspace for up to max_rows rows (allocates).
+  void reserve(int max_rows);
+  int capacity() const { return capacity_; }
+
+  // w: top-left n x n block of a capacity x capacity matrix is used; delta, lambda: first n.
+  // tolerance: relative to max |delta| (for w) and max lambda (for lambda).
+  // Rows of W with a zero diagonal (a row that cannot move) never become active.
+  LcpResult solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n, double tolerance,
+                  int max_iterations, Eigen::VectorXd& lambda);
+
+  // After a converged solve: the inverse of the active block (for the contact stiffness), in
+  // active_inverse() (top-left active x active), rows listed by active_rows().
+  void invert_active();
+  const Eigen::MatrixXd& active_inverse() const { return inverse_; }
+  const std::vector<int>& active_rows() const { return active_rows_; }
+  int num_active() const { return num_active_; }
+
+ private:
+  int capacity_{0};
+  std::vector<char> in_set_;
+  std::vector<int> active_rows_;
+  int num_active_{0};
+  Eigen::MatrixXd chol_;     // lower Cholesky factor of the active block
+  Eigen::MatrixXd inverse_;  // inverse of the active block
+  Eigen::VectorXd rhs_, sol_, w_;
+
+  // Factors and solves the active block; returns the index (in active_rows_) of a dependent
+  // row, or -1.
+  int factor_and_solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta);
+};
+
+}  // namespace neurosim::interaction

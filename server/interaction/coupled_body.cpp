@@ -1,0 +1,325 @@
+#include "server/interaction/coupled_body.hpp"
+
+#include <Eigen/SparseCore>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace neurosim::interaction {
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Unit right-hand sides per CHOLMOD block solve (BLAS-3 inside the supernodes).
+constexpr int kBlockColumns = 63;
+
+}  // namespace
+
+std::vector<mesh::Vec3> surface_vertex_normals(const mesh::TetMesh& m) {
+  std::vector<mesh::Vec3> normals(m.num_vertices(), mesh::Vec3::Zero());
+  const auto& x = m.vertices();
+  for (const auto& t : m.surface()) {
+    const mesh::Vec3 n = (x[t[1]] - x[t[0]]).cross(x[t[2]] - x[t[0]]);  // 2 area * unit normal
+    for (int v : t) normals[v] += n;
+  }
+  for (auto& n : normals) {
+    const double len = n.norm();
+    if (len > 0.0) n /= len;
+  }
+  return normals;
+}
+
+CoupledBody::CoupledBody(int host_index, const mesh::TetMesh& host, const fem::Material& material,
+                         const std::vector<int>& host_fixed)
+    : host_index_(host_index), host_(&host) {
+  const auto t0 = std::chrono::steady_clock::now();
+  solver_ = std::make_unique<fem::StaticSolver>(host, fem::MaterialMap::uniform(material), host_fixed);
+  timing_.factor_s = seconds_since(t0);
+  boundary_slot_.assign(host.num_vertices(), -1);
+  contact_slot_.assign(host.num_vertices(), -1);
+  const auto normals = surface_vertex_normals(host);
+  // Fixed nodes cannot move: a row there could never be satisfied, so they are not contactable.
+  for (int v : host.surface_vertices()) {
+    if (solver_->is_fixed_node(v) || normals[v].squaredNorm() == 0.0) continue;
+    contact_slot_[v] = static_cast<int>(contact_nodes_.size());
+    contact_nodes_.push_back(v);
+    contact_normals_.push_back(normals[v]);
+  }
+  column_of_.assign(contact_nodes_.size(), -1);
+}
+
+void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded, const fem::Material& material,
+                          const std::vector<int>& embedded_fixed, const std::vector<int>& embedded_surface_nodes,
+                          const std::vector<std::array<int, 3>>& tri_nodes,
+                          const std::vector<std::array<double, 3>>& weights, double max_map_distance_m) {
+  if (finalized_) throw std::logic_error("CoupledBody::add_tie after finalize");
+  if (tri_nodes.size() != embedded_surface_nodes.size() || weights.size() != embedded_surface_nodes.size()) {
+    throw std::invalid_argument("CoupledBody::add_tie: coupling map sizes differ");
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  EmbeddedTie tie;
+  tie.mesh = mesh_index;
+  tie.geometry = &embedded;
+  tie.fixed_nodes = embedded_fixed;
+  std::sort(tie.fixed_nodes.begin(), tie.fixed_nodes.end());
+  tie.max_map_distance_m = max_map_distance_m;
+  std::vector<std::array<int, 3>> tris;
+  const int nb = static_cast<int>(embedded.num_vertices());
+  for (std::size_t k = 0; k < embedded_surface_nodes.size(); ++k) {
+    const int v = embedded_surface_nodes[k];
+    if (v < 0 || v >= nb) {
+      throw std::invalid_argument("CoupledBody::add_tie: embedded node " + std::to_string(v) + " out of range");
+    }
+    // A fixed node of B stays fixed: tying it too would over-constrain A.
+    if (std::binary_search(tie.fixed_nodes.begin(), tie.fixed_nodes.end(), v)) continue;
+    double sum = 0.0;
+    for (int a = 0; a < 3; ++a) {
+      const int h = tri_nodes[k][a];
+      if (h < 0 || h >= static_cast<int>(host_->num_vertices()) || !std::isfinite(weights[k][a])) {
+        throw std::invalid_argument("CoupledBody::add_tie: bad coupling map entry for embedded node " +
+                                    std::to_string(v));
+      }
+      sum += weights[k][a];
+    }
+    if (std::abs(sum - 1.0) > 1e-9) {
+      throw std::invalid_argument("CoupledBody::add_tie: weights of embedded node " + std::to_string(v) +
+                                  " sum to " + std::to_string(sum));
+    }
+    tie.tied_nodes.push_back(v);
+    tie.weights.push_back(weights[k]);
+    tris.push_back(tri_nodes[k]);
+  }
+  if (tie.tied_nodes.empty()) throw std::invalid_argument("CoupledBody::add_tie: no node of the embedded mesh to tie");
+
+  // Condensation of B onto its tied dofs: S_B = K_ss - K_si K_ii^-1 K_is.
+  std::vector<int> constrained = tie.fixed_nodes;
+  constrained.insert(constrained.end(), tie.tied_nodes.begin(), tie.tied_nodes.end());
+  std::sort(constrained.begin(), constrained.end());
+  const auto materials = fem::MaterialMap::uniform(material);
+  fem::SparseMatrix k_b;
+  const int t = static_cast<int>(tie.tied_nodes.size());
+  std::vector<int> tied_dof_index(3 * nb, -1);
+  for (int k = 0; k < t; ++k)
+    for (int a = 0; a < 3; ++a) tied_dof_index[3 * tie.tied_nodes[k] + a] = 3 * k + a;
+  if (static_cast<int>(constrained.size()) < nb) {
+    fem::SolverOptions opts;
+    opts.check_rigid_modes = false;  // the whole surface is fixed: no rigid mode is left
+    tie.interior = std::make_unique<fem::StaticSolver>(embedded, materials, constrained, opts);
+    k_b = tie.interior->stiffness();
+  } else {
+    k_b = fem::assemble_stiffness(embedded, materials);
+  }
+  tie.schur.setZero(3 * t, 3 * t);
+  Eigen::MatrixXd k_is;
+  const int nf = tie.interior ? tie.interior->num_free_dofs() : 0;
+  if (nf > 0) k_is.setZero(nf, 3 * t);
+  for (int c = 0; c < k_b.outerSize(); ++c) {
+    const int tc = tied_dof_index[c];
+    if (tc < 0) continue;
+    for (fem::SparseMatrix::InnerIterator it(k_b, c); it; ++it) {
+      const int r = static_cast<int>(it.row());
+      if (tied_dof_index[r] >= 0) {
+        tie.schur(tied_dof_index[r], tc) = it.value();
+      } else if (nf > 0 && tie.interior->reduced_index()[r] >= 0) {
+        k_is(tie.interior->reduced_index()[r], tc) = it.value();
+      }
+    }
+  }
+  if (nf > 0) {
+    Eigen::MatrixXd x;
+    tie.interior->solve_reduced(k_is, x);
+    tie.schur.noalias() -= k_is.transpose() * x;
+  }
+  tie.schur = (0.5 * (tie.schur + tie.schur.transpose())).eval();
+  timing_.condense_s += seconds_since(t0);
+  pending_tri_nodes_.push_back(std::move(tris));
+  ties_.push_back(std::move(tie));
+}
+
+void CoupledBody::finalize() {
+  if (finalized_) return;
+  finalized_ = true;
+  auto t0 = std::chrono::steady_clock::now();
+  for (const auto& tris : pending_tri_nodes_)
+    for (const auto& tri : tris) boundary_nodes_.insert(boundary_nodes_.end(), tri.begin(), tri.end());
+  std::sort(boundary_nodes_.begin(), boundary_nodes_.end());
+  boundary_nodes_.erase(std::unique(boundary_nodes_.begin(), boundary_nodes_.end()), boundary_nodes_.end());
+  for (std::size_t s = 0; s < boundary_nodes_.size(); ++s) boundary_slot_[boundary_nodes_[s]] = static_cast<int>(s);
+  for (std::size_t i = 0; i < ties_.size(); ++i) {
+    auto& tie = ties_[i];
+    tie.host_slots.resize(tie.tied_nodes.size());
+    for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k)
+      for (int a = 0; a < 3; ++a) tie.host_slots[k][a] = boundary_slot_[pending_tri_nodes_[i][k][a]];
+  }
+  pending_tri_nodes_.clear();
+  const int m3 = 3 * static_cast<int>(boundary_nodes_.size());
+  const int s3 = 3 * static_cast<int>(contact_nodes_.size());
+  if (m3 == 0) return;
+
+  // Compliance columns of A at the boundary dofs (paper Eq. 5, L_bb and L_cb), by block solves.
+  l_bb_.setZero(m3, m3);
+  l_sb_.setZero(s3, m3);
+  const auto& reduced = solver_->reduced_index();
+  const int nf = solver_->num_free_dofs();
+  std::vector<int> cols;
+  for (int c = 0; c < m3; ++c)
+    if (reduced[3 * boundary_nodes_[c / 3] + c % 3] >= 0) cols.push_back(c);  // fixed dofs: zero column
+  Eigen::MatrixXd rhs, x;
+  for (std::size_t first = 0; first < cols.size(); first += kBlockColumns) {
+    const int n = static_cast<int>(std::min<std::size_t>(kBlockColumns, cols.size() - first));
+    rhs.setZero(nf, n);
+    for (int j = 0; j < n; ++j) {
+      const int c = cols[first + j];
+      rhs(reduced[3 * boundary_nodes_[c / 3] + c % 3], j) = 1.0;
+    }
+    solver_->solve_reduced(rhs, x);
+    for (int j = 0; j < n; ++j) {
+      const int c = cols[first + j];
+      for (int r = 0; r < m3; ++r) {
+        const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
+        if (red >= 0) l_bb_(r, c) = x(red, j);
+      }
+      for (int r = 0; r < s3; ++r) l_sb_(r, c) = x(reduced[3 * contact_nodes_[r / 3] + r % 3], j);
+    }
+  }
+  l_bb_ = (0.5 * (l_bb_ + l_bb_.transpose())).eval();
+  timing_.boundary_s = seconds_since(t0);
+
+  // Coupling operator: K_add = sum J^T S_B J, G = (I + K_add L_bb)^-1 K_add, factored once.
+  t0 = std::chrono::steady_clock::now();
+  k_add_.setZero(m3, m3);
+  for (const auto& tie : ties_) {
+    const int t = static_cast<int>(tie.tied_nodes.size());
+    Eigen::SparseMatrix<double> j(3 * t, m3);
+    std::vector<Eigen::Triplet<double>> entries;
+    entries.reserve(9 * t);
+    for (int k = 0; k < t; ++k)
+      for (int v = 0; v < 3; ++v)
+        for (int a = 0; a < 3; ++a) entries.emplace_back(3 * k + a, 3 * tie.host_slots[k][v] + a, tie.weights[k][v]);
+    j.setFromTriplets(entries.begin(), entries.end());
+    const Eigen::MatrixXd sj = tie.schur * j;
+    k_add_ += j.transpose() * sj;
+  }
+  k_add_ = (0.5 * (k_add_ + k_add_.transpose())).eval();
+  Eigen::MatrixXd m = Eigen::MatrixXd::Identity(m3, m3);
+  m.noalias() += k_add_ * l_bb_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> lu(m);
+  g_ = lu.solve(k_add_);
+  g_ = (0.5 * (g_ + g_.transpose())).eval();
+  if (!g_.allFinite()) throw std::runtime_error("CoupledBody: coupling operator is not finite");
+  timing_.operator_s = seconds_since(t0);
+}
+
+void CoupledBody::ensure_columns(const std::vector<int>& slots) {
+  if (!finalized_) throw std::logic_error("CoupledBody::ensure_columns before finalize");
+  std::vector<int> missing;
+  for (int s : slots) {
+    if (s < 0 || s >= static_cast<int>(contact_nodes_.size())) {
+      throw std::invalid_argument("CoupledBody::ensure_columns: contact slot " + std::to_string(s) + " out of range");
+    }
+    if (column_of_[s] < 0) missing.push_back(s);
+  }
+  std::sort(missing.begin(), missing.end());
+  missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
+  const auto& reduced = solver_->reduced_index();
+  const int nf = solver_->num_free_dofs();
+  const int s3 = 3 * static_cast<int>(contact_nodes_.size());
+  const int m3 = static_cast<int>(l_bb_.rows());
+  constexpr int kNodes = kBlockColumns / 3;
+  Eigen::MatrixXd rhs, x, lb, corr;
+  for (std::size_t first = 0; first < missing.size(); first += kNodes) {
+    const int n = static_cast<int>(std::min<std::size_t>(kNodes, missing.size() - first));
+    rhs.setZero(nf, 3 * n);
+    for (int j = 0; j < n; ++j)
+      for (int a = 0; a < 3; ++a) rhs(reduced[3 * contact_nodes_[missing[first + j]] + a], 3 * j + a) = 1.0;
+    solver_->solve_reduced(rhs, x);
+    // Coupling correction: - L_A[c, b] G L_A[b, i] (Woodbury on the tie stiffness).
+    if (m3 > 0) {
+      lb.resize(m3, 3 * n);
+      for (int j = 0; j < n; ++j) lb.middleCols(3 * j, 3) = l_sb_.middleRows(3 * missing[first + j], 3).transpose();
+      const Eigen::MatrixXd glb = g_ * lb;
+      corr.noalias() = l_sb_ * glb;
+    }
+    for (int j = 0; j < n; ++j) {
+      Eigen::Matrix<double, Eigen::Dynamic, 3> col(s3, 3);
+      for (int r = 0; r < s3; ++r)
+        for (int a = 0; a < 3; ++a) col(r, a) = x(reduced[3 * contact_nodes_[r / 3] + r % 3], 3 * j + a);
+      if (m3 > 0) col -= corr.middleCols(3 * j, 3);
+      column_of_[missing[first + j]] = static_cast<int>(columns_.size());
+      columns_.push_back(std::move(col));
+    }
+  }
+}
+
+void CoupledBody::host_displacement(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
+                                    Eigen::VectorXd& u_host_m) const {
+  if (slots.size() != forces_n.size()) throw std::invalid_argument("CoupledBody::host_displacement: sizes differ");
+  const int n3 = 3 * static_cast<int>(host_->num_vertices());
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(n3);
+  const int m3 = static_cast<int>(l_bb_.rows());
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(m3);
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    const int s = slots[k];
+    if (s < 0 || s >= static_cast<int>(contact_nodes_.size()) || !forces_n[k].allFinite()) {
+      throw std::invalid_argument("CoupledBody::host_displacement: bad slot or force at entry " + std::to_string(k));
+    }
+    f.segment<3>(3 * contact_nodes_[s]) += forces_n[k];
+    if (m3 > 0) v.noalias() += l_sb_.middleRows(3 * s, 3).transpose() * forces_n[k];
+  }
+  if (m3 > 0) {
+    // Boundary displacement of the coupled body, then B's force on A: f_b = -K_add u_b.
+    const Eigen::VectorXd u_b = v - l_bb_ * (g_ * v);
+    const Eigen::VectorXd f_b = -(k_add_ * u_b);
+    for (int r = 0; r < m3; ++r) f[3 * boundary_nodes_[r / 3] + r % 3] += f_b[r];
+  }
+  solver_->solve(f, u_host_m);
+}
+
+void CoupledBody::embedded_displacement(int tie_index, const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const {
+  const auto& tie = ties_.at(tie_index);
+  const int t = static_cast<int>(tie.tied_nodes.size());
+  Eigen::VectorXd u_s(3 * t);
+  for (int k = 0; k < t; ++k) {
+    Eigen::Vector3d u = Eigen::Vector3d::Zero();
+    for (int a = 0; a < 3; ++a) u += tie.weights[k][a] * u_host_m.segment<3>(3 * boundary_nodes_[tie.host_slots[k][a]]);
+    u_s.segment<3>(3 * k) = u;
+  }
+  if (tie.interior) {
+    u_m = tie.interior->solve_prescribed(tie.tied_nodes, u_s).displacement_m;
+  } else {
+    u_m.setZero(3 * static_cast<int>(tie.geometry->num_vertices()));
+    for (int k = 0; k < t; ++k) u_m.segment<3>(3 * tie.tied_nodes[k]) = u_s.segment<3>(3 * k);
+  }
+}
+
+double CoupledBody::tie_residual(int tie_index, const Eigen::VectorXd& u_host_m,
+                                 const Eigen::VectorXd& u_embedded_m) const {
+  const auto& tie = ties_.at(tie_index);
+  double worst = 0.0;
+  for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k) {
+    Eigen::Vector3d u = Eigen::Vector3d::Zero();
+    for (int a = 0; a < 3; ++a) u += tie.weights[k][a] * u_host_m.segment<3>(3 * boundary_nodes_[tie.host_slots[k][a]]);
+    worst = std::max(worst, (u - u_embedded_m.segment<3>(3 * tie.tied_nodes[k])).norm());
+  }
+  return worst;
+}
+
+Eigen::Matrix3d CoupledBody::host_block(int slot_i, int slot_j) const {
+  Eigen::Matrix3d out;
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * static_cast<int>(host_->num_vertices())), u;
+  for (int a = 0; a < 3; ++a) {
+    f.setZero();
+    f[3 * contact_nodes_.at(slot_j) + a] = 1.0;
+    solver_->solve(f, u);
+    out.col(a) = u.segment<3>(3 * contact_nodes_.at(slot_i));
+  }
+  return out;
+}
+
+}  // namespace neurosim::interaction

@@ -1,0 +1,124 @@
+// A host mesh A with the embedded meshes B tied to it (paper 2.3/2.6, Eq. 5-6), solved exactly.
+//
+// Formulation (exact, no regularization, also when B floats): every free surface node k of B is
+// tied to its closest point on A's new boundary S' (barycentric weights w), u_B,k = sum w u_A.
+// B is condensed onto its tied nodes by its Schur complement S_B = K_ss - K_si K_ii^-1 K_is
+// (K_ii: B with its surface fixed, positive definite even when B has no fixed node), so B adds
+// the stiffness K_add = J^T S_B J on A's boundary dofs b. The coupled compliance is then, by
+// Woodbury, L = L_A - L_A[:,b] G L_A[b,:] with G = (I + K_add L_bb)^-1 K_add, the coupling
+// operator factored once at load. The tie holds to round-off by construction: B's tied nodes
+// take the interpolated displacement of A, and B's interior follows from K_ii.
+#pragma once
+
+#include "server/fem/material.hpp"
+#include "server/fem/static_solver.hpp"
+#include "server/mesh/tet_mesh.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/LU>
+
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace neurosim::interaction {
+
+// One embedded mesh tied to the host.
+struct EmbeddedTie {
+  int mesh{-1};                          // index of B in the simulation
+  const mesh::TetMesh* geometry{nullptr};
+  std::vector<int> fixed_nodes;          // B's own fixed nodes (sorted)
+  std::vector<int> tied_nodes;           // B's free surface nodes, ascending
+  std::vector<std::array<int, 3>> host_slots;     // per tied node: boundary slots of A's 3 nodes
+  std::vector<std::array<double, 3>> weights;     // barycentric weights on them
+  double max_map_distance_m{0.0};        // largest node-to-S' distance of the coupling map, unit m
+  std::unique_ptr<fem::StaticSolver> interior;    // B with tied + fixed nodes fixed (null: no interior)
+  Eigen::MatrixXd schur;                 // S_B on the tied dofs (3t x 3t), unit N/m
+};
+
+struct CoupledBodyTiming {
+  double factor_s{0.0};     // host assembly + factorization, unit s
+  double boundary_s{0.0};   // compliance columns of A at S' and rows at the contact nodes, unit s
+  double condense_s{0.0};   // Schur complements of the embedded meshes, unit s
+  double operator_s{0.0};   // K_add and the factored coupling operator G, unit s
+};
+
+class CoupledBody {
+ public:
+  // host_fixed must hold enough nodes to remove A's rigid modes (StaticSolver checks).
+  CoupledBody(int host_index, const mesh::TetMesh& host, const fem::Material& material,
+              const std::vector<int>& host_fixed);
+
+  // Adds an embedded mesh tied through the map (B's surface node -> S' triangle of A, weights).
+  // tri_nodes[k]: A's node ids of the triangle node k of B is tied to.
+  void add_tie(int mesh_index, const mesh::TetMesh& embedded, const fem::Material& material,
+               const std::vector<int>& embedded_fixed, const std::vector<int>& embedded_surface_nodes,
+               const std::vector<std::array<int, 3>>& tri_nodes,
+               const std::vector<std::array<double, 3>>& weights, double max_map_distance_m);
+
+  // After the last add_tie: boundary compliance, coupling operator, contact rows of L_A at b.
+  void finalize();
+
+  int host_index() const { return host_index_; }
+  const mesh::TetMesh& host() const { return *host_; }
+  const fem::StaticSolver& host_solver() const { return *solver_; }
+  const std::vector<EmbeddedTie>& ties() const { return ties_; }
+  const std::vector<int>& boundary_nodes() const { return boundary_nodes_; }  // A ids, sorted
+
+  // Contactable points: A's free surface nodes (A ids ascending) and outward unit normals.
+  const std::vector<int>& contact_nodes() const { return contact_nodes_; }
+  const std::vector<mesh::Vec3>& contact_normals() const { return contact_normals_; }
+  int contact_slot(int host_node) const { return contact_slot_[host_node]; }
+
+  // Coupled compliance block L(i, j) (3x3, unit m/N) between contact slots i and j; the
+  // columns of j must be cached (ensure_columns).
+  Eigen::Matrix3d block(int slot_i, int slot_j) const {
+    return columns_[column_of_[slot_j]].block<3, 3>(3 * slot_i, 0);
+  }
+  bool has_columns(int slot) const { return column_of_[slot] >= 0; }
+  // Computes the coupled compliance columns of the given slots that are missing (block solves).
+  void ensure_columns(const std::vector<int>& slots);
+  std::size_t cached_columns() const { return columns_.size(); }
+
+  // Full fields for nodal forces on contact slots (force_n per slot, unit N): host displacement
+  // (3N_A) and, per tie, B's displacement (3N_B), unit m. Also returns the boundary displacement.
+  void host_displacement(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
+                         Eigen::VectorXd& u_host_m) const;
+  void embedded_displacement(int tie, const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
+  // max_k |sum w u_A - u_B,k| over the tied nodes of `tie` (unit m).
+  double tie_residual(int tie, const Eigen::VectorXd& u_host_m, const Eigen::VectorXd& u_embedded_m) const;
+
+  const CoupledBodyTiming& timing() const { return timing_; }
+  // Boundary blocks (for the iterative baseline): L_A[b,b], K_add, rows of L_A at contact x b.
+  const Eigen::MatrixXd& boundary_compliance() const { return l_bb_; }
+  const Eigen::MatrixXd& boundary_stiffness() const { return k_add_; }
+  const Eigen::MatrixXd& contact_boundary_compliance() const { return l_sb_; }
+  // Host-only compliance L_A(i, j) of contact slots (3x3), from one solve per call (reference).
+  Eigen::Matrix3d host_block(int slot_i, int slot_j) const;
+
+ private:
+  int host_index_{-1};
+  const mesh::TetMesh* host_{nullptr};
+  std::unique_ptr<fem::StaticSolver> solver_;
+  std::vector<EmbeddedTie> ties_;
+  std::vector<int> boundary_nodes_;
+  std::vector<int> boundary_slot_;  // A node -> slot in boundary_nodes_ or -1
+  std::vector<std::vector<std::array<int, 3>>> pending_tri_nodes_;
+  std::vector<int> contact_nodes_;
+  std::vector<int> contact_slot_;  // A node -> contact slot or -1
+  std::vector<mesh::Vec3> contact_normals_;
+  Eigen::MatrixXd l_bb_;   // L_A[b, b] (3m x 3m), unit m/N
+  Eigen::MatrixXd l_sb_;   // L_A[contact dofs, b] (3s x 3m), unit m/N
+  Eigen::MatrixXd k_add_;  // sum over ties of J^T S_B J (3m x 3m), unit N/m
+  Eigen::MatrixXd g_;      // (I + K_add L_bb)^-1 K_add (3m x 3m), unit N/m
+  std::vector<int> column_of_;  // contact slot -> index in columns_ or -1
+  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> columns_;  // coupled L[contact dofs, slot]
+  CoupledBodyTiming timing_;
+  bool finalized_{false};
+};
+
+// Area-weighted outward vertex normals of a mesh's surface (unit; zero where no face).
+std::vector<mesh::Vec3> surface_vertex_normals(const mesh::TetMesh& mesh);
+
+}  // namespace neurosim::interaction

@@ -1,0 +1,539 @@
+// Simulation: scene -> coupled bodies (exact tie, coupled_body.hpp) -> per-step tool contact LCP.
+#include "server/interaction/simulation.hpp"
+
+#include "server/fusion/coupling_map.hpp"
+#include "server/fusion/inclusion.hpp"
+#include "server/fusion/priority.hpp"
+#include "server/fusion/triangle_surface.hpp"
+#include "server/interaction/contact_lcp.hpp"
+#include "server/interaction/coupled_body.hpp"
+#include "server/interaction/tool_geometry.hpp"
+#include "server/scene/scene.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace neurosim::interaction {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// One unilateral contact row: a contactable node of a body against one tool.
+struct Row {
+  int body{-1};
+  int slot{-1};   // contact slot in the body
+  int tool{-1};
+  double depth_m{0.0};  // penetration along the node's inward normal, unit m
+  double height_m{0.0};  // the tool centre's depth below the node's surface patch, unit m
+};
+
+bool deeper(const Row& a, const Row& b) {
+  if (a.depth_m != b.depth_m) return a.depth_m > b.depth_m;
+  if (a.body != b.body) return a.body < b.body;
+  return a.slot < b.slot;
+}
+
+class SimulationImpl final : public Simulation {
+ public:
+  SimulationImpl(const scene::Scene& scene, const std::string& scene_path, const SimulationOptions& options);
+
+  int num_meshes() const override { return static_cast<int>(meshes_.size()); }
+  const std::string& mesh_id(int m) const override { return entry(m).loaded->id; }
+  const mesh::TetMesh& mesh(int m) const override { return entry(m).loaded->mesh; }
+  bool mesh_active(int m) const override { return entry(m).body >= 0; }
+  const SetupStats& setup_stats() const override { return setup_; }
+  int num_tools() const override { return static_cast<int>(tools_.size()); }
+
+  void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts, StepStats& stats) override;
+  void displacements(int mesh, Eigen::VectorXd& u_m) const override;
+  double tie_residual_m() const override;
+  const CoupledBody* body_of(int m) const override {
+    const int b = entry(m).body;
+    return b < 0 ? nullptr : bodies_[b].body.get();
+  }
+  void last_contact_forces(int m, std::vector<int>& slots, std::vector<Vec3>& forces_n) const override {
+    slots.clear();
+    forces_n.clear();
+    const int b = entry(m).body;
+    if (b < 0) return;
+    slots = bodies_[b].force_slots;
+    forces_n = bodies_[b].forces_n;
+  }
+
+ private:
+  struct MeshEntry {
+    std::unique_ptr<scene::LoadedMesh> loaded;  // stable address: bodies point into it
+    int body{-1};  // body it belongs to (host or tied), -1: inert
+    int tie{-1};   // tie index in that body when embedded
+  };
+  struct BodyEntry {
+    std::unique_ptr<CoupledBody> body;
+    PointGrid grid;
+    std::vector<mesh::Vec3> rest_m;  // per contact slot
+    double max_penetration_m{0.0};
+    double validity_radius_m{0.0};
+    std::vector<long long> stamp;  // per contact slot: last tool query that saw it
+    std::vector<int> row_of_slot;  // per contact slot: row in this step or -1
+    // Last good step's contact forces on the body, per slot (unit N).
+    std::vector<int> force_slots;
+    std::vector<mesh::Vec3> forces_n;
+  };
+
+  const MeshEntry& entry(int m) const {
+    if (m < 0 || m >= static_cast<int>(meshes_.size())) {
+      throw std::invalid_argument("Simulation: mesh index " + std::to_string(m) + " out of range");
+    }
+    return meshes_[m];
+  }
+  void reserve_workspace(int tools);
+  void collect_rows(int tool, const ToolPose& pose, const Vec3& axis);
+
+  SimulationOptions options_;
+  std::string source_;
+  std::vector<MeshEntry> meshes_;
+  std::vector<BodyEntry> bodies_;
+  std::vector<ToolShape> tools_;
+  SetupStats setup_;
+
+  // Step workspace (sized once per tool count).
+  long long stamp_counter_{0};
+  std::vector<int> candidates_;
+  std::vector<Row> tool_rows_;
+  std::vector<Row> rows_;
+  std::vector<std::vector<int>> missing_;
+  Eigen::MatrixXd w_;
+  Eigen::VectorXd delta_, lambda_;
+  ContactLcp lcp_;
+  std::vector<ToolContact> last_good_;
+};
+
+SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& scene_path,
+                               const SimulationOptions& options)
+    : options_(options), source_(scene_path) {
+  const auto t_start = Clock::now();
+  if (options_.max_contact_nodes_per_tool < 1 || options_.lcp_max_iterations < 1 ||
+      !(options_.lcp_tolerance > 0.0) || !(options_.max_penetration_m >= 0.0) ||
+      !std::isfinite(options_.max_penetration_m) || !(options_.candidate_margin >= 0.0)) {
+    throw std::invalid_argument(source_ + ": invalid SimulationOptions");
+  }
+  const std::filesystem::path dir = std::filesystem::path(scene_path).parent_path();
+
+  // Meshes, in scene order.
+  auto t0 = Clock::now();
+  for (int i = 0; i < scene.meshes_size(); ++i) {
+    MeshEntry e;
+    e.loaded = std::make_unique<scene::LoadedMesh>(scene::load_mesh(scene.meshes(i), dir, scene_path));
+    meshes_.push_back(std::move(e));
+  }
+  setup_.load_meshes_s = seconds_since(t0);
+
+  // Roles from the couplings (only when the scene asks for coupling).
+  std::vector<int> host_of(meshes_.size(), -1);
+  std::vector<char> is_host(meshes_.size(), 0);
+  std::vector<int> coupling_of(meshes_.size(), -1);
+  if (scene.effects().coupling()) {
+    for (int c = 0; c < scene.couplings_size(); ++c) {
+      const auto& cp = scene.couplings(c);
+      const std::string what = source_ + ": couplings[" + std::to_string(c) + "] (" + cp.host() + " / " + cp.embedded() + ")";
+      const int h = scene::find_mesh(scene, cp.host()), b = scene::find_mesh(scene, cp.embedded());
+      if (h < 0 || b < 0 || h == b) throw std::runtime_error(what + ": unknown or identical meshes");
+      if (cp.kind() != scene::Coupling::TIE) {
+        throw std::runtime_error(what + ": SLIDING coupling is not implemented yet (issue 4)");
+      }
+      if (cp.method() != scene::Coupling::EXACT) {
+        throw std::runtime_error(what + ": the ITERATIVE method is a benchmark baseline only; use EXACT");
+      }
+      // Priority decides which mesh gets the new boundary (paper 2.4); it must agree with the scene.
+      const auto pair = fusion::decide_roles({&meshes_[h].loaded->mesh, meshes_[h].loaded->priority, cp.host()},
+                                             {&meshes_[b].loaded->mesh, meshes_[b].loaded->priority, cp.embedded()});
+      if (pair.host.mesh != &meshes_[h].loaded->mesh) {
+        throw std::runtime_error(what + ": the host must have the lower priority");
+      }
+      if (host_of[b] >= 0) throw std::runtime_error(what + ": mesh " + cp.embedded() + " is embedded twice");
+      host_of[b] = h;
+      coupling_of[b] = c;
+      is_host[h] = 1;
+    }
+    for (std::size_t m = 0; m < meshes_.size(); ++m) {
+      if (is_host[m] && host_of[m] >= 0) {
+        throw std::runtime_error(source_ + ": mesh " + meshes_[m].loaded->id +
+                                 " is both host and embedded (nested ties are not supported)");
+      }
+    }
+  }
+
+  // Bodies: every host and every mesh with fixed nodes that is not embedded.
+  for (std::size_t m = 0; m < meshes_.size(); ++m) {
+    const auto& lm = *meshes_[m].loaded;
+    if (host_of[m] >= 0) continue;
+    if (lm.fixed_nodes.empty()) {
+      if (is_host[m]) throw std::runtime_error(source_ + ": host mesh " + lm.id + " has no fixed nodes");
+      continue;  // floating and untied: inert (cannot carry a contact force)
+    }
+    BodyEntry b;
+    try {
+      b.body = std::make_unique<CoupledBody>(static_cast<int>(m), lm.mesh, lm.material, lm.fixed_nodes);
+    } catch (const std::exception& ex) {
+      throw std::runtime_error(source_ + ": mesh " + lm.id + ": " + ex.what());
+    }
+    setup_.factor_s += b.body->timing().factor_s;
+    meshes_[m].body = static_cast<int>(bodies_.size());
+    bodies_.push_back(std::move(b));
+  }
+  // Ties: inclusion decision (Algorithm 1) and coupling map (paper 2.6) per coupled pair.
+  for (std::size_t m = 0; m < meshes_.size(); ++m) {
+    if (host_of[m] < 0) continue;
+    const int h = host_of[m];
+    auto& host = *meshes_[h].loaded;
+    auto& emb = *meshes_[m].loaded;
+    const std::string what = source_ + ": coupling " + host.id + " / " + emb.id;
+    t0 = Clock::now();
+    const auto surface = fusion::TriangleSurface::of(emb.mesh, emb.id);
+    fusion::NewBoundary boundary;
+    fusion::CouplingMap map;
+    try {
+      boundary = fusion::find_new_boundary(host.mesh, surface);
+      map = fusion::build_coupling_map(host.mesh.vertices(), boundary, surface);
+    } catch (const std::exception& ex) {
+      throw std::runtime_error(what + ": " + ex.what());
+    }
+    setup_.fusion_s += seconds_since(t0);
+    std::vector<std::array<int, 3>> tris(map.embedded_nodes.size());
+    std::vector<std::array<double, 3>> weights(map.embedded_nodes.size());
+    for (std::size_t k = 0; k < map.embedded_nodes.size(); ++k) {
+      const auto& sp = map.embedded_on_boundary[k];
+      const auto& tri = boundary.triangles.at(sp.triangle);
+      tris[k] = {tri[0], tri[1], tri[2]};
+      weights[k] = sp.weights;
+    }
+    auto& body = bodies_[meshes_[h].body];
+    try {
+      body.body->add_tie(static_cast<int>(m), emb.mesh, emb.material, emb.fixed_nodes, map.embedded_nodes, tris,
+                         weights, map.embedded_to_boundary.max_m);
+    } catch (const std::exception& ex) {
+      throw std::runtime_error(what + ": " + ex.what());
+    }
+    meshes_[m].body = meshes_[h].body;
+    meshes_[m].tie = static_cast<int>(body.body->ties().size()) - 1;
+  }
+  for (auto& b : bodies_) {
+    b.body->finalize();
+    const auto& tm = b.body->timing();
+    setup_.condense_s += tm.condense_s;
+    setup_.boundary_s += tm.boundary_s;
+    setup_.operator_s += tm.operator_s;
+    setup_.boundary_nodes += static_cast<int>(b.body->boundary_nodes().size());
+    for (const auto& tie : b.body->ties()) setup_.tied_nodes += static_cast<int>(tie.tied_nodes.size());
+    // Contact geometry: rest positions of contactable nodes on a grid.
+    const auto& host = b.body->host();
+    for (int v : b.body->contact_nodes()) b.rest_m.push_back(host.vertices()[v]);
+    const double edge = host.mean_edge_length();
+    b.grid = PointGrid(b.rest_m, 2.0 * edge);
+    Vec3 lo, hi;
+    host.bounds(lo, hi);
+    b.max_penetration_m = options_.max_penetration_m > 0.0 ? options_.max_penetration_m : 0.45 * (hi - lo).minCoeff();
+    b.validity_radius_m = 0.5 * edge;
+    b.stamp.assign(b.rest_m.size(), -1);
+    b.row_of_slot.assign(b.rest_m.size(), -1);
+    if (options_.precompute_contact_columns) {
+      t0 = Clock::now();
+      std::vector<int> all(b.rest_m.size());
+      for (std::size_t s = 0; s < all.size(); ++s) all[s] = static_cast<int>(s);
+      b.body->ensure_columns(all);
+      setup_.columns_s += seconds_since(t0);
+    }
+  }
+
+  for (int t = 0; t < scene.tools_size(); ++t) {
+    const auto& tool = scene.tools(t);
+    ToolShape shape{tool.tip_radius_m(), tool.shaft_radius_m(), tool.shaft_length_m()};
+    if (!(shape.tip_radius_m > 0.0) || !std::isfinite(shape.tip_radius_m) || !(shape.shaft_radius_m >= 0.0) ||
+        !std::isfinite(shape.shaft_radius_m) || !(shape.shaft_length_m >= 0.0) || !std::isfinite(shape.shaft_length_m)) {
+      throw std::runtime_error(source_ + ": tools[" + std::to_string(t) + "] (" + tool.id() +
+                               "): radii and length must be finite, tip radius > 0");
+    }
+    tools_.push_back(shape);
+  }
+  if (scene.effects().tool_contact() && tools_.empty()) {
+    throw std::runtime_error(source_ + ": effects.tool_contact is set but the scene has no tools");
+  }
+  if (!scene.effects().tool_contact()) tools_.clear();
+  missing_.resize(bodies_.size());
+  setup_.total_s = seconds_since(t_start);
+}
+
+void SimulationImpl::reserve_workspace(int tools) {
+  const int max_rows = std::max(1, tools * options_.max_contact_nodes_per_tool);
+  if (max_rows <= lcp_.capacity()) return;
+  lcp_.reserve(max_rows);
+  w_.setZero(max_rows, max_rows);
+  delta_.setZero(max_rows);
+  lambda_.setZero(max_rows);
+  rows_.reserve(max_rows);
+  std::size_t surface = 0;
+  for (const auto& b : bodies_) surface += b.rest_m.size();
+  candidates_.reserve(surface);
+  tool_rows_.reserve(surface);
+  for (auto& b : bodies_) {
+    b.force_slots.reserve(max_rows);
+    b.forces_n.reserve(max_rows);
+  }
+  for (auto& m : missing_) m.reserve(max_rows);
+  last_good_.resize(tools);
+  for (auto& c : last_good_) c.nodes.reserve(options_.max_contact_nodes_per_tool);
+}
+
+void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& axis) {
+  const ToolShape& shape = tools_[pose.tool];
+  const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
+  const bool shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
+  const double margin = options_.candidate_margin * shape.tip_radius_m;
+  tool_rows_.clear();
+  for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+    auto& b = bodies_[bi];
+    const long long stamp = ++stamp_counter_;
+    candidates_.clear();
+    const double reach = shape.tip_radius_m + b.max_penetration_m;
+    b.grid.query(p0 - Vec3::Constant(reach), p0 + Vec3::Constant(reach), candidates_);
+    if (shaft) {
+      const double sreach = shape.shaft_radius_m + b.max_penetration_m;
+      b.grid.query(p0.cwiseMin(p1) - Vec3::Constant(sreach), p0.cwiseMax(p1) + Vec3::Constant(sreach), candidates_);
+    }
+    const auto& normals = b.body->contact_normals();
+    const std::size_t first = tool_rows_.size();
+    for (int s : candidates_) {
+      if (b.stamp[s] == stamp) continue;
+      b.stamp[s] = stamp;
+      const Vec3& x = b.rest_m[s];
+      const Vec3& n = normals[s];
+      // Depth along the node's inward normal to the tip sphere, or to the shaft capsule.
+      // A part whose centre is deeper than max_penetration below the node's patch does not
+      // push it (bounded force when the tool jumps through the body).
+      double height = height_above(x, n, p0);
+      double depth = height <= b.max_penetration_m ? normal_line_depth(x, n, p0, shape.tip_radius_m)
+                                                   : -std::numeric_limits<double>::infinity();
+      if (shaft) {
+        const Vec3 q = closest_on_segment(x, p0, p1);
+        const double hs = height_above(x, n, q);
+        const double ds = hs <= b.max_penetration_m ? normal_line_depth(x, n, q, shape.shaft_radius_m)
+                                                    : -std::numeric_limits<double>::infinity();
+        if (ds > depth) {
+          depth = ds;
+          height = hs;
+        }
+      }
+      if (!(depth > -margin)) continue;
+      tool_rows_.push_back(Row{static_cast<int>(bi), s, tool, depth, height});
+    }
+    if (tool_rows_.size() == first) continue;
+    // The tool pushes the surface it is least deep under (where it entered): drop candidates on
+    // other sides of the body (a face the tip is far below, or one facing another way).
+    const Row* entry = &tool_rows_[first];
+    for (std::size_t k = first; k < tool_rows_.size(); ++k) {
+      const Row& r = tool_rows_[k];
+      if (r.height_m < entry->height_m || (r.height_m == entry->height_m && deeper(r, *entry))) entry = &r;
+    }
+    const double limit = entry->height_m + shape.tip_radius_m;
+    const Vec3 n_entry = normals[entry->slot];
+    auto other_side = [&](const Row& r) { return r.height_m > limit || normals[r.slot].dot(n_entry) < 0.5; };
+    tool_rows_.erase(std::remove_if(tool_rows_.begin() + first, tool_rows_.end(), other_side), tool_rows_.end());
+  }
+  // The deepest rows of this tool, deterministic order.
+  const std::size_t keep = std::min<std::size_t>(tool_rows_.size(), options_.max_contact_nodes_per_tool);
+  std::partial_sort(tool_rows_.begin(), tool_rows_.begin() + keep, tool_rows_.end(), deeper);
+  for (std::size_t k = 0; k < keep; ++k) {
+    const Row& r = tool_rows_[k];
+    auto& b = bodies_[r.body];
+    const int existing = b.row_of_slot[r.slot];
+    if (existing >= 0) {
+      // Two tools on one node: one row (same normal); the deeper tool carries it.
+      if (r.depth_m > rows_[existing].depth_m) rows_[existing] = r;
+      continue;
+    }
+    b.row_of_slot[r.slot] = static_cast<int>(rows_.size());
+    rows_.push_back(r);
+  }
+}
+
+void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts, StepStats& stats) {
+  const auto t0 = Clock::now();
+  const int nt = static_cast<int>(poses.size());
+  // Inputs first: nothing changes on a bad pose.
+  for (int t = 0; t < nt; ++t) {
+    const auto& p = poses[t];
+    if (!p.tip_m.allFinite() || !p.axis.allFinite()) {
+      throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " pose is not finite");
+    }
+    if (p.axis.norm() < 1e-12) throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " axis is zero");
+    if (p.tool < 0 || p.tool >= static_cast<int>(tools_.size())) {
+      if (!tools_.empty() || p.tool != 0) {
+        throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " refers to scene tool " +
+                                    std::to_string(p.tool) + " of " + std::to_string(tools_.size()));
+      }
+    }
+  }
+  reserve_workspace(nt);
+  if (static_cast<int>(contacts.size()) != nt) contacts.resize(nt);
+  rows_.clear();
+  if (!tools_.empty()) {
+    for (int t = 0; t < nt; ++t) collect_rows(t, poses[t], poses[t].axis.normalized());
+  }
+  const int n = static_cast<int>(rows_.size());
+  for (const Row& r : rows_) bodies_[r.body].row_of_slot[r.slot] = -1;
+
+  // Coupled compliance columns of new contact nodes (cached after the first touch).
+  for (auto& m : missing_) m.clear();
+  for (const Row& r : rows_)
+    if (!bodies_[r.body].body->has_columns(r.slot)) missing_[r.body].push_back(r.slot);
+  for (std::size_t bi = 0; bi < bodies_.size(); ++bi)
+    if (!missing_[bi].empty()) bodies_[bi].body->ensure_columns(missing_[bi]);
+
+  // Delassus operator on the rows: W_rs = n_r^T L(r, s) n_s (coupled compliance, unit m/N).
+  for (int r = 0; r < n; ++r) {
+    const Row& a = rows_[r];
+    const auto& body_a = *bodies_[a.body].body;
+    const Vec3& na = body_a.contact_normals()[a.slot];
+    delta_[r] = a.depth_m;
+    for (int s = r; s < n; ++s) {
+      const Row& c = rows_[s];
+      double v = 0.0;
+      if (c.body == a.body) {
+        const Vec3& nc = body_a.contact_normals()[c.slot];
+        v = 0.5 * (na.dot(body_a.block(a.slot, c.slot) * nc) + nc.dot(body_a.block(c.slot, a.slot) * na));
+      }
+      w_(r, s) = v;
+      w_(s, r) = v;
+    }
+  }
+  const LcpResult lcp = lcp_.solve(w_, delta_, n, options_.lcp_tolerance, options_.lcp_max_iterations, lambda_);
+
+  stats.contact_rows = n;
+  stats.converged = lcp.converged;
+  if (!lcp.converged) {
+    // Keep the last good answer, say that this step did not converge.
+    for (int t = 0; t < nt; ++t) {
+      contacts[t] = last_good_[t];
+      contacts[t].converged = false;
+      contacts[t].iterations = lcp.iterations;
+    }
+    stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+    return;
+  }
+  lcp_.invert_active();
+  const auto& active = lcp_.active_rows();
+  const Eigen::MatrixXd& inv = lcp_.active_inverse();
+  const int na = lcp_.num_active();
+  for (auto& b : bodies_) {
+    b.force_slots.clear();
+    b.forces_n.clear();
+  }
+  for (int r = 0; r < n; ++r) {
+    if (lambda_[r] <= 0.0) continue;
+    auto& b = bodies_[rows_[r].body];
+    b.force_slots.push_back(rows_[r].slot);
+    b.forces_n.push_back(-lambda_[r] * b.body->contact_normals()[rows_[r].slot]);  // inward on the tissue
+  }
+  for (int t = 0; t < nt; ++t) {
+    ToolContact& c = contacts[t];
+    c.force_n.setZero();
+    c.stiffness_n_per_m.setZero();
+    c.normal.setZero();
+    c.reference_tip_m = poses[t].tip_m;
+    c.converged = true;
+    c.iterations = lcp.iterations;
+    c.nodes.clear();
+    c.mesh = -1;
+    // Main body: the one carrying most of this tool's force.
+    int main_body = -1;
+    double best = 0.0;
+    for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+      double sum = 0.0;
+      for (int r = 0; r < n; ++r)
+        if (rows_[r].tool == t && rows_[r].body == static_cast<int>(bi)) sum += lambda_[r];
+      if (sum > best) {
+        best = sum;
+        main_body = static_cast<int>(bi);
+      }
+    }
+    for (int r = 0; r < n; ++r) {
+      if (rows_[r].tool != t || !(lambda_[r] > 0.0)) continue;
+      const auto& body = *bodies_[rows_[r].body].body;
+      c.force_n += lambda_[r] * body.contact_normals()[rows_[r].slot];
+      if (rows_[r].body == main_body) c.nodes.push_back(body.contact_nodes()[rows_[r].slot]);
+    }
+    // Contact stiffness dF/dx = -N W_AA^-1 N^T over this tool's active rows (flat-contact
+    // linearization: the depth changes by -n.dx per row).
+    for (int j = 0; j < na; ++j) {
+      const Row& rj = rows_[active[j]];
+      if (rj.tool != t) continue;
+      const Vec3& nj = bodies_[rj.body].body->contact_normals()[rj.slot];
+      for (int k = 0; k < na; ++k) {
+        const Row& rk = rows_[active[k]];
+        if (rk.tool != t) continue;
+        const Vec3& nk = bodies_[rk.body].body->contact_normals()[rk.slot];
+        c.stiffness_n_per_m.noalias() -= inv(j, k) * nj * nk.transpose();
+      }
+    }
+    c.in_contact = main_body >= 0;
+    if (c.in_contact) {
+      c.mesh = bodies_[main_body].body->host_index();
+      c.validity_radius_m = bodies_[main_body].validity_radius_m;
+      const double f = c.force_n.norm();
+      if (f > 0.0) c.normal = c.force_n / f;
+    } else {
+      c.validity_radius_m = 0.0;
+    }
+    if (!c.force_n.allFinite() || !c.stiffness_n_per_m.allFinite()) {
+      throw std::runtime_error("Simulation::step: non-finite contact result for tool " + std::to_string(t));
+    }
+    last_good_[t] = c;
+  }
+  stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+}
+
+void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
+  const MeshEntry& e = entry(m);
+  if (e.body < 0) {
+    u_m.setZero(3 * static_cast<int>(e.loaded->mesh.num_vertices()));
+    return;
+  }
+  const BodyEntry& b = bodies_[e.body];
+  if (e.tie < 0) {
+    b.body->host_displacement(b.force_slots, b.forces_n, u_m);
+    return;
+  }
+  Eigen::VectorXd u_host;
+  b.body->host_displacement(b.force_slots, b.forces_n, u_host);
+  b.body->embedded_displacement(e.tie, u_host, u_m);
+}
+
+double SimulationImpl::tie_residual_m() const {
+  double worst = 0.0;
+  Eigen::VectorXd u_host, u_emb;
+  for (const auto& b : bodies_) {
+    if (b.body->ties().empty()) continue;
+    b.body->host_displacement(b.force_slots, b.forces_n, u_host);
+    for (std::size_t t = 0; t < b.body->ties().size(); ++t) {
+      b.body->embedded_displacement(static_cast<int>(t), u_host, u_emb);
+      worst = std::max(worst, b.body->tie_residual(static_cast<int>(t), u_host, u_emb));
+    }
+  }
+  return worst;
+}
+
+}  // namespace
+
+std::unique_ptr<Simulation> Simulation::build(const scene::Scene& scene, const std::string& scene_path,
+                                              const SimulationOptions& options) {
+  return std::make_unique<SimulationImpl>(scene, scene_path, options);
+}
+
+}  // namespace neurosim::interaction

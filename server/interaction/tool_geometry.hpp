@@ -1,0 +1,64 @@
+// Tool shape against surface nodes: a spherical tip plus a capsule shaft, a uniform grid over
+// the contactable nodes' rest positions for candidates, and the penetration depth of a node.
+#pragma once
+
+#include "server/mesh/tet_mesh.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+namespace neurosim::interaction {
+
+struct ToolShape {
+  double tip_radius_m{0.0};
+  double shaft_radius_m{0.0};
+  double shaft_length_m{0.0};
+};
+
+// Depth (unit m) by which a node at x with outward normal n must move inward (along -n) to lie
+// on the sphere (centre c, radius r) from the tissue side: the sphere's point on the node's
+// normal line (Eq. "node penetration depth" of the contact rows). -inf when the normal line
+// misses the sphere; <= 0 when the node is clear of it.
+inline double normal_line_depth(const mesh::Vec3& x, const mesh::Vec3& n, const mesh::Vec3& c, double r) {
+  const mesh::Vec3 d = x - c;
+  const double a = d.dot(n);
+  const double perp2 = d.squaredNorm() - a * a;
+  if (perp2 >= r * r) return -std::numeric_limits<double>::infinity();
+  return a + std::sqrt(r * r - perp2);
+}
+
+// Height (unit m) of the node above the centre c along its outward normal n: how deep the
+// centre is below the surface patch of the node.
+inline double height_above(const mesh::Vec3& x, const mesh::Vec3& n, const mesh::Vec3& c) { return (x - c).dot(n); }
+
+// Closest point of segment [p0, p1] to x.
+inline mesh::Vec3 closest_on_segment(const mesh::Vec3& x, const mesh::Vec3& p0, const mesh::Vec3& p1) {
+  const mesh::Vec3 e = p1 - p0;
+  const double len2 = e.squaredNorm();
+  if (len2 == 0.0) return p0;
+  const double t = std::clamp((x - p0).dot(e) / len2, 0.0, 1.0);
+  return p0 + t * e;
+}
+
+// Uniform grid over points (rest positions of contactable nodes): box queries return point
+// indices in ascending order of cell then insertion (deterministic), into a caller's vector.
+class PointGrid {
+ public:
+  PointGrid() = default;
+  PointGrid(const std::vector<mesh::Vec3>& points_m, double cell_m);
+  // Appends the indices of points in cells overlapping [lo, hi] (a superset of the points in it).
+  void query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const;
+  bool empty() const { return count_ == 0; }
+
+ private:
+  mesh::Vec3 origin_{mesh::Vec3::Zero()};
+  double cell_{1.0};
+  int dims_[3]{0, 0, 0};
+  int count_{0};
+  std::vector<int> offsets_;  // CSR per cell
+  std::vector<int> items_;
+};
+
+}  // namespace neurosim::interaction

@@ -1,0 +1,367 @@
+// Simulation on a small cube/cylinder scene: exact tie, paper Figures 10 and 14, contact force
+// against in-process references (StaticSolver, monolithic KKT system), stiffness, unilaterality.
+#include "server/interaction/simulation.hpp"
+
+#include "interaction_fixtures.hpp"
+#include "server/fem/assembly.hpp"
+#include "server/fem/static_solver.hpp"
+#include "server/fusion/coupling_map.hpp"
+#include "server/fusion/inclusion.hpp"
+#include "server/scene/scene.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SparseLU>
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace neurosim::interaction {
+namespace {
+
+using testing::SceneSpec;
+
+// Tool tip on the cube's right face (x = 0.1) at (y, z) = (0.05, 0.05), pushed `depth_m` in -x.
+ToolPose push_right(double depth_m, double tip_radius_m = SceneSpec{}.tip_radius_m) {
+  ToolPose p;
+  p.tip_m = Vec3(0.1 + tip_radius_m - depth_m, 0.05, 0.05);
+  p.axis = Vec3::UnitX();
+  return p;
+}
+
+struct Stepped {
+  std::unique_ptr<Simulation> sim;
+  std::vector<ToolContact> contacts;
+  StepStats stats;
+};
+
+Stepped run(const SceneSpec& spec, const std::vector<ToolPose>& poses, const SimulationOptions& options = {}) {
+  Stepped s;
+  s.sim = Simulation::build(testing::make_scene(spec), "test.scene", options);
+  s.sim->step(poses, s.contacts, s.stats);
+  return s;
+}
+
+void expect_sane(const Stepped& s, double bound_n) {
+  for (const auto& c : s.contacts) {
+    EXPECT_TRUE(c.force_n.allFinite());
+    EXPECT_TRUE(c.stiffness_n_per_m.allFinite());
+    EXPECT_LE(c.force_n.norm(), bound_n);
+    // The tool pushes: the force on it points out of the tissue, along its contact normal.
+    if (c.in_contact) {
+      EXPECT_GE(c.force_n.dot(c.normal), 0.0);
+    }
+  }
+  for (int m = 0; m < s.sim->num_meshes(); ++m) {
+    Eigen::VectorXd u;
+    s.sim->displacements(m, u);
+    EXPECT_TRUE(u.allFinite()) << "mesh " << m;
+  }
+}
+
+TEST(interaction_simulation, ExactTieResidual) {
+  const double depth = 0.005;
+  auto s = run(SceneSpec{}, {push_right(depth)});
+  ASSERT_TRUE(s.stats.converged);
+  ASSERT_TRUE(s.contacts[0].in_contact);
+  EXPECT_GT(s.contacts[0].force_n.x(), 0.0);
+  EXPECT_GT(s.sim->setup_stats().tied_nodes, 0);
+  EXPECT_LE(s.sim->tie_residual_m(), 1e-9 * depth);
+}
+
+TEST(interaction_simulation, Figure10CylinderMovesOnlyWithCoupling) {
+  const double depth = 0.005;
+  SceneSpec off;
+  off.coupling = false;
+  auto a = run(off, {push_right(depth)});
+  auto b = run(SceneSpec{}, {push_right(depth)});
+  const int cyl = 1;
+  ASSERT_EQ(a.sim->mesh_id(cyl), "cylinder");
+  EXPECT_FALSE(a.sim->mesh_active(cyl));
+  EXPECT_TRUE(b.sim->mesh_active(cyl));
+  Eigen::VectorXd ua, ub;
+  a.sim->displacements(cyl, ua);
+  b.sim->displacements(cyl, ub);
+  EXPECT_EQ(ua.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_GT(ub.cwiseAbs().maxCoeff(), 0.01 * depth);
+  // The cylinder moves the way the cube is pushed (towards -x).
+  double mean_x = 0.0;
+  for (int v = 0; v < ub.size() / 3; ++v) mean_x += ub[3 * v];
+  EXPECT_LT(mean_x, 0.0);
+}
+
+TEST(interaction_simulation, Figure14ForceDependsOnCoupling) {
+  const double depth = 0.005;
+  SceneSpec off;
+  off.coupling = false;
+  auto a = run(off, {push_right(depth)});
+  auto b = run(SceneSpec{}, {push_right(depth)});
+  ASSERT_TRUE(a.contacts[0].in_contact && b.contacts[0].in_contact);
+  // The tied cylinder adds material: the coupled cube is stiffer.
+  EXPECT_GT(b.contacts[0].force_n.norm(), 1.001 * a.contacts[0].force_n.norm());
+}
+
+TEST(interaction_simulation, ForceEqualsStaticSolverReaction) {
+  SceneSpec spec;
+  spec.coupling = false;
+  auto s = run(spec, {push_right(0.004)});
+  const auto& c = s.contacts[0];
+  ASSERT_TRUE(c.in_contact);
+  ASSERT_GE(c.nodes.size(), 1u);
+  Eigen::VectorXd u;
+  s.sim->displacements(0, u);
+  // Reference: the same nodes prescribed to the displacements the contact produced.
+  const auto scene = testing::make_scene(spec);
+  const auto& m = s.sim->mesh(0);
+  const auto fixed = scene::select_nodes(m, scene.meshes(0).fixed(0), "fixed");
+  fem::StaticSolver solver(m, fem::MaterialMap::uniform(scene::to_material(scene.meshes(0).material(), "cube")), fixed);
+  Eigen::VectorXd ud(3 * c.nodes.size());
+  for (std::size_t k = 0; k < c.nodes.size(); ++k) ud.segment<3>(3 * k) = u.segment<3>(3 * c.nodes[k]);
+  const auto ref = solver.solve_prescribed(c.nodes, ud);
+  Vec3 support = Vec3::Zero();
+  for (int v : c.nodes) support += ref.reaction_n.segment<3>(3 * v);
+  // The supports push the nodes the way the tool does: the tool feels the opposite.
+  EXPECT_LE((-support - c.force_n).norm(), 1e-9 * c.force_n.norm());
+  EXPECT_LE((ref.displacement_m - u).cwiseAbs().maxCoeff(), 1e-9 * u.cwiseAbs().maxCoeff());
+}
+
+TEST(interaction_simulation, CoupledForceEqualsMonolithicKkt) {
+  SceneSpec spec;
+  auto s = run(spec, {push_right(0.004)});
+  const auto& c = s.contacts[0];
+  ASSERT_TRUE(c.in_contact);
+  Eigen::VectorXd ua, ub;
+  s.sim->displacements(0, ua);
+  s.sim->displacements(1, ub);
+  const auto scene = testing::make_scene(spec);
+  const auto& ma = s.sim->mesh(0);
+  const auto& mb = s.sim->mesh(1);
+  const auto fixed = scene::select_nodes(ma, scene.meshes(0).fixed(0), "fixed");
+  const auto ka = fem::assemble_stiffness(ma, fem::MaterialMap::uniform(scene::to_material(scene.meshes(0).material(), "a")));
+  const auto kb = fem::assemble_stiffness(mb, fem::MaterialMap::uniform(scene::to_material(scene.meshes(1).material(), "b")));
+  const auto surface = fusion::TriangleSurface::of(mb);
+  const auto boundary = fusion::find_new_boundary(ma, surface);
+  const auto map = fusion::build_coupling_map(ma.vertices(), boundary, surface);
+  // Unknowns [u_A, u_B, multipliers]; rows: fixed dofs, prescribed contact dofs, tie rows.
+  const int na = static_cast<int>(3 * ma.num_vertices()), nb = static_cast<int>(3 * mb.num_vertices());
+  std::vector<Eigen::Triplet<double>> t;
+  for (int j = 0; j < ka.outerSize(); ++j)
+    for (fem::SparseMatrix::InnerIterator it(ka, j); it; ++it) t.emplace_back(it.row(), j, it.value());
+  for (int j = 0; j < kb.outerSize(); ++j)
+    for (fem::SparseMatrix::InnerIterator it(kb, j); it; ++it) t.emplace_back(na + it.row(), na + j, it.value());
+  int row = na + nb;
+  std::vector<double> rhs;
+  auto constraint = [&](const std::vector<std::pair<int, double>>& coeffs, double value) {
+    for (const auto& [col, w] : coeffs) {
+      t.emplace_back(row, col, w);
+      t.emplace_back(col, row, w);
+    }
+    rhs.push_back(value);
+    ++row;
+  };
+  for (int v : fixed)
+    for (int a = 0; a < 3; ++a) constraint({{3 * v + a, 1.0}}, 0.0);
+  const int first_prescribed = row;
+  for (int v : c.nodes)
+    for (int a = 0; a < 3; ++a) constraint({{3 * v + a, 1.0}}, ua[3 * v + a]);
+  const int end_prescribed = row;
+  for (std::size_t k = 0; k < map.embedded_nodes.size(); ++k) {
+    const auto& sp = map.embedded_on_boundary[k];
+    const auto& tri = boundary.triangles[sp.triangle];
+    for (int a = 0; a < 3; ++a)
+      constraint({{3 * tri[0] + a, sp.weights[0]}, {3 * tri[1] + a, sp.weights[1]}, {3 * tri[2] + a, sp.weights[2]},
+                  {na + 3 * map.embedded_nodes[k] + a, -1.0}},
+                 0.0);
+  }
+  Eigen::SparseMatrix<double> kkt(row, row);
+  kkt.setFromTriplets(t.begin(), t.end());
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(row);
+  for (std::size_t i = 0; i < rhs.size(); ++i) b[na + nb + static_cast<int>(i)] = rhs[i];
+  Eigen::SparseLU<Eigen::SparseMatrix<double>> lu(kkt);
+  ASSERT_EQ(lu.info(), Eigen::Success);
+  const Eigen::VectorXd x = lu.solve(b);
+  Vec3 force = Vec3::Zero();  // K u + C^T mu = 0: the tool force is the sum of the multipliers
+  for (int r = first_prescribed; r < end_prescribed; ++r) force[(r - first_prescribed) % 3] += x[r];
+  EXPECT_LE((force - c.force_n).norm(), 1e-9 * c.force_n.norm());
+  const double scale = ua.cwiseAbs().maxCoeff();
+  EXPECT_LE((x.head(na) - ua).cwiseAbs().maxCoeff(), 1e-9 * scale);
+  EXPECT_LE((x.segment(na, nb) - ub).cwiseAbs().maxCoeff(), 1e-9 * scale);
+}
+
+TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  std::vector<ToolContact> c0, c1;
+  StepStats st;
+  const ToolPose p = push_right(0.003);
+  sim->step({p}, c0, st);
+  ASSERT_TRUE(c0[0].in_contact);
+  ToolPose q = p;
+  const double h = 1e-7;
+  q.tip_m.x() -= h;
+  sim->step({q}, c1, st);
+  ASSERT_EQ(c0[0].nodes, c1[0].nodes);
+  const Vec3 fd = (c1[0].force_n - c0[0].force_n) / h;
+  const Vec3 model = c0[0].stiffness_n_per_m * Vec3(-1.0, 0.0, 0.0);
+  EXPECT_LE((fd - model).norm(), 1e-5 * model.norm());
+  // Pushing deeper raises the force: dF/dx is negative along the push.
+  EXPECT_LT(c0[0].stiffness_n_per_m(0, 0), 0.0);
+  const Eigen::SelfAdjointEigenSolver<Mat3> eig(0.5 * (c0[0].stiffness_n_per_m + c0[0].stiffness_n_per_m.transpose()));
+  EXPECT_LE(eig.eigenvalues().maxCoeff(), 1e-9 * std::abs(eig.eigenvalues().minCoeff()));
+}
+
+TEST(interaction_simulation, UnilateralNoPull) {
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  std::vector<ToolContact> c;
+  StepStats st;
+  sim->step({push_right(-0.001)}, c, st);  // 1 mm clear of the surface
+  EXPECT_FALSE(c[0].in_contact);
+  EXPECT_EQ(c[0].force_n.norm(), 0.0);
+  sim->step({push_right(0.002)}, c, st);
+  EXPECT_TRUE(c[0].in_contact);
+  EXPECT_GT(c[0].force_n.x(), 0.0);
+  sim->step({push_right(-0.0005)}, c, st);  // withdrawn: nothing holds the tool
+  EXPECT_FALSE(c[0].in_contact);
+  Eigen::VectorXd u;
+  sim->displacements(0, u);
+  EXPECT_EQ(u.cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(interaction_simulation, RejectsNonFinitePose) {
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  std::vector<ToolContact> c;
+  StepStats st;
+  ToolPose p = push_right(0.002);
+  p.tip_m.y() = std::nan("");
+  EXPECT_THROW(sim->step({p}, c, st), std::invalid_argument);
+  ToolPose q = push_right(0.002);
+  q.axis = Vec3(std::numeric_limits<double>::infinity(), 0, 0);
+  EXPECT_THROW(sim->step({q}, c, st), std::invalid_argument);
+  ToolPose r = push_right(0.002);
+  r.tool = 5;
+  EXPECT_THROW(sim->step({r}, c, st), std::invalid_argument);
+}
+
+TEST(interaction_simulation, DeterministicSteps) {
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  std::vector<ToolContact> a, b;
+  StepStats st;
+  sim->step({push_right(0.003)}, a, st);
+  sim->step({push_right(0.001)}, b, st);
+  sim->step({push_right(0.003)}, b, st);
+  EXPECT_EQ(a[0].force_n, b[0].force_n);
+  EXPECT_EQ(a[0].stiffness_n_per_m, b[0].stiffness_n_per_m);
+  EXPECT_EQ(a[0].nodes, b[0].nodes);
+}
+
+// --- stability (issue 4): finite, bounded, the LCP converges or says it did not ---
+
+constexpr double kBoundN = 1e4;  // E_max x (0.1 m)^2: the whole cross-section at 100 % strain
+
+TEST(interaction_stability, StiffnessRatio1e4) {
+  for (double e_emb : {1.0e2, 1.0e10}) {
+    SceneSpec spec;
+    spec.embedded_e_pa = e_emb;
+    auto s = run(spec, {push_right(0.005)});
+    EXPECT_TRUE(s.stats.converged) << e_emb;
+    expect_sane(s, e_emb > 1e6 ? 1e4 * kBoundN : kBoundN);
+    EXPECT_LE(s.sim->tie_residual_m(), 1e-9 * 0.005) << e_emb;
+  }
+}
+
+TEST(interaction_stability, NearlyIncompressible) {
+  SceneSpec spec;
+  spec.nu = 0.499;
+  auto s = run(spec, {push_right(0.005)});
+  EXPECT_TRUE(s.stats.converged);
+  expect_sane(s, kBoundN);
+  EXPECT_LE(s.sim->tie_residual_m(), 1e-9 * 0.005);
+}
+
+TEST(interaction_stability, DeepPush30Percent) {
+  auto s = run(SceneSpec{}, {push_right(0.03)});
+  EXPECT_TRUE(s.stats.converged);
+  EXPECT_TRUE(s.contacts[0].in_contact);
+  expect_sane(s, kBoundN);
+}
+
+TEST(interaction_stability, ToolJumps10cm) {
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  std::vector<ToolContact> c;
+  StepStats st;
+  sim->step({push_right(-0.002)}, c, st);
+  for (double depth : {0.1, 0.002, 0.102, -0.002}) {
+    sim->step({push_right(depth)}, c, st);
+    EXPECT_TRUE(c[0].force_n.allFinite());
+    EXPECT_LE(c[0].force_n.norm(), kBoundN) << depth;
+    EXPECT_TRUE(st.converged || !c[0].converged);
+  }
+  EXPECT_FALSE(c[0].in_contact);
+}
+
+TEST(interaction_stability, ContactOnSliver) {
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  const auto& m = sim->mesh(0);
+  // The worst-shaped tetrahedron with a face on the free surface; push at that face's centre.
+  int worst = -1;
+  double worst_q = 2.0;
+  for (std::size_t f = 0; f < m.surface().size(); ++f) {
+    const int t = m.surface_tet()[f];
+    const auto& tet = m.tets()[t];
+    const double q = 6.0 * std::sqrt(2.0) * m.tet_volume(t) /
+                     std::pow(((m.vertices()[tet[0]] - m.vertices()[tet[1]]).norm() +
+                               (m.vertices()[tet[2]] - m.vertices()[tet[3]]).norm()) / 2.0, 3);
+    const Vec3 c = (m.vertices()[m.surface()[f][0]] + m.vertices()[m.surface()[f][1]] + m.vertices()[m.surface()[f][2]]) / 3.0;
+    if (c.z() < 0.01) continue;  // the fixed bottom
+    if (q < worst_q) {
+      worst_q = q;
+      worst = static_cast<int>(f);
+    }
+  }
+  ASSERT_GE(worst, 0);
+  const auto& tri = m.surface()[worst];
+  const Vec3 a = m.vertices()[tri[0]], b = m.vertices()[tri[1]], cc = m.vertices()[tri[2]];
+  const Vec3 n = (b - a).cross(cc - a).normalized();
+  ToolPose p;
+  p.tip_m = (a + b + cc) / 3.0 + (SceneSpec{}.tip_radius_m - 0.004) * n;
+  p.axis = n;
+  std::vector<ToolContact> c;
+  StepStats st;
+  sim->step({p}, c, st);
+  EXPECT_TRUE(st.converged);
+  EXPECT_TRUE(c[0].in_contact);
+  EXPECT_TRUE(c[0].force_n.allFinite());
+  EXPECT_LE(c[0].force_n.norm(), kBoundN);
+}
+
+TEST(interaction_stability, TwoToolsOnTheSameNode) {
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  std::vector<ToolContact> one, two;
+  StepStats st;
+  sim->step({push_right(0.003)}, one, st);
+  sim->step({push_right(0.003), push_right(0.003)}, two, st);
+  EXPECT_TRUE(st.converged);
+  ASSERT_EQ(two.size(), 2u);
+  // The node is pushed once; the tools share what one tool would feel.
+  EXPECT_LE((two[0].force_n + two[1].force_n - one[0].force_n).norm(), 1e-9 * one[0].force_n.norm());
+  // A deeper second tool takes the node over and feels more than the first alone.
+  sim->step({push_right(0.003), push_right(0.004)}, two, st);
+  EXPECT_TRUE(st.converged);
+  EXPECT_GT(two[1].force_n.norm(), one[0].force_n.norm());
+  EXPECT_TRUE(two[0].force_n.allFinite());
+}
+
+TEST(interaction_stability, ToolInsideTheEmbeddedMesh) {
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  std::vector<ToolContact> c;
+  StepStats st;
+  ToolPose p;
+  p.tip_m = Vec3(0.05, 0.05, 0.05);  // the cylinder's axis
+  p.axis = Vec3::UnitX();
+  sim->step({p}, c, st);
+  EXPECT_TRUE(st.converged || !c[0].converged);
+  EXPECT_TRUE(c[0].force_n.allFinite());
+  EXPECT_LE(c[0].force_n.norm(), kBoundN);
+  EXPECT_LE(sim->tie_residual_m(), 1e-9 * 0.05);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
