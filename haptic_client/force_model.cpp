@@ -165,9 +165,10 @@ ForceOutput ForceModel::step(const ForceInput& in) {
       const double fn = fd.dot(n);
       if (fn < 0) fd -= fn * n;  // still unilateral
     }
-    fd *= gain_;
+    // Clamp to the device first, then the gain: ramp-in and fade scale what the device renders.
     const double mag = fd.norm();
     if (mag > cfg_.max_force_n) fd *= cfg_.max_force_n / mag;
+    fd *= gain_;
     if (!fd.allFinite()) {
       ++counters_.nan_outputs;
       gain_ = 0;

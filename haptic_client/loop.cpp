@@ -7,6 +7,7 @@
 #include <sys/mman.h>
 #include <time.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -42,6 +43,15 @@ HapticLoop::HapticLoop(const LoopConfig& config, Device& device, Link* link, Rec
     throw std::invalid_argument("haptic loop: workspace up direction must be a finite non-zero vector");
   r_ = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), cfg_.workspace_up / n).toRotationMatrix();
   trace_.reserve(cfg_.trace_capacity);
+}
+
+ForceTraceSummary HapticLoop::force_trace() const {
+  ForceTraceSummary f;
+  f.contact_ticks = contact_ticks_;
+  f.max_force_n = max_force_;
+  f.mean_contact_force_n = contact_ticks_ > 0 ? contact_force_sum_ / static_cast<double>(contact_ticks_) : 0;
+  f.models_seen = models_seen_;
+  return f;
 }
 
 std::uint64_t HapticLoop::recorder_dropped() const { return recorder_ ? recorder_->dropped() : 0; }
@@ -81,6 +91,16 @@ void HapticLoop::tick(std::int64_t now_ns, double t_s, double period_s, double l
   device_.command(device_.scene_frame() ? out.force_n : Eigen::Vector3d(r_.transpose() * out.force_n));
 
   const double step = (out.force_n - last_force_).norm();
+  const double fmag = out.force_n.norm();
+  max_force_ = std::max(max_force_, fmag);
+  if (out.in_contact) {
+    ++contact_ticks_;
+    contact_force_sum_ += fmag;
+  }
+  if (out.model_sequence != last_model_seq_) {
+    last_model_seq_ = out.model_sequence;
+    ++models_seen_;
+  }
   last_force_ = out.force_n;
   metrics_.add_tick(period_s, lateness_s, out.has_model ? out.model_age_s : -1, step);
 
@@ -139,6 +159,7 @@ RealtimeInfo HapticLoop::run_realtime(double duration_s, const std::atomic<bool>
     } else {
       info.warning = std::string("SCHED_FIFO not permitted (") + std::strerror(rc) +
                      "): running at normal priority; expect late ticks under load";
+      if (cfg_.warn != nullptr) cfg_.warn(info.warning.c_str());
     }
   }
   const double T = cfg_.force.period_s;

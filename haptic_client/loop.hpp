@@ -27,6 +27,7 @@ struct LoopConfig {
   Eigen::Vector3d workspace_up = Eigen::Vector3d::UnitZ();
   bool realtime_priority = true;  // try SCHED_FIFO (warn and continue if not permitted)
   int rt_priority = 80;
+  void (*warn)(const char* message) = nullptr;  // told at once when SCHED_FIFO is refused
   std::size_t trace_capacity = 0;  // ticks kept in trace() (allocated up front)
 };
 
@@ -41,6 +42,14 @@ struct TickTrace {
   bool in_contact = false;
   bool server_alive = true;
   std::uint64_t model_sequence = 0;
+};
+
+// Force trace summary printed at exit (not part of the --summary JSON contract).
+struct ForceTraceSummary {
+  std::uint64_t contact_ticks = 0;  // ticks whose model said in contact
+  double max_force_n = 0;           // largest |F| commanded, unit N
+  double mean_contact_force_n = 0;  // mean |F| over contact ticks, unit N
+  std::uint64_t models_seen = 0;    // distinct model sequences used
 };
 
 struct RealtimeInfo {
@@ -69,6 +78,7 @@ class HapticLoop {
   double last_force_norm() const { return last_force_norm_.load(std::memory_order_acquire); }
   std::uint64_t recorder_dropped() const;
   const Eigen::Vector3d& last_force() const { return last_force_; }
+  ForceTraceSummary force_trace() const;
 
  private:
   LoopConfig cfg_;
@@ -83,6 +93,8 @@ class HapticLoop {
   Eigen::Vector3d last_force_ = Eigen::Vector3d::Zero();
   std::vector<TickTrace> trace_;
   std::atomic<std::uint64_t> ticks_done_{0};
+  std::uint64_t contact_ticks_ = 0, models_seen_ = 0, last_model_seq_ = 0;
+  double max_force_ = 0, contact_force_sum_ = 0;
   std::atomic<double> last_force_norm_{0};
 };
 

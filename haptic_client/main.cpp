@@ -30,6 +30,7 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 void on_signal(int) { g_stop = true; }
+void warn(const char* m) { std::fprintf(stderr, "neurosim-haptic: warning: %s\n", m); }
 
 const char* kUsage =
     "usage: neurosim-haptic --station ID --device SPEC [--duration SECONDS] [--summary FILE.json]\n"
@@ -149,13 +150,13 @@ int main(int argc, char** argv) {
     std::signal(SIGTERM, on_signal);
 
     cfg.trace_capacity = 0;
+    cfg.warn = warn;
     nh::HapticLoop loop(cfg, *device, link.get(), recorder.get());
     // Warning printed before the run (the loop itself never prints).
     const nh::RealtimeInfo rt = [&] {
       return loop.run_realtime(duration, &g_stop);
     }();
     if (recorder) recorder->close();
-    if (!rt.warning.empty()) std::cerr << "neurosim-haptic: warning: " << rt.warning << "\n";
 
     const nh::LoopSummary s = loop.summary();
     const auto& c = loop.force_model().counters();
@@ -175,6 +176,12 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(c.nan_models), static_cast<unsigned long long>(c.timeouts),
                 static_cast<unsigned long long>(c.server_lost),
                 static_cast<unsigned long long>(c.stiffness_limited));
+    const nh::ForceTraceSummary ft = loop.force_trace();
+    std::printf("  force trace: %llu ticks in contact (%.1f %%), max |F| %.3f N, mean |F| in contact %.3f N, "
+                "%llu models used\n",
+                static_cast<unsigned long long>(ft.contact_ticks),
+                s.samples > 0 ? 100.0 * static_cast<double>(ft.contact_ticks) / static_cast<double>(s.samples) : 0.0,
+                ft.max_force_n, ft.mean_contact_force_n, static_cast<unsigned long long>(ft.models_seen));
     if (recorder)
       std::printf("  recorded %llu samples to %s (%llu dropped)\n",
                   static_cast<unsigned long long>(recorder->written()), record_file.c_str(),

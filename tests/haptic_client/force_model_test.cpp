@@ -293,3 +293,28 @@ TEST(haptic_force_model, ConfigIsChecked) {
   c.period_s = 0;
   EXPECT_THROW(nh::ForceModel{c}, std::invalid_argument);
 }
+
+TEST(haptic_force_model, ClampedForceStillFadesWithinTwentyMilliseconds) {
+  // A stiff tissue pushing far beyond the device maximum: the fade must scale the clamped
+  // force (else it would sit at the clamp until the gain is tiny, then drop late).
+  nh::ForceModelConfig c;
+  nh::ForceModel fm(c);
+  nh::testing::HalfSpace tissue;
+  tissue.k_n_per_m = 700;
+  const Vector3d x(0, 0, -0.05);  // 35 N unclamped
+  std::int64_t t = 0;
+  for (int k = 0; k < 1000; ++k, t += kTick) {
+    const auto m = tissue.model_at(x, static_cast<std::uint64_t>(k + 1), t);
+    fm.step(input(t, x, &m));
+  }
+  const std::int64_t last = t - kTick;
+  for (; t <= last + 80 * kTick; t += kTick) {
+    const double f = fm.step(input(t, x)).force_n.norm();
+    if (t - last >= 70 * kTick) {
+      EXPECT_EQ(f, 0.0) << 1e-6 * static_cast<double>(t - last) << " ms";
+    }
+    if (t - last == 60 * kTick) {
+      EXPECT_NEAR(f, 3.3 * 0.5, 1e-9) << "half way through the fade";
+    }
+  }
+}
