@@ -74,12 +74,13 @@ int main(int argc, char** argv) {
   const std::string cube_path = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/cube_cylinder.scene";
   scenarios.push_back({"cube_cylinder", neurosim::scene::read_scene(cube_path), cube_path,
                        Eigen::Vector3d(0.05, 0.05, 0.1), 0.0, 0.004});
-  // The paper's probe (3 mm tip) touches a handful of nodes; a 12 mm tip reaches up to 20.
-  scenarios.back().scene.mutable_tools(0)->set_tip_radius_m(0.012);
-  scenarios.back().radius_m = 0.012;
+  // The paper's probe (3 mm tip) touches a handful of nodes; a 25 mm tip 8 mm deep reaches ~20.
+  scenarios.back().scene.mutable_tools(0)->set_tip_radius_m(0.025);
+  scenarios.back().radius_m = 0.025;
+  scenarios.back().depth_m = 0.008;
   if (!quick) {
     scenarios.push_back({"brain_like", neurosim::scene::parse_scene(brain_like_scene(), "brain_like.scene"),
-                         "brain_like.scene", Eigen::Vector3d(0.07, 0.055, 0.09), 0.02, 0.005});
+                         "brain_like.scene", Eigen::Vector3d(0.07, 0.055, 0.09), 0.02, 0.006});
   }
   std::ofstream residual_out;
   if (!residual_csv.empty()) {
@@ -91,6 +92,7 @@ int main(int argc, char** argv) {
   for (auto& sc : scenarios) {
     ni::SimulationOptions options;
     options.max_contact_nodes_per_tool = 20;
+    options.cache_full_field_columns = true;
     const auto t0 = Clock::now();
     auto sim = ni::Simulation::build(sc.scene, sc.path, options);
     const double build_s = std::chrono::duration<double>(Clock::now() - t0).count();
@@ -137,16 +139,28 @@ int main(int argc, char** argv) {
     std::cout << line;
     if (failures) std::cerr << sc.name << ": " << failures << " steps did not converge\n";
 
-    // Full-field displacement of the host (one sparse solve + boundary coupling).
-    std::vector<double> full;
-    Eigen::VectorXd u;
+    // Full-field displacement of the host: one sparse solve with the contact and coupling forces,
+    // or the sum of the cached full coupled columns of the contact nodes.
+    std::vector<double> full, cached;
+    Eigen::VectorXd u, uc;
+    std::vector<int> fslots;
+    std::vector<Eigen::Vector3d> fforces;
+    sim->last_contact_forces(0, fslots, fforces);
     for (int k = 0; k < 30; ++k) {
-      const auto ts = Clock::now();
-      sim->displacements(0, u);
+      auto ts = Clock::now();
+      body->host_displacement(fslots, fforces, u);
       full.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
+      ts = Clock::now();
+      sim->displacements(0, uc);
+      cached.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
     }
+    const double diff = (u - uc).cwiseAbs().maxCoeff() / std::max(1e-300, u.cwiseAbs().maxCoeff());
+    std::cerr << sc.name << ": full field, cached columns vs sparse solve: max relative difference " << diff << "\n";
     std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(), host_tets, emb_tets,
-                  boundary, max_nodes, "exact_full_field", percentile(full, 0.5), percentile(full, 0.99), tie);
+                  boundary, max_nodes, "exact_full_field_solve", percentile(full, 0.5), percentile(full, 0.99), tie);
+    std::cout << line;
+    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(), host_tets, emb_tets,
+                  boundary, max_nodes, "exact_full_field_cached", percentile(cached, 0.5), percentile(cached, 0.99), tie);
     std::cout << line;
 
     // Iterative baseline on the same contact forces: time to reach the exact answer to 1e-12.

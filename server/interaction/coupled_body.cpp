@@ -232,29 +232,48 @@ void CoupledBody::ensure_columns(const std::vector<int>& slots) {
   const int s3 = 3 * static_cast<int>(contact_nodes_.size());
   const int m3 = static_cast<int>(l_bb_.rows());
   constexpr int kNodes = kBlockColumns / 3;
-  Eigen::MatrixXd rhs, x, lb, corr;
+  const int n3 = 3 * static_cast<int>(host_->num_vertices());
+  Eigen::MatrixXd rhs, x, lb, glb;
   for (std::size_t first = 0; first < missing.size(); first += kNodes) {
     const int n = static_cast<int>(std::min<std::size_t>(kNodes, missing.size() - first));
     rhs.setZero(nf, 3 * n);
     for (int j = 0; j < n; ++j)
       for (int a = 0; a < 3; ++a) rhs(reduced[3 * contact_nodes_[missing[first + j]] + a], 3 * j + a) = 1.0;
-    solver_->solve_reduced(rhs, x);
-    // Coupling correction: - L_A[c, b] G L_A[b, i] (Woodbury on the tie stiffness).
     if (m3 > 0) {
+      // Coupled column in one solve: L (e_i + P_b^T f_b) with the tie's boundary force
+      // f_b = -G L_A[b, i] (Woodbury on the tie stiffness: L = L_A - L_A[:,b] G L_A[b,:]).
       lb.resize(m3, 3 * n);
       for (int j = 0; j < n; ++j) lb.middleCols(3 * j, 3) = l_sb_.middleRows(3 * missing[first + j], 3).transpose();
-      const Eigen::MatrixXd glb = g_ * lb;
-      corr.noalias() = l_sb_ * glb;
+      glb.noalias() = g_ * lb;
+      for (int r = 0; r < m3; ++r) {
+        const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
+        if (red >= 0) rhs.row(red) -= glb.row(r);
+      }
     }
+    solver_->solve_reduced(rhs, x);
     for (int j = 0; j < n; ++j) {
       Eigen::Matrix<double, Eigen::Dynamic, 3> col(s3, 3);
       for (int r = 0; r < s3; ++r)
         for (int a = 0; a < 3; ++a) col(r, a) = x(reduced[3 * contact_nodes_[r / 3] + r % 3], 3 * j + a);
-      if (m3 > 0) col -= corr.middleCols(3 * j, 3);
       column_of_[missing[first + j]] = static_cast<int>(columns_.size());
       columns_.push_back(std::move(col));
+      if (keep_full_columns_) {
+        Eigen::Matrix<double, Eigen::Dynamic, 3> full = Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(n3, 3);
+        for (int r = 0; r < nf; ++r) full.row(solver_->free_dofs()[r]) = x.block<1, 3>(r, 3 * j);
+        full_columns_.push_back(std::move(full));
+      }
     }
   }
+}
+
+bool CoupledBody::full_field_from_columns(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
+                                          Eigen::VectorXd& u_host_m) const {
+  if (!keep_full_columns_) return false;
+  for (int s : slots)
+    if (s < 0 || s >= static_cast<int>(column_of_.size()) || column_of_[s] < 0) return false;
+  u_host_m.setZero(3 * static_cast<int>(host_->num_vertices()));
+  for (std::size_t k = 0; k < slots.size(); ++k) u_host_m.noalias() += full_columns_[column_of_[slots[k]]] * forces_n[k];
+  return true;
 }
 
 void CoupledBody::host_displacement(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,

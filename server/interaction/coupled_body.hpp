@@ -80,6 +80,13 @@ class CoupledBody {
   // Computes the coupled compliance columns of the given slots that are missing (block solves).
   void ensure_columns(const std::vector<int>& slots);
   std::size_t cached_columns() const { return columns_.size(); }
+  // Also keep the full coupled columns (3N x 3 per contact node, memory!) so that the host's
+  // full field for contact forces is a sum of cached columns instead of a sparse solve.
+  // Set before the first ensure_columns.
+  void set_keep_full_columns(bool keep) { keep_full_columns_ = keep; }
+  // u_host = sum_k L[:, slot_k] f_k from the cached full columns; false if one is missing.
+  bool full_field_from_columns(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
+                               Eigen::VectorXd& u_host_m) const;
 
   // Full fields for nodal forces on contact slots (force_n per slot, unit N): host displacement
   // (3N_A) and, per tie, B's displacement (3N_B), unit m. Also returns the boundary displacement.
@@ -114,6 +121,8 @@ class CoupledBody {
   Eigen::MatrixXd g_;      // (I + K_add L_bb)^-1 K_add (3m x 3m), unit N/m
   std::vector<int> column_of_;  // contact slot -> index in columns_ or -1
   std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> columns_;  // coupled L[contact dofs, slot]
+  bool keep_full_columns_{false};
+  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> full_columns_;  // coupled L[:, slot], same order
   CoupledBodyTiming timing_;
   bool finalized_{false};
 };

@@ -185,6 +185,7 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
       throw std::runtime_error(source_ + ": mesh " + lm.id + ": " + ex.what());
     }
     setup_.factor_s += b.body->timing().factor_s;
+    b.body->set_keep_full_columns(options_.cache_full_field_columns);
     meshes_[m].body = static_cast<int>(bodies_.size());
     bodies_.push_back(std::move(b));
   }
@@ -507,11 +508,13 @@ void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
   }
   const BodyEntry& b = bodies_[e.body];
   if (e.tie < 0) {
-    b.body->host_displacement(b.force_slots, b.forces_n, u_m);
+    if (!b.body->full_field_from_columns(b.force_slots, b.forces_n, u_m))
+      b.body->host_displacement(b.force_slots, b.forces_n, u_m);
     return;
   }
   Eigen::VectorXd u_host;
-  b.body->host_displacement(b.force_slots, b.forces_n, u_host);
+  if (!b.body->full_field_from_columns(b.force_slots, b.forces_n, u_host))
+    b.body->host_displacement(b.force_slots, b.forces_n, u_host);
   b.body->embedded_displacement(e.tie, u_host, u_m);
 }
 

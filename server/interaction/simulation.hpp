@@ -65,6 +65,9 @@ struct SimulationOptions {
   // Compute the coupled compliance columns of every contactable node at load (else on first
   // touch, a few ms each).
   bool precompute_contact_columns{false};
+  // Keep the full coupled compliance columns of touched nodes (3N x 3 doubles each: 0.4 MB per
+  // node on a 25k-tet brain) so displacements() of a host is a sum of columns, not a sparse solve.
+  bool cache_full_field_columns{false};
 };
 
 // Load-time cost of build(), unit s.

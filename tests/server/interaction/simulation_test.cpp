@@ -187,6 +187,22 @@ TEST(interaction_simulation, CoupledForceEqualsMonolithicKkt) {
   EXPECT_LE((x.segment(na, nb) - ub).cwiseAbs().maxCoeff(), 1e-9 * scale);
 }
 
+TEST(interaction_simulation, CachedFullFieldEqualsSparseSolve) {
+  SimulationOptions cached;
+  cached.cache_full_field_columns = true;
+  auto a = run(SceneSpec{}, {push_right(0.004)});
+  auto b = run(SceneSpec{}, {push_right(0.004)}, cached);
+  ASSERT_TRUE(a.contacts[0].in_contact);
+  EXPECT_EQ(a.contacts[0].force_n, b.contacts[0].force_n);
+  for (int m = 0; m < 2; ++m) {
+    Eigen::VectorXd ua, ub;
+    a.sim->displacements(m, ua);
+    b.sim->displacements(m, ub);
+    EXPECT_LE((ua - ub).cwiseAbs().maxCoeff(), 1e-9 * ua.cwiseAbs().maxCoeff()) << "mesh " << m;
+  }
+  EXPECT_LE(b.sim->tie_residual_m(), 1e-9 * 0.004);
+}
+
 TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
   auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
   std::vector<ToolContact> c0, c1;
