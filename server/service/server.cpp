@@ -6,6 +6,8 @@
 #include "server/service/pose_handoff.hpp"
 #include "server/service/tool_filter.hpp"
 
+#include <pthread.h>
+#include <sched.h>
 #include <time.h>
 
 #include <algorithm>
@@ -489,6 +491,13 @@ void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& 
 // Step thread.
 void Server::Impl::step_loop() {
   try {
+    // Real-time priority where allowed (a 1 kHz loop on a shared machine); else say so.
+    sched_param sp{};
+    sp.sched_priority = 50;
+    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+    log(rc == 0 ? std::string("step thread: SCHED_FIFO priority 50")
+                : std::string("step thread: no real-time priority (") + std::strerror(rc) +
+                      "), running SCHED_OTHER");
     start_mono_ns = mono_ns();
     last_status_mono_ns = start_mono_ns;
     std::int64_t next = start_mono_ns;

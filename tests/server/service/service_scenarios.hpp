@@ -62,8 +62,8 @@ inline interaction::ToolPose pose_at(const std::array<double, 3>& p) {
 // simulation stepped with the pose it answers (1e-9 relative). Then a late-joining reader gets
 // MeshTopology and a FULL Deformation frame equal to the in-process displacements.
 inline void scripted_path_and_late_joiner(const Setup& setup) {
-  auto ref = setup.make_reference();
   Session ses(setup, "path");
+  auto ref = setup.make_reference();  // built while the server builds its own
   ASSERT_TRUE(ses.wait_ready());
   ModelCollector models(ses.client);
   const double x_start = setup.face_x_m + setup.tip_radius_m + 0.004;  // 4 mm outside

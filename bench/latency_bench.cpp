@@ -1,0 +1,325 @@
+// latency_bench (issue 5): starts neurosim-server on a bundled scene (child process, private DDS
+// domain, loopback) and N scripted stations (one participant and thread each, 1 kHz on absolute
+// deadlines, every tool pressing into the cube's +x face), and measures for each ToolState the
+// time until the ContactModel answering it (tool_sequence) is read by that station.
+//
+//   latency_bench --stations N --seconds S [--csv] [--scene FILE] [--server EXE] [--warmup S]
+//
+// CSV: stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct
+//   samples        ToolStates answered during the measurement (after the warm-up)
+//   lost           ContactModels the server wrote for a station that the station never read
+//                  (gaps in ContactModel.server_step), all stations
+//   server_cpu_pct server process CPU time / wall time over the measurement, % of one core
+#include "idl/wire/dds.hpp"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace wire = neurosim::wire;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::int64_t mono_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+// utime + stime of a process, unit s.
+double process_cpu_s(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto p = s.rfind(')');
+  if (p == std::string::npos) return 0;
+  std::istringstream is(s.substr(p + 2));
+  std::string f;
+  unsigned long long ut = 0, st = 0;
+  for (int i = 3; i <= 15; ++i) {
+    is >> f;
+    if (i == 14) ut = std::stoull(f);
+    if (i == 15) st = std::stoull(f);
+  }
+  return static_cast<double>(ut + st) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+struct Options {
+  int stations = 1;
+  double seconds = 5;
+  double warmup_s = 1.0;
+  bool csv = false;
+  fs::path scene = fs::path(NEUROSIM_SOURCE_DIR) / "scenes/cube_cylinder.scene";
+  fs::path server;
+  double startup_timeout_s = 300;
+};
+
+// Station k's contact point on the cube's +x face (x = 0.1 m), spread over the face.
+void station_point(int k, int n, double p[3]) {
+  const double a = 2 * M_PI * k / std::max(1, n);
+  p[0] = 0.1;
+  p[1] = 0.05 + (n > 1 ? 0.025 * std::cos(a) : 0.0);
+  p[2] = 0.05 + (n > 1 ? 0.025 * std::sin(a) : 0.0);
+}
+
+struct StationResult {
+  std::vector<double> latency_us;
+  std::uint64_t lost = 0;
+  std::uint64_t sent = 0;
+};
+
+bool own_station(const void* sample, void* arg) {
+  return std::strcmp(static_cast<const neurosim_ContactModel*>(sample)->station_id,
+                     static_cast<const char*>(arg)) == 0;
+}
+
+// One station: writes at 1 kHz, and between writes waits for and reads its ContactModels.
+struct Window {
+  std::atomic<std::int64_t> from{0}, to{0};  // CLOCK_MONOTONIC, unit ns; set before go
+};
+
+void run_station(int domain, int k, int n, const Window& window, std::atomic<int>& ready,
+                 const std::atomic<bool>& go, StationResult& out) {
+  wire::ParticipantOptions po;
+  po.domain = static_cast<dds_domainid_t>(domain);
+  wire::Participant pp(po);
+  const std::string id = "bench-" + std::to_string(k);
+  std::vector<char> id_arg(id.begin(), id.end());
+  id_arg.push_back('\0');
+  wire::Topic<neurosim_ToolState> tt(pp);
+  wire::Topic<neurosim_ContactModel> mt(pp);
+  // Only this station's models reach its reader (a haptic client reads its own key).
+  wire::check(dds_set_topic_filter_and_arg(mt.handle(), own_station, id_arg.data()), "set topic filter");
+  wire::Writer<neurosim_ToolState> w(pp, tt);
+  // History 16 instead of the profile's 1: "lost" must count models the transport lost, not
+  // ones a briefly descheduled station overwrote in its own cache (e.g. two steps back to back
+  // after a late server wake-up). A haptic client keeps 1: it only needs the newest.
+  wire::Qos rq = wire::reader_qos(wire::Profile::ContactModel);
+  dds_qset_history(rq.get(), DDS_HISTORY_KEEP_LAST, 16);
+  wire::Reader<neurosim_ContactModel> r(pp, mt, rq);
+  wire::Waitset ws(pp);
+  ws.attach_data(r, 1);
+  w.wait_for_readers(1, DDS_SECS(30));
+  r.wait_for_writers(1, DDS_SECS(30));
+  ++ready;
+  while (!go.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  const std::int64_t measure_from = window.from.load(), measure_to = window.to.load();
+
+  constexpr std::size_t kRing = 1 << 14;
+  std::vector<std::int64_t> sent_at(kRing, 0);
+  double base[3];
+  station_point(k, n, base);
+  wire::Sample<neurosim_ToolState> s;
+  wire::set_string(s->station_id, id, "station_id");
+  wire::set_string(s->tool_id, "probe", "tool_id");
+  s->orientation[0] = 1;
+  std::uint64_t seq = 0, answered = 0, last_step = 0;
+  out.latency_us.reserve(static_cast<std::size_t>((measure_to - measure_from) / 1000000 + 1000));
+  std::int64_t next = mono_ns();
+  const std::int64_t t_start = next;
+  while (next < measure_to + 200000000LL) {
+    const std::int64_t now = mono_ns();
+    if (now >= next) {
+      // Press 1.5 to 2.5 mm into the face (tip radius 3 mm), slowly in and out.
+      const double t = 1e-9 * static_cast<double>(now - t_start);
+      s->position_m[0] = base[0] + 0.003 - 0.002 - 0.0005 * std::sin(2 * M_PI * 0.5 * t);
+      s->position_m[1] = base[1];
+      s->position_m[2] = base[2];
+      s->sequence_number = ++seq;
+      s->source_time_ns = dds_time();
+      sent_at[seq % kRing] = mono_ns();
+      w.write(*s);
+      if (now >= measure_from && now < measure_to) ++out.sent;
+      next += 1000000;
+      continue;
+    }
+    ws.wait(next - now);
+    for (const auto& rx : r.take()) {
+      if (!rx.valid()) continue;
+      const std::int64_t got = mono_ns();
+      const auto& m = rx.data;
+      if (got >= measure_from && got < measure_to) {
+        if (last_step != 0 && m.server_step > last_step + 1) out.lost += m.server_step - last_step - 1;
+        if (m.tool_sequence > answered && m.tool_sequence + kRing > seq)
+          out.latency_us.push_back(1e-3 * static_cast<double>(got - sent_at[m.tool_sequence % kRing]));
+      }
+      last_step = m.server_step;
+      answered = std::max<std::uint64_t>(answered, m.tool_sequence);
+    }
+  }
+}
+
+double quantile(std::vector<double>& v, double q) {
+  if (v.empty()) return NAN;
+  const auto k = static_cast<std::size_t>(std::min<double>(static_cast<double>(v.size() - 1), q * static_cast<double>(v.size())));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+void usage() {
+  std::cerr << "usage: latency_bench --stations N --seconds S [--csv] [--scene FILE] [--server EXE] [--warmup S]\n";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  o.server = fs::read_symlink("/proc/self/exe").parent_path() / "neurosim-server";
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto val = [&] {
+        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+        return std::string(argv[++i]);
+      };
+      if (a == "--stations") o.stations = std::stoi(val());
+      else if (a == "--seconds") o.seconds = std::stod(val());
+      else if (a == "--warmup") o.warmup_s = std::stod(val());
+      else if (a == "--scene") o.scene = val();
+      else if (a == "--server") o.server = val();
+      else if (a == "--csv") o.csv = true;
+      else throw std::invalid_argument("unknown argument " + a);
+    }
+    if (o.stations < 1 || o.stations > 8) throw std::invalid_argument("--stations must be 1..8");
+    if (!(o.seconds > 0)) throw std::invalid_argument("--seconds must be > 0");
+  } catch (const std::exception& e) {
+    std::cerr << "latency_bench: " << e.what() << "\n";
+    usage();
+    return 2;
+  }
+  // Loopback only (DDS_NOTES.md): the bench sets it for itself and the server when unset.
+  setenv("CYCLONEDDS_URI", NEUROSIM_LOOPBACK_URI, 0);
+  std::random_device rd;
+  const int domain = 20 + static_cast<int>(rd() % 200);
+  const fs::path log = fs::temp_directory_path() / ("latency_bench_server_" + std::to_string(getpid()) + ".log");
+
+  // The server, bounded by --duration even if this process dies.
+  const double server_duration = o.startup_timeout_s + o.warmup_s + o.seconds + 30;
+  std::vector<std::string> args{o.server.string(), "--scene", o.scene.string(), "--domain", std::to_string(domain),
+                                "--duration", std::to_string(server_duration), "--server-id", "latency_bench"};
+  std::vector<char*> av;
+  for (auto& a : args) av.push_back(a.data());
+  av.push_back(nullptr);
+  const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    dup2(fd, 1);
+    dup2(fd, 2);
+    execv(av[0], av.data());
+    _exit(127);
+  }
+  close(fd);
+  auto stop_server = [&] {
+    kill(pid, SIGTERM);
+    for (int i = 0; i < 1000; ++i) {
+      int st = 0;
+      if (waitpid(pid, &st, WNOHANG) == pid) return;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    kill(pid, SIGKILL);
+    waitpid(pid, nullptr, 0);
+  };
+
+  int rc = 0;
+  try {
+    // Ready = the server published SimStatus.
+    wire::ParticipantOptions po;
+    po.domain = static_cast<dds_domainid_t>(domain);
+    wire::Participant pp(po);
+    wire::Topic<neurosim_SimStatus> stt(pp);
+    wire::Reader<neurosim_SimStatus> status(pp, stt);
+    const auto t0 = std::chrono::steady_clock::now();
+    bool ready = false;
+    while (!ready && std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < o.startup_timeout_s) {
+      ready = status.take_newest() != nullptr;
+      int st = 0;
+      if (waitpid(pid, &st, WNOHANG) == pid) throw std::runtime_error("the server exited; log: " + log.string());
+      if (!ready) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    if (!ready) throw std::runtime_error("no SimStatus from the server; log: " + log.string());
+
+    std::atomic<int> n_ready{0};
+    std::atomic<bool> go{false};
+    Window window;
+    std::vector<StationResult> results(static_cast<std::size_t>(o.stations));
+    std::vector<std::string> errors(static_cast<std::size_t>(o.stations));
+    std::vector<std::thread> threads;
+    for (int k = 0; k < o.stations; ++k)
+      threads.emplace_back([&, k] {
+        try {
+          run_station(domain, k, o.stations, window, n_ready, go, results[static_cast<std::size_t>(k)]);
+        } catch (const std::exception& e) {
+          errors[static_cast<std::size_t>(k)] = e.what();
+          ++n_ready;
+        }
+      });
+    const auto t1 = std::chrono::steady_clock::now();
+    while (n_ready.load() < o.stations &&
+           std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count() < 60)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const std::int64_t from = mono_ns() + static_cast<std::int64_t>(o.warmup_s * 1e9);
+    const std::int64_t to = from + static_cast<std::int64_t>(o.seconds * 1e9);
+    window.from = from;
+    window.to = to;
+    go = true;
+    auto sleep_until = [](std::int64_t t) {
+      const timespec ts{static_cast<time_t>(t / 1000000000LL), static_cast<long>(t % 1000000000LL)};
+      while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) != 0) {
+      }
+    };
+    sleep_until(from);
+    const double cpu0 = process_cpu_s(pid);
+    sleep_until(to);
+    const double cpu1 = process_cpu_s(pid);
+    for (auto& t : threads) t.join();
+    for (const auto& e : errors)
+      if (!e.empty()) throw std::runtime_error("station: " + e);
+    std::vector<double> all;
+    std::uint64_t lost = 0, sent = 0;
+    for (const auto& r : results) {
+      all.insert(all.end(), r.latency_us.begin(), r.latency_us.end());
+      lost += r.lost;
+      sent += r.sent;
+    }
+    const double cpu_pct = 100.0 * (cpu1 - cpu0) / o.seconds;
+    const std::size_t samples = all.size();
+    const double mx = all.empty() ? NAN : *std::max_element(all.begin(), all.end());
+    const double p50 = quantile(all, 0.5), p99 = quantile(all, 0.99);
+    if (o.csv) {
+      std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct\n");
+      std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f\n", o.stations, samples, p50, p99, mx,
+                  static_cast<unsigned long long>(lost), cpu_pct);
+    } else {
+      std::printf("latency_bench: %d station(s), %.1f s on %s (server %s, DDS domain %d)\n", o.stations, o.seconds,
+                  o.scene.c_str(), o.server.c_str(), domain);
+      std::printf("  ToolStates sent %llu, answered %zu; latency p50 %.1f us, p99 %.1f us, max %.1f us\n",
+                  static_cast<unsigned long long>(sent), samples, p50, p99, mx);
+      std::printf("  ContactModels lost %llu; server CPU %.1f %% of one core\n", static_cast<unsigned long long>(lost),
+                  cpu_pct);
+    }
+    if (samples == 0) throw std::runtime_error("no ContactModel answered a ToolState; server log: " + log.string());
+  } catch (const std::exception& e) {
+    std::cerr << "latency_bench: " << e.what() << "\n";
+    rc = 1;
+  }
+  stop_server();
+  return rc;
+}
