@@ -87,9 +87,15 @@ bool ForceModel::accept(const ContactModelData& m, const Eigen::Vector3d& x) {
   const double nn = next.normal.norm();
   if (nn > 0) next.normal /= nn;
   // Passivity: the rendered stiffness may not exceed the limit (operator norm, scene frame).
+  // The whole model is scaled, f0 with K: from one model to the next f0 changes at the
+  // tissue's true stiffness, so scaling K alone would still render the tissue's stiffness
+  // (a bang-bang limit cycle against a stiff mesh). Scaled, the device feels the tissue
+  // softened to the limit, consistently between and within models.
   const double k = next.k_n_per_m.operatorNorm();
   if (k > k_limit_scene_) {
-    next.k_n_per_m *= k_limit_scene_ / k;
+    const double s = k_limit_scene_ / k;
+    next.k_n_per_m *= s;
+    next.f0_n *= s;
     ++counters_.stiffness_limited;
   }
   if (has_current_ && cfg_.blend_s > 0 && x.allFinite()) {

@@ -73,7 +73,7 @@ struct ForceModelCounters {
   std::uint64_t models_accepted = 0;
   std::uint64_t server_lost = 0;      // transitions to server gone
   std::uint64_t timeouts = 0;         // transitions to a stale model
-  std::uint64_t stiffness_limited = 0;// models whose K was scaled down to the passive limit
+  std::uint64_t stiffness_limited = 0;// models scaled down (f0 and K) to the passive limit
 };
 
 class ForceModel {

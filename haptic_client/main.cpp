@@ -3,7 +3,7 @@
 //                   [--record FILE]
 //   extra: [--scene FILE] (haptics factors, scene name) [--tool ID] [--origin X,Y,Z]
 //          [--up X,Y,Z] [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]
-//          [--topic-prefix P]
+//          [--topic-prefix P] [--trace FILE.csv]
 // SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract) | hand:SCRIPT
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
@@ -37,6 +37,7 @@ const char* kUsage =
     "                       [--record FILE] [--scene FILE] [--tool ID] [--origin X,Y,Z] [--up X,Y,Z]\n"
     "                       [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]\n"
     "                       [--topic-prefix P]  (P prepended to every topic name, as neurosim-server's)\n"
+    "                       [--trace FILE.csv]  (every tick: time, position, force, model age, gain)\n"
     "  SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, circle,\n"
     "        retract). Scripts press along device -z onto a surface at device z = 0; --origin puts\n"
     "        that point in the scene (m) and --up is the surface's outward normal there.\n";
@@ -71,7 +72,7 @@ std::int64_t realtime_ns() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string station, spec, summary_file, record_file, scene_file, tool = "probe", label, topic_prefix;
+  std::string station, spec, summary_file, record_file, scene_file, tool = "probe", label, topic_prefix, trace_file;
   double duration = 0, wait_server = 5;
   bool use_server = true;
   nh::LoopConfig cfg;
@@ -94,6 +95,7 @@ int main(int argc, char** argv) {
       else if (a == "--label") label = val();
       else if (a == "--no-server") use_server = false;
       else if (a == "--topic-prefix") topic_prefix = val();
+      else if (a == "--trace") trace_file = val();
       else if (a == "--no-rt") cfg.realtime_priority = false;
       else if (a == "--wait-server") wait_server = parse_double(a, val());
       else if (a == "-h" || a == "--help") {
@@ -149,7 +151,8 @@ int main(int argc, char** argv) {
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);
 
-    cfg.trace_capacity = 0;
+    // --trace keeps every tick in memory (allocated up front), written after the run.
+    cfg.trace_capacity = trace_file.empty() ? 0 : static_cast<std::size_t>((duration > 0 ? duration : 600) * 1000) + 10;
     cfg.warn = warn;
     nh::HapticLoop loop(cfg, *device, link.get(), recorder.get());
     // Warning printed before the run (the loop itself never prints).
@@ -187,6 +190,18 @@ int main(int argc, char** argv) {
                   static_cast<unsigned long long>(recorder->written()), record_file.c_str(),
                   static_cast<unsigned long long>(recorder->dropped()));
     if (!summary_file.empty()) nh::write_summary_json(summary_file, s);
+    if (!trace_file.empty()) {
+      std::ofstream tf(trace_file);
+      if (!tf) throw std::runtime_error(trace_file + ": cannot open for the force trace");
+      tf << "t_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,model_age_ms,gain,in_contact,model_sequence\n";
+      tf.precision(9);
+      for (const auto& t : loop.trace())
+        tf << t.t_s << ',' << t.position_m.x() << ',' << t.position_m.y() << ',' << t.position_m.z() << ','
+           << t.force_n.x() << ',' << t.force_n.y() << ',' << t.force_n.z() << ','
+           << (t.model_age_s >= 0 ? t.model_age_s * 1e3 : -1) << ',' << t.gain << ',' << (t.in_contact ? 1 : 0)
+           << ',' << t.model_sequence << '\n';
+      if (!tf) throw std::runtime_error(trace_file + ": write failed");
+    }
   } catch (const std::exception& e) {
     std::cerr << "neurosim-haptic: " << e.what() << "\n";
     return 1;

@@ -43,7 +43,9 @@ struct HandRun {
 };
 
 // 10 s of the hand pressing into a half-space of stiffness k (server answer 2 ticks late).
-HandRun run_hand(const nh::ForceModelConfig& force, nh::HandParams hand, double k_wall) {
+// k_felt: the stiffness the device renders (the energy's wall term).
+HandRun run_hand(const nh::ForceModelConfig& force, nh::HandParams hand, double k_wall, double k_felt = -1) {
+  if (k_felt < 0) k_felt = k_wall;
   const double target_z = -0.004;
   auto dev = nh::HandDevice(std::make_unique<nh::ConstantScript>(Vector3d(0, 0, target_z)), hand);
   dev.set_state(Vector3d(0, 0, 0.002), Vector3d::Zero());  // starts 2 mm above the surface
@@ -52,7 +54,7 @@ HandRun run_hand(const nh::ForceModelConfig& force, nh::HandParams hand, double 
   nh::LoopConfig cfg;
   cfg.force = force;
   nh::HapticLoop loop(cfg, dev, &link, nullptr);
-  const EnergyProbe energy{hand, k_wall, target_z};
+  const EnergyProbe energy{hand, k_felt, target_z};
   HandRun r;
   double v2 = 0;
   const int ticks_per_s = 1000;
@@ -82,6 +84,19 @@ TEST(haptic_loop, SimulatedHandAgainstStiffnessDoesNotOscillate) {
         << "second " << s;
   EXPECT_LT(r.max_energy_per_second.back(), 1e-3 * r.max_energy_per_second[1] + 1e-9);
   EXPECT_LT(r.velocity_rms_last_second, 1e-4);  // m/s: at rest
+}
+
+TEST(haptic_loop, SimulatedHandAgainstStiffTissueIsRenderedAtThePassiveLimit) {
+  // Tissue 15x stiffer than the device may render: the model (f0 and K) is scaled to 700 N/m,
+  // so the closed loop behaves as against 700 N/m and settles.
+  nh::ForceModelConfig force;
+  nh::HandParams hand;
+  const HandRun r = run_hand(force, hand, 1e4, 700);
+  for (std::size_t s = 2; s < r.max_energy_per_second.size(); ++s)
+    EXPECT_LE(r.max_energy_per_second[s], r.max_energy_per_second[s - 1] * 1.001 + 1e-12)
+        << "second " << s;
+  EXPECT_LT(r.max_energy_per_second.back(), 1e-3 * r.max_energy_per_second[1] + 1e-9);
+  EXPECT_LT(r.velocity_rms_last_second, 1e-4);
 }
 
 TEST(haptic_loop, UnsafeStiffnessWithoutPassivityLimitDoesOscillate) {
