@@ -67,10 +67,15 @@ Row run(const Case& c) {
   const double tol = 1e-9 * (hi - lo).norm();
   std::vector<int> bottom, top;
   for (std::size_t v = 0; v < r.nodes; ++v) {
-    if (c.mesh.vertices()[v].z() < lo.z() + tol) bottom.push_back(static_cast<int>(v));
+    if (c.mesh.vertices()[v].z() < lo.z() + tol) {
+      bottom.push_back(static_cast<int>(v));
+    }
   }
-  for (int v : c.mesh.surface_vertices())
-    if (c.mesh.vertices()[v].z() > lo.z() + tol) top.push_back(v);
+  for (int v : c.mesh.surface_vertices()) {
+    if (c.mesh.vertices()[v].z() > lo.z() + tol) {
+      top.push_back(v);
+    }
+  }
   // Prefer the top face, then other free surface nodes (small meshes have few top nodes).
   std::stable_sort(top.begin(), top.end(), [&](int a, int b) {
     return c.mesh.vertices()[a].z() > c.mesh.vertices()[b].z();
@@ -90,8 +95,11 @@ Row run(const Case& c) {
   r.factor_mb = static_cast<double>(info.factor_bytes) / (1024.0 * 1024.0);
 
   std::vector<int> dofs;
-  for (int v : top)
-    for (int a = 0; a < 3 && dofs.size() < 300; ++a) dofs.push_back(3 * v + a);
+  for (int v : top) {
+    for (int a = 0; a < 3 && dofs.size() < 300; ++a) {
+      dofs.push_back(3 * v + a);
+    }
+  }
   r.columns = static_cast<int>(dofs.size());
   r.column_ms = best_ms(5, [&] {
     fem::Compliance comp(solver);
@@ -99,7 +107,9 @@ Row run(const Case& c) {
   });
   r.singles300_ms = best_ms(2, [&] {
     fem::Compliance comp(solver);
-    for (int d : dofs) comp.column(d);
+    for (int d : dofs) {
+      comp.column(d);
+    }
   });
   auto block = [&](int size) {
     return best_ms(2, [&] {
@@ -120,11 +130,11 @@ Row run(const Case& c) {
 int main(int argc, char** argv) {
   bool csv = false, quick = false;
   for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--csv"))
+    if (!std::strcmp(argv[i], "--csv")) {
       csv = true;
-    else if (!std::strcmp(argv[i], "--quick"))
+    } else if (!std::strcmp(argv[i], "--quick")) {
       quick = true;
-    else {
+    } else {
       std::fprintf(stderr, "usage: fem_bench [--csv] [--quick]\n");
       return 2;
     }
@@ -132,7 +142,9 @@ int main(int argc, char** argv) {
   std::vector<Case> cases;
   // Structured cubes (0.1 m, n^3 cells x 6 Kuhn tetrahedra), up to 16^3 x 6 = 24576 tetrahedra.
   for (int n : {4, 6, 8, 10, 12, 16}) {
-    if (quick && n > 8) break;
+    if (quick && n > 8) {
+      break;
+    }
     fem::testing::BoxSpec s{n, n, n, {0, 0, 0}, {0.1, 0.1, 0.1}};
     cases.push_back({"grid " + std::to_string(n) + "^3", fem::testing::box_mesh(s)});
   }
@@ -140,7 +152,9 @@ int main(int argc, char** argv) {
   // The paper's cube series (Table 3, 50..1812 vertices: a subset) and a brain-sized cube, CGAL
   // Mesh_3.
   for (int target : {50, 207, 535, 1013, 1812, 5300}) {
-    if (quick && target > 535) break;
+    if (quick && target > 535) {
+      break;
+    }
     mesh::MeshingOptions o;
     o.target_vertices = target;
     auto g = mesh::generate_box({0, 0, 0}, {0.1, 0.1, 0.1}, o);

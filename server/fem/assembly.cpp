@@ -15,14 +15,23 @@ StiffnessAssembler::StiffnessAssembler(const mesh::TetMesh& mesh)
   const int n = static_cast<int>(num_nodes_);
   // Node-node adjacency (including the node itself), CSR, sorted per node.
   std::vector<int> count(n + 1, 0);
-  for (const auto& t : tets)
-    for (int a = 0; a < 4; ++a) count[t[a] + 1] += 4;
-  for (int v = 0; v < n; ++v) count[v + 1] += count[v];
+  for (const auto& t : tets) {
+    for (int a = 0; a < 4; ++a) {
+      count[t[a] + 1] += 4;
+    }
+  }
+  for (int v = 0; v < n; ++v) {
+    count[v + 1] += count[v];
+  }
   std::vector<int> adj(count[n]);
   std::vector<int> fill(count.begin(), count.end() - 1);
-  for (const auto& t : tets)
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b < 4; ++b) adj[fill[t[a]]++] = t[b];
+  for (const auto& t : tets) {
+    for (int a = 0; a < 4; ++a) {
+      for (int b = 0; b < 4; ++b) {
+        adj[fill[t[a]]++] = t[b];
+      }
+    }
+  }
   std::vector<int> nbr_offset(n + 1, 0);
   std::vector<int> nbr;
   nbr.reserve(adj.size() / 3);
@@ -46,8 +55,11 @@ StiffnessAssembler::StiffnessAssembler(const mesh::TetMesh& mesh)
   for (int b = 0; b < n; ++b) {
     for (int j = 0; j < 3; ++j) {
       outer[3 * b + j] = pos;
-      for (int k = nbr_offset[b]; k < nbr_offset[b + 1]; ++k)
-        for (int i = 0; i < 3; ++i) inner[pos++] = 3 * nbr[k] + i;
+      for (int k = nbr_offset[b]; k < nbr_offset[b + 1]; ++k) {
+        for (int i = 0; i < 3; ++i) {
+          inner[pos++] = 3 * nbr[k] + i;
+        }
+      }
     }
   }
   outer[3 * n] = pos;
@@ -96,24 +108,34 @@ void StiffnessAssembler::assemble(const mesh::TetMesh& mesh, const MaterialMap& 
     const auto& t = tets[e];
     const TetGeometry g = tet_geometry({x[t[0]], x[t[1]], x[t[2]], x[t[3]]}, static_cast<int>(e));
     const int m = materials.tet_material.empty() ? 0 : materials.tet_material[e];
-    for (int a = 0; a < 4; ++a)
-      for (int i = 0; i < 3; ++i) grad[a][i] = g.gradients(a, i);
+    for (int a = 0; a < 4; ++a) {
+      for (int i = 0; i < 3; ++i) {
+        grad[a][i] = g.gradients(a, i);
+      }
+    }
     const double vl = g.volume_m3 * lambda[m], vm = g.volume_m3 * mu[m];
     const int* start = block_start_.data() + e * 48;
     // Blocks (a, b), b >= a, scattered to (a, b) and transposed to (b, a): K_e is never formed.
-    for (int a = 0; a < 4; ++a)
+    for (int a = 0; a < 4; ++a) {
       for (int b = a; b < 4; ++b) {
         tet_stiffness_block(grad[a], grad[b], vl, vm, kab);
         for (int j = 0; j < 3; ++j) {
           double* dst = values + start[(4 * a + b) * 3 + j];
-          for (int i = 0; i < 3; ++i) dst[i] += kab[i][j];
+          for (int i = 0; i < 3; ++i) {
+            dst[i] += kab[i][j];
+          }
         }
-        if (b == a) continue;
+        if (b == a) {
+          continue;
+        }
         for (int j = 0; j < 3; ++j) {
           double* dst = values + start[(4 * b + a) * 3 + j];
-          for (int i = 0; i < 3; ++i) dst[i] += kab[j][i];
+          for (int i = 0; i < 3; ++i) {
+            dst[i] += kab[j][i];
+          }
         }
       }
+    }
   }
 }
 

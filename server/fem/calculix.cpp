@@ -16,7 +16,9 @@ namespace {
 
 std::string shell_quote(const std::string& s) {
   std::string out = "'";
-  for (char c : s) out += (c == '\'') ? std::string("'\\''") : std::string(1, c);
+  for (char c : s) {
+    out += (c == '\'') ? std::string("'\\''") : std::string(1, c);
+  }
   return out + "'";
 }
 
@@ -40,8 +42,12 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
                           const MaterialMap& materials, const CalculixLoads& loads) {
   const std::size_t n = mesh.num_vertices();
   materials.validate(mesh.num_tets());
-  for (int v : loads.fixed_nodes) check_node(v, n, "fixed");
-  for (int v : loads.prescribed_nodes) check_node(v, n, "prescribed");
+  for (int v : loads.fixed_nodes) {
+    check_node(v, n, "fixed");
+  }
+  for (int v : loads.prescribed_nodes) {
+    check_node(v, n, "prescribed");
+  }
   if (loads.prescribed_displacements_m.size() !=
       3 * static_cast<Eigen::Index>(loads.prescribed_nodes.size())) {
     throw std::invalid_argument(
@@ -53,28 +59,35 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
   if (loads.forces_n.size() != 0 && loads.forces_n.size() != 3 * static_cast<Eigen::Index>(n)) {
     throw std::invalid_argument("write_calculix_input: forces must be empty or 3N");
   }
-  if (!loads.forces_n.allFinite())
+  if (!loads.forces_n.allFinite()) {
     throw std::invalid_argument("write_calculix_input: non-finite force");
+  }
 
   std::ofstream out(inp_file);
-  if (!out) throw std::runtime_error("write_calculix_input: cannot write " + inp_file.string());
+  if (!out) {
+    throw std::runtime_error("write_calculix_input: cannot write " + inp_file.string());
+  }
   out << std::setprecision(17);
   out << "** neurosim external reference export: " << mesh.source() << ", " << n << " nodes, "
       << mesh.num_tets() << " C3D4\n*NODE, NSET=NALL\n";
   for (std::size_t v = 0; v < n; ++v) {
     const auto& x = mesh.vertices()[v];
-    if (!x.allFinite())
+    if (!x.allFinite()) {
       throw std::invalid_argument("write_calculix_input: non-finite coordinate at node " +
                                   std::to_string(v));
+    }
     out << v + 1 << ", " << x.x() << ", " << x.y() << ", " << x.z() << "\n";
   }
   const std::size_t nm = materials.materials.size();
   std::vector<std::vector<int>> tets_of(nm);
-  for (std::size_t t = 0; t < mesh.num_tets(); ++t)
+  for (std::size_t t = 0; t < mesh.num_tets(); ++t) {
     tets_of[materials.tet_material.empty() ? 0 : materials.tet_material[t]].push_back(
         static_cast<int>(t));
+  }
   for (std::size_t m = 0; m < nm; ++m) {
-    if (tets_of[m].empty()) continue;
+    if (tets_of[m].empty()) {
+      continue;
+    }
     out << "*ELEMENT, TYPE=C3D4, ELSET=E" << m << "\n";
     for (int t : tets_of[m]) {
       const auto& tet = mesh.tets()[t];
@@ -83,7 +96,9 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
     }
   }
   for (std::size_t m = 0; m < nm; ++m) {
-    if (tets_of[m].empty()) continue;
+    if (tets_of[m].empty()) {
+      continue;
+    }
     const Material& mat = materials.materials[m];
     out << "** material " << m << ": " << mat.name << "\n*MATERIAL, NAME=M" << m << "\n*ELASTIC\n"
         << mat.youngs_modulus_pa << ", " << mat.poisson_ratio << "\n*SOLID SECTION, ELSET=E" << m
@@ -100,30 +115,44 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
     write_id_list(out, rf_nodes);
   }
   out << "*STEP\n*STATIC\n";
-  if (!loads.fixed_nodes.empty()) out << "*BOUNDARY\nNFIX, 1, 3\n";
+  if (!loads.fixed_nodes.empty()) {
+    out << "*BOUNDARY\nNFIX, 1, 3\n";
+  }
   if (!loads.prescribed_nodes.empty()) {
     out << "*BOUNDARY\n";
-    for (std::size_t k = 0; k < loads.prescribed_nodes.size(); ++k)
-      for (int a = 0; a < 3; ++a)
+    for (std::size_t k = 0; k < loads.prescribed_nodes.size(); ++k) {
+      for (int a = 0; a < 3; ++a) {
         out << loads.prescribed_nodes[k] + 1 << ", " << a + 1 << ", " << a + 1 << ", "
             << loads.prescribed_displacements_m[3 * k + a] << "\n";
+      }
+    }
   }
   bool any_force = false;
   for (Eigen::Index d = 0; d < loads.forces_n.size(); ++d) {
-    if (loads.forces_n[d] == 0.0) continue;
-    if (!any_force) out << "*CLOAD\n";
+    if (loads.forces_n[d] == 0.0) {
+      continue;
+    }
+    if (!any_force) {
+      out << "*CLOAD\n";
+    }
     any_force = true;
     out << d / 3 + 1 << ", " << d % 3 + 1 << ", " << loads.forces_n[d] << "\n";
   }
   out << "*NODE PRINT, NSET=NALL\nU\n";
-  if (!rf_nodes.empty()) out << "*NODE PRINT, NSET=NRF, TOTALS=NO\nRF\n";
+  if (!rf_nodes.empty()) {
+    out << "*NODE PRINT, NSET=NRF, TOTALS=NO\nRF\n";
+  }
   out << "*END STEP\n";
-  if (!out) throw std::runtime_error("write_calculix_input: write error on " + inp_file.string());
+  if (!out) {
+    throw std::runtime_error("write_calculix_input: write error on " + inp_file.string());
+  }
 }
 
 CalculixResult read_calculix_dat(const std::filesystem::path& dat_file, std::size_t num_nodes) {
   std::ifstream in(dat_file);
-  if (!in) throw std::runtime_error("read_calculix_dat: cannot open " + dat_file.string());
+  if (!in) {
+    throw std::runtime_error("read_calculix_dat: cannot open " + dat_file.string());
+  }
   CalculixResult r;
   r.displacement_m = Eigen::VectorXd::Zero(3 * num_nodes);
   r.reaction_n = Eigen::VectorXd::Zero(3 * num_nodes);
@@ -139,29 +168,43 @@ CalculixResult read_calculix_dat(const std::filesystem::path& dat_file, std::siz
   while (std::getline(in, line)) {
     ++line_no;
     const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos) continue;
+    if (first == std::string::npos) {
+      continue;
+    }
     if (std::isalpha(static_cast<unsigned char>(line[first]))) {
       // Block headers: " displacements (vx,vy,vz) for set NALL and time ..." / " forces (fx,fy,fz)
       // ..."
-      if (line.compare(first, 13, "displacements") == 0)
+      if (line.compare(first, 13, "displacements") == 0) {
         block = Block::kU;
-      else if (line.compare(first, 6, "forces") == 0)
+      } else if (line.compare(first, 6, "forces") == 0) {
         block = Block::kRF;
-      else
+      } else {
         block = Block::kNone;
+      }
       continue;
     }
-    if (block == Block::kNone) continue;
+    if (block == Block::kNone) {
+      continue;
+    }
     std::istringstream fields(line);
     long id = 0;
     double v[3];
-    if (!(fields >> id >> v[0] >> v[1] >> v[2])) fail("expected 'node value value value'");
-    if (id < 1 || static_cast<std::size_t>(id) > num_nodes) fail("node id out of range");
-    for (double x : v)
-      if (!std::isfinite(x)) fail("non-finite value");
+    if (!(fields >> id >> v[0] >> v[1] >> v[2])) {
+      fail("expected 'node value value value'");
+    }
+    if (id < 1 || static_cast<std::size_t>(id) > num_nodes) {
+      fail("node id out of range");
+    }
+    for (double x : v) {
+      if (!std::isfinite(x)) {
+        fail("non-finite value");
+      }
+    }
     const std::size_t node = static_cast<std::size_t>(id - 1);
     Eigen::VectorXd& dst = block == Block::kU ? r.displacement_m : r.reaction_n;
-    for (int a = 0; a < 3; ++a) dst[3 * node + a] = v[a];
+    for (int a = 0; a < 3; ++a) {
+      dst[3 * node + a] = v[a];
+    }
     (block == Block::kU ? has_u : r.has_reaction)[node] = 1;
   }
   for (std::size_t v = 0; v < num_nodes; ++v) {
@@ -197,9 +240,10 @@ CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::st
     throw std::runtime_error("run_calculix: ccx timed out after " +
                              std::to_string(options.timeout_s) + " s in " + work_dir.string());
   }
-  if (code == 127)
+  if (code == 127) {
     throw std::runtime_error("run_calculix: '" + options.executable +
                              "' not found (Debian: calculix-ccx)");
+  }
   if (code != 0 || !std::filesystem::exists(dat)) {
     throw std::runtime_error("run_calculix: ccx failed (exit " + std::to_string(code) + ") in " +
                              work_dir.string() + ":\n" + log_tail());

@@ -25,15 +25,21 @@ void Compliance::check_dof(int dof) const {
 }
 
 const Eigen::VectorXd* Compliance::find_column(int dof) const {
-  if (dof < 0 || dof >= static_cast<int>(slot_.size())) return nullptr;
-  if (solver_.reduced_index()[dof] < 0) return &zero_;
+  if (dof < 0 || dof >= static_cast<int>(slot_.size())) {
+    return nullptr;
+  }
+  if (solver_.reduced_index()[dof] < 0) {
+    return &zero_;
+  }
   const int s = slot_[dof];
   return s < 0 ? nullptr : columns_[s].get();
 }
 
 const Eigen::VectorXd& Compliance::column(int dof) {
   check_dof(dof);
-  if (const Eigen::VectorXd* c = find_column(dof)) return *c;
+  if (const Eigen::VectorXd* c = find_column(dof)) {
+    return *c;
+  }
   Eigen::VectorXd f = Eigen::VectorXd::Zero(solver_.num_dofs());
   f[dof] = 1.0;
   auto col = std::make_unique<Eigen::VectorXd>();
@@ -47,7 +53,9 @@ void Compliance::precompute(const std::vector<int>& dofs) {
   std::vector<int> missing;
   for (int d : dofs) {
     check_dof(d);
-    if (!find_column(d)) missing.push_back(d);
+    if (!find_column(d)) {
+      missing.push_back(d);
+    }
   }
   std::sort(missing.begin(), missing.end());
   missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
@@ -60,11 +68,15 @@ void Compliance::precompute(const std::vector<int>& dofs) {
         static_cast<int>(std::min<std::size_t>(options_.block_columns, missing.size() - first));
     // Unit right-hand sides: one CHOLMOD call solves all of them (BLAS-3 in the supernodes).
     rhs.setZero(nf, m);
-    for (int c = 0; c < m; ++c) rhs(reduced[missing[first + c]], c) = 1.0;
+    for (int c = 0; c < m; ++c) {
+      rhs(reduced[missing[first + c]], c) = 1.0;
+    }
     solver_.solve_reduced(rhs, x);
     for (int c = 0; c < m; ++c) {
       auto col = std::make_unique<Eigen::VectorXd>(Eigen::VectorXd::Zero(solver_.num_dofs()));
-      for (int r = 0; r < nf; ++r) (*col)[free_dofs[r]] = x(r, c);
+      for (int r = 0; r < nf; ++r) {
+        (*col)[free_dofs[r]] = x(r, c);
+      }
       slot_[missing[first + c]] = static_cast<int>(columns_.size());
       columns_.push_back(std::move(col));
     }
@@ -74,8 +86,11 @@ void Compliance::precompute(const std::vector<int>& dofs) {
 void Compliance::precompute_nodes(const std::vector<int>& nodes) {
   std::vector<int> dofs;
   dofs.reserve(3 * nodes.size());
-  for (int v : nodes)
-    for (int a = 0; a < 3; ++a) dofs.push_back(3 * v + a);
+  for (int v : nodes) {
+    for (int a = 0; a < 3; ++a) {
+      dofs.push_back(3 * v + a);
+    }
+  }
   precompute(dofs);
 }
 
@@ -94,7 +109,9 @@ void Compliance::block_from_cache(const std::vector<int>& nodes, Eigen::MatrixXd
                                   " out of range [0, " + std::to_string(solver_.num_nodes()) + ")");
     }
   }
-  if (out.rows() != m || out.cols() != m) out.resize(m, m);
+  if (out.rows() != m || out.cols() != m) {
+    out.resize(m, m);
+  }
   for (Eigen::Index c = 0; c < m; ++c) {
     const int node_c = nodes[c / 3];
     const Eigen::VectorXd* col = find_column(3 * node_c + static_cast<int>(c % 3));
@@ -102,7 +119,9 @@ void Compliance::block_from_cache(const std::vector<int>& nodes, Eigen::MatrixXd
       throw std::logic_error("Compliance::block_from_cache: column of node " +
                              std::to_string(node_c) + " not cached (call precompute_nodes first)");
     }
-    for (Eigen::Index r = 0; r < m; ++r) out(r, c) = (*col)[3 * nodes[r / 3] + r % 3];
+    for (Eigen::Index r = 0; r < m; ++r) {
+      out(r, c) = (*col)[3 * nodes[r / 3] + r % 3];
+    }
   }
 }
 

@@ -60,9 +60,15 @@ MaterialMap MaterialMap::per_tet(std::vector<Material> materials, std::vector<in
 }
 
 void MaterialMap::validate(std::size_t num_tets) const {
-  if (materials.empty()) throw std::invalid_argument("MaterialMap: no material given");
-  for (const Material& m : materials) m.validate();
-  if (tet_material.empty()) return;
+  if (materials.empty()) {
+    throw std::invalid_argument("MaterialMap: no material given");
+  }
+  for (const Material& m : materials) {
+    m.validate();
+  }
+  if (tet_material.empty()) {
+    return;
+  }
   if (tet_material.size() != num_tets) {
     throw std::invalid_argument("MaterialMap: " + std::to_string(tet_material.size()) +
                                 " per-tetrahedron material ids for a mesh of " +

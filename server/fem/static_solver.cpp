@@ -50,19 +50,26 @@ std::vector<int> connected_parts(const mesh::TetMesh& mesh, int& num_parts) {
   std::vector<int> parent(n);
   std::iota(parent.begin(), parent.end(), 0);
   auto find = [&](int v) {
-    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    while (parent[v] != v) {
+      v = parent[v] = parent[parent[v]];
+    }
     return v;
   };
-  for (const auto& t : mesh.tets())
+  for (const auto& t : mesh.tets()) {
     for (int a = 1; a < 4; ++a) {
       const int r0 = find(t[0]), r1 = find(t[a]);
-      if (r0 != r1) parent[std::max(r0, r1)] = std::min(r0, r1);
+      if (r0 != r1) {
+        parent[std::max(r0, r1)] = std::min(r0, r1);
+      }
     }
+  }
   std::vector<int> part(n, -1), root_part(n, -1);
   num_parts = 0;
   for (int v = 0; v < n; ++v) {
     const int r = find(v);
-    if (root_part[r] < 0) root_part[r] = num_parts++;
+    if (root_part[r] < 0) {
+      root_part[r] = num_parts++;
+    }
     part[v] = root_part[r];
   }
   return part;
@@ -84,8 +91,11 @@ struct StaticSolver::Impl {
 
   ~Impl() {
     cholmod_common& c = llt.common();
-    for (cholmod_dense** d : {&x1, &y1, &e1, &xm, &ym, &em})
-      if (*d) cholmod_free_dense(d, &c);
+    for (cholmod_dense** d : {&x1, &y1, &e1, &xm, &ym, &em}) {
+      if (*d) {
+        cholmod_free_dense(d, &c);
+      }
+    }
   }
 
   // x := K_ff^-1 b for b (n x m), reusing workspace `x`, `y`, `e`.
@@ -105,7 +115,9 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
       options_(options),
       num_nodes_(static_cast<int>(mesh.num_vertices())) {
   const std::string where = "StaticSolver (mesh '" + mesh.source() + "')";
-  if (num_nodes_ == 0 || mesh.num_tets() == 0) throw std::invalid_argument(where + ": empty mesh");
+  if (num_nodes_ == 0 || mesh.num_tets() == 0) {
+    throw std::invalid_argument(where + ": empty mesh");
+  }
   if (!(options_.residual_tolerance > 0.0) || !std::isfinite(options_.min_rcond)) {
     throw std::invalid_argument(where +
                                 ": SolverOptions residual_tolerance must be > 0, min_rcond finite");
@@ -123,12 +135,17 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   std::sort(fixed_nodes_.begin(), fixed_nodes_.end());
   fixed_nodes_.erase(std::unique(fixed_nodes_.begin(), fixed_nodes_.end()), fixed_nodes_.end());
   std::vector<char> is_fixed(num_nodes_, 0);
-  for (int v : fixed_nodes_) is_fixed[v] = 1;
+  for (int v : fixed_nodes_) {
+    is_fixed[v] = 1;
+  }
 
   // A free node that no tetrahedron holds has a zero row in K.
   std::vector<char> used(num_nodes_, 0);
-  for (const auto& t : mesh.tets())
-    for (int a : t) used[a] = 1;
+  for (const auto& t : mesh.tets()) {
+    for (int a : t) {
+      used[a] = 1;
+    }
+  }
   for (int v = 0; v < num_nodes_; ++v) {
     if (!used[v] && !is_fixed[v]) {
       throw std::invalid_argument(
@@ -144,24 +161,36 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
     std::vector<std::vector<int>> part_fixed(num_parts);
     std::vector<int> part_size(num_parts, 0), part_first(num_parts, -1);
     for (int v = 0; v < num_nodes_; ++v) {
-      if (!used[v]) continue;
+      if (!used[v]) {
+        continue;
+      }
       ++part_size[part[v]];
-      if (part_first[part[v]] < 0) part_first[part[v]] = v;
-      if (is_fixed[v]) part_fixed[part[v]].push_back(v);
+      if (part_first[part[v]] < 0) {
+        part_first[part[v]] = v;
+      }
+      if (is_fixed[v]) {
+        part_fixed[part[v]].push_back(v);
+      }
     }
     const auto& x = mesh.vertices();
     for (int p = 0; p < num_parts; ++p) {
-      if (part_size[p] == 0) continue;
+      if (part_size[p] == 0) {
+        continue;
+      }
       const auto& fx = part_fixed[p];
       std::string problem;
       if (fx.empty()) {
         problem = "has no fixed node (6 rigid-body modes)";
       } else {
         Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-        for (int v : fx) mean += x[v];
+        for (int v : fx) {
+          mean += x[v];
+        }
         mean /= static_cast<double>(fx.size());
         Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-        for (int v : fx) cov += (x[v] - mean) * (x[v] - mean).transpose();
+        for (int v : fx) {
+          cov += (x[v] - mean) * (x[v] - mean).transpose();
+        }
         const Eigen::Vector3d ev =
             Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();
         if (fx.size() == 1) {
@@ -202,7 +231,9 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   info_.stiffness_nnz = k_.nonZeros();
   impl_->rhs.resize(nf);
   impl_->full.resize(ndof);
-  if (nf == 0) return;  // everything fixed: u = 0, nothing to factor
+  if (nf == 0) {
+    return;  // everything fixed: u = 0, nothing to factor
+  }
 
   // Lower triangle of K_ff, built column by column (elimination of fixed dofs).
   SparseMatrix kff(nf, nf);
@@ -292,7 +323,9 @@ void StaticSolver::check_residual(const Eigen::VectorXd& u_m, const Eigen::Vecto
   r.noalias() = k_ * u_m;
   double res2 = 0.0, ref2 = 0.0, ku2 = 0.0;
   for (int d = 0; d < num_dofs(); ++d) {
-    if (reduced_index_[d] < 0 || (constrained && (*constrained)[d])) continue;
+    if (reduced_index_[d] < 0 || (constrained && (*constrained)[d])) {
+      continue;
+    }
     const double f = forces_n.size() ? forces_n[d] : 0.0;
     res2 += (r[d] - f) * (r[d] - f);
     ref2 += f * f;
@@ -311,16 +344,25 @@ void StaticSolver::solve(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m) 
   check_forces(forces_n, "forces");
   u_m.setZero(num_dofs());
   const int nf = num_free_dofs();
-  if (nf == 0) return;
+  if (nf == 0) {
+    return;
+  }
   {
     std::lock_guard<std::mutex> lock(impl_->mutex);
-    for (int r = 0; r < nf; ++r) impl_->rhs[r] = forces_n[free_dofs_[r]];
+    for (int r = 0; r < nf; ++r) {
+      impl_->rhs[r] = forces_n[free_dofs_[r]];
+    }
     impl_->solve(impl_->rhs.data(), nf, 1, &impl_->x1, &impl_->y1, &impl_->e1);
     const double* x = static_cast<const double*>(impl_->x1->x);
-    for (int r = 0; r < nf; ++r) u_m[free_dofs_[r]] = x[r];
-    if (!u_m.allFinite())
+    for (int r = 0; r < nf; ++r) {
+      u_m[free_dofs_[r]] = x[r];
+    }
+    if (!u_m.allFinite()) {
       throw std::runtime_error("StaticSolver: solve produced non-finite displacements");
-    if (options_.check_residual) check_residual(u_m, forces_n, nullptr);
+    }
+    if (options_.check_residual) {
+      check_residual(u_m, forces_n, nullptr);
+    }
   }
 }
 
@@ -337,14 +379,19 @@ void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) c
                                 std::to_string(b.rows()) + " rows, expected " + std::to_string(nf) +
                                 " free dofs");
   }
-  if (!b.allFinite())
+  if (!b.allFinite()) {
     throw std::invalid_argument("StaticSolver::solve_reduced: non-finite right-hand side");
+  }
   x.resize(nf, b.cols());
-  if (nf == 0 || b.cols() == 0) return;
+  if (nf == 0 || b.cols() == 0) {
+    return;
+  }
   std::lock_guard<std::mutex> lock(impl_->mutex);
   impl_->solve(b.data(), nf, b.cols(), &impl_->xm, &impl_->ym, &impl_->em);
   std::copy_n(static_cast<const double*>(impl_->xm->x), x.size(), x.data());
-  if (!x.allFinite()) throw std::runtime_error("StaticSolver::solve_reduced: non-finite solution");
+  if (!x.allFinite()) {
+    throw std::runtime_error("StaticSolver::solve_reduced: non-finite solution");
+  }
 }
 
 PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
@@ -356,10 +403,15 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
         "StaticSolver::solve_prescribed: " + std::to_string(displacements_m.size()) +
         " displacement values for " + std::to_string(nodes.size()) + " nodes (need 3 each)");
   }
-  if (forces_n.size() != 0) check_forces(forces_n, "forces");
+  if (forces_n.size() != 0) {
+    check_forces(forces_n, "forces");
+  }
   std::vector<char> constrained(ndof, 0);  // fixed or prescribed dofs
-  for (int v : fixed_nodes_)
-    for (int a = 0; a < 3; ++a) constrained[3 * v + a] = 1;
+  for (int v : fixed_nodes_) {
+    for (int a = 0; a < 3; ++a) {
+      constrained[3 * v + a] = 1;
+    }
+  }
   Eigen::VectorXd u = Eigen::VectorXd::Zero(ndof);
   std::vector<char> prescribed(num_nodes_, 0);
   std::vector<int> free_prescribed;  // prescribed nodes that are free in the factor
@@ -384,17 +436,22 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
       u[3 * v + a] = value;
       constrained[3 * v + a] = 1;
     }
-    if (!is_fixed_node(v)) free_prescribed.push_back(static_cast<int>(k));
+    if (!is_fixed_node(v)) {
+      free_prescribed.push_back(static_cast<int>(k));
+    }
   }
 
   // Eliminated part: K_ff u0 = f_f - K_fc u_c with u_c the values at fixed nodes.
   const int nf = num_free_dofs();
   Eigen::VectorXd uc = Eigen::VectorXd::Zero(ndof);
-  for (int v : fixed_nodes_) uc.segment<3>(3 * v) = u.segment<3>(3 * v);
+  for (int v : fixed_nodes_) {
+    uc.segment<3>(3 * v) = u.segment<3>(3 * v);
+  }
   const Eigen::VectorXd kuc = k_ * uc;
   Eigen::MatrixXd b(nf, 1), u0;
-  for (int r = 0; r < nf; ++r)
+  for (int r = 0; r < nf; ++r) {
     b(r, 0) = (forces_n.size() ? forces_n[free_dofs_[r]] : 0.0) - kuc[free_dofs_[r]];
+  }
   solve_reduced(b, u0);
 
   if (!free_prescribed.empty()) {
@@ -414,10 +471,15 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
     for (int c0 = 0; c0 < m; c0 += kBlock) {
       const int cols = std::min(kBlock, m - c0);
       e.setZero(nf, cols);
-      for (int c = 0; c < cols; ++c) e(rows[c0 + c], c) = 1.0;
+      for (int c = 0; c < cols; ++c) {
+        e(rows[c0 + c], c) = 1.0;
+      }
       solve_reduced(e, g);
-      for (int c = 0; c < cols; ++c)
-        for (int r = 0; r < m; ++r) s(r, c0 + c) = g(rows[r], c);
+      for (int c = 0; c < cols; ++c) {
+        for (int r = 0; r < m; ++r) {
+          s(r, c0 + c) = g(rows[r], c);
+        }
+      }
     }
     s = 0.5 * (s + s.transpose()).eval();
     Eigen::LLT<Eigen::MatrixXd> schur(s);
@@ -429,20 +491,29 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
     const Eigen::VectorXd lam = schur.solve(target);
     // u_f = u0 + K_ff^-1 E lam: one more solve.
     e.setZero(nf, 1);
-    for (int c = 0; c < m; ++c) e(rows[c], 0) += lam[c];
+    for (int c = 0; c < m; ++c) {
+      e(rows[c], 0) += lam[c];
+    }
     solve_reduced(e, g);
     u0.col(0) += g.col(0);
   }
   for (int r = 0; r < nf; ++r) {
     const int d = free_dofs_[r];
-    if (!constrained[d]) u[d] = u0(r, 0);
+    if (!constrained[d]) {
+      u[d] = u0(r, 0);
+    }
   }
 
   PrescribedSolution out;
   out.reaction_n = k_ * u;
-  if (forces_n.size()) out.reaction_n -= forces_n;
-  for (int d = 0; d < ndof; ++d)
-    if (!constrained[d]) out.reaction_n[d] = 0.0;
+  if (forces_n.size()) {
+    out.reaction_n -= forces_n;
+  }
+  for (int d = 0; d < ndof; ++d) {
+    if (!constrained[d]) {
+      out.reaction_n[d] = 0.0;
+    }
+  }
   if (!u.allFinite() || !out.reaction_n.allFinite()) {
     throw std::runtime_error("StaticSolver::solve_prescribed: non-finite result");
   }
@@ -458,20 +529,28 @@ ConditionEstimate StaticSolver::estimate_condition(int max_iterations, double to
   ConditionEstimate est;
   est.rcond_cholmod = info_.rcond;
   const int nf = num_free_dofs();
-  if (nf == 0) return est;
+  if (nf == 0) {
+    return est;
+  }
   std::mt19937 rng(12345);
   std::uniform_real_distribution<double> dist(-1.0, 1.0);
   Eigen::VectorXd v(nf);
-  for (int r = 0; r < nf; ++r) v[r] = dist(rng);
+  for (int r = 0; r < nf; ++r) {
+    v[r] = dist(rng);
+  }
   v.normalize();
   Eigen::VectorXd full = Eigen::VectorXd::Zero(num_dofs()), kv(num_dofs());
   // Power iteration: lambda_max of K_ff.
   double lambda = 0.0;
   Eigen::VectorXd w(nf);
   for (int it = 0; it < max_iterations; ++it) {
-    for (int r = 0; r < nf; ++r) full[free_dofs_[r]] = v[r];
+    for (int r = 0; r < nf; ++r) {
+      full[free_dofs_[r]] = v[r];
+    }
     kv.noalias() = k_ * full;
-    for (int r = 0; r < nf; ++r) w[r] = kv[free_dofs_[r]];
+    for (int r = 0; r < nf; ++r) {
+      w[r] = kv[free_dofs_[r]];
+    }
     const double next = v.dot(w);
     v = w.normalized();
     est.iterations = it + 1;
@@ -483,7 +562,9 @@ ConditionEstimate StaticSolver::estimate_condition(int max_iterations, double to
   }
   est.lambda_max = lambda;
   // Inverse iteration: 1 / lambda_min is the largest eigenvalue of K_ff^-1.
-  for (int r = 0; r < nf; ++r) v[r] = dist(rng);
+  for (int r = 0; r < nf; ++r) {
+    v[r] = dist(rng);
+  }
   v.normalize();
   Eigen::MatrixXd x;
   double mu = 0.0;

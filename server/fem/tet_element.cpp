@@ -35,8 +35,11 @@ TetGeometry tet_geometry(const TetNodes& x, int element_id) {
   const double det = j.determinant();
   const double volume = det / 6.0;
   double longest2 = 0.0;
-  for (int a = 0; a < 4; ++a)
-    for (int b = a + 1; b < 4; ++b) longest2 = std::max(longest2, (x[a] - x[b]).squaredNorm());
+  for (int a = 0; a < 4; ++a) {
+    for (int b = a + 1; b < 4; ++b) {
+      longest2 = std::max(longest2, (x[a] - x[b]).squaredNorm());
+    }
+  }
   const double longest = std::sqrt(longest2);
   if (!(volume > kDegenerateVolumeRatio * longest * longest * longest)) {
     std::ostringstream msg;
@@ -72,19 +75,24 @@ Eigen::Matrix<double, 6, 12> strain_displacement(const TetGeometry& g) {
 
 void tet_stiffness(const TetGeometry& g, double lambda_pa, double mu_pa, ElementMatrix& k) {
   double grad[4][3];
-  for (int a = 0; a < 4; ++a)
-    for (int i = 0; i < 3; ++i) grad[a][i] = g.gradients(a, i);
+  for (int a = 0; a < 4; ++a) {
+    for (int i = 0; i < 3; ++i) {
+      grad[a][i] = g.gradients(a, i);
+    }
+  }
   const double vl = g.volume_m3 * lambda_pa, vm = g.volume_m3 * mu_pa;
   double kab[3][3];
-  for (int a = 0; a < 4; ++a)
+  for (int a = 0; a < 4; ++a) {
     for (int b = a; b < 4; ++b) {
       tet_stiffness_block(grad[a], grad[b], vl, vm, kab);
-      for (int i = 0; i < 3; ++i)
+      for (int i = 0; i < 3; ++i) {
         for (int j = 0; j < 3; ++j) {
           k(3 * a + i, 3 * b + j) = kab[i][j];
           k(3 * b + j, 3 * a + i) = kab[i][j];
         }
+      }
     }
+  }
 }
 
 ElementMatrix tet_stiffness(const TetNodes& x, const Material& material, int element_id) {
@@ -127,7 +135,9 @@ TetQuality tet_quality(const TetNodes& x) {
   for (int k = 0; k < 4; ++k) {
     const int i = (k + 1) % 4, j = (k + 2) % 4, l = (k + 3) % 4;
     Eigen::Vector3d nk = (x[j] - x[i]).cross(x[l] - x[i]);
-    if (nk.dot(x[k] - x[i]) > 0.0) nk = -nk;  // point away from the opposite node
+    if (nk.dot(x[k] - x[i]) > 0.0) {
+      nk = -nk;  // point away from the opposite node
+    }
     const double len = nk.norm();
     n[k] = len > 0.0 ? Eigen::Vector3d(nk / len) : Eigen::Vector3d::Zero();
   }
@@ -136,7 +146,9 @@ TetQuality tet_quality(const TetNodes& x) {
   for (const auto& p : kPairs) {
     int c = -1, d = -1;
     for (int k = 0; k < 4; ++k) {
-      if (k == p[0] || k == p[1]) continue;
+      if (k == p[0] || k == p[1]) {
+        continue;
+      }
       (c < 0 ? c : d) = k;
     }
     const double cosang = std::clamp(-n[c].dot(n[d]), -1.0, 1.0);

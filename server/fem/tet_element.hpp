@@ -39,9 +39,14 @@ void tet_stiffness(const TetGeometry& g, double lambda_pa, double mu_pa, Element
 inline void tet_stiffness_block(const double* ga, const double* gb, double vl, double vm,
                                 double out[3][3]) {
   const double dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) out[i][j] = vl * ga[i] * gb[j] + vm * gb[i] * ga[j];
-  for (int i = 0; i < 3; ++i) out[i][i] += vm * dot;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      out[i][j] = vl * ga[i] * gb[j] + vm * gb[i] * ga[j];
+    }
+  }
+  for (int i = 0; i < 3; ++i) {
+    out[i][i] += vm * dot;
+  }
 }
 ElementMatrix tet_stiffness(const TetNodes& x, const Material& material, int element_id = -1);
 

@@ -19,11 +19,15 @@ SparseMatrix triplet_assembly(const mesh::TetMesh& m, const MaterialMap& mats) {
     const ElementMatrix k = tet_stiffness(
         {m.vertices()[tet[0]], m.vertices()[tet[1]], m.vertices()[tet[2]], m.vertices()[tet[3]]},
         mats.of_tet(t), static_cast<int>(t));
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b < 4; ++b)
-        for (int i = 0; i < 3; ++i)
-          for (int j = 0; j < 3; ++j)
+    for (int a = 0; a < 4; ++a) {
+      for (int b = 0; b < 4; ++b) {
+        for (int i = 0; i < 3; ++i) {
+          for (int j = 0; j < 3; ++j) {
             trip.emplace_back(3 * tet[a] + i, 3 * tet[b] + j, k(3 * a + i, 3 * b + j));
+          }
+        }
+      }
+    }
   }
   SparseMatrix k(3 * m.num_vertices(), 3 * m.num_vertices());
   k.setFromTriplets(trip.begin(), trip.end());
@@ -47,10 +51,11 @@ TEST(FemAssembly, RigidMotionsAreInTheNullSpace) {
   const double scale = Eigen::MatrixXd(k).cwiseAbs().maxCoeff();
   for (int mode = 0; mode < 6; ++mode) {
     Eigen::VectorXd u(3 * m.num_vertices());
-    for (std::size_t v = 0; v < m.num_vertices(); ++v)
+    for (std::size_t v = 0; v < m.num_vertices(); ++v) {
       u.segment<3>(3 * v) =
           mode < 3 ? Eigen::Vector3d(Eigen::Vector3d::Unit(mode))
                    : Eigen::Vector3d(Eigen::Vector3d::Unit(mode - 3).cross(m.vertices()[v]));
+    }
     EXPECT_LE((k * u).cwiseAbs().maxCoeff(), 1e-12 * scale * u.cwiseAbs().maxCoeff())
         << "mode " << mode;
   }
@@ -59,7 +64,9 @@ TEST(FemAssembly, RigidMotionsAreInTheNullSpace) {
 TEST(FemAssembly, PerTetMaterialsAndInPlaceRefill) {
   const auto m = box_mesh(BoxSpec{2, 2, 2});
   std::vector<int> ids(m.num_tets());
-  for (std::size_t t = 0; t < ids.size(); ++t) ids[t] = static_cast<int>(t % 2);
+  for (std::size_t t = 0; t < ids.size(); ++t) {
+    ids[t] = static_cast<int>(t % 2);
+  }
   const MaterialMap two = MaterialMap::per_tet({{1e6, 0.4, "soft"}, {1e10, 0.3, "stiff"}}, ids);
   StiffnessAssembler assembler(m);
   SparseMatrix k;

@@ -31,11 +31,13 @@ TEST(FemCalculixPaperCube, MatchesCalculix) {
   });
   ASSERT_FALSE(loads.prescribed_nodes.empty());
   loads.prescribed_displacements_m = Eigen::VectorXd::Zero(3 * loads.prescribed_nodes.size());
-  for (std::size_t k = 0; k < loads.prescribed_nodes.size(); ++k)
+  for (std::size_t k = 0; k < loads.prescribed_nodes.size(); ++k) {
     loads.prescribed_displacements_m[3 * k] = -5e-3;
+  }
   loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
-  for (std::size_t v = 0; v < m.num_vertices(); ++v)
+  for (std::size_t v = 0; v < m.num_vertices(); ++v) {
     loads.forces_n[3 * v + 2] = -1e-3;  // N per node
+  }
 
   const StaticSolver solver(m, mats, loads.fixed_nodes);
   const auto ours = solver.solve_prescribed(loads.prescribed_nodes,
@@ -44,11 +46,12 @@ TEST(FemCalculixPaperCube, MatchesCalculix) {
   const CalculixResult ccx = run_calculix(dir, "paper_cube", m, mats, loads, {"ccx", 240.0});
   const double du = testing::rel_max_diff(ours.displacement_m, ccx.displacement_m);
   Eigen::VectorXd rf = Eigen::VectorXd::Zero(ours.reaction_n.size());
-  for (std::size_t v = 0; v < m.num_vertices(); ++v)
+  for (std::size_t v = 0; v < m.num_vertices(); ++v) {
     if (ccx.has_reaction[v]) {
       // ccx's RF is K u at the node: loads applied on constrained dofs are not subtracted.
       rf.segment<3>(3 * v) = ours.reaction_n.segment<3>(3 * v) + loads.forces_n.segment<3>(3 * v);
     }
+  }
   const double drf = testing::rel_max_diff(rf, ccx.reaction_n);
   std::printf(
       "paper cube: %zu vertices, %zu tets, %zu fixed, %zu pushed; max|u| %.4e m; u rel diff %.3e, "

@@ -34,19 +34,24 @@ Comparison compare_with_ccx(const std::string& tag, const mesh::TetMesh& m, cons
   const auto ours =
       solver.solve_prescribed(loads.prescribed_nodes, loads.prescribed_displacements_m,
                               loads.forces_n.size() ? loads.forces_n : Eigen::VectorXd());
-  if (cond) *cond = solver.estimate_condition(500, 1e-6);
+  if (cond) {
+    *cond = solver.estimate_condition(500, 1e-6);
+  }
   const auto dir = neurosim::testing::temp_dir("ccx_" + tag);
   const CalculixResult ccx = run_calculix(dir, tag, m, mats, loads, {"ccx", 240.0});
   Comparison c;
   c.max_u_m = ccx.displacement_m.cwiseAbs().maxCoeff();
   c.u_rel = testing::rel_max_diff(ours.displacement_m, ccx.displacement_m);
   Eigen::VectorXd rf_ours = Eigen::VectorXd::Zero(ours.reaction_n.size());
-  for (std::size_t v = 0; v < m.num_vertices(); ++v)
+  for (std::size_t v = 0; v < m.num_vertices(); ++v) {
     if (ccx.has_reaction[v]) {
       // ccx's RF is K u at the node: loads applied on constrained dofs are not subtracted.
       rf_ours.segment<3>(3 * v) = ours.reaction_n.segment<3>(3 * v);
-      if (loads.forces_n.size()) rf_ours.segment<3>(3 * v) += loads.forces_n.segment<3>(3 * v);
+      if (loads.forces_n.size()) {
+        rf_ours.segment<3>(3 * v) += loads.forces_n.segment<3>(3 * v);
+      }
     }
+  }
   c.rf_rel = testing::rel_max_diff(rf_ours, ccx.reaction_n);
   std::printf("%-28s nodes %6zu tets %7zu  max|u| %.4e m  u rel diff %.3e  RF rel diff %.3e\n",
               tag.c_str(), m.num_vertices(), m.num_tets(), c.max_u_m, c.u_rel, c.rf_rel);
@@ -89,8 +94,9 @@ TEST(FemCalculix, BeamMatches) {
   CalculixLoads loads;
   loads.fixed_nodes = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-12; });
   loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
-  for (int v : nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() > 1.0 - 1e-12; }))
+  for (int v : nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() > 1.0 - 1e-12; })) {
     loads.forces_n.segment<3>(3 * v) = Eigen::Vector3d(0.1, 0.05, -0.2);
+  }
   const Comparison c = compare_with_ccx("beam", m, MaterialMap::uniform({1e6, 0.3, "beam"}), loads);
   EXPECT_LE(c.u_rel, 1e-6);
   EXPECT_LE(c.rf_rel, 1e-6);
@@ -106,12 +112,14 @@ TEST(FemCalculix, CubeWithForcesAndPrescribedDisplacementsMatches) {
     return p.z() > 0.1 - 1e-12 && std::abs(p.x() - 0.05) < 0.021 && std::abs(p.y() - 0.05) < 0.021;
   });
   loads.prescribed_displacements_m = Eigen::VectorXd::Zero(3 * loads.prescribed_nodes.size());
-  for (std::size_t k = 0; k < loads.prescribed_nodes.size(); ++k)
+  for (std::size_t k = 0; k < loads.prescribed_nodes.size(); ++k) {
     loads.prescribed_displacements_m[3 * k + 2] = -2e-3;
+  }
   loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
   for (int v :
-       nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-12 && p.z() > 0.05; }))
+       nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-12 && p.z() > 0.05; })) {
     loads.forces_n[3 * v] = 0.3;
+  }
   const Comparison c =
       compare_with_ccx("cube", m, MaterialMap::uniform({1e6, 0.4, "brain"}), loads);
   EXPECT_LE(c.u_rel, 1e-6);
@@ -123,9 +131,10 @@ TEST(FemCalculix, NearlyIncompressibleMatches) {
   CalculixLoads loads;
   loads.fixed_nodes = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
   loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
-  for (int v :
-       nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-12 && p.x() < 0.05; }))
+  for (int v : nodes_where(
+           m, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-12 && p.x() < 0.05; })) {
     loads.forces_n.segment<3>(3 * v) = Eigen::Vector3d(0.05, 0.0, -0.2);
+  }
   std::printf("%-8s %12s %12s %12s %12s %12s\n", "nu", "u rel diff", "lambda_min", "lambda_max",
               "cond(K_ff)", "rcond(L)");
   for (double nu : {0.3, 0.49, 0.499}) {
@@ -144,15 +153,18 @@ TEST(FemCalculix, TwoMaterialsWithStiffnessRatio1e4Match) {
   std::vector<int> ids(m.num_tets());
   for (std::size_t t = 0; t < m.num_tets(); ++t) {
     Eigen::Vector3d c = Eigen::Vector3d::Zero();
-    for (int v : m.tets()[t]) c += m.vertices()[v] / 4.0;
+    for (int v : m.tets()[t]) {
+      c += m.vertices()[v] / 4.0;
+    }
     ids[t] = c.z() < 0.06 ? 1 : 0;
   }
   const MaterialMap mats = MaterialMap::per_tet({{1e6, 0.4, "brain"}, {1e10, 0.3, "bone"}}, ids);
   CalculixLoads loads;
   loads.fixed_nodes = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
   loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
-  for (int v : nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.12 - 1e-12; }))
+  for (int v : nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.12 - 1e-12; })) {
     loads.forces_n.segment<3>(3 * v) = Eigen::Vector3d(0.1, 0.0, -0.5);
+  }
   ConditionEstimate cond;
   const Comparison c = compare_with_ccx("two_materials", m, mats, loads, &cond);
   std::printf("two materials: cond(K_ff) %.3e, rcond(L) %.3e\n", cond.condition,
@@ -185,8 +197,9 @@ TEST(FemCalculix, SliverElementMatches) {
   CalculixLoads loads;
   loads.fixed_nodes = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
   loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
-  for (int v : nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.04 - 1e-12; }))
+  for (int v : nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.04 - 1e-12; })) {
     loads.forces_n.segment<3>(3 * v) = Eigen::Vector3d(0.0, 0.02, -0.1);
+  }
   const Comparison c =
       compare_with_ccx("sliver", m, MaterialMap::uniform({1e6, 0.4, "brain"}), loads);
   EXPECT_LE(c.u_rel, 1e-6);

@@ -47,11 +47,14 @@ TEST(FemCantilever, TipDeflectionConvergesToBeamTheory) {
     for (const auto& tri : m.surface()) {
       const auto& x = m.vertices();
       if (x[tri[0]].x() < length - 1e-12 || x[tri[1]].x() < length - 1e-12 ||
-          x[tri[2]].x() < length - 1e-12)
+          x[tri[2]].x() < length - 1e-12) {
         continue;
+      }
       const double a = 0.5 * (x[tri[1]] - x[tri[0]]).cross(x[tri[2]] - x[tri[0]]).norm();
       tip_area += a;
-      for (int v : tri) f[3 * v + 2] -= load / area * a / 3.0;
+      for (int v : tri) {
+        f[3 * v + 2] -= load / area * a / 3.0;
+      }
     }
     ASSERT_NEAR(tip_area, area, 1e-12);
     const Eigen::VectorXd u = solver.solve(f);

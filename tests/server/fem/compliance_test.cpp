@@ -52,13 +52,14 @@ TEST_F(FemCompliance, BlockIsSymmetricAndMatchesSingleColumns) {
   EXPECT_LE((lss - lss.transpose()).cwiseAbs().maxCoeff(), 1e-12 * lss.cwiseAbs().maxCoeff());
   EXPECT_EQ(lss.bottomRows<3>().norm(), 0.0);
   Compliance single(solver_);
-  for (std::size_t k = 0; k < s.size(); ++k)
+  for (std::size_t k = 0; k < s.size(); ++k) {
     for (int a = 0; a < 3; ++a) {
       const Eigen::VectorXd& col = single.column(3 * s[k] + a);
       const Eigen::VectorXd* cached = blocked.find_column(3 * s[k] + a);
       ASSERT_NE(cached, nullptr);
       EXPECT_LE((*cached - col).cwiseAbs().maxCoeff(), 1e-12 * col.cwiseAbs().maxCoeff() + 1e-300);
     }
+  }
   // L_SS is positive definite on the free nodes.
   const Eigen::MatrixXd free_block = lss.topLeftCorner(30, 30);
   EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(free_block).info(), Eigen::Success);
@@ -79,7 +80,9 @@ TEST_F(FemCompliance, ReferencesStayValidWhileTheCacheGrows) {
   const Eigen::VectorXd* first = &c.column(3 * 70);
   const Eigen::VectorXd copy = *first;
   std::vector<int> many;
-  for (int v = 0; v < 60; ++v) many.push_back(3 * (v + 20) + 1);
+  for (int v = 0; v < 60; ++v) {
+    many.push_back(3 * (v + 20) + 1);
+  }
   c.precompute(many);
   EXPECT_EQ(c.find_column(3 * 70), first);
   EXPECT_EQ((*first - copy).norm(), 0.0);

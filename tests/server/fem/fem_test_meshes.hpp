@@ -36,22 +36,25 @@ inline mesh::TetMesh box_mesh(const BoxSpec& s) {
                           (s.hi - s.lo).z() / s.nz);
   std::mt19937 rng(s.seed);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (int k = 0; k <= s.nz; ++k)
-    for (int j = 0; j <= s.ny; ++j)
+  for (int k = 0; k <= s.nz; ++k) {
+    for (int j = 0; j <= s.ny; ++j) {
       for (int i = 0; i <= s.nx; ++i) {
         Eigen::Vector3d p = s.lo + Eigen::Vector3d(i * h.x(), j * h.y(), k * h.z());
         const bool interior = i > 0 && i < s.nx && j > 0 && j < s.ny && k > 0 && k < s.nz;
-        if (interior && s.jitter > 0.0)
+        if (interior && s.jitter > 0.0) {
           p += s.jitter * Eigen::Vector3d(u(rng) * h.x(), u(rng) * h.y(), u(rng) * h.z());
+        }
         x.push_back(p);
       }
+    }
+  }
   // Kuhn: one tetrahedron per axis permutation, path 000 -> 111 along the permuted axes.
   static constexpr int kPerm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2},
                                       {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
   std::vector<mesh::Tet> tets;
-  for (int k = 0; k < s.nz; ++k)
-    for (int j = 0; j < s.ny; ++j)
-      for (int i = 0; i < s.nx; ++i)
+  for (int k = 0; k < s.nz; ++k) {
+    for (int j = 0; j < s.ny; ++j) {
+      for (int i = 0; i < s.nx; ++i) {
         for (const auto& p : kPerm) {
           std::array<int, 3> c{i, j, k};
           mesh::Tet t;
@@ -60,9 +63,14 @@ inline mesh::TetMesh box_mesh(const BoxSpec& s) {
             ++c[p[step]];
             t[step + 1] = box_node(s, c[0], c[1], c[2]);
           }
-          if (mesh::signed_volume(x[t[0]], x[t[1]], x[t[2]], x[t[3]]) < 0.0) std::swap(t[2], t[3]);
+          if (mesh::signed_volume(x[t[0]], x[t[1]], x[t[2]], x[t[3]]) < 0.0) {
+            std::swap(t[2], t[3]);
+          }
           tets.push_back(t);
         }
+      }
+    }
+  }
   mesh::BuildOptions opt;
   opt.source =
       "test box " + std::to_string(s.nx) + "x" + std::to_string(s.ny) + "x" + std::to_string(s.nz);
@@ -73,8 +81,11 @@ inline mesh::TetMesh box_mesh(const BoxSpec& s) {
 inline std::vector<int> nodes_where(const mesh::TetMesh& m,
                                     const std::function<bool(const Eigen::Vector3d&)>& pred) {
   std::vector<int> out;
-  for (std::size_t v = 0; v < m.num_vertices(); ++v)
-    if (pred(m.vertices()[v])) out.push_back(static_cast<int>(v));
+  for (std::size_t v = 0; v < m.num_vertices(); ++v) {
+    if (pred(m.vertices()[v])) {
+      out.push_back(static_cast<int>(v));
+    }
+  }
   return out;
 }
 

@@ -25,13 +25,17 @@ Eigen::VectorXd linear_field(const mesh::TetMesh& m) {
   a << 1e-3, -2e-3, 0.5e-3, 0.7e-3, 1.5e-3, -1e-3, 2e-3, 0.3e-3, -0.8e-3;
   const Eigen::Vector3d c(1e-4, -2e-4, 3e-4);
   Eigen::VectorXd u(3 * m.num_vertices());
-  for (std::size_t v = 0; v < m.num_vertices(); ++v) u.segment<3>(3 * v) = a * m.vertices()[v] + c;
+  for (std::size_t v = 0; v < m.num_vertices(); ++v) {
+    u.segment<3>(3 * v) = a * m.vertices()[v] + c;
+  }
   return u;
 }
 
 Eigen::VectorXd values_at(const Eigen::VectorXd& u, const std::vector<int>& nodes) {
   Eigen::VectorXd out(3 * nodes.size());
-  for (std::size_t k = 0; k < nodes.size(); ++k) out.segment<3>(3 * k) = u.segment<3>(3 * nodes[k]);
+  for (std::size_t k = 0; k < nodes.size(); ++k) {
+    out.segment<3>(3 * k) = u.segment<3>(3 * nodes[k]);
+  }
   return out;
 }
 
@@ -48,10 +52,11 @@ TEST(FemStaticSolver, PatchTestIrregularMesh) {
   std::printf("patch test (eliminated boundary): max rel error %.3e\n", err);
   EXPECT_LE(err, 1e-12);
   // Interior nodes carry no reaction: a linear field is in equilibrium without body forces.
-  for (std::size_t v = 0; v < m.num_vertices(); ++v)
+  for (std::size_t v = 0; v < m.num_vertices(); ++v) {
     if (!std::binary_search(boundary.begin(), boundary.end(), static_cast<int>(v))) {
       EXPECT_EQ(sol.reaction_n.segment<3>(3 * v).norm(), 0.0);
     }
+  }
 
   // (b) Only the x = 0 face eliminated; the rest of the boundary prescribed through the Schur
   // complement of the factor (no refactorization).
@@ -74,11 +79,15 @@ TEST(FemStaticSolver, ReactionsBalanceLoadsAndResidualIsSmall) {
   const StaticSolver solver(m, MaterialMap::uniform(kBrain), bottom, opt);
   Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
   const auto top = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-9; });
-  for (int v : top) f.segment<3>(3 * v) = Eigen::Vector3d(0.2, -0.1, -1.0);  // N
+  for (int v : top) {
+    f.segment<3>(3 * v) = Eigen::Vector3d(0.2, -0.1, -1.0);  // N
+  }
   const auto sol = solver.solve_prescribed({}, Eigen::VectorXd(), f);
   const Eigen::VectorXd u = solver.solve(f);
   EXPECT_LE((u - sol.displacement_m).cwiseAbs().maxCoeff(), 1e-14 * u.cwiseAbs().maxCoeff());
-  for (int v : bottom) EXPECT_EQ(u.segment<3>(3 * v).norm(), 0.0);
+  for (int v : bottom) {
+    EXPECT_EQ(u.segment<3>(3 * v).norm(), 0.0);
+  }
   // Force and moment balance: sum(f) + sum(r) = 0, sum(x × (f + r)) = 0.
   Eigen::Vector3d force = Eigen::Vector3d::Zero(), moment = Eigen::Vector3d::Zero();
   for (std::size_t v = 0; v < m.num_vertices(); ++v) {
@@ -100,9 +109,11 @@ TEST(FemStaticSolver, ConditionEstimateMatchesDenseEigenvalues) {
   const ConditionEstimate est = solver.estimate_condition(2000, 1e-12);
   Eigen::MatrixXd kff(solver.num_free_dofs(), solver.num_free_dofs());
   const Eigen::MatrixXd k(solver.stiffness());
-  for (int i = 0; i < kff.rows(); ++i)
-    for (int j = 0; j < kff.cols(); ++j)
+  for (int i = 0; i < kff.rows(); ++i) {
+    for (int j = 0; j < kff.cols(); ++j) {
       kff(i, j) = k(solver.free_dofs()[i], solver.free_dofs()[j]);
+    }
+  }
   const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(kff).eigenvalues();
   std::printf(
       "lambda_max %.6e (dense %.6e), lambda_min %.6e (dense %.6e), cond %.3e, cholmod rcond %.3e\n",
@@ -169,8 +180,9 @@ TEST(FemStaticSolver, PrescribedFreeNodesMatchEliminatedOnes) {
   const auto left = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-9; });
   const auto right = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() > 0.04 - 1e-9; });
   Eigen::VectorXd d(3 * right.size());
-  for (std::size_t k = 0; k < right.size(); ++k)
+  for (std::size_t k = 0; k < right.size(); ++k) {
     d.segment<3>(3 * k) = Eigen::Vector3d(1e-3, 2e-4, -5e-4);
+  }
   Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * m.num_vertices());
   f[3 * 30 + 2] = -0.5;
   // Right face eliminated in the factor vs imposed through the Schur complement.
@@ -182,8 +194,9 @@ TEST(FemStaticSolver, PrescribedFreeNodesMatchEliminatedOnes) {
   const auto b = schur.solve_prescribed(right, d, f);
   EXPECT_LE(testing::rel_max_diff(b.displacement_m, a.displacement_m), 1e-10);
   EXPECT_LE(testing::rel_max_diff(b.reaction_n, a.reaction_n), 1e-8);
-  for (int v : right)
+  for (int v : right) {
     EXPECT_LE((b.displacement_m.segment<3>(3 * v) - d.segment<3>(0)).norm(), 1e-15);
+  }
 }
 
 // Two disconnected boxes in one TetMesh (two meshes' materials, stiffness ratio 1e4).
@@ -195,7 +208,9 @@ TEST(FemStaticSolver, TwoPartsEachNeedSupportAndSolveIndependently) {
   std::vector<mesh::Tet> tets = a.tets();
   const int offset = static_cast<int>(a.num_vertices());
   for (auto t : b.tets()) {
-    for (int& v : t) v += offset;
+    for (int& v : t) {
+      v += offset;
+    }
     tets.push_back(t);
   }
   const auto both = mesh::TetMesh::build(x, tets);
@@ -205,8 +220,9 @@ TEST(FemStaticSolver, TwoPartsEachNeedSupportAndSolveIndependently) {
   const auto fixed_a = nodes_where(a, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
   expect_message([&] { StaticSolver(both, mats, fixed_a); }, "connected part 1");
   std::vector<int> fixed = fixed_a;
-  for (int v : nodes_where(b, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; }))
+  for (int v : nodes_where(b, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; })) {
     fixed.push_back(v + offset);
+  }
   const StaticSolver solver(both, mats, fixed);
   Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
   const auto top_a = nodes_where(a, [](const Eigen::Vector3d& p) { return p.z() > 0.03 - 1e-9; });

@@ -23,9 +23,15 @@ std::vector<TetNodes> random_tets(int count) {
   std::vector<TetNodes> out;
   while (static_cast<int>(out.size()) < count) {
     TetNodes x;
-    for (auto& p : x) p = Eigen::Vector3d(u(rng), u(rng), u(rng));
-    if (tet_quality(x).volume_m3 < 0.0) std::swap(x[2], x[3]);
-    if (tet_quality(x).mean_ratio > 0.2) out.push_back(x);
+    for (auto& p : x) {
+      p = Eigen::Vector3d(u(rng), u(rng), u(rng));
+    }
+    if (tet_quality(x).volume_m3 < 0.0) {
+      std::swap(x[2], x[3]);
+    }
+    if (tet_quality(x).mean_ratio > 0.2) {
+      out.push_back(x);
+    }
   }
   return out;
 }
@@ -37,17 +43,20 @@ TEST(FemElement, StiffnessIsSymmetricWithSixRigidModes) {
     Eigen::SelfAdjointEigenSolver<ElementMatrix> eig(k);
     const auto& ev = eig.eigenvalues();  // ascending
     const double scale = ev(11);
-    for (int i = 0; i < 6; ++i) EXPECT_LE(std::abs(ev(i)), 1e-12 * scale) << "eigenvalue " << i;
+    for (int i = 0; i < 6; ++i) {
+      EXPECT_LE(std::abs(ev(i)), 1e-12 * scale) << "eigenvalue " << i;
+    }
     EXPECT_GT(ev(6), 1e-6 * scale) << "a seventh zero mode: element would be singular";
     // The six zero modes are exactly the rigid motions: translations and rotations.
     for (int mode = 0; mode < 6; ++mode) {
       ElementVector u;
       for (int a = 0; a < 4; ++a) {
         Eigen::Vector3d ua = Eigen::Vector3d::Zero();
-        if (mode < 3)
+        if (mode < 3) {
           ua(mode) = 1.0;
-        else
+        } else {
           ua = Eigen::Vector3d::Unit(mode - 3).cross(x[a]);
+        }
         u.segment<3>(3 * a) = ua;
       }
       EXPECT_LE((k * u).norm(), 1e-12 * scale * u.norm()) << "rigid mode " << mode;
@@ -71,10 +80,12 @@ TEST(FemElement, StiffnessIsSecondDerivativeOfStrainEnergy) {
   for (const TetNodes& x : random_tets(5)) {
     const ElementMatrix k = tet_stiffness(x, brain());
     ElementVector u0;
-    for (int i = 0; i < 12; ++i) u0(i) = u(rng);
+    for (int i = 0; i < 12; ++i) {
+      u0(i) = u(rng);
+    }
     const double h = 1e-5;  // m
     ElementMatrix fd;
-    for (int i = 0; i < 12; ++i)
+    for (int i = 0; i < 12; ++i) {
       for (int j = 0; j < 12; ++j) {
         auto energy = [&](double si, double sj) {
           ElementVector v = u0;
@@ -84,6 +95,7 @@ TEST(FemElement, StiffnessIsSecondDerivativeOfStrainEnergy) {
         };
         fd(i, j) = (energy(1, 1) - energy(1, -1) - energy(-1, 1) + energy(-1, -1)) / (4 * h * h);
       }
+    }
     EXPECT_LE((k - fd).cwiseAbs().maxCoeff(), 1e-6 * k.cwiseAbs().maxCoeff());
     // And the energy itself is 1/2 u^T K u.
     EXPECT_NEAR(tet_strain_energy(x, brain(), u0), 0.5 * u0.dot(k * u0), 1e-12 * u0.dot(k * u0));
@@ -96,7 +108,9 @@ TEST(FemElement, LinearFieldGivesItsStrain) {
   a << 1e-3, 2e-3, -1e-3, 0.5e-3, -2e-3, 1e-3, 3e-3, 0, 1e-3;
   for (const TetNodes& x : random_tets(5)) {
     ElementVector u;
-    for (int n = 0; n < 4; ++n) u.segment<3>(3 * n) = a * x[n];
+    for (int n = 0; n < 4; ++n) {
+      u.segment<3>(3 * n) = a * x[n];
+    }
     const Eigen::Matrix<double, 6, 1> eps = strain_displacement(tet_geometry(x)) * u;
     const Eigen::Matrix3d e = 0.5 * (a + a.transpose());
     Eigen::Matrix<double, 6, 1> expected;
@@ -136,7 +150,9 @@ TEST(FemElement, SliverIsAcceptedAndReported) {
   const double eps = 1e-3;
   TetNodes x{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1, 1, 0), Eigen::Vector3d(1, 0, eps),
              Eigen::Vector3d(0, 1, eps)};
-  if (tet_quality(x).volume_m3 < 0) std::swap(x[2], x[3]);
+  if (tet_quality(x).volume_m3 < 0) {
+    std::swap(x[2], x[3]);
+  }
   const TetQuality q = tet_quality(x);
   std::printf("sliver: volume %.3e m^3, mean ratio %.3e, dihedral [%.4f, %.4f] deg\n", q.volume_m3,
               q.mean_ratio, q.min_dihedral_deg, q.max_dihedral_deg);
@@ -147,7 +163,9 @@ TEST(FemElement, SliverIsAcceptedAndReported) {
   // Regular tetrahedron: mean ratio 1, all dihedral angles acos(1/3).
   TetNodes r{Eigen::Vector3d(1, 1, 1), Eigen::Vector3d(1, -1, -1), Eigen::Vector3d(-1, 1, -1),
              Eigen::Vector3d(-1, -1, 1)};
-  if (tet_quality(r).volume_m3 < 0) std::swap(r[2], r[3]);
+  if (tet_quality(r).volume_m3 < 0) {
+    std::swap(r[2], r[3]);
+  }
   EXPECT_NEAR(tet_quality(r).mean_ratio, 1.0, 1e-12);
   EXPECT_NEAR(tet_quality(r).min_dihedral_deg,
               std::acos(1.0 / 3.0) * 180.0 / 3.14159265358979323846, 1e-9);
