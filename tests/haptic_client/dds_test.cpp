@@ -91,8 +91,8 @@ TEST(haptic_dds, KillingServerMidContactFadesForceAndReconnects) {
   loop_thread.join();
   server.reset();
 
-  // From the trace: after the newest model before an outage, the force is zero within 50 + 20 ms
-  // of that model's time (a tick of slack); a stall (server alive) holds it for the 50 ms first.
+  // From the trace: after the newest model before an outage, no tick pushes later than 50 + 20 ms
+  // after that model's time; a stall (server alive) holds the force for the 50 ms first.
   const auto& tr = loop.trace();
   auto zero_delay_ms = [&](std::size_t from) {
     std::uint64_t last_seq = 0;
@@ -102,22 +102,23 @@ TEST(haptic_dds, KillingServerMidContactFadesForceAndReconnects) {
         last_seq = tr[i].model_sequence;
         last_ref = tr[i].now_ns - static_cast<std::int64_t>(std::llround(tr[i].model_age_s * 1e9));
       }
-      if (i > from && tr[i].force_n.norm() == 0) return 1e-6 * static_cast<double>(tr[i].now_ns - last_ref);
+      // The last tick still pushing (a late tick may make the first zero one later than 70 ms).
+      if (i > from && tr[i].force_n.norm() == 0) return 1e-6 * static_cast<double>(tr[i - 1].now_ns - last_ref);
     }
     return -1.0;
   };
   const double stall_ms = zero_delay_ms(stall_tick);
-  EXPECT_GT(stall_ms, 50) << "a stalled server's model is trusted for 50 ms";
-  EXPECT_LE(stall_ms, 50 + 20 + 1.5);
+  EXPECT_GE(stall_ms, 50) << "a stalled server's model is trusted for 50 ms";
+  EXPECT_LT(stall_ms, 50 + 20);
   const double kill_ms = zero_delay_ms(kill_tick);
-  EXPECT_GT(kill_ms, 0);
-  EXPECT_LE(kill_ms, 50 + 20 + 1.5) << "force must be zero 70 ms after the newest model";
+  EXPECT_GE(kill_ms, 0);
+  EXPECT_LT(kill_ms, 50 + 20) << "no force 70 ms after the newest model";
   double max_step = 0;
   for (std::size_t i = 1; i < tr.size(); ++i)
     max_step = std::max(max_step, (tr[i].force_n - tr[i - 1].force_n).norm());
   EXPECT_LE(max_step, cfg.force.max_force_step_n + 1e-12);
   EXPECT_GE(link.counters().server_lost, 1u);
   EXPECT_GE(link.counters().server_seen, 2u);
-  std::printf("stall: zero %.1f ms after the newest model; kill: %.1f ms; max step %.3f N\n", stall_ms,
+  std::printf("last force %.1f ms after the newest model (stall), %.1f ms (kill); max step %.3f N\n", stall_ms,
               kill_ms, max_step);
 }

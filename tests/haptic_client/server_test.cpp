@@ -249,15 +249,15 @@ TEST(haptic_server, KillingServerMidContactFadesForceToZeroInTime) {
       last_seq = tr[i].model_sequence;
       last_ref = tr[i].now_ns - static_cast<std::int64_t>(std::llround(tr[i].model_age_s * 1e9));
     }
-    if (i > kill_tick && tr[i].force_n.norm() == 0) {
-      zero_ms = 1e-6 * static_cast<double>(tr[i].now_ns - last_ref);
+    if (i > kill_tick && tr[i].force_n.norm() == 0) {  // the last tick still pushing: i - 1
+      zero_ms = 1e-6 * static_cast<double>(tr[i - 1].now_ns - last_ref);
       break;
     }
   }
-  std::printf("contact force %.3f N; zero %.1f ms after the newest model; server seen gone after %.2f s\n",
+  std::printf("contact force %.3f N; last force %.1f ms after the newest model; server seen gone after %.2f s\n",
               f_contact, zero_ms, gone_after_s);
-  EXPECT_GT(zero_ms, 0);
-  EXPECT_LE(zero_ms, 50 + 20 + 1.5) << "force must be zero 70 ms after the newest model";
+  EXPECT_GE(zero_ms, 50) << "kill -9 is only seen by the 50 ms watchdog (liveliness takes ~0.5 s)";
+  EXPECT_LT(zero_ms, 50 + 20) << "no force 70 ms after the newest model";
   double max_step = 0;
   for (std::size_t i = 1; i < tr.size(); ++i)
     max_step = std::max(max_step, (tr[i].force_n - tr[i - 1].force_n).norm());
