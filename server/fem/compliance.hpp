@@ -25,7 +25,7 @@ struct ComplianceOptions {
 // threads may call them at the same time.
 class Compliance {
  public:
-  // `solver` must outlive this object.
+  // `solver` must outlive this object and stay where it is (not moved from).
   explicit Compliance(const StaticSolver& solver, const ComplianceOptions& options = {});
 
   // Column L[:, dof] (3N, unit m/N): displacements for a unit force at `dof` (= 3 node + axis).
