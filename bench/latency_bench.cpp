@@ -13,6 +13,8 @@
 #include "idl/wire/dds.hpp"
 
 #include <fcntl.h>
+#include <pthread.h>
+#include <sched.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -98,6 +100,10 @@ struct Window {
 
 void run_station(int domain, int k, int n, const Window& window, std::atomic<int>& ready,
                  const std::atomic<bool>& go, StationResult& out) {
+  // Like a haptic loop: real-time priority where allowed (below the server's step thread).
+  sched_param sp{};
+  sp.sched_priority = 40;
+  pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
   wire::ParticipantOptions po;
   po.domain = static_cast<dds_domainid_t>(domain);
   wire::Participant pp(po);
