@@ -49,7 +49,7 @@ meshes { id: "brain" generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.14 y
 meshes { id: "artery" generate { cylinder { base_center_m { x: 0.02 y: 0.03 z: 0.03 } axis_m { x: 0.1 y: 0.05 z: 0.03 } radius_m: 0.0025 } target_vertices: 1644 seed: 1 }
   material { name: "artery" youngs_modulus_pa: 1.0e5 poisson_ratio: 0.4 } priority: 1 }
 couplings { host: "brain" embedded: "artery" kind: TIE method: EXACT }
-tools { id: "probe" tip_radius_m: 0.02 shaft_radius_m: 0.0015 shaft_length_m: 0.12 }
+tools { id: "probe" tip_radius_m: 0.025 shaft_radius_m: 0.0015 shaft_length_m: 0.12 }
 effects { tier: LINEAR coupling: true tool_contact: true deformation_output: true }
 )";
 }
@@ -80,7 +80,7 @@ int main(int argc, char** argv) {
   scenarios.back().depth_m = 0.008;
   if (!quick) {
     scenarios.push_back({"brain_like", neurosim::scene::parse_scene(brain_like_scene(), "brain_like.scene"),
-                         "brain_like.scene", Eigen::Vector3d(0.07, 0.055, 0.09), 0.02, 0.006});
+                         "brain_like.scene", Eigen::Vector3d(0.07, 0.055, 0.09), 0.025, 0.008});
   }
   std::ofstream residual_out;
   if (!residual_csv.empty()) {

@@ -43,10 +43,14 @@ CoupledBody::CoupledBody(int host_index, const mesh::TetMesh& host, const fem::M
   timing_.factor_s = seconds_since(t0);
   boundary_slot_.assign(host.num_vertices(), -1);
   contact_slot_.assign(host.num_vertices(), -1);
-  const auto normals = surface_vertex_normals(host);
-  // Fixed nodes cannot move: a row there could never be satisfied, so they are not contactable.
-  for (int v : host.surface_vertices()) {
-    if (solver_->is_fixed_node(v) || normals[v].squaredNorm() == 0.0) continue;
+}
+
+void CoupledBody::select_contact_nodes() {
+  const auto normals = surface_vertex_normals(*host_);
+  // Fixed nodes cannot move (a row there could never be satisfied) and S' nodes are covered by
+  // the embedded mesh: neither is contactable.
+  for (int v : host_->surface_vertices()) {
+    if (solver_->is_fixed_node(v) || boundary_slot_[v] >= 0 || normals[v].squaredNorm() == 0.0) continue;
     contact_slot_[v] = static_cast<int>(contact_nodes_.size());
     contact_nodes_.push_back(v);
     contact_normals_.push_back(normals[v]);
@@ -134,7 +138,9 @@ void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded, const f
   if (nf > 0) {
     Eigen::MatrixXd x;
     tie.interior->solve_reduced(k_is, x);
-    tie.schur.noalias() -= k_is.transpose() * x;
+    // K_si is sparse (a few entries per tied dof): keep the product sparse x dense.
+    const Eigen::SparseMatrix<double> k_is_sparse = k_is.sparseView();
+    tie.schur.noalias() -= k_is_sparse.transpose() * x;
   }
   tie.schur = (0.5 * (tie.schur + tie.schur.transpose())).eval();
   timing_.condense_s += seconds_since(t0);
@@ -158,6 +164,7 @@ void CoupledBody::finalize() {
       for (int a = 0; a < 3; ++a) tie.host_slots[k][a] = boundary_slot_[pending_tri_nodes_[i][k][a]];
   }
   pending_tri_nodes_.clear();
+  select_contact_nodes();
   const int m3 = 3 * static_cast<int>(boundary_nodes_.size());
   const int s3 = 3 * static_cast<int>(contact_nodes_.size());
   if (m3 == 0) return;

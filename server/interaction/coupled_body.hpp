@@ -66,7 +66,8 @@ class CoupledBody {
   const std::vector<EmbeddedTie>& ties() const { return ties_; }
   const std::vector<int>& boundary_nodes() const { return boundary_nodes_; }  // A ids, sorted
 
-  // Contactable points: A's free surface nodes (A ids ascending) and outward unit normals.
+  // Contactable points (after finalize): A's free surface nodes not on S' (A ids ascending)
+  // and their outward unit normals.
   const std::vector<int>& contact_nodes() const { return contact_nodes_; }
   const std::vector<mesh::Vec3>& contact_normals() const { return contact_normals_; }
   int contact_slot(int host_node) const { return contact_slot_[host_node]; }
@@ -125,6 +126,7 @@ class CoupledBody {
   std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> full_columns_;  // coupled L[:, slot], same order
   CoupledBodyTiming timing_;
   bool finalized_{false};
+  void select_contact_nodes();
 };
 
 // Area-weighted outward vertex normals of a mesh's surface (unit; zero where no face).

@@ -1,5 +1,7 @@
 // neurosim-figures: the paper's Figures 10, 13 and 14 on the cube/cylinder scene.
 //   neurosim-figures [--scene scenes/cube_cylinder.scene] [--out DIR] [--max-depth M] [--frames N]
+//                    [--tip-radius M]   (default 0.02 m: a patch of the face, as the paper's user
+//                                        pushes it; 0 keeps the scene's tool)
 // Writes into DIR: fig10_cylinder.csv/.png (cylinder motion with and without coupling, pushed from
 // the right and from the left), fig14_force.csv/.png (reaction force vs push depth, with and
 // without coupling), fig13_residual.csv/.png (iterative baseline residual per iteration) and
@@ -49,7 +51,8 @@ bool plot(const fs::path& script) {
 int main(int argc, char** argv) {
   std::string scene_path = "scenes/cube_cylinder.scene";
   fs::path out = "figures";
-  double max_depth = 0.008;
+  double max_depth = 0.01;
+  double tip_radius = 0.02;  // the paper pushes a patch of the face, not one node
   int frames = 8;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -57,8 +60,9 @@ int main(int argc, char** argv) {
     else if (a == "--out" && i + 1 < argc) out = argv[++i];
     else if (a == "--max-depth" && i + 1 < argc) max_depth = std::atof(argv[++i]);
     else if (a == "--frames" && i + 1 < argc) frames = std::atoi(argv[++i]);
+    else if (a == "--tip-radius" && i + 1 < argc) tip_radius = std::atof(argv[++i]);
     else {
-      std::cerr << "usage: neurosim-figures [--scene FILE] [--out DIR] [--max-depth M] [--frames N]\n";
+      std::cerr << "usage: neurosim-figures [--scene FILE] [--out DIR] [--max-depth M] [--frames N] [--tip-radius M (0: the scene's)]\n";
       return 2;
     }
   }
@@ -70,6 +74,7 @@ int main(int argc, char** argv) {
     fs::create_directories(out);
     auto scene = neurosim::scene::read_scene(scene_path);
     if (scene.tools_size() == 0) throw std::runtime_error(scene_path + ": no tool");
+    if (tip_radius > 0.0) scene.mutable_tools(0)->set_tip_radius_m(tip_radius);
     const double r = scene.tools(0).tip_radius_m();
     std::ofstream fig10(out / "fig10_cylinder.csv"), fig14(out / "fig14_force.csv");
     fig10 << "coupling,side,depth_m,cylinder_max_displacement_m,cylinder_mean_dx_m\n";

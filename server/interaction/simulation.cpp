@@ -41,6 +41,43 @@ bool deeper(const Row& a, const Row& b) {
   return a.slot < b.slot;
 }
 
+// Tetrahedra of `host` enclosed by the triangles `cut` (S'): those not reachable from the
+// host's surface without crossing a face of S'. Empty result if S' does not close.
+std::vector<char> tets_inside(const mesh::TetMesh& host, const std::vector<mesh::Tri>& cut) {
+  std::vector<std::array<int, 3>> faces;
+  faces.reserve(cut.size());
+  for (const auto& t : cut) {
+    std::array<int, 3> f{t[0], t[1], t[2]};
+    std::sort(f.begin(), f.end());
+    faces.push_back(f);
+  }
+  std::sort(faces.begin(), faces.end());
+  std::vector<char> outside(host.num_tets(), 0);
+  std::vector<int> stack;
+  for (int t : host.surface_tet()) {
+    if (!outside[t]) {
+      outside[t] = 1;
+      stack.push_back(t);
+    }
+  }
+  while (!stack.empty()) {
+    const int t = stack.back();
+    stack.pop_back();
+    for (int k = 0; k < 4; ++k) {
+      const int nb = host.neighbours()[t][k];
+      if (nb < 0 || outside[nb]) continue;
+      std::array<int, 3> f{};
+      for (int a = 0; a < 3; ++a) f[a] = host.tets()[t][mesh::kTetFaces[k][a]];
+      std::sort(f.begin(), f.end());
+      if (std::binary_search(faces.begin(), faces.end(), f)) continue;
+      outside[nb] = 1;
+      stack.push_back(nb);
+    }
+  }
+  for (auto& o : outside) o = !o;
+  return outside;  // now: inside
+}
+
 class SimulationImpl final : public Simulation {
  public:
   SimulationImpl(const scene::Scene& scene, const std::string& scene_path, const SimulationOptions& options);
@@ -50,6 +87,7 @@ class SimulationImpl final : public Simulation {
   const mesh::TetMesh& mesh(int m) const override { return entry(m).loaded->mesh; }
   bool mesh_active(int m) const override { return entry(m).body >= 0; }
   const SetupStats& setup_stats() const override { return setup_; }
+  const std::vector<int>& fixed_nodes(int m) const override { return entry(m).loaded->fixed_nodes; }
   int num_tools() const override { return static_cast<int>(tools_.size()); }
 
   void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts, StepStats& stats) override;
@@ -170,6 +208,82 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     }
   }
 
+  // Inclusion decision (Algorithm 1) and coupling map (paper 2.6) per coupled pair, on the
+  // host's full mesh; then the host is carved: the embedded mesh has the higher priority and
+  // keeps its volume (paper 2.4), so the host's tetrahedra inside S' are removed and S' becomes
+  // the host's boundary there. Vertex ids do not change (nodes left without a tetrahedron are
+  // fixed: they are inside the embedded mesh and carry nothing).
+  struct PendingTie {
+    std::vector<int> embedded_nodes;
+    std::vector<std::array<int, 3>> tris;
+    std::vector<std::array<double, 3>> weights;
+    double max_distance_m{0.0};
+  };
+  std::vector<PendingTie> pending(meshes_.size());
+  std::vector<std::vector<char>> carve(meshes_.size());
+  for (std::size_t m = 0; m < meshes_.size(); ++m) {
+    if (host_of[m] < 0) continue;
+    const int h = host_of[m];
+    auto& host = *meshes_[h].loaded;
+    auto& emb = *meshes_[m].loaded;
+    const std::string what = source_ + ": coupling " + host.id + " / " + emb.id;
+    t0 = Clock::now();
+    const auto surface = fusion::TriangleSurface::of(emb.mesh, emb.id);
+    fusion::NewBoundary boundary;
+    fusion::CouplingMap map;
+    try {
+      boundary = fusion::find_new_boundary(host.mesh, surface);
+      map = fusion::build_coupling_map(host.mesh.vertices(), boundary, surface);
+    } catch (const std::exception& ex) {
+      throw std::runtime_error(what + ": " + ex.what());
+    }
+    setup_.fusion_s += seconds_since(t0);
+    PendingTie& p = pending[m];
+    p.embedded_nodes = map.embedded_nodes;
+    p.tris.resize(map.embedded_nodes.size());
+    p.weights.resize(map.embedded_nodes.size());
+    for (std::size_t k = 0; k < map.embedded_nodes.size(); ++k) {
+      const auto& sp = map.embedded_on_boundary[k];
+      const auto& tri = boundary.triangles.at(sp.triangle);
+      p.tris[k] = {tri[0], tri[1], tri[2]};
+      p.weights[k] = sp.weights;
+    }
+    p.max_distance_m = map.embedded_to_boundary.max_m;
+    if (options_.carve_host) {
+      const auto inside = tets_inside(host.mesh, boundary.triangles);
+      if (carve[h].empty()) carve[h].assign(host.mesh.num_tets(), 0);
+      for (std::size_t t = 0; t < inside.size(); ++t)
+        if (inside[t]) carve[h][t] = 1;
+    }
+  }
+  for (std::size_t h = 0; h < meshes_.size(); ++h) {
+    if (carve[h].empty()) continue;
+    auto& host = *meshes_[h].loaded;
+    std::vector<mesh::Tet> kept;
+    std::vector<int> labels;
+    for (std::size_t t = 0; t < host.mesh.num_tets(); ++t) {
+      if (carve[h][t]) continue;
+      kept.push_back(host.mesh.tets()[t]);
+      labels.push_back(host.mesh.tet_labels().empty() ? 0 : host.mesh.tet_labels()[t]);
+    }
+    setup_.carved_tets += static_cast<int>(host.mesh.num_tets() - kept.size());
+    if (kept.size() == host.mesh.num_tets()) continue;
+    if (kept.empty()) throw std::runtime_error(source_ + ": host " + host.id + " lies entirely inside its embedded mesh");
+    mesh::BuildOptions bo;
+    bo.drop_unused_vertices = false;
+    bo.source = host.mesh.source() + " (carved around embedded meshes)";
+    std::vector<char> used(host.mesh.num_vertices(), 0);
+    for (const auto& t : kept)
+      for (int v : t) used[v] = 1;
+    mesh::TetMesh carved = mesh::TetMesh::build(host.mesh.vertices(), kept, bo);
+    carved.set_tet_labels(std::move(labels));
+    host.mesh = std::move(carved);
+    for (std::size_t v = 0; v < used.size(); ++v)
+      if (!used[v]) host.fixed_nodes.push_back(static_cast<int>(v));
+    std::sort(host.fixed_nodes.begin(), host.fixed_nodes.end());
+    host.fixed_nodes.erase(std::unique(host.fixed_nodes.begin(), host.fixed_nodes.end()), host.fixed_nodes.end());
+  }
+
   // Bodies: every host and every mesh with fixed nodes that is not embedded.
   for (std::size_t m = 0; m < meshes_.size(); ++m) {
     const auto& lm = *meshes_[m].loaded;
@@ -189,38 +303,18 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     meshes_[m].body = static_cast<int>(bodies_.size());
     bodies_.push_back(std::move(b));
   }
-  // Ties: inclusion decision (Algorithm 1) and coupling map (paper 2.6) per coupled pair.
+  // Ties: each embedded mesh condensed onto its tied nodes and attached to its host's body.
   for (std::size_t m = 0; m < meshes_.size(); ++m) {
     if (host_of[m] < 0) continue;
     const int h = host_of[m];
-    auto& host = *meshes_[h].loaded;
     auto& emb = *meshes_[m].loaded;
-    const std::string what = source_ + ": coupling " + host.id + " / " + emb.id;
-    t0 = Clock::now();
-    const auto surface = fusion::TriangleSurface::of(emb.mesh, emb.id);
-    fusion::NewBoundary boundary;
-    fusion::CouplingMap map;
-    try {
-      boundary = fusion::find_new_boundary(host.mesh, surface);
-      map = fusion::build_coupling_map(host.mesh.vertices(), boundary, surface);
-    } catch (const std::exception& ex) {
-      throw std::runtime_error(what + ": " + ex.what());
-    }
-    setup_.fusion_s += seconds_since(t0);
-    std::vector<std::array<int, 3>> tris(map.embedded_nodes.size());
-    std::vector<std::array<double, 3>> weights(map.embedded_nodes.size());
-    for (std::size_t k = 0; k < map.embedded_nodes.size(); ++k) {
-      const auto& sp = map.embedded_on_boundary[k];
-      const auto& tri = boundary.triangles.at(sp.triangle);
-      tris[k] = {tri[0], tri[1], tri[2]};
-      weights[k] = sp.weights;
-    }
+    const PendingTie& p = pending[m];
     auto& body = bodies_[meshes_[h].body];
     try {
-      body.body->add_tie(static_cast<int>(m), emb.mesh, emb.material, emb.fixed_nodes, map.embedded_nodes, tris,
-                         weights, map.embedded_to_boundary.max_m);
+      body.body->add_tie(static_cast<int>(m), emb.mesh, emb.material, emb.fixed_nodes, p.embedded_nodes, p.tris,
+                         p.weights, p.max_distance_m);
     } catch (const std::exception& ex) {
-      throw std::runtime_error(what + ": " + ex.what());
+      throw std::runtime_error(source_ + ": coupling " + meshes_[h].loaded->id + " / " + emb.id + ": " + ex.what());
     }
     meshes_[m].body = meshes_[h].body;
     meshes_[m].tie = static_cast<int>(body.body->ties().size()) - 1;

@@ -68,6 +68,9 @@ struct SimulationOptions {
   // Keep the full coupled compliance columns of touched nodes (3N x 3 doubles each: 0.4 MB per
   // node on a 25k-tet brain) so displacements() of a host is a sum of columns, not a sparse solve.
   bool cache_full_field_columns{false};
+  // With coupling: remove the host's tetrahedra inside S' (the embedded mesh keeps its volume,
+  // paper 2.4); false keeps the host whole and adds the embedded mesh's stiffness on top.
+  bool carve_host{true};
 };
 
 // Load-time cost of build(), unit s.
@@ -82,6 +85,7 @@ struct SetupStats {
   double total_s{0.0};
   int boundary_nodes{0};    // host nodes on S' used by the ties (all couplings)
   int tied_nodes{0};        // embedded nodes tied (all couplings)
+  int carved_tets{0};       // host tetrahedra removed inside S' (carve_host)
 };
 
 class Simulation {
@@ -113,6 +117,9 @@ class Simulation {
   // (full-field solves: for tests and benchmarks).
   virtual double tie_residual_m() const = 0;
   virtual const SetupStats& setup_stats() const = 0;
+  // Fixed nodes of `mesh` (sorted): the scene's, plus, on a carved host, the nodes left without
+  // a tetrahedron inside the embedded mesh. mesh(m) is the carved mesh (same vertex ids).
+  virtual const std::vector<int>& fixed_nodes(int mesh) const = 0;
   virtual int num_tools() const = 0;
   // The body (host + tied meshes) `mesh` belongs to, or nullptr if inert; and the last good
   // step's contact forces on it (contact slots, unit N). For benchmarks and the baseline.
