@@ -375,7 +375,7 @@ void SimulationImpl::reserve_workspace(int tools) {
   rows_.reserve(max_rows);
   std::size_t surface = 0;
   for (const auto& b : bodies_) surface += b.rest_m.size();
-  candidates_.reserve(surface);
+  candidates_.reserve(2 * surface);  // tip and shaft queries may both list a node
   tool_rows_.reserve(surface);
   for (auto& b : bodies_) {
     b.force_slots.reserve(max_rows);
