@@ -145,8 +145,12 @@ ForceOutput ForceModel::step(const ForceInput& in) {
   if (stale && has_current_ && !stale_) ++counters_.timeouts;
   stale_ = stale;
   // One gain for ramp-in and watchdog fade: up over ramp_in_s, down over fade_s.
-  if (stale)
+  if (stale) {
     gain_ = cfg_.fade_s > 0 ? gain_ - T / cfg_.fade_s : 0;
+    // Tied to the model's age as well, so late ticks cannot stretch it: zero at timeout + fade.
+    if (has_current_ && !server_gone_ && cfg_.fade_s > 0)
+      gain_ = std::min(gain_, 1 - (age - cfg_.model_timeout_s) / cfg_.fade_s);
+  }
   else
     gain_ = cfg_.ramp_in_s > 0 ? gain_ + T / cfg_.ramp_in_s : 1;
   gain_ = std::clamp(gain_, 0.0, 1.0);
@@ -183,11 +187,13 @@ ForceOutput ForceModel::step(const ForceInput& in) {
       return out;
     }
   }
-  // Bound the tick-to-tick step (ramp, blend and fade normally stay well below it; only a
-  // stalled loop, whose fade is then due at once, needs it). NaN is the one exception above.
+  // Bound the step (ramp, blend and fade stay below it normally). It is a rate, per nominal
+  // period: a late tick may move as far as the ticks it replaced, so the fade is never late.
+  // NaN input is the one exception (zero at once, above).
+  const double bound = cfg_.max_force_step_n * std::max(1.0, T / cfg_.period_s);
   const Eigen::Vector3d delta = fd - last_force_;
   const double dm = delta.norm();
-  if (dm > cfg_.max_force_step_n) fd = last_force_ + delta * (cfg_.max_force_step_n / dm);
+  if (dm > bound) fd = last_force_ + delta * (bound / dm);
   last_force_ = fd;
   out.force_n = fd;
   if (server_gone_ && gain_ <= 0 && fd.squaredNorm() == 0) reset();  // drop the dead server's model

@@ -44,7 +44,9 @@ struct ForceModelConfig {
   double ramp_in_s = 0.5;       // force gain 0 → 1 at start / after an outage, unit s
   double model_timeout_s = 0.05;// model older than this → force fades out, unit s
   double fade_s = 0.02;         // fade-out time, unit s
-  double max_force_step_n = 0.25;// bound on |F(k) - F(k-1)|; only NaN input zeroes at once, unit N
+  double max_force_step_n = 0.25;// bound on |F(k) - F(k-1)| per nominal period (a late tick
+                                 // may move as far as the ticks it replaced); NaN input zeroes
+                                 // at once, unit N
   // Throws std::invalid_argument naming the field if something is non-finite or out of range.
   void validate() const;
 };
