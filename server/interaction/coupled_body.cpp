@@ -119,30 +119,26 @@ void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded, const f
   } else {
     k_b = fem::assemble_stiffness(embedded, materials);
   }
-  tie.schur.setZero(3 * t, 3 * t);
-  Eigen::MatrixXd k_is;
+  // Blocks of K_B kept sparse: K_ss (tied x tied) and K_is (interior free x tied). S_B itself
+  // is never formed (dense 3t x 3t); finalize() condenses J^T S_B J directly.
+  std::vector<Eigen::Triplet<double>> ss, is;
   const int nf = tie.interior ? tie.interior->num_free_dofs() : 0;
-  if (nf > 0) k_is.setZero(nf, 3 * t);
   for (int c = 0; c < k_b.outerSize(); ++c) {
     const int tc = tied_dof_index[c];
     if (tc < 0) continue;
     for (fem::SparseMatrix::InnerIterator it(k_b, c); it; ++it) {
       const int r = static_cast<int>(it.row());
       if (tied_dof_index[r] >= 0) {
-        tie.schur(tied_dof_index[r], tc) = it.value();
+        ss.emplace_back(tied_dof_index[r], tc, it.value());
       } else if (nf > 0 && tie.interior->reduced_index()[r] >= 0) {
-        k_is(tie.interior->reduced_index()[r], tc) = it.value();
+        is.emplace_back(tie.interior->reduced_index()[r], tc, it.value());
       }
     }
   }
-  if (nf > 0) {
-    Eigen::MatrixXd x;
-    tie.interior->solve_reduced(k_is, x);
-    // K_si is sparse (a few entries per tied dof): keep the product sparse x dense.
-    const Eigen::SparseMatrix<double> k_is_sparse = k_is.sparseView();
-    tie.schur.noalias() -= k_is_sparse.transpose() * x;
-  }
-  tie.schur = (0.5 * (tie.schur + tie.schur.transpose())).eval();
+  tie.k_ss.resize(3 * t, 3 * t);
+  tie.k_ss.setFromTriplets(ss.begin(), ss.end());
+  tie.k_is.resize(nf, 3 * t);
+  tie.k_is.setFromTriplets(is.begin(), is.end());
   timing_.condense_s += seconds_since(t0);
   pending_tri_nodes_.push_back(std::move(tris));
   ties_.push_back(std::move(tie));
@@ -210,8 +206,16 @@ void CoupledBody::finalize() {
       for (int v = 0; v < 3; ++v)
         for (int a = 0; a < 3; ++a) entries.emplace_back(3 * k + a, 3 * tie.host_slots[k][v] + a, tie.weights[k][v]);
     j.setFromTriplets(entries.begin(), entries.end());
-    const Eigen::MatrixXd sj = tie.schur * j;
-    k_add_ += j.transpose() * sj;
+    // J^T S_B J = J^T K_ss J - (K_is J)^T K_ii^-1 (K_is J): one solve with 3m right-hand sides.
+    const Eigen::SparseMatrix<double> jt = j.transpose();
+    const Eigen::SparseMatrix<double> ssj = jt * (tie.k_ss * j);
+    k_add_ += Eigen::MatrixXd(ssj);
+    if (tie.k_is.rows() > 0) {
+      const Eigen::MatrixXd kj = Eigen::MatrixXd(tie.k_is * j);
+      Eigen::MatrixXd xi;
+      tie.interior->solve_reduced(kj, xi);
+      k_add_.noalias() -= kj.transpose() * xi;
+    }
   }
   k_add_ = (0.5 * (k_add_ + k_add_.transpose())).eval();
   Eigen::MatrixXd m = Eigen::MatrixXd::Identity(m3, m3);

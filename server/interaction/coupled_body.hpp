@@ -16,6 +16,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/LU>
+#include <Eigen/SparseCore>
 
 #include <array>
 #include <memory>
@@ -34,7 +35,10 @@ struct EmbeddedTie {
   std::vector<std::array<double, 3>> weights;     // barycentric weights on them
   double max_map_distance_m{0.0};        // largest node-to-S' distance of the coupling map, unit m
   std::unique_ptr<fem::StaticSolver> interior;    // B with tied + fixed nodes fixed (null: no interior)
-  Eigen::MatrixXd schur;                 // S_B on the tied dofs (3t x 3t), unit N/m
+  // K_B blocks (unit N/m): tied x tied, and interior free (reduced index of `interior`) x tied.
+  // The Schur complement S_B = K_ss - K_si K_ii^-1 K_is is only ever applied through J.
+  Eigen::SparseMatrix<double> k_ss;
+  Eigen::SparseMatrix<double> k_is;
 };
 
 struct CoupledBodyTiming {
