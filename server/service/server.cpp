@@ -82,6 +82,32 @@ void set_tool_index(P& pose, int tool) {
   (void)tool;
 }
 
+// Simulation::setup_stats() (load-time costs) is being added by issue 4; log it when there.
+template <class S, class = void>
+struct HasSetupStats : std::false_type {};
+template <class S>
+struct HasSetupStats<S, std::void_t<decltype(std::declval<const S&>().setup_stats())>> : std::true_type {};
+template <class S>
+std::string describe_setup(const S& sim) {
+  if constexpr (HasSetupStats<S>::value) {
+    const auto& st = sim.setup_stats();
+    std::ostringstream os;
+    os << "physics built in " << st.total_s << " s: meshes " << st.load_meshes_s << " s, factor "
+       << st.factor_s << " s, ";
+    if (st.fusion_s == 0 && st.tied_nodes == 0)
+      os << "inclusion decision: not run (no coupling)";
+    else
+      os << "inclusion decision + coupling map " << st.fusion_s << " s, condense " << st.condense_s
+         << " s, boundary columns " << st.boundary_s << " s, coupling operator " << st.operator_s
+         << " s (" << st.boundary_nodes << " boundary nodes, " << st.tied_nodes << " tied nodes)";
+    os << ", contact columns " << st.columns_s << " s";
+    return os.str();
+  } else {
+    (void)sim;
+    return {};
+  }
+}
+
 enum SlotState : int { kFree = 0, kActive = 1, kLeaving = 2 };
 
 // One station. The DDS thread owns join (Free → Active) and leave (Active → Leaving); the step
@@ -244,6 +270,8 @@ void Server::Impl::configure() {
                              std::to_string(sim->num_meshes()) + " meshes, the scene " +
                              std::to_string(scene.meshes_size()));
 
+  const std::string setup = describe_setup(*sim);
+  if (!setup.empty()) log(setup);
   std::ostringstream s;
   s << "scene '" << scene.name() << "' (" << opt.scene_path << "): tier " << tier_name(fx.tier())
     << ", effects [" << effects_text << "], step " << step_hz << " Hz, viewer " << viewer_hz

@@ -71,12 +71,14 @@ TEST(service_fake, DeformationOffIsNotBuilt) {
   std::ofstream(path) << text;
   auto setup = fake_setup();
   setup.scene = path;
-  st::Session ses(setup, "deformoff", 1.0);
+  st::Session ses(setup, "deformoff", 30);
   ASSERT_TRUE(ses.wait_ready());
   // A viewer that subscribes anyway gets nothing.
   neurosim::wire::Reader<neurosim_Deformation> viewer(ses.client.pp, ses.client.deform_topic);
-  EXPECT_EQ(ses.server.wait(15), 0) << ses.server.log();
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  EXPECT_EQ(ses.server.signal_and_wait(SIGINT, 15), 0) << "SIGINT: clean exit\n" << ses.server.log();
   const std::string log = ses.server.log();
+  EXPECT_NE(log.find("signal received"), std::string::npos) << log;
   EXPECT_NE(log.find("not built: Deformation"), std::string::npos) << log;
   EXPECT_EQ(displacement_calls(log), 0) << log;
   EXPECT_TRUE(viewer.take().empty());

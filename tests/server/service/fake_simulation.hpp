@@ -44,6 +44,7 @@ class FakeSimulation : public interaction::Simulation {
   bool mesh_active(int) const override { return true; }
   double tie_residual_m() const override { return 0.0; }
   const interaction::SetupStats& setup_stats() const override { return setup_; }
+  const std::vector<int>& fixed_nodes(int) const override { return no_nodes_; }
   int num_tools() const override { return 1; }
   const interaction::CoupledBody* body_of(int) const override { return nullptr; }
   void last_contact_forces(int, std::vector<int>& slots,
@@ -65,6 +66,7 @@ class FakeSimulation : public interaction::Simulation {
   mutable std::atomic<long> displacement_calls_{0};
 #if NEUROSIM_FAKE_EXTENDED_CONTRACT
   interaction::SetupStats setup_{};
+  std::vector<int> no_nodes_;
 #endif
 };
 
