@@ -294,3 +294,51 @@ TEST(haptic_server, ReplayingOneRecordingTwiceGivesIdenticalContactModels) {
   EXPECT_GT(contact, 100u) << "the replay must actually press into the cube";
   fs::remove_all(dir);
 }
+
+TEST(haptic_server, SimulatedHandAgainstTheCubeSettles) {
+  // Closed loop with the real physics: the hand pulls the stylus 4 mm into the cube's right
+  // face (E = 1 MPa, far stiffer than the Omni may render) for 10 s; the motion must die out.
+  if (!fs::exists(server_binary())) GTEST_SKIP() << "no neurosim-server at " << server_binary();
+  const fs::path dir = neurosim::testing::temp_dir("haptic_server_hand");
+  const std::string prefix = "hhand" + std::to_string(::getpid()) + "_";
+  ServerProcess server(prefix, dir / "server.log");
+  nh::DdsLink link(server.link_options("hand"));
+  WAIT_FOR_SERVER_OR_SKIP(server, link, dir / "server.log");
+  nh::HandDevice dev(std::make_unique<nh::ConstantScript>(Vector3d(0, 0, -0.004)));
+  dev.set_state(Vector3d(0, 0, 0.004), Vector3d::Zero());  // starts 4 mm in front of the face
+  nh::LoopConfig cfg;
+  cfg.workspace_origin_m = kFaceOrigin;
+  cfg.workspace_up = kFaceNormal;
+  cfg.realtime_priority = false;
+  cfg.trace_capacity = 11000;
+  nh::HapticLoop loop(cfg, dev, &link, nullptr);
+  loop.run_realtime(10.0);
+  const auto& tr = loop.trace();
+  ASSERT_GT(tr.size(), 9000u);
+  // Per second: largest speed (from positions) and force; and the last second's speed RMS.
+  std::vector<double> vmax(10, 0), fmax(10, 0);
+  double v2 = 0;
+  std::size_t n_last = 0;
+  for (std::size_t i = 1; i < tr.size(); ++i) {
+    const double dt = tr[i].t_s - tr[i - 1].t_s;  // the hand is integrated in nominal time
+    if (dt <= 0) continue;
+    const double v = (tr[i].position_m - tr[i - 1].position_m).norm() / dt;
+    const auto s = std::min<std::size_t>(9, static_cast<std::size_t>(tr[i].t_s));
+    vmax[s] = std::max(vmax[s], v);
+    fmax[s] = std::max(fmax[s], tr[i].force_n.norm());
+    if (s == 9) {
+      v2 += v * v;
+      ++n_last;
+    }
+  }
+  const double v_rms_last = std::sqrt(v2 / static_cast<double>(std::max<std::size_t>(n_last, 1)));
+  std::printf("hand vs cube: speed max per second (mm/s):");
+  for (double v : vmax) std::printf(" %.2f", v * 1e3);
+  std::printf("; force %.3f N at the end; speed rms last second %.4f mm/s\n", tr.back().force_n.norm(),
+              v_rms_last * 1e3);
+  EXPECT_GT(tr.back().force_n.norm(), 0.3) << "the hand must end up pressing on the cube";
+  EXPECT_LT(v_rms_last, 1e-3) << "still moving after 10 s: oscillation";
+  for (std::size_t s = 4; s < 10; ++s)
+    EXPECT_LE(vmax[s], vmax[3] + 1e-3) << "motion grows again in second " << s;
+  fs::remove_all(dir);
+}
