@@ -1,6 +1,7 @@
 // The haptic loop in simulated time (no DDS, no sleeping): the simulated hand against a stiff
 // half-space does not oscillate, recordings replay to the identical ToolState sequence, the
 // bundled script recordings replay, the summary JSON has the keys.
+#include "haptic_client/latest_slot.hpp"
 #include "haptic_client/loop.hpp"
 #include "fake_server.hpp"
 #include "idl/wire/recording_io.hpp"
@@ -11,7 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <regex>
+#include <thread>
 
 namespace nh = neurosim::haptic;
 namespace fs = std::filesystem;
@@ -223,4 +224,53 @@ TEST(haptic_loop, DeviceSpecs) {
       EXPECT_NE(std::string(e.what()).find("not built in"), std::string::npos) << e.what();
     }
   }
+}
+
+TEST(haptic_loop, LatestSlotHandsOverWholeNewestValues) {
+  // Producer writes (i, i, i, ...) fast; the consumer must never see a torn or older value.
+  struct V {
+    std::uint64_t a[8];
+  };
+  nh::LatestSlot<V> slot;
+  constexpr std::uint64_t kN = 200000;
+  std::thread producer([&] {
+    for (std::uint64_t i = 1; i <= kN; ++i) {
+      V v;
+      for (auto& x : v.a) x = i;
+      slot.write(v);
+    }
+  });
+  std::uint64_t last = 0, taken = 0;
+  V v{};
+  while (last < kN) {
+    if (!slot.take(v)) continue;
+    for (auto x : v.a) ASSERT_EQ(x, v.a[0]) << "torn value";
+    ASSERT_GT(v.a[0], last) << "older or repeated value";
+    last = v.a[0];
+    ++taken;
+  }
+  producer.join();
+  EXPECT_GT(taken, 0u);
+  EXPECT_FALSE(slot.take(v)) << "nothing new after the last value";
+}
+
+TEST(haptic_loop, RecorderDropsInsteadOfBlockingTheLoop) {
+  const fs::path dir = neurosim::testing::temp_dir("haptic_recorder");
+  nh::ScriptDevice dev(nh::make_script("press"));
+  nh::LoopConfig cfg;
+  std::uint64_t accepted = 0;
+  {
+    nh::Recorder rec((dir / "r.rec").string(), nh::session_header(cfg, dev, "st", "probe", "", "", "test", 0),
+                     /*blocking=*/false, /*capacity=*/16);
+    nh::RecordSample s;
+    for (int i = 0; i < 100000; ++i) {
+      s.time_s = 1e-3 * i;
+      accepted += rec.push(s) ? 1 : 0;
+    }
+    rec.close();
+    EXPECT_EQ(rec.dropped() + accepted, 100000u);
+    EXPECT_EQ(rec.written(), accepted);
+  }
+  EXPECT_EQ(neurosim::wire::read_recording(dir / "r.rec").samples.size(), accepted);
+  fs::remove_all(dir);
 }
