@@ -3,6 +3,12 @@
 #include <Eigen/SparseCore>
 
 #include <algorithm>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -37,7 +43,7 @@ std::vector<mesh::Vec3> surface_vertex_normals(const mesh::TetMesh& m) {
 
 CoupledBody::CoupledBody(int host_index, const mesh::TetMesh& host, const fem::Material& material,
                          const std::vector<int>& host_fixed)
-    : host_index_(host_index), host_(&host) {
+    : host_index_(host_index), host_(&host), material_(material) {
   const auto t0 = std::chrono::steady_clock::now();
   solver_ = std::make_unique<fem::StaticSolver>(host, fem::MaterialMap::uniform(material), host_fixed);
   timing_.factor_s = seconds_since(t0);
@@ -70,6 +76,7 @@ void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded, const f
   EmbeddedTie tie;
   tie.mesh = mesh_index;
   tie.geometry = &embedded;
+  tie.material = material;
   tie.fixed_nodes = embedded_fixed;
   std::sort(tie.fixed_nodes.begin(), tie.fixed_nodes.end());
   tie.max_map_distance_m = max_map_distance_m;
@@ -162,9 +169,27 @@ void CoupledBody::finalize() {
   pending_tri_nodes_.clear();
   select_contact_nodes();
   const int m3 = 3 * static_cast<int>(boundary_nodes_.size());
-  const int s3 = 3 * static_cast<int>(contact_nodes_.size());
   if (m3 == 0) return;
 
+  std::string cache_file;
+  if (!cache_dir_.empty()) {
+    char name[64];
+    std::snprintf(name, sizeof name, "coupling_%016llx.bin", static_cast<unsigned long long>(cache_key()));
+    cache_file = (std::filesystem::path(cache_dir_) / name).string();
+    if (load_cache(cache_file)) {
+      cache_hit_ = true;
+      timing_.boundary_s = seconds_since(t0);
+      return;
+    }
+  }
+  compute_boundary_operator();
+  if (!cache_file.empty()) save_cache(cache_file);
+}
+
+void CoupledBody::compute_boundary_operator() {
+  auto t0 = std::chrono::steady_clock::now();
+  const int m3 = 3 * static_cast<int>(boundary_nodes_.size());
+  const int s3 = 3 * static_cast<int>(contact_nodes_.size());
   // Compliance columns of A at the boundary dofs (paper Eq. 5, L_bb and L_cb), by block solves.
   l_bb_.setZero(m3, m3);
   l_sb_.setZero(s3, m3);
@@ -225,6 +250,100 @@ void CoupledBody::finalize() {
   g_ = (0.5 * (g_ + g_.transpose())).eval();
   if (!g_.allFinite()) throw std::runtime_error("CoupledBody: coupling operator is not finite");
   timing_.operator_s = seconds_since(t0);
+}
+
+namespace {
+
+// FNV-1a, 64 bit: the cache key over every input that changes the boundary operator.
+void mix(std::uint64_t& h, const void* data, std::size_t bytes) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < bytes; ++i) {
+    h ^= p[i];
+    h *= 1099511628211ull;
+  }
+}
+template <class T>
+void mix_vector(std::uint64_t& h, const std::vector<T>& v) {
+  const std::uint64_t n = v.size();
+  mix(h, &n, sizeof n);
+  if (!v.empty()) mix(h, v.data(), v.size() * sizeof(T));
+}
+void mix_mesh(std::uint64_t& h, const mesh::TetMesh& m, const fem::Material& mat) {
+  mix_vector(h, m.vertices());
+  mix_vector(h, m.tets());
+  mix(h, &mat.youngs_modulus_pa, sizeof(double));
+  mix(h, &mat.poisson_ratio, sizeof(double));
+}
+
+constexpr char kCacheMagic[8] = {'N', 'S', 'C', 'P', 'L', 'v', '1', '\0'};
+
+}  // namespace
+
+std::uint64_t CoupledBody::cache_key() const {
+  std::uint64_t h = 1469598103934665603ull;
+  mix_mesh(h, *host_, material_);
+  mix_vector(h, solver_->fixed_nodes());
+  mix_vector(h, boundary_nodes_);
+  mix_vector(h, contact_nodes_);
+  for (const auto& tie : ties_) {
+    mix_mesh(h, *tie.geometry, tie.material);
+    mix_vector(h, tie.fixed_nodes);
+    mix_vector(h, tie.tied_nodes);
+    mix_vector(h, tie.host_slots);
+    mix_vector(h, tie.weights);
+  }
+  return h;
+}
+
+bool CoupledBody::load_cache(const std::string& file) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) return false;
+  char magic[8];
+  std::uint64_t key = 0;
+  std::int32_t m3 = 0, s3 = 0;
+  in.read(magic, sizeof magic);
+  in.read(reinterpret_cast<char*>(&key), sizeof key);
+  in.read(reinterpret_cast<char*>(&m3), sizeof m3);
+  in.read(reinterpret_cast<char*>(&s3), sizeof s3);
+  if (!in || std::memcmp(magic, kCacheMagic, sizeof magic) != 0 || key != cache_key() ||
+      m3 != 3 * static_cast<int>(boundary_nodes_.size()) || s3 != 3 * static_cast<int>(contact_nodes_.size())) {
+    return false;
+  }
+  l_bb_.resize(m3, m3);
+  l_sb_.resize(s3, m3);
+  k_add_.resize(m3, m3);
+  g_.resize(m3, m3);
+  for (Eigen::MatrixXd* mat : {&l_bb_, &l_sb_, &k_add_, &g_})
+    in.read(reinterpret_cast<char*>(mat->data()), static_cast<std::streamsize>(mat->size() * sizeof(double)));
+  if (!in || !l_bb_.allFinite() || !l_sb_.allFinite() || !k_add_.allFinite() || !g_.allFinite()) {
+    std::cerr << "CoupledBody: ignoring damaged compliance cache " << file << "\n";
+    return false;
+  }
+  return true;
+}
+
+void CoupledBody::save_cache(const std::string& file) const {
+  std::error_code ec;
+  std::filesystem::create_directories(std::filesystem::path(file).parent_path(), ec);
+  const std::string tmp = file + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    const std::uint64_t key = cache_key();
+    const std::int32_t m3 = static_cast<std::int32_t>(l_bb_.rows()), s3 = static_cast<std::int32_t>(l_sb_.rows());
+    out.write(kCacheMagic, sizeof kCacheMagic);
+    out.write(reinterpret_cast<const char*>(&key), sizeof key);
+    out.write(reinterpret_cast<const char*>(&m3), sizeof m3);
+    out.write(reinterpret_cast<const char*>(&s3), sizeof s3);
+    for (const Eigen::MatrixXd* mat : {&l_bb_, &l_sb_, &k_add_, &g_})
+      out.write(reinterpret_cast<const char*>(mat->data()), static_cast<std::streamsize>(mat->size() * sizeof(double)));
+    if (!out) {
+      std::cerr << "CoupledBody: could not write compliance cache " << tmp << " (continuing without it)\n";
+      return;
+    }
+  }
+  // Atomic replace: a concurrent reader sees the old file or the whole new one.
+  std::filesystem::rename(tmp, file, ec);
+  if (ec) std::cerr << "CoupledBody: could not store compliance cache " << file << ": " << ec.message() << "\n";
 }
 
 void CoupledBody::ensure_columns(const std::vector<int>& slots) {

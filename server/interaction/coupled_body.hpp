@@ -19,6 +19,7 @@
 #include <Eigen/SparseCore>
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -29,6 +30,7 @@ namespace neurosim::interaction {
 struct EmbeddedTie {
   int mesh{-1};                          // index of B in the simulation
   const mesh::TetMesh* geometry{nullptr};
+  fem::Material material;
   std::vector<int> fixed_nodes;          // B's own fixed nodes (sorted)
   std::vector<int> tied_nodes;           // B's free surface nodes, ascending
   std::vector<std::array<int, 3>> host_slots;     // per tied node: boundary slots of A's 3 nodes
@@ -61,8 +63,13 @@ class CoupledBody {
                const std::vector<std::array<int, 3>>& tri_nodes,
                const std::vector<std::array<double, 3>>& weights, double max_map_distance_m);
 
-  // After the last add_tie: boundary compliance, coupling operator, contact rows of L_A at b.
+  // Directory of the disk cache of the boundary operator (L_bb, L_cb, K_add, G), keyed by a
+  // hash of both meshes, materials, fixed nodes and the coupling map; empty: no cache.
+  void set_cache_dir(std::string dir) { cache_dir_ = std::move(dir); }
+  // After the last add_tie: boundary compliance, coupling operator, contact rows of L_A at b
+  // (read from the cache when a file with the same key exists, else computed and stored).
   void finalize();
+  bool cache_hit() const { return cache_hit_; }
 
   int host_index() const { return host_index_; }
   const mesh::TetMesh& host() const { return *host_; }
@@ -130,7 +137,14 @@ class CoupledBody {
   std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> full_columns_;  // coupled L[:, slot], same order
   CoupledBodyTiming timing_;
   bool finalized_{false};
+  fem::Material material_;
+  std::string cache_dir_;
+  bool cache_hit_{false};
   void select_contact_nodes();
+  void compute_boundary_operator();
+  std::uint64_t cache_key() const;
+  bool load_cache(const std::string& file);
+  void save_cache(const std::string& file) const;
 };
 
 // Area-weighted outward vertex normals of a mesh's surface (unit; zero where no face).

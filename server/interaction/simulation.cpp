@@ -300,6 +300,7 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     }
     setup_.factor_s += b.body->timing().factor_s;
     b.body->set_keep_full_columns(options_.cache_full_field_columns);
+    b.body->set_cache_dir(options_.compliance_cache_dir);
     meshes_[m].body = static_cast<int>(bodies_.size());
     bodies_.push_back(std::move(b));
   }
@@ -325,6 +326,7 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     setup_.condense_s += tm.condense_s;
     setup_.boundary_s += tm.boundary_s;
     setup_.operator_s += tm.operator_s;
+    if (b.body->cache_hit()) ++setup_.cache_hits;
     setup_.boundary_nodes += static_cast<int>(b.body->boundary_nodes().size());
     for (const auto& tie : b.body->ties()) setup_.tied_nodes += static_cast<int>(tie.tied_nodes.size());
     // Contact geometry: rest positions of contactable nodes on a grid.

@@ -53,7 +53,9 @@ struct SimulationOptions {
   int max_contact_nodes_per_tool{32};
   int lcp_max_iterations{200};
   double lcp_tolerance{1e-10};           // relative
-  std::string compliance_cache_dir{};    // empty: no disk cache
+  // Disk cache of each body's boundary operator (keyed by meshes, materials, fixed nodes and the
+  // coupling map), so a second start skips the boundary compliance solves. Empty: no cache.
+  std::string compliance_cache_dir{};
   // A tool part (tip or shaft) whose centre lies deeper than this below a surface node's patch
   // does not push that node (so a tool that jumps through the body feels a bounded force, at
   // most what this indentation gives), unit m. 0: 0.45 x the smallest extent of the host's
@@ -86,6 +88,7 @@ struct SetupStats {
   int boundary_nodes{0};    // host nodes on S' used by the ties (all couplings)
   int tied_nodes{0};        // embedded nodes tied (all couplings)
   int carved_tets{0};       // host tetrahedra removed inside S' (carve_host)
+  int cache_hits{0};        // bodies whose boundary operator came from compliance_cache_dir
 };
 
 class Simulation {

@@ -3,6 +3,7 @@
 #include "server/interaction/simulation.hpp"
 
 #include "interaction_fixtures.hpp"
+#include "test_support.hpp"
 #include "server/fem/assembly.hpp"
 #include "server/fem/static_solver.hpp"
 #include "server/fusion/coupling_map.hpp"
@@ -14,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 
 namespace neurosim::interaction {
 namespace {
@@ -212,6 +214,29 @@ TEST(interaction_simulation, CachedFullFieldEqualsSparseSolve) {
     EXPECT_LE((ua - ub).cwiseAbs().maxCoeff(), 1e-9 * ua.cwiseAbs().maxCoeff()) << "mesh " << m;
   }
   EXPECT_LE(b.sim->tie_residual_m(), 1e-9 * 0.004);
+}
+
+TEST(interaction_simulation, ComplianceCacheRoundTrip) {
+  const auto dir = neurosim::testing::temp_dir("interaction_cache");
+  SimulationOptions options;
+  options.compliance_cache_dir = dir.string();
+  auto a = run(SceneSpec{}, {push_right(0.004)}, options);
+  EXPECT_EQ(a.sim->setup_stats().cache_hits, 0);
+  auto b = run(SceneSpec{}, {push_right(0.004)}, options);
+  EXPECT_EQ(b.sim->setup_stats().cache_hits, 1);
+  EXPECT_EQ(a.contacts[0].force_n, b.contacts[0].force_n);
+  EXPECT_EQ(a.contacts[0].stiffness_n_per_m, b.contacts[0].stiffness_n_per_m);
+  // Another material is another key: no hit.
+  SceneSpec other;
+  other.embedded_e_pa = 2.0e5;
+  auto c = run(other, {push_right(0.004)}, options);
+  EXPECT_EQ(c.sim->setup_stats().cache_hits, 0);
+  // A damaged file is ignored (recomputed), never trusted.
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) std::filesystem::resize_file(entry.path(), 40);
+  auto d = run(SceneSpec{}, {push_right(0.004)}, options);
+  EXPECT_EQ(d.sim->setup_stats().cache_hits, 0);
+  EXPECT_EQ(a.contacts[0].force_n, d.contacts[0].force_n);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
