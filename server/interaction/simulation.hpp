@@ -110,6 +110,9 @@ class Simulation {
 
   // Displacement of every vertex of `mesh` for the last step's contact and coupling forces
   // (3N, unit m); one sparse solve per mesh, only when someone asks.
+  // (issue 4: a host with cache_full_field_columns sums cached columns instead of solving; an
+  // embedded mesh takes its host's field on the tied nodes plus one solve for its interior.
+  // Reads what step() writes: call it from the stepping thread or serialize the two.)
   virtual void displacements(int mesh, Eigen::VectorXd& u_m) const = 0;
 
   // --- added by issue 4 (interaction) ---
