@@ -4,6 +4,7 @@
 // time until the ContactModel answering it (tool_sequence) is read by that station.
 //
 //   latency_bench --stations N --seconds S [--csv] [--scene FILE] [--server EXE] [--warmup S]
+//                 [--viewer]   also read Deformation, so the server runs its full-field solves
 //
 // CSV: stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct
 //   samples        ToolStates answered during the measurement (after the warm-up)
@@ -30,6 +31,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -69,6 +71,7 @@ struct Options {
   double seconds = 5;
   double warmup_s = 1.0;
   bool csv = false;
+  bool viewer = false;  // also read Deformation (the server then runs full-field solves)
   fs::path scene = fs::path(NEUROSIM_SOURCE_DIR) / "scenes/cube_cylinder.scene";
   fs::path server;
   double startup_timeout_s = 300;
@@ -181,7 +184,8 @@ double quantile(std::vector<double>& v, double q) {
 }
 
 void usage() {
-  std::cerr << "usage: latency_bench --stations N --seconds S [--csv] [--scene FILE] [--server EXE] [--warmup S]\n";
+  std::cerr << "usage: latency_bench --stations N --seconds S [--csv] [--scene FILE] [--server EXE] [--warmup S]\n"
+               "                     [--viewer]  (also subscribe to Deformation: full-field solves run)\n";
 }
 
 }  // namespace
@@ -202,6 +206,7 @@ int main(int argc, char** argv) {
       else if (a == "--scene") o.scene = val();
       else if (a == "--server") o.server = val();
       else if (a == "--csv") o.csv = true;
+      else if (a == "--viewer") o.viewer = true;
       else throw std::invalid_argument("unknown argument " + a);
     }
     if (o.stations < 1 || o.stations > 8) throw std::invalid_argument("--stations must be 1..8");
@@ -252,6 +257,12 @@ int main(int argc, char** argv) {
     wire::Participant pp(po);
     wire::Topic<neurosim_SimStatus> stt(pp);
     wire::Reader<neurosim_SimStatus> status(pp, stt);
+    std::optional<wire::Topic<neurosim_Deformation>> dt;
+    std::optional<wire::Reader<neurosim_Deformation>> viewer;
+    if (o.viewer) {
+      dt.emplace(pp);
+      viewer.emplace(pp, *dt);
+    }
     const auto t0 = std::chrono::steady_clock::now();
     bool ready = false;
     while (!ready && std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < o.startup_timeout_s) {
@@ -295,6 +306,17 @@ int main(int argc, char** argv) {
     const double cpu0 = process_cpu_s(pid);
     sleep_until(to);
     const double cpu1 = process_cpu_s(pid);
+    // The server's own step times over the last status period (SimStatus, 1 Hz).
+    std::string step_text = "no SimStatus";
+    if (const auto* st = status.take_newest()) {
+      char buf[256];
+      std::snprintf(buf, sizeof buf, "step p50 %.1f us, p99 %.1f us, max %.1f us, %llu deadline misses",
+                    st->step_time_p50_us, st->step_time_p99_us, st->step_time_max_us,
+                    static_cast<unsigned long long>(st->deadline_misses));
+      step_text = buf;
+    }
+    std::size_t frames = 0;
+    if (viewer) frames = viewer->take().size();
     for (auto& t : threads) t.join();
     for (const auto& e : errors)
       if (!e.empty()) throw std::runtime_error("station: " + e);
@@ -320,6 +342,8 @@ int main(int argc, char** argv) {
                   static_cast<unsigned long long>(sent), samples, p50, p99, mx);
       std::printf("  ContactModels lost %llu; server CPU %.1f %% of one core\n", static_cast<unsigned long long>(lost),
                   cpu_pct);
+      std::printf("  server (last SimStatus): %s%s\n", step_text.c_str(),
+                  o.viewer ? (", viewer matched (Deformation frames pending: " + std::to_string(frames) + ")").c_str() : "");
     }
     if (samples == 0) throw std::runtime_error("no ContactModel answered a ToolState; server log: " + log.string());
   } catch (const std::exception& e) {

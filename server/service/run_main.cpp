@@ -45,7 +45,8 @@ void single_thread_blas() {
 
 }  // namespace
 
-int run_main(int argc, char** argv, const SimulationFactory& factory) {
+int run_main(int argc, char** argv, const SimulationFactory& factory,
+             const FieldWorkerFactory& field_worker) {
   ServerOptions opt;
   double duration_s = 0;
   for (int i = 1; i < argc; ++i) {
@@ -107,7 +108,9 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::cerr << "neurosim-server: simulation built in " << build_s << " s\n";
     if (g_stop.load()) return 0;
-    Server server(sc, std::move(sim), opt, std::cerr);
+    std::unique_ptr<FieldWorker> worker;
+    if (field_worker && sc.effects().deformation_output()) worker = field_worker(*sim);
+    Server server(sc, std::move(sim), opt, std::cerr, std::move(worker));
     server.start();
     const auto started = std::chrono::steady_clock::now();
     // Polled: the signal handler only sets a flag; stop() runs here on a normal thread.

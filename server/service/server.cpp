@@ -14,6 +14,7 @@
 #include <array>
 #include <cerrno>
 #include <chrono>
+#include <condition_variable>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -133,8 +134,8 @@ struct StationSlot {
 
 struct Server::Impl {
   Impl(const scene::Scene& sc, std::unique_ptr<interaction::Simulation> s, ServerOptions o,
-       std::ostream& l)
-      : scene(sc), sim(std::move(s)), opt(std::move(o)), log_stream(l) {}
+       std::ostream& l, std::unique_ptr<FieldWorker> fw)
+      : scene(sc), sim(std::move(s)), opt(std::move(o)), log_stream(l), field_worker(std::move(fw)) {}
 
   // ---- Model (built once) --------------------------------------------------------------------
   scene::Scene scene;
@@ -142,6 +143,7 @@ struct Server::Impl {
   ServerOptions opt;
   std::ostream& log_stream;
   std::mutex log_mutex;
+  std::unique_ptr<FieldWorker> field_worker;  // null: full-field solves in the step thread
 
   double step_hz{1000}, viewer_hz{30}, status_hz{1};
   std::int64_t period_ns{1000000};
@@ -177,6 +179,15 @@ struct Server::Impl {
   std::vector<bool> deform_written;
   std::vector<Eigen::VectorXd> u_m;  // per mesh, 3N, unit m
   std::uint32_t last_matched_viewers{0};
+  std::atomic<bool> full_frame_pending{false};  // a new viewer matched: next frames FULL
+  // Field worker handshake: the step thread posts a job only when the worker is idle.
+  std::atomic<bool> field_busy{false};
+  std::uint64_t field_job_step{0};
+  std::int64_t field_job_time_ns{0};
+  std::mutex field_mutex;
+  std::condition_variable field_cv;
+  bool field_job{false};
+  std::thread field_thread;
   wire::Sample<neurosim_SimStatus> status;
   std::vector<neurosim_StationStatus> station_status;
   std::vector<double> step_us, step_us_sorted;  // this status period
@@ -195,7 +206,7 @@ struct Server::Impl {
   mutable std::mutex error_mutex;
   std::string error_text;
   std::atomic<std::uint64_t> steps{0}, deadline_misses{0}, rejected_nonfinite{0}, rejected_jump{0},
-      stations_refused{0}, deformation_frames{0}, full_field_solves{0};
+      stations_refused{0}, deformation_frames{0}, full_field_solves{0}, deformation_skipped{0};
   std::thread dds_thread, step_thread;
 
   void log(const std::string& line) {
@@ -227,6 +238,8 @@ struct Server::Impl {
   void one_step();
   void retire(int i);
   void publish_deformation(std::uint64_t step, std::int64_t now_ns);
+  void encode_and_write(std::uint64_t step, std::int64_t now_ns, bool use_worker);
+  void field_loop();
   void publish_status(std::int64_t now_mono);
   void dispose_all();
 };
@@ -327,7 +340,8 @@ void Server::Impl::create_entities() {
     deform_written.assign(static_cast<std::size_t>(sim->num_meshes()), false);
     log("built: Deformation writer, " + std::to_string(sim->num_meshes()) + " encoders (" +
         std::to_string(viewer_hz) + " Hz, FULL frame every " + std::to_string(opt.full_frame_period) +
-        " frames); full-field solves only while a viewer is matched");
+        " frames); full-field solves only while a viewer is matched, " +
+        (field_worker ? "on a worker thread" : "in the step thread"));
   } else {
     log("not built: Deformation (effects.deformation_output off): no full-field solves");
   }
@@ -636,13 +650,38 @@ void Server::Impl::one_step() {
 void Server::Impl::publish_deformation(std::uint64_t step, std::int64_t now_ns) {
   const std::uint32_t matched = deformations->matched_readers();
   // A viewer that just matched decodes from the next frame on.
-  if (matched > last_matched_viewers)
-    for (auto& e : encoders) e.force_full_next();
+  if (matched > last_matched_viewers) full_frame_pending = true;
   last_matched_viewers = matched;
   if (matched == 0) return;
+  if (!field_worker) {
+    encode_and_write(step, now_ns, false);
+    return;
+  }
+  // Worker still on the previous frame: skip this one rather than wait.
+  if (field_busy.load(std::memory_order_acquire)) {
+    ++deformation_skipped;
+    return;
+  }
+  field_worker->snapshot(*sim);
+  field_busy.store(true, std::memory_order_release);
+  {
+    std::lock_guard<std::mutex> lk(field_mutex);
+    field_job_step = step;
+    field_job_time_ns = now_ns;
+    field_job = true;
+  }
+  field_cv.notify_one();
+}
+
+void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns, bool use_worker) {
+  if (full_frame_pending.exchange(false))
+    for (auto& e : encoders) e.force_full_next();
   for (int m = 0; m < sim->num_meshes(); ++m) {
     auto& u = u_m[static_cast<std::size_t>(m)];
-    sim->displacements(m, u);
+    if (use_worker)
+      field_worker->displacements(*sim, m, u);
+    else
+      sim->displacements(m, u);
     ++full_field_solves;
     auto& out = *deform_out[static_cast<std::size_t>(m)];
     encoders[static_cast<std::size_t>(m)].encode(u.data(), static_cast<std::size_t>(u.size()), step,
@@ -650,6 +689,28 @@ void Server::Impl::publish_deformation(std::uint64_t step, std::int64_t now_ns) 
     deformations->write(out);
     deform_written[static_cast<std::size_t>(m)] = true;
     ++deformation_frames;
+  }
+}
+
+// Field worker thread: full-field solves and Deformation writes, off the step thread.
+void Server::Impl::field_loop() {
+  try {
+    for (;;) {
+      std::uint64_t step = 0;
+      std::int64_t t = 0;
+      {
+        std::unique_lock<std::mutex> lk(field_mutex);
+        field_cv.wait(lk, [&] { return field_job || !run.load(); });
+        if (!field_job) return;  // stopping
+        field_job = false;
+        step = field_job_step;
+        t = field_job_time_ns;
+      }
+      encode_and_write(step, t, true);
+      field_busy.store(false, std::memory_order_release);
+    }
+  } catch (const std::exception& e) {
+    fail("field worker thread", e);
   }
 }
 
@@ -722,8 +783,9 @@ void Server::Impl::dispose_all() {
 
 // ---------------------------------------------------------------------------------------------
 Server::Server(const scene::Scene& scene, std::unique_ptr<interaction::Simulation> sim,
-               ServerOptions options, std::ostream& log)
-    : impl_(std::make_unique<Impl>(scene, std::move(sim), std::move(options), log)) {
+               ServerOptions options, std::ostream& log, std::unique_ptr<FieldWorker> field_worker)
+    : impl_(std::make_unique<Impl>(scene, std::move(sim), std::move(options), log,
+                                   std::move(field_worker))) {
   impl_->configure();
 }
 
@@ -745,6 +807,7 @@ void Server::start() {
   d.step_us_count = 0;
   d.dds_thread = std::thread([&d] { d.dds_loop(); });
   d.step_thread = std::thread([&d] { d.step_loop(); });
+  if (d.field_worker && d.deformation_output) d.field_thread = std::thread([&d] { d.field_loop(); });
   d.log("serving (DDS domain " + (d.opt.domain >= 0 ? std::to_string(d.opt.domain) : std::string("default")) +
         ", server id '" + d.opt.server_id + "')");
 }
@@ -756,6 +819,11 @@ void Server::stop() {
   if (d.waitset) d.waitset->wake();
   if (d.dds_thread.joinable()) d.dds_thread.join();
   if (d.step_thread.joinable()) d.step_thread.join();
+  {
+    std::lock_guard<std::mutex> lk(d.field_mutex);  // so the worker cannot miss the wake-up
+  }
+  d.field_cv.notify_all();
+  if (d.field_thread.joinable()) d.field_thread.join();
   try {
     d.dispose_all();
   } catch (const std::exception& e) {
@@ -765,7 +833,9 @@ void Server::stop() {
         std::to_string(d.deadline_misses.load()) + " deadline misses, rejected " +
         std::to_string(d.rejected_nonfinite.load()) + " non-finite + " +
         std::to_string(d.rejected_jump.load()) + " jump samples, refused " +
-        std::to_string(d.stations_refused.load()) + " stations)");
+        std::to_string(d.stations_refused.load()) + " stations; " +
+        std::to_string(d.deformation_frames.load()) + " Deformation frames, " +
+        std::to_string(d.deformation_skipped.load()) + " viewer ticks skipped)");
 }
 
 bool Server::running() const { return impl_->run.load(); }
@@ -785,6 +855,7 @@ ServerCounters Server::counters() const {
   c.stations_refused = d.stations_refused.load();
   c.deformation_frames = d.deformation_frames.load();
   c.full_field_solves = d.full_field_solves.load();
+  c.deformation_skipped = d.deformation_skipped.load();
   return c;
 }
 

@@ -31,6 +31,21 @@ struct ServerOptions {
   std::uint32_t full_frame_period{30};  // Deformation FULL frame every this many frames
 };
 
+// Full-field solves off the step thread (optional): the step thread copies what the solve
+// needs right after a step (snapshot, cheap); a worker thread computes the displacements from
+// that copy while the next steps run. Without one, Simulation::displacements runs in the step.
+class FieldWorker {
+ public:
+  virtual ~FieldWorker() = default;
+  // Step thread, after Simulation::step.
+  virtual void snapshot(const interaction::Simulation& sim) = 0;
+  // Worker thread: displacements of `mesh` for the last snapshot (3N, unit m). Must not touch
+  // state that Simulation::step writes.
+  virtual void displacements(const interaction::Simulation& sim, int mesh, Eigen::VectorXd& u_m) = 0;
+};
+using FieldWorkerFactory =
+    std::function<std::unique_ptr<FieldWorker>(const interaction::Simulation& sim)>;
+
 // Counters the server exposes to tests (also published in SimStatus).
 struct ServerCounters {
   std::uint64_t steps{0};
@@ -39,7 +54,8 @@ struct ServerCounters {
   std::uint64_t rejected_jump{0};
   std::uint64_t stations_refused{0};
   std::uint64_t deformation_frames{0};  // all meshes
-  std::uint64_t full_field_solves{0};   // Simulation::displacements calls
+  std::uint64_t full_field_solves{0};   // displacement fields computed (per mesh)
+  std::uint64_t deformation_skipped{0}; // viewer ticks skipped: the field worker was still busy
 };
 
 class Server {
@@ -47,7 +63,7 @@ class Server {
   // The simulation must have been built from `scene` (mesh ids in the same order). Logs what it
   // builds to `log` (one line each). Throws std::runtime_error on a bad scene / DDS failure.
   Server(const scene::Scene& scene, std::unique_ptr<interaction::Simulation> sim,
-         ServerOptions options, std::ostream& log);
+         ServerOptions options, std::ostream& log, std::unique_ptr<FieldWorker> field_worker = nullptr);
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
@@ -74,6 +90,8 @@ using SimulationFactory = std::function<std::unique_ptr<interaction::Simulation>
 //                   [--topic-prefix P]
 // Sets OPENBLAS_NUM_THREADS=1 (unless set), installs SIGINT/SIGTERM handlers, builds the
 // simulation with `factory`, serves until a signal or the duration. Returns the exit status.
-int run_main(int argc, char** argv, const SimulationFactory& factory);
+// `field_worker` (optional) moves the Deformation solves off the step thread.
+int run_main(int argc, char** argv, const SimulationFactory& factory,
+             const FieldWorkerFactory& field_worker = {});
 
 }  // namespace neurosim::service
