@@ -102,6 +102,7 @@ int main(int argc, char** argv) {
       auto device = nh::make_device(spec);
       nh::LoopConfig cfg = base;
       cfg.realtime_priority = mode == "fifo";
+      cfg.trace_capacity = static_cast<std::size_t>(seconds * 1000) + 10;  // where the longest period was
       nh::HapticLoop loop(cfg, *device, &link, nullptr);
       const nh::RealtimeInfo rt = loop.run_realtime(seconds);
       if (pid > 0) {
@@ -120,6 +121,14 @@ int main(int argc, char** argv) {
                     static_cast<unsigned long long>(s.samples), s.period_p50_us, s.period_p99_us, s.period_max_us,
                     static_cast<unsigned long long>(s.misses_over_1ms), s.model_age_p99_ms, s.max_force_step_n, sched);
       if (!rt.warning.empty()) std::fprintf(stderr, "haptic_bench: %s\n", rt.warning.c_str());
+      const auto& tr = loop.trace();
+      std::size_t worst = 0;
+      for (std::size_t i = 1; i < tr.size(); ++i)
+        if (tr[i].now_ns - tr[i - 1].now_ns > tr[worst].now_ns - (worst > 0 ? tr[worst - 1].now_ns : tr[0].now_ns))
+          worst = i;
+      if (worst > 0)
+        std::fprintf(stderr, "haptic_bench (%s): longest period %.1f us before tick %zu (t = %.3f s)\n", mode.c_str(),
+                     1e-3 * static_cast<double>(tr[worst].now_ns - tr[worst - 1].now_ns), worst, tr[worst].t_s);
       std::fflush(stdout);
     } catch (const std::exception& e) {
       std::cerr << "haptic_bench (" << mode << "): " << e.what() << "\n";
