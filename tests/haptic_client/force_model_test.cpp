@@ -318,3 +318,21 @@ TEST(haptic_force_model, ClampedForceStillFadesWithinTwentyMilliseconds) {
     }
   }
 }
+
+TEST(haptic_force_model, SceneFactorsScaleForceAndTheStiffnessLimit) {
+  // Scene haptics: device force = force_scale * F, scene displacement = workspace_scale * device
+  // displacement; the device-side limit (700 N/m) becomes 700 / (fs * ws) in the scene.
+  nh::ForceModelConfig c;
+  c.force_scale = 0.1;
+  c.workspace_scale = 0.5;
+  c.ramp_in_s = 0;
+  c.max_force_step_n = 100;
+  nh::ForceModel fm(c);
+  EXPECT_NEAR(fm.scene_stiffness_limit(), 700 / (0.1 * 0.5), 1e-9);
+  nh::testing::HalfSpace tissue;
+  tissue.k_n_per_m = 5000;  // below the scene limit of 14000 N/m: not scaled
+  const auto m = tissue.model_at(Vector3d(0, 0, -0.002), 1, 0);
+  const auto out = fm.step(input(0, Vector3d(0, 0, -0.003), &m));
+  EXPECT_EQ(fm.counters().stiffness_limited, 0u);
+  EXPECT_NEAR(out.force_n.z(), 0.1 * 5000 * 0.003, 1e-12);
+}

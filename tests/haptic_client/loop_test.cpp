@@ -12,6 +12,10 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <iterator>
 #include <thread>
 
 namespace nh = neurosim::haptic;
@@ -272,5 +276,42 @@ TEST(haptic_loop, RecorderDropsInsteadOfBlockingTheLoop) {
     EXPECT_EQ(rec.written(), accepted);
   }
   EXPECT_EQ(neurosim::wire::read_recording(dir / "r.rec").samples.size(), accepted);
+  fs::remove_all(dir);
+}
+
+namespace {
+// Runs neurosim-haptic with arguments; returns the exit status and the combined output.
+int run_haptic(const std::string& args, std::string& output) {
+  const std::string cmd = (neurosim::testing::bin_dir() / "neurosim-haptic").string() + " " + args + " 2>&1";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (p == nullptr) return -1;
+  char buf[512];
+  while (std::fgets(buf, sizeof buf, p) != nullptr) output += buf;
+  const int st = ::pclose(p);
+  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+}  // namespace
+
+TEST(haptic_loop, CommandLineRunsScriptedStationAndWritesSummary) {
+  const fs::path dir = neurosim::testing::temp_dir("haptic_cli");
+  std::string out;
+  const int rc = run_haptic("--station cli --device script:press --duration 0.3 --no-server --no-rt --summary " +
+                                (dir / "s.json").string() + " --record " + (dir / "r.rec").string() + " --trace " +
+                                (dir / "t.csv").string(),
+                            out);
+  ASSERT_EQ(rc, 0) << out;
+  std::ifstream f(dir / "s.json");
+  const std::string json((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  EXPECT_NE(json.find("\"samples\": 300"), std::string::npos) << json;
+  EXPECT_NE(json.find("\"model_age_p99_ms\": null"), std::string::npos) << "no server: no model age";
+  EXPECT_EQ(neurosim::wire::read_recording(dir / "r.rec").samples.size(), 300u);
+  EXPECT_EQ(neurosim::wire::read_recording(dir / "r.rec").header.device().kind(), "script:press");
+  std::string omni;
+  EXPECT_NE(run_haptic("--station cli --device omni --duration 0.1 --no-server", omni), 0);
+  if (!nh::omni_supported()) {
+    EXPECT_NE(omni.find("not built in"), std::string::npos) << omni;
+  }
+  std::string bad;
+  EXPECT_EQ(run_haptic("--station cli", bad), 2) << "missing --device is a usage error";
   fs::remove_all(dir);
 }
