@@ -7,16 +7,16 @@
 #include "server/interaction/simulation.hpp"
 #include "server/scene/scene.hpp"
 
+#include <unistd.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <memory>
-#include <unistd.h>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -38,7 +38,8 @@ struct Scenario {
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0.0;
   std::sort(v.begin(), v.end());
-  const std::size_t i = std::min(v.size() - 1, static_cast<std::size_t>(std::ceil(p * v.size())) - 1);
+  const std::size_t i =
+      std::min(v.size() - 1, static_cast<std::size_t>(std::ceil(p * v.size())) - 1);
   return v[i];
 }
 
@@ -64,10 +65,14 @@ int main(int argc, char** argv) {
   int steps = 2000;
   std::string residual_csv;
   for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--csv")) csv = true;
-    else if (!std::strcmp(argv[i], "--quick")) quick = true;
-    else if (!std::strcmp(argv[i], "--steps") && i + 1 < argc) steps = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--residual-csv") && i + 1 < argc) residual_csv = argv[++i];
+    if (!std::strcmp(argv[i], "--csv"))
+      csv = true;
+    else if (!std::strcmp(argv[i], "--quick"))
+      quick = true;
+    else if (!std::strcmp(argv[i], "--steps") && i + 1 < argc)
+      steps = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--residual-csv") && i + 1 < argc)
+      residual_csv = argv[++i];
     else {
       std::cerr << "usage: interaction_bench [--csv] [--steps N] [--quick] [--residual-csv FILE]\n";
       return 2;
@@ -82,7 +87,8 @@ int main(int argc, char** argv) {
   scenarios.back().radius_m = 0.025;
   scenarios.back().depth_m = 0.008;
   if (!quick) {
-    scenarios.push_back({"brain_like", neurosim::scene::parse_scene(brain_like_scene(), "brain_like.scene"),
+    scenarios.push_back({"brain_like",
+                         neurosim::scene::parse_scene(brain_like_scene(), "brain_like.scene"),
                          "brain_like.scene", Eigen::Vector3d(0.07, 0.055, 0.09), 0.025, 0.008});
   }
   std::ofstream residual_out;
@@ -90,14 +96,17 @@ int main(int argc, char** argv) {
     residual_out.open(residual_csv);
     residual_out << "scenario,iteration,relative_residual\n";
   }
-  if (!csv) std::cout << "# interaction_bench (issue 4): per-step times in us; set-up details on stderr\n";
-  std::cout << "scenario,host_tets,embedded_tets,boundary_nodes,contact_nodes,method,p50_us,p99_us,tie_residual\n";
+  if (!csv)
+    std::cout << "# interaction_bench (issue 4): per-step times in us; set-up details on stderr\n";
+  std::cout << "scenario,host_tets,embedded_tets,boundary_nodes,contact_nodes,method,p50_us,p99_us,"
+               "tie_residual\n";
   for (auto& sc : scenarios) {
     ni::SimulationOptions options;
     options.max_contact_nodes_per_tool = 20;
     options.cache_full_field_columns = true;
     // Cold start (cache empty) and second start (boundary operator read from the disk cache).
-    const auto cache_dir = std::filesystem::temp_directory_path() / ("neurosim_interaction_bench_" + std::to_string(::getpid()));
+    const auto cache_dir = std::filesystem::temp_directory_path() /
+                           ("neurosim_interaction_bench_" + std::to_string(::getpid()));
     std::filesystem::remove_all(cache_dir);
     options.compliance_cache_dir = cache_dir.string();
     double coupling_setup_s[2] = {0.0, 0.0};
@@ -109,10 +118,11 @@ int main(int argc, char** argv) {
       const auto& st = built->setup_stats();
       // Coupling set-up: everything after the meshes exist (mesh generation is the mesher's cost).
       coupling_setup_s[start] = build_s - st.load_meshes_s;
-      std::cerr << sc.name << (start ? " (second start)" : " (cold)") << ": set-up " << build_s << " s (meshes "
-                << st.load_meshes_s << ", factor " << st.factor_s << ", fusion " << st.fusion_s << ", condense "
-                << st.condense_s << ", boundary columns " << st.boundary_s << ", operator " << st.operator_s
-                << ", cache hits " << st.cache_hits << "); boundary nodes " << st.boundary_nodes << ", tied nodes "
+      std::cerr << sc.name << (start ? " (second start)" : " (cold)") << ": set-up " << build_s
+                << " s (meshes " << st.load_meshes_s << ", factor " << st.factor_s << ", fusion "
+                << st.fusion_s << ", condense " << st.condense_s << ", boundary columns "
+                << st.boundary_s << ", operator " << st.operator_s << ", cache hits "
+                << st.cache_hits << "); boundary nodes " << st.boundary_nodes << ", tied nodes "
                 << st.tied_nodes << ", carved tets " << st.carved_tets << "\n";
       if (start == 0) sim = std::move(built);
     }
@@ -122,7 +132,8 @@ int main(int argc, char** argv) {
       ni::ToolPose p;
       const double a = 2.0 * M_PI * k / 200.0, b = 2.0 * M_PI * k / 50.0;
       const double depth = sc.depth_m * (1.0 + 0.4 * std::sin(b));
-      p.tip_m = sc.centre + Eigen::Vector3d(0.004 * std::cos(a), 0.004 * std::sin(a), sc.radius_m - depth);
+      p.tip_m = sc.centre +
+                Eigen::Vector3d(0.004 * std::cos(a), 0.004 * std::sin(a), sc.radius_m - depth);
       p.axis = Eigen::Vector3d::UnitZ();
       return p;
     };
@@ -150,8 +161,9 @@ int main(int argc, char** argv) {
     const ni::CoupledBody* body = sim->body_of(0);
     const int boundary = static_cast<int>(body->boundary_nodes().size());
     char line[512];
-    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(), host_tets, emb_tets,
-                  boundary, max_nodes, "exact", percentile(times, 0.5), percentile(times, 0.99), tie);
+    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(),
+                  host_tets, emb_tets, boundary, max_nodes, "exact", percentile(times, 0.5),
+                  percentile(times, 0.99), tie);
     std::cout << line;
     if (failures) std::cerr << sc.name << ": " << failures << " steps did not converge\n";
 
@@ -171,19 +183,24 @@ int main(int argc, char** argv) {
       cached.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
     }
     const double diff = (u - uc).cwiseAbs().maxCoeff() / std::max(1e-300, u.cwiseAbs().maxCoeff());
-    std::cerr << sc.name << ": full field, cached columns vs sparse solve: max relative difference " << diff << "\n";
-    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(), host_tets, emb_tets,
-                  boundary, max_nodes, "exact_full_field_solve", percentile(full, 0.5), percentile(full, 0.99), tie);
+    std::cerr << sc.name << ": full field, cached columns vs sparse solve: max relative difference "
+              << diff << "\n";
+    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(),
+                  host_tets, emb_tets, boundary, max_nodes, "exact_full_field_solve",
+                  percentile(full, 0.5), percentile(full, 0.99), tie);
     std::cout << line;
-    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(), host_tets, emb_tets,
-                  boundary, max_nodes, "exact_full_field_cached", percentile(cached, 0.5), percentile(cached, 0.99), tie);
+    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(),
+                  host_tets, emb_tets, boundary, max_nodes, "exact_full_field_cached",
+                  percentile(cached, 0.5), percentile(cached, 0.99), tie);
     std::cout << line;
 
-    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.0f,%.0f,%.3g\n", sc.name.c_str(), host_tets, emb_tets,
-                  boundary, max_nodes, "setup_coupling_cold", 1e6 * coupling_setup_s[0], 1e6 * coupling_setup_s[0], tie);
+    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.0f,%.0f,%.3g\n", sc.name.c_str(),
+                  host_tets, emb_tets, boundary, max_nodes, "setup_coupling_cold",
+                  1e6 * coupling_setup_s[0], 1e6 * coupling_setup_s[0], tie);
     std::cout << line;
-    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.0f,%.0f,%.3g\n", sc.name.c_str(), host_tets, emb_tets,
-                  boundary, max_nodes, "setup_coupling_cached", 1e6 * coupling_setup_s[1], 1e6 * coupling_setup_s[1], tie);
+    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.0f,%.0f,%.3g\n", sc.name.c_str(),
+                  host_tets, emb_tets, boundary, max_nodes, "setup_coupling_cached",
+                  1e6 * coupling_setup_s[1], 1e6 * coupling_setup_s[1], tie);
     std::cout << line;
 
     // Iterative baseline on the same contact forces: time to reach the exact answer to 1e-12.
@@ -211,10 +228,12 @@ int main(int argc, char** argv) {
       }
     }
     std::sort(iters.begin(), iters.end());
-    std::cerr << sc.name << ": iterative baseline: relaxation " << iterative.relaxation() << ", iterations median "
-              << iters[iters.size() / 2] << " max " << iters.back() << "\n";
-    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(), host_tets, emb_tets,
-                  boundary, max_nodes, "iterative", percentile(itimes, 0.5), percentile(itimes, 0.99), worst);
+    std::cerr << sc.name << ": iterative baseline: relaxation " << iterative.relaxation()
+              << ", iterations median " << iters[iters.size() / 2] << " max " << iters.back()
+              << "\n";
+    std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(),
+                  host_tets, emb_tets, boundary, max_nodes, "iterative", percentile(itimes, 0.5),
+                  percentile(itimes, 0.99), worst);
     std::cout << line;
     std::cout.flush();
   }

@@ -49,11 +49,12 @@ int ContactLcp::factor_and_solve(const Eigen::MatrixXd& w, const Eigen::VectorXd
   return -1;
 }
 
-LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n, double tolerance,
-                            int max_iterations, Eigen::VectorXd& lambda) {
+LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n,
+                            double tolerance, int max_iterations, Eigen::VectorXd& lambda) {
   if (n > capacity_ || w.rows() < n || w.cols() < n || delta.size() < n || lambda.size() < n) {
-    throw std::invalid_argument("ContactLcp::solve: " + std::to_string(n) + " rows exceed the workspace (" +
-                                std::to_string(capacity_) + ") or the inputs");
+    throw std::invalid_argument("ContactLcp::solve: " + std::to_string(n) +
+                                " rows exceed the workspace (" + std::to_string(capacity_) +
+                                ") or the inputs");
   }
   LcpResult result;
   lambda.head(n).setZero();
@@ -65,7 +66,8 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
   double delta_scale = 0.0;
   for (int i = 0; i < n; ++i) {
     if (!std::isfinite(delta[i]) || !std::isfinite(w(i, i))) {
-      throw std::invalid_argument("ContactLcp::solve: non-finite input at row " + std::to_string(i));
+      throw std::invalid_argument("ContactLcp::solve: non-finite input at row " +
+                                  std::to_string(i));
     }
     delta_scale = std::max(delta_scale, std::abs(delta[i]));
   }

@@ -14,9 +14,9 @@ namespace neurosim::interaction {
 
 struct LcpResult {
   bool converged{false};
-  int iterations{0};   // pivots (each one Cholesky of the active block)
-  int active{0};       // rows with lambda > 0
-  double max_violation{0.0};  // max(-w, -lambda, 0) relative to max |delta|
+  int iterations{0};           // pivots (each one Cholesky of the active block)
+  int active{0};               // rows with lambda > 0
+  double max_violation{0.0};   // max(-w, -lambda, 0) relative to max |delta|
   bool dependent_rows{false};  // a row of the active block was (numerically) dependent
 };
 

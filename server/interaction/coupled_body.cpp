@@ -3,14 +3,14 @@
 #include <Eigen/SparseCore>
 
 #include <algorithm>
+#include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
-#include <chrono>
-#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -45,7 +45,8 @@ CoupledBody::CoupledBody(int host_index, const mesh::TetMesh& host, const fem::M
                          const std::vector<int>& host_fixed)
     : host_index_(host_index), host_(&host), material_(material) {
   const auto t0 = std::chrono::steady_clock::now();
-  solver_ = std::make_unique<fem::StaticSolver>(host, fem::MaterialMap::uniform(material), host_fixed);
+  solver_ =
+      std::make_unique<fem::StaticSolver>(host, fem::MaterialMap::uniform(material), host_fixed);
   timing_.factor_s = seconds_since(t0);
   boundary_slot_.assign(host.num_vertices(), -1);
   contact_slot_.assign(host.num_vertices(), -1);
@@ -56,7 +57,8 @@ void CoupledBody::select_contact_nodes() {
   // Fixed nodes cannot move (a row there could never be satisfied) and S' nodes are covered by
   // the embedded mesh: neither is contactable.
   for (int v : host_->surface_vertices()) {
-    if (solver_->is_fixed_node(v) || boundary_slot_[v] >= 0 || normals[v].squaredNorm() == 0.0) continue;
+    if (solver_->is_fixed_node(v) || boundary_slot_[v] >= 0 || normals[v].squaredNorm() == 0.0)
+      continue;
     contact_slot_[v] = static_cast<int>(contact_nodes_.size());
     contact_nodes_.push_back(v);
     contact_normals_.push_back(normals[v]);
@@ -64,12 +66,15 @@ void CoupledBody::select_contact_nodes() {
   column_of_.assign(contact_nodes_.size(), -1);
 }
 
-void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded, const fem::Material& material,
-                          const std::vector<int>& embedded_fixed, const std::vector<int>& embedded_surface_nodes,
+void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded,
+                          const fem::Material& material, const std::vector<int>& embedded_fixed,
+                          const std::vector<int>& embedded_surface_nodes,
                           const std::vector<std::array<int, 3>>& tri_nodes,
-                          const std::vector<std::array<double, 3>>& weights, double max_map_distance_m) {
+                          const std::vector<std::array<double, 3>>& weights,
+                          double max_map_distance_m) {
   if (finalized_) throw std::logic_error("CoupledBody::add_tie after finalize");
-  if (tri_nodes.size() != embedded_surface_nodes.size() || weights.size() != embedded_surface_nodes.size()) {
+  if (tri_nodes.size() != embedded_surface_nodes.size() ||
+      weights.size() != embedded_surface_nodes.size()) {
     throw std::invalid_argument("CoupledBody::add_tie: coupling map sizes differ");
   }
   const auto t0 = std::chrono::steady_clock::now();
@@ -85,7 +90,8 @@ void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded, const f
   for (std::size_t k = 0; k < embedded_surface_nodes.size(); ++k) {
     const int v = embedded_surface_nodes[k];
     if (v < 0 || v >= nb) {
-      throw std::invalid_argument("CoupledBody::add_tie: embedded node " + std::to_string(v) + " out of range");
+      throw std::invalid_argument("CoupledBody::add_tie: embedded node " + std::to_string(v) +
+                                  " out of range");
     }
     // A fixed node of B stays fixed: tying it too would over-constrain A.
     if (std::binary_search(tie.fixed_nodes.begin(), tie.fixed_nodes.end(), v)) continue;
@@ -93,20 +99,21 @@ void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded, const f
     for (int a = 0; a < 3; ++a) {
       const int h = tri_nodes[k][a];
       if (h < 0 || h >= static_cast<int>(host_->num_vertices()) || !std::isfinite(weights[k][a])) {
-        throw std::invalid_argument("CoupledBody::add_tie: bad coupling map entry for embedded node " +
-                                    std::to_string(v));
+        throw std::invalid_argument(
+            "CoupledBody::add_tie: bad coupling map entry for embedded node " + std::to_string(v));
       }
       sum += weights[k][a];
     }
     if (std::abs(sum - 1.0) > 1e-9) {
-      throw std::invalid_argument("CoupledBody::add_tie: weights of embedded node " + std::to_string(v) +
-                                  " sum to " + std::to_string(sum));
+      throw std::invalid_argument("CoupledBody::add_tie: weights of embedded node " +
+                                  std::to_string(v) + " sum to " + std::to_string(sum));
     }
     tie.tied_nodes.push_back(v);
     tie.weights.push_back(weights[k]);
     tris.push_back(tri_nodes[k]);
   }
-  if (tie.tied_nodes.empty()) throw std::invalid_argument("CoupledBody::add_tie: no node of the embedded mesh to tie");
+  if (tie.tied_nodes.empty())
+    throw std::invalid_argument("CoupledBody::add_tie: no node of the embedded mesh to tie");
 
   // Condensation of B onto its tied dofs: S_B = K_ss - K_si K_ii^-1 K_is.
   std::vector<int> constrained = tie.fixed_nodes;
@@ -156,15 +163,19 @@ void CoupledBody::finalize() {
   finalized_ = true;
   auto t0 = std::chrono::steady_clock::now();
   for (const auto& tris : pending_tri_nodes_)
-    for (const auto& tri : tris) boundary_nodes_.insert(boundary_nodes_.end(), tri.begin(), tri.end());
+    for (const auto& tri : tris)
+      boundary_nodes_.insert(boundary_nodes_.end(), tri.begin(), tri.end());
   std::sort(boundary_nodes_.begin(), boundary_nodes_.end());
-  boundary_nodes_.erase(std::unique(boundary_nodes_.begin(), boundary_nodes_.end()), boundary_nodes_.end());
-  for (std::size_t s = 0; s < boundary_nodes_.size(); ++s) boundary_slot_[boundary_nodes_[s]] = static_cast<int>(s);
+  boundary_nodes_.erase(std::unique(boundary_nodes_.begin(), boundary_nodes_.end()),
+                        boundary_nodes_.end());
+  for (std::size_t s = 0; s < boundary_nodes_.size(); ++s)
+    boundary_slot_[boundary_nodes_[s]] = static_cast<int>(s);
   for (std::size_t i = 0; i < ties_.size(); ++i) {
     auto& tie = ties_[i];
     tie.host_slots.resize(tie.tied_nodes.size());
     for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k)
-      for (int a = 0; a < 3; ++a) tie.host_slots[k][a] = boundary_slot_[pending_tri_nodes_[i][k][a]];
+      for (int a = 0; a < 3; ++a)
+        tie.host_slots[k][a] = boundary_slot_[pending_tri_nodes_[i][k][a]];
   }
   pending_tri_nodes_.clear();
   select_contact_nodes();
@@ -174,7 +185,8 @@ void CoupledBody::finalize() {
   std::string cache_file;
   if (!cache_dir_.empty()) {
     char name[64];
-    std::snprintf(name, sizeof name, "coupling_%016llx.bin", static_cast<unsigned long long>(cache_key()));
+    std::snprintf(name, sizeof name, "coupling_%016llx.bin",
+                  static_cast<unsigned long long>(cache_key()));
     cache_file = (std::filesystem::path(cache_dir_) / name).string();
     if (load_cache(cache_file)) {
       cache_hit_ = true;
@@ -197,7 +209,8 @@ void CoupledBody::compute_boundary_operator() {
   const int nf = solver_->num_free_dofs();
   std::vector<int> cols;
   for (int c = 0; c < m3; ++c)
-    if (reduced[3 * boundary_nodes_[c / 3] + c % 3] >= 0) cols.push_back(c);  // fixed dofs: zero column
+    if (reduced[3 * boundary_nodes_[c / 3] + c % 3] >= 0)
+      cols.push_back(c);  // fixed dofs: zero column
   Eigen::MatrixXd rhs, x;
   for (std::size_t first = 0; first < cols.size(); first += kBlockColumns) {
     const int n = static_cast<int>(std::min<std::size_t>(kBlockColumns, cols.size() - first));
@@ -229,7 +242,8 @@ void CoupledBody::compute_boundary_operator() {
     entries.reserve(9 * t);
     for (int k = 0; k < t; ++k)
       for (int v = 0; v < 3; ++v)
-        for (int a = 0; a < 3; ++a) entries.emplace_back(3 * k + a, 3 * tie.host_slots[k][v] + a, tie.weights[k][v]);
+        for (int a = 0; a < 3; ++a)
+          entries.emplace_back(3 * k + a, 3 * tie.host_slots[k][v] + a, tie.weights[k][v]);
     j.setFromTriplets(entries.begin(), entries.end());
     // J^T S_B J = J^T K_ss J - (K_is J)^T K_ii^-1 (K_is J): one solve with 3m right-hand sides.
     const Eigen::SparseMatrix<double> jt = j.transpose();
@@ -306,7 +320,8 @@ bool CoupledBody::load_cache(const std::string& file) {
   in.read(reinterpret_cast<char*>(&m3), sizeof m3);
   in.read(reinterpret_cast<char*>(&s3), sizeof s3);
   if (!in || std::memcmp(magic, kCacheMagic, sizeof magic) != 0 || key != cache_key() ||
-      m3 != 3 * static_cast<int>(boundary_nodes_.size()) || s3 != 3 * static_cast<int>(contact_nodes_.size())) {
+      m3 != 3 * static_cast<int>(boundary_nodes_.size()) ||
+      s3 != 3 * static_cast<int>(contact_nodes_.size())) {
     return false;
   }
   l_bb_.resize(m3, m3);
@@ -314,7 +329,8 @@ bool CoupledBody::load_cache(const std::string& file) {
   k_add_.resize(m3, m3);
   g_.resize(m3, m3);
   for (Eigen::MatrixXd* mat : {&l_bb_, &l_sb_, &k_add_, &g_})
-    in.read(reinterpret_cast<char*>(mat->data()), static_cast<std::streamsize>(mat->size() * sizeof(double)));
+    in.read(reinterpret_cast<char*>(mat->data()),
+            static_cast<std::streamsize>(mat->size() * sizeof(double)));
   if (!in || !l_bb_.allFinite() || !l_sb_.allFinite() || !k_add_.allFinite() || !g_.allFinite()) {
     std::cerr << "CoupledBody: ignoring damaged compliance cache " << file << "\n";
     return false;
@@ -329,21 +345,26 @@ void CoupledBody::save_cache(const std::string& file) const {
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     const std::uint64_t key = cache_key();
-    const std::int32_t m3 = static_cast<std::int32_t>(l_bb_.rows()), s3 = static_cast<std::int32_t>(l_sb_.rows());
+    const std::int32_t m3 = static_cast<std::int32_t>(l_bb_.rows()),
+                       s3 = static_cast<std::int32_t>(l_sb_.rows());
     out.write(kCacheMagic, sizeof kCacheMagic);
     out.write(reinterpret_cast<const char*>(&key), sizeof key);
     out.write(reinterpret_cast<const char*>(&m3), sizeof m3);
     out.write(reinterpret_cast<const char*>(&s3), sizeof s3);
     for (const Eigen::MatrixXd* mat : {&l_bb_, &l_sb_, &k_add_, &g_})
-      out.write(reinterpret_cast<const char*>(mat->data()), static_cast<std::streamsize>(mat->size() * sizeof(double)));
+      out.write(reinterpret_cast<const char*>(mat->data()),
+                static_cast<std::streamsize>(mat->size() * sizeof(double)));
     if (!out) {
-      std::cerr << "CoupledBody: could not write compliance cache " << tmp << " (continuing without it)\n";
+      std::cerr << "CoupledBody: could not write compliance cache " << tmp
+                << " (continuing without it)\n";
       return;
     }
   }
   // Atomic replace: a concurrent reader sees the old file or the whole new one.
   std::filesystem::rename(tmp, file, ec);
-  if (ec) std::cerr << "CoupledBody: could not store compliance cache " << file << ": " << ec.message() << "\n";
+  if (ec)
+    std::cerr << "CoupledBody: could not store compliance cache " << file << ": " << ec.message()
+              << "\n";
 }
 
 void CoupledBody::ensure_columns(const std::vector<int>& slots) {
@@ -351,7 +372,8 @@ void CoupledBody::ensure_columns(const std::vector<int>& slots) {
   std::vector<int> missing;
   for (int s : slots) {
     if (s < 0 || s >= static_cast<int>(contact_nodes_.size())) {
-      throw std::invalid_argument("CoupledBody::ensure_columns: contact slot " + std::to_string(s) + " out of range");
+      throw std::invalid_argument("CoupledBody::ensure_columns: contact slot " + std::to_string(s) +
+                                  " out of range");
     }
     if (column_of_[s] < 0) missing.push_back(s);
   }
@@ -368,12 +390,14 @@ void CoupledBody::ensure_columns(const std::vector<int>& slots) {
     const int n = static_cast<int>(std::min<std::size_t>(kNodes, missing.size() - first));
     rhs.setZero(nf, 3 * n);
     for (int j = 0; j < n; ++j)
-      for (int a = 0; a < 3; ++a) rhs(reduced[3 * contact_nodes_[missing[first + j]] + a], 3 * j + a) = 1.0;
+      for (int a = 0; a < 3; ++a)
+        rhs(reduced[3 * contact_nodes_[missing[first + j]] + a], 3 * j + a) = 1.0;
     if (m3 > 0) {
       // Coupled column in one solve: L (e_i + P_b^T f_b) with the tie's boundary force
       // f_b = -G L_A[b, i] (Woodbury on the tie stiffness: L = L_A - L_A[:,b] G L_A[b,:]).
       lb.resize(m3, 3 * n);
-      for (int j = 0; j < n; ++j) lb.middleCols(3 * j, 3) = l_sb_.middleRows(3 * missing[first + j], 3).transpose();
+      for (int j = 0; j < n; ++j)
+        lb.middleCols(3 * j, 3) = l_sb_.middleRows(3 * missing[first + j], 3).transpose();
       glb.noalias() = g_ * lb;
       for (int r = 0; r < m3; ++r) {
         const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
@@ -384,11 +408,13 @@ void CoupledBody::ensure_columns(const std::vector<int>& slots) {
     for (int j = 0; j < n; ++j) {
       Eigen::Matrix<double, Eigen::Dynamic, 3> col(s3, 3);
       for (int r = 0; r < s3; ++r)
-        for (int a = 0; a < 3; ++a) col(r, a) = x(reduced[3 * contact_nodes_[r / 3] + r % 3], 3 * j + a);
+        for (int a = 0; a < 3; ++a)
+          col(r, a) = x(reduced[3 * contact_nodes_[r / 3] + r % 3], 3 * j + a);
       column_of_[missing[first + j]] = static_cast<int>(columns_.size());
       columns_.push_back(std::move(col));
       if (keep_full_columns_) {
-        Eigen::Matrix<double, Eigen::Dynamic, 3> full = Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(n3, 3);
+        Eigen::Matrix<double, Eigen::Dynamic, 3> full =
+            Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(n3, 3);
         for (int r = 0; r < nf; ++r) full.row(solver_->free_dofs()[r]) = x.block<1, 3>(r, 3 * j);
         full_columns_.push_back(std::move(full));
       }
@@ -396,19 +422,23 @@ void CoupledBody::ensure_columns(const std::vector<int>& slots) {
   }
 }
 
-bool CoupledBody::full_field_from_columns(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
+bool CoupledBody::full_field_from_columns(const std::vector<int>& slots,
+                                          const std::vector<mesh::Vec3>& forces_n,
                                           Eigen::VectorXd& u_host_m) const {
   if (!keep_full_columns_) return false;
   for (int s : slots)
     if (s < 0 || s >= static_cast<int>(column_of_.size()) || column_of_[s] < 0) return false;
   u_host_m.setZero(3 * static_cast<int>(host_->num_vertices()));
-  for (std::size_t k = 0; k < slots.size(); ++k) u_host_m.noalias() += full_columns_[column_of_[slots[k]]] * forces_n[k];
+  for (std::size_t k = 0; k < slots.size(); ++k)
+    u_host_m.noalias() += full_columns_[column_of_[slots[k]]] * forces_n[k];
   return true;
 }
 
-void CoupledBody::host_displacement(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
+void CoupledBody::host_displacement(const std::vector<int>& slots,
+                                    const std::vector<mesh::Vec3>& forces_n,
                                     Eigen::VectorXd& u_host_m) const {
-  if (slots.size() != forces_n.size()) throw std::invalid_argument("CoupledBody::host_displacement: sizes differ");
+  if (slots.size() != forces_n.size())
+    throw std::invalid_argument("CoupledBody::host_displacement: sizes differ");
   const int n3 = 3 * static_cast<int>(host_->num_vertices());
   Eigen::VectorXd f = Eigen::VectorXd::Zero(n3);
   const int m3 = static_cast<int>(l_bb_.rows());
@@ -416,7 +446,8 @@ void CoupledBody::host_displacement(const std::vector<int>& slots, const std::ve
   for (std::size_t k = 0; k < slots.size(); ++k) {
     const int s = slots[k];
     if (s < 0 || s >= static_cast<int>(contact_nodes_.size()) || !forces_n[k].allFinite()) {
-      throw std::invalid_argument("CoupledBody::host_displacement: bad slot or force at entry " + std::to_string(k));
+      throw std::invalid_argument("CoupledBody::host_displacement: bad slot or force at entry " +
+                                  std::to_string(k));
     }
     f.segment<3>(3 * contact_nodes_[s]) += forces_n[k];
     if (m3 > 0) v.noalias() += l_sb_.middleRows(3 * s, 3).transpose() * forces_n[k];
@@ -430,13 +461,15 @@ void CoupledBody::host_displacement(const std::vector<int>& slots, const std::ve
   solver_->solve(f, u_host_m);
 }
 
-void CoupledBody::embedded_displacement(int tie_index, const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const {
+void CoupledBody::embedded_displacement(int tie_index, const Eigen::VectorXd& u_host_m,
+                                        Eigen::VectorXd& u_m) const {
   const auto& tie = ties_.at(tie_index);
   const int t = static_cast<int>(tie.tied_nodes.size());
   Eigen::VectorXd u_s(3 * t);
   for (int k = 0; k < t; ++k) {
     Eigen::Vector3d u = Eigen::Vector3d::Zero();
-    for (int a = 0; a < 3; ++a) u += tie.weights[k][a] * u_host_m.segment<3>(3 * boundary_nodes_[tie.host_slots[k][a]]);
+    for (int a = 0; a < 3; ++a)
+      u += tie.weights[k][a] * u_host_m.segment<3>(3 * boundary_nodes_[tie.host_slots[k][a]]);
     u_s.segment<3>(3 * k) = u;
   }
   if (tie.interior) {
@@ -453,7 +486,8 @@ double CoupledBody::tie_residual(int tie_index, const Eigen::VectorXd& u_host_m,
   double worst = 0.0;
   for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k) {
     Eigen::Vector3d u = Eigen::Vector3d::Zero();
-    for (int a = 0; a < 3; ++a) u += tie.weights[k][a] * u_host_m.segment<3>(3 * boundary_nodes_[tie.host_slots[k][a]]);
+    for (int a = 0; a < 3; ++a)
+      u += tie.weights[k][a] * u_host_m.segment<3>(3 * boundary_nodes_[tie.host_slots[k][a]]);
     worst = std::max(worst, (u - u_embedded_m.segment<3>(3 * tie.tied_nodes[k])).norm());
   }
   return worst;

@@ -28,15 +28,16 @@ namespace neurosim::interaction {
 
 // One embedded mesh tied to the host.
 struct EmbeddedTie {
-  int mesh{-1};                          // index of B in the simulation
+  int mesh{-1};  // index of B in the simulation
   const mesh::TetMesh* geometry{nullptr};
   fem::Material material;
-  std::vector<int> fixed_nodes;          // B's own fixed nodes (sorted)
-  std::vector<int> tied_nodes;           // B's free surface nodes, ascending
-  std::vector<std::array<int, 3>> host_slots;     // per tied node: boundary slots of A's 3 nodes
-  std::vector<std::array<double, 3>> weights;     // barycentric weights on them
-  double max_map_distance_m{0.0};        // largest node-to-S' distance of the coupling map, unit m
-  std::unique_ptr<fem::StaticSolver> interior;    // B with tied + fixed nodes fixed (null: no interior)
+  std::vector<int> fixed_nodes;                // B's own fixed nodes (sorted)
+  std::vector<int> tied_nodes;                 // B's free surface nodes, ascending
+  std::vector<std::array<int, 3>> host_slots;  // per tied node: boundary slots of A's 3 nodes
+  std::vector<std::array<double, 3>> weights;  // barycentric weights on them
+  double max_map_distance_m{0.0};  // largest node-to-S' distance of the coupling map, unit m
+  std::unique_ptr<fem::StaticSolver>
+      interior;  // B with tied + fixed nodes fixed (null: no interior)
   // K_B blocks (unit N/m): tied x tied, and interior free (reduced index of `interior`) x tied.
   // The Schur complement S_B = K_ss - K_si K_ii^-1 K_is is only ever applied through J.
   Eigen::SparseMatrix<double> k_ss;
@@ -44,10 +45,10 @@ struct EmbeddedTie {
 };
 
 struct CoupledBodyTiming {
-  double factor_s{0.0};     // host assembly + factorization, unit s
-  double boundary_s{0.0};   // compliance columns of A at S' and rows at the contact nodes, unit s
-  double condense_s{0.0};   // Schur complements of the embedded meshes, unit s
-  double operator_s{0.0};   // K_add and the factored coupling operator G, unit s
+  double factor_s{0.0};    // host assembly + factorization, unit s
+  double boundary_s{0.0};  // compliance columns of A at S' and rows at the contact nodes, unit s
+  double condense_s{0.0};  // Schur complements of the embedded meshes, unit s
+  double operator_s{0.0};  // K_add and the factored coupling operator G, unit s
 };
 
 class CoupledBody {
@@ -59,7 +60,8 @@ class CoupledBody {
   // Adds an embedded mesh tied through the map (B's surface node -> S' triangle of A, weights).
   // tri_nodes[k]: A's node ids of the triangle node k of B is tied to.
   void add_tie(int mesh_index, const mesh::TetMesh& embedded, const fem::Material& material,
-               const std::vector<int>& embedded_fixed, const std::vector<int>& embedded_surface_nodes,
+               const std::vector<int>& embedded_fixed,
+               const std::vector<int>& embedded_surface_nodes,
                const std::vector<std::array<int, 3>>& tri_nodes,
                const std::vector<std::array<double, 3>>& weights, double max_map_distance_m);
 
@@ -97,7 +99,8 @@ class CoupledBody {
   // Set before the first ensure_columns.
   void set_keep_full_columns(bool keep) { keep_full_columns_ = keep; }
   // u_host = sum_k L[:, slot_k] f_k from the cached full columns; false if one is missing.
-  bool full_field_from_columns(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
+  bool full_field_from_columns(const std::vector<int>& slots,
+                               const std::vector<mesh::Vec3>& forces_n,
                                Eigen::VectorXd& u_host_m) const;
 
   // Full fields for nodal forces on contact slots (force_n per slot, unit N): host displacement
@@ -106,7 +109,8 @@ class CoupledBody {
                          Eigen::VectorXd& u_host_m) const;
   void embedded_displacement(int tie, const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
   // max_k |sum w u_A - u_B,k| over the tied nodes of `tie` (unit m).
-  double tie_residual(int tie, const Eigen::VectorXd& u_host_m, const Eigen::VectorXd& u_embedded_m) const;
+  double tie_residual(int tie, const Eigen::VectorXd& u_host_m,
+                      const Eigen::VectorXd& u_embedded_m) const;
 
   const CoupledBodyTiming& timing() const { return timing_; }
   // Boundary blocks (for the iterative baseline): L_A[b,b], K_add, rows of L_A at contact x b.
@@ -127,14 +131,15 @@ class CoupledBody {
   std::vector<int> contact_nodes_;
   std::vector<int> contact_slot_;  // A node -> contact slot or -1
   std::vector<mesh::Vec3> contact_normals_;
-  Eigen::MatrixXd l_bb_;   // L_A[b, b] (3m x 3m), unit m/N
-  Eigen::MatrixXd l_sb_;   // L_A[contact dofs, b] (3s x 3m), unit m/N
-  Eigen::MatrixXd k_add_;  // sum over ties of J^T S_B J (3m x 3m), unit N/m
-  Eigen::MatrixXd g_;      // (I + K_add L_bb)^-1 K_add (3m x 3m), unit N/m
+  Eigen::MatrixXd l_bb_;        // L_A[b, b] (3m x 3m), unit m/N
+  Eigen::MatrixXd l_sb_;        // L_A[contact dofs, b] (3s x 3m), unit m/N
+  Eigen::MatrixXd k_add_;       // sum over ties of J^T S_B J (3m x 3m), unit N/m
+  Eigen::MatrixXd g_;           // (I + K_add L_bb)^-1 K_add (3m x 3m), unit N/m
   std::vector<int> column_of_;  // contact slot -> index in columns_ or -1
   std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> columns_;  // coupled L[contact dofs, slot]
   bool keep_full_columns_{false};
-  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> full_columns_;  // coupled L[:, slot], same order
+  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>>
+      full_columns_;  // coupled L[:, slot], same order
   CoupledBodyTiming timing_;
   bool finalized_{false};
   fem::Material material_;

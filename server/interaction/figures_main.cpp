@@ -34,7 +34,8 @@ void write_frame(const ni::Simulation& sim, int mesh, const fs::path& file) {
     d[v] = u.segment<3>(3 * v);
     x[v] = m.vertices()[v] + d[v];
   }
-  neurosim::mesh::write_vtu(file.string(), x, m.tets(), {neurosim::mesh::make_field("displacement_m", d)});
+  neurosim::mesh::write_vtu(file.string(), x, m.tets(),
+                            {neurosim::mesh::make_field("displacement_m", d)});
 }
 
 bool plot(const fs::path& script) {
@@ -56,13 +57,19 @@ int main(int argc, char** argv) {
   int frames = 8;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--scene" && i + 1 < argc) scene_path = argv[++i];
-    else if (a == "--out" && i + 1 < argc) out = argv[++i];
-    else if (a == "--max-depth" && i + 1 < argc) max_depth = std::atof(argv[++i]);
-    else if (a == "--frames" && i + 1 < argc) frames = std::atoi(argv[++i]);
-    else if (a == "--tip-radius" && i + 1 < argc) tip_radius = std::atof(argv[++i]);
+    if (a == "--scene" && i + 1 < argc)
+      scene_path = argv[++i];
+    else if (a == "--out" && i + 1 < argc)
+      out = argv[++i];
+    else if (a == "--max-depth" && i + 1 < argc)
+      max_depth = std::atof(argv[++i]);
+    else if (a == "--frames" && i + 1 < argc)
+      frames = std::atoi(argv[++i]);
+    else if (a == "--tip-radius" && i + 1 < argc)
+      tip_radius = std::atof(argv[++i]);
     else {
-      std::cerr << "usage: neurosim-figures [--scene FILE] [--out DIR] [--max-depth M] [--frames N] [--tip-radius M (0: the scene's)]\n";
+      std::cerr << "usage: neurosim-figures [--scene FILE] [--out DIR] [--max-depth M] [--frames "
+                   "N] [--tip-radius M (0: the scene's)]\n";
       return 2;
     }
   }
@@ -94,7 +101,8 @@ int main(int argc, char** argv) {
         for (int k = 0; k <= frames; ++k) {
           const double depth = max_depth * k / frames;
           ni::ToolPose p;
-          p.tip_m = neurosim::mesh::Vec3(side == 0 ? hi.x() + r - depth : lo.x() - r + depth, c.y(), c.z());
+          p.tip_m = neurosim::mesh::Vec3(side == 0 ? hi.x() + r - depth : lo.x() - r + depth, c.y(),
+                                         c.z());
           p.axis = neurosim::mesh::Vec3(sign, 0.0, 0.0);
           std::vector<ni::ToolContact> contacts;
           ni::StepStats stats;
@@ -105,12 +113,13 @@ int main(int argc, char** argv) {
           for (int v = 0; v < u.size() / 3; ++v) mean_dx += u[3 * v];
           mean_dx /= std::max<Eigen::Index>(1, u.size() / 3);
           const char* sname = side == 0 ? "right" : "left";
-          fig10 << coupling << "," << sname << "," << depth << "," << (u.size() ? u.cwiseAbs().maxCoeff() : 0.0) << ","
-                << mean_dx << "\n";
-          fig14 << coupling << "," << sname << "," << depth << "," << contacts[0].force_n.norm() << ","
-                << contacts[0].nodes.size() << "\n";
+          fig10 << coupling << "," << sname << "," << depth << ","
+                << (u.size() ? u.cwiseAbs().maxCoeff() : 0.0) << "," << mean_dx << "\n";
+          fig14 << coupling << "," << sname << "," << depth << "," << contacts[0].force_n.norm()
+                << "," << contacts[0].nodes.size() << "\n";
           if (k == frames || k == frames / 2) {
-            const std::string tag = std::string(coupling ? "coupled" : "uncoupled") + "_" + sname + "_" + std::to_string(k);
+            const std::string tag = std::string(coupling ? "coupled" : "uncoupled") + "_" + sname +
+                                    "_" + std::to_string(k);
             write_frame(*sim, host, out / ("fig10_" + tag + "_" + sim->mesh_id(host) + ".vtu"));
             write_frame(*sim, emb, out / ("fig10_" + tag + "_" + sim->mesh_id(emb) + ".vtu"));
           }
@@ -133,29 +142,41 @@ int main(int argc, char** argv) {
       const auto res = it.solve(slots, forces, it.exact(slots, forces), ub);
       std::ofstream fig13(out / "fig13_residual.csv");
       fig13 << "iteration,relative_residual\n";
-      for (std::size_t i = 0; i < res.residual.size(); ++i) fig13 << i + 1 << "," << res.residual[i] << "\n";
+      for (std::size_t i = 0; i < res.residual.size(); ++i)
+        fig13 << i + 1 << "," << res.residual[i] << "\n";
     }
 
     std::ofstream gp(out / "figures.gp");
-    gp << "set terminal pngcairo size 800,560\nset datafile separator ','\nset key top left\nset grid\n"
+    gp << "set terminal pngcairo size 800,560\nset datafile separator ','\nset key top left\nset "
+          "grid\n"
        << "set output '" << (out / "fig14_force.png").string() << "'\n"
-       << "set title 'Reaction force vs push depth (paper Fig. 14)'\nset xlabel 'push depth (mm)'\nset ylabel 'force (N)'\n"
-       << "plot '" << (out / "fig14_force.csv").string() << "' using ($1==1 && strcol(2) eq 'right' ? $3*1000 : 1/0):4 "
-       << "with linespoints title 'with coupling', '' using ($1==0 && strcol(2) eq 'right' ? $3*1000 : 1/0):4 "
+       << "set title 'Reaction force vs push depth (paper Fig. 14)'\nset xlabel 'push depth "
+          "(mm)'\nset ylabel 'force (N)'\n"
+       << "plot '" << (out / "fig14_force.csv").string()
+       << "' using ($1==1 && strcol(2) eq 'right' ? $3*1000 : 1/0):4 "
+       << "with linespoints title 'with coupling', '' using ($1==0 && strcol(2) eq 'right' ? "
+          "$3*1000 : 1/0):4 "
        << "with linespoints title 'without coupling'\n"
        << "set output '" << (out / "fig10_cylinder.png").string() << "'\n"
-       << "set title 'Cylinder displacement when the cube is pushed (paper Fig. 10)'\nset ylabel 'max cylinder displacement (mm)'\n"
-       << "plot '" << (out / "fig10_cylinder.csv").string() << "' using ($1==1 && strcol(2) eq 'right' ? $3*1000 : 1/0):($4*1000) "
-       << "with linespoints title 'coupled, from the right', '' using ($1==1 && strcol(2) eq 'left' ? $3*1000 : 1/0):($4*1000) "
-       << "with linespoints title 'coupled, from the left', '' using ($1==0 ? $3*1000 : 1/0):($4*1000) "
+       << "set title 'Cylinder displacement when the cube is pushed (paper Fig. 10)'\nset ylabel "
+          "'max cylinder displacement (mm)'\n"
+       << "plot '" << (out / "fig10_cylinder.csv").string()
+       << "' using ($1==1 && strcol(2) eq 'right' ? $3*1000 : 1/0):($4*1000) "
+       << "with linespoints title 'coupled, from the right', '' using ($1==1 && strcol(2) eq "
+          "'left' ? $3*1000 : 1/0):($4*1000) "
+       << "with linespoints title 'coupled, from the left', '' using ($1==0 ? $3*1000 : "
+          "1/0):($4*1000) "
        << "with linespoints title 'without coupling'\n"
        << "set output '" << (out / "fig13_residual.png").string() << "'\n"
-       << "set title 'Iterative baseline: boundary residual per iteration (paper Fig. 13)'\nset logscale y\n"
+       << "set title 'Iterative baseline: boundary residual per iteration (paper Fig. 13)'\nset "
+          "logscale y\n"
        << "set xlabel 'iteration'\nset ylabel 'relative residual'\n"
-       << "plot '" << (out / "fig13_residual.csv").string() << "' using 1:2 every ::1 with lines title 'iterative'\n";
+       << "plot '" << (out / "fig13_residual.csv").string()
+       << "' using 1:2 every ::1 with lines title 'iterative'\n";
     gp.close();
     plot(out / "figures.gp");
-    std::cout << "neurosim-figures: wrote " << out.string() << "/fig10_cylinder.{csv,png}, fig14_force.{csv,png}, "
+    std::cout << "neurosim-figures: wrote " << out.string()
+              << "/fig10_cylinder.{csv,png}, fig14_force.{csv,png}, "
               << "fig13_residual.{csv,png}, fig10_*.vtu\n";
   } catch (const std::exception& ex) {
     std::cerr << "neurosim-figures: " << ex.what() << "\n";

@@ -7,14 +7,16 @@
 
 namespace neurosim::interaction {
 
-IterativeTie::IterativeTie(const CoupledBody& body, const IterativeOptions& options) : body_(body), options_(options) {
+IterativeTie::IterativeTie(const CoupledBody& body, const IterativeOptions& options)
+    : body_(body), options_(options) {
   const auto& l_bb = body.boundary_compliance();
   const auto& k_add = body.boundary_stiffness();
   if (l_bb.rows() == 0) throw std::invalid_argument("IterativeTie: the body has no tie");
   p_ = l_bb * k_add;
   omega_ = options_.relaxation;
   if (!(omega_ > 0.0)) {
-    // rho(L_bb K_add) by power iteration; its eigenvalues are real and >= 0 (similar to an SPD form).
+    // rho(L_bb K_add) by power iteration; its eigenvalues are real and >= 0 (similar to an SPD
+    // form).
     Eigen::VectorXd x = Eigen::VectorXd::Ones(p_.rows()).normalized();
     double rho = 0.0;
     for (int it = 0; it < 500; ++it) {
@@ -32,19 +34,23 @@ IterativeTie::IterativeTie(const CoupledBody& body, const IterativeOptions& opti
   }
 }
 
-Eigen::VectorXd IterativeTie::load(const std::vector<int>& slots, const std::vector<Eigen::Vector3d>& forces_n) const {
+Eigen::VectorXd IterativeTie::load(const std::vector<int>& slots,
+                                   const std::vector<Eigen::Vector3d>& forces_n) const {
   const auto& l_sb = body_.contact_boundary_compliance();
   Eigen::VectorXd v = Eigen::VectorXd::Zero(l_sb.cols());
-  for (std::size_t k = 0; k < slots.size(); ++k) v.noalias() += l_sb.middleRows(3 * slots[k], 3).transpose() * forces_n[k];
+  for (std::size_t k = 0; k < slots.size(); ++k)
+    v.noalias() += l_sb.middleRows(3 * slots[k], 3).transpose() * forces_n[k];
   return v;
 }
 
-Eigen::VectorXd IterativeTie::exact(const std::vector<int>& slots, const std::vector<Eigen::Vector3d>& forces_n) const {
+Eigen::VectorXd IterativeTie::exact(const std::vector<int>& slots,
+                                    const std::vector<Eigen::Vector3d>& forces_n) const {
   Eigen::MatrixXd a = Eigen::MatrixXd::Identity(p_.rows(), p_.cols()) + p_;
   return a.partialPivLu().solve(load(slots, forces_n));
 }
 
-IterativeResult IterativeTie::solve(const std::vector<int>& slots, const std::vector<Eigen::Vector3d>& forces_n,
+IterativeResult IterativeTie::solve(const std::vector<int>& slots,
+                                    const std::vector<Eigen::Vector3d>& forces_n,
                                     const Eigen::VectorXd& u_b_exact, Eigen::VectorXd& u_b) const {
   IterativeResult r;
   r.relaxation = omega_;

@@ -36,7 +36,8 @@ class IterativeTie {
   IterativeResult solve(const std::vector<int>& slots, const std::vector<Eigen::Vector3d>& forces_n,
                         const Eigen::VectorXd& u_b_exact, Eigen::VectorXd& u_b) const;
   // The exact boundary displacement for the same forces (direct solve of the same system).
-  Eigen::VectorXd exact(const std::vector<int>& slots, const std::vector<Eigen::Vector3d>& forces_n) const;
+  Eigen::VectorXd exact(const std::vector<int>& slots,
+                        const std::vector<Eigen::Vector3d>& forces_n) const;
   double relaxation() const { return omega_; }
 
  private:
@@ -44,7 +45,8 @@ class IterativeTie {
   IterativeOptions options_;
   Eigen::MatrixXd p_;  // L_bb K_add
   double omega_{1.0};
-  Eigen::VectorXd load(const std::vector<int>& slots, const std::vector<Eigen::Vector3d>& forces_n) const;
+  Eigen::VectorXd load(const std::vector<int>& slots,
+                       const std::vector<Eigen::Vector3d>& forces_n) const;
 };
 
 }  // namespace neurosim::interaction

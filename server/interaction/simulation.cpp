@@ -24,14 +24,16 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
 
 // One unilateral contact row: a contactable node of a body against one tool.
 struct Row {
   int body{-1};
-  int slot{-1};   // contact slot in the body
+  int slot{-1};  // contact slot in the body
   int tool{-1};
-  double depth_m{0.0};  // penetration along the node's inward normal, unit m
+  double depth_m{0.0};   // penetration along the node's inward normal, unit m
   double height_m{0.0};  // the tool centre's depth below the node's surface patch, unit m
 };
 
@@ -80,7 +82,8 @@ std::vector<char> tets_inside(const mesh::TetMesh& host, const std::vector<mesh:
 
 class SimulationImpl final : public Simulation {
  public:
-  SimulationImpl(const scene::Scene& scene, const std::string& scene_path, const SimulationOptions& options);
+  SimulationImpl(const scene::Scene& scene, const std::string& scene_path,
+                 const SimulationOptions& options);
 
   int num_meshes() const override { return static_cast<int>(meshes_.size()); }
   const std::string& mesh_id(int m) const override { return entry(m).loaded->id; }
@@ -90,14 +93,16 @@ class SimulationImpl final : public Simulation {
   const std::vector<int>& fixed_nodes(int m) const override { return entry(m).loaded->fixed_nodes; }
   int num_tools() const override { return static_cast<int>(tools_.size()); }
 
-  void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts, StepStats& stats) override;
+  void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts,
+            StepStats& stats) override;
   void displacements(int mesh, Eigen::VectorXd& u_m) const override;
   double tie_residual_m() const override;
   const CoupledBody* body_of(int m) const override {
     const int b = entry(m).body;
     return b < 0 ? nullptr : bodies_[b].body.get();
   }
-  void last_contact_forces(int m, std::vector<int>& slots, std::vector<Vec3>& forces_n) const override {
+  void last_contact_forces(int m, std::vector<int>& slots,
+                           std::vector<Vec3>& forces_n) const override {
     slots.clear();
     forces_n.clear();
     const int b = entry(m).body;
@@ -109,8 +114,8 @@ class SimulationImpl final : public Simulation {
  private:
   struct MeshEntry {
     std::unique_ptr<scene::LoadedMesh> loaded;  // stable address: bodies point into it
-    int body{-1};  // body it belongs to (host or tied), -1: inert
-    int tie{-1};   // tie index in that body when embedded
+    int body{-1};                               // body it belongs to (host or tied), -1: inert
+    int tie{-1};                                // tie index in that body when embedded
   };
   struct BodyEntry {
     std::unique_ptr<CoupledBody> body;
@@ -168,7 +173,8 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
   auto t0 = Clock::now();
   for (int i = 0; i < scene.meshes_size(); ++i) {
     MeshEntry e;
-    e.loaded = std::make_unique<scene::LoadedMesh>(scene::load_mesh(scene.meshes(i), dir, scene_path));
+    e.loaded =
+        std::make_unique<scene::LoadedMesh>(scene::load_mesh(scene.meshes(i), dir, scene_path));
     meshes_.push_back(std::move(e));
   }
   setup_.load_meshes_s = seconds_since(t0);
@@ -180,22 +186,28 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
   if (scene.effects().coupling()) {
     for (int c = 0; c < scene.couplings_size(); ++c) {
       const auto& cp = scene.couplings(c);
-      const std::string what = source_ + ": couplings[" + std::to_string(c) + "] (" + cp.host() + " / " + cp.embedded() + ")";
+      const std::string what = source_ + ": couplings[" + std::to_string(c) + "] (" + cp.host() +
+                               " / " + cp.embedded() + ")";
       const int h = scene::find_mesh(scene, cp.host()), b = scene::find_mesh(scene, cp.embedded());
-      if (h < 0 || b < 0 || h == b) throw std::runtime_error(what + ": unknown or identical meshes");
+      if (h < 0 || b < 0 || h == b)
+        throw std::runtime_error(what + ": unknown or identical meshes");
       if (cp.kind() != scene::Coupling::TIE) {
         throw std::runtime_error(what + ": SLIDING coupling is not implemented yet (issue 4)");
       }
       if (cp.method() != scene::Coupling::EXACT) {
-        throw std::runtime_error(what + ": the ITERATIVE method is a benchmark baseline only; use EXACT");
+        throw std::runtime_error(what +
+                                 ": the ITERATIVE method is a benchmark baseline only; use EXACT");
       }
-      // Priority decides which mesh gets the new boundary (paper 2.4); it must agree with the scene.
-      const auto pair = fusion::decide_roles({&meshes_[h].loaded->mesh, meshes_[h].loaded->priority, cp.host()},
-                                             {&meshes_[b].loaded->mesh, meshes_[b].loaded->priority, cp.embedded()});
+      // Priority decides which mesh gets the new boundary (paper 2.4); it must agree with the
+      // scene.
+      const auto pair = fusion::decide_roles(
+          {&meshes_[h].loaded->mesh, meshes_[h].loaded->priority, cp.host()},
+          {&meshes_[b].loaded->mesh, meshes_[b].loaded->priority, cp.embedded()});
       if (pair.host.mesh != &meshes_[h].loaded->mesh) {
         throw std::runtime_error(what + ": the host must have the lower priority");
       }
-      if (host_of[b] >= 0) throw std::runtime_error(what + ": mesh " + cp.embedded() + " is embedded twice");
+      if (host_of[b] >= 0)
+        throw std::runtime_error(what + ": mesh " + cp.embedded() + " is embedded twice");
       host_of[b] = h;
       coupling_of[b] = c;
       is_host[h] = 1;
@@ -268,7 +280,9 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     }
     setup_.carved_tets += static_cast<int>(host.mesh.num_tets() - kept.size());
     if (kept.size() == host.mesh.num_tets()) continue;
-    if (kept.empty()) throw std::runtime_error(source_ + ": host " + host.id + " lies entirely inside its embedded mesh");
+    if (kept.empty())
+      throw std::runtime_error(source_ + ": host " + host.id +
+                               " lies entirely inside its embedded mesh");
     mesh::BuildOptions bo;
     bo.drop_unused_vertices = false;
     bo.source = host.mesh.source() + " (carved around embedded meshes)";
@@ -281,7 +295,8 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     for (std::size_t v = 0; v < used.size(); ++v)
       if (!used[v]) host.fixed_nodes.push_back(static_cast<int>(v));
     std::sort(host.fixed_nodes.begin(), host.fixed_nodes.end());
-    host.fixed_nodes.erase(std::unique(host.fixed_nodes.begin(), host.fixed_nodes.end()), host.fixed_nodes.end());
+    host.fixed_nodes.erase(std::unique(host.fixed_nodes.begin(), host.fixed_nodes.end()),
+                           host.fixed_nodes.end());
   }
 
   // Bodies: every host and every mesh with fixed nodes that is not embedded.
@@ -289,12 +304,14 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     const auto& lm = *meshes_[m].loaded;
     if (host_of[m] >= 0) continue;
     if (lm.fixed_nodes.empty()) {
-      if (is_host[m]) throw std::runtime_error(source_ + ": host mesh " + lm.id + " has no fixed nodes");
+      if (is_host[m])
+        throw std::runtime_error(source_ + ": host mesh " + lm.id + " has no fixed nodes");
       continue;  // floating and untied: inert (cannot carry a contact force)
     }
     BodyEntry b;
     try {
-      b.body = std::make_unique<CoupledBody>(static_cast<int>(m), lm.mesh, lm.material, lm.fixed_nodes);
+      b.body =
+          std::make_unique<CoupledBody>(static_cast<int>(m), lm.mesh, lm.material, lm.fixed_nodes);
     } catch (const std::exception& ex) {
       throw std::runtime_error(source_ + ": mesh " + lm.id + ": " + ex.what());
     }
@@ -312,10 +329,11 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     const PendingTie& p = pending[m];
     auto& body = bodies_[meshes_[h].body];
     try {
-      body.body->add_tie(static_cast<int>(m), emb.mesh, emb.material, emb.fixed_nodes, p.embedded_nodes, p.tris,
-                         p.weights, p.max_distance_m);
+      body.body->add_tie(static_cast<int>(m), emb.mesh, emb.material, emb.fixed_nodes,
+                         p.embedded_nodes, p.tris, p.weights, p.max_distance_m);
     } catch (const std::exception& ex) {
-      throw std::runtime_error(source_ + ": coupling " + meshes_[h].loaded->id + " / " + emb.id + ": " + ex.what());
+      throw std::runtime_error(source_ + ": coupling " + meshes_[h].loaded->id + " / " + emb.id +
+                               ": " + ex.what());
     }
     meshes_[m].body = meshes_[h].body;
     meshes_[m].tie = static_cast<int>(body.body->ties().size()) - 1;
@@ -328,7 +346,8 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     setup_.operator_s += tm.operator_s;
     if (b.body->cache_hit()) ++setup_.cache_hits;
     setup_.boundary_nodes += static_cast<int>(b.body->boundary_nodes().size());
-    for (const auto& tie : b.body->ties()) setup_.tied_nodes += static_cast<int>(tie.tied_nodes.size());
+    for (const auto& tie : b.body->ties())
+      setup_.tied_nodes += static_cast<int>(tie.tied_nodes.size());
     // Contact geometry: rest positions of contactable nodes on a grid.
     const auto& host = b.body->host();
     for (int v : b.body->contact_nodes()) b.rest_m.push_back(host.vertices()[v]);
@@ -336,7 +355,8 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     b.grid = PointGrid(b.rest_m, 2.0 * edge);
     Vec3 lo, hi;
     host.bounds(lo, hi);
-    b.max_penetration_m = options_.max_penetration_m > 0.0 ? options_.max_penetration_m : 0.45 * (hi - lo).minCoeff();
+    b.max_penetration_m =
+        options_.max_penetration_m > 0.0 ? options_.max_penetration_m : 0.45 * (hi - lo).minCoeff();
     b.validity_radius_m = 0.5 * edge;
     b.stamp.assign(b.rest_m.size(), -1);
     b.row_of_slot.assign(b.rest_m.size(), -1);
@@ -352,8 +372,9 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
   for (int t = 0; t < scene.tools_size(); ++t) {
     const auto& tool = scene.tools(t);
     ToolShape shape{tool.tip_radius_m(), tool.shaft_radius_m(), tool.shaft_length_m()};
-    if (!(shape.tip_radius_m > 0.0) || !std::isfinite(shape.tip_radius_m) || !(shape.shaft_radius_m >= 0.0) ||
-        !std::isfinite(shape.shaft_radius_m) || !(shape.shaft_length_m >= 0.0) || !std::isfinite(shape.shaft_length_m)) {
+    if (!(shape.tip_radius_m > 0.0) || !std::isfinite(shape.tip_radius_m) ||
+        !(shape.shaft_radius_m >= 0.0) || !std::isfinite(shape.shaft_radius_m) ||
+        !(shape.shaft_length_m >= 0.0) || !std::isfinite(shape.shaft_length_m)) {
       throw std::runtime_error(source_ + ": tools[" + std::to_string(t) + "] (" + tool.id() +
                                "): radii and length must be finite, tip radius > 0");
     }
@@ -402,7 +423,8 @@ void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& ax
     b.grid.query(p0 - Vec3::Constant(reach), p0 + Vec3::Constant(reach), candidates_);
     if (shaft) {
       const double sreach = shape.shaft_radius_m + b.max_penetration_m;
-      b.grid.query(p0.cwiseMin(p1) - Vec3::Constant(sreach), p0.cwiseMax(p1) + Vec3::Constant(sreach), candidates_);
+      b.grid.query(p0.cwiseMin(p1) - Vec3::Constant(sreach),
+                   p0.cwiseMax(p1) + Vec3::Constant(sreach), candidates_);
     }
     const auto& normals = b.body->contact_normals();
     const std::size_t first = tool_rows_.size();
@@ -420,8 +442,9 @@ void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& ax
       if (shaft) {
         const Vec3 q = closest_on_segment(x, p0, p1);
         const double hs = height_above(x, n, q);
-        const double ds = hs <= b.max_penetration_m ? normal_line_depth(x, n, q, shape.shaft_radius_m)
-                                                    : -std::numeric_limits<double>::infinity();
+        const double ds = hs <= b.max_penetration_m
+                              ? normal_line_depth(x, n, q, shape.shaft_radius_m)
+                              : -std::numeric_limits<double>::infinity();
         if (ds > depth) {
           depth = ds;
           height = hs;
@@ -436,15 +459,20 @@ void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& ax
     const Row* entry = &tool_rows_[first];
     for (std::size_t k = first; k < tool_rows_.size(); ++k) {
       const Row& r = tool_rows_[k];
-      if (r.height_m < entry->height_m || (r.height_m == entry->height_m && deeper(r, *entry))) entry = &r;
+      if (r.height_m < entry->height_m || (r.height_m == entry->height_m && deeper(r, *entry)))
+        entry = &r;
     }
     const double limit = entry->height_m + shape.tip_radius_m;
     const Vec3 n_entry = normals[entry->slot];
-    auto other_side = [&](const Row& r) { return r.height_m > limit || normals[r.slot].dot(n_entry) < 0.5; };
-    tool_rows_.erase(std::remove_if(tool_rows_.begin() + first, tool_rows_.end(), other_side), tool_rows_.end());
+    auto other_side = [&](const Row& r) {
+      return r.height_m > limit || normals[r.slot].dot(n_entry) < 0.5;
+    };
+    tool_rows_.erase(std::remove_if(tool_rows_.begin() + first, tool_rows_.end(), other_side),
+                     tool_rows_.end());
   }
   // The deepest rows of this tool, deterministic order.
-  const std::size_t keep = std::min<std::size_t>(tool_rows_.size(), options_.max_contact_nodes_per_tool);
+  const std::size_t keep =
+      std::min<std::size_t>(tool_rows_.size(), options_.max_contact_nodes_per_tool);
   std::partial_sort(tool_rows_.begin(), tool_rows_.begin() + keep, tool_rows_.end(), deeper);
   for (std::size_t k = 0; k < keep; ++k) {
     const Row& r = tool_rows_[k];
@@ -460,20 +488,24 @@ void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& ax
   }
 }
 
-void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts, StepStats& stats) {
+void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts,
+                          StepStats& stats) {
   const auto t0 = Clock::now();
   const int nt = static_cast<int>(poses.size());
   // Inputs first: nothing changes on a bad pose.
   for (int t = 0; t < nt; ++t) {
     const auto& p = poses[t];
     if (!p.tip_m.allFinite() || !p.axis.allFinite()) {
-      throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " pose is not finite");
+      throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) +
+                                  " pose is not finite");
     }
-    if (p.axis.norm() < 1e-12) throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " axis is zero");
+    if (p.axis.norm() < 1e-12)
+      throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " axis is zero");
     if (p.tool < 0 || p.tool >= static_cast<int>(tools_.size())) {
       if (!tools_.empty() || p.tool != 0) {
-        throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " refers to scene tool " +
-                                    std::to_string(p.tool) + " of " + std::to_string(tools_.size()));
+        throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) +
+                                    " refers to scene tool " + std::to_string(p.tool) + " of " +
+                                    std::to_string(tools_.size()));
       }
     }
   }
@@ -504,13 +536,15 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
       double v = 0.0;
       if (c.body == a.body) {
         const Vec3& nc = body_a.contact_normals()[c.slot];
-        v = 0.5 * (na.dot(body_a.block(a.slot, c.slot) * nc) + nc.dot(body_a.block(c.slot, a.slot) * na));
+        v = 0.5 *
+            (na.dot(body_a.block(a.slot, c.slot) * nc) + nc.dot(body_a.block(c.slot, a.slot) * na));
       }
       w_(r, s) = v;
       w_(s, r) = v;
     }
   }
-  const LcpResult lcp = lcp_.solve(w_, delta_, n, options_.lcp_tolerance, options_.lcp_max_iterations, lambda_);
+  const LcpResult lcp =
+      lcp_.solve(w_, delta_, n, options_.lcp_tolerance, options_.lcp_max_iterations, lambda_);
 
   stats.contact_rows = n;
   stats.converged = lcp.converged;
@@ -536,7 +570,8 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     if (lambda_[r] <= 0.0) continue;
     auto& b = bodies_[rows_[r].body];
     b.force_slots.push_back(rows_[r].slot);
-    b.forces_n.push_back(-lambda_[r] * b.body->contact_normals()[rows_[r].slot]);  // inward on the tissue
+    b.forces_n.push_back(-lambda_[r] *
+                         b.body->contact_normals()[rows_[r].slot]);  // inward on the tissue
   }
   for (int t = 0; t < nt; ++t) {
     ToolContact& c = contacts[t];
@@ -589,7 +624,8 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
       c.validity_radius_m = 0.0;
     }
     if (!c.force_n.allFinite() || !c.stiffness_n_per_m.allFinite()) {
-      throw std::runtime_error("Simulation::step: non-finite contact result for tool " + std::to_string(t));
+      throw std::runtime_error("Simulation::step: non-finite contact result for tool " +
+                               std::to_string(t));
     }
     last_good_[t] = c;
   }
@@ -630,7 +666,8 @@ double SimulationImpl::tie_residual_m() const {
 
 }  // namespace
 
-std::unique_ptr<Simulation> Simulation::build(const scene::Scene& scene, const std::string& scene_path,
+std::unique_ptr<Simulation> Simulation::build(const scene::Scene& scene,
+                                              const std::string& scene_path,
                                               const SimulationOptions& options) {
   return std::make_unique<SimulationImpl>(scene, scene_path, options);
 }

@@ -23,9 +23,9 @@ using Mat3 = Eigen::Matrix3d;
 
 // Pose of one tool (from a station's ToolState), unit m.
 struct ToolPose {
-  Vec3 tip_m{Vec3::Zero()};   // centre of the spherical tip
-  Vec3 axis{Vec3::UnitZ()};   // unit vector from the tip towards the handle (shaft direction)
-  int tool{0};                // index into scene.tools() (tip and shaft radii); added by issue 4
+  Vec3 tip_m{Vec3::Zero()};  // centre of the spherical tip
+  Vec3 axis{Vec3::UnitZ()};  // unit vector from the tip towards the handle (shaft direction)
+  int tool{0};               // index into scene.tools() (tip and shaft radii); added by issue 4
 };
 
 // What a step returns for one tool.
@@ -52,7 +52,7 @@ struct StepStats {
 struct SimulationOptions {
   int max_contact_nodes_per_tool{32};
   int lcp_max_iterations{200};
-  double lcp_tolerance{1e-10};           // relative
+  double lcp_tolerance{1e-10};  // relative
   // Disk cache of each body's boundary operator (keyed by meshes, materials, fixed nodes and the
   // coupling map), so a second start skips the boundary compliance solves. Empty: no cache.
   std::string compliance_cache_dir{};
@@ -79,16 +79,16 @@ struct SimulationOptions {
 struct SetupStats {
   double load_meshes_s{0.0};
   double factor_s{0.0};
-  double fusion_s{0.0};     // inclusion decision + coupling map
-  double condense_s{0.0};   // Schur complements of embedded meshes
-  double boundary_s{0.0};   // host compliance columns at the new boundary
-  double operator_s{0.0};   // coupling operator G
-  double columns_s{0.0};    // precomputed contact columns
+  double fusion_s{0.0};    // inclusion decision + coupling map
+  double condense_s{0.0};  // Schur complements of embedded meshes
+  double boundary_s{0.0};  // host compliance columns at the new boundary
+  double operator_s{0.0};  // coupling operator G
+  double columns_s{0.0};   // precomputed contact columns
   double total_s{0.0};
-  int boundary_nodes{0};    // host nodes on S' used by the ties (all couplings)
-  int tied_nodes{0};        // embedded nodes tied (all couplings)
-  int carved_tets{0};       // host tetrahedra removed inside S' (carve_host)
-  int cache_hits{0};        // bodies whose boundary operator came from compliance_cache_dir
+  int boundary_nodes{0};  // host nodes on S' used by the ties (all couplings)
+  int tied_nodes{0};      // embedded nodes tied (all couplings)
+  int carved_tets{0};     // host tetrahedra removed inside S' (carve_host)
+  int cache_hits{0};      // bodies whose boundary operator came from compliance_cache_dir
 };
 
 class Simulation {
@@ -130,7 +130,8 @@ class Simulation {
   // The body (host + tied meshes) `mesh` belongs to, or nullptr if inert; and the last good
   // step's contact forces on it (contact slots, unit N). For benchmarks and the baseline.
   virtual const CoupledBody* body_of(int mesh) const = 0;
-  virtual void last_contact_forces(int mesh, std::vector<int>& slots, std::vector<Vec3>& forces_n) const = 0;
+  virtual void last_contact_forces(int mesh, std::vector<int>& slots,
+                                   std::vector<Vec3>& forces_n) const = 0;
 };
 
 }  // namespace neurosim::interaction

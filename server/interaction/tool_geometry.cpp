@@ -6,8 +6,10 @@
 
 namespace neurosim::interaction {
 
-PointGrid::PointGrid(const std::vector<mesh::Vec3>& points_m, double cell_m) : count_(static_cast<int>(points_m.size())) {
-  if (!(cell_m > 0.0) || !std::isfinite(cell_m)) throw std::invalid_argument("PointGrid: cell size must be > 0");
+PointGrid::PointGrid(const std::vector<mesh::Vec3>& points_m, double cell_m)
+    : count_(static_cast<int>(points_m.size())) {
+  if (!(cell_m > 0.0) || !std::isfinite(cell_m))
+    throw std::invalid_argument("PointGrid: cell size must be > 0");
   if (points_m.empty()) return;
   mesh::Vec3 lo = points_m.front(), hi = points_m.front();
   for (const auto& p : points_m) {
@@ -18,21 +20,24 @@ PointGrid::PointGrid(const std::vector<mesh::Vec3>& points_m, double cell_m) : c
   const double extent = (hi - lo).maxCoeff();
   cell_ = std::max(cell_m, extent / 64.0);
   origin_ = lo;
-  for (int a = 0; a < 3; ++a) dims_[a] = std::max(1, static_cast<int>(std::floor((hi[a] - lo[a]) / cell_)) + 1);
+  for (int a = 0; a < 3; ++a)
+    dims_[a] = std::max(1, static_cast<int>(std::floor((hi[a] - lo[a]) / cell_)) + 1);
   const int cells = dims_[0] * dims_[1] * dims_[2];
   std::vector<int> cell_of(points_m.size());
   offsets_.assign(cells + 1, 0);
   for (std::size_t i = 0; i < points_m.size(); ++i) {
     int idx[3];
     for (int a = 0; a < 3; ++a)
-      idx[a] = std::clamp(static_cast<int>(std::floor((points_m[i][a] - lo[a]) / cell_)), 0, dims_[a] - 1);
+      idx[a] = std::clamp(static_cast<int>(std::floor((points_m[i][a] - lo[a]) / cell_)), 0,
+                          dims_[a] - 1);
     cell_of[i] = (idx[2] * dims_[1] + idx[1]) * dims_[0] + idx[0];
     ++offsets_[cell_of[i] + 1];
   }
   for (int c = 0; c < cells; ++c) offsets_[c + 1] += offsets_[c];
   items_.resize(points_m.size());
   std::vector<int> fill(offsets_.begin(), offsets_.end() - 1);
-  for (std::size_t i = 0; i < points_m.size(); ++i) items_[fill[cell_of[i]]++] = static_cast<int>(i);
+  for (std::size_t i = 0; i < points_m.size(); ++i)
+    items_[fill[cell_of[i]]++] = static_cast<int>(i);
 }
 
 void PointGrid::query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const {

@@ -21,7 +21,8 @@ struct ToolShape {
 // on the sphere (centre c, radius r) from the tissue side: the sphere's point on the node's
 // normal line (Eq. "node penetration depth" of the contact rows). -inf when the normal line
 // misses the sphere; <= 0 when the node is clear of it.
-inline double normal_line_depth(const mesh::Vec3& x, const mesh::Vec3& n, const mesh::Vec3& c, double r) {
+inline double normal_line_depth(const mesh::Vec3& x, const mesh::Vec3& n, const mesh::Vec3& c,
+                                double r) {
   const mesh::Vec3 d = x - c;
   const double a = d.dot(n);
   const double perp2 = d.squaredNorm() - a * a;
@@ -31,10 +32,13 @@ inline double normal_line_depth(const mesh::Vec3& x, const mesh::Vec3& n, const 
 
 // Height (unit m) of the node above the centre c along its outward normal n: how deep the
 // centre is below the surface patch of the node.
-inline double height_above(const mesh::Vec3& x, const mesh::Vec3& n, const mesh::Vec3& c) { return (x - c).dot(n); }
+inline double height_above(const mesh::Vec3& x, const mesh::Vec3& n, const mesh::Vec3& c) {
+  return (x - c).dot(n);
+}
 
 // Closest point of segment [p0, p1] to x.
-inline mesh::Vec3 closest_on_segment(const mesh::Vec3& x, const mesh::Vec3& p0, const mesh::Vec3& p1) {
+inline mesh::Vec3 closest_on_segment(const mesh::Vec3& x, const mesh::Vec3& p0,
+                                     const mesh::Vec3& p1) {
   const mesh::Vec3 e = p1 - p0;
   const double len2 = e.squaredNorm();
   if (len2 == 0.0) return p0;

@@ -2,8 +2,8 @@
 // solution) and its reporting when it runs out of pivots.
 #include "server/interaction/contact_lcp.hpp"
 
-#include <Eigen/Cholesky>
 #include <gtest/gtest.h>
+#include <Eigen/Cholesky>
 
 #include <random>
 
@@ -29,7 +29,8 @@ Eigen::VectorXd enumerate(const Eigen::MatrixXd& w, const Eigen::VectorXd& d) {
       for (std::size_t i = 0; i < a.size(); ++i) lam[a[i]] = x[i];
     }
     const Eigen::VectorXd slack = w * lam - d;
-    if (lam.minCoeff() >= -1e-12 && slack.minCoeff() >= -1e-12 * d.cwiseAbs().maxCoeff()) return lam;
+    if (lam.minCoeff() >= -1e-12 && slack.minCoeff() >= -1e-12 * d.cwiseAbs().maxCoeff())
+      return lam;
   }
   ADD_FAILURE() << "no solution found by enumeration";
   return Eigen::VectorXd::Zero(n);

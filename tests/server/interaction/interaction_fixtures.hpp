@@ -25,14 +25,19 @@ inline std::string scene_text(const SceneSpec& s) {
   std::ostringstream o;
   o.precision(17);
   o << "name: \"test\"\n"
-    << "meshes { id: \"cube\" generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.1 y: 0.1 z: 0.1 } } "
+    << "meshes { id: \"cube\" generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.1 y: 0.1 z: "
+       "0.1 } } "
     << "cell_size_m: " << s.host_cell_m << " seed: 1 }\n"
-    << "  material { name: \"host\" youngs_modulus_pa: " << s.host_e_pa << " poisson_ratio: " << s.nu << " }\n"
+    << "  material { name: \"host\" youngs_modulus_pa: " << s.host_e_pa
+    << " poisson_ratio: " << s.nu << " }\n"
     << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 1 z: 1e-6 } } } priority: 0 }\n"
     << "meshes { id: \"cylinder\" generate { cylinder { base_center_m { x: 0.05 y: 0.02 z: 0.05 } "
-    << "axis_m { x: 0 y: 0.06 z: 0 } radius_m: 0.015 } cell_size_m: " << s.embedded_cell_m << " seed: 1 }\n"
-    << "  material { name: \"embedded\" youngs_modulus_pa: " << s.embedded_e_pa << " poisson_ratio: " << s.nu << " }\n";
-  if (s.embedded_fixed) o << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 0.0201 z: 1 } } }\n";
+    << "axis_m { x: 0 y: 0.06 z: 0 } radius_m: 0.015 } cell_size_m: " << s.embedded_cell_m
+    << " seed: 1 }\n"
+    << "  material { name: \"embedded\" youngs_modulus_pa: " << s.embedded_e_pa
+    << " poisson_ratio: " << s.nu << " }\n";
+  if (s.embedded_fixed)
+    o << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 0.0201 z: 1 } } }\n";
   o << "  priority: 1 }\n"
     << "couplings { host: \"cube\" embedded: \"cylinder\" kind: TIE method: EXACT }\n"
     << "tools { id: \"probe\" tip_radius_m: " << s.tip_radius_m
@@ -42,6 +47,8 @@ inline std::string scene_text(const SceneSpec& s) {
   return o.str();
 }
 
-inline scene::Scene make_scene(const SceneSpec& s) { return scene::parse_scene(scene_text(s), "test.scene"); }
+inline scene::Scene make_scene(const SceneSpec& s) {
+  return scene::parse_scene(scene_text(s), "test.scene");
+}
 
 }  // namespace neurosim::interaction::testing

@@ -3,16 +3,16 @@
 #include "server/interaction/simulation.hpp"
 
 #include "interaction_fixtures.hpp"
-#include "test_support.hpp"
 #include "server/fem/assembly.hpp"
 #include "server/fem/static_solver.hpp"
 #include "server/fusion/coupling_map.hpp"
 #include "server/fusion/inclusion.hpp"
 #include "server/scene/scene.hpp"
+#include "test_support.hpp"
 
+#include <gtest/gtest.h>
 #include <Eigen/Eigenvalues>
 #include <Eigen/SparseLU>
-#include <gtest/gtest.h>
 
 #include <cmath>
 #include <filesystem>
@@ -36,7 +36,8 @@ struct Stepped {
   StepStats stats;
 };
 
-Stepped run(const SceneSpec& spec, const std::vector<ToolPose>& poses, const SimulationOptions& options = {}) {
+Stepped run(const SceneSpec& spec, const std::vector<ToolPose>& poses,
+            const SimulationOptions& options = {}) {
   Stepped s;
   s.sim = Simulation::build(testing::make_scene(spec), "test.scene", options);
   s.sim->step(poses, s.contacts, s.stats);
@@ -123,9 +124,11 @@ TEST(interaction_simulation, ForceEqualsStaticSolverReaction) {
   const auto scene = testing::make_scene(spec);
   const auto& m = s.sim->mesh(0);
   const auto fixed = scene::select_nodes(m, scene.meshes(0).fixed(0), "fixed");
-  fem::StaticSolver solver(m, fem::MaterialMap::uniform(scene::to_material(scene.meshes(0).material(), "cube")), fixed);
+  fem::StaticSolver solver(
+      m, fem::MaterialMap::uniform(scene::to_material(scene.meshes(0).material(), "cube")), fixed);
   Eigen::VectorXd ud(3 * c.nodes.size());
-  for (std::size_t k = 0; k < c.nodes.size(); ++k) ud.segment<3>(3 * k) = u.segment<3>(3 * c.nodes[k]);
+  for (std::size_t k = 0; k < c.nodes.size(); ++k)
+    ud.segment<3>(3 * k) = u.segment<3>(3 * c.nodes[k]);
   const auto ref = solver.solve_prescribed(c.nodes, ud);
   Vec3 support = Vec3::Zero();
   for (int v : c.nodes) support += ref.reaction_n.segment<3>(3 * v);
@@ -146,8 +149,10 @@ TEST(interaction_simulation, CoupledForceEqualsMonolithicKkt) {
   const auto& ma = s.sim->mesh(0);
   const auto& mb = s.sim->mesh(1);
   const auto& fixed = s.sim->fixed_nodes(0);  // the scene's plus the carved-out interior nodes
-  const auto ka = fem::assemble_stiffness(ma, fem::MaterialMap::uniform(scene::to_material(scene.meshes(0).material(), "a")));
-  const auto kb = fem::assemble_stiffness(mb, fem::MaterialMap::uniform(scene::to_material(scene.meshes(1).material(), "b")));
+  const auto ka = fem::assemble_stiffness(
+      ma, fem::MaterialMap::uniform(scene::to_material(scene.meshes(0).material(), "a")));
+  const auto kb = fem::assemble_stiffness(
+      mb, fem::MaterialMap::uniform(scene::to_material(scene.meshes(1).material(), "b")));
   const auto surface = fusion::TriangleSurface::of(mb);
   // The coupling map comes from the host before carving (same vertex ids).
   const auto whole = scene::load_mesh(scene.meshes(0), ".", "test.scene");
@@ -155,12 +160,15 @@ TEST(interaction_simulation, CoupledForceEqualsMonolithicKkt) {
   const auto boundary = fusion::find_new_boundary(whole.mesh, surface);
   const auto map = fusion::build_coupling_map(whole.mesh.vertices(), boundary, surface);
   // Unknowns [u_A, u_B, multipliers]; rows: fixed dofs, prescribed contact dofs, tie rows.
-  const int na = static_cast<int>(3 * ma.num_vertices()), nb = static_cast<int>(3 * mb.num_vertices());
+  const int na = static_cast<int>(3 * ma.num_vertices()),
+            nb = static_cast<int>(3 * mb.num_vertices());
   std::vector<Eigen::Triplet<double>> t;
   for (int j = 0; j < ka.outerSize(); ++j)
-    for (fem::SparseMatrix::InnerIterator it(ka, j); it; ++it) t.emplace_back(it.row(), j, it.value());
+    for (fem::SparseMatrix::InnerIterator it(ka, j); it; ++it)
+      t.emplace_back(it.row(), j, it.value());
   for (int j = 0; j < kb.outerSize(); ++j)
-    for (fem::SparseMatrix::InnerIterator it(kb, j); it; ++it) t.emplace_back(na + it.row(), na + j, it.value());
+    for (fem::SparseMatrix::InnerIterator it(kb, j); it; ++it)
+      t.emplace_back(na + it.row(), na + j, it.value());
   int row = na + nb;
   std::vector<double> rhs;
   auto constraint = [&](const std::vector<std::pair<int, double>>& coeffs, double value) {
@@ -181,7 +189,9 @@ TEST(interaction_simulation, CoupledForceEqualsMonolithicKkt) {
     const auto& sp = map.embedded_on_boundary[k];
     const auto& tri = boundary.triangles[sp.triangle];
     for (int a = 0; a < 3; ++a)
-      constraint({{3 * tri[0] + a, sp.weights[0]}, {3 * tri[1] + a, sp.weights[1]}, {3 * tri[2] + a, sp.weights[2]},
+      constraint({{3 * tri[0] + a, sp.weights[0]},
+                  {3 * tri[1] + a, sp.weights[1]},
+                  {3 * tri[2] + a, sp.weights[2]},
                   {na + 3 * map.embedded_nodes[k] + a, -1.0}},
                  0.0);
   }
@@ -232,7 +242,8 @@ TEST(interaction_simulation, ComplianceCacheRoundTrip) {
   auto c = run(other, {push_right(0.004)}, options);
   EXPECT_EQ(c.sim->setup_stats().cache_hits, 0);
   // A damaged file is ignored (recomputed), never trusted.
-  for (const auto& entry : std::filesystem::directory_iterator(dir)) std::filesystem::resize_file(entry.path(), 40);
+  for (const auto& entry : std::filesystem::directory_iterator(dir))
+    std::filesystem::resize_file(entry.path(), 40);
   auto d = run(SceneSpec{}, {push_right(0.004)}, options);
   EXPECT_EQ(d.sim->setup_stats().cache_hits, 0);
   EXPECT_EQ(a.contacts[0].force_n, d.contacts[0].force_n);
@@ -256,7 +267,8 @@ TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
   EXPECT_LE((fd - model).norm(), 1e-5 * model.norm());
   // Pushing deeper raises the force: dF/dx is negative along the push.
   EXPECT_LT(c0[0].stiffness_n_per_m(0, 0), 0.0);
-  const Eigen::SelfAdjointEigenSolver<Mat3> eig(0.5 * (c0[0].stiffness_n_per_m + c0[0].stiffness_n_per_m.transpose()));
+  const Eigen::SelfAdjointEigenSolver<Mat3> eig(
+      0.5 * (c0[0].stiffness_n_per_m + c0[0].stiffness_n_per_m.transpose()));
   EXPECT_LE(eig.eigenvalues().maxCoeff(), 1e-9 * std::abs(eig.eigenvalues().minCoeff()));
 }
 
@@ -360,8 +372,12 @@ TEST(interaction_stability, ContactOnSliver) {
     const auto& tet = m.tets()[t];
     const double q = 6.0 * std::sqrt(2.0) * m.tet_volume(t) /
                      std::pow(((m.vertices()[tet[0]] - m.vertices()[tet[1]]).norm() +
-                               (m.vertices()[tet[2]] - m.vertices()[tet[3]]).norm()) / 2.0, 3);
-    const Vec3 c = (m.vertices()[m.surface()[f][0]] + m.vertices()[m.surface()[f][1]] + m.vertices()[m.surface()[f][2]]) / 3.0;
+                               (m.vertices()[tet[2]] - m.vertices()[tet[3]]).norm()) /
+                                  2.0,
+                              3);
+    const Vec3 c = (m.vertices()[m.surface()[f][0]] + m.vertices()[m.surface()[f][1]] +
+                    m.vertices()[m.surface()[f][2]]) /
+                   3.0;
     if (c.z() < 0.01) continue;  // the fixed bottom
     if (q < worst_q) {
       worst_q = q;
@@ -393,7 +409,8 @@ TEST(interaction_stability, TwoToolsOnTheSameNode) {
   EXPECT_TRUE(st.converged);
   ASSERT_EQ(two.size(), 2u);
   // The node is pushed once; the tools share what one tool would feel.
-  EXPECT_LE((two[0].force_n + two[1].force_n - one[0].force_n).norm(), 1e-9 * one[0].force_n.norm());
+  EXPECT_LE((two[0].force_n + two[1].force_n - one[0].force_n).norm(),
+            1e-9 * one[0].force_n.norm());
   // A deeper second tool takes the node over and feels more than the first alone.
   sim->step({push_right(0.003), push_right(0.004)}, two, st);
   EXPECT_TRUE(st.converged);
