@@ -1,0 +1,132 @@
+// CGAL Mesh_3 for the patient model: the brain from the labeled MRI mask, the artery from an
+// implicit tube. Both use Labeled_mesh_domain_3, so make_mesh_3 is instantiated once.
+#include "tools/model/mesh3.hpp"
+
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/IO/read_vtk_image_data.h>
+#include <CGAL/Image_3.h>
+#include <CGAL/Labeled_mesh_domain_3.h>
+#include <CGAL/Mesh_complex_3_in_triangulation_3.h>
+#include <CGAL/Mesh_criteria_3.h>
+#include <CGAL/Mesh_triangulation_3.h>
+#include <CGAL/Random.h>
+#include <CGAL/make_mesh_3.h>
+
+#include <vtkImageData.h>
+
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace neurosim::model {
+namespace {
+
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Domain = CGAL::Labeled_mesh_domain_3<K>;
+using Tr = CGAL::Mesh_triangulation_3<Domain, CGAL::Default, CGAL::Sequential_tag>::type;
+using C3t3 = CGAL::Mesh_complex_3_in_triangulation_3<Tr>;
+using Criteria = CGAL::Mesh_criteria_3<Tr>;
+namespace params = CGAL::parameters;
+
+void check_size(double s, const char* what) {
+  if (!(s > 0.0) || !std::isfinite(s)) {
+    throw std::invalid_argument(std::string("mesh3: ") + what + " must be finite and > 0 mm");
+  }
+}
+
+Criteria make_criteria(double s, double facet_distance) {
+  return Criteria(params::facet_angle = 30.0, params::facet_size = s,
+                  params::facet_distance = facet_distance, params::cell_radius_edge_ratio = 3.0,
+                  params::cell_size = s);
+}
+
+// Refinement, sliver perturbation, then sliver exudation. Without an explicit time limit
+// make_mesh_3 bounds both by the refinement's wall time, which makes the mesh depend on machine
+// load; time_limit = 0 means no limit (both stop when they cannot improve any more).
+Mesh3Output run(const Domain& domain, const Criteria& criteria) {
+  C3t3 c3t3 = CGAL::make_mesh_3<C3t3>(
+      domain, criteria, params::perturb(params::time_limit = 0, params::sliver_bound = 12),
+      params::exude(params::time_limit = 0, params::sliver_bound = 0));
+  Mesh3Output out;
+  out.vertices_in_complex = c3t3.triangulation().number_of_vertices();
+  out.cells = c3t3.number_of_cells_in_complex();
+  std::ostringstream os;
+  os.precision(10);
+  c3t3.output_to_medit(os);
+  out.medit = os.str();
+  return out;
+}
+
+}  // namespace
+
+Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::uint32_t seed) {
+  check_size(cell_size_mm, "brain cell size");
+  if (labels == nullptr || labels->GetScalarType() != VTK_UNSIGNED_CHAR) {
+    throw std::invalid_argument("mesh3: label image must be unsigned char");
+  }
+  CGAL::get_default_random() = CGAL::Random(seed);
+  CGAL::Random rng(seed);
+  const CGAL::Image_3 image = CGAL::IO::read_vtk_image_data(labels);
+  if (!image.is_valid()) throw std::runtime_error("mesh3: CGAL could not take the label image");
+  const Domain domain = Domain::create_labeled_image_mesh_domain(
+      image, params::relative_error_bound = 1e-6, params::p_rng = &rng);
+  // Surface within a quarter cell of the mask boundary (a voxel is 1 mm).
+  return run(domain, make_criteria(cell_size_mm, 0.25 * cell_size_mm));
+}
+
+Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm,
+                      double cell_size_mm, std::uint32_t seed) {
+  check_size(cell_size_mm, "artery cell size");
+  check_size(radius_mm, "artery radius");
+  if (centreline_mm.size() < 2) throw std::invalid_argument("mesh3: tube needs >= 2 points");
+  Vec3 lo = centreline_mm.front(), hi = lo;
+  for (const auto& p : centreline_mm) {
+    if (!p.allFinite()) throw std::invalid_argument("mesh3: tube centreline point not finite");
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  for (std::size_t i = 0; i + 1 < centreline_mm.size(); ++i) {
+    if (!((centreline_mm[i + 1] - centreline_mm[i]).norm() > 0.0)) {
+      throw std::invalid_argument("mesh3: tube centreline points " + std::to_string(i) + " and " +
+                                  std::to_string(i + 1) + " coincide");
+    }
+  }
+  CGAL::get_default_random() = CGAL::Random(seed);
+  CGAL::Random rng(seed);
+  const double r2 = radius_mm * radius_mm;
+  const Vec3 box_lo = lo.array() - radius_mm, box_hi = hi.array() + radius_mm;
+  // Segment midpoints and half lengths: |p - mid| - half bounds the distance from below.
+  std::vector<Vec3> mid;
+  std::vector<double> half;
+  for (std::size_t i = 0; i + 1 < centreline_mm.size(); ++i) {
+    mid.push_back(0.5 * (centreline_mm[i] + centreline_mm[i + 1]));
+    half.push_back(0.5 * (centreline_mm[i + 1] - centreline_mm[i]).norm());
+  }
+  // Negative inside: the point is within radius of some segment of the centreline.
+  std::function<double(const K::Point_3&)> inside = [&](const K::Point_3& q) {
+    const Vec3 p(q.x(), q.y(), q.z());
+    if ((p.array() < box_lo.array()).any() || (p.array() > box_hi.array()).any()) return 1.0;
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < mid.size(); ++i) {
+      const double bound = (p - mid[i]).norm() - half[i];
+      if (bound > 0.0 && bound * bound >= best) continue;
+      const Vec3& a = centreline_mm[i];
+      const Vec3 ab = centreline_mm[i + 1] - a;
+      const double t = std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+      best = std::min(best, (a + t * ab - p).squaredNorm());
+      if (best < r2) break;
+    }
+    return best - r2;
+  };
+  const Vec3 c = 0.5 * (lo + hi);
+  const double radius = 0.5 * (hi - lo).norm() + radius_mm + 2.0 * cell_size_mm;
+  const Domain domain = Domain::create_implicit_mesh_domain(
+      inside, K::Sphere_3(K::Point_3(c.x(), c.y(), c.z()), radius * radius),
+      params::relative_error_bound = 1e-6, params::p_rng = &rng);
+  // A facet of size h on the tube deviates about h^2 / (8 r) from it: the size criterion leads.
+  return run(domain, make_criteria(cell_size_mm, 0.1 * cell_size_mm));
+}
+
+}  // namespace neurosim::model

@@ -1,0 +1,31 @@
+// CGAL Mesh_3 runs (the only CGAL translation unit of the tool): a labeled image and a tube.
+#pragma once
+
+#include "server/mesh/tet_mesh.hpp"
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+class vtkImageData;
+
+namespace neurosim::model {
+
+using mesh::Vec3;
+
+struct Mesh3Output {
+  std::string medit;  // c3t3.output_to_medit, coordinates in the input's unit (mm)
+  std::size_t vertices_in_complex{0};
+  std::size_t cells{0};
+};
+
+// Mesh_3 on a labeled image (0 = outside), cell/facet size in mm, sliver exudation on.
+// CGAL's random generator is seeded with `seed` first, so the result is reproducible.
+Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::uint32_t seed);
+
+// Solid tube of radius_mm around the polyline `centreline_mm` (rounded ends), implicit domain.
+Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm,
+                      double cell_size_mm, std::uint32_t seed);
+
+}  // namespace neurosim::model

@@ -1,0 +1,369 @@
+// The brain/artery patient model: MRI mask -> meshes -> checks -> scene file.
+#include "tools/model/model.hpp"
+
+#include "scene.pb.h"
+#include "server/fusion/inclusion.hpp"
+#include "server/fusion/triangle_surface.hpp"
+#include "server/mesh/io.hpp"
+#include "server/scene/scene.hpp"
+#include "tools/model/mesh3.hpp"
+#include "tools/model/mri_mask.hpp"
+
+#include <google/protobuf/text_format.h>
+
+#include <Eigen/Dense>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+
+namespace neurosim::model {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+constexpr double kMmToM = 1e-3;
+
+void check_positive(double v, const std::string& what) {
+  if (!(v > 0.0) || !std::isfinite(v)) {
+    throw std::invalid_argument("neurosim-model: " + what + " must be finite and > 0");
+  }
+}
+
+// Uniform Catmull-Rom spline through the control points, sampled every <= step_mm.
+std::vector<Vec3> sample_spline(const std::vector<Vec3>& p, double step_mm) {
+  const int n = static_cast<int>(p.size());
+  std::vector<Vec3> out{p.front()};
+  for (int i = 0; i + 1 < n; ++i) {
+    const Vec3& p0 = p[std::max(i - 1, 0)];
+    const Vec3& p1 = p[i];
+    const Vec3& p2 = p[i + 1];
+    const Vec3& p3 = p[std::min(i + 2, n - 1)];
+    const int steps = std::max(1, static_cast<int>(std::ceil((p2 - p1).norm() / step_mm)));
+    for (int s = 1; s <= steps; ++s) {
+      const double t = static_cast<double>(s) / steps, t2 = t * t, t3 = t2 * t;
+      out.push_back(0.5 * ((2.0 * p1) + (-p0 + p2) * t + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2 +
+                           (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t3));
+    }
+  }
+  return out;
+}
+
+std::string fmt(const Vec3& v, int precision = 1) {
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(precision) << "(" << v.x() << ", " << v.y() << ", "
+     << v.z() << ")";
+  return os.str();
+}
+
+// Writes the Medit text, reads it back as the server will (mm -> m), checks it.
+mesh::TetMesh write_and_load(const std::filesystem::path& file, const Mesh3Output& meshed,
+                             MeshSummary& summary) {
+  {
+    std::ofstream out(file);
+    out << meshed.medit;
+    if (!out) throw std::runtime_error(file.string() + ": cannot write");
+  }
+  mesh::MeshData data = mesh::read_medit(file.string(), kMmToM);
+  summary.file = file;
+  summary.file_vertices = static_cast<int>(data.vertices_m.size());
+  // Judge the file as written, before TetMesh::build could reorient anything.
+  summary.quality = mesh::quality(data.vertices_m, data.tets);
+  mesh::BuildOptions build;
+  build.source = file.string();
+  mesh::TetMesh m = mesh::TetMesh::build(std::move(data.vertices_m), std::move(data.tets), build);
+  summary.vertices = static_cast<int>(m.num_vertices());
+  summary.tets = static_cast<int>(m.num_tets());
+  if (summary.quality.inverted > 0 || summary.quality.zero_volume > 0) {
+    throw std::runtime_error(file.string() + ": mesher produced " +
+                             std::to_string(summary.quality.inverted) + " inverted and " +
+                             std::to_string(summary.quality.zero_volume) + " flat tetrahedra");
+  }
+  return m;
+}
+
+// Skull base: a plane z = a + b*y fitted (least squares) to the lowest brain vertex of each
+// 10 mm slab along y (anterior fossa high, posterior fossa low), raised by the margin.
+void skull_base_plane(const mesh::TetMesh& brain, double margin_m, Vec3& point_m, Vec3& normal) {
+  constexpr double kSlabM = 0.010;
+  std::map<long, double> lowest;
+  for (int v : brain.surface_vertices()) {
+    const Vec3& x = brain.vertices()[v];
+    const long slab = static_cast<long>(std::floor(x.y() / kSlabM));
+    auto [it, inserted] = lowest.emplace(slab, x.z());
+    if (!inserted) it->second = std::min(it->second, x.z());
+  }
+  if (lowest.size() < 2) throw std::runtime_error("brain mesh too small to fit a skull base");
+  Eigen::MatrixXd A(lowest.size(), 2);
+  Eigen::VectorXd z(lowest.size());
+  int row = 0;
+  for (const auto& [slab, zmin] : lowest) {
+    A(row, 0) = 1.0;
+    A(row, 1) = (slab + 0.5) * kSlabM;
+    z(row) = zmin;
+    ++row;
+  }
+  const Eigen::Vector2d ab = A.colPivHouseholderQr().solve(z);
+  Vec3 lo, hi;
+  brain.bounds(lo, hi);
+  const double yc = 0.5 * (lo.y() + hi.y());
+  point_m = Vec3(0.5 * (lo.x() + hi.x()), yc, ab(0) + ab(1) * yc + margin_m);
+  normal = Vec3(0.0, -ab(1), 1.0).normalized();  // fixed side: dot(x - point, normal) <= 0
+}
+
+// Rounded to `quantum` so that the scene file stays readable (1e-6 m: a micrometre).
+void set_vec(scene::Vec3* out, const Vec3& v, double quantum) {
+  auto q = [quantum](double x) { return std::round(x / quantum) * quantum; };
+  out->set_x(q(v.x()));
+  out->set_y(q(v.y()));
+  out->set_z(q(v.z()));
+}
+
+void set_material(scene::Material* m, MaterialSet set, bool artery) {
+  if (set == MaterialSet::Paper) {
+    m->set_name("paper");
+    m->set_youngs_modulus_pa(1.0e6);
+    m->set_poisson_ratio(0.4);
+    m->set_source("Seed paper, section 3: E = 1.0 MPa, nu = 0.4 applied to the model");
+  } else if (!artery) {
+    m->set_name("brain_literature");
+    m->set_youngs_modulus_pa(3.0e3);
+    m->set_poisson_ratio(0.45);
+    m->set_source(
+        "Brain tissue, literature: E of order 1-3 kPa (Miller et al. 2000, J Biomech 33:1369, "
+        "in vivo indentation; Budday et al. 2015, J Mech Behav Biomed Mater 46:318, ~1 kPa); "
+        "nu = 0.45, nearly incompressible but below 0.49 where linear tetrahedra lock");
+  } else {
+    m->set_name("artery_literature");
+    m->set_youngs_modulus_pa(1.0e6);
+    m->set_poisson_ratio(0.45);
+    m->set_source(
+        "Cerebral artery wall: E of order 1 MPa at small strain (e.g. Monson et al. 2003, "
+        "J Biomech Eng 125:288; stiffer at large strain); nu = 0.45");
+  }
+}
+
+}  // namespace
+
+std::vector<Vec3> default_mca_course_mni_mm() {
+  // Checked against ch2bet (T1 >= 20): every point >= 9 mm inside the mask.
+  return {{18, 2, -16},   // M1 origin near the carotid terminus
+          {28, 3, -13},   // M1, lateral along the sphenoid ridge
+          {37, 4, -8},    // genu at the limen insulae
+          {40, 0, -1},    // M2 over the insula (Sylvian fissure), posterosuperior
+          {41, -9, 6},
+          {42, -19, 12},
+          {45, -28, 19},  // towards the posterior end of the fissure
+          {51, -36, 26}};
+}
+
+ModelResult build_model(const ModelOptions& o) {
+  const auto t_start = Clock::now();
+  check_positive(o.brain_cell_size_mm, "--cell-size (mm)");
+  check_positive(o.artery_cell_size_mm, "artery cell size (mm)");
+  check_positive(o.artery_radius_mm, "artery radius (mm)");
+  check_positive(o.fixed_margin_mm, "fixed margin (mm)");
+  if (o.name.empty() || o.name.find('/') != std::string::npos) {
+    throw std::invalid_argument("neurosim-model: model name must be a plain file name");
+  }
+  ModelResult r;
+
+  // 1. MRI -> brain mask.
+  auto t0 = Clock::now();
+  const BrainMask mask = load_brain_mask(o.mri_path, o.mask_threshold);
+  r.mask_seconds = seconds_since(t0);
+  r.brain_volume_ml = mask.voxels_inside * mask.spacing_mm[0] * mask.spacing_mm[1] *
+                      mask.spacing_mm[2] * 1e-3;
+
+  // 2. Artery centreline in image coordinates, checked against the mask.
+  std::vector<Vec3> control = o.artery_course_world_mm.empty() ? default_mca_course_mni_mm()
+                                                               : o.artery_course_world_mm;
+  if (control.size() < 2) throw std::invalid_argument("neurosim-model: artery needs >= 2 points");
+  for (auto& p : control) {
+    if (!p.allFinite()) throw std::invalid_argument("neurosim-model: artery point not finite");
+    p = world_to_image(mask, p);
+  }
+  const std::vector<Vec3> centreline =
+      sample_spline(control, 1.0);  // chord error ~ (1 mm)^2 / (8 x 10 mm radius of curvature)
+  r.artery_min_depth_mm = std::numeric_limits<double>::infinity();
+  const double needed = o.artery_radius_mm + 2.0;  // the tube plus the mesh's surface error
+  for (std::size_t i = 0; i < centreline.size(); ++i) {
+    if (i > 0) r.artery_length_mm += (centreline[i] - centreline[i - 1]).norm();
+    const double depth = depth_in_mask_mm(mask, centreline[i], needed + 10.0);
+    if (depth < needed) {
+      const Eigen::Vector4d w = mask.image_to_world * centreline[i].homogeneous();
+      throw std::runtime_error(o.mri_path + ": artery centreline at world " +
+                               fmt(w.head<3>()) + " mm is only " + std::to_string(depth) +
+                               " mm inside the brain mask (needs " + std::to_string(needed) +
+                               " mm)");
+    }
+    r.artery_min_depth_mm = std::min(r.artery_min_depth_mm, depth);
+  }
+
+  // 3. Meshes (image mm in the files; the scene says file_unit_m 0.001).
+  const std::filesystem::path mesh_dir = o.out_dir / o.name;
+  std::filesystem::create_directories(mesh_dir);
+  t0 = Clock::now();
+  const Mesh3Output brain3 = mesh_labeled_image(mask.labels, o.brain_cell_size_mm, o.seed);
+  r.brain.seconds = seconds_since(t0);
+  const mesh::TetMesh brain = write_and_load(mesh_dir / "brain.mesh", brain3, r.brain);
+  t0 = Clock::now();
+  const Mesh3Output artery3 =
+      mesh_tube(centreline, o.artery_radius_mm, o.artery_cell_size_mm, o.seed);
+  r.artery.seconds = seconds_since(t0);
+  const mesh::TetMesh artery = write_and_load(mesh_dir / "artery.mesh", artery3, r.artery);
+
+  // 4. Artery inside the brain surface (exact parity test of the fusion component).
+  const auto surface = fusion::TriangleSurface::of(brain, "brain surface");
+  for (const Vec3& x : artery.vertices()) {
+    try {
+      if (fusion::outside_closed_surface(x, surface)) ++r.artery_vertices_outside;
+    } catch (const std::invalid_argument&) {  // on the surface: not strictly inside
+      ++r.artery_vertices_outside;
+    }
+  }
+
+  // 5. Skull base plane for the fixed nodes.
+  skull_base_plane(brain, o.fixed_margin_mm * kMmToM, r.fixed_plane_point_m, r.fixed_plane_normal);
+
+  // 6. The scene.
+  scene::Scene s;
+  s.set_name(o.name);
+  std::ostringstream desc;
+  const Eigen::Vector3d world0 = (mask.image_to_world * Eigen::Vector4d(0, 0, 0, 1)).head<3>();
+  desc << "Patient model (issue 7): brain from the Colin27 MRI (" << o.mri_path
+       << ") with a generated right middle cerebral artery; built by neurosim-model --seed "
+       << o.seed << " --cell-size " << o.brain_cell_size_mm << " --material "
+       << (o.material == MaterialSet::Paper ? "paper" : "literature")
+       << ". Mesh coordinates are the image's VTK coordinates (voxel index x spacing, mm); "
+          "NIfTI world (MNI) = image + "
+       << fmt(world0) << " mm.";
+  s.set_description(desc.str());
+  const std::string rel_dir = o.name + "/";
+  {
+    auto* m = s.add_meshes();
+    m->set_id("brain");
+    m->set_file(rel_dir + "brain.mesh");
+    m->set_file_unit_m(kMmToM);
+    set_material(m->mutable_material(), o.material, false);
+    auto* hs = m->add_fixed()->mutable_half_space();
+    set_vec(hs->mutable_point_m(), r.fixed_plane_point_m, 1e-6);
+    set_vec(hs->mutable_normal(), r.fixed_plane_normal, 1e-6);
+    m->set_priority(0);
+    std::ostringstream prov;
+    prov << "Colin27 ch2bet (mricron-data), T1 >= " << o.mask_threshold
+         << " mask, largest component, cavities filled; CGAL Mesh_3 labeled image, cell size "
+         << o.brain_cell_size_mm << " mm, seed " << o.seed
+         << ", sliver perturbation and exudation; fixed: brain resting on the skull base (nodes within "
+         << o.fixed_margin_mm << " mm above a plane fitted to the lowest surface points)";
+    m->set_provenance(prov.str());
+  }
+  {
+    auto* m = s.add_meshes();
+    m->set_id("artery");
+    m->set_file(rel_dir + "artery.mesh");
+    m->set_file_unit_m(kMmToM);
+    set_material(m->mutable_material(), o.material, true);
+    m->set_priority(1);  // paper 2.4: the vessel wins over the brain
+    std::ostringstream prov;
+    prov << "generated (not segmented): tube r = " << o.artery_radius_mm << " mm, "
+         << std::fixed << std::setprecision(1) << r.artery_length_mm
+         << " mm along a plausible right MCA course (M1 -> genu at the limen insulae -> M2 over "
+            "the insula in the Sylvian fissure); CGAL Mesh_3 implicit tube, cell size "
+         << o.artery_cell_size_mm << " mm, seed " << o.seed;
+    m->set_provenance(prov.str());
+  }
+  {
+    auto* c = s.add_couplings();
+    c->set_host("brain");
+    c->set_embedded("artery");
+    c->set_kind(scene::Coupling::TIE);
+    c->set_method(scene::Coupling::EXACT);
+  }
+  {
+    auto* t = s.add_tools();
+    t->set_id("probe");
+    t->set_tip_radius_m(0.002);
+    t->set_shaft_radius_m(0.0015);
+    t->set_shaft_length_m(0.15);
+    t->set_max_speed_m_per_s(2.0);
+  }
+  auto* fx = s.mutable_effects();
+  fx->set_tier(scene::Effects::LINEAR);
+  fx->set_coupling(true);
+  fx->set_tool_contact(true);
+  fx->set_deformation_output(true);
+  s.mutable_rates()->set_step_hz(1000);
+  s.mutable_rates()->set_viewer_hz(30);
+  s.mutable_rates()->set_status_hz(1);
+  s.mutable_haptics()->set_force_scale(1);
+  s.mutable_haptics()->set_workspace_scale(1);
+  s.mutable_haptics()->set_max_force_n(3.3);
+  s.mutable_image()->set_file(o.mri_path);
+  s.mutable_image()->set_file_unit_m(kMmToM);
+  s.set_max_stations(8);
+
+  std::string text;
+  if (!google::protobuf::TextFormat::PrintToString(s, &text)) {
+    throw std::runtime_error("neurosim-model: cannot print the scene");
+  }
+  r.scene = o.out_dir / (o.name + ".scene");
+  {
+    std::ofstream out(r.scene);
+    out << "# Generated by neurosim-model (tools/model); do not edit, rebuild instead.\n"
+        << "# Brain: Colin27 MRI mesh. Artery: generated tube (see provenance). Units: m, Pa.\n"
+        << text;
+    if (!out) throw std::runtime_error(r.scene.string() + ": cannot write");
+  }
+
+  // 7. Read it back as the server does.
+  const scene::Scene back = scene::read_scene(r.scene);
+  for (const auto& entry : back.meshes()) {
+    const auto loaded = scene::load_mesh(entry, r.scene.parent_path(), r.scene.string());
+    if (entry.id() == "brain") r.fixed_nodes = static_cast<int>(loaded.fixed_nodes.size());
+  }
+  r.total_seconds = seconds_since(t_start);
+  return r;
+}
+
+std::string summary(const ModelResult& r) {
+  std::ostringstream os;
+  auto pct = [](int n, int paper) {
+    std::ostringstream p;
+    p << std::showpos << std::fixed << std::setprecision(1) << 100.0 * (n - paper) / paper << "%";
+    return p.str();
+  };
+  auto line = [&](const char* what, const MeshSummary& m, int pv, int pt) {
+    os << "  " << what << ": " << m.vertices << " vertices (paper " << pv << ", "
+       << pct(m.vertices, pv) << "; " << m.file_vertices << " in the file), " << m.tets
+       << " tetrahedra (paper " << pt << ", " << pct(m.tets, pt) << ")\n"
+       << "    min dihedral " << std::fixed << std::setprecision(2) << m.quality.min_dihedral_deg
+       << " deg, max " << m.quality.max_dihedral_deg << " deg, inverted "
+       << m.quality.inverted << ", meshed in " << std::setprecision(2) << m.seconds << " s -> "
+       << m.file.string() << "\n";
+  };
+  os << "neurosim-model: " << r.scene.string() << "\n";
+  os << std::fixed << std::setprecision(2) << "  MRI mask: " << std::setprecision(0)
+     << r.brain_volume_ml << " ml, read and masked in " << std::setprecision(2) << r.mask_seconds
+     << " s\n";
+  line("brain ", r.brain, kPaperBrainVertices, kPaperBrainTets);
+  line("artery", r.artery, kPaperArteryVertices, kPaperArteryTets);
+  const int inside = r.artery.vertices - r.artery_vertices_outside;
+  os << std::setprecision(1) << "  artery inside brain: " << inside << "/" << r.artery.vertices
+     << " vertices strictly inside the brain surface ("
+     << (r.artery_vertices_outside == 0 ? "OK" : "FAILED") << "); centreline "
+     << r.artery_length_mm << " mm, >= " << r.artery_min_depth_mm << " mm inside the mask\n";
+  os << "  fixed: " << r.fixed_nodes << " brain nodes on the skull-base side of the plane through "
+     << fmt(r.fixed_plane_point_m * 1e3) << " mm, normal " << fmt(r.fixed_plane_normal, 3) << "\n";
+  os << std::setprecision(2) << "  total " << r.total_seconds << " s\n";
+  return os.str();
+}
+
+}  // namespace neurosim::model

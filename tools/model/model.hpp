@@ -1,0 +1,81 @@
+// The patient model (issue 7): brain mesh from the Colin27 MRI, a generated artery tube inside
+// it, fixed nodes at the skull base, materials, and the scene file that ties them together.
+#pragma once
+
+#include "server/mesh/quality.hpp"
+#include "server/mesh/tet_mesh.hpp"
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace neurosim::model {
+
+using mesh::Vec3;
+
+enum class MaterialSet {
+  Literature,  // brain E = 3 kPa, nu = 0.45; artery E = 1 MPa, nu = 0.45
+  Paper,       // the seed paper's E = 1 MPa, nu = 0.4 for both
+};
+
+struct ModelOptions {
+  std::string mri_path{"/usr/share/mricron/templates/ch2bet.nii.gz"};
+  std::filesystem::path out_dir{"scenes"};
+  std::string name{"brain_artery"};  // <out_dir>/<name>.scene and <out_dir>/<name>/*.mesh
+  double mask_threshold{20.0};       // T1 intensity (ch2bet is 0..133); voxels >= it are brain
+  double brain_cell_size_mm{7.0};    // Mesh_3 cell/facet size, unit mm (~5.4k vertices)
+  double artery_cell_size_mm{0.9};   // unit mm (~1.5k vertices, ~4.4k tetrahedra)
+  double artery_radius_mm{1.5};      // MCA M1 diameter ~3 mm
+  // Artery centreline control points in the image's world space (NIfTI sform: MNI mm).
+  // Empty: default_mca_course_mni_mm().
+  std::vector<Vec3> artery_course_world_mm;
+  double fixed_margin_mm{10.0};  // fixed layer above the fitted skull-base plane, unit mm
+  std::uint32_t seed{1};
+  MaterialSet material{MaterialSet::Literature};
+};
+
+// Right middle cerebral artery, MNI mm: M1 from the carotid terminus laterally to the genu at
+// the limen insulae, then M2 posterosuperiorly over the insula in the Sylvian fissure.
+std::vector<Vec3> default_mca_course_mni_mm();
+
+struct MeshSummary {
+  std::filesystem::path file;
+  int vertices{0};       // used by a tetrahedron
+  int file_vertices{0};  // written (CGAL's Medit output holds some unused ones)
+  int tets{0};
+  mesh::QualityReport quality;
+  double seconds{0.0};  // meshing wall time, unit s
+};
+
+struct ModelResult {
+  MeshSummary brain;
+  MeshSummary artery;
+  double brain_volume_ml{0.0};      // mask volume, unit ml
+  double artery_length_mm{0.0};     // centreline length, unit mm
+  double artery_min_depth_mm{0.0};  // least distance from the centreline to outside the mask
+  int artery_vertices_outside{0};   // artery vertices not strictly inside the brain surface
+  int fixed_nodes{0};               // brain nodes fixed at the skull base
+  Vec3 fixed_plane_point_m{Vec3::Zero()};
+  Vec3 fixed_plane_normal{Vec3::UnitZ()};
+  std::filesystem::path scene;
+  double mask_seconds{0.0};   // reading and masking the MRI, unit s
+  double total_seconds{0.0};  // unit s
+};
+
+// Builds everything and writes <out_dir>/<name>.scene and <out_dir>/<name>/{brain,artery}.mesh,
+// then reads the scene back with the server's loader. Throws std::invalid_argument on bad
+// options and std::runtime_error when the MRI cannot be read or the artery course leaves the
+// brain mask. An artery vertex outside the brain mesh is reported, not thrown.
+ModelResult build_model(const ModelOptions& options);
+
+// Human-readable summary, compared with the paper's Table 2 (5367/25103, 1644/4449).
+std::string summary(const ModelResult& result);
+
+// Paper, Table 2b (patient model).
+inline constexpr int kPaperBrainVertices = 5367;
+inline constexpr int kPaperBrainTets = 25103;
+inline constexpr int kPaperArteryVertices = 1644;
+inline constexpr int kPaperArteryTets = 4449;
+
+}  // namespace neurosim::model

@@ -1,0 +1,41 @@
+// Brain mask from a T1 volume: threshold (VTK), largest component, cavities filled.
+#pragma once
+
+#include "server/mesh/tet_mesh.hpp"
+
+#include <vtkImageData.h>
+#include <vtkSmartPointer.h>
+
+#include <Eigen/Core>
+
+#include <array>
+#include <string>
+
+namespace neurosim::model {
+
+using mesh::Vec3;
+
+struct BrainMask {
+  // Labels 1 (brain) / 0 (outside), unsigned char, in the reader's image coordinates
+  // (voxel index x spacing + origin, unit mm): the coordinates the meshes are written in.
+  vtkSmartPointer<vtkImageData> labels;
+  // Image coordinates (mm) -> NIfTI world (sform, else qform; MNI mm for Colin27).
+  Eigen::Matrix4d image_to_world{Eigen::Matrix4d::Identity()};
+  bool has_world{false};
+  std::array<int, 3> dims{};
+  std::array<double, 3> spacing_mm{};
+  std::array<double, 3> origin_mm{};
+  long long voxels_inside{0};
+};
+
+// Reads the NIfTI file and builds the mask (voxels >= threshold). Throws std::runtime_error
+// naming the file when it cannot be read or no voxel reaches the threshold.
+BrainMask load_brain_mask(const std::string& path, double threshold);
+
+Vec3 world_to_image(const BrainMask& mask, const Vec3& world_mm);
+
+// Distance (mm) from p (image mm) to the centre of the nearest voxel outside the mask,
+// searched up to max_mm (returns max_mm when none is that close).
+double depth_in_mask_mm(const BrainMask& mask, const Vec3& p_image_mm, double max_mm);
+
+}  // namespace neurosim::model
