@@ -217,19 +217,30 @@ inline void bad_samples(const Setup& setup, int max_stations) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const double inf = std::numeric_limits<double>::infinity();
   std::set<std::uint64_t> bad;
-  bad.insert(send(good, [&](neurosim_ToolState& t) { t.position_m[0] = nan; }));
-  bad.insert(send(good, [&](neurosim_ToolState& t) { t.velocity_m_per_s[2] = inf; }));
-  bad.insert(send(good, [&](neurosim_ToolState& t) { t.orientation[1] = nan; }));
-  std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  // 0.5 m in 2 ms is 250 m/s, far beyond the 2 m/s maximum.
-  bad.insert(send({good[0] + 0.5, good[1], good[2]}, [](neurosim_ToolState&) {}));
-  std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  const bool saw_flag = [&] {
-    for (const auto& r : models.records())
-      if (r.station == "bad-1" && r.rejected) return true;
-    return false;
-  }();
-  EXPECT_TRUE(saw_flag) << "ContactModel.tool_sample_rejected never set";
+  // Each bad sample is sent only after the previous one was seen by the server (a model flagged
+  // tool_sample_rejected after a good one): the server keeps one sample per station, so a bad
+  // one overwritten before its DDS thread took it would not be counted.
+  auto send_bad = [&](std::array<double, 3> p, const std::function<void(neurosim_ToolState&)>& spoil) {
+    send(good, nullptr);
+    ASSERT_TRUE(models.wait_for([&] {
+      const auto recs = models.records();
+      return !recs.empty() && recs.back().station == "bad-1" && recs.back().tool_sequence == seq && !recs.back().rejected;
+    }, 5)) << "no model for good sample " << seq;
+    const std::size_t n = models.records().size();
+    bad.insert(send(p, spoil));
+    ASSERT_TRUE(models.wait_for([&] {
+      const auto recs = models.records();
+      for (std::size_t i = n; i < recs.size(); ++i)
+        if (recs[i].station == "bad-1" && recs[i].rejected) return true;
+      return false;
+    }, 5)) << "ContactModel.tool_sample_rejected never set after sample " << seq;
+  };
+  send_bad(good, [&](neurosim_ToolState& t) { t.position_m[0] = nan; });
+  send_bad(good, [&](neurosim_ToolState& t) { t.velocity_m_per_s[2] = inf; });
+  send_bad(good, [&](neurosim_ToolState& t) { t.orientation[1] = nan; });
+  // 0.5 m in a few ms is > 100 m/s, far beyond the 2 m/s maximum.
+  send_bad({good[0] + 0.5, good[1], good[2]}, [](neurosim_ToolState&) {});
+  if (::testing::Test::HasFatalFailure()) return;
   for (int i = 0; i < 100; ++i) send(good, nullptr);
   const std::uint64_t last_good = seq;
   EXPECT_TRUE(ses.status.wait_for(
@@ -237,7 +248,7 @@ inline void bad_samples(const Setup& setup, int max_stations) {
         const auto* b = find_station(st, "bad-1");
         return st.samples_rejected_nonfinite == 3 && st.samples_rejected_jump == 1 && b != nullptr &&
                b->samples_rejected_nonfinite == 3 && b->samples_rejected_jump == 1 &&
-               b->last_sequence == last_good && b->samples_accepted <= last_good - 4 &&
+               b->last_sequence == last_good && b->samples_accepted <= last_good - bad.size() &&
                b->samples_accepted >= 10;
       },
       5))
@@ -322,7 +333,7 @@ inline void station_vanishes(const Setup& setup, const std::filesystem::path& st
       << ses.server.log();
   const std::size_t before = models.count("live-1");
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
-  EXPECT_GT(models.count("live-1"), before + 100) << "the remaining station must keep getting answers";
+  EXPECT_GT(models.count("live-1"), before + 20) << "the remaining station must keep getting answers";
   ASSERT_TRUE(ses.server.alive());
   live.join();
   EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
