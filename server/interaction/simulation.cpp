@@ -522,8 +522,13 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   for (auto& m : missing_) m.clear();
   for (const Row& r : rows_)
     if (!bodies_[r.body].body->has_columns(r.slot)) missing_[r.body].push_back(r.slot);
-  for (std::size_t bi = 0; bi < bodies_.size(); ++bi)
-    if (!missing_[bi].empty()) bodies_[bi].body->ensure_columns(missing_[bi]);
+  stats.columns_computed = 0;
+  for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+    if (missing_[bi].empty()) continue;
+    const std::size_t before = bodies_[bi].body->cached_columns();
+    bodies_[bi].body->ensure_columns(missing_[bi]);
+    stats.columns_computed += static_cast<int>(bodies_[bi].body->cached_columns() - before);
+  }
 
   // Delassus operator on the rows: W_rs = n_r^T L(r, s) n_s (coupled compliance, unit m/N).
   for (int r = 0; r < n; ++r) {

@@ -250,6 +250,19 @@ TEST(interaction_simulation, ComplianceCacheRoundTrip) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(interaction_simulation, PrecomputedColumnsGiveTheSameStep) {
+  SimulationOptions pre;
+  pre.precompute_contact_columns = true;
+  auto a = run(SceneSpec{}, {push_right(0.004)});
+  auto b = run(SceneSpec{}, {push_right(0.004)}, pre);
+  EXPECT_GT(a.stats.columns_computed, 0);
+  EXPECT_EQ(b.stats.columns_computed, 0);
+  EXPECT_GT(b.sim->setup_stats().columns_s, 0.0);
+  EXPECT_EQ(a.contacts[0].nodes, b.contacts[0].nodes);
+  EXPECT_LE((a.contacts[0].force_n - b.contacts[0].force_n).norm(),
+            1e-12 * a.contacts[0].force_n.norm());
+}
+
 TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
   auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
   std::vector<ToolContact> c0, c1;
