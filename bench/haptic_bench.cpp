@@ -35,9 +35,10 @@ Eigen::Vector3d vec(const std::string& s) {
   return v;
 }
 
-pid_t spawn_server(const std::string& path, const std::string& scene, const std::string& prefix, double seconds) {
-  std::vector<std::string> args{path, "--scene", scene, "--topic-prefix", prefix, "--duration",
-                                std::to_string(seconds)};
+pid_t spawn_server(const std::string& path, const std::string& scene, const std::string& prefix,
+                   double seconds) {
+  std::vector<std::string> args{
+      path, "--scene", scene, "--topic-prefix", prefix, "--duration", std::to_string(seconds)};
   std::vector<char*> argv;
   for (auto& a : args) argv.push_back(a.data());
   argv.push_back(nullptr);
@@ -61,15 +62,24 @@ int main(int argc, char** argv) {
         if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
         return std::string(argv[++i]);
       };
-      if (a == "--seconds") seconds = std::stod(val());
-      else if (a == "--modes") modes = val();
-      else if (a == "--server") server = val();
-      else if (a == "--scene") scene = val();
-      else if (a == "--device") spec = val();
-      else if (a == "--origin") base.workspace_origin_m = vec(val());
-      else if (a == "--up") base.workspace_up = vec(val());
-      else if (a == "--csv") csv = true;
-      else throw std::invalid_argument("unknown option " + a);
+      if (a == "--seconds")
+        seconds = std::stod(val());
+      else if (a == "--modes")
+        modes = val();
+      else if (a == "--server")
+        server = val();
+      else if (a == "--scene")
+        scene = val();
+      else if (a == "--device")
+        spec = val();
+      else if (a == "--origin")
+        base.workspace_origin_m = vec(val());
+      else if (a == "--up")
+        base.workspace_up = vec(val());
+      else if (a == "--csv")
+        csv = true;
+      else
+        throw std::invalid_argument("unknown option " + a);
     }
     if (!server.empty() && scene.empty()) throw std::invalid_argument("--server needs --scene");
   } catch (const std::exception& e) {
@@ -79,19 +89,23 @@ int main(int argc, char** argv) {
   std::printf(csv ? "mode,server,samples,period_p50_us,period_p99_us,period_max_us,misses_over_1ms,"
                     "model_age_p99_ms,max_force_step_n,sched\n"
                   : "%-7s %-6s %8s %9s %9s %10s %8s %12s %10s %s\n",
-              "mode", "server", "samples", "p50_us", "p99_us", "max_us", "misses", "age_p99_ms", "step_N", "sched");
+              "mode", "server", "samples", "p50_us", "p99_us", "max_us", "misses", "age_p99_ms",
+              "step_N", "sched");
   std::stringstream ms(modes);
   std::string mode;
   int run = 0;
   while (std::getline(ms, mode, ',')) {
     try {
-      const std::string prefix = "hbench" + std::to_string(::getpid()) + "_" + std::to_string(run++) + "_";
+      const std::string prefix =
+          "hbench" + std::to_string(::getpid()) + "_" + std::to_string(run++) + "_";
       nh::testing::Topics topics{prefix + "neurosim_ToolState", prefix + "neurosim_ContactModel",
                                  prefix + "neurosim_SimStatus"};
       std::unique_ptr<nh::testing::FakeDdsServer> fake;
       pid_t pid = 0;
-      if (server.empty()) fake = std::make_unique<nh::testing::FakeDdsServer>(topics, nh::testing::HalfSpace{});
-      else pid = spawn_server(server, scene, prefix, seconds + 60);
+      if (server.empty())
+        fake = std::make_unique<nh::testing::FakeDdsServer>(topics, nh::testing::HalfSpace{});
+      else
+        pid = spawn_server(server, scene, prefix, seconds + 60);
       nh::DdsLinkOptions o;
       o.station_id = "bench";
       o.tool_topic = topics.tool;
@@ -102,7 +116,8 @@ int main(int argc, char** argv) {
       auto device = nh::make_device(spec);
       nh::LoopConfig cfg = base;
       cfg.realtime_priority = mode == "fifo";
-      cfg.trace_capacity = static_cast<std::size_t>(seconds * 1000) + 10;  // where the longest period was
+      cfg.trace_capacity =
+          static_cast<std::size_t>(seconds * 1000) + 10;  // where the longest period was
       nh::HapticLoop loop(cfg, *device, &link, nullptr);
       const nh::RealtimeInfo rt = loop.run_realtime(seconds);
       if (pid > 0) {
@@ -114,21 +129,27 @@ int main(int argc, char** argv) {
       const char* srv = server.empty() ? "fake" : "real";
       if (csv)
         std::printf("%s,%s,%llu,%.1f,%.1f,%.1f,%llu,%.3f,%.4f,%s\n", mode.c_str(), srv,
-                    static_cast<unsigned long long>(s.samples), s.period_p50_us, s.period_p99_us, s.period_max_us,
-                    static_cast<unsigned long long>(s.misses_over_1ms), s.model_age_p99_ms, s.max_force_step_n, sched);
+                    static_cast<unsigned long long>(s.samples), s.period_p50_us, s.period_p99_us,
+                    s.period_max_us, static_cast<unsigned long long>(s.misses_over_1ms),
+                    s.model_age_p99_ms, s.max_force_step_n, sched);
       else
-        std::printf("%-7s %-6s %8llu %9.1f %9.1f %10.1f %8llu %12.3f %10.4f %s\n", mode.c_str(), srv,
-                    static_cast<unsigned long long>(s.samples), s.period_p50_us, s.period_p99_us, s.period_max_us,
-                    static_cast<unsigned long long>(s.misses_over_1ms), s.model_age_p99_ms, s.max_force_step_n, sched);
+        std::printf("%-7s %-6s %8llu %9.1f %9.1f %10.1f %8llu %12.3f %10.4f %s\n", mode.c_str(),
+                    srv, static_cast<unsigned long long>(s.samples), s.period_p50_us,
+                    s.period_p99_us, s.period_max_us,
+                    static_cast<unsigned long long>(s.misses_over_1ms), s.model_age_p99_ms,
+                    s.max_force_step_n, sched);
       if (!rt.warning.empty()) std::fprintf(stderr, "haptic_bench: %s\n", rt.warning.c_str());
       const auto& tr = loop.trace();
       std::size_t worst = 0;
       for (std::size_t i = 1; i < tr.size(); ++i)
-        if (tr[i].now_ns - tr[i - 1].now_ns > tr[worst].now_ns - (worst > 0 ? tr[worst - 1].now_ns : tr[0].now_ns))
+        if (tr[i].now_ns - tr[i - 1].now_ns >
+            tr[worst].now_ns - (worst > 0 ? tr[worst - 1].now_ns : tr[0].now_ns))
           worst = i;
       if (worst > 0)
-        std::fprintf(stderr, "haptic_bench (%s): longest period %.1f us before tick %zu (t = %.3f s)\n", mode.c_str(),
-                     1e-3 * static_cast<double>(tr[worst].now_ns - tr[worst - 1].now_ns), worst, tr[worst].t_s);
+        std::fprintf(
+            stderr, "haptic_bench (%s): longest period %.1f us before tick %zu (t = %.3f s)\n",
+            mode.c_str(), 1e-3 * static_cast<double>(tr[worst].now_ns - tr[worst - 1].now_ns),
+            worst, tr[worst].t_s);
       std::fflush(stdout);
     } catch (const std::exception& e) {
       std::cerr << "haptic_bench (" << mode << "): " << e.what() << "\n";

@@ -116,6 +116,11 @@ bool DdsLink::wait_for_server(double timeout_s) const {
 
 void DdsLink::run() {
   Impl& im = *impl_;
+  if (im.opt.receiver_rt_priority > 0) {
+    sched_param p{};
+    p.sched_priority = im.opt.receiver_rt_priority;
+    pthread_setschedparam(pthread_self(), SCHED_FIFO, &p);  // best effort: normal if refused
+  }
   ContactModelData m;
   bool had_writer = false;
   while (!stop_.load()) {

@@ -24,20 +24,22 @@ struct DdsLinkOptions {
   // ToolStates are written by a publisher thread (the loop only posts them lock-free), at this
   // SCHED_FIFO priority where permitted (0: normal priority), so DDS locks never stall the loop.
   int publisher_rt_priority = 70;
+  // The thread taking ContactModels, likewise (0: normal priority).
+  int receiver_rt_priority = 60;
 };
 
 struct DdsLinkCounters {
-  std::uint64_t models_received = 0;   // for this station
-  std::uint64_t models_rejected = 0;   // tool_sample_rejected set by the server
-  std::uint64_t server_lost = 0;       // SimStatus writers went from alive to none
-  std::uint64_t server_seen = 0;       // SimStatus writers appeared (first time or reconnect)
-  std::uint64_t write_errors = 0;      // ToolState writes that failed
+  std::uint64_t models_received = 0;  // for this station
+  std::uint64_t models_rejected = 0;  // tool_sample_rejected set by the server
+  std::uint64_t server_lost = 0;      // SimStatus writers went from alive to none
+  std::uint64_t server_seen = 0;      // SimStatus writers appeared (first time or reconnect)
+  std::uint64_t write_errors = 0;     // ToolState writes that failed
 };
 
 class DdsLink : public Link {
  public:
   explicit DdsLink(const DdsLinkOptions& options);  // starts the DDS thread
-  ~DdsLink() override;                               // stops it
+  ~DdsLink() override;                              // stops it
   DdsLink(const DdsLink&) = delete;
   DdsLink& operator=(const DdsLink&) = delete;
 

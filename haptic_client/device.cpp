@@ -25,9 +25,12 @@ class PressScript : public Script {
   Eigen::Vector3d position(double t) const override {
     const double c = std::fmod(std::max(t, 0.0), 4.0);
     double s = 0;
-    if (c < 1.5) s = smooth(c / 1.5);
-    else if (c < 2.0) s = 1;
-    else if (c < 3.5) s = 1 - smooth((c - 2.0) / 1.5);
+    if (c < 1.5)
+      s = smooth(c / 1.5);
+    else if (c < 2.0)
+      s = 1;
+    else if (c < 3.5)
+      s = 1 - smooth((c - 2.0) / 1.5);
     return {0, 0, 0.004 - 0.008 * s};
   }
 };
@@ -83,7 +86,8 @@ std::unique_ptr<Script> make_script(const std::string& name) {
   if (name == "stroke") return std::make_unique<StrokeScript>();
   if (name == "circle") return std::make_unique<CircleScript>();
   if (name == "retract") return std::make_unique<RetractScript>();
-  throw std::invalid_argument("unknown script '" + name + "' (known: press, stroke, circle, retract)");
+  throw std::invalid_argument("unknown script '" + name +
+                              "' (known: press, stroke, circle, retract)");
 }
 
 ScriptDevice::ScriptDevice(std::unique_ptr<Script> script) : script_(std::move(script)) {
@@ -103,7 +107,8 @@ HandDevice::HandDevice(std::unique_ptr<Script> target, const HandParams& params)
   if (!target_) throw std::invalid_argument("HandDevice: no target script");
   if (!(p_.mass_kg > 0) || !(p_.stiffness_n_per_m >= 0) || !(p_.damping_n_s_per_m >= 0) ||
       p_.substeps < 1)
-    throw std::invalid_argument("HandDevice: mass must be > 0, stiffness and damping >= 0, substeps >= 1");
+    throw std::invalid_argument(
+        "HandDevice: mass must be > 0, stiffness and damping >= 0, substeps >= 1");
   x_ = target_->position(0);
   v_ = target_->velocity(0);
 }
@@ -145,9 +150,11 @@ ReplayDevice::ReplayDevice(const std::string& file) : file_(file) {
   while (reader.next(s)) {
     DeviceReading r;
     r.position_m = {s.position_m().x(), s.position_m().y(), s.position_m().z()};
-    r.orientation = {s.orientation().w(), s.orientation().x(), s.orientation().y(), s.orientation().z()};
+    r.orientation = {s.orientation().w(), s.orientation().x(), s.orientation().y(),
+                     s.orientation().z()};
     if (!s.has_orientation()) r.orientation = {1, 0, 0, 0};
-    r.velocity_m_per_s = {s.velocity_m_per_s().x(), s.velocity_m_per_s().y(), s.velocity_m_per_s().z()};
+    r.velocity_m_per_s = {s.velocity_m_per_s().x(), s.velocity_m_per_s().y(),
+                          s.velocity_m_per_s().z()};
     r.buttons = s.buttons();
     samples_.push_back(r);
     times_.push_back(s.time_s());

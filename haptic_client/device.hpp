@@ -85,10 +85,10 @@ class ScriptDevice : public Device {
 // A hand holding the stylus: the stylus (mass m) is pulled to the script's point by a spring
 // and damper (the grip) while the commanded force acts on it, so force changes motion.
 struct HandParams {
-  double mass_kg = 0.15;             // stylus + fingers, unit kg
-  double stiffness_n_per_m = 300;    // grip spring, unit N/m
-  double damping_n_s_per_m = 3;      // grip damper, unit N s/m
-  int substeps = 10;                 // integration steps per read() interval
+  double mass_kg = 0.15;           // stylus + fingers, unit kg
+  double stiffness_n_per_m = 300;  // grip spring, unit N/m
+  double damping_n_s_per_m = 3;    // grip damper, unit N s/m
+  int substeps = 10;               // integration steps per read() interval
 };
 
 class HandDevice : public Device {

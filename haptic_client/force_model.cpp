@@ -29,8 +29,10 @@ void ForceModelConfig::validate() const {
   auto nonneg = [](double v) { return std::isfinite(v) && v >= 0; };
   require(pos(period_s), "period_s", period_s, "finite and > 0");
   require(pos(max_force_n), "max_force_n", max_force_n, "finite and > 0");
-  require(pos(max_stiffness_n_per_m), "max_stiffness_n_per_m", max_stiffness_n_per_m, "finite and > 0");
-  require(nonneg(max_damping_n_s_per_m), "max_damping_n_s_per_m", max_damping_n_s_per_m, "finite and >= 0");
+  require(pos(max_stiffness_n_per_m), "max_stiffness_n_per_m", max_stiffness_n_per_m,
+          "finite and > 0");
+  require(nonneg(max_damping_n_s_per_m), "max_damping_n_s_per_m", max_damping_n_s_per_m,
+          "finite and >= 0");
   require(std::isfinite(damping_n_s_per_m), "damping_n_s_per_m", damping_n_s_per_m, "finite");
   require(pos(passivity_margin), "passivity_margin", passivity_margin, "finite and > 0");
   require(pos(force_scale), "force_scale", force_scale, "finite and > 0");
@@ -45,7 +47,8 @@ void ForceModelConfig::validate() const {
 ForceModel::ForceModel(const ForceModelConfig& config) : cfg_(config) {
   cfg_.validate();
   const double T = cfg_.period_s;
-  // Virtual damping b (device side): enough for K < 2b/T with margin, within what the device can render.
+  // Virtual damping b (device side): enough for K < 2b/T with margin, within what the device can
+  // render.
   damping_ = cfg_.damping_n_s_per_m >= 0
                  ? cfg_.damping_n_s_per_m
                  : std::min(cfg_.max_damping_n_s_per_m,
@@ -140,7 +143,8 @@ ForceOutput ForceModel::step(const ForceInput& in) {
   }
 
   double age = 0;
-  if (has_current_) age = std::max(0.0, 1e-9 * static_cast<double>(in.now_ns - current_.reference_time_ns));
+  if (has_current_)
+    age = std::max(0.0, 1e-9 * static_cast<double>(in.now_ns - current_.reference_time_ns));
   const bool stale = !has_current_ || age > cfg_.model_timeout_s || server_gone_;
   if (stale && has_current_ && !stale_) ++counters_.timeouts;
   stale_ = stale;
@@ -150,8 +154,7 @@ ForceOutput ForceModel::step(const ForceInput& in) {
     // Tied to the model's age as well, so late ticks cannot stretch it: zero at timeout + fade.
     if (has_current_ && !server_gone_ && cfg_.fade_s > 0)
       gain_ = std::min(gain_, 1 - (age - cfg_.model_timeout_s) / cfg_.fade_s);
-  }
-  else
+  } else
     gain_ = cfg_.ramp_in_s > 0 ? gain_ + T / cfg_.ramp_in_s : 1;
   gain_ = std::clamp(gain_, 0.0, 1.0);
   if (gain_ < 1e-9) gain_ = 0;  // rounding of the fade steps must not leave a residue

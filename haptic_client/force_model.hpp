@@ -18,64 +18,64 @@ struct ContactModelData {
   std::uint64_t tool_sequence = 0;     // ToolState.sequence_number it answers
   std::int64_t reference_time_ns = 0;  // time the model refers to (the answered ToolState's
                                        // source time), same clock as ForceInput::now_ns, unit ns
-  Eigen::Vector3d x0_m = Eigen::Vector3d::Zero();      // reference tool tip, scene frame, unit m
-  Eigen::Vector3d f0_n = Eigen::Vector3d::Zero();      // force on the tool at x0, unit N
-  Eigen::Matrix3d k_n_per_m = Eigen::Matrix3d::Zero(); // K = dF/dx at x0, unit N/m
-  Eigen::Vector3d normal = Eigen::Vector3d::Zero();    // out of the tissue, unit vector
+  Eigen::Vector3d x0_m = Eigen::Vector3d::Zero();       // reference tool tip, scene frame, unit m
+  Eigen::Vector3d f0_n = Eigen::Vector3d::Zero();       // force on the tool at x0, unit N
+  Eigen::Matrix3d k_n_per_m = Eigen::Matrix3d::Zero();  // K = dF/dx at x0, unit N/m
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();     // out of the tissue, unit vector
   bool in_contact = false;
   double validity_radius_m = 0;  // extrapolate within this distance of x0 (0: no limit), unit m
   std::uint64_t server_step = 0;
 };
 
 struct ForceModelConfig {
-  double period_s = 1e-3;               // loop period T, unit s
-  double max_force_n = 3.3;             // device clamp |F| (Phantom Omni peak), unit N
-  double max_stiffness_n_per_m = 700;   // device-side stiffness limit (Omni usable), unit N/m
-  double max_damping_n_s_per_m = 5;     // device-side usable damping (Omni), unit N s/m
+  double period_s = 1e-3;              // loop period T, unit s
+  double max_force_n = 3.3;            // device clamp |F| (Phantom Omni peak), unit N
+  double max_stiffness_n_per_m = 700;  // device-side stiffness limit (Omni usable), unit N/m
+  double max_damping_n_s_per_m = 5;    // device-side usable damping (Omni), unit N s/m
   // Virtual damping along the normal while in contact; < 0: automatic, passivity_margin times
   // the minimum K T / 2 (K < 2b/T, Colgate & Schenkel), capped at max_damping_n_s_per_m.
   double damping_n_s_per_m = -1;
-  double passivity_margin = 2;          // b >= margin * K T / 2
+  double passivity_margin = 2;  // b >= margin * K T / 2
   // Limit stiffness so K < 2b/T holds with the margin. Off only to demonstrate instability.
   bool enforce_passivity = true;
-  double force_scale = 1;       // device force = scale * simulated force (scene haptics factor)
-  double workspace_scale = 1;   // simulated displacement = scale * device displacement
-  double blend_s = 0.005;       // a new model takes over within this time of its arrival, unit s
-  double ramp_in_s = 0.5;       // force gain 0 → 1 at start / after an outage, unit s
-  double model_timeout_s = 0.05;// model older than this → force fades out, unit s
-  double fade_s = 0.02;         // fade-out time, unit s
-  double max_force_step_n = 0.25;// bound on |F(k) - F(k-1)| per nominal period (a late tick
-                                 // may move as far as the ticks it replaced); NaN input zeroes
-                                 // at once, unit N
+  double force_scale = 1;          // device force = scale * simulated force (scene haptics factor)
+  double workspace_scale = 1;      // simulated displacement = scale * device displacement
+  double blend_s = 0.005;          // a new model takes over within this time of its arrival, unit s
+  double ramp_in_s = 0.5;          // force gain 0 → 1 at start / after an outage, unit s
+  double model_timeout_s = 0.05;   // model older than this → force fades out, unit s
+  double fade_s = 0.02;            // fade-out time, unit s
+  double max_force_step_n = 0.25;  // bound on |F(k) - F(k-1)| per nominal period (a late tick
+                                   // may move as far as the ticks it replaced); NaN input zeroes
+                                   // at once, unit N
   // Throws std::invalid_argument naming the field if something is non-finite or out of range.
   void validate() const;
 };
 
 struct ForceInput {
-  std::int64_t now_ns = 0;                                // loop time, unit ns
-  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();   // tool tip, scene frame, unit m
-  Eigen::Vector3d velocity_m_per_s = Eigen::Vector3d::Zero(); // scene frame, unit m/s
-  const ContactModelData* new_model = nullptr;            // a model that arrived since last tick
-  bool server_alive = true;                               // SimStatus liveliness
+  std::int64_t now_ns = 0;                                     // loop time, unit ns
+  Eigen::Vector3d position_m = Eigen::Vector3d::Zero();        // tool tip, scene frame, unit m
+  Eigen::Vector3d velocity_m_per_s = Eigen::Vector3d::Zero();  // scene frame, unit m/s
+  const ContactModelData* new_model = nullptr;  // a model that arrived since last tick
+  bool server_alive = true;                     // SimStatus liveliness
 };
 
 struct ForceOutput {
   Eigen::Vector3d force_n = Eigen::Vector3d::Zero();  // device force, scene axes, unit N
   bool in_contact = false;                            // model in use says in contact
   bool has_model = false;
-  double model_age_s = 0;                             // age of the model in use, unit s
-  double gain = 0;                                    // ramp/watchdog gain in [0, 1]
-  std::uint64_t model_sequence = 0;                   // tool_sequence of the model in use
+  double model_age_s = 0;            // age of the model in use, unit s
+  double gain = 0;                   // ramp/watchdog gain in [0, 1]
+  std::uint64_t model_sequence = 0;  // tool_sequence of the model in use
 };
 
 struct ForceModelCounters {
-  std::uint64_t nan_inputs = 0;       // non-finite position or velocity (force zeroed)
-  std::uint64_t nan_models = 0;       // non-finite ContactModel (rejected)
-  std::uint64_t nan_outputs = 0;      // non-finite force computed (zeroed; should stay 0)
+  std::uint64_t nan_inputs = 0;   // non-finite position or velocity (force zeroed)
+  std::uint64_t nan_models = 0;   // non-finite ContactModel (rejected)
+  std::uint64_t nan_outputs = 0;  // non-finite force computed (zeroed; should stay 0)
   std::uint64_t models_accepted = 0;
-  std::uint64_t server_lost = 0;      // transitions to server gone
-  std::uint64_t timeouts = 0;         // transitions to a stale model
-  std::uint64_t stiffness_limited = 0;// models scaled down (f0 and K) to the passive limit
+  std::uint64_t server_lost = 0;        // transitions to server gone
+  std::uint64_t timeouts = 0;           // transitions to a stale model
+  std::uint64_t stiffness_limited = 0;  // models scaled down (f0 and K) to the passive limit
 };
 
 class ForceModel {

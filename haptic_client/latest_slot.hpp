@@ -13,8 +13,8 @@ class LatestSlot {
   // Producer: publish v (overwrites an unread older value).
   void write(const T& v) {
     buf_[back_] = v;
-    const std::uint8_t old = middle_.exchange(static_cast<std::uint8_t>(back_ | kFresh),
-                                              std::memory_order_acq_rel);
+    const std::uint8_t old =
+        middle_.exchange(static_cast<std::uint8_t>(back_ | kFresh), std::memory_order_acq_rel);
     back_ = old & kIndex;
   }
   // Consumer: copies the newest value into out if one arrived since the last take.

@@ -40,8 +40,10 @@ HapticLoop::HapticLoop(const LoopConfig& config, Device& device, Link* link, Rec
     throw std::invalid_argument("haptic loop: workspace origin is not finite");
   const double n = cfg_.workspace_up.norm();
   if (!std::isfinite(n) || n == 0)
-    throw std::invalid_argument("haptic loop: workspace up direction must be a finite non-zero vector");
-  r_ = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), cfg_.workspace_up / n).toRotationMatrix();
+    throw std::invalid_argument(
+        "haptic loop: workspace up direction must be a finite non-zero vector");
+  r_ = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), cfg_.workspace_up / n)
+           .toRotationMatrix();
   trace_.reserve(cfg_.trace_capacity);
 }
 
@@ -49,7 +51,8 @@ ForceTraceSummary HapticLoop::force_trace() const {
   ForceTraceSummary f;
   f.contact_ticks = contact_ticks_;
   f.max_force_n = max_force_;
-  f.mean_contact_force_n = contact_ticks_ > 0 ? contact_force_sum_ / static_cast<double>(contact_ticks_) : 0;
+  f.mean_contact_force_n =
+      contact_ticks_ > 0 ? contact_force_sum_ / static_cast<double>(contact_ticks_) : 0;
   f.models_seen = models_seen_;
   return f;
 }
@@ -70,8 +73,9 @@ void HapticLoop::tick(std::int64_t now_ns, double t_s, double period_s, double l
     const double s = cfg_.force.workspace_scale;
     ts.position_m = cfg_.workspace_origin_m + s * (r_ * r.position_m);
     ts.velocity_m_per_s = s * (r_ * r.velocity_m_per_s);
-    const Eigen::Quaterniond q = Eigen::Quaterniond(r_) *
-                                 Eigen::Quaterniond(r.orientation[0], r.orientation[1], r.orientation[2], r.orientation[3]);
+    const Eigen::Quaterniond q =
+        Eigen::Quaterniond(r_) *
+        Eigen::Quaterniond(r.orientation[0], r.orientation[1], r.orientation[2], r.orientation[3]);
     ts.orientation = {q.w(), q.x(), q.y(), q.z()};
   }
   bool alive = true;
@@ -88,7 +92,8 @@ void HapticLoop::tick(std::int64_t now_ns, double t_s, double period_s, double l
   in.new_model = nm;
   in.server_alive = alive;
   const ForceOutput out = fm_.step(in);
-  device_.command(device_.scene_frame() ? out.force_n : Eigen::Vector3d(r_.transpose() * out.force_n));
+  device_.command(device_.scene_frame() ? out.force_n
+                                        : Eigen::Vector3d(r_.transpose() * out.force_n));
 
   const double step = (out.force_n - last_force_).norm();
   const double fmag = out.force_n.norm();

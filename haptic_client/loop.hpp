@@ -28,7 +28,7 @@ struct LoopConfig {
   bool realtime_priority = true;  // try SCHED_FIFO (warn and continue if not permitted)
   int rt_priority = 80;
   void (*warn)(const char* message) = nullptr;  // told at once when SCHED_FIFO is refused
-  std::size_t trace_capacity = 0;  // ticks kept in trace() (allocated up front)
+  std::size_t trace_capacity = 0;               // ticks kept in trace() (allocated up front)
 };
 
 // One tick as seen by tests and the demo's force trace.
@@ -53,9 +53,9 @@ struct ForceTraceSummary {
 };
 
 struct RealtimeInfo {
-  bool sched_fifo = false;       // SCHED_FIFO was granted
-  std::string warning;           // why not, if requested
-  std::uint64_t resyncs = 0;     // deadline re-anchored after falling > 100 ms behind
+  bool sched_fifo = false;    // SCHED_FIFO was granted
+  std::string warning;        // why not, if requested
+  std::uint64_t resyncs = 0;  // deadline re-anchored after falling > 100 ms behind
 };
 
 class HapticLoop {

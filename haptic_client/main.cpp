@@ -12,6 +12,7 @@
 
 #include <google/protobuf/text_format.h>
 
+#include <time.h>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -22,7 +23,6 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
-#include <time.h>
 
 namespace nh = neurosim::haptic;
 
@@ -34,12 +34,17 @@ void warn(const char* m) { std::fprintf(stderr, "neurosim-haptic: warning: %s\n"
 
 const char* kUsage =
     "usage: neurosim-haptic --station ID --device SPEC [--duration SECONDS] [--summary FILE.json]\n"
-    "                       [--record FILE] [--scene FILE] [--tool ID] [--origin X,Y,Z] [--up X,Y,Z]\n"
+    "                       [--record FILE] [--scene FILE] [--tool ID] [--origin X,Y,Z] [--up "
+    "X,Y,Z]\n"
     "                       [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]\n"
-    "                       [--topic-prefix P]  (P prepended to every topic name, as neurosim-server's)\n"
-    "                       [--trace FILE.csv]  (every tick: time, position, force, model age, gain)\n"
-    "  SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, circle,\n"
-    "        retract). Scripts press along device -z onto a surface at device z = 0; --origin puts\n"
+    "                       [--topic-prefix P]  (P prepended to every topic name, as "
+    "neurosim-server's)\n"
+    "                       [--trace FILE.csv]  (every tick: time, position, force, model age, "
+    "gain)\n"
+    "  SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, "
+    "circle,\n"
+    "        retract). Scripts press along device -z onto a surface at device z = 0; --origin "
+    "puts\n"
     "        that point in the scene (m) and --up is the surface's outward normal there.\n";
 
 Eigen::Vector3d parse_vec(const std::string& opt, const std::string& s) {
@@ -59,7 +64,8 @@ double parse_double(const std::string& opt, const std::string& s) {
   } catch (...) {
     pos = 0;
   }
-  if (pos != s.size() || !std::isfinite(v)) throw std::invalid_argument(opt + ": not a number: '" + s + "'");
+  if (pos != s.size() || !std::isfinite(v))
+    throw std::invalid_argument(opt + ": not a number: '" + s + "'");
   return v;
 }
 
@@ -72,7 +78,8 @@ std::int64_t realtime_ns() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string station, spec, summary_file, record_file, scene_file, tool = "probe", label, topic_prefix, trace_file;
+  std::string station, spec, summary_file, record_file, scene_file, tool = "probe", label,
+                                                                    topic_prefix, trace_file;
   double duration = 0, wait_server = 5;
   bool use_server = true;
   nh::LoopConfig cfg;
@@ -83,27 +90,44 @@ int main(int argc, char** argv) {
         if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
         return argv[++i];
       };
-      if (a == "--station") station = val();
-      else if (a == "--device") spec = val();
-      else if (a == "--duration") duration = parse_double(a, val());
-      else if (a == "--summary") summary_file = val();
-      else if (a == "--record") record_file = val();
-      else if (a == "--scene") scene_file = val();
-      else if (a == "--tool") tool = val();
-      else if (a == "--origin") cfg.workspace_origin_m = parse_vec(a, val());
-      else if (a == "--up") cfg.workspace_up = parse_vec(a, val());
-      else if (a == "--label") label = val();
-      else if (a == "--no-server") use_server = false;
-      else if (a == "--topic-prefix") topic_prefix = val();
-      else if (a == "--trace") trace_file = val();
-      else if (a == "--no-rt") cfg.realtime_priority = false;
-      else if (a == "--wait-server") wait_server = parse_double(a, val());
+      if (a == "--station")
+        station = val();
+      else if (a == "--device")
+        spec = val();
+      else if (a == "--duration")
+        duration = parse_double(a, val());
+      else if (a == "--summary")
+        summary_file = val();
+      else if (a == "--record")
+        record_file = val();
+      else if (a == "--scene")
+        scene_file = val();
+      else if (a == "--tool")
+        tool = val();
+      else if (a == "--origin")
+        cfg.workspace_origin_m = parse_vec(a, val());
+      else if (a == "--up")
+        cfg.workspace_up = parse_vec(a, val());
+      else if (a == "--label")
+        label = val();
+      else if (a == "--no-server")
+        use_server = false;
+      else if (a == "--topic-prefix")
+        topic_prefix = val();
+      else if (a == "--trace")
+        trace_file = val();
+      else if (a == "--no-rt")
+        cfg.realtime_priority = false;
+      else if (a == "--wait-server")
+        wait_server = parse_double(a, val());
       else if (a == "-h" || a == "--help") {
         std::cout << kUsage;
         return 0;
-      } else throw std::invalid_argument("unknown option " + a);
+      } else
+        throw std::invalid_argument("unknown option " + a);
     }
-    if (station.empty() || spec.empty()) throw std::invalid_argument("--station and --device are required");
+    if (station.empty() || spec.empty())
+      throw std::invalid_argument("--station and --device are required");
     if (duration < 0) throw std::invalid_argument("--duration must be >= 0");
   } catch (const std::exception& e) {
     std::cerr << "neurosim-haptic: " << e.what() << "\n" << kUsage;
@@ -146,45 +170,52 @@ int main(int argc, char** argv) {
     if (!record_file.empty()) {
       if (label.empty()) label = "made with " + device->kind() + " by neurosim-haptic";
       recorder = std::make_unique<nh::Recorder>(
-          record_file, nh::session_header(cfg, *device, station, tool, scene_name, scene_file, label, realtime_ns()));
+          record_file, nh::session_header(cfg, *device, station, tool, scene_name, scene_file,
+                                          label, realtime_ns()));
     }
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);
 
     // --trace keeps every tick in memory (allocated up front), written after the run.
-    cfg.trace_capacity = trace_file.empty() ? 0 : static_cast<std::size_t>((duration > 0 ? duration : 600) * 1000) + 10;
+    cfg.trace_capacity =
+        trace_file.empty() ? 0
+                           : static_cast<std::size_t>((duration > 0 ? duration : 600) * 1000) + 10;
     cfg.warn = warn;
     nh::HapticLoop loop(cfg, *device, link.get(), recorder.get());
     // Warning printed before the run (the loop itself never prints).
-    const nh::RealtimeInfo rt = [&] {
-      return loop.run_realtime(duration, &g_stop);
-    }();
+    const nh::RealtimeInfo rt = [&] { return loop.run_realtime(duration, &g_stop); }();
     if (recorder) recorder->close();
 
     const nh::LoopSummary s = loop.summary();
     const auto& c = loop.force_model().counters();
-    std::printf("neurosim-haptic %s: %llu ticks, period p50 %.1f us p99 %.1f us max %.1f us, "
-                "%llu ticks > 1 ms late, sched %s\n",
-                station.c_str(), static_cast<unsigned long long>(s.samples), s.period_p50_us, s.period_p99_us,
-                s.period_max_us, static_cast<unsigned long long>(s.misses_over_1ms),
-                rt.sched_fifo ? "SCHED_FIFO" : "normal");
+    std::printf(
+        "neurosim-haptic %s: %llu ticks, period p50 %.1f us p99 %.1f us max %.1f us, "
+        "%llu ticks > 1 ms late, sched %s\n",
+        station.c_str(), static_cast<unsigned long long>(s.samples), s.period_p50_us,
+        s.period_p99_us, s.period_max_us, static_cast<unsigned long long>(s.misses_over_1ms),
+        rt.sched_fifo ? "SCHED_FIFO" : "normal");
     if (s.model_age_p99_ms >= 0)
       std::printf("  model age p99 %.2f ms, models accepted %llu\n", s.model_age_p99_ms,
                   static_cast<unsigned long long>(c.models_accepted));
     else
       std::printf("  no ContactModel received\n");
-    std::printf("  max force step %.4f N, errors: nan inputs %llu, nan models %llu, timeouts %llu, "
-                "server lost %llu, stiffness limited %llu\n",
-                s.max_force_step_n, static_cast<unsigned long long>(c.nan_inputs),
-                static_cast<unsigned long long>(c.nan_models), static_cast<unsigned long long>(c.timeouts),
-                static_cast<unsigned long long>(c.server_lost),
-                static_cast<unsigned long long>(c.stiffness_limited));
+    std::printf(
+        "  max force step %.4f N, errors: nan inputs %llu, nan models %llu, timeouts %llu, "
+        "server lost %llu, stiffness limited %llu\n",
+        s.max_force_step_n, static_cast<unsigned long long>(c.nan_inputs),
+        static_cast<unsigned long long>(c.nan_models), static_cast<unsigned long long>(c.timeouts),
+        static_cast<unsigned long long>(c.server_lost),
+        static_cast<unsigned long long>(c.stiffness_limited));
     const nh::ForceTraceSummary ft = loop.force_trace();
-    std::printf("  force trace: %llu ticks in contact (%.1f %%), max |F| %.3f N, mean |F| in contact %.3f N, "
-                "%llu models used\n",
-                static_cast<unsigned long long>(ft.contact_ticks),
-                s.samples > 0 ? 100.0 * static_cast<double>(ft.contact_ticks) / static_cast<double>(s.samples) : 0.0,
-                ft.max_force_n, ft.mean_contact_force_n, static_cast<unsigned long long>(ft.models_seen));
+    std::printf(
+        "  force trace: %llu ticks in contact (%.1f %%), max |F| %.3f N, mean |F| in contact %.3f "
+        "N, "
+        "%llu models used\n",
+        static_cast<unsigned long long>(ft.contact_ticks),
+        s.samples > 0
+            ? 100.0 * static_cast<double>(ft.contact_ticks) / static_cast<double>(s.samples)
+            : 0.0,
+        ft.max_force_n, ft.mean_contact_force_n, static_cast<unsigned long long>(ft.models_seen));
     if (recorder)
       std::printf("  recorded %llu samples to %s (%llu dropped)\n",
                   static_cast<unsigned long long>(recorder->written()), record_file.c_str(),
@@ -196,10 +227,10 @@ int main(int argc, char** argv) {
       tf << "t_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,model_age_ms,gain,in_contact,model_sequence\n";
       tf.precision(9);
       for (const auto& t : loop.trace())
-        tf << t.t_s << ',' << t.position_m.x() << ',' << t.position_m.y() << ',' << t.position_m.z() << ','
-           << t.force_n.x() << ',' << t.force_n.y() << ',' << t.force_n.z() << ','
-           << (t.model_age_s >= 0 ? t.model_age_s * 1e3 : -1) << ',' << t.gain << ',' << (t.in_contact ? 1 : 0)
-           << ',' << t.model_sequence << '\n';
+        tf << t.t_s << ',' << t.position_m.x() << ',' << t.position_m.y() << ',' << t.position_m.z()
+           << ',' << t.force_n.x() << ',' << t.force_n.y() << ',' << t.force_n.z() << ','
+           << (t.model_age_s >= 0 ? t.model_age_s * 1e3 : -1) << ',' << t.gain << ','
+           << (t.in_contact ? 1 : 0) << ',' << t.model_sequence << '\n';
       if (!tf) throw std::runtime_error(trace_file + ": write failed");
     }
   } catch (const std::exception& e) {

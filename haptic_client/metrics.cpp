@@ -14,8 +14,8 @@ Histogram::Histogram(double bin_width, std::size_t bins) : width_(bin_width), bi
 void Histogram::add(double v) {
   if (!std::isfinite(v) || v < 0) v = 0;
   const double b = v / width_;
-  const std::size_t i = b >= static_cast<double>(bins_.size() - 1) ? bins_.size() - 1
-                                                                   : static_cast<std::size_t>(b);
+  const std::size_t i =
+      b >= static_cast<double>(bins_.size() - 1) ? bins_.size() - 1 : static_cast<std::size_t>(b);
   ++bins_[i];
   ++n_;
   max_ = std::max(max_, v);
@@ -27,7 +27,8 @@ double Histogram::quantile(double p) const {
   std::uint64_t acc = 0;
   for (std::size_t i = 0; i < bins_.size(); ++i) {
     acc += bins_[i];
-    if (acc >= std::max<std::uint64_t>(rank, 1)) return std::min(max_, width_ * static_cast<double>(i + 1));
+    if (acc >= std::max<std::uint64_t>(rank, 1))
+      return std::min(max_, width_ * static_cast<double>(i + 1));
   }
   return max_;
 }
@@ -35,7 +36,8 @@ double Histogram::quantile(double p) const {
 // 1 us bins up to 200 ms; 10 us bins up to 10 s.
 LoopMetrics::LoopMetrics() : period_us_(1.0, 200000), model_age_ms_(0.01, 1000000) {}
 
-void LoopMetrics::add_tick(double period_s, double lateness_s, double model_age_s, double force_step_n) {
+void LoopMetrics::add_tick(double period_s, double lateness_s, double model_age_s,
+                           double force_step_n) {
   ++samples_;
   if (period_s >= 0) period_us_.add(period_s * 1e6);
   if (lateness_s > 1e-3) ++misses_;
@@ -58,12 +60,16 @@ LoopSummary LoopMetrics::summary() const {
 std::string summary_json(const LoopSummary& s) {
   std::ostringstream o;
   o.precision(9);
-  o << "{\n  \"period_p50_us\": " << s.period_p50_us << ",\n  \"period_p99_us\": " << s.period_p99_us
-    << ",\n  \"period_max_us\": " << s.period_max_us << ",\n  \"misses_over_1ms\": " << s.misses_over_1ms
-    << ",\n  \"model_age_p99_ms\": ";
-  if (s.model_age_p99_ms < 0) o << "null";
-  else o << s.model_age_p99_ms;
-  o << ",\n  \"max_force_step_n\": " << s.max_force_step_n << ",\n  \"samples\": " << s.samples << "\n}\n";
+  o << "{\n  \"period_p50_us\": " << s.period_p50_us
+    << ",\n  \"period_p99_us\": " << s.period_p99_us
+    << ",\n  \"period_max_us\": " << s.period_max_us
+    << ",\n  \"misses_over_1ms\": " << s.misses_over_1ms << ",\n  \"model_age_p99_ms\": ";
+  if (s.model_age_p99_ms < 0)
+    o << "null";
+  else
+    o << s.model_age_p99_ms;
+  o << ",\n  \"max_force_step_n\": " << s.max_force_step_n << ",\n  \"samples\": " << s.samples
+    << "\n}\n";
   return o.str();
 }
 

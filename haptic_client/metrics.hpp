@@ -30,10 +30,10 @@ struct LoopSummary {
   double period_p50_us = 0;
   double period_p99_us = 0;
   double period_max_us = 0;
-  std::uint64_t misses_over_1ms = 0;   // ticks that started more than 1 ms after their deadline
-  double model_age_p99_ms = -1;        // < 0: no model was ever in use
-  double max_force_step_n = 0;         // largest |F(k) - F(k-1)|
-  std::uint64_t samples = 0;           // ticks
+  std::uint64_t misses_over_1ms = 0;  // ticks that started more than 1 ms after their deadline
+  double model_age_p99_ms = -1;       // < 0: no model was ever in use
+  double max_force_step_n = 0;        // largest |F(k) - F(k-1)|
+  std::uint64_t samples = 0;          // ticks
 };
 
 class LoopMetrics {

@@ -29,7 +29,8 @@ class OmniDevice : public Device {
   explicit OmniDevice(const std::string& name) : name_(name) {
     hhd_ = hdInitDevice(name.empty() ? HD_DEFAULT_DEVICE : name.c_str());
     HDErrorInfo e = hdGetError();
-    if (HD_DEVICE_ERROR(e)) throw std::runtime_error(hd_error_text(e, ("cannot open device '" + name + "'").c_str()));
+    if (HD_DEVICE_ERROR(e))
+      throw std::runtime_error(hd_error_text(e, ("cannot open device '" + name + "'").c_str()));
     hdMakeCurrentDevice(hhd_);
     hdEnable(HD_FORCE_OUTPUT);
     hdEnable(HD_MAX_FORCE_CLAMPING);  // the device's own clamp, on top of ours
@@ -54,7 +55,9 @@ class OmniDevice : public Device {
     hdDisableDevice(hhd_);
   }
 
-  std::string kind() const override { return "omni" + (name_.empty() ? std::string() : ":" + name_); }
+  std::string kind() const override {
+    return "omni" + (name_.empty() ? std::string() : ":" + name_);
+  }
   std::string model() const override { return model_; }
   double max_force_n() const override { return max_force_; }
   DeviceReading read(double) override {

@@ -12,7 +12,8 @@ struct Recorder::Writer {
   Writer(const std::string& f, recording::Header h) : w(f, std::move(h)) {}
 };
 
-Recorder::Recorder(const std::string& file, recording::Header header, bool blocking, std::size_t capacity)
+Recorder::Recorder(const std::string& file, recording::Header header, bool blocking,
+                   std::size_t capacity)
     : file_(file), ring_(capacity < 2 ? 2 : capacity), blocking_(blocking) {
   writer_ = std::make_unique<Writer>(file, std::move(header));
   thread_ = std::thread([this] { run(); });
@@ -49,14 +50,23 @@ void Recorder::run() {
       const RecordSample& s = ring_[t % ring_.size()];
       out.set_time_s(s.time_s);
       auto* p = out.mutable_position_m();
-      p->set_x(s.position_m.x()); p->set_y(s.position_m.y()); p->set_z(s.position_m.z());
+      p->set_x(s.position_m.x());
+      p->set_y(s.position_m.y());
+      p->set_z(s.position_m.z());
       auto* q = out.mutable_orientation();
-      q->set_w(s.orientation[0]); q->set_x(s.orientation[1]); q->set_y(s.orientation[2]); q->set_z(s.orientation[3]);
+      q->set_w(s.orientation[0]);
+      q->set_x(s.orientation[1]);
+      q->set_y(s.orientation[2]);
+      q->set_z(s.orientation[3]);
       auto* v = out.mutable_velocity_m_per_s();
-      v->set_x(s.velocity_m_per_s.x()); v->set_y(s.velocity_m_per_s.y()); v->set_z(s.velocity_m_per_s.z());
+      v->set_x(s.velocity_m_per_s.x());
+      v->set_y(s.velocity_m_per_s.y());
+      v->set_z(s.velocity_m_per_s.z());
       out.set_buttons(s.buttons);
       auto* f = out.mutable_force_n();
-      f->set_x(s.force_n.x()); f->set_y(s.force_n.y()); f->set_z(s.force_n.z());
+      f->set_x(s.force_n.x());
+      f->set_y(s.force_n.y());
+      f->set_z(s.force_n.z());
       out.set_contact_model_sequence(s.contact_model_sequence);
       out.set_tool_sequence(s.tool_sequence);
       out.set_in_contact(s.in_contact);

@@ -2,18 +2,18 @@
 // participant answering ToolStates with half-space ContactModels and writing SimStatus):
 // models reach the loop, killing the server mid-contact fades the force to zero in time, and
 // the client picks the server up again when it returns.
+#include "idl/wire/dds.hpp"
+#include "fake_dds_server.hpp"
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
-#include "fake_dds_server.hpp"
-#include "idl/wire/dds.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <chrono>
 #include <thread>
 
 namespace nh = neurosim::haptic;
@@ -103,7 +103,8 @@ TEST(haptic_dds, KillingServerMidContactFadesForceAndReconnects) {
         last_ref = tr[i].now_ns - static_cast<std::int64_t>(std::llround(tr[i].model_age_s * 1e9));
       }
       // The last tick still pushing (a late tick may make the first zero one later than 70 ms).
-      if (i > from && tr[i].force_n.norm() == 0) return 1e-6 * static_cast<double>(tr[i - 1].now_ns - last_ref);
+      if (i > from && tr[i].force_n.norm() == 0)
+        return 1e-6 * static_cast<double>(tr[i - 1].now_ns - last_ref);
     }
     return -1.0;
   };
@@ -116,12 +117,14 @@ TEST(haptic_dds, KillingServerMidContactFadesForceAndReconnects) {
   double max_step = 0;
   for (std::size_t i = 1; i < tr.size(); ++i) {
     // The bound is per nominal 1 ms period: a late tick may move as far as the ticks it replaced.
-    const double periods = std::max(1.0, 1e-6 * static_cast<double>(tr[i].now_ns - tr[i - 1].now_ns));
+    const double periods =
+        std::max(1.0, 1e-6 * static_cast<double>(tr[i].now_ns - tr[i - 1].now_ns));
     max_step = std::max(max_step, (tr[i].force_n - tr[i - 1].force_n).norm() / periods);
   }
   EXPECT_LE(max_step, cfg.force.max_force_step_n + 1e-12);
   EXPECT_GE(link.counters().server_lost, 1u);
   EXPECT_GE(link.counters().server_seen, 2u);
-  std::printf("last force %.1f ms after the newest model (stall), %.1f ms (kill); max step %.3f N\n", stall_ms,
-              kill_ms, max_step);
+  std::printf(
+      "last force %.1f ms after the newest model (stall), %.1f ms (kill); max step %.3f N\n",
+      stall_ms, kill_ms, max_step);
 }

@@ -67,8 +67,9 @@ class FakeDdsServer {
       for (const auto& rx : tools_->take()) {
         if (!rx.valid() || !answering) continue;
         const neurosim_ToolState& ts = rx.data;
-        const ContactModelData m = tissue_.model_at(
-            Vector3d(ts.position_m[0], ts.position_m[1], ts.position_m[2]), ts.sequence_number, ts.source_time_ns);
+        const ContactModelData m =
+            tissue_.model_at(Vector3d(ts.position_m[0], ts.position_m[1], ts.position_m[2]),
+                             ts.sequence_number, ts.source_time_ns);
         wire::set_string(cm->station_id, wire::get_string(ts.station_id));
         cm->tool_sequence = m.tool_sequence;
         cm->tool_source_time_ns = m.reference_time_ns;

@@ -56,7 +56,8 @@ nh::ForceModelConfig open_config() {
   return c;
 }
 
-nh::ForceInput input(std::int64_t t_ns, const Vector3d& x, const nh::ContactModelData* m = nullptr) {
+nh::ForceInput input(std::int64_t t_ns, const Vector3d& x,
+                     const nh::ContactModelData* m = nullptr) {
   nh::ForceInput in;
   in.now_ns = t_ns;
   in.position_m = x;

@@ -1,18 +1,18 @@
 // The haptic loop in simulated time (no DDS, no sleeping): the simulated hand against a stiff
 // half-space does not oscillate, recordings replay to the identical ToolState sequence, the
 // bundled script recordings replay, the summary JSON has the keys.
-#include "haptic_client/latest_slot.hpp"
 #include "haptic_client/loop.hpp"
 #include "fake_server.hpp"
+#include "haptic_client/latest_slot.hpp"
 #include "idl/wire/recording_io.hpp"
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <sys/wait.h>
 
 #include <cstdio>
 #include <iterator>
@@ -49,7 +49,8 @@ struct HandRun {
 
 // 10 s of the hand pressing into a half-space of stiffness k (server answer 2 ticks late).
 // k_felt: the stiffness the device renders (the energy's wall term).
-HandRun run_hand(const nh::ForceModelConfig& force, nh::HandParams hand, double k_wall, double k_felt = -1) {
+HandRun run_hand(const nh::ForceModelConfig& force, nh::HandParams hand, double k_wall,
+                 double k_felt = -1) {
   if (k_felt < 0) k_felt = k_wall;
   const double target_z = -0.004;
   auto dev = nh::HandDevice(std::make_unique<nh::ConstantScript>(Vector3d(0, 0, target_z)), hand);
@@ -131,7 +132,8 @@ TEST(haptic_loop, ReplayGivesIdenticalToolStateSequence) {
   link2.tissue.surface_z_m = -1;
   {
     nh::ScriptDevice dev(nh::make_script("stroke"));
-    nh::Recorder rec(first.string(), nh::session_header(cfg, dev, "st", "probe", "", "", "test", 0), true);
+    nh::Recorder rec(first.string(), nh::session_header(cfg, dev, "st", "probe", "", "", "test", 0),
+                     true);
     nh::HapticLoop loop(cfg, dev, &link1, &rec);
     loop.run_simulated(3000, 1000000000);
     rec.close();
@@ -140,7 +142,8 @@ TEST(haptic_loop, ReplayGivesIdenticalToolStateSequence) {
   {
     nh::ReplayDevice dev(first.string());
     EXPECT_EQ(dev.size(), 3000u);
-    nh::Recorder rec(second.string(), nh::session_header(cfg, dev, "st", "probe", "", "", "replay", 0), true);
+    nh::Recorder rec(second.string(),
+                     nh::session_header(cfg, dev, "st", "probe", "", "", "replay", 0), true);
     nh::HapticLoop loop(cfg, dev, &link2, &rec);
     loop.run_simulated(5000, 1000000000);  // stops by itself at the end of the recording
     rec.close();
@@ -165,7 +168,8 @@ TEST(haptic_loop, ReplayGivesIdenticalToolStateSequence) {
   EXPECT_EQ(r2.header.device().kind(), "replay:" + first.string());
   ASSERT_EQ(r1.samples.size(), r2.samples.size());
   for (std::size_t i = 0; i < r1.samples.size(); ++i)
-    ASSERT_EQ(r1.samples[i].position_m().SerializeAsString(), r2.samples[i].position_m().SerializeAsString());
+    ASSERT_EQ(r1.samples[i].position_m().SerializeAsString(),
+              r2.samples[i].position_m().SerializeAsString());
   fs::remove_all(dir);
 }
 
@@ -178,7 +182,8 @@ TEST(haptic_loop, BundledScriptRecordingsReplayExactly) {
     ++found;
     const auto rec = neurosim::wire::read_recording(f);
     EXPECT_EQ(rec.header.device().kind(), std::string("script:") + name);
-    EXPECT_NE(rec.header.label().find("script"), std::string::npos) << "labelled as made with a script";
+    EXPECT_NE(rec.header.label().find("script"), std::string::npos)
+        << "labelled as made with a script";
     nh::ReplayDevice dev(f.string());
     nh::testing::FakeLink link;
     nh::LoopConfig cfg;
@@ -187,7 +192,8 @@ TEST(haptic_loop, BundledScriptRecordingsReplayExactly) {
     ASSERT_EQ(link.published.size(), rec.samples.size()) << f;
     for (std::size_t i = 0; i < rec.samples.size(); ++i) {
       const auto& p = rec.samples[i].position_m();
-      ASSERT_EQ(link.published[i].position_m, Vector3d(p.x(), p.y(), p.z())) << f << " sample " << i;
+      ASSERT_EQ(link.published[i].position_m, Vector3d(p.x(), p.y(), p.z()))
+          << f << " sample " << i;
     }
   }
   EXPECT_EQ(found, 4);
@@ -264,7 +270,8 @@ TEST(haptic_loop, RecorderDropsInsteadOfBlockingTheLoop) {
   nh::LoopConfig cfg;
   std::uint64_t accepted = 0;
   {
-    nh::Recorder rec((dir / "r.rec").string(), nh::session_header(cfg, dev, "st", "probe", "", "", "test", 0),
+    nh::Recorder rec((dir / "r.rec").string(),
+                     nh::session_header(cfg, dev, "st", "probe", "", "", "test", 0),
                      /*blocking=*/false, /*capacity=*/16);
     nh::RecordSample s;
     for (int i = 0; i < 100000; ++i) {
@@ -282,7 +289,8 @@ TEST(haptic_loop, RecorderDropsInsteadOfBlockingTheLoop) {
 namespace {
 // Runs neurosim-haptic with arguments; returns the exit status and the combined output.
 int run_haptic(const std::string& args, std::string& output) {
-  const std::string cmd = (neurosim::testing::bin_dir() / "neurosim-haptic").string() + " " + args + " 2>&1";
+  const std::string cmd =
+      (neurosim::testing::bin_dir() / "neurosim-haptic").string() + " " + args + " 2>&1";
   FILE* p = ::popen(cmd.c_str(), "r");
   if (p == nullptr) return -1;
   char buf[512];
@@ -295,15 +303,17 @@ int run_haptic(const std::string& args, std::string& output) {
 TEST(haptic_loop, CommandLineRunsScriptedStationAndWritesSummary) {
   const fs::path dir = neurosim::testing::temp_dir("haptic_cli");
   std::string out;
-  const int rc = run_haptic("--station cli --device script:press --duration 0.3 --no-server --no-rt --summary " +
-                                (dir / "s.json").string() + " --record " + (dir / "r.rec").string() + " --trace " +
-                                (dir / "t.csv").string(),
-                            out);
+  const int rc = run_haptic(
+      "--station cli --device script:press --duration 0.3 --no-server --no-rt --summary " +
+          (dir / "s.json").string() + " --record " + (dir / "r.rec").string() + " --trace " +
+          (dir / "t.csv").string(),
+      out);
   ASSERT_EQ(rc, 0) << out;
   std::ifstream f(dir / "s.json");
   const std::string json((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   EXPECT_NE(json.find("\"samples\": 300"), std::string::npos) << json;
-  EXPECT_NE(json.find("\"model_age_p99_ms\": null"), std::string::npos) << "no server: no model age";
+  EXPECT_NE(json.find("\"model_age_p99_ms\": null"), std::string::npos)
+      << "no server: no model age";
   EXPECT_EQ(neurosim::wire::read_recording(dir / "r.rec").samples.size(), 300u);
   EXPECT_EQ(neurosim::wire::read_recording(dir / "r.rec").header.device().kind(), "script:press");
   std::string omni;

@@ -54,8 +54,8 @@ class ServerProcess {
  public:
   ServerProcess(const std::string& prefix, const fs::path& log) : prefix_(prefix) {
     const std::string bin = server_binary().string();
-    std::vector<std::string> args{bin, "--scene", cube_scene().string(), "--topic-prefix", prefix,
-                                  "--duration", "240"};
+    std::vector<std::string> args{
+        bin, "--scene", cube_scene().string(), "--topic-prefix", prefix, "--duration", "240"};
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -110,21 +110,21 @@ std::string read_file(const fs::path& p) {
 }
 
 // Waits for the server's first ContactModel; skips the test if the server ended by itself.
-#define WAIT_FOR_SERVER_OR_SKIP(server, link, log)                                               \
-  do {                                                                                           \
-    const auto t0_ = std::chrono::steady_clock::now();                                           \
-    bool up_ = false;                                                                            \
-    while (seconds_since(t0_) < 180) {                                                           \
-      int st_ = 0;                                                                               \
-      if ((server).exited(st_))                                                                  \
-        GTEST_SKIP() << "neurosim-server ended before answering (status " << st_ << "): "       \
-                     << read_file(log);                                                          \
-      if ((link).wait_for_server(0.5)) {                                                         \
-        up_ = true;                                                                              \
-        break;                                                                                   \
-      }                                                                                          \
-    }                                                                                            \
-    ASSERT_TRUE(up_) << "neurosim-server did not come up within 180 s: " << read_file(log);     \
+#define WAIT_FOR_SERVER_OR_SKIP(server, link, log)                                          \
+  do {                                                                                      \
+    const auto t0_ = std::chrono::steady_clock::now();                                      \
+    bool up_ = false;                                                                       \
+    while (seconds_since(t0_) < 180) {                                                      \
+      int st_ = 0;                                                                          \
+      if ((server).exited(st_))                                                             \
+        GTEST_SKIP() << "neurosim-server ended before answering (status " << st_            \
+                     << "): " << read_file(log);                                            \
+      if ((link).wait_for_server(0.5)) {                                                    \
+        up_ = true;                                                                         \
+        break;                                                                              \
+      }                                                                                     \
+    }                                                                                       \
+    ASSERT_TRUE(up_) << "neurosim-server did not come up within 180 s: " << read_file(log); \
   } while (0)
 
 struct ModelRecord {
@@ -139,8 +139,10 @@ struct ModelRecord {
 };
 
 // Replays `rec` against a fresh server; returns the ContactModels seen, by tool sequence.
-std::map<std::uint64_t, ModelRecord> replay_against_fresh_server(const fs::path& rec, const std::string& prefix,
-                                                                 const fs::path& log, bool& skipped) {
+std::map<std::uint64_t, ModelRecord> replay_against_fresh_server(const fs::path& rec,
+                                                                 const std::string& prefix,
+                                                                 const fs::path& log,
+                                                                 bool& skipped) {
   std::map<std::uint64_t, ModelRecord> seen;
   skipped = true;
   ServerProcess server(prefix, log);
@@ -158,7 +160,8 @@ std::map<std::uint64_t, ModelRecord> replay_against_fresh_server(const fs::path&
     while (seconds_since(t0) < 180) {
       int st = 0;
       if (server.exited(st)) {
-        std::printf("neurosim-server ended before answering (status %d): %s\n", st, read_file(log).c_str());
+        std::printf("neurosim-server ended before answering (status %d): %s\n", st,
+                    read_file(log).c_str());
         return seen;
       }
       if (link.wait_for_server(0.5)) {
@@ -257,14 +260,17 @@ TEST(haptic_server, KillingServerMidContactFadesForceToZeroInTime) {
       break;
     }
   }
-  std::printf("contact force %.3f N; last force %.1f ms after the newest model; server seen gone after %.2f s\n",
-              f_contact, zero_ms, gone_after_s);
+  std::printf(
+      "contact force %.3f N; last force %.1f ms after the newest model; server seen gone after "
+      "%.2f s\n",
+      f_contact, zero_ms, gone_after_s);
   EXPECT_GE(zero_ms, 50) << "kill -9 is only seen by the 50 ms watchdog (liveliness takes ~0.5 s)";
   EXPECT_LT(zero_ms, 50 + 20) << "no force 70 ms after the newest model";
   double max_step = 0;
   for (std::size_t i = 1; i < tr.size(); ++i) {
     // The bound is per nominal 1 ms period: a late tick may move as far as the ticks it replaced.
-    const double periods = std::max(1.0, 1e-6 * static_cast<double>(tr[i].now_ns - tr[i - 1].now_ns));
+    const double periods =
+        std::max(1.0, 1e-6 * static_cast<double>(tr[i].now_ns - tr[i - 1].now_ns));
     max_step = std::max(max_step, (tr[i].force_n - tr[i - 1].force_n).norm() / periods);
   }
   EXPECT_LE(max_step, cfg.force.max_force_step_n + 1e-12);
@@ -288,11 +294,12 @@ TEST(haptic_server, ReplayingOneRecordingTwiceGivesIdenticalContactModels) {
     if (it == b.end()) continue;
     ++common;
     contact += m.in_contact ? 1 : 0;
-    ASSERT_TRUE(m == it->second) << "ContactModel for tool sequence " << seq << " differs between runs";
+    ASSERT_TRUE(m == it->second) << "ContactModel for tool sequence " << seq
+                                 << " differs between runs";
   }
   const auto n = neurosim::wire::read_recording(rec).samples.size();
-  std::printf("models: run a %zu, run b %zu, common %zu (%zu in contact) of %zu poses\n", a.size(), b.size(),
-              common, contact, n);
+  std::printf("models: run a %zu, run b %zu, common %zu (%zu in contact) of %zu poses\n", a.size(),
+              b.size(), common, contact, n);
   // The server answers the newest pose each step, so a loaded machine skips some poses.
   EXPECT_GT(common, n / 4) << "too few poses answered in both runs to compare";
   EXPECT_GT(contact, 100u) << "the replay must actually press into the cube";
@@ -302,47 +309,63 @@ TEST(haptic_server, ReplayingOneRecordingTwiceGivesIdenticalContactModels) {
 TEST(haptic_server, SimulatedHandAgainstTheCubeSettles) {
   // Closed loop with the real physics: the hand pulls the stylus 4 mm into the cube's right
   // face (E = 1 MPa, far stiffer than the Omni may render) for 10 s; the motion must die out.
+  // Stability is only judged on a run where the server answered in time throughout (no
+  // watchdog timeout: a stalled server fades the force out, and the hand then falls in, which
+  // is the safety rule working, not an oscillation); up to 3 runs on a loaded machine.
   if (!fs::exists(server_binary())) GTEST_SKIP() << "no neurosim-server at " << server_binary();
   const fs::path dir = neurosim::testing::temp_dir("haptic_server_hand");
   const std::string prefix = "hhand" + std::to_string(::getpid()) + "_";
   ServerProcess server(prefix, dir / "server.log");
-  nh::DdsLink link(server.link_options("hand"));
-  WAIT_FOR_SERVER_OR_SKIP(server, link, dir / "server.log");
-  nh::HandDevice dev(std::make_unique<nh::ConstantScript>(Vector3d(0, 0, -0.004)));
-  dev.set_state(Vector3d(0, 0, 0.004), Vector3d::Zero());  // starts 4 mm in front of the face
-  nh::LoopConfig cfg;
-  cfg.workspace_origin_m = kFaceOrigin;
-  cfg.workspace_up = kFaceNormal;
-  cfg.realtime_priority = false;
-  cfg.trace_capacity = 11000;
-  nh::HapticLoop loop(cfg, dev, &link, nullptr);
-  loop.run_realtime(10.0);
-  const auto& tr = loop.trace();
-  ASSERT_GT(tr.size(), 9000u);
-  // Per second: largest speed (from positions) and force; and the last second's speed RMS.
-  std::vector<double> vmax(10, 0), fmax(10, 0);
-  double v2 = 0;
-  std::size_t n_last = 0;
-  for (std::size_t i = 1; i < tr.size(); ++i) {
-    const double dt = tr[i].t_s - tr[i - 1].t_s;  // the hand is integrated in nominal time
-    if (dt <= 0) continue;
-    const double v = (tr[i].position_m - tr[i - 1].position_m).norm() / dt;
-    const auto s = std::min<std::size_t>(9, static_cast<std::size_t>(tr[i].t_s));
-    vmax[s] = std::max(vmax[s], v);
-    fmax[s] = std::max(fmax[s], tr[i].force_n.norm());
-    if (s == 9) {
-      v2 += v * v;
-      ++n_last;
+  for (int attempt = 1; attempt <= 3; ++attempt) {
+    // A new station each run: the server would reject the jump back to the start pose.
+    nh::DdsLink link(server.link_options("hand-" + std::to_string(attempt)));
+    WAIT_FOR_SERVER_OR_SKIP(server, link, dir / "server.log");
+    nh::HandDevice dev(std::make_unique<nh::ConstantScript>(Vector3d(0, 0, -0.004)));
+    dev.set_state(Vector3d(0, 0, 0.004), Vector3d::Zero());  // starts 4 mm in front of the face
+    nh::LoopConfig cfg;
+    cfg.workspace_origin_m = kFaceOrigin;
+    cfg.workspace_up = kFaceNormal;
+    cfg.trace_capacity = 11000;
+    nh::HapticLoop loop(cfg, dev, &link, nullptr);
+    loop.run_realtime(10.0);
+    const auto& tr = loop.trace();
+    ASSERT_GT(tr.size(), 9000u);
+    const auto sum = loop.summary();
+    const auto& cnt = loop.force_model().counters();
+    std::printf(
+        "run %d: model age p99 %.2f ms, misses %llu, timeouts %llu, models %llu, max step %.3f N\n",
+        attempt, sum.model_age_p99_ms, static_cast<unsigned long long>(sum.misses_over_1ms),
+        static_cast<unsigned long long>(cnt.timeouts),
+        static_cast<unsigned long long>(cnt.models_accepted), sum.max_force_step_n);
+    if (cnt.timeouts > 0) {
+      if (attempt == 3) FAIL() << "the server never answered in time for 10 s (3 runs)";
+      continue;
     }
+    // Per second: largest speed (from positions); and the last second's speed RMS.
+    std::vector<double> vmax(10, 0);
+    double v2 = 0;
+    std::size_t n_last = 0;
+    for (std::size_t i = 1; i < tr.size(); ++i) {
+      const double dt = tr[i].t_s - tr[i - 1].t_s;  // the hand is integrated in nominal time
+      if (dt <= 0) continue;
+      const double v = (tr[i].position_m - tr[i - 1].position_m).norm() / dt;
+      const auto s = std::min<std::size_t>(9, static_cast<std::size_t>(tr[i].t_s));
+      vmax[s] = std::max(vmax[s], v);
+      if (s == 9) {
+        v2 += v * v;
+        ++n_last;
+      }
+    }
+    const double v_rms_last = std::sqrt(v2 / static_cast<double>(std::max<std::size_t>(n_last, 1)));
+    std::printf("hand vs cube: speed max per second (mm/s):");
+    for (double v : vmax) std::printf(" %.2f", v * 1e3);
+    std::printf("; force %.3f N at the end; speed rms last second %.4f mm/s\n",
+                tr.back().force_n.norm(), v_rms_last * 1e3);
+    EXPECT_GT(tr.back().force_n.norm(), 0.3) << "the hand must end up pressing on the cube";
+    EXPECT_LT(v_rms_last, 1e-3) << "still moving after 10 s: oscillation";
+    for (std::size_t s = 4; s < 10; ++s)
+      EXPECT_LE(vmax[s], vmax[3] + 1e-3) << "motion grows again in second " << s;
+    break;
   }
-  const double v_rms_last = std::sqrt(v2 / static_cast<double>(std::max<std::size_t>(n_last, 1)));
-  std::printf("hand vs cube: speed max per second (mm/s):");
-  for (double v : vmax) std::printf(" %.2f", v * 1e3);
-  std::printf("; force %.3f N at the end; speed rms last second %.4f mm/s\n", tr.back().force_n.norm(),
-              v_rms_last * 1e3);
-  EXPECT_GT(tr.back().force_n.norm(), 0.3) << "the hand must end up pressing on the cube";
-  EXPECT_LT(v_rms_last, 1e-3) << "still moving after 10 s: oscillation";
-  for (std::size_t s = 4; s < 10; ++s)
-    EXPECT_LE(vmax[s], vmax[3] + 1e-3) << "motion grows again in second " << s;
   fs::remove_all(dir);
 }
