@@ -263,6 +263,23 @@ TEST(interaction_simulation, PrecomputedColumnsGiveTheSameStep) {
             1e-12 * a.contacts[0].force_n.norm());
 }
 
+TEST(interaction_simulation, EmbeddedMeshWithFixedNodes) {
+  SceneSpec spec;
+  spec.embedded_fixed = true;  // the cylinder's end face at y = 0.02 is held
+  auto on = run(spec, {push_right(0.004)});
+  EXPECT_TRUE(on.stats.converged);
+  EXPECT_TRUE(on.contacts[0].in_contact);
+  EXPECT_LE(on.sim->tie_residual_m(), 1e-9 * 0.004);
+  Eigen::VectorXd u;
+  on.sim->displacements(1, u);
+  for (int v : on.sim->fixed_nodes(1)) EXPECT_EQ(u.segment<3>(3 * v).norm(), 0.0) << v;
+  spec.coupling = false;
+  auto off = run(spec, {push_right(0.004)});
+  EXPECT_TRUE(off.sim->mesh_active(1));  // a body of its own now, untouched inside the cube
+  off.sim->displacements(1, u);
+  EXPECT_EQ(u.cwiseAbs().maxCoeff(), 0.0);
+}
+
 TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
   auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
   std::vector<ToolContact> c0, c1;
