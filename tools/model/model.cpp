@@ -17,6 +17,7 @@
 #include <cmath>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <stdexcept>
@@ -119,6 +120,22 @@ void skull_base_plane(const mesh::TetMesh& brain, double margin_m, Vec3& point_m
 }
 
 // Rounded to `quantum` so that the scene file stays readable (1e-6 m: a micrometre).
+// The tool's footprint for the static load case: surface nodes of the brain within a box
+// around the most lateral surface point near `target_m` (y, z within +-half_m).
+void footprint_box(const mesh::TetMesh& brain, const Vec3& target_m, double half_m,
+                   double depth_m, Vec3& lo, Vec3& hi) {
+  double xmax = -std::numeric_limits<double>::infinity();
+  for (int v : brain.surface_vertices()) {
+    const Vec3& x = brain.vertices()[v];
+    if (std::abs(x.y() - target_m.y()) <= half_m && std::abs(x.z() - target_m.z()) <= half_m) {
+      xmax = std::max(xmax, x.x());
+    }
+  }
+  if (!std::isfinite(xmax)) throw std::runtime_error("no brain surface near the load point");
+  lo = Vec3(xmax - depth_m, target_m.y() - half_m, target_m.z() - half_m);
+  hi = Vec3(xmax + 0.05, target_m.y() + half_m, target_m.z() + half_m);
+}
+
 void set_vec(scene::Vec3* out, const Vec3& v, double quantum) {
   auto q = [quantum](double x) { return std::round(x / quantum) * quantum; };
   out->set_x(q(v.x()));
@@ -309,6 +326,21 @@ ModelResult build_model(const ModelOptions& o) {
   s.mutable_image()->set_file(o.mri_path);
   s.mutable_image()->set_file_unit_m(kMmToM);
   s.set_max_stations(8);
+  {
+    // Static load case (neurosim-solve, the demo): the probe's footprint on the right lateral
+    // surface over the Sylvian fissure, pushed 3 mm medially towards the artery.
+    const Vec3 target_image =
+        world_to_image(mask, Vec3(60.0, -10.0, 8.0));  // MNI mm, right superior temporal gyrus
+    Vec3 lo, hi;
+    footprint_box(brain, target_image * kMmToM, 0.010, 0.006, lo, hi);  // ~2 x 2 cm
+    auto* pr = s.add_prescribed();
+    pr->set_mesh("brain");
+    set_vec(pr->mutable_region()->mutable_box()->mutable_min_m(), lo, 1e-6);
+    set_vec(pr->mutable_region()->mutable_box()->mutable_max_m(), hi, 1e-6);
+    set_vec(pr->mutable_displacement_m(), Vec3(-0.003, 0.0, 0.0), 1e-6);
+    r.prescribed_nodes = static_cast<int>(
+        scene::select_nodes(brain, pr->region(), "prescribed[0]").size());
+  }
 
   std::string text;
   if (!google::protobuf::TextFormat::PrintToString(s, &text)) {
@@ -362,6 +394,8 @@ std::string summary(const ModelResult& r) {
      << r.artery_length_mm << " mm, >= " << r.artery_min_depth_mm << " mm inside the mask\n";
   os << "  fixed: " << r.fixed_nodes << " brain nodes on the skull-base side of the plane through "
      << fmt(r.fixed_plane_point_m * 1e3) << " mm, normal " << fmt(r.fixed_plane_normal, 3) << "\n";
+  os << "  load case: " << r.prescribed_nodes
+     << " brain nodes on the right lateral surface pushed 3 mm medially (prescribed)\n";
   os << std::setprecision(2) << "  total " << r.total_seconds << " s\n";
   return os.str();
 }

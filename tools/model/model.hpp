@@ -56,6 +56,7 @@ struct ModelResult {
   double artery_min_depth_mm{0.0};  // least distance from the centreline to outside the mask
   int artery_vertices_outside{0};   // artery vertices not strictly inside the brain surface
   int fixed_nodes{0};               // brain nodes fixed at the skull base
+  int prescribed_nodes{0};          // brain nodes of the static load case (tool footprint)
   Vec3 fixed_plane_point_m{Vec3::Zero()};
   Vec3 fixed_plane_normal{Vec3::UnitZ()};
   std::filesystem::path scene;

@@ -157,6 +157,12 @@ TEST_F(model_builder, SceneParsesAndLoads) {
   for (int n : brain.fixed_nodes) {
     EXPECT_LT(brain.mesh.vertices()[n].z(), lo.z() + 0.5 * (hi.z() - lo.z())) << "node " << n;
   }
+  // The static load case pushes a few brain surface nodes.
+  ASSERT_EQ(s.prescribed_size(), 1);
+  EXPECT_EQ(s.prescribed(0).mesh(), "brain");
+  const auto pushed = scene::select_nodes(brain.mesh, s.prescribed(0).region(), "prescribed");
+  EXPECT_EQ(static_cast<int>(pushed.size()), result_->prescribed_nodes);
+  EXPECT_LT(pushed.size(), 50u);
   // Brain-sized (m): Colin27 is about 0.14 x 0.17 x 0.12 m.
   EXPECT_GT((hi - lo).minCoeff(), 0.08);
   EXPECT_LT((hi - lo).maxCoeff(), 0.25);
