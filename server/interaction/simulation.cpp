@@ -35,6 +35,7 @@ struct Row {
   int tool{-1};
   double depth_m{0.0};   // penetration along the node's inward normal, unit m
   double height_m{0.0};  // the tool centre's depth below the node's surface patch, unit m
+  bool shaft{false};     // pushed by the shaft (else by the tip)
 };
 
 bool deeper(const Row& a, const Row& b) {
@@ -439,6 +440,7 @@ void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& ax
       double height = height_above(x, n, p0);
       double depth = height <= b.max_penetration_m ? normal_line_depth(x, n, p0, shape.tip_radius_m)
                                                    : -std::numeric_limits<double>::infinity();
+      bool by_shaft = false;
       if (shaft) {
         const Vec3 q = closest_on_segment(x, p0, p1);
         const double hs = height_above(x, n, q);
@@ -448,24 +450,32 @@ void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& ax
         if (ds > depth) {
           depth = ds;
           height = hs;
+          by_shaft = true;
         }
       }
       if (!(depth > -margin)) continue;
-      tool_rows_.push_back(Row{static_cast<int>(bi), s, tool, depth, height});
+      tool_rows_.push_back(Row{static_cast<int>(bi), s, tool, depth, height, by_shaft});
     }
     if (tool_rows_.size() == first) continue;
     // The tool pushes the surface it is least deep under (where it entered): drop candidates on
     // other sides of the body (a face the tip is far below, or one facing another way).
-    const Row* entry = &tool_rows_[first];
+    // The entry is chosen among the tip's rows when there are any (the shaft crossing the
+    // surface elsewhere must not hide what the tip pushes); shaft rows only need the same side.
+    const Row* entry = nullptr;
+    bool tip_rows = false;
+    for (std::size_t k = first; k < tool_rows_.size(); ++k)
+      tip_rows = tip_rows || !tool_rows_[k].shaft;
     for (std::size_t k = first; k < tool_rows_.size(); ++k) {
       const Row& r = tool_rows_[k];
-      if (r.height_m < entry->height_m || (r.height_m == entry->height_m && deeper(r, *entry)))
+      if (tip_rows && r.shaft) continue;
+      if (!entry || r.height_m < entry->height_m ||
+          (r.height_m == entry->height_m && deeper(r, *entry)))
         entry = &r;
     }
     const double limit = entry->height_m + shape.tip_radius_m;
     const Vec3 n_entry = normals[entry->slot];
     auto other_side = [&](const Row& r) {
-      return r.height_m > limit || normals[r.slot].dot(n_entry) < 0.5;
+      return (!r.shaft && r.height_m > limit) || normals[r.slot].dot(n_entry) < 0.5;
     };
     tool_rows_.erase(std::remove_if(tool_rows_.begin() + first, tool_rows_.end(), other_side),
                      tool_rows_.end());
