@@ -76,8 +76,8 @@ Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::u
   return run(domain, make_criteria(cell_size_mm, 0.25 * cell_size_mm));
 }
 
-Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm,
-                      double cell_size_mm, std::uint32_t seed) {
+Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm, double cell_size_mm,
+                      std::uint32_t seed) {
   check_size(cell_size_mm, "artery cell size");
   check_size(radius_mm, "artery radius");
   if (centreline_mm.size() < 2) throw std::invalid_argument("mesh3: tube needs >= 2 points");

@@ -25,7 +25,7 @@ struct Mesh3Output {
 Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::uint32_t seed);
 
 // Solid tube of radius_mm around the polyline `centreline_mm` (rounded ends), implicit domain.
-Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm,
-                      double cell_size_mm, std::uint32_t seed);
+Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm, double cell_size_mm,
+                      std::uint32_t seed);
 
 }  // namespace neurosim::model

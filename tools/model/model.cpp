@@ -50,8 +50,9 @@ std::vector<Vec3> sample_spline(const std::vector<Vec3>& p, double step_mm) {
     const int steps = std::max(1, static_cast<int>(std::ceil((p2 - p1).norm() / step_mm)));
     for (int s = 1; s <= steps; ++s) {
       const double t = static_cast<double>(s) / steps, t2 = t * t, t3 = t2 * t;
-      out.push_back(0.5 * ((2.0 * p1) + (-p0 + p2) * t + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2 +
-                           (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t3));
+      out.push_back(0.5 *
+                    ((2.0 * p1) + (-p0 + p2) * t + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2 +
+                     (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t3));
     }
   }
   return out;
@@ -59,8 +60,8 @@ std::vector<Vec3> sample_spline(const std::vector<Vec3>& p, double step_mm) {
 
 std::string fmt(const Vec3& v, int precision = 1) {
   std::ostringstream os;
-  os << std::fixed << std::setprecision(precision) << "(" << v.x() << ", " << v.y() << ", "
-     << v.z() << ")";
+  os << std::fixed << std::setprecision(precision) << "(" << v.x() << ", " << v.y() << ", " << v.z()
+     << ")";
   return os.str();
 }
 
@@ -122,8 +123,8 @@ void skull_base_plane(const mesh::TetMesh& brain, double margin_m, Vec3& point_m
 // Rounded to `quantum` so that the scene file stays readable (1e-6 m: a micrometre).
 // The tool's footprint for the static load case: surface nodes of the brain within a box
 // around the most lateral surface point near `target_m` (y, z within +-half_m).
-void footprint_box(const mesh::TetMesh& brain, const Vec3& target_m, double half_m,
-                   double depth_m, Vec3& lo, Vec3& hi) {
+void footprint_box(const mesh::TetMesh& brain, const Vec3& target_m, double half_m, double depth_m,
+                   Vec3& lo, Vec3& hi) {
   double xmax = -std::numeric_limits<double>::infinity();
   for (int v : brain.surface_vertices()) {
     const Vec3& x = brain.vertices()[v];
@@ -171,13 +172,11 @@ void set_material(scene::Material* m, MaterialSet set, bool artery) {
 
 std::vector<Vec3> default_mca_course_mni_mm() {
   // Checked against ch2bet (T1 >= 20): every point >= 9 mm inside the mask.
-  return {{18, 2, -16},   // M1 origin near the carotid terminus
-          {28, 3, -13},   // M1, lateral along the sphenoid ridge
-          {37, 4, -8},    // genu at the limen insulae
-          {40, 0, -1},    // M2 over the insula (Sylvian fissure), posterosuperior
-          {41, -9, 6},
-          {42, -19, 12},
-          {45, -28, 19},  // towards the posterior end of the fissure
+  return {{18, 2, -16},  // M1 origin near the carotid terminus
+          {28, 3, -13},  // M1, lateral along the sphenoid ridge
+          {37, 4, -8},   // genu at the limen insulae
+          {40, 0, -1},   // M2 over the insula (Sylvian fissure), posterosuperior
+          {41, -9, 6},  {42, -19, 12}, {45, -28, 19},  // towards the posterior end of the fissure
           {51, -36, 26}};
 }
 
@@ -196,12 +195,12 @@ ModelResult build_model(const ModelOptions& o) {
   auto t0 = Clock::now();
   const BrainMask mask = load_brain_mask(o.mri_path, o.mask_threshold);
   r.mask_seconds = seconds_since(t0);
-  r.brain_volume_ml = mask.voxels_inside * mask.spacing_mm[0] * mask.spacing_mm[1] *
-                      mask.spacing_mm[2] * 1e-3;
+  r.brain_volume_ml =
+      mask.voxels_inside * mask.spacing_mm[0] * mask.spacing_mm[1] * mask.spacing_mm[2] * 1e-3;
 
   // 2. Artery centreline in image coordinates, checked against the mask.
-  std::vector<Vec3> control = o.artery_course_world_mm.empty() ? default_mca_course_mni_mm()
-                                                               : o.artery_course_world_mm;
+  std::vector<Vec3> control =
+      o.artery_course_world_mm.empty() ? default_mca_course_mni_mm() : o.artery_course_world_mm;
   if (control.size() < 2) throw std::invalid_argument("neurosim-model: artery needs >= 2 points");
   for (auto& p : control) {
     if (!p.allFinite()) throw std::invalid_argument("neurosim-model: artery point not finite");
@@ -216,8 +215,8 @@ ModelResult build_model(const ModelOptions& o) {
     const double depth = depth_in_mask_mm(mask, centreline[i], needed + 10.0);
     if (depth < needed) {
       const Eigen::Vector4d w = mask.image_to_world * centreline[i].homogeneous();
-      throw std::runtime_error(o.mri_path + ": artery centreline at world " +
-                               fmt(w.head<3>()) + " mm is only " + std::to_string(depth) +
+      throw std::runtime_error(o.mri_path + ": artery centreline at world " + fmt(w.head<3>()) +
+                               " mm is only " + std::to_string(depth) +
                                " mm inside the brain mask (needs " + std::to_string(needed) +
                                " mm)");
     }
@@ -278,7 +277,8 @@ ModelResult build_model(const ModelOptions& o) {
     prov << "Colin27 ch2bet (mricron-data), T1 >= " << o.mask_threshold
          << " mask, largest component, cavities filled; CGAL Mesh_3 labeled image, cell size "
          << o.brain_cell_size_mm << " mm, seed " << o.seed
-         << ", sliver perturbation and exudation; fixed: brain resting on the skull base (nodes within "
+         << ", sliver perturbation and exudation; fixed: brain resting on the skull base (nodes "
+            "within "
          << o.fixed_margin_mm << " mm above a plane fitted to the lowest surface points)";
     m->set_provenance(prov.str());
   }
@@ -290,8 +290,8 @@ ModelResult build_model(const ModelOptions& o) {
     set_material(m->mutable_material(), o.material, true);
     m->set_priority(1);  // paper 2.4: the vessel wins over the brain
     std::ostringstream prov;
-    prov << "generated (not segmented): tube r = " << o.artery_radius_mm << " mm, "
-         << std::fixed << std::setprecision(1) << r.artery_length_mm
+    prov << "generated (not segmented): tube r = " << o.artery_radius_mm << " mm, " << std::fixed
+         << std::setprecision(1) << r.artery_length_mm
          << " mm along a plausible right MCA course (M1 -> genu at the limen insulae -> M2 over "
             "the insula in the Sylvian fissure); CGAL Mesh_3 implicit tube, cell size "
          << o.artery_cell_size_mm << " mm, seed " << o.seed;
@@ -338,8 +338,8 @@ ModelResult build_model(const ModelOptions& o) {
     set_vec(pr->mutable_region()->mutable_box()->mutable_min_m(), lo, 1e-6);
     set_vec(pr->mutable_region()->mutable_box()->mutable_max_m(), hi, 1e-6);
     set_vec(pr->mutable_displacement_m(), Vec3(-0.003, 0.0, 0.0), 1e-6);
-    r.prescribed_nodes = static_cast<int>(
-        scene::select_nodes(brain, pr->region(), "prescribed[0]").size());
+    r.prescribed_nodes =
+        static_cast<int>(scene::select_nodes(brain, pr->region(), "prescribed[0]").size());
   }
 
   std::string text;
@@ -377,9 +377,9 @@ std::string summary(const ModelResult& r) {
        << pct(m.vertices, pv) << "; " << m.file_vertices << " in the file), " << m.tets
        << " tetrahedra (paper " << pt << ", " << pct(m.tets, pt) << ")\n"
        << "    min dihedral " << std::fixed << std::setprecision(2) << m.quality.min_dihedral_deg
-       << " deg, max " << m.quality.max_dihedral_deg << " deg, inverted "
-       << m.quality.inverted << ", meshed in " << std::setprecision(2) << m.seconds << " s -> "
-       << m.file.string() << "\n";
+       << " deg, max " << m.quality.max_dihedral_deg << " deg, inverted " << m.quality.inverted
+       << ", meshed in " << std::setprecision(2) << m.seconds << " s -> " << m.file.string()
+       << "\n";
   };
   os << "neurosim-model: " << r.scene.string() << "\n";
   os << std::fixed << std::setprecision(2) << "  MRI mask: " << std::setprecision(0)
@@ -390,8 +390,8 @@ std::string summary(const ModelResult& r) {
   const int inside = r.artery.vertices - r.artery_vertices_outside;
   os << std::setprecision(1) << "  artery inside brain: " << inside << "/" << r.artery.vertices
      << " vertices strictly inside the brain surface ("
-     << (r.artery_vertices_outside == 0 ? "OK" : "FAILED") << "); centreline "
-     << r.artery_length_mm << " mm, >= " << r.artery_min_depth_mm << " mm inside the mask\n";
+     << (r.artery_vertices_outside == 0 ? "OK" : "FAILED") << "); centreline " << r.artery_length_mm
+     << " mm, >= " << r.artery_min_depth_mm << " mm inside the mask\n";
   os << "  fixed: " << r.fixed_nodes << " brain nodes on the skull-base side of the plane through "
      << fmt(r.fixed_plane_point_m * 1e3) << " mm, normal " << fmt(r.fixed_plane_normal, 3) << "\n";
   os << "  load case: " << r.prescribed_nodes

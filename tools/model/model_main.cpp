@@ -52,7 +52,8 @@ int main(int argc, char** argv) {
         o.artery_cell_size_mm = parse_double(a, v);
       } else if (a == "--seed") {
         const double s = parse_double(a, v);
-        if (!(s >= 0.0 && s <= 4294967295.0) || s != static_cast<double>(static_cast<long long>(s))) {
+        if (!(s >= 0.0 && s <= 4294967295.0) ||
+            s != static_cast<double>(static_cast<long long>(s))) {
           throw std::invalid_argument("--seed: need an integer in [0, 2^32): " + v);
         }
         o.seed = static_cast<std::uint32_t>(s);

@@ -7,10 +7,10 @@
 
 #include <algorithm>
 #include <array>
-#include <vector>
 #include <cmath>
 #include <filesystem>
 #include <stdexcept>
+#include <vector>
 
 namespace neurosim::model {
 namespace {
@@ -32,9 +32,9 @@ std::vector<unsigned char> components(const unsigned char* v, const std::array<i
       const long long i = queue[q];
       ++count;
       const long long x = i % nx, y = (i / nx) % ny, z = i / (nx * ny);
-      const long long nb[6][2] = {{x > 0, i - 1},           {x + 1 < nx, i + 1},
-                                  {y > 0, i - nx},          {y + 1 < ny, i + nx},
-                                  {z > 0, i - nx * ny},     {z + 1 < nz, i + nx * ny}};
+      const long long nb[6][2] = {{x > 0, i - 1},       {x + 1 < nx, i + 1},
+                                  {y > 0, i - nx},      {y + 1 < ny, i + nx},
+                                  {z > 0, i - nx * ny}, {z + 1 < nz, i + nx * ny}};
       for (const auto& [ok, j] : nb) {
         if (ok && label[j] < 0 && v[j] == value) {
           label[j] = id;
@@ -55,9 +55,9 @@ std::vector<unsigned char> components(const unsigned char* v, const std::array<i
       sizes.push_back(grow(i, static_cast<int>(sizes.size())));
     }
   }
-  const int keep = from_border ? 0
-                               : static_cast<int>(std::max_element(sizes.begin(), sizes.end()) -
-                                                  sizes.begin());
+  const int keep =
+      from_border ? 0
+                  : static_cast<int>(std::max_element(sizes.begin(), sizes.end()) - sizes.begin());
   std::vector<unsigned char> out(static_cast<std::size_t>(n), 0);
   for (long long i = 0; i < n; ++i) out[i] = label[i] == keep ? 1 : 0;
   return out;
@@ -155,7 +155,8 @@ double depth_in_mask_mm(const BrainMask& mask, const Vec3& p, double max_mm) {
         const double dist2 = (c - p).squaredNorm();
         if (dist2 >= best2) continue;
         const bool in_image = i >= 0 && j >= 0 && k >= 0 && i < d[0] && j < d[1] && k < d[2];
-        if (!in_image || v[i + static_cast<long long>(d[0]) * (j + static_cast<long long>(d[1]) * k)] == 0) {
+        if (!in_image ||
+            v[i + static_cast<long long>(d[0]) * (j + static_cast<long long>(d[1]) * k)] == 0) {
           best2 = dist2;
         }
       }

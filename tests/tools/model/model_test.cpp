@@ -1,9 +1,9 @@
 // neurosim-model (issue 7): meshes valid, quality reported, artery inside the brain, scene loads.
+#include "tools/model/model.hpp"
 #include "server/mesh/io.hpp"
 #include "server/mesh/quality.hpp"
 #include "server/scene/scene.hpp"
 #include "test_support.hpp"
-#include "tools/model/model.hpp"
 
 #include <gtest/gtest.h>
 
@@ -205,10 +205,10 @@ TEST(model_scene, BrainArterySceneLoadsWithArteryInside) {
   const auto path = neurosim::testing::source_dir() / "scenes" / "brain_artery.scene";
   if (!std::filesystem::exists(path)) GTEST_SKIP() << path << " not built (run neurosim-model)";
   const scene::Scene s = scene::read_scene(path);
-  const auto brain = scene::load_mesh(s.meshes(scene::find_mesh(s, "brain")),
-                                      path.parent_path(), path.string());
-  const auto artery = scene::load_mesh(s.meshes(scene::find_mesh(s, "artery")),
-                                       path.parent_path(), path.string());
+  const auto brain =
+      scene::load_mesh(s.meshes(scene::find_mesh(s, "brain")), path.parent_path(), path.string());
+  const auto artery =
+      scene::load_mesh(s.meshes(scene::find_mesh(s, "artery")), path.parent_path(), path.string());
   EXPECT_EQ(brain.mesh.inverted_fixed(), 0);
   EXPECT_EQ(artery.mesh.inverted_fixed(), 0);
   EXPECT_GT(neurosim::mesh::quality(brain.mesh).min_dihedral_deg, 0.0);
