@@ -73,6 +73,17 @@ class CoupledBody {
   void finalize();
   bool cache_hit() const { return cache_hit_; }
 
+  // Baseline instead of the factored operator: G is applied by the paper-style iteration on the
+  // boundary (relaxed fixed point, stops when an update is below tolerance x |rhs|). Results
+  // then differ from the exact ones by about that tolerance; for comparison only.
+  void set_iterative(double tolerance, int max_iterations);
+  struct IterativeReport {
+    int solves{0};          // right-hand sides iterated
+    int max_iterations{0};  // most iterations one needed
+    int unconverged{0};     // stopped at max_iterations
+  };
+  const IterativeReport& iterative_report() const { return iterative_report_; }
+
   int host_index() const { return host_index_; }
   const mesh::TetMesh& host() const { return *host_; }
   const fem::StaticSolver& host_solver() const { return *solver_; }
@@ -145,6 +156,13 @@ class CoupledBody {
   fem::Material material_;
   std::string cache_dir_;
   bool cache_hit_{false};
+  double iterative_tolerance_{0.0};  // 0: exact (factored G)
+  int iterative_max_iterations_{0};
+  mutable Eigen::MatrixXd p_;  // L_bb K_add, built on first iterative use
+  mutable double omega_{1.0};
+  mutable IterativeReport iterative_report_;
+  // out = G in (exact) or its iterative approximation.
+  void apply_coupling(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const;
   void select_contact_nodes();
   void compute_boundary_operator();
   std::uint64_t cache_key() const;

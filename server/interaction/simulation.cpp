@@ -184,6 +184,7 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
   std::vector<int> host_of(meshes_.size(), -1);
   std::vector<char> is_host(meshes_.size(), 0);
   std::vector<int> coupling_of(meshes_.size(), -1);
+  std::vector<char> iterative_host(meshes_.size(), 0);  // a coupling asks for the baseline
   if (scene.effects().coupling()) {
     for (int c = 0; c < scene.couplings_size(); ++c) {
       const auto& cp = scene.couplings(c);
@@ -194,10 +195,6 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
         throw std::runtime_error(what + ": unknown or identical meshes");
       if (cp.kind() != scene::Coupling::TIE) {
         throw std::runtime_error(what + ": SLIDING coupling is not implemented yet (issue 4)");
-      }
-      if (cp.method() != scene::Coupling::EXACT) {
-        throw std::runtime_error(what +
-                                 ": the ITERATIVE method is a benchmark baseline only; use EXACT");
       }
       // Priority decides which mesh gets the new boundary (paper 2.4); it must agree with the
       // scene.
@@ -211,6 +208,7 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
         throw std::runtime_error(what + ": mesh " + cp.embedded() + " is embedded twice");
       host_of[b] = h;
       coupling_of[b] = c;
+      if (cp.method() == scene::Coupling::ITERATIVE) iterative_host[h] = 1;
       is_host[h] = 1;
     }
     for (std::size_t m = 0; m < meshes_.size(); ++m) {
@@ -319,6 +317,8 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     setup_.factor_s += b.body->timing().factor_s;
     b.body->set_keep_full_columns(options_.cache_full_field_columns);
     b.body->set_cache_dir(options_.compliance_cache_dir);
+    if (iterative_host[m])
+      b.body->set_iterative(options_.iterative_tolerance, options_.iterative_max_iterations);
     meshes_[m].body = static_cast<int>(bodies_.size());
     bodies_.push_back(std::move(b));
   }

@@ -76,6 +76,10 @@ struct SimulationOptions {
   // With coupling: remove the host's tetrahedra inside S' (the embedded mesh keeps its volume,
   // paper 2.4); false keeps the host whole and adds the embedded mesh's stiffness on top.
   bool carve_host{true};
+  // Couplings with method ITERATIVE (the paper's baseline, never the default): the tie is
+  // solved by boundary iteration to this relative tolerance, at most this many iterations.
+  double iterative_tolerance{1e-12};
+  int iterative_max_iterations{10000};
 };
 
 // Load-time cost of build(), unit s.

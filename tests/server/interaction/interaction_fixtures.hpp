@@ -17,7 +17,8 @@ struct SceneSpec {
   double host_cell_m{0.012};
   double embedded_cell_m{0.01};
   double tip_radius_m{0.015};
-  bool embedded_fixed{false};  // fix the cylinder's end (then it is a body of its own when untied)
+  bool embedded_fixed{false};  // fix the cylinder's end (then it is a body of its own untied)
+  bool iterative{false};       // coupling method ITERATIVE (the paper's baseline)
 };
 
 // Cube [0, 0.1]^3 m fixed at z = 0; cylinder r = 15 mm along y through (0.05, *, 0.05), 60 mm long.
@@ -39,7 +40,8 @@ inline std::string scene_text(const SceneSpec& s) {
   if (s.embedded_fixed)
     o << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 0.0201 z: 1 } } }\n";
   o << "  priority: 1 }\n"
-    << "couplings { host: \"cube\" embedded: \"cylinder\" kind: TIE method: EXACT }\n"
+    << "couplings { host: \"cube\" embedded: \"cylinder\" kind: TIE method: "
+    << (s.iterative ? "ITERATIVE" : "EXACT") << " }\n"
     << "tools { id: \"probe\" tip_radius_m: " << s.tip_radius_m
     << " shaft_radius_m: 0.002 shaft_length_m: 0.12 max_speed_m_per_s: 2 }\n"
     << "effects { tier: LINEAR coupling: " << (s.coupling ? "true" : "false")
