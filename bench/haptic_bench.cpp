@@ -111,6 +111,7 @@ int main(int argc, char** argv) {
       o.tool_topic = topics.tool;
       o.model_topic = topics.model;
       o.status_topic = topics.status;
+      if (mode != "fifo") o.publisher_rt_priority = o.receiver_rt_priority = 0;  // all unprivileged
       nh::DdsLink link(o);
       if (!link.wait_for_server(60)) std::cerr << "haptic_bench: no server within 60 s\n";
       auto device = nh::make_device(spec);

@@ -158,6 +158,7 @@ int main(int argc, char** argv) {
       nh::DdsLinkOptions o;
       o.station_id = station;
       o.tool_id = tool;
+      if (!cfg.realtime_priority) o.publisher_rt_priority = o.receiver_rt_priority = 0;  // --no-rt
       o.tool_topic = topic_prefix + o.tool_topic;
       o.model_topic = topic_prefix + o.model_topic;
       o.status_topic = topic_prefix + o.status_topic;
