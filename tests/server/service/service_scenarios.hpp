@@ -251,7 +251,7 @@ inline void bad_samples(const Setup& setup, int max_stations) {
                b->last_sequence == last_good && b->samples_accepted <= last_good - bad.size() &&
                b->samples_accepted >= 10;
       },
-      5))
+      10))
       << ses.status.last_text << "\n" << ses.server.log();
   // No model ever answers a rejected sample; the station keeps being answered.
   ASSERT_TRUE(models.wait_for([&] {
@@ -286,7 +286,7 @@ inline void bad_samples(const Setup& setup, int max_stations) {
           return st.stations_refused == 1 && wire::view(st.stations).size == static_cast<std::size_t>(max_stations) &&
                  find_station(st, "refused-1") == nullptr;
         },
-        5))
+        10))
         << ses.status.last_text << "\n" << ses.server.log();
     EXPECT_EQ(models.count("refused-1"), 0u);
     const std::size_t before = models.count("bad-1");
