@@ -1,0 +1,120 @@
+// Resampling of the MRI through the deformed meshes (issue 7, ARCHITECTURE.md "Viewer client").
+//
+// A sample point p of the deformed scene is mapped back to the rest configuration through the
+// deformed tetrahedron that contains it: barycentric weights w of p in the deformed tetrahedron
+// (x_i + u_i), rest point X = sum w_i x_i; the image is then read trilinearly at X. Points in no
+// tetrahedron of any mesh are read at p itself (the tissue around the meshes does not move).
+// Where meshes overlap (the artery inside the brain) the mesh of higher priority wins.
+//
+// Incremental: set_displacements() records which tetrahedra moved (by more than a tolerance)
+// since the last update of each output; update_slice()/update_volume() recompute only the
+// samples inside the bounding box of those tetrahedra (old and new positions), so a tool
+// pressing on one spot costs one spot.
+//
+// Units: metres inside (positions, displacements, spacing); image values are whatever the
+// image holds (float). Pure Eigen + C++: no VTK, no DDS, so it is unit-testable on its own.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace neurosim::viewer {
+
+// A scalar volume on a regular grid: voxel (i, j, k) sits at origin_m + spacing_m .* (i, j, k);
+// values are stored x fastest: values[i + dims[0] * (j + dims[1] * k)].
+struct ImageGrid {
+  std::array<int, 3> dims{0, 0, 0};
+  Eigen::Vector3d origin_m{Eigen::Vector3d::Zero()};
+  Eigen::Vector3d spacing_m{Eigen::Vector3d::Ones()};
+  std::vector<float> values;
+
+  std::size_t index(int i, int j, int k) const {
+    return static_cast<std::size_t>(i) +
+           static_cast<std::size_t>(dims[0]) *
+               (static_cast<std::size_t>(j) + static_cast<std::size_t>(dims[1]) * k);
+  }
+  // Throws std::invalid_argument when dims, spacing or the value count are inconsistent, or a
+  // spacing/origin component is not finite and positive (spacing) / finite (origin).
+  void validate() const;
+};
+
+// Trilinear interpolation at p (m); outside the grid (beyond the outermost voxel centres) the
+// value is `outside`. Non-finite p gives `outside`.
+float sample_trilinear(const ImageGrid& image, const Eigen::Vector3d& p_m, float outside = 0.0F);
+
+// One mesh as the viewer knows it (from MeshTopology): rest vertices (m) and tetrahedra.
+struct MeshGeometry {
+  std::string id;
+  std::vector<Eigen::Vector3d> rest_m;
+  std::vector<std::array<int, 4>> tets;
+  int priority = 0;  // higher wins where meshes overlap
+};
+
+// An axis-aligned slice through the deformed scene: axis 0 = sagittal (constant x),
+// 1 = coronal (constant y), 2 = axial (constant z). The in-plane axes are the two others in
+// increasing order (u = first, v = second); pixel (a, b) sits at
+// origin_m + a * spacing_m(u) e_u + b * spacing_m(v) e_v, with the slice coordinate
+// position_m along the slice axis. values[a + width * b].
+struct Slice {
+  int axis = 2;
+  double position_m = 0.0;
+  int width = 0;
+  int height = 0;
+  Eigen::Vector3d origin_m{Eigen::Vector3d::Zero()};  // pixel (0, 0), its slice component unused
+  Eigen::Vector2d spacing_m{Eigen::Vector2d::Ones()};
+  std::vector<float> values;
+};
+
+// Slice of the image's own grid through the voxel plane nearest position_m (same pixel spacing
+// and extent as the image in the two in-plane axes), values not yet computed.
+Slice make_image_slice(const ImageGrid& image, int axis, double position_m);
+
+struct ResampleStats {
+  std::size_t samples_recomputed = 0;  // in the last update
+  std::size_t samples_total = 0;
+  std::size_t moved_tets = 0;  // tetrahedra that moved since that output's last update
+};
+
+class DeformedVolumeSampler {
+ public:
+  // Copies the image and meshes; builds the search structure over the rest (undeformed) meshes.
+  // Throws std::invalid_argument naming the mesh and tetrahedron on an out-of-range vertex id or
+  // a non-finite vertex, and on an invalid image.
+  DeformedVolumeSampler(ImageGrid image, std::vector<MeshGeometry> meshes);
+  ~DeformedVolumeSampler();
+  DeformedVolumeSampler(DeformedVolumeSampler&&) noexcept;
+  DeformedVolumeSampler& operator=(DeformedVolumeSampler&&) noexcept;
+
+  std::size_t mesh_count() const;
+  const ImageGrid& image() const;
+
+  // New displacements of mesh `mesh` (3 per vertex, x y z, m; the Deformation topic's layout).
+  // Throws std::invalid_argument on a wrong size or a non-finite component (names mesh and
+  // vertex); the previous displacements are then kept.
+  void set_displacements(std::size_t mesh, const float* u_m, std::size_t count);
+
+  // Point map deformed -> rest (see the file comment). Returns p itself outside every mesh.
+  Eigen::Vector3d to_rest(const Eigen::Vector3d& p_m) const;
+  // The image value at deformed-space point p.
+  float sample(const Eigen::Vector3d& p_m) const;
+
+  // Recompute the slice: all of it the first time (or when its axis/position/extent changed),
+  // afterwards only the pixels in the region whose tetrahedra moved since its last update.
+  // Each output is tracked separately by its address: keep Slice objects alive between calls.
+  ResampleStats update_slice(Slice& slice);
+
+  // The whole deformed volume on the image grid (for volume rendering), incrementally as above.
+  ResampleStats update_volume(ImageGrid& deformed);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace neurosim::viewer
