@@ -90,9 +90,11 @@ TetMesh run_mesh3(const Polyhedron& surface, double s, const MeshingOptions& opt
                     params::facet_distance = 0.05 * s,
                     params::cell_radius_edge_ratio = options.cell_radius_edge_ratio,
                     params::cell_size = s);
+  // Exudation without a time limit (time_limit = 0): it stops when no sliver can be improved, so
+  // the mesh does not depend on how loaded the machine is (a wall-clock limit made it vary).
   C3t3 c3t3 = options.exude_slivers
                   ? CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(),
-                                            params::exude(params::time_limit = 10))
+                                            params::exude(params::time_limit = 0))
                   : CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(),
                                             params::no_exude());
   std::unordered_map<Tr::Vertex_handle, int> index;
