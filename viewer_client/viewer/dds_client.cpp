@@ -1,0 +1,106 @@
+#include "viewer_client/viewer/dds_client.hpp"
+
+#include "idl/wire/dds.hpp"
+
+#include <optional>
+
+namespace neurosim::viewer {
+
+namespace {
+constexpr dds_attach_t kData = 1, kLiveliness = 2;
+}
+
+struct DdsClient::Impl {
+  wire::Participant pp;
+  wire::Topic<neurosim_MeshTopology> topo_topic;
+  wire::Topic<neurosim_Deformation> deform_topic;
+  wire::Topic<neurosim_ToolState> tool_topic;
+  wire::Topic<neurosim_ContactModel> model_topic;
+  wire::Topic<neurosim_SimStatus> status_topic;
+  wire::Reader<neurosim_MeshTopology> topologies;
+  wire::Reader<neurosim_Deformation> deformations;
+  wire::Reader<neurosim_ToolState> tools;
+  wire::Reader<neurosim_ContactModel> models;
+  wire::Reader<neurosim_SimStatus> status;
+  wire::Waitset ws;
+
+  static wire::ParticipantOptions participant_options(const DdsClientOptions& o) {
+    wire::ParticipantOptions po;
+    if (o.domain >= 0) po.domain = static_cast<dds_domainid_t>(o.domain);
+    return po;
+  }
+
+  explicit Impl(const DdsClientOptions& o)
+      : pp(participant_options(o)),
+        topo_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_MeshTopology>::name),
+        deform_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_Deformation>::name),
+        tool_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_ToolState>::name),
+        model_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_ContactModel>::name),
+        status_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_SimStatus>::name),
+        topologies(pp, topo_topic),
+        deformations(pp, deform_topic),
+        tools(pp, tool_topic),
+        models(pp, model_topic),
+        status(pp, status_topic),
+        ws(pp) {
+    ws.attach_data(topologies, kData);
+    ws.attach_data(deformations, kData);
+    ws.attach_data(status, kData);
+    ws.attach_liveliness(status, kLiveliness);
+  }
+};
+
+DdsClient::DdsClient(const DdsClientOptions& options) : impl_(std::make_unique<Impl>(options)) {}
+DdsClient::~DdsClient() = default;
+
+void DdsClient::wait(double timeout_s) {
+  impl_->ws.wait(static_cast<dds_duration_t>(timeout_s * 1e9));
+}
+
+bool DdsClient::poll(ViewerState& state) {
+  Impl& im = *impl_;
+  bool changed = false;
+  // Server liveliness first: a restarted server's topology then lands in a "live" state.
+  const wire::Liveliness l = im.status.liveliness();
+  const bool alive = l.alive_count > 0;
+  if (alive != state.server_alive()) {
+    state.set_server_alive(alive);
+    changed = true;
+  }
+  im.status.take();  // the content is not shown; keep the reader empty so the waitset idles
+
+  // Topologies before deformations: a frame needs its mesh.
+  for (;;) {
+    const auto batch = im.topologies.take();
+    if (batch.empty()) break;
+    for (const auto& rx : batch)
+      if (rx.valid()) changed |= state.ingest_topology(rx.data);
+  }
+  for (;;) {
+    const auto batch = im.deformations.take();
+    if (batch.empty()) break;
+    for (const auto& rx : batch)
+      if (rx.valid()) changed |= state.ingest_deformation(rx.data);
+  }
+  for (;;) {
+    const auto batch = im.tools.take();
+    if (batch.empty()) break;
+    for (const auto& rx : batch) {
+      if (rx.valid())
+        changed |= state.ingest_tool(rx.data);
+      else if (rx.disposed() || rx.no_writers()) {
+        state.remove_station(std::string(rx.key()));
+        changed = true;
+      }
+    }
+  }
+  for (;;) {
+    const auto batch = im.models.take();
+    if (batch.empty()) break;
+    for (const auto& rx : batch)
+      if (rx.valid()) changed |= state.ingest_contact(rx.data);
+  }
+  return changed;
+}
+
+}  // namespace neurosim::viewer

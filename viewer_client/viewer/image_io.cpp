@@ -1,0 +1,80 @@
+#include "viewer_client/viewer/image_io.hpp"
+
+#include <vtkDataArray.h>
+#include <vtkImageData.h>
+#include <vtkNIFTIImageReader.h>
+#include <vtkNew.h>
+#include <vtkPointData.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <stdexcept>
+
+namespace neurosim::viewer {
+
+ImageGrid load_nifti(const std::string& path, double unit_m) {
+  if (!(std::isfinite(unit_m) && unit_m > 0))
+    throw std::runtime_error(path + ": image unit " + std::to_string(unit_m) +
+                             " m is not positive");
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw std::runtime_error(path + ": image file not found");
+  vtkNew<vtkNIFTIImageReader> reader;
+  if (!reader->CanReadFile(path.c_str()))
+    throw std::runtime_error(path + ": not a NIfTI file VTK can read");
+  reader->SetFileName(path.c_str());
+  reader->Update();
+  vtkImageData* im = reader->GetOutput();
+  vtkDataArray* s = im != nullptr ? im->GetPointData()->GetScalars() : nullptr;
+  if (s == nullptr) throw std::runtime_error(path + ": no voxel values read");
+  int dims[3];
+  double spacing[3], origin[3];
+  im->GetDimensions(dims);
+  im->GetSpacing(spacing);
+  im->GetOrigin(origin);
+  ImageGrid g;
+  for (int a = 0; a < 3; ++a) {
+    g.dims[static_cast<std::size_t>(a)] = dims[a];
+    g.spacing_m[a] = spacing[a] * unit_m;
+    g.origin_m[a] = origin[a] * unit_m;
+  }
+  const vtkIdType n = s->GetNumberOfTuples();
+  g.values.resize(static_cast<std::size_t>(n));
+  for (vtkIdType i = 0; i < n; ++i)
+    g.values[static_cast<std::size_t>(i)] = static_cast<float>(s->GetComponent(i, 0));
+  try {
+    g.validate();
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": " + e.what());
+  }
+  return g;
+}
+
+ImageGrid downsample(const ImageGrid& image, int step) {
+  if (step <= 1) return image;
+  ImageGrid g;
+  for (std::size_t a = 0; a < 3; ++a) g.dims[a] = (image.dims[a] + step - 1) / step;
+  g.origin_m = image.origin_m;
+  g.spacing_m = image.spacing_m * step;
+  g.values.resize(static_cast<std::size_t>(g.dims[0]) * g.dims[1] * g.dims[2]);
+  for (int k = 0; k < g.dims[2]; ++k)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int i = 0; i < g.dims[0]; ++i)
+        g.values[g.index(i, j, k)] = image.values[image.index(i * step, j * step, k * step)];
+  return g;
+}
+
+std::pair<float, float> display_range(const ImageGrid& image) {
+  std::vector<float> v;
+  v.reserve(image.values.size() / 4);
+  for (std::size_t i = 0; i < image.values.size(); i += 7)  // a sparse sample is enough
+    if (image.values[i] > 0 && std::isfinite(image.values[i])) v.push_back(image.values[i]);
+  if (v.empty()) return {0.0F, 1.0F};
+  const auto k = static_cast<std::size_t>(0.995 * static_cast<double>(v.size() - 1));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  const float hi = v[k];
+  return {0.0F, hi > 0 ? hi : 1.0F};
+}
+
+}  // namespace neurosim::viewer

@@ -1,0 +1,40 @@
+// neurosim-viewer command line (issue 7): what to show, where to write frames, which DDS domain.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace neurosim::viewer {
+
+enum class Mode {
+  Navigation,  // three orthogonal MRI slices through the tool tip + surfaces
+  Observe,     // volume rendering of the resampled MRI + surfaces
+};
+const char* to_string(Mode m);
+
+struct ViewerOptions {
+  Mode mode = Mode::Navigation;
+  bool headless = false;      // render offscreen, write PNG frames into out_dir
+  int frames = 0;             // headless: stop after this many frames (0: no limit)
+  std::string out_dir = ".";  // headless: frame_0000.png ...
+  double duration_s = 0;      // stop after this long (0: no limit), unit s
+  double wait_server_s = 30;  // give up if no MeshTopology arrives within this, unit s
+  int domain = -1;            // DDS domain id (-1: the CYCLONEDDS_URI configuration's)
+  std::string topic_prefix;   // prepended to every topic name, as neurosim-server's
+  int width = 960;            // window / frame size, unit px
+  int height = 720;
+  double fps = 10;            // render at most this often, unit 1/s
+  int volume_step = 2;        // observe: resample the volume every this many voxels
+  double force_unit_n = 1.0;  // colour rule's f = |F| / force_unit_n (paper: F in N, so 1 N)
+  std::string summary_file;   // JSON summary written at exit ("" none)
+  bool overlay = true;        // status text in the frame
+};
+
+// Parses argv (without argv[0] handling beyond skipping it). Throws std::invalid_argument with a
+// message naming the option on any bad or missing value or unknown option. Sets help = true and
+// returns defaults for -h/--help.
+ViewerOptions parse_options(int argc, const char* const* argv, bool& help);
+
+const char* usage();
+
+}  // namespace neurosim::viewer

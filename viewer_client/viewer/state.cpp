@@ -1,0 +1,274 @@
+#include "viewer_client/viewer/state.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace neurosim::viewer {
+
+namespace {
+enum WarnKind { kTopology = 0, kDeformation = 1, kTool = 2, kContact = 3 };
+
+bool finite3(const double* v) {
+  return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
+}
+}  // namespace
+
+std::array<double, 3> force_colour(double force_n, double force_unit_n) {
+  const double f = std::isfinite(force_n) ? std::abs(force_n) / force_unit_n : 1.0;
+  return {std::min(0.2 + f, 1.0), std::max(0.2 - f, 0.0), std::max(0.2 - f, 0.0)};
+}
+
+Eigen::Vector3d shaft_axis(double w, double x, double y, double z) {
+  Eigen::Vector3d a(2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y));
+  const double n = a.norm();
+  return n > 1e-12 && std::isfinite(n) ? Eigen::Vector3d(a / n) : Eigen::Vector3d::UnitZ();
+}
+
+MeshState mesh_from_topology(const neurosim_MeshTopology& t) {
+  MeshState m;
+  m.id = t.mesh_id;
+  const std::string what = "MeshTopology '" + m.id + "'";
+  if (m.id.empty()) throw std::invalid_argument("MeshTopology with an empty mesh_id");
+  m.revision = t.revision;
+  const auto v = wire::view(t.rest_vertices_m);
+  if (v.size == 0 || v.size % 3 != 0)
+    throw std::invalid_argument(what + ": rest_vertices_m has " + std::to_string(v.size) +
+                                " components (a positive multiple of 3 expected)");
+  const std::size_t nv = v.size / 3;
+  if (nv > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+    throw std::invalid_argument(what + ": too many vertices");
+  m.rest_m.resize(nv);
+  for (std::size_t i = 0; i < nv; ++i) {
+    if (!finite3(&v[3 * i]))
+      throw std::invalid_argument(what + ": vertex " + std::to_string(i) + " is not finite");
+    m.rest_m[i] = Eigen::Vector3d(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+  }
+  const auto te = wire::view(t.tetrahedra);
+  if (te.size % 4 != 0)
+    throw std::invalid_argument(what + ": tetrahedra has " + std::to_string(te.size) +
+                                " ids (a multiple of 4 expected)");
+  m.tets.resize(te.size / 4);
+  for (std::size_t e = 0; e < m.tets.size(); ++e)
+    for (int k = 0; k < 4; ++k) {
+      const std::int32_t id = te[4 * e + static_cast<std::size_t>(k)];
+      if (id < 0 || static_cast<std::size_t>(id) >= nv)
+        throw std::invalid_argument(what + ": tetrahedron " + std::to_string(e) + " has vertex " +
+                                    std::to_string(id) + " outside 0.." + std::to_string(nv - 1));
+      m.tets[e][static_cast<std::size_t>(k)] = id;
+    }
+  const auto tr = wire::view(t.surface_triangles);
+  if (tr.size % 3 != 0)
+    throw std::invalid_argument(what + ": surface_triangles has " + std::to_string(tr.size) +
+                                " ids (a multiple of 3 expected)");
+  m.surface.resize(tr.size / 3);
+  for (std::size_t e = 0; e < m.surface.size(); ++e)
+    for (int k = 0; k < 3; ++k) {
+      const std::int32_t id = tr[3 * e + static_cast<std::size_t>(k)];
+      if (id < 0 || static_cast<std::size_t>(id) >= nv)
+        throw std::invalid_argument(what + ": surface triangle " + std::to_string(e) +
+                                    " has vertex " + std::to_string(id) + " outside 0.." +
+                                    std::to_string(nv - 1));
+      m.surface[e][static_cast<std::size_t>(k)] = id;
+    }
+  m.priority = t.priority;
+  m.image_file = std::string(wire::get_string(t.volume_image_file));
+  m.image_unit_m = t.volume_image_unit_m;
+  if (!m.image_file.empty() && !(std::isfinite(m.image_unit_m) && m.image_unit_m > 0))
+    throw std::invalid_argument(what + ": volume_image_unit_m " + std::to_string(m.image_unit_m) +
+                                " is not a positive number");
+  m.u_m.assign(3 * nv, 0.0F);
+  return m;
+}
+
+ViewerState::ViewerState(Warn warn, int max_warnings_per_kind)
+    : warn_(std::move(warn)), max_warnings_(max_warnings_per_kind) {}
+
+void ViewerState::warn(int kind, const std::string& message) {
+  auto& n = warned_[static_cast<std::size_t>(kind)];
+  if (!warn_ || n > max_warnings_) return;
+  ++n;
+  warn_(n > max_warnings_ ? message + " (further warnings of this kind suppressed)" : message);
+}
+
+MeshState* ViewerState::find(const std::string& id) {
+  for (auto& m : meshes_)
+    if (m.id == id) return &m;
+  return nullptr;
+}
+
+const MeshState* ViewerState::mesh(const std::string& id) const {
+  for (const auto& m : meshes_)
+    if (m.id == id) return &m;
+  return nullptr;
+}
+
+void ViewerState::set_mesh(MeshState mesh) {
+  if (mesh.id.empty()) throw std::invalid_argument("viewer: mesh with an empty id");
+  if (mesh.u_m.size() != 3 * mesh.rest_m.size()) mesh.u_m.assign(3 * mesh.rest_m.size(), 0.0F);
+  if (MeshState* old = find(mesh.id)) {
+    *old = std::move(mesh);
+  } else {
+    meshes_.push_back(std::move(mesh));
+    // Stable order (by id) so renders do not depend on arrival order.
+    std::sort(meshes_.begin(), meshes_.end(),
+              [](const MeshState& a, const MeshState& b) { return a.id < b.id; });
+  }
+  ++topology_generation_;
+}
+
+bool ViewerState::ingest_topology(const neurosim_MeshTopology& t) {
+  try {
+    set_mesh(mesh_from_topology(t));
+    ++counters_.topologies;
+    return true;
+  } catch (const std::invalid_argument& e) {
+    ++counters_.malformed_topology;
+    warn(kTopology, std::string("ignored a malformed sample: ") + e.what());
+    return false;
+  }
+}
+
+void ViewerState::set_displacements(const std::string& mesh_id, std::vector<float> u_m) {
+  MeshState* m = find(mesh_id);
+  if (m == nullptr) throw std::invalid_argument("viewer: no mesh '" + mesh_id + "'");
+  if (u_m.size() != m->u_m.size())
+    throw std::invalid_argument("viewer: mesh '" + mesh_id + "' has " +
+                                std::to_string(m->rest_m.size()) + " vertices, got " +
+                                std::to_string(u_m.size()) + " displacement components");
+  float mx = 0;
+  for (std::size_t i = 0; i < u_m.size(); i += 3) {
+    if (!std::isfinite(u_m[i]) || !std::isfinite(u_m[i + 1]) || !std::isfinite(u_m[i + 2]))
+      throw std::invalid_argument("viewer: mesh '" + mesh_id + "' vertex " + std::to_string(i / 3) +
+                                  ": non-finite displacement");
+    mx = std::max(mx,
+                  std::sqrt(u_m[i] * u_m[i] + u_m[i + 1] * u_m[i + 1] + u_m[i + 2] * u_m[i + 2]));
+  }
+  m->u_m = std::move(u_m);
+  m->max_displacement_m = mx;
+  m->has_deformation = true;
+  ++m->u_version;
+}
+
+bool ViewerState::ingest_deformation(const neurosim_Deformation& d) {
+  MeshState* m = find(d.mesh_id);
+  if (m == nullptr) {
+    ++counters_.deformations_waiting;  // topology not here yet (or another scene's mesh)
+    return false;
+  }
+  try {
+    if (d.vertex_count != m->rest_m.size())
+      throw std::invalid_argument("Deformation '" + m->id + "' frame " + std::to_string(d.frame) +
+                                  ": vertex_count " + std::to_string(d.vertex_count) +
+                                  ", the topology has " + std::to_string(m->rest_m.size()));
+    if (!m->decoder.decode(d, scratch_)) {
+      ++counters_.deformations_waiting;
+      return false;
+    }
+    const std::uint64_t frame = d.frame;
+    set_displacements(m->id, scratch_);  // checks finiteness; copies
+    m->frame = frame;
+    ++counters_.deformations;
+    return true;
+  } catch (const std::invalid_argument& e) {
+    ++counters_.malformed_deformation;
+    warn(kDeformation, std::string("ignored a malformed sample: ") + e.what());
+    return false;
+  }
+}
+
+void ViewerState::set_tool(const ToolView& tool) {
+  if (!tool.tip_m.allFinite() || !tool.axis.allFinite() || !tool.force_n.allFinite())
+    throw std::invalid_argument("viewer: station '" + tool.station + "': non-finite tool state");
+  tools_[tool.station] = tool;
+}
+
+bool ViewerState::ingest_tool(const neurosim_ToolState& s) {
+  const std::string station(s.station_id);
+  if (station.empty() || !finite3(s.position_m) ||
+      !(std::isfinite(s.orientation[0]) && finite3(s.orientation + 1))) {
+    ++counters_.malformed_tool;
+    warn(kTool, "ignored a malformed ToolState from station '" + station +
+                    "': empty station id or non-finite pose");
+    return false;
+  }
+  ToolView& t = tools_[station];
+  t.station = station;
+  t.tip_m = Eigen::Vector3d(s.position_m[0], s.position_m[1], s.position_m[2]);
+  t.axis = shaft_axis(s.orientation[0], s.orientation[1], s.orientation[2], s.orientation[3]);
+  t.has_pose = true;
+  ++counters_.tool_states;
+  return true;
+}
+
+bool ViewerState::ingest_contact(const neurosim_ContactModel& c) {
+  const std::string station(c.station_id);
+  if (station.empty() || !finite3(c.f0_n)) {
+    ++counters_.malformed_contact;
+    warn(kContact, "ignored a malformed ContactModel for station '" + station +
+                       "': empty station id or non-finite force");
+    return false;
+  }
+  ToolView& t = tools_[station];
+  t.station = station;
+  t.force_n =
+      c.in_contact ? Eigen::Vector3d(c.f0_n[0], c.f0_n[1], c.f0_n[2]) : Eigen::Vector3d::Zero();
+  t.in_contact = c.in_contact;
+  // The model's reference pose stands in for the pose until a ToolState is read.
+  if (!t.has_pose && finite3(c.x0_position_m)) {
+    t.tip_m = Eigen::Vector3d(c.x0_position_m[0], c.x0_position_m[1], c.x0_position_m[2]);
+    t.axis = shaft_axis(c.x0_orientation[0], c.x0_orientation[1], c.x0_orientation[2],
+                        c.x0_orientation[3]);
+    t.has_pose = true;
+  }
+  ++counters_.contact_models;
+  return true;
+}
+
+void ViewerState::remove_station(const std::string& station) { tools_.erase(station); }
+
+void ViewerState::set_server_alive(bool alive) {
+  if (alive && !server_alive_) ++counters_.server_seen;
+  if (!alive && server_alive_) ++counters_.server_lost;
+  server_alive_ = alive;
+  if (alive) server_ever_seen_ = true;
+}
+
+const ToolView* ViewerState::primary_tool() const {
+  for (const auto& [id, t] : tools_)
+    if (t.has_pose) return &t;
+  return nullptr;
+}
+
+double ViewerState::max_displacement_m() const {
+  double mx = 0;
+  for (const auto& m : meshes_) mx = std::max(mx, static_cast<double>(m.max_displacement_m));
+  return mx;
+}
+
+std::pair<Eigen::Vector3d, Eigen::Vector3d> ViewerState::bounds_m() const {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = -lo;
+  for (const auto& m : meshes_)
+    for (const auto& x : m.rest_m) {
+      lo = lo.cwiseMin(x);
+      hi = hi.cwiseMax(x);
+    }
+  if (!lo.allFinite()) return {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+  return {lo, hi};
+}
+
+std::string ViewerState::image_file() const {
+  for (const auto& m : meshes_)
+    if (!m.image_file.empty()) return m.image_file;
+  return {};
+}
+
+double ViewerState::image_unit_m() const {
+  for (const auto& m : meshes_)
+    if (!m.image_file.empty()) return m.image_unit_m;
+  return 1.0;
+}
+
+}  // namespace neurosim::viewer

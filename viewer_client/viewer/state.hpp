@@ -1,0 +1,130 @@
+// What the viewer knows about the simulation (issue 7): mesh topologies, their newest decoded
+// displacements, the tools (pose from ToolState, force from ContactModel) and the server's
+// liveliness. Fed from DDS samples (dds_client.hpp) or directly (tests, benchmark); no VTK here.
+//
+// Bad samples never throw out of ingest_*(): they are counted, the first few are reported through
+// the warning callback, and the previous state is kept.
+#pragma once
+
+#include "idl/wire/deformation_codec.hpp"
+#include "idl/wire/types.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace neurosim::viewer {
+
+struct MeshState {
+  std::string id;
+  std::uint32_t revision = 0;
+  std::vector<Eigen::Vector3d> rest_m;      // rest vertices, unit m
+  std::vector<std::array<int, 4>> tets;     // 0-based vertex ids
+  std::vector<std::array<int, 3>> surface;  // outward triangles, 0-based vertex ids
+  int priority = 0;
+  std::string image_file;     // NIfTI the mesh maps to ("" none)
+  double image_unit_m = 1.0;  // image physical units to m
+  std::vector<float> u_m;     // 3 per vertex, unit m (zeros until a frame)
+  std::uint64_t frame = 0;    // Deformation frame of u_m
+  bool has_deformation = false;
+  std::uint64_t u_version = 0;       // bumped whenever u_m changes
+  float max_displacement_m = 0;      // max |u| of u_m, unit m
+  wire::DeformationDecoder decoder;  // per topology (reset with it)
+};
+
+struct ToolView {
+  std::string station;
+  Eigen::Vector3d tip_m = Eigen::Vector3d::Zero();    // tool tip, scene frame, unit m
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();    // unit, from the tip towards the handle
+  Eigen::Vector3d force_n = Eigen::Vector3d::Zero();  // newest ContactModel f0, unit N
+  bool in_contact = false;
+  bool has_pose = false;
+};
+
+struct ViewerCounters {
+  std::uint64_t topologies = 0;            // accepted MeshTopology samples
+  std::uint64_t deformations = 0;          // decoded Deformation frames
+  std::uint64_t deformations_waiting = 0;  // deltas before their FULL frame, or no topology yet
+  std::uint64_t tool_states = 0;
+  std::uint64_t contact_models = 0;
+  std::uint64_t malformed_topology = 0;
+  std::uint64_t malformed_deformation = 0;
+  std::uint64_t malformed_tool = 0;
+  std::uint64_t malformed_contact = 0;
+  std::uint64_t server_seen = 0;  // SimStatus writer appeared (first time or after a loss)
+  std::uint64_t server_lost = 0;  // SimStatus writer went away
+  std::uint64_t malformed() const {
+    return malformed_topology + malformed_deformation + malformed_tool + malformed_contact;
+  }
+};
+
+// Colour of a tool carrying force |F| (paper's rule, f = |F| / force_unit_n with F in N):
+// (R, G, B) = (min(0.2 + f, 1), max(0.2 - f, 0), max(0.2 - f, 0)).
+std::array<double, 3> force_colour(double force_n, double force_unit_n = 1.0);
+
+// Shaft axis of a tool with orientation q (w, x, y, z): the tool frame's +z in the scene frame
+// (the server's convention, server/service/server.cpp).
+Eigen::Vector3d shaft_axis(double w, double x, double y, double z);
+
+class ViewerState {
+ public:
+  using Warn = std::function<void(const std::string&)>;
+  explicit ViewerState(Warn warn = {}, int max_warnings_per_kind = 5);
+
+  // DDS samples. Return whether the state changed.
+  bool ingest_topology(const neurosim_MeshTopology& t);
+  bool ingest_deformation(const neurosim_Deformation& d);
+  bool ingest_tool(const neurosim_ToolState& s);
+  bool ingest_contact(const neurosim_ContactModel& c);
+  void remove_station(const std::string& station);  // its writer left (disposed, no writers)
+  void set_server_alive(bool alive);
+
+  // Direct setters (benchmark, tests): throw std::invalid_argument on bad input.
+  void set_mesh(MeshState mesh);
+  void set_displacements(const std::string& mesh_id, std::vector<float> u_m);
+  void set_tool(const ToolView& tool);
+
+  const std::vector<MeshState>& meshes() const { return meshes_; }
+  const MeshState* mesh(const std::string& id) const;
+  const std::map<std::string, ToolView>& tools() const { return tools_; }
+  // The tool the slices follow: the first station (by id) with a pose, or null.
+  const ToolView* primary_tool() const;
+  // Bumped whenever a mesh is added or replaced (renderer and resampler rebuild then).
+  std::uint64_t topology_generation() const { return topology_generation_; }
+  bool server_alive() const { return server_alive_; }
+  bool server_ever_seen() const { return server_ever_seen_; }
+  const ViewerCounters& counters() const { return counters_; }
+  // Largest |u| over all meshes, unit m.
+  double max_displacement_m() const;
+  // Axis-aligned bounds of all rest vertices (min, max), unit m; zero if no mesh.
+  std::pair<Eigen::Vector3d, Eigen::Vector3d> bounds_m() const;
+  // The image file the meshes name (the first non-empty), and its unit.
+  std::string image_file() const;
+  double image_unit_m() const;
+
+ private:
+  void warn(int kind, const std::string& message);
+  MeshState* find(const std::string& id);
+  Warn warn_;
+  int max_warnings_;
+  std::array<int, 4> warned_{};
+  std::vector<MeshState> meshes_;
+  std::map<std::string, ToolView> tools_;
+  std::uint64_t topology_generation_ = 0;
+  bool server_alive_ = false;
+  bool server_ever_seen_ = false;
+  ViewerCounters counters_;
+  std::vector<float> scratch_;
+};
+
+// The MeshState a MeshTopology sample describes. Throws std::invalid_argument naming the mesh and
+// the bad field, vertex or element.
+MeshState mesh_from_topology(const neurosim_MeshTopology& t);
+
+}  // namespace neurosim::viewer
