@@ -123,6 +123,9 @@ FrameTiming Pipeline::frame(const ViewerState& state, const std::string& status)
       // The volume is re-uploaded only when something in it changed.
       if (st.samples_recomputed > 0 || !volume_started_) renderer_->set_volume(&volume_);
       volume_started_ = true;
+      // Cut through the tool tip (x: the middle of the meshes, so the cut is deep).
+      const auto [lo, hi] = state.bounds_m();
+      renderer_->set_volume_crop(Eigen::Vector3d(0.5 * (lo.x() + hi.x()), c.y(), c.z()));
     }
   } else if (opt_.render.mode == Mode::Navigation) {
     renderer_->set_slices(nullptr, slice_centre(state));

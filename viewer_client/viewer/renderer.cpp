@@ -420,18 +420,23 @@ void SceneRenderer::set_volume(const ImageGrid* grid) {
     vtkNew<vtkColorTransferFunction> colour;
     const double lo = im.range_lo, hi = im.range_hi;
     colour->AddRGBPoint(lo, 0.0, 0.0, 0.0);
-    colour->AddRGBPoint(lo + 0.5 * (hi - lo), 0.75, 0.65, 0.6);
+    colour->AddRGBPoint(lo + 0.5 * (hi - lo), 0.55, 0.45, 0.42);
     colour->AddRGBPoint(hi, 1.0, 1.0, 1.0);
     vtkNew<vtkPiecewiseFunction> opacity;
     opacity->AddPoint(lo, 0.0);
-    opacity->AddPoint(lo + 0.15 * (hi - lo), 0.0);
-    opacity->AddPoint(lo + 0.6 * (hi - lo), 0.02);
-    opacity->AddPoint(hi, 0.08);
+    opacity->AddPoint(lo + 0.25 * (hi - lo), 0.0);
+    opacity->AddPoint(lo + 0.55 * (hi - lo), 0.03);
+    opacity->AddPoint(hi, 0.25);
     auto prop = vtkSmartPointer<vtkVolumeProperty>::New();
     prop->SetColor(colour);
     prop->SetScalarOpacity(opacity);
     prop->SetInterpolationTypeToLinear();
     prop->ShadeOff();
+    // Opacities are per voxel, not per metre (VTK's default unit distance is 1 scene unit).
+    prop->SetScalarOpacityUnitDistance(grid->spacing_m.minCoeff());
+    im.volume_mapper->InteractiveAdjustSampleDistancesOff();
+    im.volume_mapper->AutoAdjustSampleDistancesOff();
+    im.volume_mapper->SetSampleDistance(static_cast<float>(0.5 * grid->spacing_m.minCoeff()));
     im.volume = vtkSmartPointer<vtkVolume>::New();
     im.volume->SetMapper(im.volume_mapper);
     im.volume->SetProperty(prop);
@@ -450,6 +455,22 @@ void SceneRenderer::set_volume(const ImageGrid* grid) {
   im.volume_values->Modified();
   im.volume_image->Modified();
   im.volume->SetVisibility(1);
+}
+
+void SceneRenderer::set_volume_crop(const Eigen::Vector3d& c) {
+  Impl& im = *impl_;
+  if (!im.volume_mapper || !c.allFinite()) return;
+  constexpr double kFar = 1e3;  // m: beyond any scene
+  im.volume_mapper->SetCropping(1);
+  im.volume_mapper->SetCroppingRegionPlanes(c.x(), kFar, c.y(), kFar, c.z(), kFar);
+  // Regions i + 3 j + 9 k (i, j, k: below / between / above the planes): keep all but the
+  // octant with i, j, k >= 1.
+  int flags = 0;
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i)
+        if (i == 0 || j == 0 || k == 0) flags |= 1 << (i + 3 * j + 9 * k);
+  im.volume_mapper->SetCroppingRegionFlags(flags);
 }
 
 void SceneRenderer::render() {

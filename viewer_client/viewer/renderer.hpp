@@ -50,8 +50,10 @@ class SceneRenderer {
   void set_image_range(float low, float high);
   // Navigation: the three slices (axis 0, 1, 2) and the point they pass through; null: hide.
   void set_slices(const std::array<Slice, 3>* slices, const Eigen::Vector3d& centre_m);
-  // Observe: the resampled volume; null: hide.
+  // Observe: the resampled volume; null: hide. Its octant beyond crop_centre_m (towards the
+  // camera: +x, +y, +z) is cut away so the deformed interior shows on the cut faces.
   void set_volume(const ImageGrid* volume);
+  void set_volume_crop(const Eigen::Vector3d& crop_centre_m);
 
   void render();
   // PNG of the last render. Throws std::runtime_error naming the file on failure.
