@@ -4,6 +4,7 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -104,6 +105,8 @@ struct MeshState {
 // Per-output incremental state.
 struct OutputState {
   bool is_slice = true;
+  std::uint64_t token = 0;      // also in the output object (sampler_token)
+  std::uint64_t last_used = 0;  // Impl::use_counter at the last update
   const float* data = nullptr;
   std::size_t size = 0;
   // Slice geometry at the last update.
@@ -248,7 +251,8 @@ struct DeformedVolumeSampler::Impl {
   float sample(const Vector3d& p) const {
     return sample_trilinear(image, to_rest(p), options.outside_value);
   }
-  OutputState& output(const void* key, bool is_slice, bool& fresh);
+  std::uint64_t use_counter = 0;
+  OutputState& output(const void* key, bool is_slice, std::uint64_t& token, bool& fresh);
 };
 
 void DeformedVolumeSampler::Impl::build_mesh(MeshState& m, std::size_t index) {
@@ -625,14 +629,33 @@ void DeformedVolumeSampler::Impl::apply(std::size_t mi, std::vector<Vector3d>&& 
   }
 }
 
-OutputState& DeformedVolumeSampler::Impl::output(const void* key, bool is_slice, bool& fresh) {
+// The tracking state of the output at `key`; fresh (reset, new token) unless it is the object
+// this sampler last updated there (same kind, same token).
+OutputState& DeformedVolumeSampler::Impl::output(const void* key, bool is_slice,
+                                                 std::uint64_t& token, bool& fresh) {
+  static std::atomic<std::uint64_t> next_token{1};
+  ++use_counter;
+  // Outputs that were dropped without forget(): keep the newest few.
+  constexpr std::size_t kKeep = 32;
+  if (outputs.size() > kKeep && outputs.find(key) == outputs.end()) {
+    std::vector<std::uint64_t> used;
+    for (const auto& kv : outputs) used.push_back(kv.second.last_used);
+    std::nth_element(used.begin(), used.end() - kKeep / 2, used.end());
+    const std::uint64_t cut = *(used.end() - kKeep / 2);
+    for (auto it = outputs.begin(); it != outputs.end();)
+      it = it->second.last_used < cut ? outputs.erase(it) : std::next(it);
+  }
   auto it = outputs.find(key);
-  fresh = it == outputs.end() || it->second.is_slice != is_slice;
+  fresh = it == outputs.end() || it->second.is_slice != is_slice || it->second.token != token ||
+          token == 0;
   OutputState& out = outputs[key];
   if (fresh) {
     out = OutputState();
     out.is_slice = is_slice;
+    out.token = next_token.fetch_add(1);
+    token = out.token;
   }
+  out.last_used = use_counter;
   return out;
 }
 
@@ -778,7 +801,7 @@ ResampleStats DeformedVolumeSampler::update_slice(Slice& slice) {
   const std::size_t total = static_cast<std::size_t>(slice.width) * slice.height;
 
   bool fresh = false;
-  OutputState& out = d.output(&slice, true, fresh);
+  OutputState& out = d.output(&slice, true, slice.sampler_token, fresh);
   const bool same_geometry = !fresh && out.axis == axis && out.position_m == slice.position_m &&
                              out.width == slice.width && out.height == slice.height &&
                              out.origin[ua] == slice.origin_m[ua] &&
@@ -841,7 +864,7 @@ ResampleStats DeformedVolumeSampler::update_volume(ImageGrid& deformed) {
   const ImageGrid& img = d.image;
   const std::size_t total = img.values.size();
   bool fresh = false;
-  OutputState& out = d.output(&deformed, false, fresh);
+  OutputState& out = d.output(&deformed, false, deformed.sampler_token, fresh);
   const bool same_geometry =
       !fresh && deformed.dims == img.dims && deformed.origin_m == img.origin_m &&
       deformed.spacing_m == img.spacing_m && deformed.values.size() == total &&

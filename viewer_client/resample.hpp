@@ -46,6 +46,9 @@ struct ImageGrid {
   Eigen::Vector3d origin_m{Eigen::Vector3d::Zero()};
   Eigen::Vector3d spacing_m{Eigen::Vector3d::Ones()};
   std::vector<float> values;
+  // Set by DeformedVolumeSampler::update_volume on its output (see Slice::sampler_token);
+  // unused on input images.
+  std::uint64_t sampler_token = 0;
 
   std::size_t index(int i, int j, int k) const {
     return static_cast<std::size_t>(i) +
@@ -84,6 +87,9 @@ struct Slice {
   Eigen::Vector3d origin_m{Eigen::Vector3d::Zero()};  // pixel (0, 0), its slice component unused
   Eigen::Vector2d spacing_m{Eigen::Vector2d::Ones()};
   std::vector<float> values;
+  // Set by DeformedVolumeSampler::update_slice to tell its own outputs from new ones at a
+  // reused address; leave it alone (a copy or a fresh Slice is recomputed in full).
+  std::uint64_t sampler_token = 0;
 };
 
 // Slice of the image's own grid through the voxel plane nearest position_m (same pixel spacing
