@@ -8,7 +8,16 @@ namespace neurosim::viewer {
 
 namespace {
 constexpr dds_attach_t kData = 1, kLiveliness = 2;
+
+// Deformation is keep-last 1 on the wire, but the viewer renders slower than the 30 Hz stream:
+// its reader keeps the last second of frames so the FULL frames that the deltas refer to are
+// never overwritten between two polls (reader history need not match the writer's).
+wire::Qos deformation_reader_qos() {
+  wire::Qos q = wire::reader_qos(wire::Profile::Deformation);
+  dds_qset_history(q.get(), DDS_HISTORY_KEEP_LAST, 64);
+  return q;
 }
+}  // namespace
 
 struct DdsClient::Impl {
   wire::Participant pp;
@@ -38,7 +47,7 @@ struct DdsClient::Impl {
         model_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_ContactModel>::name),
         status_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_SimStatus>::name),
         topologies(pp, topo_topic),
-        deformations(pp, deform_topic),
+        deformations(pp, deform_topic, deformation_reader_qos(), wire::ReaderOptions{128}),
         tools(pp, tool_topic),
         models(pp, model_topic),
         status(pp, status_topic),
