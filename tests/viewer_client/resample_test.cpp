@@ -474,6 +474,20 @@ TEST(resample_sampler, IncrementalUpdateEqualsAFullRecompute) {
   s.update_volume(sc.vol);
   expect_equal_to_full(s, sc.slices, sc.vol);
   for (std::size_t n = 0; n < sc.g.values.size(); ++n) ASSERT_EQ(sc.vol.values[n], sc.g.values[n]);
+
+  // The surface bulges out of the rest mesh and comes back: the space it left (outside every
+  // rest tetrahedron) must be recomputed too.
+  const Vector3d surface(0.038, 0.022, 0.021);
+  Slice through = make_image_slice(sc.g, 2, surface[2]);
+  s.update_slice(through);
+  s.set_displacements(0, sc.bump(surface, Vector3d(0.003, 0.0, 0.0)));
+  s.update_slice(through);
+  s.update_volume(sc.vol);
+  expect_equal_to_full(s, {through}, sc.vol);
+  s.set_displacements(0, std::vector<Vector3d>(sc.mesh.rest_m.size(), Vector3d::Zero()));
+  s.update_slice(through);
+  s.update_volume(sc.vol);
+  expect_equal_to_full(s, {through}, sc.vol);
 }
 
 TEST(resample_sampler, PushAwayFromASliceLeavesItAlone) {
