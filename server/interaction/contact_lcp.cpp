@@ -50,7 +50,10 @@ int ContactLcp::factor_and_solve(const Eigen::MatrixXd& w, const Eigen::VectorXd
 }
 
 LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n,
-                            double tolerance, int max_iterations, Eigen::VectorXd& lambda) {
+                            double tolerance, int max_iterations, Eigen::VectorXd& lambda,
+                            const std::vector<char>* initial_active) {
+  if (initial_active && static_cast<int>(initial_active->size()) < n)
+    throw std::invalid_argument("ContactLcp::solve: warm start shorter than the rows");
   if (n > capacity_ || w.rows() < n || w.cols() < n || delta.size() < n || lambda.size() < n) {
     throw std::invalid_argument("ContactLcp::solve: " + std::to_string(n) +
                                 " rows exceed the workspace (" + std::to_string(capacity_) +
@@ -76,7 +79,10 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
     return result;
   }
   // 0: inactive, 1: active, 2: blocked (dependent or immovable row, never active).
-  for (int i = 0; i < n; ++i) in_set_[i] = w(i, i) > 0.0 ? (delta[i] > 0.0 ? 1 : 0) : 2;
+  for (int i = 0; i < n; ++i) {
+    const bool start = initial_active ? (*initial_active)[i] != 0 : delta[i] > 0.0;
+    in_set_[i] = w(i, i) > 0.0 ? (start ? 1 : 0) : 2;
+  }
 
   const double tol_w = tolerance * delta_scale;
   for (int it = 0; it < max_iterations; ++it) {

@@ -29,8 +29,11 @@ class ContactLcp {
   // w: top-left n x n block of a capacity x capacity matrix is used; delta, lambda: first n.
   // tolerance: relative to max |delta| (for w) and max lambda (for lambda).
   // Rows of W with a zero diagonal (a row that cannot move) never become active.
+  // initial_active (optional, first n entries): warm start from this active set (e.g. the last
+  // step's) instead of the rows with delta > 0; the pivoting is finite from any start.
   LcpResult solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n, double tolerance,
-                  int max_iterations, Eigen::VectorXd& lambda);
+                  int max_iterations, Eigen::VectorXd& lambda,
+                  const std::vector<char>* initial_active = nullptr);
 
   // After a converged solve: the inverse of the active block (for the contact stiffness), in
   // active_inverse() (top-left active x active), rows listed by active_rows().

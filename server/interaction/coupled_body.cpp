@@ -50,6 +50,35 @@ CoupledBody::CoupledBody(int host_index, const mesh::TetMesh& host, const fem::M
   timing_.factor_s = seconds_since(t0);
   boundary_slot_.assign(host.num_vertices(), -1);
   contact_slot_.assign(host.num_vertices(), -1);
+  sliding_node_.assign(host.num_vertices(), 0);
+}
+
+int CoupledBody::add_sliding_rows(const std::vector<HostSlidingRow>& rows,
+                                  const std::string& what) {
+  if (finalized_) throw std::logic_error("CoupledBody::add_sliding_rows after finalize");
+  const int first = static_cast<int>(sliding_rows_.size());
+  const int n = static_cast<int>(host_->num_vertices());
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    const auto& r = rows[k];
+    double sum = 0.0;
+    for (int a = 0; a < 3; ++a) {
+      if (r.nodes[a] < 0 || r.nodes[a] >= n || !std::isfinite(r.weights[a]) ||
+          r.weights[a] < -1e-12) {
+        throw std::invalid_argument(what + ": bad sliding row " + std::to_string(k) +
+                                    " (host node or weight)");
+      }
+      sum += r.weights[a];
+    }
+    if (std::abs(sum - 1.0) > 1e-9 || !r.normal.allFinite() ||
+        std::abs(r.normal.norm() - 1.0) > 1e-9) {
+      throw std::invalid_argument(what + ": sliding row " + std::to_string(k) +
+                                  " has weights summing to " + std::to_string(sum) +
+                                  " or a normal that is not unit");
+    }
+    for (int v : r.nodes) sliding_node_[v] = 1;
+    sliding_rows_.push_back(r);
+  }
+  return first;
 }
 
 void CoupledBody::select_contact_nodes() {
@@ -57,7 +86,8 @@ void CoupledBody::select_contact_nodes() {
   // Fixed nodes cannot move (a row there could never be satisfied) and S' nodes are covered by
   // the embedded mesh: neither is contactable.
   for (int v : host_->surface_vertices()) {
-    if (solver_->is_fixed_node(v) || boundary_slot_[v] >= 0 || normals[v].squaredNorm() == 0.0)
+    if (solver_->is_fixed_node(v) || boundary_slot_[v] >= 0 || sliding_node_[v] ||
+        normals[v].squaredNorm() == 0.0)
       continue;
     contact_slot_[v] = static_cast<int>(contact_nodes_.size());
     contact_nodes_.push_back(v);
@@ -180,22 +210,92 @@ void CoupledBody::finalize() {
   pending_tri_nodes_.clear();
   select_contact_nodes();
   const int m3 = 3 * static_cast<int>(boundary_nodes_.size());
-  if (m3 == 0) return;
-
-  std::string cache_file;
-  if (!cache_dir_.empty()) {
-    char name[64];
-    std::snprintf(name, sizeof name, "coupling_%016llx.bin",
-                  static_cast<unsigned long long>(cache_key()));
-    cache_file = (std::filesystem::path(cache_dir_) / name).string();
-    if (load_cache(cache_file)) {
-      cache_hit_ = true;
-      timing_.boundary_s = seconds_since(t0);
-      return;
+  if (m3 > 0) {
+    std::string cache_file;
+    if (!cache_dir_.empty()) {
+      char name[64];
+      std::snprintf(name, sizeof name, "coupling_%016llx.bin",
+                    static_cast<unsigned long long>(cache_key()));
+      cache_file = (std::filesystem::path(cache_dir_) / name).string();
+      if (load_cache(cache_file)) {
+        cache_hit_ = true;
+        timing_.boundary_s = seconds_since(t0);
+      }
+    }
+    if (!cache_hit_) {
+      compute_boundary_operator();
+      if (!cache_file.empty()) save_cache(cache_file);
     }
   }
-  compute_boundary_operator();
-  if (!cache_file.empty()) save_cache(cache_file);
+  compute_sliding_operator();
+}
+
+void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const {
+  solver_->solve_reduced(b, x);
+  const int m3 = static_cast<int>(l_bb_.rows());
+  if (m3 == 0) return;
+  // Woodbury on the tie stiffness: L b = L_A (b - P_b^T G (L_A b)[b]).
+  const auto& reduced = solver_->reduced_index();
+  Eigen::MatrixXd v = Eigen::MatrixXd::Zero(m3, b.cols()), gv;
+  for (int r = 0; r < m3; ++r) {
+    const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
+    if (red >= 0) v.row(r) = x.row(red);
+  }
+  apply_coupling(v, gv);
+  Eigen::MatrixXd rhs = b;
+  for (int r = 0; r < m3; ++r) {
+    const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
+    if (red >= 0) rhs.row(red) -= gv.row(r);
+  }
+  solver_->solve_reduced(rhs, x);
+}
+
+void CoupledBody::compute_sliding_operator() {
+  const int ns = static_cast<int>(sliding_rows_.size());
+  if (ns == 0) return;
+  const auto t0 = std::chrono::steady_clock::now();
+  // J_A on the free dofs: row k = sum_a w_a n^T at A's nodes (fixed dofs do not move).
+  const auto& reduced = solver_->reduced_index();
+  const int nf = solver_->num_free_dofs();
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(9 * ns);
+  for (int k = 0; k < ns; ++k) {
+    const auto& r = sliding_rows_[k];
+    for (int a = 0; a < 3; ++a)
+      for (int d = 0; d < 3; ++d) {
+        const int red = reduced[3 * r.nodes[a] + d];
+        if (red >= 0 && r.weights[a] * r.normal[d] != 0.0)
+          entries.emplace_back(k, red, r.weights[a] * r.normal[d]);
+      }
+  }
+  j_slide_.resize(ns, nf);
+  j_slide_.setFromTriplets(entries.begin(), entries.end());
+  // W_A = J_A L J_A^T by block solves with the rows' force patterns as right-hand sides.
+  w_slide_.setZero(ns, ns);
+  Eigen::MatrixXd rhs, x;
+  for (int first = 0; first < ns; first += kBlockColumns) {
+    const int n = std::min(kBlockColumns, ns - first);
+    rhs = Eigen::MatrixXd(j_slide_.middleRows(first, n).transpose());
+    coupled_solve_reduced(rhs, x);
+    w_slide_.middleCols(first, n).noalias() = j_slide_ * x;
+  }
+  w_slide_ = (0.5 * (w_slide_ + w_slide_.transpose())).eval();
+  if (!w_slide_.allFinite())
+    throw std::runtime_error("CoupledBody: sliding compliance is not finite");
+  timing_.sliding_s = seconds_since(t0);
+}
+
+void CoupledBody::coupled_displacement(const Eigen::VectorXd& forces_n,
+                                       Eigen::VectorXd& u_host_m) const {
+  const int n3 = 3 * static_cast<int>(host_->num_vertices());
+  if (forces_n.size() != n3 || !forces_n.allFinite())
+    throw std::invalid_argument("CoupledBody::coupled_displacement: bad force vector");
+  const int nf = solver_->num_free_dofs();
+  Eigen::MatrixXd rhs(nf, 1), x;
+  for (int r = 0; r < nf; ++r) rhs(r, 0) = forces_n[solver_->free_dofs()[r]];
+  coupled_solve_reduced(rhs, x);
+  u_host_m.setZero(n3);
+  for (int r = 0; r < nf; ++r) u_host_m[solver_->free_dofs()[r]] = x(r, 0);
 }
 
 void CoupledBody::compute_boundary_operator() {
@@ -412,6 +512,7 @@ void CoupledBody::ensure_columns(const std::vector<int>& slots) {
           col(r, a) = x(reduced[3 * contact_nodes_[r / 3] + r % 3], 3 * j + a);
       column_of_[missing[first + j]] = static_cast<int>(columns_.size());
       columns_.push_back(std::move(col));
+      if (!sliding_rows_.empty()) sliding_columns_.push_back(j_slide_ * x.middleCols(3 * j, 3));
       if (keep_full_columns_) {
         Eigen::Matrix<double, Eigen::Dynamic, 3> full =
             Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(n3, 3);

@@ -44,11 +44,20 @@ struct EmbeddedTie {
   Eigen::SparseMatrix<double> k_is;
 };
 
+// Host side of one row of a sliding coupling (sliding_coupling.hpp): the row measures
+// n . sum_a w_a u_A(node_a), the normal motion of a point of S' (dimensionless weights, unit n).
+struct HostSlidingRow {
+  std::array<int, 3> nodes{};  // A's node ids (a triangle of S')
+  std::array<double, 3> weights{};
+  Eigen::Vector3d normal{Eigen::Vector3d::Zero()};
+};
+
 struct CoupledBodyTiming {
   double factor_s{0.0};    // host assembly + factorization, unit s
   double boundary_s{0.0};  // compliance columns of A at S' and rows at the contact nodes, unit s
   double condense_s{0.0};  // Schur complements of the embedded meshes, unit s
   double operator_s{0.0};  // K_add and the factored coupling operator G, unit s
+  double sliding_s{0.0};   // coupled compliance W_A over the sliding rows, unit s
 };
 
 class CoupledBody {
@@ -64,6 +73,23 @@ class CoupledBody {
                const std::vector<int>& embedded_surface_nodes,
                const std::vector<std::array<int, 3>>& tri_nodes,
                const std::vector<std::array<double, 3>>& weights, double max_map_distance_m);
+
+  // Registers the host side of sliding rows (before finalize; the rows of all calls are stacked,
+  // returns the index of the first one). Their S' nodes are not contactable; finalize computes
+  // W_A = J_A L J_A^T over them (coupled compliance L, ties included) and every contact column
+  // computed afterwards also records J_A L[:, slot]. Throws on a bad row (what: for messages).
+  int add_sliding_rows(const std::vector<HostSlidingRow>& rows, const std::string& what);
+  int num_sliding_rows() const { return static_cast<int>(sliding_rows_.size()); }
+  const std::vector<HostSlidingRow>& sliding_rows() const { return sliding_rows_; }
+  // W_A (rows x rows), unit m/N.
+  const Eigen::MatrixXd& sliding_compliance() const { return w_slide_; }
+  // J_A L[:, slot] (rows x 3) of a contact slot whose columns are cached, unit m/N.
+  const Eigen::Matrix<double, Eigen::Dynamic, 3>& sliding_block(int slot) const {
+    return sliding_columns_[column_of_[slot]];
+  }
+  // Coupled host displacement (ties included) for arbitrary nodal forces (3N_A, unit N), unit m.
+  // Two sparse solves when the body has ties, one otherwise.
+  void coupled_displacement(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_host_m) const;
 
   // Directory of the disk cache of the boundary operator (L_bb, L_cb, K_add, G), keyed by a
   // hash of both meshes, materials, fixed nodes and the coupling map; empty: no cache.
@@ -151,6 +177,14 @@ class CoupledBody {
   bool keep_full_columns_{false};
   std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>>
       full_columns_;  // coupled L[:, slot], same order
+  std::vector<HostSlidingRow> sliding_rows_;
+  std::vector<char> sliding_node_;                        // A node -> on a sliding row
+  Eigen::SparseMatrix<double, Eigen::RowMajor> j_slide_;  // J_A on the free dofs (rows x nf)
+  Eigen::MatrixXd w_slide_;                               // J_A L J_A^T, unit m/N
+  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> sliding_columns_;  // per cached column
+  // X = coupled L B for free-dof right-hand sides (ties by Woodbury: two solves).
+  void coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const;
+  void compute_sliding_operator();
   CoupledBodyTiming timing_;
   bool finalized_{false};
   fem::Material material_;

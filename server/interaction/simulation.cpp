@@ -7,6 +7,7 @@
 #include "server/fusion/triangle_surface.hpp"
 #include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/coupled_body.hpp"
+#include "server/interaction/sliding_coupling.hpp"
 #include "server/interaction/tool_geometry.hpp"
 #include "server/scene/scene.hpp"
 
@@ -111,12 +112,15 @@ class SimulationImpl final : public Simulation {
     slots = bodies_[b].force_slots;
     forces_n = bodies_[b].forces_n;
   }
+  void sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const override;
+  double sliding_penetration_m() const override;
 
  private:
   struct MeshEntry {
     std::unique_ptr<scene::LoadedMesh> loaded;  // stable address: bodies point into it
     int body{-1};                               // body it belongs to (host or tied), -1: inert
-    int tie{-1};                                // tie index in that body when embedded
+    int tie{-1};                                // tie index in that body when embedded (TIE)
+    int slide{-1};                              // slide index in that body (SLIDING)
   };
   struct BodyEntry {
     std::unique_ptr<CoupledBody> body;
@@ -129,6 +133,13 @@ class SimulationImpl final : public Simulation {
     // Last good step's contact forces on the body, per slot (unit N).
     std::vector<int> force_slots;
     std::vector<mesh::Vec3> forces_n;
+    // SLIDING couplings hosted by the body: B's part, and where its rows start among the body's
+    // sliding rows (CoupledBody::sliding_rows); the body's rows start at sliding_offset in the
+    // LCP. Last good step's row forces (unit N).
+    std::vector<std::unique_ptr<SlidingCoupling>> slides;
+    std::vector<int> slide_first_row;
+    int sliding_offset{0};
+    Eigen::VectorXd sliding_lambda;
   };
 
   const MeshEntry& entry(int m) const {
@@ -139,6 +150,8 @@ class SimulationImpl final : public Simulation {
   }
   void reserve_workspace(int tools);
   void collect_rows(int tool, const ToolPose& pose, const Vec3& axis);
+  // Host field for the last good contact and sliding forces (ties included).
+  void host_field(const BodyEntry& b, Eigen::VectorXd& u_host_m) const;
 
   SimulationOptions options_;
   std::string source_;
@@ -155,6 +168,9 @@ class SimulationImpl final : public Simulation {
   std::vector<std::vector<int>> missing_;
   Eigen::MatrixXd w_;
   Eigen::VectorXd delta_, lambda_;
+  int num_sliding_{0};                // sliding rows, first in the LCP
+  std::vector<char> sliding_active_;  // per sliding row: carried a force in the last good step
+  std::vector<char> warm_;            // LCP warm start
   ContactLcp lcp_;
   std::vector<ToolContact> last_good_;
 };
@@ -185,6 +201,7 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
   std::vector<char> is_host(meshes_.size(), 0);
   std::vector<int> coupling_of(meshes_.size(), -1);
   std::vector<char> iterative_host(meshes_.size(), 0);  // a coupling asks for the baseline
+  std::vector<char> sliding(meshes_.size(), 0);         // embedded by a SLIDING coupling
   if (scene.effects().coupling()) {
     for (int c = 0; c < scene.couplings_size(); ++c) {
       const auto& cp = scene.couplings(c);
@@ -193,8 +210,12 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
       const int h = scene::find_mesh(scene, cp.host()), b = scene::find_mesh(scene, cp.embedded());
       if (h < 0 || b < 0 || h == b)
         throw std::runtime_error(what + ": unknown or identical meshes");
-      if (cp.kind() != scene::Coupling::TIE) {
-        throw std::runtime_error(what + ": SLIDING coupling is not implemented yet (issue 4)");
+      if (cp.kind() != scene::Coupling::TIE && cp.kind() != scene::Coupling::SLIDING)
+        throw std::runtime_error(what + ": unknown coupling kind " + std::to_string(cp.kind()));
+      if (cp.kind() == scene::Coupling::SLIDING && cp.method() == scene::Coupling::ITERATIVE) {
+        throw std::runtime_error(what +
+                                 ": method ITERATIVE is the tie baseline; SLIDING is solved "
+                                 "exactly (method EXACT)");
       }
       // Priority decides which mesh gets the new boundary (paper 2.4); it must agree with the
       // scene.
@@ -209,6 +230,7 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
       host_of[b] = h;
       coupling_of[b] = c;
       if (cp.method() == scene::Coupling::ITERATIVE) iterative_host[h] = 1;
+      sliding[b] = cp.kind() == scene::Coupling::SLIDING;
       is_host[h] = 1;
     }
     for (std::size_t m = 0; m < meshes_.size(); ++m) {
@@ -228,6 +250,7 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     std::vector<int> embedded_nodes;
     std::vector<std::array<int, 3>> tris;
     std::vector<std::array<double, 3>> weights;
+    std::vector<mesh::Vec3> points_m;  // closest points on S'
     double max_distance_m{0.0};
   };
   std::vector<PendingTie> pending(meshes_.size());
@@ -253,11 +276,13 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     p.embedded_nodes = map.embedded_nodes;
     p.tris.resize(map.embedded_nodes.size());
     p.weights.resize(map.embedded_nodes.size());
+    p.points_m.resize(map.embedded_nodes.size());
     for (std::size_t k = 0; k < map.embedded_nodes.size(); ++k) {
       const auto& sp = map.embedded_on_boundary[k];
       const auto& tri = boundary.triangles.at(sp.triangle);
       p.tris[k] = {tri[0], tri[1], tri[2]};
       p.weights[k] = sp.weights;
+      p.points_m[k] = sp.point_m;
     }
     p.max_distance_m = map.embedded_to_boundary.max_m;
     if (options_.carve_host) {
@@ -329,6 +354,41 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     auto& emb = *meshes_[m].loaded;
     const PendingTie& p = pending[m];
     auto& body = bodies_[meshes_[h].body];
+    if (sliding[m]) {
+      // Frictionless unilateral pairs: B's surface node, its closest point on S', B's normal.
+      const std::string what =
+          source_ + ": SLIDING coupling " + meshes_[h].loaded->id + " / " + emb.id;
+      const auto normals = surface_vertex_normals(emb.mesh);
+      std::vector<SlidingPair> pairs;
+      std::vector<HostSlidingRow> rows;
+      for (std::size_t k = 0; k < p.embedded_nodes.size(); ++k) {
+        const int v = p.embedded_nodes[k];
+        const Vec3& n = normals.at(v);
+        if (n.squaredNorm() == 0.0) {
+          throw std::runtime_error(what + ": surface node " + std::to_string(v) + " of " + emb.id +
+                                   " has no normal (degenerate faces)");
+        }
+        const double g0 = options_.sliding_geometric_gap
+                              ? std::max(0.0, n.dot(p.points_m[k] - emb.mesh.vertices()[v]))
+                              : 0.0;
+        pairs.push_back(SlidingPair{v, p.tris[k], p.weights[k], n, g0});
+        rows.push_back(HostSlidingRow{p.tris[k], p.weights[k], n});
+      }
+      t0 = Clock::now();
+      try {
+        const int first = body.body->add_sliding_rows(rows, what);
+        body.slides.push_back(std::make_unique<SlidingCoupling>(
+            static_cast<int>(m), emb.mesh, emb.material, emb.fixed_nodes, std::move(pairs),
+            options_.sliding_anchor_ratio, what + ": mesh " + emb.id));
+        body.slide_first_row.push_back(first);
+      } catch (const std::invalid_argument& ex) {
+        throw std::runtime_error(ex.what());
+      }
+      setup_.sliding_s += seconds_since(t0);
+      meshes_[m].body = meshes_[h].body;
+      meshes_[m].slide = static_cast<int>(body.slides.size()) - 1;
+      continue;
+    }
     try {
       body.body->add_tie(static_cast<int>(m), emb.mesh, emb.material, emb.fixed_nodes,
                          p.embedded_nodes, p.tris, p.weights, p.max_distance_m);
@@ -345,6 +405,10 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     setup_.condense_s += tm.condense_s;
     setup_.boundary_s += tm.boundary_s;
     setup_.operator_s += tm.operator_s;
+    setup_.sliding_s += tm.sliding_s;
+    b.sliding_offset = num_sliding_;
+    num_sliding_ += b.body->num_sliding_rows();
+    b.sliding_lambda.setZero(b.body->num_sliding_rows());
     if (b.body->cache_hit()) ++setup_.cache_hits;
     setup_.boundary_nodes += static_cast<int>(b.body->boundary_nodes().size());
     for (const auto& tie : b.body->ties())
@@ -386,17 +450,33 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
   }
   if (!scene.effects().tool_contact()) tools_.clear();
   missing_.resize(bodies_.size());
+  setup_.sliding_rows = num_sliding_;
+  sliding_active_.assign(num_sliding_, 0);
   setup_.total_s = seconds_since(t_start);
 }
 
 void SimulationImpl::reserve_workspace(int tools) {
-  const int max_rows = std::max(1, tools * options_.max_contact_nodes_per_tool);
+  const int max_contact = std::max(1, tools * options_.max_contact_nodes_per_tool);
+  const int max_rows = num_sliding_ + max_contact;
   if (max_rows <= lcp_.capacity()) return;
   lcp_.reserve(max_rows);
   w_.setZero(max_rows, max_rows);
   delta_.setZero(max_rows);
   lambda_.setZero(max_rows);
-  rows_.reserve(max_rows);
+  warm_.assign(max_rows, 0);
+  rows_.reserve(max_contact);
+  // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
+  for (const auto& b : bodies_) {
+    const int o = b.sliding_offset, ns = b.body->num_sliding_rows();
+    if (ns == 0) continue;
+    w_.block(o, o, ns, ns) = b.body->sliding_compliance();
+    for (std::size_t i = 0; i < b.slides.size(); ++i) {
+      const auto& sl = *b.slides[i];
+      const int f = o + b.slide_first_row[i];
+      w_.block(f, f, sl.size(), sl.size()) += sl.compliance();
+      for (int k = 0; k < sl.size(); ++k) delta_[f + k] = -sl.pairs()[k].initial_gap_m;
+    }
+  }
   std::size_t surface = 0;
   for (const auto& b : bodies_) surface += b.rest_m.size();
   candidates_.reserve(2 * surface);  // tip and shaft queries may both list a node
@@ -525,7 +605,9 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   if (!tools_.empty()) {
     for (int t = 0; t < nt; ++t) collect_rows(t, poses[t], poses[t].axis.normalized());
   }
-  const int n = static_cast<int>(rows_.size());
+  const int nc = static_cast<int>(rows_.size());
+  const int ns = num_sliding_;  // sliding rows first (constant block of W), then contact rows
+  const int n = ns + nc;
   for (const Row& r : rows_) bodies_[r.body].row_of_slot[r.slot] = -1;
 
   // Coupled compliance columns of new contact nodes (cached after the first touch).
@@ -540,31 +622,50 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     stats.columns_computed += static_cast<int>(bodies_[bi].body->cached_columns() - before);
   }
 
-  // Delassus operator on the rows: W_rs = n_r^T L(r, s) n_s (coupled compliance, unit m/N).
-  for (int r = 0; r < n; ++r) {
+  // Delassus operator on the contact rows: W_rs = n_r^T L(r, s) n_s (coupled compliance, unit
+  // m/N); against the sliding rows of the same body, W_kr = -J_A,k L[:, r] n_r (the tool
+  // pushes along -n_r, the row measures the inward motion of the node).
+  for (int r = 0; r < nc; ++r) {
     const Row& a = rows_[r];
+    const int i = ns + r;
     const auto& body_a = *bodies_[a.body].body;
     const Vec3& na = body_a.contact_normals()[a.slot];
-    delta_[r] = a.depth_m;
-    for (int s = r; s < n; ++s) {
+    delta_[i] = a.depth_m;
+    for (int s = r; s < nc; ++s) {
       const Row& c = rows_[s];
       double v = 0.0;
       if (c.body == a.body) {
-        const Vec3& nc = body_a.contact_normals()[c.slot];
-        v = 0.5 *
-            (na.dot(body_a.block(a.slot, c.slot) * nc) + nc.dot(body_a.block(c.slot, a.slot) * na));
+        const Vec3& nc_ = body_a.contact_normals()[c.slot];
+        v = 0.5 * (na.dot(body_a.block(a.slot, c.slot) * nc_) +
+                   nc_.dot(body_a.block(c.slot, a.slot) * na));
       }
-      w_(r, s) = v;
-      w_(s, r) = v;
+      w_(i, ns + s) = v;
+      w_(ns + s, i) = v;
     }
+    if (ns == 0) continue;
+    w_.col(i).head(ns).setZero();
+    const int rows_a = body_a.num_sliding_rows();
+    if (rows_a > 0) {
+      const int o = bodies_[a.body].sliding_offset;
+      const Vec3 push = -na;
+      w_.col(i).segment(o, rows_a).noalias() = body_a.sliding_block(a.slot) * push;
+    }
+    w_.row(i).head(ns) = w_.col(i).head(ns).transpose();
   }
+  // Warm start: the sliding rows active in the last good step, the contact rows that penetrate.
+  for (int k = 0; k < ns; ++k) warm_[k] = sliding_active_[k];
+  for (int r = 0; r < nc; ++r) warm_[ns + r] = delta_[ns + r] > 0.0 ? 1 : 0;
+  const int max_iterations =
+      options_.lcp_max_iterations + options_.lcp_iterations_per_sliding_row * ns;
   const LcpResult lcp =
-      lcp_.solve(w_, delta_, n, options_.lcp_tolerance, options_.lcp_max_iterations, lambda_);
+      lcp_.solve(w_, delta_, n, options_.lcp_tolerance, max_iterations, lambda_, &warm_);
 
-  stats.contact_rows = n;
+  stats.contact_rows = nc;
+  stats.sliding_rows = ns;
   stats.converged = lcp.converged;
   if (!lcp.converged) {
-    // Keep the last good answer, say that this step did not converge.
+    // Keep the last good answer (contact and sliding forces), say that this step did not
+    // converge.
     for (int t = 0; t < nt; ++t) {
       contacts[t] = last_good_[t];
       contacts[t].converged = false;
@@ -577,16 +678,23 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   const auto& active = lcp_.active_rows();
   const Eigen::MatrixXd& inv = lcp_.active_inverse();
   const int na = lcp_.num_active();
+  stats.sliding_active = 0;
+  for (int k = 0; k < ns; ++k) {
+    sliding_active_[k] = lambda_[k] > 0.0 ? 1 : 0;
+    stats.sliding_active += sliding_active_[k];
+  }
   for (auto& b : bodies_) {
     b.force_slots.clear();
     b.forces_n.clear();
+    const int rows_b = b.body->num_sliding_rows();
+    if (rows_b > 0) b.sliding_lambda = lambda_.segment(b.sliding_offset, rows_b);
   }
-  for (int r = 0; r < n; ++r) {
-    if (lambda_[r] <= 0.0) continue;
+  for (int r = 0; r < nc; ++r) {
+    const double l = lambda_[ns + r];
+    if (l <= 0.0) continue;
     auto& b = bodies_[rows_[r].body];
     b.force_slots.push_back(rows_[r].slot);
-    b.forces_n.push_back(-lambda_[r] *
-                         b.body->contact_normals()[rows_[r].slot]);  // inward on the tissue
+    b.forces_n.push_back(-l * b.body->contact_normals()[rows_[r].slot]);  // inward on the tissue
   }
   for (int t = 0; t < nt; ++t) {
     ToolContact& c = contacts[t];
@@ -603,27 +711,30 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     double best = 0.0;
     for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
       double sum = 0.0;
-      for (int r = 0; r < n; ++r)
-        if (rows_[r].tool == t && rows_[r].body == static_cast<int>(bi)) sum += lambda_[r];
+      for (int r = 0; r < nc; ++r)
+        if (rows_[r].tool == t && rows_[r].body == static_cast<int>(bi)) sum += lambda_[ns + r];
       if (sum > best) {
         best = sum;
         main_body = static_cast<int>(bi);
       }
     }
-    for (int r = 0; r < n; ++r) {
-      if (rows_[r].tool != t || !(lambda_[r] > 0.0)) continue;
+    for (int r = 0; r < nc; ++r) {
+      if (rows_[r].tool != t || !(lambda_[ns + r] > 0.0)) continue;
       const auto& body = *bodies_[rows_[r].body].body;
-      c.force_n += lambda_[r] * body.contact_normals()[rows_[r].slot];
+      c.force_n += lambda_[ns + r] * body.contact_normals()[rows_[r].slot];
       if (rows_[r].body == main_body) c.nodes.push_back(body.contact_nodes()[rows_[r].slot]);
     }
-    // Contact stiffness dF/dx = -N W_AA^-1 N^T over this tool's active rows (flat-contact
-    // linearization: the depth changes by -n.dx per row).
+    // Contact stiffness dF/dx = -N (W_AA^-1)_cc N^T over this tool's active rows (flat-contact
+    // linearization: the depth changes by -n.dx per row; active sliding rows stay active, so
+    // the contact block of the inverse of the whole active block is the stiffness).
     for (int j = 0; j < na; ++j) {
-      const Row& rj = rows_[active[j]];
+      if (active[j] < ns) continue;
+      const Row& rj = rows_[active[j] - ns];
       if (rj.tool != t) continue;
       const Vec3& nj = bodies_[rj.body].body->contact_normals()[rj.slot];
       for (int k = 0; k < na; ++k) {
-        const Row& rk = rows_[active[k]];
+        if (active[k] < ns) continue;
+        const Row& rk = rows_[active[k] - ns];
         if (rk.tool != t) continue;
         const Vec3& nk = bodies_[rk.body].body->contact_normals()[rk.slot];
         c.stiffness_n_per_m.noalias() -= inv(j, k) * nj * nk.transpose();
@@ -647,6 +758,27 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
 }
 
+void SimulationImpl::host_field(const BodyEntry& b, Eigen::VectorXd& u_host_m) const {
+  const bool sliding_force = b.sliding_lambda.size() > 0 && b.sliding_lambda.maxCoeff() > 0.0;
+  if (!sliding_force) {
+    if (!b.body->full_field_from_columns(b.force_slots, b.forces_n, u_host_m))
+      b.body->host_displacement(b.force_slots, b.forces_n, u_host_m);
+    return;
+  }
+  // Contact forces at their nodes plus the sliding forces J_A^T lambda on S'.
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * static_cast<int>(b.body->host().num_vertices()));
+  for (std::size_t k = 0; k < b.force_slots.size(); ++k)
+    f.segment<3>(3 * b.body->contact_nodes()[b.force_slots[k]]) += b.forces_n[k];
+  const auto& rows = b.body->sliding_rows();
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    const double l = b.sliding_lambda[static_cast<int>(k)];
+    if (l == 0.0) continue;
+    for (int a = 0; a < 3; ++a)
+      f.segment<3>(3 * rows[k].nodes[a]) += (l * rows[k].weights[a]) * rows[k].normal;
+  }
+  b.body->coupled_displacement(f, u_host_m);
+}
+
 void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
   const MeshEntry& e = entry(m);
   if (e.body < 0) {
@@ -654,15 +786,47 @@ void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
     return;
   }
   const BodyEntry& b = bodies_[e.body];
+  if (e.slide >= 0) {
+    const auto& sl = *b.slides[e.slide];
+    sl.displacement(b.sliding_lambda.segment(b.slide_first_row[e.slide], sl.size()), u_m);
+    return;
+  }
   if (e.tie < 0) {
-    if (!b.body->full_field_from_columns(b.force_slots, b.forces_n, u_m))
-      b.body->host_displacement(b.force_slots, b.forces_n, u_m);
+    host_field(b, u_m);
     return;
   }
   Eigen::VectorXd u_host;
-  if (!b.body->full_field_from_columns(b.force_slots, b.forces_n, u_host))
-    b.body->host_displacement(b.force_slots, b.forces_n, u_host);
+  host_field(b, u_host);
   b.body->embedded_displacement(e.tie, u_host, u_m);
+}
+
+void SimulationImpl::sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const {
+  pairs.clear();
+  const MeshEntry& e = entry(m);
+  if (e.slide < 0) return;
+  const BodyEntry& b = bodies_[e.body];
+  const auto& sl = *b.slides[e.slide];
+  const int first = b.slide_first_row[e.slide];
+  for (int k = 0; k < sl.size(); ++k) {
+    const auto& p = sl.pairs()[k];
+    pairs.push_back(SlidingPairState{p.embedded_node, p.host_nodes, p.weights, p.normal,
+                                     p.initial_gap_m, b.sliding_lambda[first + k]});
+  }
+}
+
+double SimulationImpl::sliding_penetration_m() const {
+  double worst = 0.0;
+  Eigen::VectorXd u_host, u_emb;
+  for (const auto& b : bodies_) {
+    if (b.slides.empty()) continue;
+    host_field(b, u_host);
+    for (std::size_t i = 0; i < b.slides.size(); ++i) {
+      const auto& sl = *b.slides[i];
+      sl.displacement(b.sliding_lambda.segment(b.slide_first_row[i], sl.size()), u_emb);
+      for (int k = 0; k < sl.size(); ++k) worst = std::max(worst, -sl.gap(k, u_host, u_emb));
+    }
+  }
+  return worst;
 }
 
 double SimulationImpl::tie_residual_m() const {
@@ -670,7 +834,7 @@ double SimulationImpl::tie_residual_m() const {
   Eigen::VectorXd u_host, u_emb;
   for (const auto& b : bodies_) {
     if (b.body->ties().empty()) continue;
-    b.body->host_displacement(b.force_slots, b.forces_n, u_host);
+    host_field(b, u_host);
     for (std::size_t t = 0; t < b.body->ties().size(); ++t) {
       b.body->embedded_displacement(static_cast<int>(t), u_host, u_emb);
       worst = std::max(worst, b.body->tie_residual(static_cast<int>(t), u_host, u_emb));

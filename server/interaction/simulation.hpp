@@ -10,6 +10,7 @@
 
 #include <Eigen/Core>
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -49,6 +50,20 @@ struct StepStats {
   // Contact nodes touched for the first time in this step: their coupled compliance columns were
   // computed (block solves, milliseconds) inside the step (issue 4).
   int columns_computed{0};
+  int sliding_rows{0};    // unilateral rows of SLIDING couplings in this step's LCP
+  int sliding_active{0};  // of which carry a force
+};
+
+// One pair of a SLIDING coupling (server/interaction/sliding_coupling.hpp): B's surface node and
+// its closest point on A's new boundary S'. Gap g = n . (sum w u_A - u_B) + g0 >= 0 (g < 0:
+// interpenetration); the pair's normal force pushes A along +n and B along -n.
+struct SlidingPairState {
+  int embedded_node{-1};
+  std::array<int, 3> host_nodes{};  // A's node ids (triangle of S')
+  std::array<double, 3> weights{};
+  Vec3 normal{Vec3::Zero()};  // unit, B's outward surface normal (from B towards A)
+  double initial_gap_m{0.0};  // g0 >= 0, unit m
+  double force_n{0.0};        // last good step's normal force (>= 0), unit N
 };
 
 // Options the scene does not give (limits, tolerances), with defaults.
@@ -80,6 +95,15 @@ struct SimulationOptions {
   // solved by boundary iteration to this relative tolerance, at most this many iterations.
   double iterative_tolerance{1e-12};
   int iterative_max_iterations{10000};
+  // SLIDING couplings. false: the meshes touch at rest, g0 = 0 (the space between S' and B's
+  // surface is the fusion's discretization, bridged as a tie bridges it); true: g0 = the normal
+  // distance max(0, n . (p - x)) from B's node x to its closest point p on S'.
+  bool sliding_geometric_gap{false};
+  // A floating embedded mesh (no fixed node) in sliding contact is anchored in its six rigid
+  // modes only, by this fraction of its mean diagonal stiffness (dimensionless, > 0).
+  double sliding_anchor_ratio{1e-6};
+  // The contact LCP may pivot lcp_max_iterations + this x (number of sliding rows) times.
+  int lcp_iterations_per_sliding_row{4};
 };
 
 // Load-time cost of build(), unit s.
@@ -91,11 +115,13 @@ struct SetupStats {
   double boundary_s{0.0};  // host compliance columns at the new boundary
   double operator_s{0.0};  // coupling operator G
   double columns_s{0.0};   // precomputed contact columns
+  double sliding_s{0.0};   // Delassus block of the sliding rows (host and embedded parts)
   double total_s{0.0};
   int boundary_nodes{0};  // host nodes on S' used by the ties (all couplings)
   int tied_nodes{0};      // embedded nodes tied (all couplings)
   int carved_tets{0};     // host tetrahedra removed inside S' (carve_host)
   int cache_hits{0};      // bodies whose boundary operator came from compliance_cache_dir
+  int sliding_rows{0};    // unilateral rows of SLIDING couplings (all couplings)
 };
 
 class Simulation {
@@ -139,6 +165,12 @@ class Simulation {
   virtual const CoupledBody* body_of(int mesh) const = 0;
   virtual void last_contact_forces(int mesh, std::vector<int>& slots,
                                    std::vector<Vec3>& forces_n) const = 0;
+  // SLIDING couplings: the pairs of the coupling whose embedded mesh is `mesh` with the last good
+  // step's forces (empty if `mesh` is not embedded by SLIDING).
+  virtual void sliding_pairs(int mesh, std::vector<SlidingPairState>& pairs) const = 0;
+  // Largest interpenetration max(0, -g) over every sliding pair for the last step, unit m
+  // (full-field solves: for tests and benchmarks).
+  virtual double sliding_penetration_m() const = 0;
 };
 
 }  // namespace neurosim::interaction

@@ -19,6 +19,11 @@ struct SceneSpec {
   double tip_radius_m{0.015};
   bool embedded_fixed{false};  // fix the cylinder's end (then it is a body of its own untied)
   bool iterative{false};       // coupling method ITERATIVE (the paper's baseline)
+  bool sliding{false};         // coupling kind SLIDING (frictionless unilateral) instead of TIE
+  // A second embedded mesh (a thin vertical rod, r = 5 mm, axis x = 0.02, y = 0.05 m, z from
+  // 0.025 to 0.075 m), coupled by this kind
+  // ("TIE" or "SLIDING"); empty: none.
+  std::string rod_kind{};
 };
 
 // Cube [0, 0.1]^3 m fixed at z = 0; cylinder r = 15 mm along y through (0.05, *, 0.05), 60 mm long.
@@ -40,9 +45,16 @@ inline std::string scene_text(const SceneSpec& s) {
   if (s.embedded_fixed)
     o << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 0.0201 z: 1 } } }\n";
   o << "  priority: 1 }\n"
-    << "couplings { host: \"cube\" embedded: \"cylinder\" kind: TIE method: "
-    << (s.iterative ? "ITERATIVE" : "EXACT") << " }\n"
-    << "tools { id: \"probe\" tip_radius_m: " << s.tip_radius_m
+    << "couplings { host: \"cube\" embedded: \"cylinder\" kind: " << (s.sliding ? "SLIDING" : "TIE")
+    << " method: " << (s.iterative ? "ITERATIVE" : "EXACT") << " }\n";
+  if (!s.rod_kind.empty()) {
+    o << "meshes { id: \"rod\" generate { cylinder { base_center_m { x: 0.02 y: 0.05 z: 0.025 } "
+      << "axis_m { x: 0 y: 0 z: 0.05 } radius_m: 0.005 } cell_size_m: 0.004 seed: 1 }\n"
+      << "  material { name: \"rod\" youngs_modulus_pa: " << s.embedded_e_pa
+      << " poisson_ratio: " << s.nu << " } priority: 1 }\n"
+      << "couplings { host: \"cube\" embedded: \"rod\" kind: " << s.rod_kind << " }\n";
+  }
+  o << "tools { id: \"probe\" tip_radius_m: " << s.tip_radius_m
     << " shaft_radius_m: 0.002 shaft_length_m: 0.12 max_speed_m_per_s: 2 }\n"
     << "effects { tier: LINEAR coupling: " << (s.coupling ? "true" : "false")
     << " tool_contact: true deformation_output: true }\n";

@@ -1,0 +1,176 @@
+#include "server/interaction/sliding_coupling.hpp"
+
+#include "server/fem/assembly.hpp"
+#include "server/fem/static_solver.hpp"
+
+#include <Eigen/QR>
+#include <Eigen/SparseCholesky>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace neurosim::interaction {
+
+namespace {
+// Right-hand sides per block solve when W_B is built.
+constexpr int kBlock = 63;
+// Shift of the floating factor K + sigma I, relative to K's mean diagonal: far below the softest
+// deformation mode of any mesh we load, so the refinement contracts by sigma / mu_min per step.
+constexpr double kShiftRatio = 1e-10;
+constexpr int kMaxRefinements = 60;
+}  // namespace
+
+struct EmbeddedCompliance::Floating {
+  fem::SparseMatrix k;                              // K_B, unit N/m
+  Eigen::SimplicialLDLT<fem::SparseMatrix> factor;  // of K_B + sigma I
+  Eigen::MatrixXd r;                                // 3N x 6 orthonormal rigid modes
+  double kappa{0.0};                                // anchor stiffness per rigid mode, N/m
+};
+
+EmbeddedCompliance::EmbeddedCompliance(const mesh::TetMesh& mesh, const fem::Material& material,
+                                       const std::vector<int>& fixed, double anchor_ratio,
+                                       const std::string& what)
+    : what_(what), dofs_(3 * static_cast<int>(mesh.num_vertices())) {
+  const auto materials = fem::MaterialMap::uniform(material);
+  if (!fixed.empty()) {
+    try {
+      solver_ = std::make_unique<fem::StaticSolver>(mesh, materials, fixed);
+    } catch (const std::exception& ex) {
+      throw std::runtime_error(what_ + ": " + ex.what());
+    }
+    return;
+  }
+  if (!(anchor_ratio > 0.0) || !std::isfinite(anchor_ratio))
+    throw std::invalid_argument(what_ + ": sliding anchor ratio must be finite and > 0");
+  floating_ = std::make_unique<Floating>();
+  Floating& f = *floating_;
+  f.k = fem::assemble_stiffness(mesh, materials);
+  const double mean_diag = f.k.diagonal().mean();
+  if (!(mean_diag > 0.0) || !std::isfinite(mean_diag))
+    throw std::runtime_error(what_ + ": stiffness has no positive diagonal");
+  f.kappa = anchor_ratio * mean_diag;
+  // Rigid modes: translations and rotations about the centroid, orthonormalized.
+  const auto& x = mesh.vertices();
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (const auto& p : x) c += p;
+  c /= static_cast<double>(x.size());
+  Eigen::MatrixXd modes = Eigen::MatrixXd::Zero(dofs_, 6);
+  for (std::size_t v = 0; v < x.size(); ++v) {
+    const Eigen::Vector3d d = x[v] - c;
+    for (int a = 0; a < 3; ++a) {
+      modes(3 * v + a, a) = 1.0;
+      modes.block<3, 1>(3 * v, 3 + a) = Eigen::Vector3d::Unit(a).cross(d);
+    }
+  }
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr(modes);
+  f.r = qr.householderQ() * Eigen::MatrixXd::Identity(dofs_, 6);
+  fem::SparseMatrix shifted = f.k;
+  for (int i = 0; i < dofs_; ++i) shifted.coeffRef(i, i) += kShiftRatio * mean_diag;
+  f.factor.compute(shifted);
+  if (f.factor.info() != Eigen::Success)
+    throw std::runtime_error(what_ + ": factorization of the floating embedded mesh failed");
+}
+
+EmbeddedCompliance::~EmbeddedCompliance() = default;
+
+void EmbeddedCompliance::apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_m) const {
+  if (forces_n.rows() != dofs_ || !forces_n.allFinite())
+    throw std::invalid_argument(what_ + ": EmbeddedCompliance::apply: bad forces");
+  if (solver_) {
+    const auto& free = solver_->free_dofs();
+    const int nf = solver_->num_free_dofs();
+    Eigen::MatrixXd rhs(nf, forces_n.cols()), x;
+    for (int r = 0; r < nf; ++r) rhs.row(r) = forces_n.row(free[r]);
+    solver_->solve_reduced(rhs, x);
+    u_m.setZero(dofs_, forces_n.cols());
+    for (int r = 0; r < nf; ++r) u_m.row(free[r]) = x.row(r);
+    return;
+  }
+  // Pseudo-inverse on the self-equilibrated part, anchor on the rigid part.
+  const Floating& f = *floating_;
+  const Eigen::MatrixXd rigid = f.r.transpose() * forces_n;  // 6 x m
+  const Eigen::MatrixXd pf = forces_n - f.r * rigid;
+  Eigen::MatrixXd x = f.factor.solve(pf);
+  x -= f.r * (f.r.transpose() * x);
+  Eigen::MatrixXd res, d;
+  int it = 0;
+  double change = 0.0, previous = std::numeric_limits<double>::infinity();
+  for (; it < kMaxRefinements; ++it) {
+    res = pf - f.k * x;
+    d = f.factor.solve(res);
+    d -= f.r * (f.r.transpose() * d);
+    x += d;
+    change = d.norm();
+    // Converged, or at the round-off floor of K (updates stop shrinking).
+    if (change <= 1e-14 * x.norm() || change > 0.5 * previous) break;
+    previous = change;
+  }
+  max_refinements_ = std::max(max_refinements_, it + 1);
+  if (!x.allFinite() || change > 1e-7 * x.norm()) {
+    throw std::runtime_error(what_ +
+                             ": the compliance of the floating embedded mesh did not converge "
+                             "(refinement of the shifted factor); fix some of its nodes");
+  }
+  u_m = x + f.r * (rigid / f.kappa);
+}
+
+SlidingCoupling::SlidingCoupling(int mesh_index, const mesh::TetMesh& embedded,
+                                 const fem::Material& material,
+                                 const std::vector<int>& embedded_fixed,
+                                 std::vector<SlidingPair> pairs, double anchor_ratio,
+                                 const std::string& what)
+    : mesh_(mesh_index), geometry_(&embedded), pairs_(std::move(pairs)) {
+  const int nb = static_cast<int>(embedded.num_vertices());
+  if (pairs_.empty()) throw std::invalid_argument(what + ": no sliding pair");
+  for (std::size_t k = 0; k < pairs_.size(); ++k) {
+    const auto& p = pairs_[k];
+    if (p.embedded_node < 0 || p.embedded_node >= nb || !p.normal.allFinite() ||
+        std::abs(p.normal.norm() - 1.0) > 1e-9 || !std::isfinite(p.initial_gap_m) ||
+        p.initial_gap_m < 0.0) {
+      throw std::invalid_argument(what + ": bad sliding pair " + std::to_string(k) +
+                                  " (embedded node " + std::to_string(p.embedded_node) + ")");
+    }
+  }
+  compliance_ =
+      std::make_unique<EmbeddedCompliance>(embedded, material, embedded_fixed, anchor_ratio, what);
+  // W_B(s, t) = n_s . L_B(k_s, k_t) n_t, by block solves with unit normal forces.
+  const int ns = size();
+  w_b_.setZero(ns, ns);
+  Eigen::MatrixXd f, u;
+  for (int first = 0; first < ns; first += kBlock) {
+    const int n = std::min(kBlock, ns - first);
+    f.setZero(3 * nb, n);
+    for (int j = 0; j < n; ++j)
+      f.block<3, 1>(3 * pairs_[first + j].embedded_node, j) = pairs_[first + j].normal;
+    compliance_->apply(f, u);
+    for (int j = 0; j < n; ++j)
+      for (int s = 0; s < ns; ++s)
+        w_b_(s, first + j) = pairs_[s].normal.dot(u.block<3, 1>(3 * pairs_[s].embedded_node, j));
+  }
+  w_b_ = (0.5 * (w_b_ + w_b_.transpose())).eval();
+  if (!w_b_.allFinite()) throw std::runtime_error(what + ": sliding compliance is not finite");
+}
+
+void SlidingCoupling::displacement(const Eigen::VectorXd& lambda_n, Eigen::VectorXd& u_m) const {
+  if (lambda_n.size() != size() || !lambda_n.allFinite())
+    throw std::invalid_argument("SlidingCoupling::displacement: bad row forces");
+  Eigen::MatrixXd f = Eigen::MatrixXd::Zero(3 * geometry_->num_vertices(), 1), u;
+  for (int k = 0; k < size(); ++k)
+    f.block<3, 1>(3 * pairs_[k].embedded_node, 0) -= lambda_n[k] * pairs_[k].normal;
+  compliance_->apply(f, u);
+  u_m = u.col(0);
+}
+
+double SlidingCoupling::gap(int k, const Eigen::VectorXd& u_host_m,
+                            const Eigen::VectorXd& u_embedded_m) const {
+  const auto& p = pairs_.at(k);
+  Eigen::Vector3d ua = Eigen::Vector3d::Zero();
+  for (int a = 0; a < 3; ++a) ua += p.weights[a] * u_host_m.segment<3>(3 * p.host_nodes[a]);
+  return p.normal.dot(ua - u_embedded_m.segment<3>(3 * p.embedded_node)) + p.initial_gap_m;
+}
+
+}  // namespace neurosim::interaction

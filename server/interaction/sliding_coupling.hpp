@@ -1,0 +1,102 @@
+// Frictionless sliding contact between a host mesh A (through its new boundary S') and an
+// embedded mesh B that is not bonded to it (issue 4, coupling kind SLIDING): the meshes may
+// separate but not interpenetrate.
+//
+// One unilateral normal row per surface node k of B, paired with its closest point on S'
+// (triangle of A, barycentric weights w, from the coupling map):
+//
+//   g_k = n_k . (sum_a w_a u_A,a - u_B,k) + g0_k  >= 0,   lambda_k >= 0,   lambda_k g_k = 0
+//
+// n_k: B's outward unit surface normal at k (from B towards A); g0_k >= 0: initial normal gap
+// (0 when the meshes touch at rest). g_k < 0 is interpenetration. lambda_k (unit N) pushes the
+// meshes apart: +lambda_k n_k on A's S' point (spread by w), -lambda_k n_k on B's node k. No
+// tangential row: the meshes slide freely along each other.
+// In constraint form: J_A row k = n_k^T (x) w on A's dofs, J_B row k = -n_k^T at B's node k, and
+// the Delassus block of the rows is W_ss = J_A L_A J_A^T + J_B L_B J_B^T. The host part is
+// CoupledBody::sliding_compliance(); this file holds B's part and B's displacement.
+//
+// B with fixed nodes: L_B = K_B^-1 with those nodes fixed. A floating B (no fixed node) has six
+// rigid modes R that frictionless contact alone may not hold (a cylinder turning about its
+// axis); it is anchored in those modes only: L_B = K_B^+ + R R^T / kappa with
+// kappa = anchor_ratio x mean diagonal of K_B (deformation modes exact, the pseudo-inverse by a
+// slightly shifted factor and iterative refinement; a rigid load moves B by load / kappa).
+#pragma once
+
+#include "server/fem/material.hpp"
+#include "server/mesh/tet_mesh.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace neurosim::fem {
+class StaticSolver;
+}
+
+namespace neurosim::interaction {
+
+struct SlidingPair {
+  int embedded_node{-1};                            // B's node id
+  std::array<int, 3> host_nodes{};                  // A's triangle of S'
+  std::array<double, 3> weights{};                  // barycentric weights on it
+  Eigen::Vector3d normal{Eigen::Vector3d::Zero()};  // unit, B's outward normal at the node
+  double initial_gap_m{0.0};                        // g0 >= 0, unit m
+};
+
+// Compliance operator of an embedded mesh (see above).
+class EmbeddedCompliance {
+ public:
+  // what: names the mesh in messages. anchor_ratio > 0 (dimensionless) is used when fixed is
+  // empty.
+  EmbeddedCompliance(const mesh::TetMesh& mesh, const fem::Material& material,
+                     const std::vector<int>& fixed, double anchor_ratio, const std::string& what);
+  ~EmbeddedCompliance();
+  EmbeddedCompliance(const EmbeddedCompliance&) = delete;
+  EmbeddedCompliance& operator=(const EmbeddedCompliance&) = delete;
+
+  // U = L_B F for nodal forces F (3N x m, unit N), U unit m.
+  void apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_m) const;
+  bool floating() const { return !solver_; }
+  int refinement_iterations() const { return max_refinements_; }  // most one apply needed
+
+ private:
+  struct Floating;
+  std::unique_ptr<fem::StaticSolver> solver_;  // B with fixed nodes
+  std::unique_ptr<Floating> floating_;         // B without
+  std::string what_;
+  int dofs_{0};
+  mutable int max_refinements_{0};
+};
+
+class SlidingCoupling {
+ public:
+  // pairs: one per free surface node of B (checked: finite, unit normals, g0 >= 0).
+  SlidingCoupling(int mesh_index, const mesh::TetMesh& embedded, const fem::Material& material,
+                  const std::vector<int>& embedded_fixed, std::vector<SlidingPair> pairs,
+                  double anchor_ratio, const std::string& what);
+
+  int mesh() const { return mesh_; }
+  const mesh::TetMesh& geometry() const { return *geometry_; }
+  const std::vector<SlidingPair>& pairs() const { return pairs_; }
+  int size() const { return static_cast<int>(pairs_.size()); }
+  // W_B = J_B L_B J_B^T (pairs x pairs), unit m/N.
+  const Eigen::MatrixXd& compliance() const { return w_b_; }
+  const EmbeddedCompliance& operator_b() const { return *compliance_; }
+  // B's displacement (3N_B, unit m) for the row forces lambda (pairs, unit N).
+  void displacement(const Eigen::VectorXd& lambda_n, Eigen::VectorXd& u_m) const;
+  // g_k for the given full fields of A and B (unit m).
+  double gap(int k, const Eigen::VectorXd& u_host_m, const Eigen::VectorXd& u_embedded_m) const;
+
+ private:
+  int mesh_{-1};
+  const mesh::TetMesh* geometry_{nullptr};
+  std::vector<SlidingPair> pairs_;
+  std::unique_ptr<EmbeddedCompliance> compliance_;
+  Eigen::MatrixXd w_b_;
+};
+
+}  // namespace neurosim::interaction

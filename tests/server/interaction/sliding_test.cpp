@@ -1,0 +1,422 @@
+// SLIDING coupling (frictionless unilateral contact between the host's new boundary S' and the
+// embedded mesh's surface), on the small cube/cylinder scene: no interpenetration, compressive
+// forces only, complementarity checked from the full fields, separation where TIE would drag,
+// the variational ordering against TIE, stability, mixed TIE + SLIDING scenes.
+#include "interaction_fixtures.hpp"
+#include "server/interaction/simulation.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace neurosim::interaction {
+namespace {
+
+using testing::SceneSpec;
+
+constexpr int kCube = 0, kCylinder = 1, kRod = 2;
+
+ToolPose push_right(double depth_m, double tip_radius_m = SceneSpec{}.tip_radius_m) {
+  ToolPose p;
+  p.tip_m = Vec3(0.1 + tip_radius_m - depth_m, 0.05, 0.05);
+  p.axis = Vec3::UnitX();
+  return p;
+}
+
+struct Stepped {
+  std::unique_ptr<Simulation> sim;
+  std::vector<ToolContact> contacts;
+  StepStats stats;
+};
+
+Stepped run(const SceneSpec& spec, const std::vector<ToolPose>& poses,
+            const SimulationOptions& options = {}) {
+  Stepped s;
+  s.sim = Simulation::build(testing::make_scene(spec), "test.scene", options);
+  s.sim->step(poses, s.contacts, s.stats);
+  return s;
+}
+
+SceneSpec sliding_spec() {
+  SceneSpec s;
+  s.sliding = true;
+  return s;
+}
+
+// Gaps g = n . (sum w u_A - u_B) + g0 of every pair, from the full fields (independent of the
+// LCP's own bookkeeping), and the pairs with their forces.
+struct Gaps {
+  std::vector<SlidingPairState> pairs;
+  std::vector<double> g_m;
+  double min_m{std::numeric_limits<double>::infinity()};
+  double max_m{-std::numeric_limits<double>::infinity()};
+};
+
+Gaps gaps(const Simulation& sim, int embedded = kCylinder) {
+  Gaps out;
+  sim.sliding_pairs(embedded, out.pairs);
+  Eigen::VectorXd ua, ub;
+  sim.displacements(kCube, ua);
+  sim.displacements(embedded, ub);
+  for (const auto& p : out.pairs) {
+    Vec3 u = Vec3::Zero();
+    for (int a = 0; a < 3; ++a) u += p.weights[a] * ua.segment<3>(3 * p.host_nodes[a]);
+    const double g = p.normal.dot(u - ub.segment<3>(3 * p.embedded_node)) + p.initial_gap_m;
+    out.g_m.push_back(g);
+    out.min_m = std::min(out.min_m, g);
+    out.max_m = std::max(out.max_m, g);
+  }
+  return out;
+}
+
+TEST(interaction_sliding, SceneLoadsAndRunsThroughSimulation) {
+  const double depth = 0.004;
+  auto s = run(sliding_spec(), {push_right(depth)});
+  ASSERT_TRUE(s.stats.converged);
+  ASSERT_TRUE(s.contacts[0].in_contact);
+  EXPECT_GT(s.contacts[0].force_n.x(), 0.0);
+  EXPECT_TRUE(s.sim->mesh_active(kCylinder));
+  EXPECT_GT(s.sim->setup_stats().sliding_rows, 0);
+  EXPECT_EQ(s.sim->setup_stats().tied_nodes, 0);
+  EXPECT_EQ(s.stats.sliding_rows, s.sim->setup_stats().sliding_rows);
+  EXPECT_GT(s.stats.sliding_active, 0);
+  std::vector<SlidingPairState> pairs;
+  s.sim->sliding_pairs(kCylinder, pairs);
+  EXPECT_EQ(static_cast<int>(pairs.size()), s.sim->setup_stats().sliding_rows);
+  s.sim->sliding_pairs(kCube, pairs);
+  EXPECT_TRUE(pairs.empty());
+  // Nothing to tie: the tie residual is zero; the fields are finite.
+  EXPECT_EQ(s.sim->tie_residual_m(), 0.0);
+  for (int m = 0; m < s.sim->num_meshes(); ++m) {
+    Eigen::VectorXd u;
+    s.sim->displacements(m, u);
+    EXPECT_TRUE(u.allFinite()) << m;
+  }
+}
+
+TEST(interaction_sliding, RejectsIterativeMethod) {
+  SceneSpec spec = sliding_spec();
+  spec.iterative = true;
+  try {
+    Simulation::build(testing::make_scene(spec), "test.scene");
+    FAIL() << "ITERATIVE with SLIDING was accepted";
+  } catch (const std::runtime_error& ex) {
+    EXPECT_NE(std::string(ex.what()).find("cube / cylinder"), std::string::npos) << ex.what();
+    EXPECT_NE(std::string(ex.what()).find("SLIDING"), std::string::npos) << ex.what();
+  }
+}
+
+// (a) The host pushed towards the embedded mesh: no interpenetration, compressive forces only,
+// complementarity, and the embedded mesh is pushed the way the host moves.
+TEST(interaction_sliding, PushNoInterpenetrationCompressiveOnly) {
+  const double depth = 0.005;
+  auto s = run(sliding_spec(), {push_right(depth)});
+  ASSERT_TRUE(s.stats.converged);
+  ASSERT_TRUE(s.contacts[0].in_contact);
+  const Gaps g = gaps(*s.sim);
+  ASSERT_FALSE(g.pairs.empty());
+  EXPECT_GE(g.min_m, -1e-9 * depth);
+  EXPECT_LE(s.sim->sliding_penetration_m(), 1e-9 * depth);
+  int active = 0;
+  double largest = 0.0;
+  for (const auto& p : g.pairs) largest = std::max(largest, p.force_n);
+  for (std::size_t k = 0; k < g.pairs.size(); ++k) {
+    const auto& p = g.pairs[k];
+    EXPECT_GE(p.force_n, 0.0) << k;
+    EXPECT_TRUE(std::isfinite(p.force_n));
+    // lambda g = 0: a pair that carries force is closed (to round-off).
+    if (p.force_n > 1e-9 * largest) {
+      ++active;
+      EXPECT_LE(std::abs(g.g_m[k]), 1e-9 * depth) << k;
+    }
+  }
+  EXPECT_GT(active, 0);
+  EXPECT_GT(largest, 0.0);
+  // The cylinder is pushed towards -x with the host.
+  Eigen::VectorXd ub;
+  s.sim->displacements(kCylinder, ub);
+  double mean_x = 0.0;
+  for (int v = 0; v < ub.size() / 3; ++v) mean_x += ub[3 * v];
+  EXPECT_LT(mean_x, 0.0);
+  EXPECT_GT(ub.cwiseAbs().maxCoeff(), 0.01 * depth);
+  // Forces balance: the sliding forces push A along +n and B along -n; with B floating, the
+  // anchor of its rigid modes carries only a tiny share of their resultant.
+  Vec3 resultant = Vec3::Zero();
+  double total = 0.0;
+  for (const auto& p : g.pairs) {
+    resultant += p.force_n * p.normal;
+    total += p.force_n;
+  }
+  EXPECT_LE(resultant.norm(), 1e-3 * total);
+}
+
+// (b) Where the host moves away from the embedded mesh, the meshes separate without force
+// (the embedded mesh does not follow), whereas TIE drags those nodes along.
+TEST(interaction_sliding, PulledSideSeparatesWithoutForce) {
+  const double depth = 0.005;
+  auto slide = run(sliding_spec(), {push_right(depth)});
+  auto tie = run(SceneSpec{}, {push_right(depth)});
+  ASSERT_TRUE(slide.stats.converged && tie.stats.converged);
+  const Gaps g = gaps(*slide.sim);
+  int open = 0;
+  for (std::size_t k = 0; k < g.pairs.size(); ++k) {
+    if (g.g_m[k] > 1e-6 * depth) {
+      ++open;
+      EXPECT_EQ(g.pairs[k].force_n, 0.0) << k;  // separated pairs carry nothing
+    }
+  }
+  EXPECT_GT(open, 0);
+  EXPECT_LT(open, static_cast<int>(g.pairs.size()));
+  // TIE keeps every node on the host (its residual is round-off), so where SLIDING opens a gap
+  // the tie pulls the cylinder along.
+  EXPECT_LE(tie.sim->tie_residual_m(), 1e-9 * depth);
+  EXPECT_GT(g.max_m, 1e-3 * depth);
+}
+
+// (b) With the fusion's clearance as initial gap, a push too small to close it leaves the
+// cylinder unloaded and still (no other load, so exactly zero), while TIE drags it.
+TEST(interaction_sliding, ClearanceLeavesEmbeddedMeshStill) {
+  SimulationOptions geometric;
+  geometric.sliding_geometric_gap = true;
+  auto probe = Simulation::build(testing::make_scene(sliding_spec()), "test.scene", geometric);
+  std::vector<SlidingPairState> pairs;
+  probe->sliding_pairs(kCylinder, pairs);
+  double smallest = std::numeric_limits<double>::infinity(), largest = 0.0;
+  for (const auto& p : pairs) {
+    EXPECT_GE(p.initial_gap_m, 0.0);
+    smallest = std::min(smallest, p.initial_gap_m);
+    largest = std::max(largest, p.initial_gap_m);
+  }
+  ASSERT_GT(largest, 0.0);
+  // A push small against the clearance.
+  const double depth = 1e-4;
+  std::vector<ToolContact> c;
+  StepStats st;
+  probe->step({push_right(depth)}, c, st);
+  ASSERT_TRUE(st.converged);
+  ASSERT_TRUE(c[0].in_contact);
+  probe->sliding_pairs(kCylinder, pairs);
+  const Gaps g = gaps(*probe);
+  if (smallest > 1e-3) {
+    for (const auto& p : pairs) EXPECT_EQ(p.force_n, 0.0);
+    Eigen::VectorXd ub;
+    probe->displacements(kCylinder, ub);
+    EXPECT_EQ(ub.cwiseAbs().maxCoeff(), 0.0);
+  }
+  EXPECT_GE(g.min_m, -1e-9 * depth);
+  auto tie = run(SceneSpec{}, {push_right(depth)});
+  Eigen::VectorXd ut;
+  tie.sim->displacements(kCylinder, ut);
+  EXPECT_GT(ut.cwiseAbs().maxCoeff(), 0.01 * depth);
+  // Pushed far enough, the clearance closes and the unilateral rows hold.
+  const double deep = 0.03;
+  probe->step({push_right(deep)}, c, st);
+  ASSERT_TRUE(st.converged);
+  EXPECT_GE(gaps(*probe).min_m, -1e-9 * deep);
+  EXPECT_LE(probe->sliding_penetration_m(), 1e-9 * deep);
+}
+
+// (c) Variational ordering on the same push: frictionless unilateral pairs constrain less than
+// the tie (no tangential rows, may separate), so the body is softer with SLIDING and the tool
+// feels less; and on every pair SLIDING holds closed, the normal gap closure is zero as with
+// TIE (whose normal closure is zero on every pair).
+TEST(interaction_sliding, SofterThanTieWhereTangentialRowsAreMissing) {
+  const double depth = 0.004;
+  auto slide = run(sliding_spec(), {push_right(depth)});
+  auto tie = run(SceneSpec{}, {push_right(depth)});
+  ASSERT_TRUE(slide.stats.converged && tie.stats.converged);
+  ASSERT_EQ(slide.contacts[0].nodes, tie.contacts[0].nodes);
+  const double fs = slide.contacts[0].force_n.norm(), ft = tie.contacts[0].force_n.norm();
+  EXPECT_LE(fs, ft * (1.0 + 1e-12));
+  // ... but the cylinder still carries load: softer than the carved host with an (almost)
+  // empty cavity, i.e. a cylinder 1e-6 as stiff.
+  SceneSpec empty = sliding_spec();
+  empty.embedded_e_pa = 1e-1;
+  auto hollow = run(empty, {push_right(depth)});
+  ASSERT_TRUE(hollow.stats.converged);
+  ASSERT_EQ(hollow.contacts[0].nodes, slide.contacts[0].nodes);
+  const double fh = hollow.contacts[0].force_n.norm();
+  EXPECT_GT(fs, fh * (1.0 + 1e-6));
+  // The tool sees the softer coupling in its stiffness too (same contact nodes).
+  EXPECT_LE(-slide.contacts[0].stiffness_n_per_m(0, 0),
+            -tie.contacts[0].stiffness_n_per_m(0, 0) * (1.0 + 1e-12));
+  // Normal gap closure on the closed pairs is zero for both kinds.
+  const Gaps g = gaps(*slide.sim);
+  Eigen::VectorXd ua, ub;
+  tie.sim->displacements(kCube, ua);
+  tie.sim->displacements(kCylinder, ub);
+  int closed = 0;
+  for (std::size_t k = 0; k < g.pairs.size(); ++k) {
+    const auto& p = g.pairs[k];
+    if (!(p.force_n > 0.0)) continue;
+    ++closed;
+    Vec3 u = Vec3::Zero();
+    for (int a = 0; a < 3; ++a) u += p.weights[a] * ua.segment<3>(3 * p.host_nodes[a]);
+    const double tie_closure = p.normal.dot(u - ub.segment<3>(3 * p.embedded_node));
+    EXPECT_LE(std::abs(tie_closure), 1e-9 * depth) << k;
+    EXPECT_LE(std::abs(g.g_m[k]), 1e-9 * depth) << k;
+  }
+  EXPECT_GT(closed, 0);
+}
+
+// The contact stiffness handed to the haptic client includes the sliding rows (finite
+// difference of the force along the push, same active sets).
+TEST(interaction_sliding, StiffnessMatchesFiniteDifference) {
+  auto sim = Simulation::build(testing::make_scene(sliding_spec()), "test.scene");
+  std::vector<ToolContact> c0, c1;
+  StepStats s0, s1;
+  const ToolPose p = push_right(0.003);
+  sim->step({p}, c0, s0);
+  ASSERT_TRUE(c0[0].in_contact);
+  ToolPose q = p;
+  const double h = 1e-8;
+  q.tip_m.x() -= h;
+  sim->step({q}, c1, s1);
+  ASSERT_EQ(c0[0].nodes, c1[0].nodes);
+  ASSERT_EQ(s0.sliding_active, s1.sliding_active);
+  const Vec3 fd = (c1[0].force_n - c0[0].force_n) / h;
+  const Vec3 model = c0[0].stiffness_n_per_m * Vec3(-1.0, 0.0, 0.0);
+  EXPECT_LE((fd - model).norm(), 1e-4 * model.norm());
+  EXPECT_LT(c0[0].stiffness_n_per_m(0, 0), 0.0);
+}
+
+// Warm start from the last step and a cold start give the same answer; withdrawing the tool
+// releases everything.
+TEST(interaction_sliding, DeterministicAndReleases) {
+  auto a = Simulation::build(testing::make_scene(sliding_spec()), "test.scene");
+  auto b = Simulation::build(testing::make_scene(sliding_spec()), "test.scene");
+  std::vector<ToolContact> ca, cb;
+  StepStats st;
+  a->step({push_right(0.004)}, ca, st);
+  b->step({push_right(0.002)}, cb, st);
+  b->step({push_right(0.006)}, cb, st);
+  b->step({push_right(0.004)}, cb, st);
+  ASSERT_TRUE(st.converged);
+  EXPECT_LE((ca[0].force_n - cb[0].force_n).norm(), 1e-9 * ca[0].force_n.norm());
+  a->step({push_right(-0.001)}, ca, st);
+  EXPECT_FALSE(ca[0].in_contact);
+  EXPECT_EQ(st.sliding_active, 0);
+  Eigen::VectorXd u;
+  a->displacements(kCylinder, u);
+  EXPECT_EQ(u.cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(interaction_sliding, EmbeddedMeshWithFixedNodes) {
+  SceneSpec spec = sliding_spec();
+  spec.embedded_fixed = true;
+  const double depth = 0.004;
+  auto s = run(spec, {push_right(depth)});
+  ASSERT_TRUE(s.stats.converged);
+  EXPECT_GE(gaps(*s.sim).min_m, -1e-9 * depth);
+  Eigen::VectorXd u;
+  s.sim->displacements(kCylinder, u);
+  for (int v : s.sim->fixed_nodes(kCylinder)) EXPECT_EQ(u.segment<3>(3 * v).norm(), 0.0) << v;
+  EXPECT_GT(u.cwiseAbs().maxCoeff(), 0.0);
+}
+
+// Mixed scene: the cylinder slides, the rod is tied (and the other way round); both hold.
+TEST(interaction_sliding, MixedTieAndSliding) {
+  for (bool cylinder_slides : {true, false}) {
+    SceneSpec spec;
+    spec.sliding = cylinder_slides;
+    spec.rod_kind = cylinder_slides ? "TIE" : "SLIDING";
+    const double depth = 0.005;
+    // Push the top face down, above the rod.
+    ToolPose p;
+    p.tip_m = Vec3(0.02, 0.05, 0.1 + spec.tip_radius_m - depth);
+    p.axis = Vec3::UnitZ();
+    auto s = run(spec, {p});
+    ASSERT_TRUE(s.stats.converged) << cylinder_slides;
+    ASSERT_TRUE(s.contacts[0].in_contact);
+    EXPECT_GT(s.sim->setup_stats().tied_nodes, 0);
+    EXPECT_GT(s.sim->setup_stats().sliding_rows, 0);
+    EXPECT_LE(s.sim->tie_residual_m(), 1e-9 * depth) << cylinder_slides;
+    const int sliding_mesh = cylinder_slides ? kCylinder : kRod;
+    EXPECT_GE(gaps(*s.sim, sliding_mesh).min_m, -1e-9 * depth) << cylinder_slides;
+    for (int m = 0; m < s.sim->num_meshes(); ++m) {
+      Eigen::VectorXd u;
+      s.sim->displacements(m, u);
+      EXPECT_TRUE(u.allFinite());
+      EXPECT_GT(u.cwiseAbs().maxCoeff(), 0.0) << m;
+    }
+  }
+}
+
+// --- (d) stability: finite, bounded, converged or reported, no interpenetration when converged
+
+constexpr double kBoundN = 1e4;  // E_max x (0.1 m)^2: the whole cross-section at 100 % strain
+
+void expect_sane(Simulation& sim, const std::vector<ToolContact>& contacts, const StepStats& st,
+                 double depth, double bound_n) {
+  for (const auto& c : contacts) {
+    EXPECT_TRUE(c.force_n.allFinite());
+    EXPECT_TRUE(c.stiffness_n_per_m.allFinite());
+    EXPECT_LE(c.force_n.norm(), bound_n);
+    EXPECT_TRUE(st.converged || !c.converged);
+  }
+  for (int m = 0; m < sim.num_meshes(); ++m) {
+    Eigen::VectorXd u;
+    sim.displacements(m, u);
+    EXPECT_TRUE(u.allFinite()) << m;
+  }
+  std::vector<SlidingPairState> pairs;
+  sim.sliding_pairs(kCylinder, pairs);
+  for (const auto& p : pairs) {
+    EXPECT_TRUE(std::isfinite(p.force_n));
+    EXPECT_GE(p.force_n, 0.0);
+  }
+  if (st.converged) {
+    EXPECT_LE(sim.sliding_penetration_m(), 1e-9 * std::abs(depth));
+  }
+}
+
+TEST(interaction_sliding_stability, StiffnessRatio1e4) {
+  for (double e_emb : {1.0e2, 1.0e10}) {
+    SceneSpec spec = sliding_spec();
+    spec.embedded_e_pa = e_emb;
+    auto s = run(spec, {push_right(0.005)});
+    EXPECT_TRUE(s.stats.converged) << e_emb;
+    expect_sane(*s.sim, s.contacts, s.stats, 0.005, e_emb > 1e6 ? 1e4 * kBoundN : kBoundN);
+  }
+}
+
+TEST(interaction_sliding_stability, NearlyIncompressible) {
+  SceneSpec spec = sliding_spec();
+  spec.nu = 0.499;
+  auto s = run(spec, {push_right(0.005)});
+  EXPECT_TRUE(s.stats.converged);
+  expect_sane(*s.sim, s.contacts, s.stats, 0.005, kBoundN);
+}
+
+TEST(interaction_sliding_stability, StiffRatioNearlyIncompressibleLargeMotion) {
+  SceneSpec spec = sliding_spec();
+  spec.nu = 0.499;
+  spec.embedded_e_pa = 1.0e10;
+  auto sim = Simulation::build(testing::make_scene(spec), "test.scene");
+  std::vector<ToolContact> c;
+  StepStats st;
+  // Deep push (30 % of the cube), a 10 cm jump through the body and back, withdrawal.
+  for (double depth : {0.03, 0.1, 0.002, 0.102, 0.03, -0.002}) {
+    sim->step({push_right(depth)}, c, st);
+    expect_sane(*sim, c, st, depth, 1e4 * kBoundN);
+  }
+  EXPECT_FALSE(c[0].in_contact);
+}
+
+TEST(interaction_sliding_stability, TwoToolsAndToolInsideTheEmbeddedMesh) {
+  auto sim = Simulation::build(testing::make_scene(sliding_spec()), "test.scene");
+  std::vector<ToolContact> c;
+  StepStats st;
+  ToolPose inside;
+  inside.tip_m = Vec3(0.05, 0.05, 0.05);
+  inside.axis = Vec3::UnitX();
+  sim->step({push_right(0.004), push_right(0.004), inside}, c, st);
+  ASSERT_EQ(c.size(), 3u);
+  expect_sane(*sim, c, st, 0.004, kBoundN);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
