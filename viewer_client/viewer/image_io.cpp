@@ -4,7 +4,9 @@
 #include <vtkImageData.h>
 #include <vtkNIFTIImageReader.h>
 #include <vtkNew.h>
+#include <vtkPNGWriter.h>
 #include <vtkPointData.h>
+#include <vtkUnsignedCharArray.h>
 
 #include <algorithm>
 #include <cmath>
@@ -63,6 +65,26 @@ ImageGrid downsample(const ImageGrid& image, int step) {
       for (int i = 0; i < g.dims[0]; ++i)
         g.values[g.index(i, j, k)] = image.values[image.index(i * step, j * step, k * step)];
   return g;
+}
+
+void write_png_rgb(const std::string& path, int width, int height,
+                   const std::vector<std::uint8_t>& rgb) {
+  if (width <= 0 || height <= 0 ||
+      rgb.size() != 3 * static_cast<std::size_t>(width) * static_cast<std::size_t>(height))
+    throw std::runtime_error(path + ": RGB buffer does not match " + std::to_string(width) + "x" +
+                             std::to_string(height));
+  vtkNew<vtkImageData> im;
+  im->SetDimensions(width, height, 1);
+  vtkNew<vtkUnsignedCharArray> px;
+  px->SetNumberOfComponents(3);
+  px->SetNumberOfTuples(static_cast<vtkIdType>(width) * height);
+  std::copy(rgb.begin(), rgb.end(), px->GetPointer(0));
+  im->GetPointData()->SetScalars(px);
+  vtkNew<vtkPNGWriter> writer;
+  writer->SetFileName(path.c_str());
+  writer->SetInputData(im);
+  writer->Write();
+  if (writer->GetErrorCode() != 0) throw std::runtime_error(path + ": cannot write PNG");
 }
 
 std::pair<float, float> display_range(const ImageGrid& image) {

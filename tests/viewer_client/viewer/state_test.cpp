@@ -1,0 +1,180 @@
+// Viewer state and command line (issue 7): topology/deformation ingestion, malformed samples
+// counted and ignored, the paper's tool colour rule, option errors.
+#include "viewer_client/viewer/state.hpp"
+#include "idl/wire/deformation_codec.hpp"
+#include "viewer_client/viewer/options.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+namespace nv = neurosim::viewer;
+namespace wire = neurosim::wire;
+
+namespace {
+
+// One tetrahedron, its four faces as surface.
+void fill_topology(neurosim_MeshTopology& t, const char* id) {
+  wire::set_string(t.mesh_id, id);
+  t.revision = 1;
+  const double v[] = {0, 0, 0, 0.01, 0, 0, 0, 0.01, 0, 0, 0, 0.01};
+  wire::assign(t.rest_vertices_m, v, 12);
+  const std::int32_t tet[] = {0, 1, 2, 3};
+  wire::assign(t.tetrahedra, tet, 4);
+  const std::int32_t tri[] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3};
+  wire::assign(t.surface_triangles, tri, 12);
+  wire::set_string(t.volume_image_file, "/nonexistent.nii.gz");
+  t.volume_image_unit_m = 0.001;
+}
+
+}  // namespace
+
+TEST(ViewerState, ForceColourIsThePapersRule) {
+  const auto c0 = nv::force_colour(0.0);
+  EXPECT_DOUBLE_EQ(c0[0], 0.2);
+  EXPECT_DOUBLE_EQ(c0[1], 0.2);
+  EXPECT_DOUBLE_EQ(c0[2], 0.2);
+  const auto c1 = nv::force_colour(0.1);
+  EXPECT_NEAR(c1[0], 0.3, 1e-15);
+  EXPECT_NEAR(c1[1], 0.1, 1e-15);
+  const auto c2 = nv::force_colour(2.0);
+  EXPECT_DOUBLE_EQ(c2[0], 1.0);
+  EXPECT_DOUBLE_EQ(c2[1], 0.0);
+  // --force-unit 0.5: f = |F| / 0.5 N.
+  EXPECT_NEAR(nv::force_colour(0.1, 0.5)[0], 0.4, 1e-15);
+  EXPECT_DOUBLE_EQ(nv::force_colour(std::numeric_limits<double>::quiet_NaN())[0], 1.0);
+}
+
+TEST(ViewerState, ShaftAxisIsToolZ) {
+  EXPECT_TRUE(nv::shaft_axis(1, 0, 0, 0).isApprox(Eigen::Vector3d::UnitZ()));
+  // 90 degrees about y: z -> x.
+  const double h = std::sqrt(0.5);
+  EXPECT_TRUE(nv::shaft_axis(h, 0, h, 0).isApprox(Eigen::Vector3d::UnitX(), 1e-12));
+}
+
+TEST(ViewerState, TopologyAndDeformationFrames) {
+  std::vector<std::string> warnings;
+  nv::ViewerState s([&](const std::string& m) { warnings.push_back(m); });
+  wire::Sample<neurosim_MeshTopology> t;
+  fill_topology(*t, "cube");
+  ASSERT_TRUE(s.ingest_topology(*t));
+  ASSERT_EQ(s.meshes().size(), 1u);
+  EXPECT_EQ(s.image_file(), "/nonexistent.nii.gz");
+  EXPECT_EQ(s.topology_generation(), 1u);
+
+  wire::DeformationEncoder enc("cube", 4, 1, {3, true});
+  wire::Sample<neurosim_Deformation> d;
+  double u[12] = {0};
+  u[3] = 0.002;  // vertex 1 moves 2 mm along x
+  enc.encode(u, 12, 1, 0, *d);
+  ASSERT_TRUE(s.ingest_deformation(*d));
+  EXPECT_NEAR(s.max_displacement_m(), 0.002, 1e-9);
+  u[3] = 0.003;
+  enc.encode(u, 12, 2, 0, *d);  // a delta frame
+  ASSERT_TRUE(s.ingest_deformation(*d));
+  EXPECT_NEAR(s.max_displacement_m(), 0.003, 1e-6);
+  EXPECT_EQ(s.counters().deformations, 2u);
+  EXPECT_TRUE(warnings.empty());
+}
+
+TEST(ViewerState, MalformedSamplesAreCountedAndIgnored) {
+  std::vector<std::string> warnings;
+  nv::ViewerState s([&](const std::string& m) { warnings.push_back(m); });
+  wire::Sample<neurosim_MeshTopology> t;
+  fill_topology(*t, "cube");
+  ASSERT_TRUE(s.ingest_topology(*t));
+
+  // Topology with a tetrahedron naming vertex 9 of 4.
+  wire::Sample<neurosim_MeshTopology> bad;
+  fill_topology(*bad, "cube");
+  bad->tetrahedra._buffer[3] = 9;
+  EXPECT_FALSE(s.ingest_topology(*bad));
+  EXPECT_EQ(s.counters().malformed_topology, 1u);
+  ASSERT_FALSE(warnings.empty());
+  EXPECT_NE(warnings.back().find("'cube'"), std::string::npos) << warnings.back();
+  EXPECT_NE(warnings.back().find("tetrahedron 0"), std::string::npos) << warnings.back();
+  EXPECT_EQ(s.mesh("cube")->tets[0][3], 3);  // the good topology is kept
+
+  // Deformation with the wrong vertex count, and one with a NaN.
+  wire::Sample<neurosim_Deformation> d;
+  wire::set_string(d->mesh_id, "cube");
+  d->encoding = neurosim_ENCODING_FULL;
+  d->vertex_count = 5;
+  std::vector<float> u(15, 0.0F);
+  wire::assign(d->displacement_m, u);
+  EXPECT_FALSE(s.ingest_deformation(*d));
+  d->vertex_count = 4;
+  u.assign(12, 0.0F);
+  u[4] = std::numeric_limits<float>::quiet_NaN();
+  wire::assign(d->displacement_m, u);
+  EXPECT_FALSE(s.ingest_deformation(*d));
+  EXPECT_EQ(s.counters().malformed_deformation, 2u);
+  EXPECT_EQ(s.max_displacement_m(), 0.0);
+
+  // ToolState with inf, ContactModel with NaN force.
+  wire::Sample<neurosim_ToolState> ts;
+  wire::set_string(ts->station_id, "omni-1");
+  ts->orientation[0] = 1;
+  ts->position_m[1] = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(s.ingest_tool(*ts));
+  wire::Sample<neurosim_ContactModel> cm;
+  wire::set_string(cm->station_id, "omni-1");
+  cm->in_contact = true;
+  cm->f0_n[2] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(s.ingest_contact(*cm));
+  EXPECT_EQ(s.counters().malformed(), 5u);
+  EXPECT_TRUE(s.tools().empty());
+
+  // A deformation for a mesh not (yet) known waits, it is not malformed.
+  wire::set_string(d->mesh_id, "other");
+  EXPECT_FALSE(s.ingest_deformation(*d));
+  EXPECT_EQ(s.counters().deformations_waiting, 1u);
+}
+
+TEST(ViewerState, ServerLivelinessCounts) {
+  nv::ViewerState s;
+  s.set_server_alive(true);
+  s.set_server_alive(false);
+  s.set_server_alive(true);
+  EXPECT_EQ(s.counters().server_seen, 2u);
+  EXPECT_EQ(s.counters().server_lost, 1u);
+}
+
+TEST(ViewerOptions, GoodAndBadCommandLines) {
+  bool help = false;
+  const char* ok[] = {"v",        "--mode", "observe", "--headless", "--frames",       "3",
+                      "--out",    "/tmp/x", "--size",  "320x240",    "--topic-prefix", "t_",
+                      "--domain", "7"};
+  const nv::ViewerOptions o = nv::parse_options(14, ok, help);
+  EXPECT_EQ(o.mode, nv::Mode::Observe);
+  EXPECT_TRUE(o.headless);
+  EXPECT_EQ(o.frames, 3);
+  EXPECT_EQ(o.width, 320);
+  EXPECT_EQ(o.height, 240);
+  EXPECT_EQ(o.domain, 7);
+  EXPECT_EQ(o.topic_prefix, "t_");
+
+  auto error_of = [&](std::vector<const char*> argv) {
+    try {
+      nv::parse_options(static_cast<int>(argv.size()), argv.data(), help);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(error_of({"v"}).find("--mode"), std::string::npos);
+  EXPECT_NE(error_of({"v", "--mode", "xray"}).find("xray"), std::string::npos);
+  EXPECT_NE(error_of({"v", "--mode", "navigation", "--frames", "3"}).find("--headless"),
+            std::string::npos);
+  EXPECT_NE(
+      error_of({"v", "--mode", "navigation", "--headless", "--frames", "-1"}).find("--frames"),
+      std::string::npos);
+  EXPECT_NE(error_of({"v", "--mode", "navigation", "--size", "12"}).find("--size"),
+            std::string::npos);
+  EXPECT_NE(error_of({"v", "--mode", "navigation", "--domain", "999"}).find("--domain"),
+            std::string::npos);
+  EXPECT_NE(error_of({"v", "--mode", "navigation", "--bogus"}).find("--bogus"), std::string::npos);
+  EXPECT_NE(error_of({"v", "--mode", "navigation", "--duration"}).find("needs a value"),
+            std::string::npos);
+}

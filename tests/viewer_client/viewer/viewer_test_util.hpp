@@ -1,0 +1,190 @@
+// Helpers of the viewer tests: an Xvfb display for VTK (X only on these machines), child
+// processes (neurosim-server, neurosim-viewer) with logs, and the brain press point.
+#pragma once
+
+#include "test_support.hpp"
+#include "viewer_client/viewer/state.hpp"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+extern char** environ;
+
+namespace neurosim::testing {
+
+inline double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+inline std::string slurp(const std::filesystem::path& p) {
+  std::ifstream f(p);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+// A child process with stdout+stderr into a log file; killed (SIGKILL) when destroyed.
+class Child {
+ public:
+  Child(std::vector<std::string> args, const std::filesystem::path& log) : log_(log) {
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    const int rc = posix_spawn(&pid_, args[0].c_str(), &fa, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&fa);
+    if (rc != 0) throw std::runtime_error("cannot start " + args[0]);
+  }
+  ~Child() { kill(SIGKILL); }
+  Child(const Child&) = delete;
+  Child& operator=(const Child&) = delete;
+  // Sends sig and waits; returns the wait status (-1 if it was not running).
+  int kill(int sig) {
+    if (pid_ <= 0) return status_;
+    ::kill(pid_, sig);
+    waitpid(pid_, &status_, 0);
+    pid_ = 0;
+    return status_;
+  }
+  // Waits up to timeout_s for the process to end; true if it ended (status in status()).
+  bool wait(double timeout_s) {
+    const auto t0 = std::chrono::steady_clock::now();
+    while (pid_ > 0) {
+      if (waitpid(pid_, &status_, WNOHANG) == pid_) {
+        pid_ = 0;
+        return true;
+      }
+      if (seconds_since(t0) > timeout_s) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return true;
+  }
+  bool running() {
+    if (pid_ <= 0) return false;
+    if (waitpid(pid_, &status_, WNOHANG) == pid_) {
+      pid_ = 0;
+      return false;
+    }
+    return true;
+  }
+  int status() const { return status_; }
+  std::string log() const { return slurp(log_); }
+  // Waits until the log contains `text` at least `count` times.
+  bool wait_for_log(const std::string& text, double timeout_s, int count = 1) {
+    const auto t0 = std::chrono::steady_clock::now();
+    while (seconds_since(t0) < timeout_s) {
+      const std::string l = log();
+      int n = 0;
+      for (auto p = l.find(text); p != std::string::npos; p = l.find(text, p + 1)) ++n;
+      if (n >= count) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return false;
+  }
+
+ private:
+  std::filesystem::path log_;
+  pid_t pid_ = 0;
+  int status_ = -1;
+};
+
+// An Xvfb server on a free display (-displayfd); sets DISPLAY for this process and its children.
+class Xvfb {
+ public:
+  Xvfb() {
+    int fds[2];
+    if (pipe(fds) != 0) throw std::runtime_error("pipe failed");
+    const std::string fd = std::to_string(fds[1]);
+    std::vector<std::string> args{"/usr/bin/Xvfb", "-displayfd", fd,   "-screen", "0",
+                                  "1280x1024x24",  "-nolisten",  "tcp"};
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addclose(&fa, fds[0]);
+    posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
+    const int rc = posix_spawn(&pid_, args[0].c_str(), &fa, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&fa);
+    close(fds[1]);
+    if (rc != 0) {
+      close(fds[0]);
+      throw std::runtime_error("cannot start /usr/bin/Xvfb (apt-get install xvfb)");
+    }
+    std::string number;
+    char c = 0;
+    while (read(fds[0], &c, 1) == 1 && c != '\n') number += c;
+    close(fds[0]);
+    if (number.empty()) throw std::runtime_error("Xvfb did not report a display");
+    display_ = ":" + number;
+    setenv("DISPLAY", display_.c_str(), 1);
+  }
+  ~Xvfb() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGTERM);
+      waitpid(pid_, nullptr, 0);
+    }
+  }
+  const std::string& display() const { return display_; }
+
+ private:
+  pid_t pid_ = 0;
+  std::string display_;
+};
+
+inline std::filesystem::path brain_scene() { return source_dir() / "scenes/brain_artery.scene"; }
+
+inline std::vector<std::string> server_args(const std::string& prefix, double duration_s) {
+  return {(bin_dir() / "neurosim-server").string(),
+          "--scene",
+          brain_scene().string(),
+          "--topic-prefix",
+          prefix,
+          "--duration",
+          std::to_string(duration_s)};
+}
+
+// Where the tests press the brain: the brain surface vertex furthest right (+x) near the
+// scene's load box centre (y 0.115 m, z 0.079 m), and its outward normal.
+struct PressPoint {
+  Eigen::Vector3d point_m, normal;
+};
+inline PressPoint press_point(const viewer::MeshState& brain) {
+  int best = -1;
+  for (const auto& t : brain.surface)
+    for (int v : t) {
+      const Eigen::Vector3d& p = brain.rest_m[static_cast<std::size_t>(v)];
+      if (std::abs(p.y() - 0.115) < 0.006 && std::abs(p.z() - 0.079) < 0.006 &&
+          (best < 0 || p.x() > brain.rest_m[static_cast<std::size_t>(best)].x()))
+        best = v;
+    }
+  if (best < 0) throw std::runtime_error("no brain surface vertex near the load box");
+  Eigen::Vector3d n = Eigen::Vector3d::Zero();
+  for (const auto& t : brain.surface)
+    if (t[0] == best || t[1] == best || t[2] == best) {
+      const auto& a = brain.rest_m[static_cast<std::size_t>(t[0])];
+      const auto& b = brain.rest_m[static_cast<std::size_t>(t[1])];
+      const auto& c = brain.rest_m[static_cast<std::size_t>(t[2])];
+      n += (b - a).cross(c - a);  // outward (CCW) triangles
+    }
+  return {brain.rest_m[static_cast<std::size_t>(best)], n.normalized()};
+}
+
+}  // namespace neurosim::testing
