@@ -51,6 +51,59 @@ struct TetRest {
 
 enum TetKind : std::uint8_t { kPositive = 0, kInverted = 1, kDegenerate = 2 };
 
+// Barycentric weights (w1, w2, w3) of p; true when p is inside (within kBaryEps). The one place
+// this arithmetic is written, so the point search and the slice/volume rasterization agree bit
+// for bit (the project builds without -march, so no FMA contraction differs between sites).
+inline bool barycentric(const TetSearch& s, const double p[3], double w[3]) {
+  const double dx = p[0] - s.o[0], dy = p[1] - s.o[1], dz = p[2] - s.o[2];
+  w[0] = s.inv[0] * dx + s.inv[1] * dy + s.inv[2] * dz;
+  w[1] = s.inv[3] * dx + s.inv[4] * dy + s.inv[5] * dz;
+  w[2] = s.inv[6] * dx + s.inv[7] * dy + s.inv[8] * dz;
+  // Written so that NaN fails.
+  return w[0] >= -kBaryEps && w[1] >= -kBaryEps && w[2] >= -kBaryEps &&
+         w[0] + w[1] + w[2] <= 1.0 + kBaryEps;
+}
+
+inline bool box_contains(const Box& b, const double p[3]) {
+  return p[0] >= b.min()[0] && p[0] <= b.max()[0] && p[1] >= b.min()[1] && p[1] <= b.max()[1] &&
+         p[2] >= b.min()[2] && p[2] <= b.max()[2];
+}
+
+inline void rest_point(const TetRest& r, const double w[3], double x[3]) {
+  for (int a = 0; a < 3; ++a)
+    x[a] = r.x0[a] + r.e[3 * a] * w[0] + r.e[3 * a + 1] * w[1] + r.e[3 * a + 2] * w[2];
+}
+
+// A tetrahedron of some mesh.
+struct TetRef {
+  int mesh;
+  int tet;
+};
+
+// A regular grid of sample points in a plane: point (a, b) has coordinate `position` along
+// `axis`, origin_u + a * step_u along the first other axis and origin_v + b * step_v along the
+// second. Slices and the volume's z planes are both this.
+struct PlaneGrid {
+  int axis = 2;
+  double position = 0.0;
+  double origin_u = 0.0, step_u = 1.0, origin_v = 0.0, step_v = 1.0;
+  int width = 0, height = 0;
+  int u_axis() const { return axis == 0 ? 1 : 0; }
+  int v_axis() const { return axis == 2 ? 1 : 2; }
+  void point(int a, int b, double p[3]) const {
+    p[axis] = position;
+    p[u_axis()] = origin_u + a * step_u;
+    p[v_axis()] = origin_v + b * step_v;
+  }
+};
+
+// Index range [i0, i1] of grid points origin + i * step (0 <= i < n) that may lie in [lo, hi]
+// (one point of margin: callers test the exact point).
+void index_range(double lo, double hi, double origin, double step, int n, int& i0, int& i1) {
+  i0 = static_cast<int>(std::clamp(std::ceil((lo - origin) / step) - 1.0, 0.0, 1.0 * n));
+  i1 = static_cast<int>(std::clamp(std::floor((hi - origin) / step) + 1.0, -1.0, n - 1.0));
+}
+
 // Where a tetrahedron sits in its mesh's grid.
 struct CellRange {
   int lo[3]{0, 0, 0};
@@ -169,7 +222,8 @@ float sample_trilinear(const ImageGrid& image, const Eigen::Vector3d& p_m, float
     const double last = image.dims[a] - 1;
     // Also false for NaN.
     if (!(f[a] >= -kSnapVoxels && f[a] <= last + kSnapVoxels)) return outside;
-    const double r = std::round(f[a]);
+    // f >= -kSnapVoxels here, so truncation of f + 0.5 rounds (no libm call).
+    const double r = static_cast<double>(static_cast<long long>(f[a] + 0.5));
     if (std::abs(f[a] - r) <= kSnapVoxels) {
       f[a] = r;
     } else {
@@ -184,7 +238,8 @@ float sample_trilinear(const ImageGrid& image, const Eigen::Vector3d& p_m, float
   int i0[3];
   double t[3];
   for (int a = 0; a < 3; ++a) {
-    i0[a] = std::clamp(static_cast<int>(std::floor(f[a])), 0, std::max(image.dims[a] - 2, 0));
+    // f >= 0 after snapping: truncation is floor.
+    i0[a] = std::clamp(static_cast<int>(f[a]), 0, std::max(image.dims[a] - 2, 0));
     t[a] = image.dims[a] > 1 ? f[a] - i0[a] : 0.0;
   }
   const int sx = image.dims[0] > 1 ? 1 : 0;
@@ -247,6 +302,15 @@ struct DeformedVolumeSampler::Impl {
   bool find_in_mesh(const MeshState& m, const Vector3d& p, int& tet, double w[3],
                     bool& inverted) const;
   Location locate(const Vector3d& p) const;
+  void plane_candidates(const PlaneGrid& g, int a0, int a1, int b0, int b1,
+                        std::vector<TetRef>& out) const;
+  void raster_plane(const PlaneGrid& g, int a0, int a1, int b0, int b1,
+                    const std::vector<TetRef>& candidates, float* out, std::size_t stride,
+                    const float* identity_values);
+  std::vector<std::uint64_t> keys;  // scratch of raster_plane
+  std::vector<TetRef> scratch_refs;
+  std::vector<std::vector<TetRef>> plane_refs;  // scratch of update_volume
+  std::vector<int> rank;                        // mesh index -> position in `order`
   Vector3d to_rest(const Vector3d& p) const;
   float sample(const Vector3d& p) const {
     return sample_trilinear(image, to_rest(p), options.outside_value);
@@ -468,27 +532,21 @@ bool DeformedVolumeSampler::Impl::find_in_mesh(const MeshState& m, const Vector3
   int best_pos = std::numeric_limits<int>::max();
   int best_inv = std::numeric_limits<int>::max();
   double w_pos[3] = {0, 0, 0}, w_inv[3] = {0, 0, 0};
+  const double q[3] = {p[0], p[1], p[2]};
+  // Contains = inside the padded box and barycentric test (the rasterizer's rule too).
   const auto test = [&](int t) {
-    const TetSearch& s = m.search[t];
-    const double dx = p[0] - s.o[0], dy = p[1] - s.o[1], dz = p[2] - s.o[2];
-    const double w1 = s.inv[0] * dx + s.inv[1] * dy + s.inv[2] * dz;
-    const double w2 = s.inv[3] * dx + s.inv[4] * dy + s.inv[5] * dz;
-    const double w3 = s.inv[6] * dx + s.inv[7] * dy + s.inv[8] * dz;
-    // Written so that NaN fails.
-    if (!(w1 >= -kBaryEps && w2 >= -kBaryEps && w3 >= -kBaryEps &&
-          w1 + w2 + w3 <= 1.0 + kBaryEps)) {
-      return false;
-    }
+    double wt[3];
+    if (!barycentric(m.search[t], q, wt) || !box_contains(m.box[t], q)) return false;
     if (m.kind[t] == kPositive) {
       if (t < best_pos) {
         best_pos = t;
-        w_pos[0] = w1, w_pos[1] = w2, w_pos[2] = w3;
+        std::copy(wt, wt + 3, w_pos);
       }
       return true;
     }
     if (t < best_inv) {
       best_inv = t;
-      w_inv[0] = w1, w_inv[1] = w2, w_inv[2] = w3;
+      std::copy(wt, wt + 3, w_inv);
     }
     return false;
   };
@@ -536,9 +594,7 @@ Location DeformedVolumeSampler::Impl::locate(const Vector3d& p) const {
     if (m.identity[t]) {
       loc.rest_m = p;
     } else {
-      const TetRest& r = m.rest[t];
-      for (int a = 0; a < 3; ++a)
-        loc.rest_m[a] = r.x0[a] + r.e[3 * a] * w[0] + r.e[3 * a + 1] * w[1] + r.e[3 * a + 2] * w[2];
+      rest_point(m.rest[t], w, loc.rest_m.data());
     }
     return loc;
   }
@@ -554,12 +610,127 @@ Vector3d DeformedVolumeSampler::Impl::to_rest(const Vector3d& p) const {
     bool inv = false;
     if (!find_in_mesh(m, p, t, w, inv)) continue;
     if (m.identity[t]) return p;
-    const TetRest& r = m.rest[t];
-    return Vector3d(r.x0[0] + r.e[0] * w[0] + r.e[1] * w[1] + r.e[2] * w[2],
-                    r.x0[1] + r.e[3] * w[0] + r.e[4] * w[1] + r.e[5] * w[2],
-                    r.x0[2] + r.e[6] * w[0] + r.e[7] * w[1] + r.e[8] * w[2]);
+    Vector3d x;
+    rest_point(m.rest[t], w, x.data());
+    return x;
   }
   return p;
+}
+
+// Tetrahedra whose box meets the plane and the pixel rectangle [a0, a1] x [b0, b1].
+void DeformedVolumeSampler::Impl::plane_candidates(const PlaneGrid& g, int a0, int a1, int b0,
+                                                   int b1, std::vector<TetRef>& out) const {
+  out.clear();
+  const int ax = g.axis, ua = g.u_axis(), va = g.v_axis();
+  const double ulo = g.origin_u + (a0 - 1) * g.step_u, uhi = g.origin_u + (a1 + 1) * g.step_u;
+  const double vlo = g.origin_v + (b0 - 1) * g.step_v, vhi = g.origin_v + (b1 + 1) * g.step_v;
+  const auto meets = [&](const Box& b) {
+    return g.position >= b.min()[ax] && g.position <= b.max()[ax] && b.max()[ua] >= ulo &&
+           b.min()[ua] <= uhi && b.max()[va] >= vlo && b.min()[va] <= vhi;
+  };
+  for (std::size_t mi = 0; mi < meshes.size(); ++mi) {
+    const MeshState& m = meshes[mi];
+    if (m.bounds.isEmpty() || !meets(m.bounds)) continue;
+    for (std::size_t t = 0; t < m.box.size(); ++t)
+      if (m.kind[t] != kDegenerate && meets(m.box[t]))
+        out.push_back({static_cast<int>(mi), static_cast<int>(t)});
+  }
+}
+
+// Samples of the pixels [a0, a1] x [b0, b1] of plane g into out[a + stride * b]: each candidate
+// tetrahedron marks the pixels it contains with its key (mesh rank, inverted, index), the
+// smallest key wins (the point search's rule, see find_in_mesh), then each pixel is read through
+// its winner. Pixels in no tetrahedron read the image at themselves, or identity_values[a +
+// stride * b] when given (the volume: the voxel itself).
+void DeformedVolumeSampler::Impl::raster_plane(const PlaneGrid& g, int a0, int a1, int b0, int b1,
+                                               const std::vector<TetRef>& candidates, float* out,
+                                               std::size_t stride, const float* identity_values) {
+  constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
+  if (a0 > a1 || b0 > b1) return;
+  const int w = a1 - a0 + 1;
+  keys.assign(static_cast<std::size_t>(w) * (b1 - b0 + 1), kNone);
+  const int ua = g.u_axis(), va = g.v_axis();
+  double p[3];
+  p[g.axis] = g.position;
+  for (const TetRef& r : candidates) {
+    const MeshState& m = meshes[r.mesh];
+    const Box& box = m.box[r.tet];
+    const TetSearch& ts = m.search[r.tet];
+    int i0, i1, j0, j1;
+    index_range(box.min()[ua], box.max()[ua], g.origin_u, g.step_u, g.width, i0, i1);
+    index_range(box.min()[va], box.max()[va], g.origin_v, g.step_v, g.height, j0, j1);
+    i0 = std::max(i0, a0), i1 = std::min(i1, a1);
+    j0 = std::max(j0, b0), j1 = std::min(j1, b1);
+    const std::uint64_t key = (static_cast<std::uint64_t>(rank[r.mesh]) << 33) |
+                              (static_cast<std::uint64_t>(m.kind[r.tet] == kInverted) << 32) |
+                              static_cast<std::uint32_t>(r.tet);
+    // Along a row the weights are affine in u: clip the row to where all four may pass (with a
+    // wider tolerance, so the clip is a superset), then run the exact test on those pixels.
+    const double* inv = ts.inv;
+    const double d_axis = g.position - ts.o[g.axis];
+    const double g1 = inv[ua], g2 = inv[3 + ua], g3 = inv[6 + ua];
+    const double gr[4] = {-(g1 + g2 + g3), g1, g2, g3};
+    for (int b = j0; b <= j1; ++b) {
+      p[va] = g.origin_v + b * g.step_v;
+      const double dv = p[va] - ts.o[va];
+      const double c1 = inv[g.axis] * d_axis + inv[va] * dv;
+      const double c2 = inv[3 + g.axis] * d_axis + inv[3 + va] * dv;
+      const double c3 = inv[6 + g.axis] * d_axis + inv[6 + va] * dv;
+      const double c[4] = {1.0 - c1 - c2 - c3, c1, c2, c3};
+      double tlo = -std::numeric_limits<double>::infinity();
+      double thi = std::numeric_limits<double>::infinity();
+      bool empty = false;
+      for (int i = 0; i < 4; ++i) {
+        // c + gr t >= -eps', t = u - o_u.
+        const double lim = -(kBaryEps + 1e-12) - c[i];
+        if (gr[i] > 0.0) {
+          tlo = std::max(tlo, lim / gr[i]);
+        } else if (gr[i] < 0.0) {
+          thi = std::min(thi, lim / gr[i]);
+        } else if (lim > 0.0) {
+          empty = true;
+        }
+      }
+      if (empty || !(tlo <= thi)) continue;
+      const double shift = ts.o[ua] - g.origin_u;
+      const double alo = std::ceil((tlo + shift) / g.step_u - 1e-6);
+      const double ahi = std::floor((thi + shift) / g.step_u + 1e-6);
+      const int r0 = static_cast<int>(std::clamp(alo, 1.0 * i0, i1 + 1.0));
+      const int r1 = static_cast<int>(std::clamp(ahi, i0 - 1.0, 1.0 * i1));
+      std::uint64_t* row = keys.data() + static_cast<std::size_t>(w) * (b - b0) - a0;
+      for (int a = r0; a <= r1; ++a) {
+        if (key >= row[a]) continue;
+        p[ua] = g.origin_u + a * g.step_u;
+        double wt[3];
+        if (barycentric(ts, p, wt) && box_contains(box, p)) row[a] = key;
+      }
+    }
+  }
+  const float outside = options.outside_value;
+  for (int b = b0; b <= b1; ++b) {
+    p[va] = g.origin_v + b * g.step_v;
+    const std::uint64_t* row = keys.data() + static_cast<std::size_t>(w) * (b - b0) - a0;
+    float* o = out + stride * b;
+    const float* id = identity_values ? identity_values + stride * b : nullptr;
+    for (int a = a0; a <= a1; ++a) {
+      p[ua] = g.origin_u + a * g.step_u;
+      const std::uint64_t key = row[a];
+      const MeshState* m = nullptr;
+      int t = -1;
+      if (key != kNone) {
+        m = &meshes[order[key >> 33]];
+        t = static_cast<int>(key & 0xffffffffU);
+      }
+      if (m == nullptr || m->identity[t]) {
+        o[a] = id ? id[a] : sample_trilinear(image, Vector3d(p[0], p[1], p[2]), outside);
+        continue;
+      }
+      double wt[3], x[3];
+      barycentric(m->search[t], p, wt);
+      rest_point(m->rest[t], wt, x);
+      o[a] = sample_trilinear(image, Vector3d(x[0], x[1], x[2]), outside);
+    }
+  }
 }
 
 // Install new displacements (validated) of one mesh: update the moved tetrahedra's search data
@@ -687,6 +858,8 @@ DeformedVolumeSampler::DeformedVolumeSampler(ImageGrid image, std::vector<MeshGe
   std::stable_sort(d.order.begin(), d.order.end(), [&d](int a, int b) {
     return d.meshes[a].geo.priority > d.meshes[b].geo.priority;
   });
+  d.rank.resize(d.meshes.size());
+  for (std::size_t r = 0; r < d.order.size(); ++r) d.rank[d.order[r]] = static_cast<int>(r);
 }
 
 DeformedVolumeSampler::~DeformedVolumeSampler() = default;
@@ -815,14 +988,10 @@ ResampleStats DeformedVolumeSampler::update_slice(Slice& slice) {
     if (box.isEmpty() || slice.position_m < box.min()[axis] || slice.position_m > box.max()[axis]) {
       a1 = -1;
     } else {
-      const auto range = [](double lo, double hi, double o, double s, int n, int& i0, int& i1) {
-        i0 = static_cast<int>(std::clamp(std::ceil((lo - o) / s) - 1.0, 0.0, 1.0 * n));
-        i1 = static_cast<int>(std::clamp(std::floor((hi - o) / s) + 1.0, -1.0, n - 1.0));
-      };
-      range(box.min()[ua], box.max()[ua], slice.origin_m[ua], slice.spacing_m[0], slice.width, a0,
-            a1);
-      range(box.min()[va], box.max()[va], slice.origin_m[va], slice.spacing_m[1], slice.height, b0,
-            b1);
+      index_range(box.min()[ua], box.max()[ua], slice.origin_m[ua], slice.spacing_m[0], slice.width,
+                  a0, a1);
+      index_range(box.min()[va], box.max()[va], slice.origin_m[va], slice.spacing_m[1],
+                  slice.height, b0, b1);
     }
   } else {
     slice.values.assign(total, 0.0F);
@@ -832,16 +1001,18 @@ ResampleStats DeformedVolumeSampler::update_slice(Slice& slice) {
   stats.samples_total = total;
   stats.moved_tets = out.moved_count;
   if (a0 <= a1 && b0 <= b1) {
-    Vector3d p;
-    p[axis] = slice.position_m;
-    for (int b = b0; b <= b1; ++b) {
-      p[va] = slice.origin_m[va] + b * slice.spacing_m[1];
-      float* row = slice.values.data() + static_cast<std::size_t>(slice.width) * b;
-      for (int a = a0; a <= a1; ++a) {
-        p[ua] = slice.origin_m[ua] + a * slice.spacing_m[0];
-        row[a] = d.sample(p);
-      }
-    }
+    PlaneGrid g;
+    g.axis = axis;
+    g.position = slice.position_m;
+    g.origin_u = slice.origin_m[ua];
+    g.step_u = slice.spacing_m[0];
+    g.origin_v = slice.origin_m[va];
+    g.step_v = slice.spacing_m[1];
+    g.width = slice.width;
+    g.height = slice.height;
+    d.plane_candidates(g, a0, a1, b0, b1, d.scratch_refs);
+    d.raster_plane(g, a0, a1, b0, b1, d.scratch_refs, slice.values.data(),
+                   static_cast<std::size_t>(slice.width), nullptr);
     stats.samples_recomputed = static_cast<std::size_t>(a1 - a0 + 1) * (b1 - b0 + 1);
   }
 
@@ -874,11 +1045,8 @@ ResampleStats DeformedVolumeSampler::update_volume(ImageGrid& deformed) {
   if (same_geometry) {
     const Box& box = out.dirty;
     for (int a = 0; a < 3 && !box.isEmpty(); ++a) {
-      const double o = img.origin_m[a], s = img.spacing_m[a];
-      lo[a] = static_cast<int>(
-          std::clamp(std::ceil((box.min()[a] - o) / s) - 1.0, 0.0, 1.0 * img.dims[a]));
-      hi[a] = static_cast<int>(
-          std::clamp(std::floor((box.max()[a] - o) / s) + 1.0, -1.0, img.dims[a] - 1.0));
+      index_range(box.min()[a], box.max()[a], img.origin_m[a], img.spacing_m[a], img.dims[a], lo[a],
+                  hi[a]);
     }
     if (box.isEmpty()) hi[0] = -1;
   } else {
@@ -892,27 +1060,40 @@ ResampleStats DeformedVolumeSampler::update_volume(ImageGrid& deformed) {
   stats.samples_total = total;
   stats.moved_tets = out.moved_count;
   if (lo[0] <= hi[0] && lo[1] <= hi[1] && lo[2] <= hi[2]) {
-    // Voxels outside every mesh's bounds read the image at themselves: copy those directly.
-    Box all;
-    for (const MeshState& m : d.meshes)
-      if (!m.bounds.isEmpty()) all.extend(m.bounds);
-    Vector3d p;
-    for (int k = lo[2]; k <= hi[2]; ++k) {
-      p[2] = img.origin_m[2] + k * img.spacing_m[2];
-      for (int j = lo[1]; j <= hi[1]; ++j) {
-        p[1] = img.origin_m[1] + j * img.spacing_m[1];
-        const std::size_t row = img.index(0, j, k);
-        const bool row_out = all.isEmpty() || p[2] < all.min()[2] || p[2] > all.max()[2] ||
-                             p[1] < all.min()[1] || p[1] > all.max()[1];
-        for (int i = lo[0]; i <= hi[0]; ++i) {
-          p[0] = img.origin_m[0] + i * img.spacing_m[0];
-          if (row_out || p[0] < all.min()[0] || p[0] > all.max()[0]) {
-            deformed.values[row + i] = img.values[row + i];
-          } else {
-            deformed.values[row + i] = d.sample(p);
-          }
-        }
+    // The volume is a stack of z planes; each tetrahedron goes to the planes its box spans.
+    PlaneGrid g;
+    g.axis = 2;
+    g.origin_u = img.origin_m[0];
+    g.step_u = img.spacing_m[0];
+    g.origin_v = img.origin_m[1];
+    g.step_v = img.spacing_m[1];
+    g.width = img.dims[0];
+    g.height = img.dims[1];
+    const int planes = hi[2] - lo[2] + 1;
+    if (d.plane_refs.size() < static_cast<std::size_t>(planes)) d.plane_refs.resize(planes);
+    for (int k = 0; k < planes; ++k) d.plane_refs[k].clear();
+    const double ulo = img.origin_m[0] + (lo[0] - 1) * img.spacing_m[0];
+    const double uhi = img.origin_m[0] + (hi[0] + 1) * img.spacing_m[0];
+    const double vlo = img.origin_m[1] + (lo[1] - 1) * img.spacing_m[1];
+    const double vhi = img.origin_m[1] + (hi[1] + 1) * img.spacing_m[1];
+    for (std::size_t mi = 0; mi < d.meshes.size(); ++mi) {
+      const MeshState& m = d.meshes[mi];
+      for (std::size_t t = 0; t < m.box.size(); ++t) {
+        if (m.kind[t] == kDegenerate) continue;
+        const Box& b = m.box[t];
+        if (b.max()[0] < ulo || b.min()[0] > uhi || b.max()[1] < vlo || b.min()[1] > vhi) continue;
+        int k0, k1;
+        index_range(b.min()[2], b.max()[2], img.origin_m[2], img.spacing_m[2], img.dims[2], k0, k1);
+        for (int k = std::max(k0, lo[2]); k <= std::min(k1, hi[2]); ++k)
+          d.plane_refs[k - lo[2]].push_back({static_cast<int>(mi), static_cast<int>(t)});
       }
+    }
+    const std::size_t plane_size = static_cast<std::size_t>(img.dims[0]) * img.dims[1];
+    for (int k = lo[2]; k <= hi[2]; ++k) {
+      g.position = img.origin_m[2] + k * img.spacing_m[2];
+      d.raster_plane(g, lo[0], hi[0], lo[1], hi[1], d.plane_refs[k - lo[2]],
+                     deformed.values.data() + plane_size * k, static_cast<std::size_t>(img.dims[0]),
+                     img.values.data() + plane_size * k);
     }
     stats.samples_recomputed =
         static_cast<std::size_t>(hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1);
