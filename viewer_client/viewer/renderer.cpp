@@ -54,7 +54,7 @@ constexpr double kArteryColour[3] = {0.85, 0.12, 0.10};
 constexpr double kBackground3d[3] = {0.08, 0.09, 0.12};
 
 // Half-height of the 2D slice views, unit m.
-constexpr double kSliceViewHalfHeightM = 0.075;
+constexpr double kSliceViewHalfHeightM = 0.06;
 
 struct SurfaceActor {
   std::string mesh_id;
@@ -143,6 +143,7 @@ struct SceneRenderer::Impl {
     }
     status->GetTextProperty()->SetFontSize(std::max(12, o.height / 45));
     status->GetTextProperty()->SetColor(1, 1, 1);
+    status->GetTextProperty()->ShadowOn();
     status->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
     status->SetPosition(0.01, 0.015);
     status->SetVisibility(o.overlay ? 1 : 0);
@@ -214,6 +215,7 @@ struct SceneRenderer::Impl {
       s.label = vtkSmartPointer<vtkTextActor>::New();
       s.label->GetTextProperty()->SetFontSize(std::max(11, opt.height / 50));
       s.label->GetTextProperty()->SetColor(0.9, 0.9, 0.3);
+      s.label->GetTextProperty()->ShadowOn();
       s.label->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
       s.label->SetPosition(0.01, 0.015);
       s.label->SetVisibility(opt.overlay ? 1 : 0);
