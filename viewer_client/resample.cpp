@@ -763,6 +763,14 @@ void DeformedVolumeSampler::Impl::apply(std::size_t mi, std::vector<Vector3d>&& 
     }
   }
   if (changed.empty()) return;
+  // In index order (the per-tetrahedron arrays are then read sequentially).
+  if (changed.size() * 8 > m.geo.tets.size()) {
+    changed.clear();
+    for (std::size_t t = 0; t < m.geo.tets.size(); ++t)
+      if (tet_stamp[m.tet_offset + t] == changed_mark) changed.push_back(static_cast<int>(t));
+  } else {
+    std::sort(changed.begin(), changed.end());
+  }
   const std::vector<Vector3d> u_old = std::exchange(m.u, std::move(u_new));
   for (std::size_t v = 0; v < m.u.size(); ++v) m.x[v] = m.geo.rest_m[v] + m.u[v];
 

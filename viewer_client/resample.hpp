@@ -22,7 +22,11 @@
 //
 // Lookup: a uniform grid per mesh over the deformed tetrahedra's bounding boxes, updated only
 // for tetrahedra whose vertices changed; tetrahedra that leave the grid's domain (huge
-// displacements) or span too many cells go to a short list that every lookup checks.
+// displacements) or span too many cells go to a short list that every lookup checks. Slices
+// and the volume (a stack of z planes) are instead rasterized: each deformed tetrahedron that
+// meets the plane marks the pixels it contains (each row clipped analytically, then the same
+// exact test as the point search), the winner by the rule above is kept per pixel. The result
+// equals sample() at every pixel, bit for bit.
 //
 // Units: metres inside (positions, displacements, spacing); image values are whatever the
 // image holds (float). Pure Eigen + C++: no VTK, no DDS, so it is unit-testable on its own.
