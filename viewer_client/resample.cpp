@@ -8,7 +8,6 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
-#include <sstream>
 #include <stdexcept>
 #include <unordered_map>
 #include <utility>
@@ -90,11 +89,6 @@ struct PlaneGrid {
   int width = 0, height = 0;
   int u_axis() const { return axis == 0 ? 1 : 0; }
   int v_axis() const { return axis == 2 ? 1 : 2; }
-  void point(int a, int b, double p[3]) const {
-    p[axis] = position;
-    p[u_axis()] = origin_u + a * step_u;
-    p[v_axis()] = origin_v + b * step_v;
-  }
 };
 
 // Index range [i0, i1] of grid points origin + i * step (0 <= i < n) that may lie in [lo, hi]
