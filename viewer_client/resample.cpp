@@ -208,7 +208,10 @@ void ImageGrid::validate() const {
   }
 }
 
-float sample_trilinear(const ImageGrid& image, const Eigen::Vector3d& p_m, float outside) {
+namespace {
+
+// sample_trilinear on a validated image (inlined into the rasterizer).
+inline float trilinear(const ImageGrid& image, const double p_m[3], float outside) {
   double f[3];
   bool on_voxel = true;
   for (int a = 0; a < 3; ++a) {
@@ -248,6 +251,20 @@ float sample_trilinear(const ImageGrid& image, const Eigen::Vector3d& p_m, float
   const double c0 = c00 + t[1] * (c10 - c00);
   const double c1 = c01 + t[1] * (c11 - c01);
   return static_cast<float>(c0 + t[2] * (c1 - c0));
+}
+
+}  // namespace
+
+float sample_trilinear(const ImageGrid& image, const Eigen::Vector3d& p_m, float outside) {
+  if (image.dims[0] <= 0 || image.dims[1] <= 0 || image.dims[2] <= 0 ||
+      image.values.size() !=
+          static_cast<std::size_t>(image.dims[0]) * image.dims[1] * image.dims[2]) {
+    throw std::invalid_argument("sample_trilinear: " + std::to_string(image.values.size()) +
+                                " values for dims " + std::to_string(image.dims[0]) + " x " +
+                                std::to_string(image.dims[1]) + " x " +
+                                std::to_string(image.dims[2]));
+  }
+  return trilinear(image, p_m.data(), outside);
 }
 
 Slice make_image_slice(const ImageGrid& image, int axis, double position_m) {
@@ -307,7 +324,7 @@ struct DeformedVolumeSampler::Impl {
   std::vector<int> rank;                        // mesh index -> position in `order`
   Vector3d to_rest(const Vector3d& p) const;
   float sample(const Vector3d& p) const {
-    return sample_trilinear(image, to_rest(p), options.outside_value);
+    return trilinear(image, to_rest(p).data(), options.outside_value);
   }
   std::uint64_t use_counter = 0;
   OutputState& output(const void* key, bool is_slice, std::uint64_t& token, bool& fresh);
@@ -716,13 +733,13 @@ void DeformedVolumeSampler::Impl::raster_plane(const PlaneGrid& g, int a0, int a
         t = static_cast<int>(key & 0xffffffffU);
       }
       if (m == nullptr || m->identity[t]) {
-        o[a] = id ? id[a] : sample_trilinear(image, Vector3d(p[0], p[1], p[2]), outside);
+        o[a] = id ? id[a] : trilinear(image, p, outside);
         continue;
       }
       double wt[3], x[3];
       barycentric(m->search[t], p, wt);
       rest_point(m->rest[t], wt, x);
-      o[a] = sample_trilinear(image, Vector3d(x[0], x[1], x[2]), outside);
+      o[a] = trilinear(image, x, outside);
     }
   }
 }
@@ -1090,10 +1107,40 @@ ResampleStats DeformedVolumeSampler::update_volume(ImageGrid& deformed) {
           d.plane_refs[k - lo[2]].push_back({static_cast<int>(mi), static_cast<int>(t)});
       }
     }
+    // Outside every mesh's bounds the volume is the image: copy; rasterize the rest.
+    Box all;
+    for (const MeshState& m : d.meshes)
+      if (!m.bounds.isEmpty()) all.extend(m.bounds);
+    int in_lo[2] = {0, 0}, in_hi[2] = {-1, -1};
+    if (!all.isEmpty()) {
+      for (int a = 0; a < 2; ++a) {
+        index_range(all.min()[a], all.max()[a], img.origin_m[a], img.spacing_m[a], img.dims[a],
+                    in_lo[a], in_hi[a]);
+        in_lo[a] = std::max(in_lo[a], lo[a]);
+        in_hi[a] = std::min(in_hi[a], hi[a]);
+      }
+    }
     const std::size_t plane_size = static_cast<std::size_t>(img.dims[0]) * img.dims[1];
+    const auto copy = [&](std::size_t k, int j, int i0, int i1) {
+      if (i0 > i1) return;
+      const std::size_t at = plane_size * k + static_cast<std::size_t>(img.dims[0]) * j + i0;
+      std::copy(img.values.begin() + at, img.values.begin() + at + (i1 - i0 + 1),
+                deformed.values.begin() + at);
+    };
     for (int k = lo[2]; k <= hi[2]; ++k) {
+      const std::vector<TetRef>& refs = d.plane_refs[k - lo[2]];
+      const bool raster = !refs.empty() && in_lo[0] <= in_hi[0] && in_lo[1] <= in_hi[1];
+      for (int j = lo[1]; j <= hi[1]; ++j) {
+        if (!raster || j < in_lo[1] || j > in_hi[1]) {
+          copy(k, j, lo[0], hi[0]);
+        } else {
+          copy(k, j, lo[0], in_lo[0] - 1);
+          copy(k, j, in_hi[0] + 1, hi[0]);
+        }
+      }
+      if (!raster) continue;
       g.position = img.origin_m[2] + k * img.spacing_m[2];
-      d.raster_plane(g, lo[0], hi[0], lo[1], hi[1], d.plane_refs[k - lo[2]],
+      d.raster_plane(g, in_lo[0], in_hi[0], in_lo[1], in_hi[1], refs,
                      deformed.values.data() + plane_size * k, static_cast<std::size_t>(img.dims[0]),
                      img.values.data() + plane_size * k);
     }

@@ -68,6 +68,7 @@ struct ImageGrid {
 // Trilinear interpolation at p (m); outside the grid (beyond the outermost voxel centres) the
 // value is `outside`. Non-finite p gives `outside`. A point within 1e-9 voxel of a voxel centre
 // gives that voxel's value exactly (so resampling the image on its own grid is bit-exact).
+// Throws std::invalid_argument when the value count does not match dims (see validate()).
 float sample_trilinear(const ImageGrid& image, const Eigen::Vector3d& p_m, float outside = 0.0F);
 
 // One mesh as the viewer knows it (from MeshTopology): rest vertices (m) and tetrahedra.

@@ -220,6 +220,14 @@ TEST(resample_trilinear, GridPointsCornersOutsideAndNaN) {
   }
 }
 
+TEST(resample_trilinear, InconsistentImageIsRefused) {
+  ImageGrid g = random_image();
+  g.values.resize(10);
+  EXPECT_THROW(sample_trilinear(g, Vector3d(0.01, 0.01, 0.01)), std::invalid_argument);
+  g = ImageGrid();
+  EXPECT_THROW(sample_trilinear(g, Vector3d::Zero()), std::invalid_argument);
+}
+
 TEST(resample_trilinear, SingleVoxelThickAxis) {
   ImageGrid g;
   g.dims = {3, 1, 2};
