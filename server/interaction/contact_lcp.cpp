@@ -10,6 +10,8 @@ namespace neurosim::interaction {
 void ContactLcp::reserve(int max_rows) {
   if (max_rows <= capacity_) return;
   capacity_ = max_rows;
+  factor_valid_ = false;
+  num_active_ = 0;
   in_set_.assign(capacity_, 0);
   active_rows_.assign(capacity_, 0);
   chol_.setZero(capacity_, capacity_);
@@ -19,83 +21,117 @@ void ContactLcp::reserve(int max_rows) {
   w_.setZero(capacity_);
 }
 
-int ContactLcp::factor_and_solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta) {
+bool ContactLcp::append_row(const Eigen::MatrixXd& w, int row) {
   const int k = num_active_;
-  // Cholesky of W_AA, column by column (k is a few dozen at most).
-  for (int j = 0; j < k; ++j) {
-    const int rj = active_rows_[j];
-    double d = w(rj, rj);
-    for (int p = 0; p < j; ++p) d -= chol_(j, p) * chol_(j, p);
-    // A pivot lost to round-off: the row is a combination of the others.
-    if (!(d > 1e-12 * w(rj, rj))) return j;
-    const double ljj = std::sqrt(d);
-    chol_(j, j) = ljj;
-    for (int i = j + 1; i < k; ++i) {
-      double s = w(active_rows_[i], rj);
-      for (int p = 0; p < j; ++p) s -= chol_(i, p) * chol_(j, p);
-      chol_(i, j) = s / ljj;
+  // New factor row: L y = W_A,row, d = W_row,row - |y|^2.
+  auto y = rhs_.head(k);
+  for (int i = 0; i < k; ++i) y[i] = w(active_rows_[i], row);
+  chol_.topLeftCorner(k, k).triangularView<Eigen::Lower>().solveInPlace(y);
+  const double d = w(row, row) - y.squaredNorm();
+  // A pivot lost to round-off: the row is a combination of the others.
+  if (!(d > 1e-12 * w(row, row))) return false;
+  chol_.row(k).head(k) = y.transpose();
+  chol_(k, k) = std::sqrt(d);
+  active_rows_[k] = row;
+  num_active_ = k + 1;
+  return true;
+}
+
+void ContactLcp::remove_position(int pos) {
+  const int k = num_active_;
+  // Drop row pos of L: the rows below keep one entry right of the diagonal (Hessenberg);
+  // rotations of the column pairs (j, j+1) from the right take it out again (L Q Q^T L^T).
+  for (int i = pos; i + 1 < k; ++i) active_rows_[i] = active_rows_[i + 1];
+  for (int p = 0; p < k; ++p)
+    for (int i = std::max(pos, p - 1); i + 1 < k; ++i) chol_(i, p) = chol_(i + 1, p);
+  for (int j = pos; j + 1 < k; ++j) {
+    const double a = chol_(j, j), b = chol_(j, j + 1);
+    const double r = std::hypot(a, b);
+    const double c = a / r, s = b / r;
+    double* cj = &chol_(0, j);
+    double* cj1 = &chol_(0, j + 1);
+    for (int i = j; i + 1 < k; ++i) {
+      const double x = cj[i], yv = cj1[i];
+      cj[i] = c * x + s * yv;
+      cj1[i] = -s * x + c * yv;
     }
+    chol_(j, j + 1) = 0.0;
   }
-  for (int i = 0; i < k; ++i) {
-    double s = delta[active_rows_[i]];
-    for (int p = 0; p < i; ++p) s -= chol_(i, p) * rhs_[p];
-    rhs_[i] = s / chol_(i, i);
-  }
-  for (int i = k - 1; i >= 0; --i) {
-    double s = rhs_[i];
-    for (int p = i + 1; p < k; ++p) s -= chol_(p, i) * sol_[p];
-    sol_[i] = s / chol_(i, i);
-  }
-  return -1;
+  num_active_ = k - 1;
+}
+
+void ContactLcp::solve_active(const Eigen::VectorXd& delta) {
+  const int k = num_active_;
+  auto x = sol_.head(k);
+  for (int i = 0; i < k; ++i) x[i] = delta[active_rows_[i]];
+  const auto l = chol_.topLeftCorner(k, k).triangularView<Eigen::Lower>();
+  l.solveInPlace(x);
+  l.transpose().solveInPlace(x);
 }
 
 LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n,
                             double tolerance, int max_iterations, Eigen::VectorXd& lambda,
-                            const std::vector<char>* initial_active) {
+                            const std::vector<char>* initial_active, int stable_rows) {
   if (initial_active && static_cast<int>(initial_active->size()) < n)
     throw std::invalid_argument("ContactLcp::solve: warm start shorter than the rows");
-  if (n > capacity_ || w.rows() < n || w.cols() < n || delta.size() < n || lambda.size() < n) {
+  if (n > capacity_ || w.rows() < n || w.cols() < n || delta.size() < n || lambda.size() < n ||
+      stable_rows < 0 || stable_rows > n) {
     throw std::invalid_argument("ContactLcp::solve: " + std::to_string(n) +
                                 " rows exceed the workspace (" + std::to_string(capacity_) +
                                 ") or the inputs");
   }
   LcpResult result;
   lambda.head(n).setZero();
-  num_active_ = 0;
-  if (n == 0) {
-    result.converged = true;
-    return result;
-  }
-  double delta_scale = 0.0;
   for (int i = 0; i < n; ++i) {
     if (!std::isfinite(delta[i]) || !std::isfinite(w(i, i))) {
       throw std::invalid_argument("ContactLcp::solve: non-finite input at row " +
                                   std::to_string(i));
     }
-    delta_scale = std::max(delta_scale, std::abs(delta[i]));
   }
+  // Warm start: keep the previous factor's rows below stable_rows (refactored from scratch now
+  // and then, so round-off of the updates cannot pile up).
+  const bool reuse = stable_rows > 0 && factor_valid_ && factored_rows_ >= stable_rows &&
+                     solves_since_factor_ < 1000;
+  for (int i = 0; i < n; ++i) in_set_[i] = 0;
+  if (reuse) {
+    ++solves_since_factor_;
+    for (int p = num_active_ - 1; p >= 0; --p) {
+      if (active_rows_[p] >= stable_rows)
+        remove_position(p);
+      else
+        in_set_[active_rows_[p]] = 1;
+    }
+  } else {
+    solves_since_factor_ = 0;
+    num_active_ = 0;
+  }
+  factor_valid_ = true;
+  factored_rows_ = n;
+  double delta_scale = 0.0;
+  for (int i = 0; i < n; ++i) delta_scale = std::max(delta_scale, std::abs(delta[i]));
   if (delta_scale == 0.0) {
+    num_active_ = 0;
     result.converged = true;
     return result;
   }
   // 0: inactive, 1: active, 2: blocked (dependent or immovable row, never active).
-  for (int i = 0; i < n; ++i) {
+  for (int i = reuse ? stable_rows : 0; i < n; ++i) {
     const bool start = initial_active ? (*initial_active)[i] != 0 : delta[i] > 0.0;
-    in_set_[i] = w(i, i) > 0.0 ? (start ? 1 : 0) : 2;
+    if (!(w(i, i) > 0.0)) {
+      in_set_[i] = 2;
+    } else if (start) {
+      in_set_[i] = 1;
+      if (!append_row(w, i)) {
+        in_set_[i] = 2;
+        result.dependent_rows = true;
+      }
+    }
   }
 
   const double tol_w = tolerance * delta_scale;
   for (int it = 0; it < max_iterations; ++it) {
     result.iterations = it + 1;
-    num_active_ = 0;
-    for (int i = 0; i < n; ++i)
-      if (in_set_[i] == 1) active_rows_[num_active_++] = i;
-    const int dep = factor_and_solve(w, delta);
-    if (dep >= 0) {
-      in_set_[active_rows_[dep]] = 2;
-      result.dependent_rows = true;
-      continue;
-    }
+    solve_active(delta);
     lambda.head(n).setZero();
     double lambda_scale = 0.0;
     for (int j = 0; j < num_active_; ++j) {
@@ -103,7 +139,9 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
       lambda_scale = std::max(lambda_scale, std::abs(sol_[j]));
     }
     const double tol_l = tolerance * std::max(lambda_scale, 1e-300);
-    w_.head(n).noalias() = w.topLeftCorner(n, n) * lambda.head(n);
+    w_.head(n).setZero();
+    for (int j = 0; j < num_active_; ++j)
+      w_.head(n).noalias() += w.col(active_rows_[j]).head(n) * sol_[j];
     w_.head(n) -= delta.head(n);
     // Murty's least-index pivot: the first row violating its sign condition changes sides.
     int flip = -1;
@@ -115,7 +153,19 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
       result.converged = true;
       break;
     }
-    in_set_[flip] = in_set_[flip] == 1 ? 0 : 1;
+    if (in_set_[flip] == 1) {
+      in_set_[flip] = 0;
+      for (int p = 0; p < num_active_; ++p)
+        if (active_rows_[p] == flip) {
+          remove_position(p);
+          break;
+        }
+    } else if (append_row(w, flip)) {
+      in_set_[flip] = 1;
+    } else {
+      in_set_[flip] = 2;
+      result.dependent_rows = true;
+    }
   }
   // Report the remaining violation whatever happened (blocked rows included).
   double violation = 0.0;
@@ -130,17 +180,23 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
   }
   result.max_violation = violation;
   if (result.converged && violation > 1e3 * tolerance) result.converged = false;
-  if (!lambda.head(n).allFinite()) result.converged = false;
+  if (!lambda.head(n).allFinite()) {
+    result.converged = false;
+    factor_valid_ = false;
+  }
   return result;
 }
 
-void ContactLcp::invert_active() {
+void ContactLcp::invert_active(int first_row) {
   const int k = num_active_;
   // Columns of the identity through the factor.
   for (int c = 0; c < k; ++c) {
-    for (int i = 0; i < k; ++i) {
+    if (active_rows_[c] < first_row) continue;
+    // L y = e_c: y is zero above c.
+    for (int i = 0; i < c; ++i) rhs_[i] = 0.0;
+    for (int i = c; i < k; ++i) {
       double s = i == c ? 1.0 : 0.0;
-      for (int p = 0; p < i; ++p) s -= chol_(i, p) * rhs_[p];
+      for (int p = c; p < i; ++p) s -= chol_(i, p) * rhs_[p];
       rhs_[i] = s / chol_(i, i);
     }
     for (int i = k - 1; i >= 0; --i) {

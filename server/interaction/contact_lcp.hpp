@@ -3,7 +3,10 @@
 // (W: effective contact compliance on the candidate rows, unit m/N, symmetric positive
 // definite; delta: penetration depth per row, unit m; lambda: normal force per row, unit N).
 // Solved exactly by principal pivoting (Murty's least-index rule, finite for P-matrices) with a
-// Cholesky factor of the active block; no allocation once reserve() has sized the workspace.
+// Cholesky factor of the active block, updated per pivot (a row added: one forward solve; a row
+// removed: Givens rotations), O(k^2) per pivot for k active rows, and kept from one solve to the
+// next for rows the caller declares unchanged; no allocation once reserve() has sized the
+// workspace.
 #pragma once
 
 #include <Eigen/Core>
@@ -31,13 +34,17 @@ class ContactLcp {
   // Rows of W with a zero diagonal (a row that cannot move) never become active.
   // initial_active (optional, first n entries): warm start from this active set (e.g. the last
   // step's) instead of the rows with delta > 0; the pivoting is finite from any start.
+  // stable_rows: rows [0, stable_rows) have the same entries of W as in the previous solve (e.g.
+  // the constant block of sliding-coupling rows): their active set and its factor are taken
+  // over from the previous solve (initial_active then applies to the other rows only).
   LcpResult solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n, double tolerance,
                   int max_iterations, Eigen::VectorXd& lambda,
-                  const std::vector<char>* initial_active = nullptr);
+                  const std::vector<char>* initial_active = nullptr, int stable_rows = 0);
 
   // After a converged solve: the inverse of the active block (for the contact stiffness), in
-  // active_inverse() (top-left active x active), rows listed by active_rows().
-  void invert_active();
+  // active_inverse() (top-left active x active), rows listed by active_rows(). Only the columns
+  // of active rows >= first_row are computed (e.g. the contact rows after the sliding rows).
+  void invert_active(int first_row = 0);
   const Eigen::MatrixXd& active_inverse() const { return inverse_; }
   const std::vector<int>& active_rows() const { return active_rows_; }
   int num_active() const { return num_active_; }
@@ -51,9 +58,17 @@ class ContactLcp {
   Eigen::MatrixXd inverse_;  // inverse of the active block
   Eigen::VectorXd rhs_, sol_, w_;
 
-  // Factors and solves the active block; returns the index (in active_rows_) of a dependent
-  // row, or -1.
-  int factor_and_solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta);
+  bool factor_valid_{false};  // chol_ factors the block of active_rows_ of the last solve's W
+  int factored_rows_{0};      // n of that solve
+  int solves_since_factor_{0};
+
+  // Appends `row` to the active block and its factor (one forward solve); false (nothing
+  // changed) if the row is numerically dependent on the active ones.
+  bool append_row(const Eigen::MatrixXd& w, int row);
+  // Removes the active row at position p of active_rows_ (Givens rotations restore the factor).
+  void remove_position(int p);
+  // sol_ (factor order) = W_AA^-1 delta_A.
+  void solve_active(const Eigen::VectorXd& delta);
 };
 
 }  // namespace neurosim::interaction

@@ -657,8 +657,9 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   for (int r = 0; r < nc; ++r) warm_[ns + r] = delta_[ns + r] > 0.0 ? 1 : 0;
   const int max_iterations =
       options_.lcp_max_iterations + options_.lcp_iterations_per_sliding_row * ns;
+  // The sliding block of W never changes: its active set and factor carry over between steps.
   const LcpResult lcp =
-      lcp_.solve(w_, delta_, n, options_.lcp_tolerance, max_iterations, lambda_, &warm_);
+      lcp_.solve(w_, delta_, n, options_.lcp_tolerance, max_iterations, lambda_, &warm_, ns);
 
   stats.contact_rows = nc;
   stats.sliding_rows = ns;
@@ -674,7 +675,7 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
     return;
   }
-  lcp_.invert_active();
+  lcp_.invert_active(ns);  // the stiffness needs the contact rows' columns only
   const auto& active = lcp_.active_rows();
   const Eigen::MatrixXd& inv = lcp_.active_inverse();
   const int na = lcp_.num_active();

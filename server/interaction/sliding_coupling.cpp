@@ -8,7 +8,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -18,15 +17,11 @@ namespace neurosim::interaction {
 namespace {
 // Right-hand sides per block solve when W_B is built.
 constexpr int kBlock = 63;
-// Shift of the floating factor K + sigma I, relative to K's mean diagonal: far below the softest
-// deformation mode of any mesh we load, so the refinement contracts by sigma / mu_min per step.
-constexpr double kShiftRatio = 1e-10;
-constexpr int kMaxRefinements = 60;
 }  // namespace
 
 struct EmbeddedCompliance::Floating {
-  fem::SparseMatrix k;                              // K_B, unit N/m
-  Eigen::SimplicialLDLT<fem::SparseMatrix> factor;  // of K_B + sigma I
+  std::vector<int> reduced;                         // dof -> index in the support's system or -1
+  Eigen::SimplicialLDLT<fem::SparseMatrix> factor;  // K_B with six dofs held (determinate)
   Eigen::MatrixXd r;                                // 3N x 6 orthonormal rigid modes
   double kappa{0.0};                                // anchor stiffness per rigid mode, N/m
 };
@@ -48,18 +43,19 @@ EmbeddedCompliance::EmbeddedCompliance(const mesh::TetMesh& mesh, const fem::Mat
     throw std::invalid_argument(what_ + ": sliding anchor ratio must be finite and > 0");
   floating_ = std::make_unique<Floating>();
   Floating& f = *floating_;
-  f.k = fem::assemble_stiffness(mesh, materials);
-  const double mean_diag = f.k.diagonal().mean();
+  const fem::SparseMatrix k = fem::assemble_stiffness(mesh, materials);
+  const double mean_diag = k.diagonal().mean();
   if (!(mean_diag > 0.0) || !std::isfinite(mean_diag))
     throw std::runtime_error(what_ + ": stiffness has no positive diagonal");
   f.kappa = anchor_ratio * mean_diag;
   // Rigid modes: translations and rotations about the centroid, orthonormalized.
   const auto& x = mesh.vertices();
+  const int nv = static_cast<int>(x.size());
   Eigen::Vector3d c = Eigen::Vector3d::Zero();
   for (const auto& p : x) c += p;
-  c /= static_cast<double>(x.size());
+  c /= static_cast<double>(nv);
   Eigen::MatrixXd modes = Eigen::MatrixXd::Zero(dofs_, 6);
-  for (std::size_t v = 0; v < x.size(); ++v) {
+  for (int v = 0; v < nv; ++v) {
     const Eigen::Vector3d d = x[v] - c;
     for (int a = 0; a < 3; ++a) {
       modes(3 * v + a, a) = 1.0;
@@ -68,11 +64,53 @@ EmbeddedCompliance::EmbeddedCompliance(const mesh::TetMesh& mesh, const fem::Mat
   }
   Eigen::HouseholderQR<Eigen::MatrixXd> qr(modes);
   f.r = qr.householderQ() * Eigen::MatrixXd::Identity(dofs_, 6);
-  fem::SparseMatrix shifted = f.k;
-  for (int i = 0; i < dofs_; ++i) shifted.coeffRef(i, i) += kShiftRatio * mean_diag;
-  f.factor.compute(shifted);
-  if (f.factor.info() != Eigen::Success)
-    throw std::runtime_error(what_ + ": factorization of the floating embedded mesh failed");
+  // A statically determinate support (six dofs): node a held, node b (farthest from a) held
+  // across ab, node c (farthest from the line ab) held against turning about ab. A
+  // self-equilibrated load meets no reaction there, so K_det^-1 P f is a solution of K u = P f.
+  int a = 0, b = 0, cc = 0;
+  double best = -1.0;
+  for (int v = 0; v < nv; ++v)
+    if ((x[v] - c).squaredNorm() > best) best = (x[v] - c).squaredNorm(), a = v;
+  best = -1.0;
+  for (int v = 0; v < nv; ++v)
+    if ((x[v] - x[a]).squaredNorm() > best) best = (x[v] - x[a]).squaredNorm(), b = v;
+  const Eigen::Vector3d ab = (x[b] - x[a]).normalized();
+  best = -1.0;
+  for (int v = 0; v < nv; ++v) {
+    const Eigen::Vector3d d = x[v] - x[a];
+    const double off = (d - d.dot(ab) * ab).squaredNorm();
+    if (off > best) best = off, cc = v;
+  }
+  const Eigen::Vector3d turn = ab.cross(x[cc] - x[a]);
+  if (!(best > 0.0) || !(turn.norm() > 0.0))
+    throw std::runtime_error(what_ + ": floating embedded mesh is degenerate (collinear)");
+  int along = 0, spin = 0;
+  ab.cwiseAbs().maxCoeff(&along);   // b keeps its dof along ab
+  turn.cwiseAbs().maxCoeff(&spin);  // c is held along the turning direction
+  std::vector<char> held(dofs_, 0);
+  for (int d = 0; d < 3; ++d) held[3 * a + d] = 1;
+  for (int d = 0; d < 3; ++d)
+    if (d != along) held[3 * b + d] = 1;
+  held[3 * cc + spin] = 1;
+  f.reduced.assign(dofs_, -1);
+  int nf = 0;
+  for (int i = 0; i < dofs_; ++i)
+    if (!held[i]) f.reduced[i] = nf++;
+  std::vector<Eigen::Triplet<double>> t;
+  t.reserve(k.nonZeros());
+  for (int col = 0; col < k.outerSize(); ++col) {
+    if (f.reduced[col] < 0) continue;
+    for (fem::SparseMatrix::InnerIterator it(k, col); it; ++it)
+      if (f.reduced[it.row()] >= 0) t.emplace_back(f.reduced[it.row()], f.reduced[col], it.value());
+  }
+  fem::SparseMatrix kd(nf, nf);
+  kd.setFromTriplets(t.begin(), t.end());
+  f.factor.compute(kd);
+  if (f.factor.info() != Eigen::Success || !(f.factor.vectorD().minCoeff() > 0.0)) {
+    throw std::runtime_error(what_ +
+                             ": factorization of the floating embedded mesh on a determinate "
+                             "support failed");
+  }
 }
 
 EmbeddedCompliance::~EmbeddedCompliance() = default;
@@ -90,31 +128,22 @@ void EmbeddedCompliance::apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd&
     for (int r = 0; r < nf; ++r) u_m.row(free[r]) = x.row(r);
     return;
   }
-  // Pseudo-inverse on the self-equilibrated part, anchor on the rigid part.
+  // Pseudo-inverse on the self-equilibrated part (one solve on the determinate support, rigid
+  // component projected out), anchor on the rigid part.
   const Floating& f = *floating_;
   const Eigen::MatrixXd rigid = f.r.transpose() * forces_n;  // 6 x m
   const Eigen::MatrixXd pf = forces_n - f.r * rigid;
-  Eigen::MatrixXd x = f.factor.solve(pf);
+  const int nf = static_cast<int>(f.factor.rows());
+  Eigen::MatrixXd rhs(nf, forces_n.cols());
+  for (int i = 0; i < dofs_; ++i)
+    if (f.reduced[i] >= 0) rhs.row(f.reduced[i]) = pf.row(i);
+  const Eigen::MatrixXd xr = f.factor.solve(rhs);
+  Eigen::MatrixXd x = Eigen::MatrixXd::Zero(dofs_, forces_n.cols());
+  for (int i = 0; i < dofs_; ++i)
+    if (f.reduced[i] >= 0) x.row(i) = xr.row(f.reduced[i]);
   x -= f.r * (f.r.transpose() * x);
-  Eigen::MatrixXd res, d;
-  int it = 0;
-  double change = 0.0, previous = std::numeric_limits<double>::infinity();
-  for (; it < kMaxRefinements; ++it) {
-    res = pf - f.k * x;
-    d = f.factor.solve(res);
-    d -= f.r * (f.r.transpose() * d);
-    x += d;
-    change = d.norm();
-    // Converged, or at the round-off floor of K (updates stop shrinking).
-    if (change <= 1e-14 * x.norm() || change > 0.5 * previous) break;
-    previous = change;
-  }
-  max_refinements_ = std::max(max_refinements_, it + 1);
-  if (!x.allFinite() || change > 1e-7 * x.norm()) {
-    throw std::runtime_error(what_ +
-                             ": the compliance of the floating embedded mesh did not converge "
-                             "(refinement of the shifted factor); fix some of its nodes");
-  }
+  if (!x.allFinite())
+    throw std::runtime_error(what_ + ": compliance of the floating embedded mesh is not finite");
   u_m = x + f.r * (rigid / f.kappa);
 }
 

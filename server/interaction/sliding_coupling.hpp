@@ -18,8 +18,9 @@
 // B with fixed nodes: L_B = K_B^-1 with those nodes fixed. A floating B (no fixed node) has six
 // rigid modes R that frictionless contact alone may not hold (a cylinder turning about its
 // axis); it is anchored in those modes only: L_B = K_B^+ + R R^T / kappa with
-// kappa = anchor_ratio x mean diagonal of K_B (deformation modes exact, the pseudo-inverse by a
-// slightly shifted factor and iterative refinement; a rigid load moves B by load / kappa).
+// kappa = anchor_ratio x mean diagonal of K_B (deformation modes exact: the pseudo-inverse is one
+// solve on a statically determinate six-dof support followed by the projection out of R; a rigid
+// load moves B by load / kappa).
 #pragma once
 
 #include "server/fem/material.hpp"
@@ -61,7 +62,6 @@ class EmbeddedCompliance {
   // U = L_B F for nodal forces F (3N x m, unit N), U unit m.
   void apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_m) const;
   bool floating() const { return !solver_; }
-  int refinement_iterations() const { return max_refinements_; }  // most one apply needed
 
  private:
   struct Floating;
@@ -69,7 +69,6 @@ class EmbeddedCompliance {
   std::unique_ptr<Floating> floating_;         // B without
   std::string what_;
   int dofs_{0};
-  mutable int max_refinements_{0};
 };
 
 class SlidingCoupling {

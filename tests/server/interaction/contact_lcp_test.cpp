@@ -86,6 +86,51 @@ TEST(interaction_lcp, DuplicateRowsAreHandled) {
   EXPECT_NEAR(lam[0] + lam[1], 0.5, 1e-12);
 }
 
+// Warm starts (any initial active set) and a factor kept over a stable leading block give the
+// unique solution of the SPD LCP, as a cold start does; the pivots update the factor (rows added
+// and removed in any order), so this also checks the updates against a fresh factorization.
+TEST(interaction_lcp, WarmStartAndStableRowsMatchColdStart) {
+  std::mt19937 rng(11);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::bernoulli_distribution coin(0.5);
+  const int cap = 40;
+  ContactLcp warm, cold;
+  warm.reserve(cap);
+  cold.reserve(cap);
+  const int stable = 25;
+  Eigen::MatrixXd a(cap, cap);
+  for (int i = 0; i < cap; ++i)
+    for (int j = 0; j < cap; ++j) a(i, j) = g(rng);
+  Eigen::VectorXd d0(stable);
+  for (int i = 0; i < stable; ++i) d0[i] = 1e-3 * g(rng);
+  for (int trial = 0; trial < 50; ++trial) {
+    // The stable block keeps its rows of W and its delta; the trailing rows change every trial.
+    const int n = stable + trial % 15;
+    Eigen::MatrixXd b(n - stable, cap);
+    for (int i = 0; i < b.rows(); ++i)
+      for (int j = 0; j < cap; ++j) b(i, j) = g(rng);
+    // Positive definite: the Gram matrix of the rows [a_stable; b] plus a shift.
+    Eigen::MatrixXd rows(n, cap);
+    rows.topRows(stable) = a.topRows(stable);
+    rows.bottomRows(n - stable) = b;
+    Eigen::MatrixXd spd = Eigen::MatrixXd::Zero(cap, cap);
+    spd.topLeftCorner(n, n) =
+        1e-4 * (rows * rows.transpose() / cap + 0.05 * Eigen::MatrixXd::Identity(n, n));
+    Eigen::VectorXd d = Eigen::VectorXd::Zero(cap), lw = d, lc = d;
+    d.head(stable) = d0;
+    for (int i = stable; i < n; ++i) d[i] = 1e-3 * g(rng);
+    std::vector<char> start(cap, 0);
+    for (int i = 0; i < n; ++i) start[i] = coin(rng) ? 1 : 0;
+    const LcpResult rw = warm.solve(spd, d, n, 1e-12, 500, lw, &start, stable);
+    const LcpResult rc = cold.solve(spd, d, n, 1e-12, 500, lc);
+    ASSERT_TRUE(rw.converged && rc.converged) << trial;
+    EXPECT_LE((lw.head(n) - lc.head(n)).norm(), 1e-9 * std::max(1.0, lc.head(n).norm())) << trial;
+    EXPECT_GE(lw.head(n).minCoeff(), 0.0);
+    const Eigen::VectorXd slack = spd.topLeftCorner(n, n) * lw.head(n) - d.head(n);
+    EXPECT_GE(slack.minCoeff(), -1e-9 * d.head(n).cwiseAbs().maxCoeff()) << trial;
+  }
+}
+
 TEST(interaction_lcp, RejectsNonFinite) {
   Eigen::MatrixXd w = Eigen::MatrixXd::Identity(2, 2);
   Eigen::VectorXd d(2), lam(2);
