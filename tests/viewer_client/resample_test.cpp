@@ -775,6 +775,27 @@ TEST(resample_sampler, SlicesAndVolumeEqualPointwiseSampling) {
   EXPECT_GT(in_mesh, 3000U);
 }
 
+// Tetrahedra moved far outside their search grid's domain are still found (the big list).
+TEST(resample_sampler, MeshTranslatedFarAwayIsStillFound) {
+  const MeshGeometry mesh = default_mesh();
+  DeformedVolumeSampler s(random_image(), {mesh});
+  const Vector3d far(0.35, -0.2, 0.1);
+  s.set_displacements(0, std::vector<Vector3d>(mesh.rest_m.size(), far));
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0.0065, 0.0185);
+  for (int n = 0; n < 500; ++n) {
+    const Vector3d x(u(rng), u(rng) - 0.001, u(rng));
+    const Location l = s.locate(x + far);
+    ASSERT_EQ(l.mesh, 0);
+    ASSERT_LT((l.rest_m - x).norm(), 1e-12);
+    ASSERT_EQ(s.to_rest(x), x);  // the rest place is empty now
+  }
+  // And back into the grid.
+  s.set_displacements(0, std::vector<Vector3d>(mesh.rest_m.size(), Vector3d(1e-4, 0, 0)));
+  const Vector3d x(0.012, 0.011, 0.013);
+  EXPECT_LT((s.to_rest(x + Vector3d(1e-4, 0, 0)) - x).norm(), 1e-12);
+}
+
 TEST(resample_sampler, PointsOnSharedFacesPickTheLowestIndexTetrahedron) {
   const MeshGeometry mesh = default_mesh();
   DeformedVolumeSampler s(random_image(), {mesh});
