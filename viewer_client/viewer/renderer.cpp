@@ -438,7 +438,7 @@ void SceneRenderer::set_volume(const ImageGrid* grid) {
     prop->SetScalarOpacityUnitDistance(grid->spacing_m.minCoeff());
     im.volume_mapper->InteractiveAdjustSampleDistancesOff();
     im.volume_mapper->AutoAdjustSampleDistancesOff();
-    im.volume_mapper->SetSampleDistance(static_cast<float>(0.5 * grid->spacing_m.minCoeff()));
+    im.volume_mapper->SetSampleDistance(static_cast<float>(grid->spacing_m.minCoeff()));
     im.volume = vtkSmartPointer<vtkVolume>::New();
     im.volume->SetMapper(im.volume_mapper);
     im.volume->SetProperty(prop);
