@@ -5,7 +5,8 @@
 // default 5) along the inward normal at a point of the lateral surface, growing by D mm per
 // frame (default 0.05, a 1.5 mm/s push seen at 30 Hz) up to A mm (default 4) and back; the
 // artery (embedded in the brain) takes the same field. Rows:
-//   slices3_full         the three orthogonal slices through the tool tip, recomputed in full
+//   slices3_full         the three orthogonal slices through the tool tip, made anew
+//                        (make_image_slice) and computed in full
 //   slices3_incremental  the same slices after each frame's push (update_slice x 3)
 //   set_displacements    both meshes' new displacements (search structure update)
 //   frame_incremental    set_displacements + slices3_incremental: the viewer's work per frame
@@ -243,7 +244,7 @@ int main(int argc, char** argv) {
     double samples = 0, total = 0;
     const Timer t0;
     for (nv::Slice& s : slices) {
-      sampler.forget(s);
+      s = nv::make_image_slice(image, s.axis, s.position_m);  // as the viewer does on a new plane
       const nv::ResampleStats st = sampler.update_slice(s);
       samples += st.samples_recomputed;
       total += st.samples_total;

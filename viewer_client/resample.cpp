@@ -175,7 +175,14 @@ bool finite3(const Vector3d& v) { return v.allFinite(); }
 // ------------------------------------------------------------------------------------------------
 // ImageGrid and free functions
 
-void ImageGrid::validate() const {
+namespace {
+
+// ImageGrid::validate without the per-voxel finiteness scan (cheap: for make_image_slice).
+void validate_geometry(const ImageGrid& g) {
+  const auto& dims = g.dims;
+  const auto& spacing_m = g.spacing_m;
+  const auto& origin_m = g.origin_m;
+  const auto& values = g.values;
   long double count = 1;
   for (int a = 0; a < 3; ++a) {
     if (dims[a] <= 0) {
@@ -197,6 +204,12 @@ void ImageGrid::validate() const {
                                 " values for dims " + std::to_string(dims[0]) + " x " +
                                 std::to_string(dims[1]) + " x " + std::to_string(dims[2]));
   }
+}
+
+}  // namespace
+
+void ImageGrid::validate() const {
+  validate_geometry(*this);
   for (std::size_t n = 0; n < values.size(); ++n) {
     if (!std::isfinite(values[n])) {
       const std::size_t i = n % static_cast<std::size_t>(dims[0]);
@@ -268,7 +281,7 @@ float sample_trilinear(const ImageGrid& image, const Eigen::Vector3d& p_m, float
 }
 
 Slice make_image_slice(const ImageGrid& image, int axis, double position_m) {
-  image.validate();
+  validate_geometry(image);
   if (axis < 0 || axis > 2) {
     throw std::invalid_argument("make_image_slice: axis " + std::to_string(axis) +
                                 " is not 0, 1 or 2");

@@ -100,7 +100,8 @@ struct Slice {
 // Slice of the image's own grid through the voxel plane nearest position_m (same pixel spacing
 // and extent as the image in the two in-plane axes), values not yet computed (zeros). A
 // position beyond the image snaps to its first/last voxel plane. Throws std::invalid_argument
-// on an axis other than 0-2, a non-finite position or an invalid image.
+// on an axis other than 0-2, a non-finite position or inconsistent image dims/spacing/origin/
+// value count (the values themselves are not scanned: this is cheap).
 Slice make_image_slice(const ImageGrid& image, int axis, double position_m);
 
 // Options of DeformedVolumeSampler (defaults suit a 1 mm MRI and meshes of ~1-7 mm elements).
