@@ -17,8 +17,9 @@
 // with the lowest index wins, a tetrahedron that kept its orientation before an inverted one;
 // degenerate deformed tetrahedra (volume below 1e-6 of the rest volume) are skipped. The choice
 // depends only on the point and the current displacements, never on the update history, so an
-// incremental update gives the same values as a full one. No input produces NaN: the rest
-// point is a convex combination of rest vertices, or p itself.
+// incremental update gives the same values as a full one (exactly when no vertex moved by less
+// than SamplerOptions::move_tolerance_m; otherwise within that motion). No input produces NaN:
+// the rest point is a convex combination of rest vertices (weights >= -1e-9), or p itself.
 //
 // Lookup: a uniform grid per mesh over the deformed tetrahedra's bounding boxes, updated only
 // for tetrahedra whose vertices changed; tetrahedra that leave the grid's domain (huge
