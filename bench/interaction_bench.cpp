@@ -264,7 +264,8 @@ int main(int argc, char** argv) {
       std::cerr << sc.name << " (sliding): warm-up "
                 << std::chrono::duration<double>(Clock::now() - tws).count() << " s\n";
       std::vector<double> stimes;
-      int smax_nodes = 0, sfailures = 0, max_active = 0, max_pivots = 0;
+      int smax_nodes = 0, sfailures = 0, max_active = 0;
+      std::vector<int> pivots;
       double penetration = 0.0;
       const int every = std::max(1, sliding_steps / 20);
       for (int k = 0; k < sliding_steps; ++k) {
@@ -274,13 +275,14 @@ int main(int argc, char** argv) {
         stimes.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
         smax_nodes = std::max(smax_nodes, static_cast<int>(contacts[0].nodes.size()));
         max_active = std::max(max_active, stats.sliding_active);
-        max_pivots = std::max(max_pivots, contacts[0].iterations);
+        pivots.push_back(contacts[0].iterations);
         if (!stats.converged) ++sfailures;
         if (k % every == 0) penetration = std::max(penetration, ssim->sliding_penetration_m());
       }
+      std::sort(pivots.begin(), pivots.end());
       std::cerr << sc.name << " (sliding): most active pairs " << max_active << " of "
-                << st.sliding_rows << ", most LCP pivots in a step " << max_pivots
-                << ", steps not converged " << sfailures << "\n";
+                << st.sliding_rows << ", LCP pivots per step median " << pivots[pivots.size() / 2]
+                << " max " << pivots.back() << ", steps not converged " << sfailures << "\n";
       std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(),
                     host_tets, emb_tets, st.sliding_rows, smax_nodes, "sliding",
                     percentile(stimes, 0.5), percentile(stimes, 0.99), penetration / depth_now);

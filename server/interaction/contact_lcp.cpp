@@ -139,15 +139,12 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
       lambda_scale = std::max(lambda_scale, std::abs(sol_[j]));
     }
     const double tol_l = tolerance * std::max(lambda_scale, 1e-300);
-    w_.head(n).setZero();
-    for (int j = 0; j < num_active_; ++j)
-      w_.head(n).noalias() += w.col(active_rows_[j]).head(n) * sol_[j];
-    w_.head(n) -= delta.head(n);
-    // Murty's least-index pivot: the first row violating its sign condition changes sides.
+    // Murty's least-index pivot: the first row violating its sign condition changes sides
+    // (w = W lambda - delta only where it is needed: inactive rows, in index order).
     int flip = -1;
     for (int i = 0; i < n && flip < 0; ++i) {
       if (in_set_[i] == 1 && lambda[i] < -tol_l) flip = i;
-      if (in_set_[i] == 0 && w_[i] < -tol_w) flip = i;
+      if (in_set_[i] == 0 && w.col(i).head(n).dot(lambda.head(n)) - delta[i] < -tol_w) flip = i;
     }
     if (flip < 0) {
       result.converged = true;

@@ -25,8 +25,7 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 namespace neurosim::interaction {
 namespace {
 
-TEST(interaction_allocation, WarmStepDoesNotAllocate) {
-  testing::SceneSpec spec;
+void expect_warm_step_does_not_allocate(const testing::SceneSpec& spec) {
   auto sim = Simulation::build(testing::make_scene(spec), "test.scene");
   std::vector<ToolPose> poses(2);
   auto set = [&](double d0, double d1) {
@@ -53,6 +52,17 @@ TEST(interaction_allocation, WarmStepDoesNotAllocate) {
     sim->step(poses, contacts, stats);
   }
   EXPECT_EQ(g_allocations.load() - before, 0);
+}
+
+TEST(interaction_allocation, WarmStepDoesNotAllocate) {
+  expect_warm_step_does_not_allocate(testing::SceneSpec{});
+}
+
+// SLIDING: the sliding rows join the LCP (constant block, factor kept between steps).
+TEST(interaction_allocation, WarmSlidingStepDoesNotAllocate) {
+  testing::SceneSpec spec;
+  spec.sliding = true;
+  expect_warm_step_does_not_allocate(spec);
 }
 
 }  // namespace
