@@ -326,7 +326,11 @@ void SceneRenderer::update(const ViewerState& state, const std::string& status) 
     t.line->SetPoint1(tool.tip_m.x(), tool.tip_m.y(), tool.tip_m.z());
     t.line->SetPoint2(end.x(), end.y(), end.z());
     const auto rgb = force_colour(tool.force_n.norm(), im.opt.force_unit_n);
-    for (auto& a : t.actors) a->GetProperty()->SetColor(rgb[0], rgb[1], rgb[2]);
+    for (auto& a : t.actors) {
+      a->GetProperty()->SetColor(rgb[0], rgb[1], rgb[2]);
+      a->GetProperty()->SetAmbient(0.4);  // the rule's colour reads also on the unlit side
+      a->GetProperty()->SetDiffuse(0.7);
+    }
   }
   im.status->SetInput(status.c_str());
 }
