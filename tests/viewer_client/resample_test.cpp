@@ -1,11 +1,15 @@
 // Tests of the MRI resampling through deformed meshes (viewer_client/resample.hpp).
 #include "viewer_client/resample.hpp"
 
+#include "test_support.hpp"
+
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <random>
@@ -826,6 +830,115 @@ TEST(resample_sampler, PointsOnSharedFacesPickTheLowestIndexTetrahedron) {
     ASSERT_LT((l.rest_m - x).norm(), 1e-12);
   }
   EXPECT_GT(shared, 1000);
+}
+
+// The scene's meshes (scenes/brain_artery/*.mesh, Medit, mm): vertices and tetrahedra only,
+// enough for these tests (the test links the resampler alone, not the mesh library).
+MeshGeometry read_medit_tets(const std::filesystem::path& path, const std::string& id,
+                             int priority) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path.string() + ": cannot open");
+  MeshGeometry m;
+  m.id = id;
+  m.priority = priority;
+  std::string word;
+  while (in >> word) {
+    if (word == "Vertices") {
+      std::size_t n = 0;
+      in >> n;
+      m.rest_m.resize(n);
+      for (auto& v : m.rest_m) {
+        int ref = 0;
+        in >> v.x() >> v.y() >> v.z() >> ref;
+        v *= 1e-3;
+      }
+    } else if (word == "Tetrahedra") {
+      std::size_t n = 0;
+      in >> n;
+      m.tets.resize(n);
+      for (auto& t : m.tets) {
+        int ref = 0;
+        in >> t[0] >> t[1] >> t[2] >> t[3] >> ref;
+        for (int& v : t) --v;
+      }
+    }
+  }
+  if (!in.eof() || m.tets.empty()) throw std::runtime_error(path.string() + ": not read");
+  return m;
+}
+
+// The brain/artery model on a random image covering the MRI's extent at 2 mm: zero
+// displacement is exact, a tool push gives finite values, slices and the volume agree with the
+// point search, and an incremental update equals a full one.
+TEST(resample_model, BrainAndArteryMeshes) {
+  const auto dir = neurosim::testing::source_dir() / "scenes" / "brain_artery";
+  if (!std::filesystem::exists(dir / "brain.mesh")) GTEST_SKIP() << "no " << dir;
+  const MeshGeometry brain = read_medit_tets(dir / "brain.mesh", "brain", 0);
+  const MeshGeometry artery = read_medit_tets(dir / "artery.mesh", "artery", 1);
+  ASSERT_GT(brain.tets.size(), 20000U);
+  ASSERT_GT(artery.tets.size(), 4000U);
+  ImageGrid g;
+  g.dims = {91, 109, 91};
+  g.spacing_m = Vector3d::Constant(0.002);
+  g.values.resize(static_cast<std::size_t>(91) * 109 * 91);
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> d(0.0F, 255.0F);
+  for (float& v : g.values) v = d(rng);
+  // Tolerance 0: every change is reported, so the incremental result must be exact.
+  SamplerOptions exact;
+  exact.move_tolerance_m = 0.0;
+  DeformedVolumeSampler s(g, {brain, artery}, exact);
+  expect_image_reproduced(s, g);
+
+  // Tool: the lateral surface (largest x near y = 115, z = 79 mm), pushed 3 mm inward.
+  Vector3d tip = brain.rest_m[0];
+  for (const Vector3d& x : brain.rest_m)
+    if (x.x() - 4 * std::hypot(x.y() - 0.115, x.z() - 0.079) >
+        tip.x() - 4 * std::hypot(tip.y() - 0.115, tip.z() - 0.079))
+      tip = x;
+  const auto push = [&tip](const MeshGeometry& m, double amp) {
+    std::vector<Vector3d> u(m.rest_m.size());
+    // Cut at 1e-3: no motion below the move tolerance, so incremental == full exactly.
+    for (std::size_t v = 0; v < u.size(); ++v) {
+      const double w = std::exp(-(m.rest_m[v] - tip).squaredNorm() / (2 * 0.005 * 0.005));
+      u[v] = Vector3d(w > 1e-3 ? -amp * w : 0.0, 0, 0);
+    }
+    return u;
+  };
+  std::vector<Slice> slices;
+  for (int axis = 0; axis < 3; ++axis) slices.push_back(make_image_slice(g, axis, tip[axis]));
+  for (Slice& sl : slices) s.update_slice(sl);
+  ImageGrid vol;
+  s.update_volume(vol);
+  for (double amp : {0.001, 0.003}) {
+    s.set_displacements(0, push(brain, amp));
+    s.set_displacements(1, push(artery, amp));
+    std::size_t recomputed = 0, changed = 0;
+    for (Slice& sl : slices) recomputed += s.update_slice(sl).samples_recomputed;
+    EXPECT_GT(recomputed, 0U);
+    EXPECT_LT(recomputed, 3U * 109 * 91 / 4);
+    s.update_volume(vol);
+    expect_equal_to_full(s, slices, vol);
+    for (const Slice& sl : slices)
+      for (int b = 0; b < sl.height; ++b)
+        for (int a = 0; a < sl.width; ++a) {
+          const float v = sl.values[a + sl.width * b];
+          ASSERT_TRUE(std::isfinite(v));
+          ASSERT_EQ(v, s.sample(pixel_point(sl, a, b)));
+          const auto ijk = pixel_voxel(g, sl, a, b);
+          changed += v != g.values[g.index(ijk[0], ijk[1], ijk[2])];
+        }
+    EXPECT_GT(changed, 10U);  // the push shows
+  }
+  // The whole volume against the point search.
+  std::size_t mismatches = 0;
+  for (int k = 0; k < g.dims[2]; ++k)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int i = 0; i < g.dims[0]; ++i) {
+        const Vector3d p = g.origin_m + g.spacing_m.cwiseProduct(Vector3d(i, j, k));
+        mismatches += vol.values[g.index(i, j, k)] != s.sample(p);
+      }
+  EXPECT_EQ(mismatches, 0U);
 }
 
 }  // namespace
