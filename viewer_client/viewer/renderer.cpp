@@ -6,6 +6,7 @@
 #include <vtkCellArray.h>
 #include <vtkColorTransferFunction.h>
 #include <vtkCoordinate.h>
+#include <vtkCutter.h>
 #include <vtkFloatArray.h>
 #include <vtkImageActor.h>
 #include <vtkImageData.h>
@@ -17,6 +18,7 @@
 #include <vtkNew.h>
 #include <vtkPNGWriter.h>
 #include <vtkPiecewiseFunction.h>
+#include <vtkPlane.h>
 #include <vtkPointData.h>
 #include <vtkPoints.h>
 #include <vtkPolyData.h>
@@ -61,6 +63,9 @@ struct SurfaceActor {
   vtkSmartPointer<vtkPolyData> poly;
   vtkSmartPointer<vtkPolyDataNormals> normals;
   vtkSmartPointer<vtkActor> actor;
+  // Navigation: where the deformed surface cuts each slice plane, drawn in the 2D views.
+  std::array<vtkSmartPointer<vtkPlane>, 3> planes;
+  std::array<vtkSmartPointer<vtkActor>, 3> contours;
   std::uint64_t u_version = ~std::uint64_t{0};
 };
 
@@ -238,7 +243,11 @@ int SceneRenderer::height() const { return impl_->window->GetSize()[1]; }
 
 void SceneRenderer::set_meshes(const ViewerState& state) {
   Impl& im = *impl_;
-  for (auto& s : im.surfaces) im.view3d->RemoveActor(s.actor);
+  for (auto& s : im.surfaces) {
+    im.view3d->RemoveActor(s.actor);
+    for (std::size_t a = 0; a < 3; ++a)
+      if (s.contours[a]) im.view2d[a]->RemoveActor(s.contours[a]);
+  }
   im.surfaces.clear();
   for (const MeshState& m : state.meshes()) {
     SurfaceActor s;
@@ -270,6 +279,32 @@ void SceneRenderer::set_meshes(const ViewerState& state) {
     s.actor->GetProperty()->SetSpecular(0.2);
     if (!vessel) s.actor->GetProperty()->SetOpacity(im.opt.mode == Mode::Navigation ? 0.45 : 0.25);
     im.view3d->AddActor(s.actor);
+    if (im.opt.mode == Mode::Navigation) {
+      for (std::size_t a = 0; a < 3; ++a) {
+        s.planes[a] = vtkSmartPointer<vtkPlane>::New();
+        double nrm[3] = {0, 0, 0};
+        nrm[a] = 1;
+        s.planes[a]->SetNormal(nrm);
+        auto cutter = vtkSmartPointer<vtkCutter>::New();
+        cutter->SetCutFunction(s.planes[a]);
+        cutter->SetInputData(s.poly);
+        auto cmapper = vtkSmartPointer<vtkPolyDataMapper>::New();
+        cmapper->SetInputConnection(cutter->GetOutputPort());
+        cmapper->ScalarVisibilityOff();
+        s.contours[a] = vtkSmartPointer<vtkActor>::New();
+        s.contours[a]->SetMapper(cmapper);
+        s.contours[a]->GetProperty()->SetColor(vessel ? kArteryColour[0] : 0.3,
+                                               vessel ? kArteryColour[1] : 0.9,
+                                               vessel ? kArteryColour[2] : 0.4);
+        s.contours[a]->GetProperty()->SetLineWidth(2);
+        s.contours[a]->GetProperty()->LightingOff();
+        // 1 mm towards the 2D view's camera (on +axis): drawn over the slice, not in it.
+        double offset[3] = {0, 0, 0};
+        offset[a] = 0.001;
+        s.contours[a]->SetPosition(offset);
+        im.view2d[a]->AddActor(s.contours[a]);
+      }
+    }
     im.surfaces.push_back(s);
   }
   if (!im.camera_placed && !state.meshes().empty()) {
@@ -393,6 +428,15 @@ void SceneRenderer::set_slices(const std::array<Slice, 3>* slices,
       v.label->SetInput(text);
     }
   }
+  // Surface contours in the slice planes.
+  for (auto& s : im.surfaces)
+    for (std::size_t a = 0; a < 3; ++a) {
+      if (!s.planes[a]) continue;
+      Eigen::Vector3d o = centre_m;
+      if (slices != nullptr && (*slices)[a].width > 0)
+        o[static_cast<Eigen::Index>(a)] = (*slices)[a].position_m;
+      s.planes[a]->SetOrigin(o.x(), o.y(), o.z());
+    }
   // 2D cameras look along their axis at the slice point.
   for (int axis = 0; axis < 3; ++axis) {
     vtkCamera* cam = im.view2d[static_cast<std::size_t>(axis)]->GetActiveCamera();
