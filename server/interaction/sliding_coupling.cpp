@@ -67,22 +67,28 @@ EmbeddedCompliance::EmbeddedCompliance(const mesh::TetMesh& mesh, const fem::Mat
   // A statically determinate support (six dofs): node a held, node b (farthest from a) held
   // across ab, node c (farthest from the line ab) held against turning about ab. A
   // self-equilibrated load meets no reaction there, so K_det^-1 P f is a solution of K u = P f.
-  int a = 0, b = 0, cc = 0;
-  double best = -1.0;
-  for (int v = 0; v < nv; ++v)
-    if ((x[v] - c).squaredNorm() > best) best = (x[v] - c).squaredNorm(), a = v;
-  best = -1.0;
-  for (int v = 0; v < nv; ++v)
-    if ((x[v] - x[a]).squaredNorm() > best) best = (x[v] - x[a]).squaredNorm(), b = v;
+  // The vertex with the largest distance(x_v).
+  auto farthest = [&](auto&& distance) {
+    int arg = 0;
+    double best = -1.0;
+    for (int v = 0; v < nv; ++v) {
+      const double d = distance(x[v]);
+      if (d > best) {
+        best = d;
+        arg = v;
+      }
+    }
+    return std::pair<int, double>(arg, best);
+  };
+  const int a = farthest([&](const Eigen::Vector3d& p) { return (p - c).squaredNorm(); }).first;
+  const int b = farthest([&](const Eigen::Vector3d& p) { return (p - x[a]).squaredNorm(); }).first;
   const Eigen::Vector3d ab = (x[b] - x[a]).normalized();
-  best = -1.0;
-  for (int v = 0; v < nv; ++v) {
-    const Eigen::Vector3d d = x[v] - x[a];
-    const double off = (d - d.dot(ab) * ab).squaredNorm();
-    if (off > best) best = off, cc = v;
-  }
+  const auto [cc, off] = farthest([&](const Eigen::Vector3d& p) {
+    const Eigen::Vector3d d = p - x[a];
+    return (d - d.dot(ab) * ab).squaredNorm();
+  });
   const Eigen::Vector3d turn = ab.cross(x[cc] - x[a]);
-  if (!(best > 0.0) || !(turn.norm() > 0.0))
+  if (!(off > 0.0) || !(turn.norm() > 0.0))
     throw std::runtime_error(what_ + ": floating embedded mesh is degenerate (collinear)");
   int along = 0, spin = 0;
   ab.cwiseAbs().maxCoeff(&along);   // b keeps its dof along ab
