@@ -706,7 +706,7 @@ void DeformedVolumeSampler::Impl::raster_plane(const PlaneGrid& g, int a0, int a
       bool empty = false;
       for (int i = 0; i < 4; ++i) {
         // c + gr t >= -eps', t = u - o_u.
-        const double lim = -(kBaryEps + 1e-12) - c[i];
+        const double lim = -(kBaryEps + 1e-10) - c[i];
         if (gr[i] > 0.0) {
           tlo = std::max(tlo, lim / gr[i]);
         } else if (gr[i] < 0.0) {

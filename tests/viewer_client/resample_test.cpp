@@ -757,6 +757,15 @@ TEST(resample_sampler, SlicesAndVolumeEqualPointwiseSampling) {
   s.set_displacements(1, ua);
   std::size_t mismatches = 0, in_mesh = 0;
   std::vector<Slice> slices = some_slices(g);
+  // And one off the image grid: finer, shifted, between voxel planes.
+  Slice off;
+  off.axis = 1;
+  off.position_m = 0.01237;
+  off.width = 61;
+  off.height = 47;
+  off.origin_m = Vector3d(0.00411, 0.0, 0.00533);
+  off.spacing_m = Eigen::Vector2d(0.00037, 0.00041);
+  slices.push_back(off);
   for (Slice& sl : slices) {
     s.update_slice(sl);
     for (int b = 0; b < sl.height; ++b)
