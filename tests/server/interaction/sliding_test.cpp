@@ -304,6 +304,38 @@ TEST(interaction_sliding, DeterministicAndReleases) {
   EXPECT_EQ(u.cwiseAbs().maxCoeff(), 0.0);
 }
 
+// Out of pivots: the step says so and keeps the last good answer (here: none yet); the factor of
+// the sliding rows carries over, so the same pose converges after a few more steps, to the
+// same answer as with enough pivots.
+TEST(interaction_sliding, NonConvergenceReportedLastGoodKept) {
+  const double depth = 0.004;
+  auto ref = run(sliding_spec(), {push_right(depth)});
+  ASSERT_TRUE(ref.stats.converged);
+  ASSERT_GT(ref.contacts[0].iterations, 3);
+  SimulationOptions few;
+  few.lcp_max_iterations = 3;
+  few.lcp_iterations_per_sliding_row = 0;
+  auto sim = Simulation::build(testing::make_scene(sliding_spec()), "test.scene", few);
+  std::vector<ToolContact> c;
+  StepStats st;
+  sim->step({push_right(depth)}, c, st);
+  EXPECT_FALSE(st.converged);
+  EXPECT_FALSE(c[0].converged);
+  EXPECT_FALSE(c[0].in_contact);  // the last good answer: no contact yet
+  Eigen::VectorXd u;
+  sim->displacements(kCylinder, u);
+  EXPECT_EQ(u.cwiseAbs().maxCoeff(), 0.0);
+  int steps = 1;
+  while (!st.converged && steps < 200) {
+    sim->step({push_right(depth)}, c, st);
+    ++steps;
+  }
+  ASSERT_TRUE(st.converged) << steps;
+  EXPECT_GT(steps, 1);
+  EXPECT_LE((c[0].force_n - ref.contacts[0].force_n).norm(), 1e-9 * ref.contacts[0].force_n.norm());
+  EXPECT_GE(gaps(*sim).min_m, -1e-9 * depth);
+}
+
 TEST(interaction_sliding, EmbeddedMeshWithFixedNodes) {
   SceneSpec spec = sliding_spec();
   spec.embedded_fixed = true;
