@@ -52,6 +52,11 @@ class FakeSimulation : public interaction::Simulation {
     slots.clear();
     forces_n.clear();
   }
+  // No SLIDING couplings in the fake.
+  void sliding_pairs(int, std::vector<interaction::SlidingPairState>& pairs) const override {
+    pairs.clear();
+  }
+  double sliding_penetration_m() const override { return 0.0; }
 #endif
 
   long displacement_calls() const { return displacement_calls_.load(); }
