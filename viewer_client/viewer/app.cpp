@@ -42,6 +42,7 @@ std::string status_line(const ViewerOptions& o, const ViewerState& s, std::uint6
 struct Totals {
   std::uint64_t frames = 0;
   double resample_ms = 0, render_ms = 0, max_resample_ms = 0;
+  double samples = 0;  // resampled (slices or volume), summed over frames
 };
 
 void write_summary(const std::string& path, const ViewerOptions& o, const ViewerState& s,
@@ -60,6 +61,7 @@ void write_summary(const std::string& path, const ViewerOptions& o, const Viewer
     << "  \"resample_ms_mean\": " << t.resample_ms / n << ",\n"
     << "  \"resample_ms_max\": " << t.max_resample_ms << ",\n"
     << "  \"render_ms_mean\": " << t.render_ms / n << ",\n"
+    << "  \"samples_recomputed_mean\": " << t.samples / n << ",\n"
     << "  \"meshes\": " << s.meshes().size() << ",\n"
     << "  \"topologies\": " << c.topologies << ",\n"
     << "  \"deformations\": " << c.deformations << ",\n"
@@ -172,6 +174,7 @@ int run_viewer(const ViewerOptions& o, std::ostream& log, const std::atomic<bool
       totals.resample_ms += ft.resample_ms;
       totals.max_resample_ms = std::max(totals.max_resample_ms, ft.resample_ms);
       totals.render_ms += ft.render_ms;
+      totals.samples += static_cast<double>(ft.samples_recomputed);
       if (o.headless) {
         char name[32];
         std::snprintf(name, sizeof name, "frame_%04llu.png",
