@@ -72,7 +72,9 @@ void Pipeline::rebuild(const ViewerState& state) {
     sampler_meshes_.push_back(m.id);
   }
   try {
-    sampler_ = std::make_unique<DeformedVolumeSampler>(image_, std::move(meshes));
+    SamplerOptions so;
+    so.move_tolerance_m = opt_.move_tolerance_m;
+    sampler_ = std::make_unique<DeformedVolumeSampler>(image_, std::move(meshes), so);
   } catch (const std::exception& e) {
     if (warn_) warn_(std::string("cannot resample the MRI through these meshes: ") + e.what());
     sampler_meshes_.clear();

@@ -18,6 +18,11 @@ namespace neurosim::viewer {
 struct PipelineOptions {
   RenderOptions render;
   int volume_step = 2;  // observe: volume resampled every this many voxels
+  // A vertex counts as moved for the incremental resampling once its displacement changed by
+  // more than this since it last counted (SamplerOptions::move_tolerance_m), unit m. A tenth of
+  // the 1 mm MRI voxel: the slow far-field creep of the soft brain does not redo whole slices
+  // every frame, and the picture lags the exact resampling by at most this much motion.
+  double move_tolerance_m = 1e-4;
 };
 
 struct FrameTiming {
