@@ -166,11 +166,14 @@ class Simulation {
   virtual void last_contact_forces(int mesh, std::vector<int>& slots,
                                    std::vector<Vec3>& forces_n) const = 0;
   // SLIDING couplings: the pairs of the coupling whose embedded mesh is `mesh` with the last good
-  // step's forces (empty if `mesh` is not embedded by SLIDING).
-  virtual void sliding_pairs(int mesh, std::vector<SlidingPairState>& pairs) const = 0;
+  // step's forces (empty if `mesh` is not embedded by SLIDING). Defaults (for implementations
+  // without sliding couplings, e.g. test doubles): none.
+  virtual void sliding_pairs(int /*mesh*/, std::vector<SlidingPairState>& pairs) const {
+    pairs.clear();
+  }
   // Largest interpenetration max(0, -g) over every sliding pair for the last step, unit m
   // (full-field solves: for tests and benchmarks).
-  virtual double sliding_penetration_m() const = 0;
+  virtual double sliding_penetration_m() const { return 0.0; }
 };
 
 }  // namespace neurosim::interaction
