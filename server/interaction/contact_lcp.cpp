@@ -16,6 +16,8 @@ void ContactLcp::reserve(int max_rows) {
   active_rows_.assign(capacity_, 0);
   chol_.setZero(capacity_, capacity_);
   inverse_.setZero(capacity_, capacity_);
+  columns_.setZero(capacity_, capacity_);
+  position_.assign(capacity_, 0);
   rhs_.setZero(capacity_);
   sol_.setZero(capacity_);
   w_.setZero(capacity_);
@@ -186,22 +188,27 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
 
 void ContactLcp::invert_active(int first_row) {
   const int k = num_active_;
-  // Columns of the identity through the factor.
+  // (W_AA^-1)(c, d) = z_c . z_d with z_c = L^-1 e_c, which is zero above position c: the rows
+  // appended last (the contact rows, after the kept sliding rows) cost only the factor's tail.
+  int m = 0;
   for (int c = 0; c < k; ++c) {
     if (active_rows_[c] < first_row) continue;
-    // L y = e_c: y is zero above c.
-    for (int i = 0; i < c; ++i) rhs_[i] = 0.0;
+    auto z = columns_.col(m);
     for (int i = c; i < k; ++i) {
       double s = i == c ? 1.0 : 0.0;
-      for (int p = c; p < i; ++p) s -= chol_(i, p) * rhs_[p];
-      rhs_[i] = s / chol_(i, i);
+      for (int p = c; p < i; ++p) s -= chol_(i, p) * z[p];
+      z[i] = s / chol_(i, i);
     }
-    for (int i = k - 1; i >= 0; --i) {
-      double s = rhs_[i];
-      for (int p = i + 1; p < k; ++p) s -= chol_(p, i) * inverse_(p, c);
-      inverse_(i, c) = s / chol_(i, i);
-    }
+    position_[m++] = c;
   }
+  for (int a = 0; a < m; ++a)
+    for (int b = 0; b <= a; ++b) {
+      const int from = std::max(position_[a], position_[b]);
+      const double v =
+          columns_.col(a).segment(from, k - from).dot(columns_.col(b).segment(from, k - from));
+      inverse_(position_[a], position_[b]) = v;
+      inverse_(position_[b], position_[a]) = v;
+    }
 }
 
 }  // namespace neurosim::interaction

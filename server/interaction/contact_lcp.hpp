@@ -42,8 +42,8 @@ class ContactLcp {
                   const std::vector<char>* initial_active = nullptr, int stable_rows = 0);
 
   // After a converged solve: the inverse of the active block (for the contact stiffness), in
-  // active_inverse() (top-left active x active), rows listed by active_rows(). Only the columns
-  // of active rows >= first_row are computed (e.g. the contact rows after the sliding rows).
+  // active_inverse() (top-left active x active), rows listed by active_rows(). Only the entries
+  // between active rows >= first_row are computed (e.g. the contact rows after the sliding rows).
   void invert_active(int first_row = 0);
   const Eigen::MatrixXd& active_inverse() const { return inverse_; }
   const std::vector<int>& active_rows() const { return active_rows_; }
@@ -54,8 +54,10 @@ class ContactLcp {
   std::vector<char> in_set_;
   std::vector<int> active_rows_;
   int num_active_{0};
-  Eigen::MatrixXd chol_;     // lower Cholesky factor of the active block
-  Eigen::MatrixXd inverse_;  // inverse of the active block
+  Eigen::MatrixXd chol_;       // lower Cholesky factor of the active block
+  Eigen::MatrixXd inverse_;    // inverse of the active block
+  Eigen::MatrixXd columns_;    // workspace of invert_active: L^-1 e_c per wanted column
+  std::vector<int> position_;  // their positions
   Eigen::VectorXd rhs_, sol_, w_;
 
   bool factor_valid_{false};  // chol_ factors the block of active_rows_ of the last solve's W
