@@ -20,6 +20,7 @@ void ContactLcp::reserve(int max_rows) {
   position_.assign(capacity_, 0);
   rhs_.setZero(capacity_);
   sol_.setZero(capacity_);
+  z_.setZero(capacity_);
   w_.setZero(capacity_);
 }
 
@@ -62,13 +63,21 @@ void ContactLcp::remove_position(int pos) {
   num_active_ = k - 1;
 }
 
-void ContactLcp::solve_active(const Eigen::VectorXd& delta) {
+void ContactLcp::forward_from(const Eigen::VectorXd& delta, int from) {
+  const int k = num_active_;
+  if (from >= k) return;
+  // z = L^-1 delta_A below position `from` (z above it is unchanged by the last pivot).
+  auto tail = z_.segment(from, k - from);
+  for (int i = from; i < k; ++i) tail[i - from] = delta[active_rows_[i]];
+  if (from > 0) tail.noalias() -= chol_.block(from, 0, k - from, from) * z_.head(from);
+  chol_.block(from, from, k - from, k - from).triangularView<Eigen::Lower>().solveInPlace(tail);
+}
+
+void ContactLcp::back_solve() {
   const int k = num_active_;
   auto x = sol_.head(k);
-  for (int i = 0; i < k; ++i) x[i] = delta[active_rows_[i]];
-  const auto l = chol_.topLeftCorner(k, k).triangularView<Eigen::Lower>();
-  l.solveInPlace(x);
-  l.transpose().solveInPlace(x);
+  x = z_.head(k);
+  chol_.topLeftCorner(k, k).triangularView<Eigen::Lower>().transpose().solveInPlace(x);
 }
 
 LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n,
@@ -131,9 +140,13 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
   }
 
   const double tol_w = tolerance * delta_scale;
+  // Forward solution z = L^-1 delta_A kept over the pivots: valid below position `valid`.
+  int valid = 0;
   for (int it = 0; it < max_iterations; ++it) {
     result.iterations = it + 1;
-    solve_active(delta);
+    forward_from(delta, valid);
+    valid = num_active_;
+    back_solve();
     lambda.head(n).setZero();
     double lambda_scale = 0.0;
     for (int j = 0; j < num_active_; ++j) {
@@ -157,10 +170,12 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
       for (int p = 0; p < num_active_; ++p)
         if (active_rows_[p] == flip) {
           remove_position(p);
+          valid = std::min(valid, p);
           break;
         }
     } else if (append_row(w, flip)) {
       in_set_[flip] = 1;
+      valid = std::min(valid, num_active_ - 1);
     } else {
       in_set_[flip] = 2;
       result.dependent_rows = true;

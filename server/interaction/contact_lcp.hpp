@@ -58,7 +58,7 @@ class ContactLcp {
   Eigen::MatrixXd inverse_;    // inverse of the active block
   Eigen::MatrixXd columns_;    // workspace of invert_active: L^-1 e_c per wanted column
   std::vector<int> position_;  // their positions
-  Eigen::VectorXd rhs_, sol_, w_;
+  Eigen::VectorXd rhs_, sol_, z_, w_;
 
   bool factor_valid_{false};  // chol_ factors the block of active_rows_ of the last solve's W
   int factored_rows_{0};      // n of that solve
@@ -69,8 +69,10 @@ class ContactLcp {
   bool append_row(const Eigen::MatrixXd& w, int row);
   // Removes the active row at position p of active_rows_ (Givens rotations restore the factor).
   void remove_position(int p);
-  // sol_ (factor order) = W_AA^-1 delta_A.
-  void solve_active(const Eigen::VectorXd& delta);
+  // z_ = L^-1 delta_A from position `from` on (the part above is still valid).
+  void forward_from(const Eigen::VectorXd& delta, int from);
+  // sol_ (factor order) = L^-T z_ = W_AA^-1 delta_A.
+  void back_solve();
 };
 
 }  // namespace neurosim::interaction
