@@ -1,4 +1,5 @@
-// Simulation: scene -> coupled bodies (exact tie, coupled_body.hpp) -> per-step tool contact LCP.
+// Simulation: scene -> coupled bodies (exact tie, coupled_body.hpp; frictionless sliding pairs,
+// sliding_coupling.hpp) -> per-step LCP of the tool contact rows and the sliding rows together.
 #include "server/interaction/simulation.hpp"
 
 #include "server/fusion/coupling_map.hpp"
