@@ -2,10 +2,13 @@
 #pragma once
 
 #include "scene.pb.h"
+#include "server/interaction/simulation.hpp"
 #include "server/scene/scene.hpp"
 
+#include <memory>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace neurosim::interaction::testing {
 
@@ -63,6 +66,29 @@ inline std::string scene_text(const SceneSpec& s) {
 
 inline scene::Scene make_scene(const SceneSpec& s) {
   return scene::parse_scene(scene_text(s), "test.scene");
+}
+
+// Tool tip on the cube's right face (x = 0.1) at (y, z) = (0.05, 0.05), pushed `depth_m` in -x.
+inline ToolPose push_right(double depth_m, double tip_radius_m = SceneSpec{}.tip_radius_m) {
+  ToolPose p;
+  p.tip_m = Vec3(0.1 + tip_radius_m - depth_m, 0.05, 0.05);
+  p.axis = Vec3::UnitX();
+  return p;
+}
+
+// A simulation built from a SceneSpec and stepped once with the given poses.
+struct Stepped {
+  std::unique_ptr<Simulation> sim;
+  std::vector<ToolContact> contacts;
+  StepStats stats;
+};
+
+inline Stepped run(const SceneSpec& spec, const std::vector<ToolPose>& poses,
+                   const SimulationOptions& options = {}) {
+  Stepped s;
+  s.sim = Simulation::build(make_scene(spec), "test.scene", options);
+  s.sim->step(poses, s.contacts, s.stats);
+  return s;
 }
 
 }  // namespace neurosim::interaction::testing

@@ -23,27 +23,9 @@ namespace {
 
 using testing::SceneSpec;
 
-// Tool tip on the cube's right face (x = 0.1) at (y, z) = (0.05, 0.05), pushed `depth_m` in -x.
-ToolPose push_right(double depth_m, double tip_radius_m = SceneSpec{}.tip_radius_m) {
-  ToolPose p;
-  p.tip_m = Vec3(0.1 + tip_radius_m - depth_m, 0.05, 0.05);
-  p.axis = Vec3::UnitX();
-  return p;
-}
-
-struct Stepped {
-  std::unique_ptr<Simulation> sim;
-  std::vector<ToolContact> contacts;
-  StepStats stats;
-};
-
-Stepped run(const SceneSpec& spec, const std::vector<ToolPose>& poses,
-            const SimulationOptions& options = {}) {
-  Stepped s;
-  s.sim = Simulation::build(testing::make_scene(spec), "test.scene", options);
-  s.sim->step(poses, s.contacts, s.stats);
-  return s;
-}
+using testing::push_right;
+using testing::run;
+using testing::Stepped;
 
 void expect_sane(const Stepped& s, double bound_n) {
   for (const auto& c : s.contacts) {
