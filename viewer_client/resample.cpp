@@ -626,19 +626,7 @@ Location DeformedVolumeSampler::Impl::locate(const Vector3d& p) const {
 }
 
 Vector3d DeformedVolumeSampler::Impl::to_rest(const Vector3d& p) const {
-  if (!finite3(p)) return p;
-  for (int mi : order) {
-    const MeshState& m = meshes[mi];
-    int t = -1;
-    double w[3];
-    bool inv = false;
-    if (!find_in_mesh(m, p, t, w, inv)) continue;
-    if (m.identity[t]) return p;
-    Vector3d x;
-    rest_point(m.rest[t], w, x.data());
-    return x;
-  }
-  return p;
+  return locate(p).rest_m;
 }
 
 // Tetrahedra whose box meets the plane and the pixel rectangle [a0, a1] x [b0, b1].

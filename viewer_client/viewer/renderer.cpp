@@ -98,6 +98,15 @@ vtkSmartPointer<vtkLookupTable> grey_table(float lo, float hi, bool transparent_
   return t;
 }
 
+// The last rendered frame of `window` (RGB, back buffer, no re-render) into `grab`.
+void grab_frame(vtkRenderWindow* window, vtkWindowToImageFilter* grab) {
+  grab->SetInput(window);
+  grab->SetInputBufferTypeToRGB();
+  grab->ReadFrontBufferOff();
+  grab->ShouldRerenderOff();
+  grab->Update();
+}
+
 }  // namespace
 
 struct SceneRenderer::Impl {
@@ -530,11 +539,7 @@ void SceneRenderer::render() {
 
 std::vector<std::uint8_t> SceneRenderer::capture() {
   vtkNew<vtkWindowToImageFilter> grab;
-  grab->SetInput(impl_->window);
-  grab->SetInputBufferTypeToRGB();
-  grab->ReadFrontBufferOff();
-  grab->ShouldRerenderOff();
-  grab->Update();
+  grab_frame(impl_->window, grab);
   vtkImageData* im = grab->GetOutput();
   auto* px = vtkUnsignedCharArray::SafeDownCast(im->GetPointData()->GetScalars());
   if (px == nullptr) throw std::runtime_error("viewer: could not read the rendered frame");
@@ -546,11 +551,7 @@ std::vector<std::uint8_t> SceneRenderer::capture() {
 
 void SceneRenderer::write_png(const std::string& path) {
   vtkNew<vtkWindowToImageFilter> grab;
-  grab->SetInput(impl_->window);
-  grab->SetInputBufferTypeToRGB();
-  grab->ReadFrontBufferOff();
-  grab->ShouldRerenderOff();
-  grab->Update();
+  grab_frame(impl_->window, grab);
   vtkNew<vtkPNGWriter> writer;
   writer->SetFileName(path.c_str());
   writer->SetInputConnection(grab->GetOutputPort());

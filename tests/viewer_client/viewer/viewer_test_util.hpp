@@ -105,36 +105,20 @@ class Child {
   int status_ = -1;
 };
 
-// An Xvfb server on a free display (-displayfd); sets DISPLAY for this process and its children.
+// An Xvfb server on a display of its own; sets DISPLAY for this process and its children.
+// The display number is derived from the pid (not the first free one, as -displayfd alone would
+// pick): a server of another test that is shutting down unlinks its socket after its lock file,
+// and a new server on that same number then loses its socket ("bad X server connection").
+// -displayfd still reports when the server accepts connections; a number in use makes Xvfb exit,
+// and the next one is tried.
 class Xvfb {
  public:
   Xvfb() {
-    int fds[2];
-    if (pipe(fds) != 0) throw std::runtime_error("pipe failed");
-    const std::string fd = std::to_string(fds[1]);
-    std::vector<std::string> args{"/usr/bin/Xvfb", "-displayfd", fd,   "-screen", "0",
-                                  "1280x1024x24",  "-nolisten",  "tcp"};
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addclose(&fa, fds[0]);
-    posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
-    const int rc = posix_spawn(&pid_, args[0].c_str(), &fa, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&fa);
-    close(fds[1]);
-    if (rc != 0) {
-      close(fds[0]);
-      throw std::runtime_error("cannot start /usr/bin/Xvfb (apt-get install xvfb)");
+    for (int attempt = 0; attempt < 50; ++attempt) {
+      const int number = 300 + static_cast<int>((getpid() + 7919 * attempt) % 4000);
+      if (start(number)) return;
     }
-    std::string number;
-    char c = 0;
-    while (read(fds[0], &c, 1) == 1 && c != '\n') number += c;
-    close(fds[0]);
-    if (number.empty()) throw std::runtime_error("Xvfb did not report a display");
-    display_ = ":" + number;
-    setenv("DISPLAY", display_.c_str(), 1);
+    throw std::runtime_error("Xvfb did not start on any of 50 displays");
   }
   ~Xvfb() {
     if (pid_ > 0) {
@@ -147,6 +131,47 @@ class Xvfb {
  private:
   pid_t pid_ = 0;
   std::string display_;
+
+  // True when Xvfb runs on :number and accepts connections; false (nothing left running) when it
+  // exited, e.g. because the display is taken.
+  bool start(int number) {
+    int fds[2];
+    if (pipe(fds) != 0) throw std::runtime_error("pipe failed");
+    const std::string fd = std::to_string(fds[1]);
+    std::vector<std::string> args{"/usr/bin/Xvfb", ":" + std::to_string(number),
+                                  "-displayfd",    fd,
+                                  "-screen",       "0",
+                                  "1280x1024x24",  "-nolisten",
+                                  "tcp"};
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addclose(&fa, fds[0]);
+    posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
+    pid_t pid = 0;
+    const int rc = posix_spawn(&pid, args[0].c_str(), &fa, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&fa);
+    close(fds[1]);
+    if (rc != 0) {
+      close(fds[0]);
+      throw std::runtime_error("cannot start /usr/bin/Xvfb (apt-get install xvfb)");
+    }
+    std::string reported;
+    char c = 0;
+    while (read(fds[0], &c, 1) == 1 && c != '\n') reported += c;
+    close(fds[0]);
+    if (reported != std::to_string(number)) {
+      ::kill(pid, SIGTERM);
+      waitpid(pid, nullptr, 0);
+      return false;
+    }
+    pid_ = pid;
+    display_ = ":" + reported;
+    setenv("DISPLAY", display_.c_str(), 1);
+    return true;
+  }
 };
 
 inline std::filesystem::path brain_scene() { return source_dir() / "scenes/brain_artery.scene"; }
