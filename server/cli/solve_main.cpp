@@ -1,7 +1,10 @@
 // neurosim-solve: linear static solve of a scene (loads and prescribed displacements).
 // Writes, per solved mesh, displacement.csv, reactions.csv and result.vtu; the first solved
 // mesh (or --mesh ID) also at the top of --out, which is what verification scripts read.
+#include "server/fem/assembly.hpp"
 #include "server/fem/static_solver.hpp"
+#include "server/interaction/coupled_body.hpp"
+#include "server/interaction/simulation.hpp"
 #include "server/mesh/quality.hpp"
 #include "server/mesh/vtu.hpp"
 #include "server/scene/scene.hpp"
@@ -21,11 +24,16 @@ using neurosim::mesh::Vec3;
 namespace {
 
 void usage(std::ostream& out) {
-  out << "usage: neurosim-solve --scene FILE --out DIR [--mesh ID] [--quiet]\n"
+  out << "usage: neurosim-solve --scene FILE --out DIR [--mesh ID] [--uncoupled] [--quiet]\n"
          "  Linear static solve of every mesh the scene loads or constrains (SI units).\n"
-         "  Writes DIR/<mesh>/{displacement.csv,reactions.csv,result.vtu} and copies the\n"
-         "  first solved mesh (or --mesh ID) to DIR/displacement.csv, DIR/reactions.csv,\n"
-         "  DIR/result.vtu. CSV headers: node,x,y,z,ux,uy,uz and node,x,y,z,rx,ry,rz.\n";
+         "  With effects.coupling, a host and the meshes TIE-coupled to it are solved as one\n"
+         "  body (exact tie, the host carved as the server carves it); --uncoupled solves every\n"
+         "  mesh on its own. SLIDING couplings are not applied (their meshes are solved on\n"
+         "  their own, with a note). Loads and prescribed displacements go on hosts or\n"
+         "  uncoupled meshes. Writes DIR/<mesh>/{displacement.csv,reactions.csv,result.vtu}\n"
+         "  and copies the first solved mesh (or --mesh ID) to DIR/displacement.csv,\n"
+         "  DIR/reactions.csv, DIR/result.vtu. CSV headers: node,x,y,z,ux,uy,uz and\n"
+         "  node,x,y,z,rx,ry,rz (reactions: force the supports exert on the body).\n";
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -38,16 +46,16 @@ struct MeshResult {
   std::vector<char> constrained;  // per node
 };
 
-void write_outputs(const fs::path& dir, const neurosim::scene::LoadedMesh& lm,
-                   const MeshResult& r) {
+void write_outputs(const fs::path& dir, const neurosim::mesh::TetMesh& mesh,
+                   const std::vector<int>& fixed_nodes, const MeshResult& r) {
   fs::create_directories(dir);
-  const auto& x = lm.mesh.vertices();
+  const auto& x = mesh.vertices();
   {
     std::ofstream out(dir / "displacement.csv");
     out << "node,x,y,z,ux,uy,uz\n" << std::setprecision(17);
     for (std::size_t i = 0; i < x.size(); ++i) {
-      out << i << ',' << x[i].x() << ',' << x[i].y() << ',' << x[i].z() << ','
-          << r.u_m[3 * i] << ',' << r.u_m[3 * i + 1] << ',' << r.u_m[3 * i + 2] << '\n';
+      out << i << ',' << x[i].x() << ',' << x[i].y() << ',' << x[i].z() << ',' << r.u_m[3 * i]
+          << ',' << r.u_m[3 * i + 1] << ',' << r.u_m[3 * i + 2] << '\n';
     }
     if (!out) throw std::runtime_error((dir / "displacement.csv").string() + ": write failed");
   }
@@ -57,8 +65,8 @@ void write_outputs(const fs::path& dir, const neurosim::scene::LoadedMesh& lm,
     for (std::size_t i = 0; i < x.size(); ++i) {
       if (!r.constrained[i]) continue;
       out << i << ',' << x[i].x() << ',' << x[i].y() << ',' << x[i].z() << ','
-          << r.reaction_n[3 * i] << ',' << r.reaction_n[3 * i + 1] << ','
-          << r.reaction_n[3 * i + 2] << '\n';
+          << r.reaction_n[3 * i] << ',' << r.reaction_n[3 * i + 1] << ',' << r.reaction_n[3 * i + 2]
+          << '\n';
     }
     if (!out) throw std::runtime_error((dir / "reactions.csv").string() + ": write failed");
   }
@@ -69,30 +77,272 @@ void write_outputs(const fs::path& dir, const neurosim::scene::LoadedMesh& lm,
   for (std::size_t i = 0; i < x.size(); ++i) {
     magnitude[i] = r.u_m.segment<3>(3 * i).norm();
   }
-  for (int n : lm.fixed_nodes) fixed[n] = 1;
-  neurosim::mesh::write_vtu(
-      (dir / "result.vtu").string(), x, lm.mesh.tets(),
-      {neurosim::mesh::VtuField{"displacement_m", 3, u}, neurosim::mesh::VtuField{"reaction_n", 3, rf},
-       neurosim::mesh::make_field("displacement_magnitude_m", magnitude),
-       neurosim::mesh::make_field("fixed", fixed)},
-      {neurosim::mesh::make_field("label", lm.mesh.tet_labels())});
+  for (int n : fixed_nodes) fixed[n] = 1;
+  neurosim::mesh::write_vtu((dir / "result.vtu").string(), x, mesh.tets(),
+                            {neurosim::mesh::VtuField{"displacement_m", 3, u},
+                             neurosim::mesh::VtuField{"reaction_n", 3, rf},
+                             neurosim::mesh::make_field("displacement_magnitude_m", magnitude),
+                             neurosim::mesh::make_field("fixed", fixed)},
+                            {neurosim::mesh::make_field("label", mesh.tet_labels())});
+}
+
+// Loads and prescribed displacements of one mesh (mesh: the one node ids refer to).
+struct MeshLoads {
+  Eigen::VectorXd f;               // 3N, unit N
+  std::map<int, Vec3> prescribed;  // node -> displacement, unit m
+  int count{0};                    // scene entries on this mesh
+};
+
+MeshLoads gather_loads(const neurosim::scene::Scene& scene, const std::string& scene_path,
+                       const std::string& id, const neurosim::mesh::TetMesh& mesh) {
+  MeshLoads out;
+  out.f = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(mesh.num_vertices()));
+  for (int i = 0; i < scene.loads_size(); ++i) {
+    const auto& l = scene.loads(i);
+    if (l.mesh() != id) continue;
+    ++out.count;
+    auto nodes = neurosim::scene::select_nodes(mesh, l.region(),
+                                               scene_path + ": loads[" + std::to_string(i) + "]");
+    Vec3 per_node = neurosim::scene::to_vec3(l.force_n());
+    if (l.distribution() == neurosim::scene::Load::TOTAL_SPLIT_EQUALLY) {
+      per_node /= static_cast<double>(nodes.size());
+    }
+    for (int node : nodes) out.f.segment<3>(3 * node) += per_node;
+  }
+  for (int i = 0; i < scene.prescribed_size(); ++i) {
+    const auto& p = scene.prescribed(i);
+    if (p.mesh() != id) continue;
+    ++out.count;
+    auto nodes = neurosim::scene::select_nodes(
+        mesh, p.region(), scene_path + ": prescribed[" + std::to_string(i) + "]");
+    for (int node : nodes) out.prescribed[node] = neurosim::scene::to_vec3(p.displacement_m());
+  }
+  return out;
+}
+
+// Summary lines shared by both paths: largest displacement, equilibrium of the supports.
+void print_summary(const MeshResult& r, const Eigen::VectorXd& f,
+                   const std::map<int, Vec3>& prescribed) {
+  Vec3 total_load = Vec3::Zero(), total_reaction = Vec3::Zero(), prescribed_reaction = Vec3::Zero();
+  for (const auto& [node, disp] : prescribed) {
+    (void)disp;
+    prescribed_reaction += r.reaction_n.segment<3>(3 * node);
+  }
+  double max_u = 0.0;
+  int max_node = 0;
+  const int n = static_cast<int>(r.u_m.size() / 3);
+  for (int i = 0; i < n; ++i) {
+    if (f.size() > 0) total_load += f.segment<3>(3 * i);
+    total_reaction += r.reaction_n.segment<3>(3 * i);
+    const double ui = r.u_m.segment<3>(3 * i).norm();
+    if (ui > max_u) {
+      max_u = ui;
+      max_node = i;
+    }
+  }
+  std::cout << std::setprecision(6) << "  max |u| = " << max_u << " m at node " << max_node
+            << "\n  total load = (" << total_load.transpose() << ") N, total reaction = ("
+            << total_reaction.transpose()
+            << ") N, imbalance = " << (total_load + total_reaction).norm() << " N\n";
+  if (!prescribed.empty()) {
+    std::cout << "  force the prescribed nodes (" << prescribed.size() << ") exert on the body = ("
+              << prescribed_reaction.transpose() << ") N\n";
+  }
+}
+
+// One mesh on its own (no coupling): factor, solve, reactions at fixed and prescribed nodes.
+MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& loads) {
+  const int n = static_cast<int>(lm.mesh.num_vertices());
+  const auto t1 = std::chrono::steady_clock::now();
+  neurosim::fem::StaticSolver solver(lm.mesh, neurosim::fem::MaterialMap::uniform(lm.material),
+                                     lm.fixed_nodes);
+  const double factor_s = seconds_since(t1);
+  const auto t2 = std::chrono::steady_clock::now();
+  MeshResult r;
+  r.constrained.assign(n, 0);
+  for (int node : lm.fixed_nodes) r.constrained[node] = 1;
+  if (loads.prescribed.empty()) {
+    r.u_m = solver.solve(loads.f);
+    // Reactions at the supports: K u - f at fixed nodes.
+    Eigen::VectorXd residual = solver.stiffness() * r.u_m - loads.f;
+    r.reaction_n = Eigen::VectorXd::Zero(3 * n);
+    for (int node : lm.fixed_nodes)
+      r.reaction_n.segment<3>(3 * node) = residual.segment<3>(3 * node);
+  } else {
+    std::vector<int> nodes;
+    Eigen::VectorXd d(3 * loads.prescribed.size());
+    for (const auto& [node, disp] : loads.prescribed) {
+      d.segment<3>(3 * nodes.size()) = disp;
+      nodes.push_back(node);
+      r.constrained[node] = 1;
+    }
+    auto sol = solver.solve_prescribed(nodes, d, loads.f);
+    r.u_m = std::move(sol.displacement_m);
+    r.reaction_n = std::move(sol.reaction_n);
+  }
+  const double solve_s = seconds_since(t2);
+  const auto& info = solver.factor_info();
+  std::cout << std::setprecision(6) << "  factor " << info.num_free_dofs << " dofs in " << factor_s
+            << " s (nnz(L) = " << info.factor_nnz << "), solve " << solve_s << " s\n";
+  return r;
+}
+
+// A host and the meshes tied to it, solved as one body through the exact coupled compliance
+// (interaction::CoupledBody): u = L_c (f + F_P), with the prescribed nodes' forces F_P from the
+// 3p x 3p block of L_c at those nodes (3p coupled solves). Reactions at the host's constrained
+// nodes are r_A = K_A u_A - f + J^T (K_B u_B)_tied (what the supports add to the applied load
+// and to the embedded meshes' pull), at an embedded mesh's fixed nodes r_B = K_B u_B.
+struct BodyResult {
+  MeshResult host;
+  std::vector<std::pair<int, MeshResult>> embedded;  // (mesh index, result)
+};
+
+BodyResult solve_body(const neurosim::interaction::Simulation& sim,
+                      const neurosim::interaction::CoupledBody& body, const MeshLoads& loads,
+                      const std::string& what) {
+  namespace ni = neurosim::interaction;
+  const int h = body.host_index();
+  const auto& host = sim.mesh(h);
+  const int n = static_cast<int>(host.num_vertices());
+  const auto& fixed = sim.fixed_nodes(h);
+  std::vector<char> is_fixed(n, 0);
+  for (int v : fixed) is_fixed[v] = 1;
+  for (const auto& [node, disp] : loads.prescribed) {
+    (void)disp;
+    if (is_fixed[node]) {
+      throw std::runtime_error(what + ": node " + std::to_string(node) +
+                               " is both fixed (or carved out inside an embedded mesh) and "
+                               "prescribed");
+    }
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  BodyResult out;
+  MeshResult& r = out.host;
+  body.coupled_displacement(loads.f, r.u_m);
+  if (!loads.prescribed.empty()) {
+    const int p3 = 3 * static_cast<int>(loads.prescribed.size());
+    std::vector<int> dofs;
+    Eigen::VectorXd d(p3);
+    for (const auto& [node, disp] : loads.prescribed) {
+      d.segment<3>(static_cast<Eigen::Index>(dofs.size())) = disp;
+      for (int a = 0; a < 3; ++a) dofs.push_back(3 * node + a);
+    }
+    Eigen::MatrixXd columns(3 * n, p3);  // L_c E_P
+    Eigen::VectorXd e = Eigen::VectorXd::Zero(3 * n), col;
+    for (int j = 0; j < p3; ++j) {
+      e[dofs[j]] = 1.0;
+      body.coupled_displacement(e, col);
+      e[dofs[j]] = 0.0;
+      columns.col(j) = col;
+    }
+    Eigen::MatrixXd block(p3, p3);
+    Eigen::VectorXd gap(p3);
+    for (int i = 0; i < p3; ++i) {
+      block.row(i) = columns.row(dofs[i]);
+      gap[i] = d[i] - r.u_m[dofs[i]];
+    }
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(0.5 * (block + block.transpose()));
+    if (ldlt.info() != Eigen::Success || !ldlt.isPositive() || ldlt.vectorD().minCoeff() <= 0.0) {
+      throw std::runtime_error(what +
+                               ": the compliance at the prescribed nodes is singular (a "
+                               "prescribed node that cannot move?)");
+    }
+    r.u_m += columns * ldlt.solve(gap);
+  }
+  // Embedded meshes and the forces they put on the host.
+  Eigen::VectorXd coupling_on_host = Eigen::VectorXd::Zero(3 * n);
+  const auto& ties = body.ties();
+  for (std::size_t t = 0; t < ties.size(); ++t) {
+    const auto& tie = ties[t];
+    MeshResult rb;
+    body.embedded_displacement(static_cast<int>(t), r.u_m, rb.u_m);
+    const auto k_b = neurosim::fem::assemble_stiffness(
+        *tie.geometry, neurosim::fem::MaterialMap::uniform(tie.material));
+    const Eigen::VectorXd internal = k_b * rb.u_m;  // force B's elements need at its nodes
+    const int nb = static_cast<int>(tie.geometry->num_vertices());
+    rb.constrained.assign(nb, 0);
+    rb.reaction_n = Eigen::VectorXd::Zero(3 * nb);
+    for (int v : tie.fixed_nodes) {
+      rb.constrained[v] = 1;
+      rb.reaction_n.segment<3>(3 * v) = internal.segment<3>(3 * v);
+    }
+    for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k) {
+      const Vec3 pull = internal.segment<3>(3 * tie.tied_nodes[k]);  // A holds B with this
+      for (int a = 0; a < 3; ++a) {
+        const int node = body.boundary_nodes()[tie.host_slots[k][a]];
+        coupling_on_host.segment<3>(3 * node) -= tie.weights[k][a] * pull;
+      }
+    }
+    const double residual = body.tie_residual(static_cast<int>(t), r.u_m, rb.u_m);
+    std::cout << std::setprecision(6) << "  tied: " << sim.mesh_id(tie.mesh) << " ("
+              << tie.tied_nodes.size() << " surface nodes on " << body.boundary_nodes().size()
+              << " nodes of S'), tie residual max |u_A - u_B| = " << residual << " m\n";
+    out.embedded.emplace_back(tie.mesh, std::move(rb));
+  }
+  // Reactions at the host's fixed and prescribed nodes; everywhere else the residual is the
+  // solution's equilibrium error, reported.
+  const Eigen::VectorXd residual =
+      body.host_solver().stiffness() * r.u_m - loads.f - coupling_on_host;
+  r.constrained.assign(n, 0);
+  r.reaction_n = Eigen::VectorXd::Zero(3 * n);
+  for (int v : fixed) r.constrained[v] = 1;
+  for (const auto& [node, disp] : loads.prescribed) {
+    (void)disp;
+    r.constrained[node] = 1;
+  }
+  double free_residual = 0.0, scale = loads.f.lpNorm<Eigen::Infinity>();
+  for (int v = 0; v < n; ++v) {
+    if (r.constrained[v]) {
+      r.reaction_n.segment<3>(3 * v) = residual.segment<3>(3 * v);
+      scale = std::max(scale, residual.segment<3>(3 * v).norm());
+    } else {
+      free_residual = std::max(free_residual, residual.segment<3>(3 * v).norm());
+    }
+  }
+  if (!r.u_m.allFinite() || !r.reaction_n.allFinite()) {
+    throw std::runtime_error(what + ": solution is not finite");
+  }
+  std::cout << std::setprecision(6) << "  coupled solve " << seconds_since(t0)
+            << " s; equilibrium residual at free nodes " << free_residual << " N (largest "
+            << "nodal load or reaction " << scale << " N)\n";
+  return out;
+}
+
+void print_mesh_header(const std::string& id, const neurosim::mesh::TetMesh& mesh,
+                       std::size_t num_fixed, const neurosim::fem::Material& material,
+                       double load_s) {
+  const auto q = neurosim::mesh::quality(mesh);
+  std::cout << "mesh " << id << ": " << mesh.num_vertices() << " vertices, " << mesh.num_tets()
+            << " tetrahedra, " << num_fixed << " fixed nodes; E = " << material.youngs_modulus_pa
+            << " Pa, nu = " << material.poisson_ratio << "; load " << std::fixed
+            << std::setprecision(3) << load_s << " s\n"
+            << std::defaultfloat << "  quality: " << q.summary() << "\n";
 }
 
 int run(int argc, char** argv) {
   std::string scene_path, out_dir, only_mesh;
-  bool quiet = false;
+  bool quiet = false, uncoupled = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
       if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
       return argv[++i];
     };
-    if (a == "--scene") scene_path = value();
-    else if (a == "--out") out_dir = value();
-    else if (a == "--mesh") only_mesh = value();
-    else if (a == "--quiet") quiet = true;
-    else if (a == "-h" || a == "--help") { usage(std::cout); return 0; }
-    else throw std::invalid_argument("unknown argument " + a);
+    if (a == "--scene")
+      scene_path = value();
+    else if (a == "--out")
+      out_dir = value();
+    else if (a == "--mesh")
+      only_mesh = value();
+    else if (a == "--uncoupled")
+      uncoupled = true;
+    else if (a == "--quiet")
+      quiet = true;
+    else if (a == "-h" || a == "--help") {
+      usage(std::cout);
+      return 0;
+    } else
+      throw std::invalid_argument("unknown argument " + a);
   }
   if (scene_path.empty() || out_dir.empty()) {
     usage(std::cerr);
@@ -104,122 +354,122 @@ int run(int argc, char** argv) {
   if (!only_mesh.empty() && neurosim::scene::find_mesh(scene, only_mesh) < 0) {
     throw std::invalid_argument(scene_path + ": --mesh " + only_mesh + ": no such mesh");
   }
-  if (scene.effects().coupling() && !quiet) {
-    std::cout << "note: couplings are not applied by the static solver yet; meshes are solved "
-                 "independently\n";
-  }
   std::cout << "scene " << scene.name() << " (" << scene_path << ")\n";
-  bool primary_written = false;
-  for (const auto& entry : scene.meshes()) {
-    const auto t0 = std::chrono::steady_clock::now();
-    auto lm = neurosim::scene::load_mesh(entry, scene_dir, scene_path);
-    const double load_s = seconds_since(t0);
-    const int n = static_cast<int>(lm.mesh.num_vertices());
-    const std::string what = scene_path + ": mesh \"" + lm.id + "\"";
-    const auto q = neurosim::mesh::quality(lm.mesh);
-    std::cout << "mesh " << lm.id << ": " << n << " vertices, " << lm.mesh.num_tets()
-              << " tetrahedra, " << lm.fixed_nodes.size() << " fixed nodes; E = "
-              << lm.material.youngs_modulus_pa << " Pa, nu = " << lm.material.poisson_ratio
-              << "; load " << std::fixed << std::setprecision(3) << load_s << " s\n"
-              << std::defaultfloat << "  quality: " << q.summary() << "\n";
+  const int num_meshes = scene.meshes_size();
+  // Per mesh (scene order): the result, the mesh it refers to and its fixed nodes.
+  struct Solved {
+    bool done{false};
+    MeshResult result;
+    const neurosim::mesh::TetMesh* mesh{nullptr};
+    std::vector<int> fixed;
+  };
+  std::vector<Solved> solved(static_cast<std::size_t>(num_meshes));
+  std::vector<std::unique_ptr<neurosim::scene::LoadedMesh>> alone(num_meshes);
 
-    // Loads and prescribed displacements on this mesh.
-    Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * n);
-    std::map<int, Vec3> prescribed;
-    int num_loads = 0;
-    for (int i = 0; i < scene.loads_size(); ++i) {
-      const auto& l = scene.loads(i);
-      if (l.mesh() != lm.id) continue;
-      ++num_loads;
-      auto nodes = neurosim::scene::select_nodes(lm.mesh, l.region(),
-                                                 scene_path + ": loads[" + std::to_string(i) + "]");
-      Vec3 per_node = neurosim::scene::to_vec3(l.force_n());
-      if (l.distribution() == neurosim::scene::Load::TOTAL_SPLIT_EQUALLY) {
-        per_node /= static_cast<double>(nodes.size());
+  // Coupled bodies first: the simulation model the server builds (without tools), so the tie,
+  // the carving and the coupling map are the server's.
+  std::unique_ptr<neurosim::interaction::Simulation> sim;
+  std::vector<char> in_body(static_cast<std::size_t>(num_meshes), 0);
+  const bool coupled = scene.effects().coupling() && scene.couplings_size() > 0 && !uncoupled;
+  if (scene.effects().coupling() && scene.couplings_size() > 0 && uncoupled && !quiet) {
+    std::cout << "note: --uncoupled: the scene's couplings are not applied; every mesh is solved "
+                 "on its own\n";
+  }
+  if (coupled) {
+    auto model_scene = scene;
+    model_scene.mutable_effects()->set_tool_contact(false);
+    model_scene.mutable_effects()->set_deformation_output(false);
+    model_scene.clear_tools();
+    const auto t0 = std::chrono::steady_clock::now();
+    sim = neurosim::interaction::Simulation::build(model_scene, scene_path);
+    const double build_s = seconds_since(t0);
+    for (int m = 0; m < num_meshes; ++m) {
+      const auto* body = sim->body_of(m);
+      if (body == nullptr || body->host_index() != m) continue;
+      const std::string what = scene_path + ": mesh \"" + sim->mesh_id(m) + "\"";
+      const auto& entry = scene.meshes(m);
+      print_mesh_header(sim->mesh_id(m), sim->mesh(m), sim->fixed_nodes(m).size(),
+                        neurosim::scene::to_material(entry.material(), what), build_s);
+      const MeshLoads loads = gather_loads(scene, scene_path, sim->mesh_id(m), sim->mesh(m));
+      for (const auto& tie : body->ties()) {
+        in_body[static_cast<std::size_t>(tie.mesh)] = 1;
+        if (gather_loads(scene, scene_path, sim->mesh_id(tie.mesh), sim->mesh(tie.mesh)).count >
+            0) {
+          throw std::runtime_error(scene_path + ": mesh \"" + sim->mesh_id(tie.mesh) +
+                                   "\" is tied to \"" + sim->mesh_id(m) +
+                                   "\": neurosim-solve takes loads and prescribed displacements "
+                                   "on the host only (or use --uncoupled)");
+        }
       }
-      for (int node : nodes) f.segment<3>(3 * node) += per_node;
+      in_body[static_cast<std::size_t>(m)] = 1;
+      std::cout << "  body: host carved to " << sim->mesh(m).num_tets() << " tetrahedra, "
+                << body->ties().size() << " tied mesh(es); model built in " << std::fixed
+                << std::setprecision(3) << build_s << " s" << std::defaultfloat << "\n";
+      if (loads.count == 0) {
+        std::cout << "  no load or prescribed displacement: at rest, not solved\n";
+        continue;
+      }
+      BodyResult br = solve_body(*sim, *body, loads, what);
+      print_summary(br.host, loads.f, loads.prescribed);
+      solved[m] = {true, std::move(br.host), &sim->mesh(m), sim->fixed_nodes(m)};
+      for (auto& [mb, rb] : br.embedded) {
+        std::cout << "mesh " << sim->mesh_id(mb) << " (tied to " << sim->mesh_id(m) << ")\n";
+        print_summary(rb, Eigen::VectorXd(), {});
+        solved[mb] = {true, std::move(rb), &sim->mesh(mb), sim->fixed_nodes(mb)};
+      }
     }
-    for (int i = 0; i < scene.prescribed_size(); ++i) {
-      const auto& p = scene.prescribed(i);
-      if (p.mesh() != lm.id) continue;
-      ++num_loads;
-      auto nodes = neurosim::scene::select_nodes(
-          lm.mesh, p.region(), scene_path + ": prescribed[" + std::to_string(i) + "]");
-      for (int node : nodes) prescribed[node] = neurosim::scene::to_vec3(p.displacement_m());
+  }
+
+  // Every other mesh on its own.
+  for (int m = 0; m < num_meshes; ++m) {
+    if (in_body[static_cast<std::size_t>(m)]) continue;
+    const auto& entry = scene.meshes(m);
+    const auto t0 = std::chrono::steady_clock::now();
+    alone[m] = std::make_unique<neurosim::scene::LoadedMesh>(
+        neurosim::scene::load_mesh(entry, scene_dir, scene_path));
+    const auto& lm = *alone[m];
+    const double load_s = seconds_since(t0);
+    const std::string what = scene_path + ": mesh \"" + lm.id + "\"";
+    print_mesh_header(lm.id, lm.mesh, lm.fixed_nodes.size(), lm.material, load_s);
+    if (coupled) {
+      for (const auto& c : scene.couplings()) {
+        if (c.embedded() == lm.id && c.kind() == neurosim::scene::Coupling::SLIDING) {
+          std::cout << "  note: its SLIDING coupling to " << c.host()
+                    << " is not applied by the static solver; solved on its own\n";
+        }
+      }
     }
-    if (num_loads == 0 || (!only_mesh.empty() && only_mesh != lm.id)) {
+    const MeshLoads loads = gather_loads(scene, scene_path, lm.id, lm.mesh);
+    if (loads.count == 0 || (!only_mesh.empty() && only_mesh != lm.id)) {
       std::cout << "  no load or prescribed displacement: at rest, not solved\n";
       continue;
     }
-
-    const auto t1 = std::chrono::steady_clock::now();
-    neurosim::fem::StaticSolver solver(lm.mesh, neurosim::fem::MaterialMap::uniform(lm.material),
-                                       lm.fixed_nodes);
-    const double factor_s = seconds_since(t1);
-    const auto t2 = std::chrono::steady_clock::now();
-    MeshResult r;
-    r.constrained.assign(n, 0);
-    for (int node : lm.fixed_nodes) r.constrained[node] = 1;
-    if (prescribed.empty()) {
-      r.u_m = solver.solve(f);
-      // Reactions at the supports: K u - f at fixed nodes.
-      Eigen::VectorXd residual = solver.stiffness() * r.u_m - f;
-      r.reaction_n = Eigen::VectorXd::Zero(3 * n);
-      for (int node : lm.fixed_nodes) r.reaction_n.segment<3>(3 * node) = residual.segment<3>(3 * node);
-    } else {
-      std::vector<int> nodes;
-      Eigen::VectorXd d(3 * prescribed.size());
-      for (const auto& [node, disp] : prescribed) {
-        d.segment<3>(3 * nodes.size()) = disp;
-        nodes.push_back(node);
-        r.constrained[node] = 1;
-      }
-      auto sol = solver.solve_prescribed(nodes, d, f);
-      r.u_m = std::move(sol.displacement_m);
-      r.reaction_n = std::move(sol.reaction_n);
-    }
-    const double solve_s = seconds_since(t2);
+    MeshResult r = solve_alone(lm, loads);
     if (!r.u_m.allFinite() || !r.reaction_n.allFinite()) {
       throw std::runtime_error(what + ": solution is not finite");
     }
+    print_summary(r, loads.f, loads.prescribed);
+    solved[m] = {true, std::move(r), &lm.mesh, lm.fixed_nodes};
+  }
 
-    // Equilibrium: supports balance the applied loads.
-    Vec3 total_load = Vec3::Zero(), total_reaction = Vec3::Zero(), prescribed_reaction = Vec3::Zero();
-    for (const auto& [node, disp] : prescribed) {
-      (void)disp;
-      prescribed_reaction += r.reaction_n.segment<3>(3 * node);
-    }
-    double max_u = 0.0;
-    int max_node = 0;
-    for (int i = 0; i < n; ++i) {
-      total_load += f.segment<3>(3 * i);
-      total_reaction += r.reaction_n.segment<3>(3 * i);
-      const double ui = r.u_m.segment<3>(3 * i).norm();
-      if (ui > max_u) { max_u = ui; max_node = i; }
-    }
-    const auto& info = solver.factor_info();
-    std::cout << std::setprecision(6) << "  factor " << info.num_free_dofs << " dofs in "
-              << factor_s << " s (nnz(L) = " << info.factor_nnz << "), solve " << solve_s
-              << " s\n  max |u| = " << max_u << " m at node " << max_node
-              << "\n  total load = (" << total_load.transpose() << ") N, total reaction = ("
-              << total_reaction.transpose() << ") N, imbalance = "
-              << (total_load + total_reaction).norm() << " N\n";
-    if (!prescribed.empty()) {
-      std::cout << "  force the prescribed nodes (" << prescribed.size()
-                << ") exert on the body = (" << prescribed_reaction.transpose() << ") N\n";
-    }
-
-    write_outputs(fs::path(out_dir) / lm.id, lm, r);
-    if (!primary_written && (only_mesh.empty() || only_mesh == lm.id)) {
+  bool primary_written = false;
+  for (int m = 0; m < num_meshes; ++m) {
+    const auto& s = solved[static_cast<std::size_t>(m)];
+    if (!s.done) continue;
+    const std::string& id = scene.meshes(m).id();
+    write_outputs(fs::path(out_dir) / id, *s.mesh, s.fixed, s.result);
+    if (!primary_written && (only_mesh.empty() || only_mesh == id)) {
       for (const char* name : {"displacement.csv", "reactions.csv", "result.vtu"}) {
-        fs::copy_file(fs::path(out_dir) / lm.id / name, fs::path(out_dir) / name,
+        fs::copy_file(fs::path(out_dir) / id / name, fs::path(out_dir) / name,
                       fs::copy_options::overwrite_existing);
       }
       primary_written = true;
     }
   }
   if (!primary_written) {
-    throw std::runtime_error(scene_path + ": nothing to solve (no loads or prescribed displacements)");
+    throw std::runtime_error(scene_path +
+                             ": nothing to solve (no loads or prescribed displacements" +
+                             (only_mesh.empty() ? std::string(")") : " on " + only_mesh + ")"));
   }
   std::cout << "results in " << fs::absolute(out_dir).string() << " (" << std::setprecision(3)
             << seconds_since(t_start) << " s total)\n";

@@ -1,10 +1,15 @@
-// neurosim-solve end to end: its CSV output agrees with CalculiX (ccx) on the same problem.
+// neurosim-solve end to end: its CSV output agrees with CalculiX (ccx) on the same problem, and
+// with the monolithic tied system for a coupled scene.
+#include "server/fem/assembly.hpp"
 #include "server/fem/calculix.hpp"
+#include "server/interaction/coupled_body.hpp"
+#include "server/interaction/simulation.hpp"
 #include "server/scene/scene.hpp"
 
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>
+#include <Eigen/SparseCholesky>
 
 #include <cstdlib>
 #include <fstream>
@@ -47,7 +52,7 @@ int run_solve(const fs::path& scene, const fs::path& out, const std::string& ext
 void expect_agrees_with_calculix(const fs::path& scene_path, const std::string& mesh_id,
                                  double tolerance) {
   const auto dir = testing::temp_dir("solve_ccx");
-  ASSERT_EQ(run_solve(scene_path, dir / "out", "--mesh " + mesh_id), 0)
+  ASSERT_EQ(run_solve(scene_path, dir / "out", "--uncoupled --mesh " + mesh_id), 0)
       << "see " << (dir / "out").string() << ".log";
   const CsvRows csv = read_csv(dir / "out" / "displacement.csv");
   EXPECT_EQ(csv.header, "node,x,y,z,ux,uy,uz");
@@ -66,7 +71,8 @@ void expect_agrees_with_calculix(const fs::path& scene_path, const std::string& 
     if (l.mesh() != mesh_id) continue;
     const auto nodes = scene::select_nodes(lm.mesh, l.region(), "load");
     mesh::Vec3 f = scene::to_vec3(l.force_n());
-    if (l.distribution() == scene::Load::TOTAL_SPLIT_EQUALLY) f /= static_cast<double>(nodes.size());
+    if (l.distribution() == scene::Load::TOTAL_SPLIT_EQUALLY)
+      f /= static_cast<double>(nodes.size());
     for (int node : nodes) loads.forces_n.segment<3>(3 * node) += f;
   }
   std::vector<double> prescribed;
@@ -78,9 +84,10 @@ void expect_agrees_with_calculix(const fs::path& scene_path, const std::string& 
       prescribed.insert(prescribed.end(), {d.x(), d.y(), d.z()});
     }
   }
-  loads.prescribed_displacements_m = Eigen::Map<Eigen::VectorXd>(prescribed.data(), prescribed.size());
-  const auto ccx = fem::run_calculix(dir / "ccx", "job", lm.mesh,
-                                     fem::MaterialMap::uniform(lm.material), loads);
+  loads.prescribed_displacements_m =
+      Eigen::Map<Eigen::VectorXd>(prescribed.data(), prescribed.size());
+  const auto ccx =
+      fem::run_calculix(dir / "ccx", "job", lm.mesh, fem::MaterialMap::uniform(lm.material), loads);
 
   double max_u = 0.0, max_diff = 0.0;
   for (int i = 0; i < n; ++i) {
@@ -95,9 +102,180 @@ void expect_agrees_with_calculix(const fs::path& scene_path, const std::string& 
   }
   ASSERT_GT(max_u, 0.0);
   std::cout << scene_path.filename().string() << " / " << mesh_id << ": " << n
-            << " nodes, max |u| = " << max_u << " m, max |u - u_ccx| / max |u| = "
-            << max_diff / max_u << "\n";
+            << " nodes, max |u| = " << max_u
+            << " m, max |u - u_ccx| / max |u| = " << max_diff / max_u << "\n";
   EXPECT_LE(max_diff / max_u, tolerance);
+  fs::remove_all(dir);
+}
+
+// The cube/cylinder scene has a TIE coupling: the cube (carved) and the cylinder are solved as
+// one body. Reference: the monolithic system of both meshes with the tie as a linear constraint,
+// u_B(tied node k) = sum_a w_a u_A(a), eliminated (u = T q), K_q = T^T diag(K_A, K_B) T, the
+// prescribed dofs moved to the right-hand side, solved by sparse LDL^T. Same carved host, fixed
+// nodes and coupling map as the server (from Simulation::build).
+TEST(SolveCli, CoupledSceneMatchesTheMonolithicTiedSystem) {
+  const fs::path scene_path = testing::source_dir() / "scenes" / "cube_cylinder.scene";
+  const auto dir = testing::temp_dir("solve_tie");
+  ASSERT_EQ(run_solve(scene_path, dir / "out"), 0) << "see " << (dir / "out").string() << ".log";
+  const CsvRows cube_csv = read_csv(dir / "out" / "cube" / "displacement.csv");
+  const CsvRows cyl_csv = read_csv(dir / "out" / "cylinder" / "displacement.csv");
+
+  scene::Scene s = scene::read_scene(scene_path);
+  ASSERT_TRUE(s.effects().coupling());
+  s.mutable_effects()->set_tool_contact(false);
+  s.clear_tools();
+  const auto sim = interaction::Simulation::build(s, scene_path.string());
+  const int a = scene::find_mesh(s, "cube"), b = scene::find_mesh(s, "cylinder");
+  const interaction::CoupledBody* body = sim->body_of(a);
+  ASSERT_NE(body, nullptr);
+  ASSERT_EQ(body->ties().size(), 1u);
+  const auto& tie = body->ties()[0];
+  ASSERT_EQ(tie.mesh, b);
+  const auto& mesh_a = sim->mesh(a);
+  const auto& mesh_b = sim->mesh(b);
+  const int na = static_cast<int>(mesh_a.num_vertices()),
+            nb = static_cast<int>(mesh_b.num_vertices());
+  ASSERT_EQ(cube_csv.rows.size(), static_cast<std::size_t>(na));
+  ASSERT_EQ(cyl_csv.rows.size(), static_cast<std::size_t>(nb));
+
+  // Dof kinds: A fixed -> 0, A prescribed -> value, tied B node -> combination of A dofs,
+  // B fixed -> 0, else unknown.
+  std::vector<int> index(3 * (na + nb), -1);  // full dof -> unknown, or -1
+  std::vector<double> value(3 * (na + nb), 0.0);
+  std::vector<char> known(3 * (na + nb), 0);
+  for (int v : sim->fixed_nodes(a))
+    for (int c = 0; c < 3; ++c) known[3 * v + c] = 1;
+  for (int v : sim->fixed_nodes(b))
+    for (int c = 0; c < 3; ++c) known[3 * (na + v) + c] = 1;
+  int num_prescribed = 0;
+  for (const auto& p : s.prescribed()) {
+    ASSERT_EQ(p.mesh(), "cube");
+    for (int v : scene::select_nodes(mesh_a, p.region(), "prescribed")) {
+      ++num_prescribed;
+      for (int c = 0; c < 3; ++c) {
+        known[3 * v + c] = 1;
+        value[3 * v + c] = scene::to_vec3(p.displacement_m())[c];
+      }
+    }
+  }
+  ASSERT_GT(num_prescribed, 0);
+  std::vector<int> tied_row(nb, -1);
+  for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k)
+    tied_row[tie.tied_nodes[k]] = static_cast<int>(k);
+  int nq = 0;
+  for (int d = 0; d < 3 * na; ++d)
+    if (!known[d]) index[d] = nq++;
+  for (int v = 0; v < nb; ++v)
+    for (int c = 0; c < 3; ++c)
+      if (!known[3 * (na + v) + c] && tied_row[v] < 0) index[3 * (na + v) + c] = nq++;
+  // u = T q + u_known: T maps unknowns to all dofs; u_known holds the prescribed values.
+  std::vector<Eigen::Triplet<double>> t;
+  Eigen::VectorXd u_known = Eigen::VectorXd::Zero(3 * (na + nb));
+  for (int d = 0; d < 3 * na; ++d) {
+    if (index[d] >= 0)
+      t.emplace_back(d, index[d], 1.0);
+    else
+      u_known[d] = value[d];
+  }
+  for (int v = 0; v < nb; ++v) {
+    for (int c = 0; c < 3; ++c) {
+      const int d = 3 * (na + v) + c;
+      if (tied_row[v] < 0) {
+        if (index[d] >= 0) t.emplace_back(d, index[d], 1.0);
+        continue;
+      }
+      for (int j = 0; j < 3; ++j) {
+        const int host_dof = 3 * body->boundary_nodes()[tie.host_slots[tied_row[v]][j]] + c;
+        const double w = tie.weights[tied_row[v]][j];
+        if (index[host_dof] >= 0)
+          t.emplace_back(d, index[host_dof], w);
+        else
+          u_known[d] += w * value[host_dof];
+      }
+    }
+  }
+  Eigen::SparseMatrix<double> tm(3 * (na + nb), nq);
+  tm.setFromTriplets(t.begin(), t.end());
+  const auto& cube_entry = s.meshes(a);
+  const auto k_a = fem::assemble_stiffness(
+      mesh_a, fem::MaterialMap::uniform(scene::to_material(cube_entry.material(), "cube")));
+  const auto k_b = fem::assemble_stiffness(mesh_b, fem::MaterialMap::uniform(tie.material));
+  std::vector<Eigen::Triplet<double>> kt;
+  for (int k = 0; k < k_a.outerSize(); ++k)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(k_a, k); it; ++it)
+      kt.emplace_back(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
+  for (int k = 0; k < k_b.outerSize(); ++k)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(k_b, k); it; ++it)
+      kt.emplace_back(3 * na + static_cast<int>(it.row()), 3 * na + static_cast<int>(it.col()),
+                      it.value());
+  Eigen::SparseMatrix<double> k_full(3 * (na + nb), 3 * (na + nb));
+  k_full.setFromTriplets(kt.begin(), kt.end());
+  const Eigen::SparseMatrix<double> k_q = tm.transpose() * k_full * tm;
+  const Eigen::VectorXd rhs = -(tm.transpose() * (k_full * u_known));
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(k_q);
+  ASSERT_EQ(ldlt.info(), Eigen::Success);
+  const Eigen::VectorXd u_ref = tm * ldlt.solve(rhs) + u_known;
+
+  auto compare = [&](const CsvRows& csv, int offset, int n, const char* name) {
+    double max_u = 0.0, max_diff = 0.0;
+    for (int i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c) {
+        const double ref = u_ref[3 * (offset + i) + c];
+        max_u = std::max(max_u, std::abs(ref));
+        max_diff = std::max(max_diff, std::abs(csv.rows[i][4 + c] - ref));
+      }
+    std::cout << name << ": max |u| = " << max_u << " m, max |u - u_monolithic| = " << max_diff
+              << " m\n";
+    EXPECT_GT(max_u, 1e-4) << name << " does not move";
+    EXPECT_LE(max_diff, 1e-8 * max_u) << name;
+  };
+  compare(cube_csv, 0, na, "cube");
+  compare(cyl_csv, na, nb, "cylinder");
+
+  // The whole cube on its own (--uncoupled) is stiffer than the carved cube holding the softer
+  // cylinder (E 0.1 MPa where the cube has 1 MPa): the push forces differ.
+  ASSERT_EQ(run_solve(scene_path, dir / "alone", "--uncoupled --mesh cube"), 0);
+  EXPECT_FALSE(fs::exists(dir / "alone" / "cylinder" / "displacement.csv"));
+  auto total_force = [&](const fs::path& reactions, const std::vector<char>& at) {
+    const CsvRows r = read_csv(reactions);
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (const auto& row : r.rows)
+      if (at[static_cast<std::size_t>(row[0])]) sum += Eigen::Vector3d(row[4], row[5], row[6]);
+    return sum;
+  };
+  std::vector<char> prescribed_node(na, 0);
+  for (const auto& p : s.prescribed())
+    for (int v : scene::select_nodes(mesh_a, p.region(), "prescribed")) prescribed_node[v] = 1;
+  const Eigen::Vector3d f_tied =
+      total_force(dir / "out" / "cube" / "reactions.csv", prescribed_node);
+  const Eigen::Vector3d f_alone =
+      total_force(dir / "alone" / "cube" / "reactions.csv", prescribed_node);
+  std::cout << "push force tied " << f_tied.transpose() << " N, alone " << f_alone.transpose()
+            << " N\n";
+  EXPECT_LT(f_tied.x(), 0.0);
+  EXPECT_GT(std::abs(f_tied.x() - f_alone.x()), 0.01 * std::abs(f_tied.x()));
+  fs::remove_all(dir);
+}
+
+// Loads go on the host of a tied body: one on the embedded mesh is refused, naming it.
+TEST(SolveCli, LoadOnATiedEmbeddedMeshIsRefused) {
+  const auto dir = testing::temp_dir("solve_tie_load");
+  const fs::path scene_path = testing::source_dir() / "scenes" / "cube_cylinder.scene";
+  {
+    std::ifstream in(scene_path);
+    std::stringstream text;
+    text << in.rdbuf();
+    std::ofstream out(dir / "pull.scene");
+    out << text.str()
+        << "\nloads { mesh: \"cylinder\" region { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 1 y: "
+           "1 z: 1 } } } force_n { x: 1 } distribution: TOTAL_SPLIT_EQUALLY }\n";
+  }
+  EXPECT_NE(run_solve(dir / "pull.scene", dir / "out"), 0);
+  std::ifstream log(dir.string() + "/out.log");
+  std::stringstream text;
+  text << log.rdbuf();
+  EXPECT_NE(text.str().find("\"cylinder\" is tied to \"cube\""), std::string::npos) << text.str();
+  EXPECT_NE(text.str().find("pull.scene"), std::string::npos) << text.str();
   fs::remove_all(dir);
 }
 
