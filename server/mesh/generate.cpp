@@ -80,8 +80,15 @@ Polyhedron cylinder_surface(const Vec3& base, const Vec3& axis, double radius, i
 }
 
 // One Mesh_3 run at cell size s (m): tetrahedra of the complex and the vertices they use.
-TetMesh run_mesh3(const Polyhedron& surface, double s, const MeshingOptions& options,
-                  const std::string& what) {
+// optimize: the sliver steps the options ask for (perturbation, exudation), and the TetMesh
+// built; without them only the vertex count, which is the same, faster (what the cell-size
+// search needs; unoptimized meshes may hold flat tetrahedra that TetMesh refuses).
+struct Mesh3Run {
+  TetMesh mesh;
+  int vertices{0};
+};
+Mesh3Run run_mesh3(const Polyhedron& surface, double s, const MeshingOptions& options,
+                   const std::string& what, bool optimize) {
   // Mesh_3 draws from CGAL's default random generator: seed it for reproducible meshes.
   CGAL::get_default_random() = CGAL::Random(options.seed);
   Domain domain(surface);
@@ -90,13 +97,23 @@ TetMesh run_mesh3(const Polyhedron& surface, double s, const MeshingOptions& opt
                     params::facet_distance = 0.05 * s,
                     params::cell_radius_edge_ratio = options.cell_radius_edge_ratio,
                     params::cell_size = s);
-  // Exudation without a time limit (time_limit = 0): it stops when no sliver can be improved, so
-  // the mesh does not depend on how loaded the machine is (a wall-clock limit made it vary).
-  C3t3 c3t3 = options.exude_slivers
-                  ? CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(),
-                                            params::exude(params::time_limit = 0))
-                  : CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(),
-                                            params::no_exude());
+  C3t3 c3t3 = CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(), params::no_exude());
+  // Both without a time limit (time_limit = 0): they stop when no sliver can be improved, so the
+  // mesh does not depend on how loaded the machine is (a wall-clock limit made it vary).
+  if (optimize && options.perturb_slivers) {
+    if (!(options.perturb_sliver_bound_deg > 0.0 && options.perturb_sliver_bound_deg < 60.0)) {
+      throw std::invalid_argument(what + ": perturb_sliver_bound_deg must be in (0, 60) degrees");
+    }
+    CGAL::perturb_mesh_3(c3t3, domain, params::time_limit = 0,
+                         params::sliver_bound = options.perturb_sliver_bound_deg);
+  }
+  if (optimize && options.exude_slivers) CGAL::exude_mesh_3(c3t3, params::time_limit = 0);
+  if (!optimize) {
+    std::unordered_map<Tr::Vertex_handle, int> seen;
+    for (auto c = c3t3.cells_in_complex_begin(); c != c3t3.cells_in_complex_end(); ++c)
+      for (int k = 0; k < 4; ++k) seen.emplace(c->vertex(k), 0);
+    return {TetMesh{}, static_cast<int>(seen.size())};
+  }
   std::unordered_map<Tr::Vertex_handle, int> index;
   std::vector<Vec3> vertices;
   std::vector<Tet> tets;
@@ -117,7 +134,10 @@ TetMesh run_mesh3(const Polyhedron& surface, double s, const MeshingOptions& opt
   }
   BuildOptions build;
   build.source = what;
-  return TetMesh::build(std::move(vertices), std::move(tets), build);
+  Mesh3Run out;
+  out.mesh = TetMesh::build(std::move(vertices), std::move(tets), build);
+  out.vertices = static_cast<int>(out.mesh.num_vertices());
+  return out;
 }
 
 // Search the cell size whose mesh has the vertex count closest to target.
@@ -130,13 +150,15 @@ GeneratedMesh mesh_to_target(const Polyhedron& surface, double volume_m3,
     if (!(options.cell_size_m > 0.0) || !std::isfinite(options.cell_size_m)) {
       throw std::invalid_argument(what + ": give target_vertices > 0 or a cell size > 0 m");
     }
-    return {run_mesh3(surface, options.cell_size_m, options, what), options.cell_size_m, 1};
+    return {run_mesh3(surface, options.cell_size_m, options, what, true).mesh, options.cell_size_m,
+            1};
   }
   if (options.target_vertices < 8) {
     throw std::invalid_argument(what + ": target_vertices must be at least 8");
   }
   const double target = options.target_vertices;
-  // Start from about (volume / tets)^(1/3) with ~5 tets per vertex, then secant steps on
+  // The search counts vertices only (no sliver steps, no TetMesh); the chosen size is meshed
+  // again at the end. Start from about (volume / tets)^(1/3) with ~5 tets per vertex, then secant steps on
   // log(vertices) against log(size) (slope about -3 for volume meshes, less when small).
   double s = std::cbrt(volume_m3 / (0.6 * target));
   double best_err = std::numeric_limits<double>::infinity();
@@ -146,12 +168,11 @@ GeneratedMesh mesh_to_target(const Polyhedron& surface, double volume_m3,
   constexpr int kMaxAttempts = 12;
   int attempts = 0;
   for (; attempts < kMaxAttempts; ++attempts) {
-    TetMesh m = run_mesh3(surface, s, options, what);
-    const double n = static_cast<double>(m.num_vertices());
+    const double n = run_mesh3(surface, s, options, what, false).vertices;
     const double err = std::abs(n - target) / target;
     if (err < best_err) {
       best_err = err;
-      best = {std::move(m), s, attempts + 1};
+      best.cell_size_m = s;
     }
     if (err < 0.01) break;
     double slope = -3.0;
@@ -169,6 +190,9 @@ GeneratedMesh mesh_to_target(const Polyhedron& surface, double volume_m3,
     s *= std::exp(step);
   }
   best.attempts = attempts;
+  // The chosen size again, with the sliver steps and the mesh built (same seed and size: same
+  // vertices).
+  best.mesh = run_mesh3(surface, best.cell_size_m, options, what, true).mesh;
   return best;
 }
 

@@ -15,6 +15,11 @@ struct MeshingOptions {
   double cell_size_m{0.0};  // unit m; used when target_vertices == 0
   // Radius-edge bound of CGAL's refinement (lower: better shaped, more vertices).
   double cell_radius_edge_ratio{2.0};
+  // Sliver removal on the final mesh (the cell-size search counts vertices without it; neither
+  // step adds or removes vertices): CGAL's perturbation (moves vertices until every dihedral
+  // angle exceeds perturb_sliver_bound_deg or none improves), then exudation (weights).
+  bool perturb_slivers{true};
+  double perturb_sliver_bound_deg{12.0};
   bool exude_slivers{true};
   std::uint32_t seed{0};  // CGAL's random generator seed: same seed, same mesh
   // Facet sample count for the cylinder's polygonal approximation (per circle).
