@@ -105,7 +105,27 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
                                   std::to_string(i));
     }
   }
-  if (use_schur_ && schur_ready_ && stable_rows == schur_rows_ && n - stable_rows <= contact_cap_) {
+  bool schur =
+      use_schur_ && schur_ready_ && stable_rows == schur_rows_ && n - stable_rows <= contact_cap_;
+  if (schur) {
+    // The smaller of the two sets of leading rows gets the factor: the inactive set above 60 %
+    // warm-active leading rows, the active set (reference path) below 40 % (hysteresis: a switch
+    // starts the new path's factor from the warm start, O(rows^3) once).
+    int warm = 0;
+    for (int i = 0; i < stable_rows; ++i)
+      warm += (initial_active ? (*initial_active)[i] != 0 : delta[i] > 0.0) ? 1 : 0;
+    const bool want =
+        always_schur_ || (prefer_schur_ ? 5 * warm >= 2 * stable_rows : 5 * warm > 3 * stable_rows);
+    if (want != prefer_schur_) {
+      prefer_schur_ = want;
+      if (want)
+        schur_carry_ = false;
+      else
+        factor_valid_ = false;
+    }
+    schur = prefer_schur_;
+  }
+  if (schur) {
     if (solve_schur(w, delta, n, tolerance, max_iterations, lambda, initial_active, result))
       return result;
     // Numerical trouble in the inactive-set factor: the reference path, from scratch.

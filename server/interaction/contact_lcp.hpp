@@ -56,7 +56,15 @@ class ContactLcp {
   int constant_rows() const { return schur_ready_ ? schur_rows_ : 0; }
   // Selects the path for the constant block: true (default) the inactive-set path, false the
   // active-factor reference path (both solve the same LCP to the same tolerance).
-  void use_inactive_set(bool on) { use_schur_ = on; }
+  // With it on, each solve takes the inactive-set path when most leading rows start active and
+  // the reference path when few do (the factor goes to the smaller set; see solve()); always:
+  // the inactive-set path whatever the warm start (tests).
+  void use_inactive_set(bool on, bool always = false) {
+    use_schur_ = on;
+    always_schur_ = always;
+  }
+  // The last solve took the inactive-set path.
+  bool last_solve_inactive_set() const { return last_schur_; }
 
   // w: top-left n x n block of a capacity x capacity matrix is used; delta, lambda: first n.
   // tolerance: relative to max |delta| (for w) and max lambda (for lambda).
@@ -108,12 +116,14 @@ class ContactLcp {
   // Inactive-set path (see the top of the file).
   bool schur_ready_{false};
   bool use_schur_{true};
-  bool last_schur_{false};   // the last solve took the inactive-set path
-  int schur_rows_{0};        // n_s
-  int contact_cap_{0};       // trailing rows the workspace holds
-  Eigen::MatrixXd g_;        // W_ss^-1
-  Eigen::VectorXd ds_, a_;   // d_s of the last solve, a = G d_s
-  bool schur_carry_{false};  // inact_, li_ and the v column of zx_ carry over to the next solve
+  bool always_schur_{false};
+  bool last_schur_{false};    // the last solve took the inactive-set path
+  bool prefer_schur_{false};  // path for the constant block (hysteresis on the warm start)
+  int schur_rows_{0};         // n_s
+  int contact_cap_{0};        // trailing rows the workspace holds
+  Eigen::MatrixXd g_;         // W_ss^-1
+  Eigen::VectorXd ds_, a_;    // d_s of the last solve, a = G d_s
+  bool schur_carry_{false};   // inact_, li_ and the v column of zx_ carry over to the next solve
   int schur_solves_{0};
   std::vector<char> status_;  // per row: 0 inactive, 1 active, 2 blocked
   std::vector<int> inact_;    // I in factor order

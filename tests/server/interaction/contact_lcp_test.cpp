@@ -220,12 +220,15 @@ TEST(interaction_lcp, InactiveSetMatchesReferenceOverSteps) {
   Eigen::VectorXd ds(ns);
   for (int i = 0; i < ns; ++i) ds[i] = 1e-3 * prob.g(prob.rng) - 3e-4;
   std::vector<char> warm_f(cap, 0), warm_r(cap, 0);
-  int checked_inverse = 0;
-  for (int step = 0; step < 150; ++step) {
+  int checked_inverse = 0, inactive_path = 0;
+  for (int step = 0; step < 200; ++step) {
     const int nc = step % 17;
     prob.make(nc, w, false, false);
-    if (step % 40 == 39)
-      for (int i = 0; i < ns; ++i) ds[i] = 1e-3 * prob.g(prob.rng) - 3e-4;
+    // Regimes: most leading rows pushed (inactive-set path), few (reference path), in between.
+    if (step % 30 == 29) {
+      const double offset = (step / 30) % 3 == 0 ? 1.5e-3 : (step / 30) % 3 == 1 ? -1.2e-3 : 0.0;
+      for (int i = 0; i < ns; ++i) ds[i] = 1e-3 * prob.g(prob.rng) + offset;
+    }
     Eigen::VectorXd d = Eigen::VectorXd::Zero(cap), lf = d, lr = d;
     d.head(ns) = ds;
     for (int i = ns; i < ns + nc; ++i) d[i] = 1e-3 * prob.g(prob.rng) + 5e-4;
@@ -234,6 +237,7 @@ TEST(interaction_lcp, InactiveSetMatchesReferenceOverSteps) {
     const LcpResult rf = fast.solve(w, d, n, 1e-12, 2000, lf, &warm_f, ns);
     const LcpResult rr = ref.solve(w, d, n, 1e-12, 2000, lr, &warm_r, ns);
     const std::string what = "step " + std::to_string(step);
+    if (fast.last_solve_inactive_set()) ++inactive_path;
     ASSERT_TRUE(rf.converged) << what;
     ASSERT_TRUE(rr.converged) << what;
     EXPECT_FALSE(rf.dependent_rows) << what;
@@ -268,6 +272,8 @@ TEST(interaction_lcp, InactiveSetMatchesReferenceOverSteps) {
     }
   }
   EXPECT_GT(checked_inverse, 100);
+  EXPECT_GT(inactive_path, 40);  // both paths taken
+  EXPECT_LT(inactive_path, 160);
 }
 
 // Degenerate steps: dependent trailing rows (a duplicate, a copy of a leading row), a zero row,
@@ -281,6 +287,7 @@ TEST(interaction_lcp, InactiveSetDegenerateCases) {
   fast.reserve(cap);
   ref.reserve(cap);
   ASSERT_TRUE(fast.set_constant_block(w, ns));
+  fast.use_inactive_set(true, true);
   for (int step = 0; step < 40; ++step) {
     const int nc = 3 + step % 6;
     prob.make(nc, w, step % 2 == 0, step % 3 == 0);
@@ -295,6 +302,10 @@ TEST(interaction_lcp, InactiveSetDegenerateCases) {
     const std::string what = "step " + std::to_string(step);
     const LcpResult rf = fast.solve(w, d, n, 1e-12, 2000, lf, nullptr, ns);
     const LcpResult rr = ref.solve(w, d, n, 1e-12, 2000, lr, nullptr, ns);
+    EXPECT_TRUE(fast.last_solve_inactive_set());
+    if (step % 2 == 0 && lr[ns] > 0.0) {
+      EXPECT_TRUE(rf.dependent_rows) << step;
+    }
     ASSERT_TRUE(rr.converged) << what << " " << rr.max_violation;
     ASSERT_TRUE(rf.converged) << what << " " << rf.max_violation << " " << rf.iterations;
     expect_kkt(w, d, lf, n, 1e-8, what);
