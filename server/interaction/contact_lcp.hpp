@@ -23,8 +23,16 @@
 // refactored per iteration. Pivoting: block principal pivoting (Judice-Pires: every infeasible
 // index flips while their number falls, three more tries otherwise), then Murty's least-index
 // rule (finite for P-matrices) until the end of that solve. Cost per iteration O(m^2 + n_s m +
-// n_s |A_c|) instead of O(k^2) per pivot for k active rows; an uncached coupling column costs
-// O(n_s^2) once.
+// n_s |A_c|) plus O(m^2) per flipped leading row, instead of O(k^2) per pivot for k active rows;
+// an uncached coupling column costs O(n_s^2) once (cache of 16 x trailing capacity columns, LRU,
+// keyed by a hash of the column and checked entry by entry, so a changed column is never taken
+// from it). The result is checked as in the reference path: slack W_i lambda - delta_i of every
+// inactive row from W itself, lambda_I = 0 to round-off (drift of the kept factor: past
+// 1e3 x tolerance the solve is redone from a fresh factor, then reported as not converged).
+// Both paths solve the same LCP (unique solution, W SPD); the factor goes to the smaller set:
+// this path when more than 60 % of the leading rows start active, the reference path below
+// 40 % (hysteresis; a switch refactors from the warm start once, O(rows^3)). Memory: n_s^2
+// doubles for G, n_s^2 for L_I, 2 x 16 x trailing capacity x n_s for the cache.
 #pragma once
 
 #include <Eigen/Core>
@@ -35,7 +43,8 @@ namespace neurosim::interaction {
 
 struct LcpResult {
   bool converged{false};
-  int iterations{0};           // pivots (each one Cholesky of the active block)
+  int iterations{0};           // pivots (each one Cholesky of the active block); inactive-set path:
+                               // block-pivoting passes (each flips one or more rows)
   int active{0};               // rows with lambda > 0
   double max_violation{0.0};   // max(-w, -lambda, 0) relative to max |delta|
   bool dependent_rows{false};  // a row of the active block was (numerically) dependent
