@@ -499,7 +499,7 @@ void SimulationImpl::reserve_workspace(int tools) {
   // The inverse of the constant sliding block, once (its size does not depend on the tools).
   if (num_sliding_ > 0 && !lcp_constant_block_) {
     lcp_constant_block_ = true;
-    lcp_.use_inactive_set(options_.sliding_inactive_set);
+    lcp_.use_inactive_set(options_.sliding_inactive_set, options_.sliding_inactive_set_always);
     if (options_.sliding_inactive_set) lcp_.set_constant_block(w_, num_sliding_);
   }
 }

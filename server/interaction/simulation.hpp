@@ -108,6 +108,9 @@ struct SimulationOptions {
   // (O(n_s^3)) and each step works on the inactive sliding rows (ContactLcp::set_constant_block);
   // false, the reference path (a factor of the active rows, kept between steps). Same LCP.
   bool sliding_inactive_set{true};
+  // With sliding_inactive_set: that path in every step, however few sliding rows are active
+  // (otherwise the reference path takes the steps with few; tests).
+  bool sliding_inactive_set_always{false};
 };
 
 // Load-time cost of build(), unit s.
