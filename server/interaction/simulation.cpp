@@ -671,7 +671,8 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   for (int r = 0; r < nc; ++r) warm_[ns + r] = delta_[ns + r] > 0.0 ? 1 : 0;
   const int max_iterations =
       options_.lcp_max_iterations + options_.lcp_iterations_per_sliding_row * ns;
-  // The sliding block of W never changes: its active set and factor carry over between steps.
+  // The sliding block of W never changes: its active (or inactive) set and factor carry over
+  // between steps; with options_.sliding_inactive_set its inverse was computed at load.
   const LcpResult lcp =
       lcp_.solve(w_, delta_, n, options_.lcp_tolerance, max_iterations, lambda_, &warm_, ns);
 
