@@ -2,7 +2,10 @@
 // cached), full-field displacement, the iterative baseline on the same rows, and the same scene
 // with the coupling kind SLIDING (frictionless unilateral pairs solved with the tool contact).
 //   interaction_bench [--csv] [--steps N] [--sliding-steps N] [--quick] [--residual-csv FILE]
-// --csv prints only the table; set-up times and notes go to stderr.
+//                     [--only SCENARIO] [--no-sliding-ref]
+// --csv prints only the table; set-up times and notes go to stderr. SLIDING rows: `sliding` (the
+// default LCP path, inverse of the sliding block at load) and `sliding_ref` (the reference path,
+// factor of the active rows), unless --no-sliding-ref.
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/iterative_tie.hpp"
 #include "server/interaction/simulation.hpp"
@@ -65,6 +68,8 @@ int main(int argc, char** argv) {
   bool csv = false, quick = false;
   int steps = 2000;
   int sliding_steps = -1;  // default: as --steps
+  std::string only;        // one scenario by name
+  bool sliding_ref = true;
   std::string residual_csv;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--csv"))
@@ -77,9 +82,13 @@ int main(int argc, char** argv) {
       sliding_steps = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--residual-csv") && i + 1 < argc)
       residual_csv = argv[++i];
+    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc)
+      only = argv[++i];
+    else if (!std::strcmp(argv[i], "--no-sliding-ref"))
+      sliding_ref = false;
     else {
       std::cerr << "usage: interaction_bench [--csv] [--steps N] [--sliding-steps N] [--quick] "
-                   "[--residual-csv FILE]\n";
+                   "[--residual-csv FILE] [--only SCENARIO] [--no-sliding-ref]\n";
       return 2;
     }
   }
@@ -107,6 +116,7 @@ int main(int argc, char** argv) {
   std::cout << "scenario,host_tets,embedded_tets,boundary_nodes,contact_nodes,method,p50_us,p99_us,"
                "tie_residual\n";
   for (auto& sc : scenarios) {
+    if (!only.empty() && sc.name != only) continue;
     ni::SimulationOptions options;
     options.max_contact_nodes_per_tool = 20;
     options.cache_full_field_columns = true;
@@ -247,21 +257,23 @@ int main(int argc, char** argv) {
     // rest): every surface node of the embedded mesh is a unilateral row of the step's LCP.
     // tie_residual column: largest interpenetration max(0, -g) over all pairs / mean depth,
     // from full-field solves at 20 poses of the timed path.
-    if (sliding_steps > 0) {
+    for (int variant = 0; variant < (sliding_ref ? 2 : 1) && sliding_steps > 0; ++variant) {
+      const std::string tag = variant == 0 ? "sliding" : "sliding_ref";
       auto scene = sc.scene;
       scene.mutable_couplings(0)->set_kind(neurosim::scene::Coupling::SLIDING);
       ni::SimulationOptions sopt;
       sopt.max_contact_nodes_per_tool = 20;
+      sopt.sliding_inactive_set = variant == 0;
       const auto t0 = Clock::now();
       auto ssim = ni::Simulation::build(scene, sc.path, sopt);
       const double build_s = std::chrono::duration<double>(Clock::now() - t0).count();
       const auto& st = ssim->setup_stats();
-      std::cerr << sc.name << " (sliding): set-up " << build_s << " s (meshes " << st.load_meshes_s
-                << ", sliding block " << st.sliding_s << "); sliding rows " << st.sliding_rows
-                << "\n";
+      std::cerr << sc.name << " (" << tag << "): set-up " << build_s << " s (meshes "
+                << st.load_meshes_s << ", sliding block " << st.sliding_s << "); sliding rows "
+                << st.sliding_rows << "\n";
       const auto tws = Clock::now();
       for (int k = 0; k < 200; ++k) ssim->step({pose(k)}, contacts, stats);
-      std::cerr << sc.name << " (sliding): warm-up "
+      std::cerr << sc.name << " (" << tag << "): warm-up "
                 << std::chrono::duration<double>(Clock::now() - tws).count() << " s\n";
       std::vector<double> stimes;
       int smax_nodes = 0, sfailures = 0, max_active = 0;
@@ -280,15 +292,15 @@ int main(int argc, char** argv) {
         if (k % every == 0) penetration = std::max(penetration, ssim->sliding_penetration_m());
       }
       std::sort(pivots.begin(), pivots.end());
-      std::cerr << sc.name << " (sliding): most active pairs " << max_active << " of "
+      std::cerr << sc.name << " (" << tag << "): most active pairs " << max_active << " of "
                 << st.sliding_rows << ", LCP pivots per step median " << pivots[pivots.size() / 2]
                 << " max " << pivots.back() << ", steps not converged " << sfailures << "\n";
       std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.1f,%.1f,%.3g\n", sc.name.c_str(),
-                    host_tets, emb_tets, st.sliding_rows, smax_nodes, "sliding",
+                    host_tets, emb_tets, st.sliding_rows, smax_nodes, tag.c_str(),
                     percentile(stimes, 0.5), percentile(stimes, 0.99), penetration / depth_now);
       std::cout << line;
       std::snprintf(line, sizeof line, "%s,%d,%d,%d,%d,%s,%.0f,%.0f,%.3g\n", sc.name.c_str(),
-                    host_tets, emb_tets, st.sliding_rows, smax_nodes, "setup_sliding",
+                    host_tets, emb_tets, st.sliding_rows, smax_nodes, ("setup_" + tag).c_str(),
                     1e6 * (build_s - st.load_meshes_s), 1e6 * (build_s - st.load_meshes_s),
                     penetration / depth_now);
       std::cout << line;

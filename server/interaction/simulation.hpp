@@ -104,6 +104,13 @@ struct SimulationOptions {
   double sliding_anchor_ratio{1e-6};
   // The contact LCP may pivot lcp_max_iterations + this x (number of sliding rows) times.
   int lcp_iterations_per_sliding_row{4};
+  // Sliding rows in the LCP: true, the inverse of their constant block is computed at load
+  // (O(n_s^3)) and each step works on the inactive sliding rows (ContactLcp::set_constant_block);
+  // false, the reference path (a factor of the active rows, kept between steps). Same LCP.
+  bool sliding_inactive_set{true};
+  // With sliding_inactive_set: that path in every step, however few sliding rows are active
+  // (otherwise the reference path takes the steps with few; tests).
+  bool sliding_inactive_set_always{false};
 };
 
 // Load-time cost of build(), unit s.

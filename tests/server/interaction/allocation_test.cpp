@@ -1,5 +1,6 @@
 // The step is State only: once warmed up (contact columns cached, workspace sized) it must not
 // allocate. Counts global operator new calls around step().
+#include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/simulation.hpp"
 
 #include "interaction_fixtures.hpp"
@@ -7,8 +8,10 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstdlib>
 #include <new>
+#include <vector>
 
 namespace {
 std::atomic<long> g_allocations{0};
@@ -63,6 +66,61 @@ TEST(interaction_allocation, WarmSlidingStepDoesNotAllocate) {
   testing::SceneSpec spec;
   spec.sliding = true;
   expect_warm_step_does_not_allocate(spec);
+}
+
+// The LCP's inactive-set path for a constant leading block (ContactLcp::set_constant_block): no
+// allocation per solve, with new trailing rows every solve (coupling columns not cached yet),
+// pivots both ways, and a switch to the reference path and back.
+TEST(interaction_allocation, ConstantBlockLcpDoesNotAllocate) {
+  const int ns = 50, cap = 62, dim = 70;
+  Eigen::MatrixXd rows(cap, dim);
+  for (int i = 0; i < cap; ++i)
+    for (int j = 0; j < dim; ++j) rows(i, j) = std::sin(1.0 + 0.37 * i * j + 0.11 * i);
+  auto fill = [&](int step, Eigen::MatrixXd& w) {
+    for (int i = ns; i < cap; ++i)
+      for (int j = 0; j < dim; ++j) rows(i, j) = std::sin(0.3 * step + 0.37 * i * j + 0.7 * i);
+    w.noalias() = rows * rows.transpose() / dim;
+    w.diagonal().array() += 0.05;
+    w *= 1e-4;
+  };
+  Eigen::MatrixXd w(cap, cap);
+  fill(0, w);
+  Eigen::VectorXd d(cap), lam = Eigen::VectorXd::Zero(cap);
+  std::vector<char> warm(cap, 1);
+  ContactLcp fast, hybrid;
+  fast.reserve(cap);
+  hybrid.reserve(cap);
+  ASSERT_TRUE(fast.set_constant_block(w, ns));
+  ASSERT_TRUE(hybrid.set_constant_block(w, ns));
+  fast.use_inactive_set(true, true);
+  int inactive_path = 0;
+  auto run = [&](ContactLcp& lcp, int step) {
+    fill(step, w);
+    const double shift = step % 20 < 10 ? 4e-4 : -6e-4;  // many leading rows pushed, then few
+    for (int i = 0; i < cap; ++i) d[i] = 1e-3 * std::sin(0.9 * i + 0.2 * step) + shift;
+    for (int i = 0; i < cap; ++i) warm[i] = i < ns ? (lam[i] > 0.0 ? 1 : 0) : d[i] > 0.0;
+    const int n = ns + 4 + step % 8;
+    const LcpResult r = lcp.solve(w, d, n, 1e-12, 2000, lam, &warm, ns);
+    lcp.invert_active(ns);
+    inactive_path += lcp.last_solve_inactive_set() ? 1 : 0;
+    return r.converged;
+  };
+  for (ContactLcp* lcp : {&fast, &hybrid}) {
+    for (int step = 0; step < 3; ++step) ASSERT_TRUE(run(*lcp, step));
+    const long before = g_allocations.load();
+    bool ok = true;
+    for (int step = 3; step < 60; ++step) ok = run(*lcp, step) && ok;
+    EXPECT_EQ(g_allocations.load() - before, 0);
+    EXPECT_TRUE(ok);
+    // fast: every solve on the inactive set; hybrid: both paths.
+    if (lcp == &fast) {
+      EXPECT_EQ(inactive_path, 60);
+    } else {
+      EXPECT_GT(inactive_path, 5);
+      EXPECT_LT(inactive_path, 55);
+    }
+    inactive_path = 0;
+  }
 }
 
 }  // namespace

@@ -447,5 +447,44 @@ TEST(interaction_sliding_stability, TwoToolsAndToolInsideTheEmbeddedMesh) {
   expect_sane(*sim, c, st, 0.004, kBoundN);
 }
 
+// The LCP's inactive-set path (inverse of the constant sliding block) and the reference path
+// (factor of the active rows) give the same step: tool force, contact stiffness, pair forces,
+// over a path that presses, slides and releases (pivots both ways, factors kept between steps).
+TEST(interaction_sliding, InactiveSetPathMatchesReferencePath) {
+  SimulationOptions fast_opt, ref_opt;
+  fast_opt.sliding_inactive_set_always = true;
+  ref_opt.sliding_inactive_set = false;
+  auto fast = Simulation::build(testing::make_scene(sliding_spec()), "test.scene", fast_opt);
+  auto ref = Simulation::build(testing::make_scene(sliding_spec()), "test.scene", ref_opt);
+  std::vector<ToolContact> cf, cr;
+  StepStats sf, sr;
+  std::vector<SlidingPairState> pf, pr;
+  int compared = 0;
+  for (int k = 0; k <= 40; ++k) {
+    const double depth = 0.006 * std::sin(M_PI * k / 40.0);
+    ToolPose pose = push_right(depth);
+    pose.tip_m.y() += 0.01 * std::sin(0.3 * k);
+    fast->step({pose}, cf, sf);
+    ref->step({pose}, cr, sr);
+    ASSERT_TRUE(sf.converged) << k;
+    ASSERT_TRUE(sr.converged) << k;
+    EXPECT_EQ(sf.sliding_active, sr.sliding_active) << k;
+    const double fscale = std::max(cr[0].force_n.norm(), 1e-12);
+    EXPECT_LE((cf[0].force_n - cr[0].force_n).norm(), 1e-8 * fscale) << k;
+    const double kscale = std::max(cr[0].stiffness_n_per_m.norm(), 1e-12);
+    EXPECT_LE((cf[0].stiffness_n_per_m - cr[0].stiffness_n_per_m).norm(), 1e-7 * kscale) << k;
+    fast->sliding_pairs(kCylinder, pf);
+    ref->sliding_pairs(kCylinder, pr);
+    ASSERT_EQ(pf.size(), pr.size());
+    double largest = 1e-300;
+    for (const auto& p : pr) largest = std::max(largest, p.force_n);
+    for (std::size_t i = 0; i < pf.size(); ++i)
+      EXPECT_NEAR(pf[i].force_n, pr[i].force_n, 1e-8 * largest) << k << " pair " << i;
+    EXPECT_LE(fast->sliding_penetration_m(), 1e-9 * std::max(depth, 1e-4)) << k;
+    if (sr.sliding_active > 0) ++compared;
+  }
+  EXPECT_GT(compared, 20);
+}
+
 }  // namespace
 }  // namespace neurosim::interaction
