@@ -11,6 +11,37 @@
 
 namespace neurosim::interaction {
 
+namespace {
+
+// Drops row/column pos of the k x k lower Cholesky factor l in place (first k-1 rows/columns
+// then factor the matrix without that row and column): the rows below pos are moved up, which
+// leaves one entry right of the diagonal (Hessenberg); Givens rotations of the column pairs
+// (j, j+1) from the right take it out again (L Q Q^T L^T). rot_c / rot_s (k-1 entries, may be
+// null) receive the rotations, for callers that apply them to other data as well.
+void drop_factor_row(Eigen::MatrixXd& l, int k, int pos, double* rot_c, double* rot_s) {
+  for (int p = 0; p < k; ++p)
+    for (int i = std::max(pos, p - 1); i + 1 < k; ++i) l(i, p) = l(i + 1, p);
+  for (int j = pos; j + 1 < k; ++j) {
+    const double a = l(j, j), b = l(j, j + 1);
+    const double r = std::hypot(a, b);
+    const double c = a / r, s = b / r;
+    double* cj = &l(0, j);
+    double* cj1 = &l(0, j + 1);
+    for (int i = j; i + 1 < k; ++i) {
+      const double x = cj[i], yv = cj1[i];
+      cj[i] = c * x + s * yv;
+      cj1[i] = -s * x + c * yv;
+    }
+    l(j, j + 1) = 0.0;
+    if (rot_c != nullptr) {
+      rot_c[j] = c;
+      rot_s[j] = s;
+    }
+  }
+}
+
+}  // namespace
+
 void ContactLcp::reserve(int max_rows) {
   if (max_rows <= capacity_) return;
   capacity_ = max_rows;
@@ -48,24 +79,8 @@ bool ContactLcp::append_row(const Eigen::MatrixXd& w, int row) {
 
 void ContactLcp::remove_position(int pos) {
   const int k = num_active_;
-  // Drop row pos of L: the rows below keep one entry right of the diagonal (Hessenberg);
-  // rotations of the column pairs (j, j+1) from the right take it out again (L Q Q^T L^T).
   for (int i = pos; i + 1 < k; ++i) active_rows_[i] = active_rows_[i + 1];
-  for (int p = 0; p < k; ++p)
-    for (int i = std::max(pos, p - 1); i + 1 < k; ++i) chol_(i, p) = chol_(i + 1, p);
-  for (int j = pos; j + 1 < k; ++j) {
-    const double a = chol_(j, j), b = chol_(j, j + 1);
-    const double r = std::hypot(a, b);
-    const double c = a / r, s = b / r;
-    double* cj = &chol_(0, j);
-    double* cj1 = &chol_(0, j + 1);
-    for (int i = j; i + 1 < k; ++i) {
-      const double x = cj[i], yv = cj1[i];
-      cj[i] = c * x + s * yv;
-      cj1[i] = -s * x + c * yv;
-    }
-    chol_(j, j + 1) = 0.0;
-  }
+  drop_factor_row(chol_, k, pos, nullptr, nullptr);
   num_active_ = k - 1;
 }
 
@@ -420,23 +435,7 @@ void ContactLcp::remove_inactive(int pos) {
   const int k = m_;
   // As remove_position; the column rotations of L act on the rows of Z (L Z = U_I stays true).
   for (int i = pos; i + 1 < k; ++i) inact_[i] = inact_[i + 1];
-  for (int p = 0; p < k; ++p)
-    for (int i = std::max(pos, p - 1); i + 1 < k; ++i) li_(i, p) = li_(i + 1, p);
-  for (int j = pos; j + 1 < k; ++j) {
-    const double a = li_(j, j), b = li_(j, j + 1);
-    const double r = std::hypot(a, b);
-    const double c = a / r, s = b / r;
-    double* cj = &li_(0, j);
-    double* cj1 = &li_(0, j + 1);
-    for (int i = j; i + 1 < k; ++i) {
-      const double x = cj[i], yv = cj1[i];
-      cj[i] = c * x + s * yv;
-      cj1[i] = -s * x + c * yv;
-    }
-    li_(j, j + 1) = 0.0;
-    rot_c_[j] = c;
-    rot_s_[j] = s;
-  }
+  drop_factor_row(li_, k, pos, rot_c_.data(), rot_s_.data());
   const int cols = 1 + contact_cap_;
   for (int col = 0; col < cols; ++col) {
     double* z = &zx_(0, col);
