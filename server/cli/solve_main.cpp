@@ -189,9 +189,9 @@ MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& l
 
 // A host and the meshes tied to it, solved as one body through the exact coupled compliance
 // (interaction::CoupledBody): u = L_c (f + F_P), with the prescribed nodes' forces F_P from the
-// 3p x 3p block of L_c at those nodes (3p coupled solves). Reactions at the host's constrained
-// nodes are r_A = K_A u_A - f + J^T (K_B u_B)_tied (what the supports add to the applied load
-// and to the embedded meshes' pull), at an embedded mesh's fixed nodes r_B = K_B u_B.
+// 3p x 3p block of L_c at those nodes (one block solve of 3p columns). Reactions at the host's
+// constrained nodes are r_A = K_A u_A - f + J^T (K_B u_B)_tied (what the supports add to the
+// applied load and to the embedded meshes' pull), at an embedded mesh's fixed nodes r_B = K_B u_B.
 struct BodyResult {
   MeshResult host;
   std::vector<std::pair<int, MeshResult>> embedded;  // (mesh index, result)
@@ -200,7 +200,6 @@ struct BodyResult {
 BodyResult solve_body(const neurosim::interaction::Simulation& sim,
                       const neurosim::interaction::CoupledBody& body, const MeshLoads& loads,
                       const std::string& what) {
-  namespace ni = neurosim::interaction;
   const int h = body.host_index();
   const auto& host = sim.mesh(h);
   const int n = static_cast<int>(host.num_vertices());
@@ -227,14 +226,9 @@ BodyResult solve_body(const neurosim::interaction::Simulation& sim,
       d.segment<3>(static_cast<Eigen::Index>(dofs.size())) = disp;
       for (int a = 0; a < 3; ++a) dofs.push_back(3 * node + a);
     }
-    Eigen::MatrixXd columns(3 * n, p3);  // L_c E_P
-    Eigen::VectorXd e = Eigen::VectorXd::Zero(3 * n), col;
-    for (int j = 0; j < p3; ++j) {
-      e[dofs[j]] = 1.0;
-      body.coupled_displacement(e, col);
-      e[dofs[j]] = 0.0;
-      columns.col(j) = col;
-    }
+    Eigen::MatrixXd unit = Eigen::MatrixXd::Zero(3 * n, p3), columns;  // E_P, L_c E_P
+    for (int j = 0; j < p3; ++j) unit(dofs[j], j) = 1.0;
+    body.coupled_displacement(unit, columns);
     Eigen::MatrixXd block(p3, p3);
     Eigen::VectorXd gap(p3);
     for (int i = 0; i < p3; ++i) {

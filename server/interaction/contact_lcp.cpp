@@ -114,11 +114,13 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
   }
   LcpResult result;
   lambda.head(n).setZero();
+  double delta_scale = 0.0;  // max |delta|, unit m: the scale of the slack tolerance
   for (int i = 0; i < n; ++i) {
     if (!std::isfinite(delta[i]) || !std::isfinite(w(i, i))) {
       throw std::invalid_argument("ContactLcp::solve: non-finite input at row " +
                                   std::to_string(i));
     }
+    delta_scale = std::max(delta_scale, std::abs(delta[i]));
   }
   bool schur =
       use_schur_ && schur_ready_ && stable_rows == schur_rows_ && n - stable_rows <= contact_cap_;
@@ -141,7 +143,8 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
     schur = prefer_schur_;
   }
   if (schur) {
-    if (solve_schur(w, delta, n, tolerance, max_iterations, lambda, initial_active, result))
+    if (solve_schur(w, delta, n, delta_scale, tolerance, max_iterations, lambda, initial_active,
+                    result))
       return result;
     // Numerical trouble in the inactive-set factor: the reference path, from scratch.
     result = LcpResult{};
@@ -169,8 +172,6 @@ LcpResult ContactLcp::solve(const Eigen::MatrixXd& w, const Eigen::VectorXd& del
   }
   factor_valid_ = true;
   factored_rows_ = n;
-  double delta_scale = 0.0;
-  for (int i = 0; i < n; ++i) delta_scale = std::max(delta_scale, std::abs(delta[i]));
   if (delta_scale == 0.0) {
     num_active_ = 0;
     result.converged = true;
@@ -449,15 +450,14 @@ void ContactLcp::remove_inactive(int pos) {
 }
 
 bool ContactLcp::solve_schur(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n,
-                             double tolerance, int max_iterations, Eigen::VectorXd& lambda,
-                             const std::vector<char>* initial_active, LcpResult& result) {
+                             double delta_scale, double tolerance, int max_iterations,
+                             Eigen::VectorXd& lambda, const std::vector<char>* initial_active,
+                             LcpResult& result) {
   const int ns = schur_rows_, nc = n - ns;
   ++solve_count_;
   last_schur_ = true;
   num_active_ = 0;
   p_ = 0;
-  double delta_scale = 0.0;
-  for (int i = 0; i < n; ++i) delta_scale = std::max(delta_scale, std::abs(delta[i]));
   if (delta_scale == 0.0) {
     result.converged = true;
     return true;

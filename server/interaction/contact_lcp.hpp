@@ -158,9 +158,11 @@ class ContactLcp {
   bool refactor_inactive();
   bool append_inactive(int row);  // false: G_II lost definiteness (round-off)
   void remove_inactive(int pos);
-  bool solve_schur(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n, double tolerance,
-                   int max_iterations, Eigen::VectorXd& lambda,
-                   const std::vector<char>* initial_active, LcpResult& result);
+  // delta_scale: max |delta| over the n rows (solve() has it from its input checks).
+  bool solve_schur(const Eigen::MatrixXd& w, const Eigen::VectorXd& delta, int n,
+                   double delta_scale, double tolerance, int max_iterations,
+                   Eigen::VectorXd& lambda, const std::vector<char>* initial_active,
+                   LcpResult& result);
 };
 
 }  // namespace neurosim::interaction

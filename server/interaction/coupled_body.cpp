@@ -285,17 +285,25 @@ void CoupledBody::compute_sliding_operator() {
   timing_.sliding_s = seconds_since(t0);
 }
 
-void CoupledBody::coupled_displacement(const Eigen::VectorXd& forces_n,
-                                       Eigen::VectorXd& u_host_m) const {
+void CoupledBody::coupled_displacement(const Eigen::MatrixXd& forces_n,
+                                       Eigen::MatrixXd& u_host_m) const {
   const int n3 = 3 * static_cast<int>(host_->num_vertices());
-  if (forces_n.size() != n3 || !forces_n.allFinite())
+  if (forces_n.rows() != n3 || !forces_n.allFinite())
     throw std::invalid_argument("CoupledBody::coupled_displacement: bad force vector");
   const int nf = solver_->num_free_dofs();
-  Eigen::MatrixXd rhs(nf, 1), x;
-  for (int r = 0; r < nf; ++r) rhs(r, 0) = forces_n[solver_->free_dofs()[r]];
+  const auto& free = solver_->free_dofs();
+  Eigen::MatrixXd rhs(nf, forces_n.cols()), x;
+  for (int r = 0; r < nf; ++r) rhs.row(r) = forces_n.row(free[r]);
   coupled_solve_reduced(rhs, x);
-  u_host_m.setZero(n3);
-  for (int r = 0; r < nf; ++r) u_host_m[solver_->free_dofs()[r]] = x(r, 0);
+  u_host_m.setZero(n3, forces_n.cols());
+  for (int r = 0; r < nf; ++r) u_host_m.row(free[r]) = x.row(r);
+}
+
+void CoupledBody::coupled_displacement(const Eigen::VectorXd& forces_n,
+                                       Eigen::VectorXd& u_host_m) const {
+  Eigen::MatrixXd u;
+  coupled_displacement(Eigen::MatrixXd(forces_n), u);
+  u_host_m = u.col(0);
 }
 
 void CoupledBody::compute_boundary_operator() {

@@ -88,8 +88,10 @@ class CoupledBody {
     return sliding_columns_[column_of_[slot]];
   }
   // Coupled host displacement (ties included) for arbitrary nodal forces (3N_A, unit N), unit m.
-  // Two sparse solves when the body has ties, one otherwise.
+  // Two sparse solves when the body has ties, one otherwise; the matrix form solves all its
+  // columns (3N_A x k load cases) as one block.
   void coupled_displacement(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_host_m) const;
+  void coupled_displacement(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_host_m) const;
 
   // Directory of the disk cache of the boundary operator (L_bb, L_cb, K_add, G), keyed by a
   // hash of both meshes, materials, fixed nodes and the coupling map; empty: no cache.

@@ -158,8 +158,8 @@ GeneratedMesh mesh_to_target(const Polyhedron& surface, double volume_m3,
   }
   const double target = options.target_vertices;
   // The search counts vertices only (no sliver steps, no TetMesh); the chosen size is meshed
-  // again at the end. Start from about (volume / tets)^(1/3) with ~5 tets per vertex, then secant steps on
-  // log(vertices) against log(size) (slope about -3 for volume meshes, less when small).
+  // again at the end. Start from about (volume / tets)^(1/3) with ~5 tets per vertex, then secant
+  // steps on log(vertices) against log(size) (slope about -3 for volume meshes, less when small).
   double s = std::cbrt(volume_m3 / (0.6 * target));
   double best_err = std::numeric_limits<double>::infinity();
   GeneratedMesh best{TetMesh{}, 0.0, 0};
