@@ -9,7 +9,7 @@
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/iterative_tie.hpp"
 #include "server/interaction/simulation.hpp"
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 
 #include <unistd.h>
 #include <algorithm>
@@ -32,8 +32,7 @@ namespace {
 
 struct Scenario {
   std::string name;
-  neurosim::scene::Scene scene;
-  std::string path;
+  neurosim::scene::Model model;
   Eigen::Vector3d centre;  // where the tool presses (on the top face), unit m
   double radius_m;         // tool tip radius, unit m
   double depth_m;          // mean indentation, unit m
@@ -95,16 +94,18 @@ int main(int argc, char** argv) {
   if (sliding_steps < 0) sliding_steps = steps;
   std::vector<Scenario> scenarios;
   const std::string cube_path = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/cube_cylinder.scene";
-  scenarios.push_back({"cube_cylinder", neurosim::scene::read_scene(cube_path), cube_path,
+  scenarios.push_back({"cube_cylinder", neurosim::scene::load_model(cube_path),
                        Eigen::Vector3d(0.05, 0.05, 0.1), 0.0, 0.004});
   // The paper's probe (3 mm tip) touches a handful of nodes; a 25 mm tip 8 mm deep reaches ~20.
-  scenarios.back().scene.mutable_tools(0)->set_tip_radius_m(0.025);
+  scenarios.back().model.tools.at(0).tip_radius_m = 0.025;
   scenarios.back().radius_m = 0.025;
   scenarios.back().depth_m = 0.008;
   if (!quick) {
     scenarios.push_back({"brain_like",
-                         neurosim::scene::parse_scene(brain_like_scene(), "brain_like.scene"),
-                         "brain_like.scene", Eigen::Vector3d(0.07, 0.055, 0.09), 0.025, 0.008});
+                         neurosim::scene::compile(
+                             neurosim::scene::parse_scene(brain_like_scene(), "brain_like.scene"),
+                             "brain_like.scene"),
+                         Eigen::Vector3d(0.07, 0.055, 0.09), 0.025, 0.008});
   }
   std::ofstream residual_out;
   if (!residual_csv.empty()) {
@@ -129,7 +130,7 @@ int main(int argc, char** argv) {
     std::unique_ptr<ni::Simulation> sim;
     for (int start = 0; start < 2; ++start) {
       const auto t0 = Clock::now();
-      auto built = ni::Simulation::build(sc.scene, sc.path, options);
+      auto built = ni::Simulation::build(sc.model, options);
       const double build_s = std::chrono::duration<double>(Clock::now() - t0).count();
       const auto& st = built->setup_stats();
       // Coupling set-up: everything after the meshes exist (mesh generation is the mesher's cost).
@@ -259,13 +260,13 @@ int main(int argc, char** argv) {
     // from full-field solves at 20 poses of the timed path.
     for (int variant = 0; variant < (sliding_ref ? 2 : 1) && sliding_steps > 0; ++variant) {
       const std::string tag = variant == 0 ? "sliding" : "sliding_ref";
-      auto scene = sc.scene;
-      scene.mutable_couplings(0)->set_kind(neurosim::scene::Coupling::SLIDING);
+      auto model = sc.model;
+      model.couplings.at(0).kind = neurosim::scene::CouplingKind::kSliding;
       ni::SimulationOptions sopt;
       sopt.max_contact_nodes_per_tool = 20;
       sopt.sliding_inactive_set = variant == 0;
       const auto t0 = Clock::now();
-      auto ssim = ni::Simulation::build(scene, sc.path, sopt);
+      auto ssim = ni::Simulation::build(model, sopt);
       const double build_s = std::chrono::duration<double>(Clock::now() - t0).count();
       const auto& st = ssim->setup_stats();
       std::cerr << sc.name << " (" << tag << "): set-up " << build_s << " s (meshes "

@@ -15,7 +15,7 @@
 // p50/p99 in ms over the runs (wall, and CPU time of the thread: the machine may be shared);
 // samples = mean samples recomputed per run (of samples_total);
 // moved_tets = mean tetrahedra reported moved per run. One thread. --csv prints only the table.
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 #include "viewer_client/resample.hpp"
 
 #include <vtkImageCast.h>

@@ -5,7 +5,7 @@
 //   xvfb-run -a build/bin/viewer_bench [--scene FILE] [--frames N] [--size WxH] [--csv]
 // Prints per mode: frames per second (resample + render), mean slice/volume resample time per
 // frame, mean render time, and the first (full) resample.
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 #include "viewer_client/viewer/pipeline.hpp"
 
 #include <chrono>

@@ -8,9 +8,8 @@
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
 
-#include "scene.pb.h"
+#include "server/scene/scene.hpp"
 
-#include <google/protobuf/text_format.h>
 
 #include <time.h>
 #include <atomic>
@@ -137,18 +136,12 @@ int main(int argc, char** argv) {
   try {
     std::string scene_name;
     if (!scene_file.empty()) {
-      std::ifstream f(scene_file);
-      if (!f) throw std::runtime_error(scene_file + ": cannot open scene file");
-      std::stringstream ss;
-      ss << f.rdbuf();
-      neurosim::scene::Scene scene;
-      if (!google::protobuf::TextFormat::ParseFromString(ss.str(), &scene))
-        throw std::runtime_error(scene_file + ": not a valid scene (protobuf text format)");
-      scene_name = scene.name();
-      const auto& h = scene.haptics();
-      if (h.force_scale() > 0) cfg.force.force_scale = h.force_scale();
-      if (h.workspace_scale() > 0) cfg.force.workspace_scale = h.workspace_scale();
-      if (h.max_force_n() > 0) cfg.force.max_force_n = h.max_force_n();
+      // The server's loader: the same validation, the same defaults.
+      const neurosim::scene::Settings scene = neurosim::scene::load_settings(scene_file);
+      scene_name = scene.name;
+      cfg.force.force_scale = scene.haptics.force_scale;
+      cfg.force.workspace_scale = scene.haptics.workspace_scale;
+      cfg.force.max_force_n = scene.haptics.max_force_n;
     }
     std::unique_ptr<nh::Device> device = nh::make_device(spec);
     cfg.force.max_force_n = std::min(cfg.force.max_force_n, device->max_force_n());

@@ -7,7 +7,7 @@
 #include "server/interaction/simulation.hpp"
 #include "server/mesh/quality.hpp"
 #include "server/mesh/vtu.hpp"
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 
 #include <chrono>
 #include <cstdio>
@@ -87,42 +87,51 @@ void write_outputs(const fs::path& dir, const neurosim::mesh::TetMesh& mesh,
 }
 
 // Loads and prescribed displacements of one mesh (mesh: the one node ids refer to).
+struct Held {
+  Vec3 displacement_m{Vec3::Zero()};  // unit m, the held components only
+  std::array<bool, 3> components{{false, false, false}};
+};
 struct MeshLoads {
-  Eigen::VectorXd f;               // 3N, unit N
-  std::map<int, Vec3> prescribed;  // node -> displacement, unit m
-  int count{0};                    // scene entries on this mesh
+  Eigen::VectorXd f;          // 3N, unit N
+  std::map<int, Held> prescribed;  // node -> held components and their displacement
+  int count{0};               // scene entries on this mesh
 };
 
-MeshLoads gather_loads(const neurosim::scene::Scene& scene, const std::string& scene_path,
-                       const std::string& id, const neurosim::mesh::TetMesh& mesh) {
+MeshLoads gather_loads(const neurosim::scene::Model& model, int mesh_index) {
   MeshLoads out;
+  const auto& mesh = model.meshes[static_cast<std::size_t>(mesh_index)].mesh;
   out.f = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(mesh.num_vertices()));
-  for (int i = 0; i < scene.loads_size(); ++i) {
-    const auto& l = scene.loads(i);
-    if (l.mesh() != id) continue;
+  for (const auto& l : model.loads) {
+    if (l.mesh != mesh_index) continue;
     ++out.count;
-    auto nodes = neurosim::scene::select_nodes(mesh, l.region(),
-                                               scene_path + ": loads[" + std::to_string(i) + "]");
-    Vec3 per_node = neurosim::scene::to_vec3(l.force_n());
-    if (l.distribution() == neurosim::scene::Load::TOTAL_SPLIT_EQUALLY) {
-      per_node /= static_cast<double>(nodes.size());
-    }
-    for (int node : nodes) out.f.segment<3>(3 * node) += per_node;
+    for (int node : l.nodes) out.f.segment<3>(3 * node) += l.force_per_node_n;
   }
-  for (int i = 0; i < scene.prescribed_size(); ++i) {
-    const auto& p = scene.prescribed(i);
-    if (p.mesh() != id) continue;
+  for (const auto& p : model.prescribed) {
+    if (p.mesh != mesh_index) continue;
     ++out.count;
-    auto nodes = neurosim::scene::select_nodes(
-        mesh, p.region(), scene_path + ": prescribed[" + std::to_string(i) + "]");
-    for (int node : nodes) out.prescribed[node] = neurosim::scene::to_vec3(p.displacement_m());
+    for (int node : p.nodes) {
+      Held& h = out.prescribed[node];
+      for (int a = 0; a < 3; ++a) {
+        if (!p.components[a]) continue;
+        h.components[a] = true;
+        h.displacement_m[a] = p.displacement_m[a];
+      }
+    }
   }
   return out;
 }
 
+bool all_components(const MeshLoads& loads) {
+  for (const auto& [node, h] : loads.prescribed) {
+    (void)node;
+    if (!(h.components[0] && h.components[1] && h.components[2])) return false;
+  }
+  return true;
+}
+
 // Summary lines shared by both paths: largest displacement, equilibrium of the supports.
 void print_summary(const MeshResult& r, const Eigen::VectorXd& f,
-                   const std::map<int, Vec3>& prescribed) {
+                   const std::map<int, Held>& prescribed) {
   Vec3 total_load = Vec3::Zero(), total_reaction = Vec3::Zero(), prescribed_reaction = Vec3::Zero();
   for (const auto& [node, disp] : prescribed) {
     (void)disp;
@@ -151,7 +160,8 @@ void print_summary(const MeshResult& r, const Eigen::VectorXd& f,
 }
 
 // One mesh on its own (no coupling): factor, solve, reactions at fixed and prescribed nodes.
-MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& loads) {
+MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& loads,
+                       const std::string& what) {
   const int n = static_cast<int>(lm.mesh.num_vertices());
   const auto t1 = std::chrono::steady_clock::now();
   neurosim::fem::StaticSolver solver(lm.mesh, neurosim::fem::MaterialMap::uniform(lm.material),
@@ -169,10 +179,15 @@ MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& l
     for (int node : lm.fixed_nodes)
       r.reaction_n.segment<3>(3 * node) = residual.segment<3>(3 * node);
   } else {
+    if (!all_components(loads)) {
+      throw std::runtime_error(what +
+                               ": prescribed displacements of some components only are solved "
+                               "on coupled bodies only in this build");
+    }
     std::vector<int> nodes;
     Eigen::VectorXd d(3 * loads.prescribed.size());
-    for (const auto& [node, disp] : loads.prescribed) {
-      d.segment<3>(3 * nodes.size()) = disp;
+    for (const auto& [node, held] : loads.prescribed) {
+      d.segment<3>(3 * nodes.size()) = held.displacement_m;
       nodes.push_back(node);
       r.constrained[node] = 1;
     }
@@ -217,23 +232,30 @@ BodyResult solve_body(const neurosim::interaction::Simulation& sim,
   const auto t0 = std::chrono::steady_clock::now();
   BodyResult out;
   MeshResult& r = out.host;
-  body.coupled_displacement(loads.f, r.u_m);
+  // Host nodal forces: the loads plus, at the prescribed components, the forces that hold them.
+  Eigen::VectorXd forces_n = loads.f;
   if (!loads.prescribed.empty()) {
-    const int p3 = 3 * static_cast<int>(loads.prescribed.size());
-    std::vector<int> dofs;
-    Eigen::VectorXd d(p3);
-    for (const auto& [node, disp] : loads.prescribed) {
-      d.segment<3>(static_cast<Eigen::Index>(dofs.size())) = disp;
-      for (int a = 0; a < 3; ++a) dofs.push_back(3 * node + a);
+    std::vector<int> dofs;  // the held components only (the others stay free)
+    std::vector<double> held;
+    for (const auto& [node, hold] : loads.prescribed) {
+      for (int a = 0; a < 3; ++a) {
+        if (!hold.components[a]) continue;
+        dofs.push_back(3 * node + a);
+        held.push_back(hold.displacement_m[a]);
+      }
     }
+    const int p3 = static_cast<int>(dofs.size());
+    const Eigen::VectorXd d = Eigen::Map<const Eigen::VectorXd>(held.data(), p3);
     Eigen::MatrixXd unit = Eigen::MatrixXd::Zero(3 * n, p3), columns;  // E_P, L_c E_P
     for (int j = 0; j < p3; ++j) unit(dofs[j], j) = 1.0;
     body.coupled_displacement(unit, columns);
+    Eigen::VectorXd u_loads;
+    body.coupled_displacement(loads.f, u_loads);
     Eigen::MatrixXd block(p3, p3);
     Eigen::VectorXd gap(p3);
     for (int i = 0; i < p3; ++i) {
       block.row(i) = columns.row(dofs[i]);
-      gap[i] = d[i] - r.u_m[dofs[i]];
+      gap[i] = d[i] - u_loads[dofs[i]];
     }
     const Eigen::LDLT<Eigen::MatrixXd> ldlt(0.5 * (block + block.transpose()));
     if (ldlt.info() != Eigen::Success || !ldlt.isPositive() || ldlt.vectorD().minCoeff() <= 0.0) {
@@ -241,15 +263,25 @@ BodyResult solve_body(const neurosim::interaction::Simulation& sim,
                                ": the compliance at the prescribed nodes is singular (a "
                                "prescribed node that cannot move?)");
     }
-    r.u_m += columns * ldlt.solve(gap);
+    const Eigen::VectorXd held_n = ldlt.solve(gap);
+    for (int j = 0; j < p3; ++j) forces_n[dofs[j]] += held_n[j];
   }
+  // Fields of the host and its tied meshes for these forces: the implementation the server's
+  // field thread uses (one coupled solve, tied meshes from the host field).
+  neurosim::interaction::FieldSnapshot snapshot;
+  sim.snapshot(snapshot);
+  auto& forces_on_body = snapshot.bodies.at(static_cast<std::size_t>(sim.body_index(h)));
+  forces_on_body.slots.clear();
+  forces_on_body.forces_n.clear();
+  forces_on_body.nodal_forces_n = forces_n;
+  sim.displacements(snapshot, h, r.u_m);
   // Embedded meshes and the forces they put on the host.
   Eigen::VectorXd coupling_on_host = Eigen::VectorXd::Zero(3 * n);
   const auto& ties = body.ties();
   for (std::size_t t = 0; t < ties.size(); ++t) {
     const auto& tie = ties[t];
     MeshResult rb;
-    body.embedded_displacement(static_cast<int>(t), r.u_m, rb.u_m);
+    sim.displacements(snapshot, tie.mesh, rb.u_m);
     const auto k_b = neurosim::fem::assemble_stiffness(
         *tie.geometry, neurosim::fem::MaterialMap::uniform(tie.material));
     const Eigen::VectorXd internal = k_b * rb.u_m;  // force B's elements need at its nodes
@@ -343,13 +375,19 @@ int run(int argc, char** argv) {
     return 2;
   }
   const auto t_start = std::chrono::steady_clock::now();
-  const auto scene = neurosim::scene::read_scene(scene_path);
-  const fs::path scene_dir = fs::path(scene_path).parent_path();
-  if (!only_mesh.empty() && neurosim::scene::find_mesh(scene, only_mesh) < 0) {
+  const neurosim::scene::Model model = neurosim::scene::load_model(scene_path);
+  const double load_s = seconds_since(t_start);
+  if (!only_mesh.empty() && model.find_mesh(only_mesh) < 0) {
     throw std::invalid_argument(scene_path + ": --mesh " + only_mesh + ": no such mesh");
   }
-  std::cout << "scene " << scene.name() << " (" << scene_path << ")\n";
-  const int num_meshes = scene.meshes_size();
+  // A static solve of another elasticity tier would silently be a linear one: refused.
+  if (model.effects.tier != neurosim::scene::Tier::kLinear) {
+    throw std::runtime_error(scene_path + ": effects.tier " +
+                             neurosim::scene::tier_name(model.effects.tier) +
+                             " is not implemented by neurosim-solve (implemented: LINEAR)");
+  }
+  std::cout << "scene " << model.name << " (" << scene_path << ")\n";
+  const int num_meshes = static_cast<int>(model.meshes.size());
   // Per mesh (scene order): the result, the mesh it refers to and its fixed nodes.
   struct Solved {
     bool done{false};
@@ -358,37 +396,35 @@ int run(int argc, char** argv) {
     std::vector<int> fixed;
   };
   std::vector<Solved> solved(static_cast<std::size_t>(num_meshes));
-  std::vector<std::unique_ptr<neurosim::scene::LoadedMesh>> alone(num_meshes);
 
   // Coupled bodies first: the simulation model the server builds (without tools), so the tie,
   // the carving and the coupling map are the server's.
   std::unique_ptr<neurosim::interaction::Simulation> sim;
   std::vector<char> in_body(static_cast<std::size_t>(num_meshes), 0);
-  const bool coupled = scene.effects().coupling() && scene.couplings_size() > 0 && !uncoupled;
-  if (scene.effects().coupling() && scene.couplings_size() > 0 && uncoupled && !quiet) {
+  const bool has_couplings = model.effects.coupling && !model.couplings.empty();
+  const bool coupled = has_couplings && !uncoupled;
+  if (has_couplings && uncoupled && !quiet) {
     std::cout << "note: --uncoupled: the scene's couplings are not applied; every mesh is solved "
                  "on its own\n";
   }
   if (coupled) {
-    auto model_scene = scene;
-    model_scene.mutable_effects()->set_tool_contact(false);
-    model_scene.mutable_effects()->set_deformation_output(false);
-    model_scene.clear_tools();
+    auto static_model = model;
+    static_model.effects.tool_contact = false;
+    static_model.effects.deformation_output = false;
+    static_model.tools.clear();
     const auto t0 = std::chrono::steady_clock::now();
-    sim = neurosim::interaction::Simulation::build(model_scene, scene_path);
+    sim = neurosim::interaction::Simulation::build(static_model);
     const double build_s = seconds_since(t0);
     for (int m = 0; m < num_meshes; ++m) {
       const auto* body = sim->body_of(m);
       if (body == nullptr || body->host_index() != m) continue;
       const std::string what = scene_path + ": mesh \"" + sim->mesh_id(m) + "\"";
-      const auto& entry = scene.meshes(m);
       print_mesh_header(sim->mesh_id(m), sim->mesh(m), sim->fixed_nodes(m).size(),
-                        neurosim::scene::to_material(entry.material(), what), build_s);
-      const MeshLoads loads = gather_loads(scene, scene_path, sim->mesh_id(m), sim->mesh(m));
+                        model.meshes[static_cast<std::size_t>(m)].material, load_s + build_s);
+      const MeshLoads loads = gather_loads(model, m);
       for (const auto& tie : body->ties()) {
         in_body[static_cast<std::size_t>(tie.mesh)] = 1;
-        if (gather_loads(scene, scene_path, sim->mesh_id(tie.mesh), sim->mesh(tie.mesh)).count >
-            0) {
+        if (gather_loads(model, tie.mesh).count > 0) {
           throw std::runtime_error(scene_path + ": mesh \"" + sim->mesh_id(tie.mesh) +
                                    "\" is tied to \"" + sim->mesh_id(m) +
                                    "\": neurosim-solve takes loads and prescribed displacements "
@@ -417,28 +453,23 @@ int run(int argc, char** argv) {
   // Every other mesh on its own.
   for (int m = 0; m < num_meshes; ++m) {
     if (in_body[static_cast<std::size_t>(m)]) continue;
-    const auto& entry = scene.meshes(m);
-    const auto t0 = std::chrono::steady_clock::now();
-    alone[m] = std::make_unique<neurosim::scene::LoadedMesh>(
-        neurosim::scene::load_mesh(entry, scene_dir, scene_path));
-    const auto& lm = *alone[m];
-    const double load_s = seconds_since(t0);
+    const auto& lm = model.meshes[static_cast<std::size_t>(m)];
     const std::string what = scene_path + ": mesh \"" + lm.id + "\"";
     print_mesh_header(lm.id, lm.mesh, lm.fixed_nodes.size(), lm.material, load_s);
     if (coupled) {
-      for (const auto& c : scene.couplings()) {
-        if (c.embedded() == lm.id && c.kind() == neurosim::scene::Coupling::SLIDING) {
-          std::cout << "  note: its SLIDING coupling to " << c.host()
+      for (const auto& c : model.couplings) {
+        if (c.embedded == m && c.kind == neurosim::scene::CouplingKind::kSliding) {
+          std::cout << "  note: its SLIDING coupling to " << model.meshes[c.host].id
                     << " is not applied by the static solver; solved on its own\n";
         }
       }
     }
-    const MeshLoads loads = gather_loads(scene, scene_path, lm.id, lm.mesh);
+    const MeshLoads loads = gather_loads(model, m);
     if (loads.count == 0 || (!only_mesh.empty() && only_mesh != lm.id)) {
       std::cout << "  no load or prescribed displacement: at rest, not solved\n";
       continue;
     }
-    MeshResult r = solve_alone(lm, loads);
+    MeshResult r = solve_alone(lm, loads, what);
     if (!r.u_m.allFinite() || !r.reaction_n.allFinite()) {
       throw std::runtime_error(what + ": solution is not finite");
     }
@@ -450,7 +481,7 @@ int run(int argc, char** argv) {
   for (int m = 0; m < num_meshes; ++m) {
     const auto& s = solved[static_cast<std::size_t>(m)];
     if (!s.done) continue;
-    const std::string& id = scene.meshes(m).id();
+    const std::string& id = model.meshes[static_cast<std::size_t>(m)].id;
     write_outputs(fs::path(out_dir) / id, *s.mesh, s.fixed, s.result);
     if (!primary_written && (only_mesh.empty() || only_mesh == id)) {
       for (const char* name : {"displacement.csv", "reactions.csv", "result.vtu"}) {

@@ -10,7 +10,7 @@
 #include "server/interaction/iterative_tie.hpp"
 #include "server/interaction/simulation.hpp"
 #include "server/mesh/vtu.hpp"
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 
 #include <cstdlib>
 #include <cstring>
@@ -79,19 +79,20 @@ int main(int argc, char** argv) {
   }
   try {
     fs::create_directories(out);
-    auto scene = neurosim::scene::read_scene(scene_path);
-    if (scene.tools_size() == 0) throw std::runtime_error(scene_path + ": no tool");
-    if (tip_radius > 0.0) scene.mutable_tools(0)->set_tip_radius_m(tip_radius);
-    const double r = scene.tools(0).tip_radius_m();
+    auto model = neurosim::scene::load_model(scene_path);
+    if (model.tools.empty()) throw std::runtime_error(scene_path + ": no tool");
+    if (model.couplings.empty()) throw std::runtime_error(scene_path + ": no coupling");
+    if (tip_radius > 0.0) model.tools[0].tip_radius_m = tip_radius;
+    const double r = model.tools[0].tip_radius_m;
     std::ofstream fig10(out / "fig10_cylinder.csv"), fig14(out / "fig14_force.csv");
     fig10 << "coupling,side,depth_m,cylinder_max_displacement_m,cylinder_mean_dx_m\n";
     fig14 << "coupling,side,depth_m,force_n,contact_nodes\n";
     std::unique_ptr<ni::Simulation> coupled;
     for (int coupling = 0; coupling <= 1; ++coupling) {
-      scene.mutable_effects()->set_coupling(coupling != 0);
-      auto sim = ni::Simulation::build(scene, scene_path);
-      const int host = neurosim::scene::find_mesh(scene, scene.couplings(0).host());
-      const int emb = neurosim::scene::find_mesh(scene, scene.couplings(0).embedded());
+      model.effects.coupling = coupling != 0;
+      auto sim = ni::Simulation::build(model);
+      const int host = model.couplings[0].host;
+      const int emb = model.couplings[0].embedded;
       neurosim::mesh::Vec3 lo, hi;
       sim->mesh(host).bounds(lo, hi);
       const neurosim::mesh::Vec3 c = 0.5 * (lo + hi);
@@ -132,7 +133,7 @@ int main(int argc, char** argv) {
 
     // Paper Figure 13: the iterative method's residual per iteration, for the last push.
     {
-      const int host = neurosim::scene::find_mesh(scene, scene.couplings(0).host());
+      const int host = model.couplings[0].host;
       const ni::CoupledBody* body = coupled->body_of(host);
       std::vector<int> slots;
       std::vector<ni::Vec3> forces;

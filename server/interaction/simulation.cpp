@@ -4,13 +4,11 @@
 
 #include "server/fusion/coupling_map.hpp"
 #include "server/fusion/inclusion.hpp"
-#include "server/fusion/priority.hpp"
 #include "server/fusion/triangle_surface.hpp"
 #include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/sliding_coupling.hpp"
 #include "server/interaction/tool_geometry.hpp"
-#include "server/scene/scene.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -85,8 +83,7 @@ std::vector<char> tets_inside(const mesh::TetMesh& host, const std::vector<mesh:
 
 class SimulationImpl final : public Simulation {
  public:
-  SimulationImpl(const scene::Scene& scene, const std::string& scene_path,
-                 const SimulationOptions& options);
+  SimulationImpl(const scene::Model& model, const SimulationOptions& options);
 
   int num_meshes() const override { return static_cast<int>(meshes_.size()); }
   const std::string& mesh_id(int m) const override { return entry(m).loaded->id; }
@@ -115,6 +112,9 @@ class SimulationImpl final : public Simulation {
   }
   void sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const override;
   double sliding_penetration_m() const override;
+  void snapshot(FieldSnapshot& s) const override;
+  void displacements(FieldSnapshot& s, int mesh, Eigen::VectorXd& u_m) const override;
+  int body_index(int m) const override { return entry(m).body; }
 
  private:
   struct MeshEntry {
@@ -151,8 +151,19 @@ class SimulationImpl final : public Simulation {
   }
   void reserve_workspace(int tools);
   void collect_rows(int tool, const ToolPose& pose, const Vec3& axis);
-  // Host field for the last good contact and sliding forces (ties included).
-  void host_field(const BodyEntry& b, Eigen::VectorXd& u_host_m) const;
+  // Host field (ties included) for contact forces on slots, sliding row forces and other nodal
+  // forces (may be empty); the cached full columns only when `use_columns` (stepping thread).
+  void host_field(const BodyEntry& b, const std::vector<int>& slots,
+                  const std::vector<Vec3>& forces_n, const Eigen::VectorXd& sliding_lambda_n,
+                  const Eigen::VectorXd& nodal_forces_n, bool use_columns,
+                  Eigen::VectorXd& u_host_m) const;
+  // Host field for the last good step (stepping thread).
+  void host_field(const BodyEntry& b, Eigen::VectorXd& u_host_m) const {
+    host_field(b, b.force_slots, b.forces_n, b.sliding_lambda, Eigen::VectorXd(), true, u_host_m);
+  }
+  // Field of mesh `m` (entry e) from its body's host field.
+  void mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
+                  const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
 
   SimulationOptions options_;
   std::string source_;
@@ -177,69 +188,41 @@ class SimulationImpl final : public Simulation {
   std::vector<ToolContact> last_good_;
 };
 
-SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& scene_path,
-                               const SimulationOptions& options)
-    : options_(options), source_(scene_path) {
+SimulationImpl::SimulationImpl(const scene::Model& model, const SimulationOptions& options)
+    : options_(options), source_(model.source) {
   const auto t_start = Clock::now();
   if (options_.max_contact_nodes_per_tool < 1 || options_.lcp_max_iterations < 1 ||
       !(options_.lcp_tolerance > 0.0) || !(options_.max_penetration_m >= 0.0) ||
       !std::isfinite(options_.max_penetration_m) || !(options_.candidate_margin >= 0.0)) {
     throw std::invalid_argument(source_ + ": invalid SimulationOptions");
   }
-  const std::filesystem::path dir = std::filesystem::path(scene_path).parent_path();
+  // Only the linear tier is implemented: any other is refused, never run as linear.
+  if (model.effects.tier != scene::Tier::kLinear) {
+    throw std::runtime_error(source_ + ": effects.tier " + scene::tier_name(model.effects.tier) +
+                             " is not implemented by this build (implemented: LINEAR)");
+  }
 
-  // Meshes, in scene order.
+  // Meshes, in scene order (copies: a host is carved below).
   auto t0 = Clock::now();
-  for (int i = 0; i < scene.meshes_size(); ++i) {
+  for (const auto& lm : model.meshes) {
     MeshEntry e;
-    e.loaded =
-        std::make_unique<scene::LoadedMesh>(scene::load_mesh(scene.meshes(i), dir, scene_path));
+    e.loaded = std::make_unique<scene::LoadedMesh>(lm);
     meshes_.push_back(std::move(e));
   }
   setup_.load_meshes_s = seconds_since(t0);
 
-  // Roles from the couplings (only when the scene asks for coupling).
+  // Roles from the couplings (only when the scene asks for coupling; checked by the scene
+  // compiler: priorities, one host per embedded mesh, no nesting).
   std::vector<int> host_of(meshes_.size(), -1);
   std::vector<char> is_host(meshes_.size(), 0);
-  std::vector<int> coupling_of(meshes_.size(), -1);
   std::vector<char> iterative_host(meshes_.size(), 0);  // a coupling asks for the baseline
   std::vector<char> sliding(meshes_.size(), 0);         // embedded by a SLIDING coupling
-  if (scene.effects().coupling()) {
-    for (int c = 0; c < scene.couplings_size(); ++c) {
-      const auto& cp = scene.couplings(c);
-      const std::string what = source_ + ": couplings[" + std::to_string(c) + "] (" + cp.host() +
-                               " / " + cp.embedded() + ")";
-      const int h = scene::find_mesh(scene, cp.host()), b = scene::find_mesh(scene, cp.embedded());
-      if (h < 0 || b < 0 || h == b)
-        throw std::runtime_error(what + ": unknown or identical meshes");
-      if (cp.kind() != scene::Coupling::TIE && cp.kind() != scene::Coupling::SLIDING)
-        throw std::runtime_error(what + ": unknown coupling kind " + std::to_string(cp.kind()));
-      if (cp.kind() == scene::Coupling::SLIDING && cp.method() == scene::Coupling::ITERATIVE) {
-        throw std::runtime_error(what +
-                                 ": method ITERATIVE is the tie baseline; SLIDING is solved "
-                                 "exactly (method EXACT)");
-      }
-      // Priority decides which mesh gets the new boundary (paper 2.4); it must agree with the
-      // scene.
-      const auto pair = fusion::decide_roles(
-          {&meshes_[h].loaded->mesh, meshes_[h].loaded->priority, cp.host()},
-          {&meshes_[b].loaded->mesh, meshes_[b].loaded->priority, cp.embedded()});
-      if (pair.host.mesh != &meshes_[h].loaded->mesh) {
-        throw std::runtime_error(what + ": the host must have the lower priority");
-      }
-      if (host_of[b] >= 0)
-        throw std::runtime_error(what + ": mesh " + cp.embedded() + " is embedded twice");
-      host_of[b] = h;
-      coupling_of[b] = c;
-      if (cp.method() == scene::Coupling::ITERATIVE) iterative_host[h] = 1;
-      sliding[b] = cp.kind() == scene::Coupling::SLIDING;
-      is_host[h] = 1;
-    }
-    for (std::size_t m = 0; m < meshes_.size(); ++m) {
-      if (is_host[m] && host_of[m] >= 0) {
-        throw std::runtime_error(source_ + ": mesh " + meshes_[m].loaded->id +
-                                 " is both host and embedded (nested ties are not supported)");
-      }
+  if (model.effects.coupling) {
+    for (const auto& cp : model.couplings) {
+      host_of[cp.embedded] = cp.host;
+      if (cp.method == scene::CouplingMethod::kIterative) iterative_host[cp.host] = 1;
+      sliding[cp.embedded] = cp.kind == scene::CouplingKind::kSliding;
+      is_host[cp.host] = 1;
     }
   }
 
@@ -436,21 +419,10 @@ SimulationImpl::SimulationImpl(const scene::Scene& scene, const std::string& sce
     }
   }
 
-  for (int t = 0; t < scene.tools_size(); ++t) {
-    const auto& tool = scene.tools(t);
-    ToolShape shape{tool.tip_radius_m(), tool.shaft_radius_m(), tool.shaft_length_m()};
-    if (!(shape.tip_radius_m > 0.0) || !std::isfinite(shape.tip_radius_m) ||
-        !(shape.shaft_radius_m >= 0.0) || !std::isfinite(shape.shaft_radius_m) ||
-        !(shape.shaft_length_m >= 0.0) || !std::isfinite(shape.shaft_length_m)) {
-      throw std::runtime_error(source_ + ": tools[" + std::to_string(t) + "] (" + tool.id() +
-                               "): radii and length must be finite, tip radius > 0");
-    }
-    tools_.push_back(shape);
+  if (model.effects.tool_contact) {
+    for (const auto& tool : model.tools)
+      tools_.push_back(ToolShape{tool.tip_radius_m, tool.shaft_radius_m, tool.shaft_length_m});
   }
-  if (scene.effects().tool_contact() && tools_.empty()) {
-    throw std::runtime_error(source_ + ": effects.tool_contact is set but the scene has no tools");
-  }
-  if (!scene.effects().tool_contact()) tools_.clear();
   missing_.resize(bodies_.size());
   setup_.sliding_rows = num_sliding_;
   sliding_active_.assign(num_sliding_, 0);
@@ -774,25 +746,55 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
 }
 
-void SimulationImpl::host_field(const BodyEntry& b, Eigen::VectorXd& u_host_m) const {
-  const bool sliding_force = b.sliding_lambda.size() > 0 && b.sliding_lambda.maxCoeff() > 0.0;
-  if (!sliding_force) {
-    if (!b.body->full_field_from_columns(b.force_slots, b.forces_n, u_host_m))
-      b.body->host_displacement(b.force_slots, b.forces_n, u_host_m);
+void SimulationImpl::host_field(const BodyEntry& b, const std::vector<int>& slots,
+                                const std::vector<Vec3>& forces_n,
+                                const Eigen::VectorXd& sliding_lambda_n,
+                                const Eigen::VectorXd& nodal_forces_n, bool use_columns,
+                                Eigen::VectorXd& u_host_m) const {
+  const bool sliding_force = sliding_lambda_n.size() > 0 && sliding_lambda_n.maxCoeff() > 0.0;
+  const int n3 = 3 * static_cast<int>(b.body->host().num_vertices());
+  if (nodal_forces_n.size() != 0 && nodal_forces_n.size() != n3) {
+    throw std::invalid_argument(source_ + ": nodal forces of host " +
+                                meshes_[b.body->host_index()].loaded->id + ": " +
+                                std::to_string(nodal_forces_n.size()) + " values for " +
+                                std::to_string(n3) + " dofs");
+  }
+  if (!sliding_force && nodal_forces_n.size() == 0) {
+    if (!use_columns || !b.body->full_field_from_columns(slots, forces_n, u_host_m))
+      b.body->host_displacement(slots, forces_n, u_host_m);
     return;
   }
-  // Contact forces at their nodes plus the sliding forces J_A^T lambda on S'.
-  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * static_cast<int>(b.body->host().num_vertices()));
-  for (std::size_t k = 0; k < b.force_slots.size(); ++k)
-    f.segment<3>(3 * b.body->contact_nodes()[b.force_slots[k]]) += b.forces_n[k];
+  // Contact forces at their nodes, the sliding forces J_A^T lambda on S', other nodal forces.
+  Eigen::VectorXd f = nodal_forces_n.size() == n3 ? nodal_forces_n : Eigen::VectorXd::Zero(n3);
+  for (std::size_t k = 0; k < slots.size(); ++k)
+    f.segment<3>(3 * b.body->contact_nodes()[slots[k]]) += forces_n[k];
   const auto& rows = b.body->sliding_rows();
-  for (std::size_t k = 0; k < rows.size(); ++k) {
-    const double l = b.sliding_lambda[static_cast<int>(k)];
+  for (std::size_t k = 0; k < rows.size() && sliding_force; ++k) {
+    const double l = sliding_lambda_n[static_cast<int>(k)];
     if (l == 0.0) continue;
     for (int a = 0; a < 3; ++a)
       f.segment<3>(3 * rows[k].nodes[a]) += (l * rows[k].weights[a]) * rows[k].normal;
   }
   b.body->coupled_displacement(f, u_host_m);
+}
+
+void SimulationImpl::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
+                                const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const {
+  const BodyEntry& b = bodies_[e.body];
+  if (e.slide >= 0) {
+    const auto& sl = *b.slides[e.slide];
+    const Eigen::VectorXd lambda =
+        sliding_lambda_n.size() > 0
+            ? Eigen::VectorXd(sliding_lambda_n.segment(b.slide_first_row[e.slide], sl.size()))
+            : Eigen::VectorXd(Eigen::VectorXd::Zero(sl.size()));
+    sl.displacement(lambda, u_m);
+    return;
+  }
+  if (e.tie < 0) {
+    u_m = u_host_m;
+    return;
+  }
+  b.body->embedded_displacement(e.tie, u_host_m, u_m);
 }
 
 void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
@@ -802,9 +804,8 @@ void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
     return;
   }
   const BodyEntry& b = bodies_[e.body];
-  if (e.slide >= 0) {
-    const auto& sl = *b.slides[e.slide];
-    sl.displacement(b.sliding_lambda.segment(b.slide_first_row[e.slide], sl.size()), u_m);
+  if (e.slide >= 0) {  // B's field depends on the sliding forces only
+    mesh_field(e, b.sliding_lambda, Eigen::VectorXd(), u_m);
     return;
   }
   if (e.tie < 0) {
@@ -813,7 +814,41 @@ void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
   }
   Eigen::VectorXd u_host;
   host_field(b, u_host);
-  b.body->embedded_displacement(e.tie, u_host, u_m);
+  mesh_field(e, b.sliding_lambda, u_host, u_m);
+}
+
+void SimulationImpl::snapshot(FieldSnapshot& s) const {
+  s.bodies.resize(bodies_.size());
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    auto& out = s.bodies[i];
+    const auto& b = bodies_[i];
+    out.slots = b.force_slots;
+    out.forces_n = b.forces_n;
+    out.sliding_lambda_n = b.sliding_lambda;
+    out.nodal_forces_n.resize(0);
+    out.host_done = false;
+  }
+}
+
+void SimulationImpl::displacements(FieldSnapshot& s, int m, Eigen::VectorXd& u_m) const {
+  const MeshEntry& e = entry(m);
+  if (e.body < 0) {
+    u_m.setZero(3 * static_cast<int>(e.loaded->mesh.num_vertices()));
+    return;
+  }
+  if (s.bodies.size() != bodies_.size()) {
+    throw std::invalid_argument(source_ + ": field snapshot has " +
+                                std::to_string(s.bodies.size()) + " bodies, the model " +
+                                std::to_string(bodies_.size()));
+  }
+  auto& sb = s.bodies[e.body];
+  const BodyEntry& b = bodies_[e.body];
+  if (e.slide < 0 && !sb.host_done) {
+    host_field(b, sb.slots, sb.forces_n, sb.sliding_lambda_n, sb.nodal_forces_n, false,
+               sb.u_host_m);
+    sb.host_done = true;
+  }
+  mesh_field(e, sb.sliding_lambda_n, sb.u_host_m, u_m);
 }
 
 void SimulationImpl::sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const {
@@ -861,10 +896,9 @@ double SimulationImpl::tie_residual_m() const {
 
 }  // namespace
 
-std::unique_ptr<Simulation> Simulation::build(const scene::Scene& scene,
-                                              const std::string& scene_path,
+std::unique_ptr<Simulation> Simulation::build(const scene::Model& model,
                                               const SimulationOptions& options) {
-  return std::make_unique<SimulationImpl>(scene, scene_path, options);
+  return std::make_unique<SimulationImpl>(model, options);
 }
 
 }  // namespace neurosim::interaction

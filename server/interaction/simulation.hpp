@@ -5,8 +5,8 @@
 // Extend freely; do not change the meaning of what is here without telling the lead.
 #pragma once
 
-#include "scene.pb.h"
 #include "server/mesh/tet_mesh.hpp"
+#include "server/scene/model.hpp"
 
 #include <Eigen/Core>
 
@@ -64,6 +64,23 @@ struct SlidingPairState {
   Vec3 normal{Vec3::Zero()};  // unit, B's outward surface normal (from B towards A)
   double initial_gap_m{0.0};  // g0 >= 0, unit m
   double force_n{0.0};        // last good step's normal force (>= 0), unit N
+};
+
+// What displacement fields are computed from: the last good step's forces on every body.
+// Simulation::snapshot fills it on the stepping thread (a copy, no solve);
+// Simulation::displacements(snapshot, ...) reads it on any thread and touches nothing step()
+// writes, so the server's field thread, neurosim-solve and the tests share one implementation.
+struct FieldSnapshot {
+  struct Body {
+    std::vector<int> slots;              // contact slots carrying a force
+    std::vector<Vec3> forces_n;          // per slot, the force on the tissue, unit N
+    Eigen::VectorXd sliding_lambda_n;    // per sliding row of the body, normal force, unit N
+    Eigen::VectorXd nodal_forces_n;      // optional: any other host nodal forces (3N_A), unit N
+    // The host field for these forces (3N_A, unit m), computed on the first request.
+    Eigen::VectorXd u_host_m;
+    bool host_done{false};
+  };
+  std::vector<Body> bodies;  // one per body (Simulation::body_index)
 };
 
 // Options the scene does not give (limits, tolerances), with defaults.
@@ -133,9 +150,10 @@ struct SetupStats {
 
 class Simulation {
  public:
-  // Builds only what scene.effects() asks for (no coupling → no inclusion decision, ...).
-  // Throws std::runtime_error naming the scene file and the mesh/coupling on bad input.
-  static std::unique_ptr<Simulation> build(const scene::Scene& scene, const std::string& scene_path,
+  // Builds only what model.effects asks for (no coupling → no inclusion decision, ...).
+  // Throws std::runtime_error naming the scene file and the mesh/coupling on bad input, and for
+  // an elasticity tier this build does not implement (never runs another tier instead).
+  static std::unique_ptr<Simulation> build(const scene::Model& model,
                                            const SimulationOptions& options = {});
   virtual ~Simulation() = default;
 
@@ -149,13 +167,25 @@ class Simulation {
                     StepStats& stats) = 0;
 
   // Displacement of every vertex of `mesh` for the last step's contact and coupling forces
-  // (3N, unit m); one sparse solve per mesh, only when someone asks.
-  // (issue 4: a host with cache_full_field_columns sums cached columns instead of solving; an
-  // embedded mesh takes its host's field on the tied nodes plus one solve for its interior.
-  // Reads what step() writes: call it from the stepping thread or serialize the two.)
+  // (3N, unit m); one sparse solve per mesh, only when someone asks. A host with
+  // cache_full_field_columns sums cached columns instead of solving; an embedded mesh takes its
+  // host's field on the tied nodes plus one solve for its interior. Reads what step() writes:
+  // call it from the stepping thread (or use a snapshot).
   virtual void displacements(int mesh, Eigen::VectorXd& u_m) const = 0;
+  // The last good step's forces, copied (stepping thread; no solve, no allocation once sized).
+  // Defaults (test doubles without bodies): an empty snapshot.
+  virtual void snapshot(FieldSnapshot& s) const { s.bodies.clear(); }
+  // Displacement of `mesh` for the forces of `s` (3N, unit m): the same fields as above, from
+  // any thread (never reads the step's state or its caches); the host field of a body is solved
+  // once per snapshot and serves the host and its tied meshes. Default (test doubles): the
+  // stepping-thread path.
+  virtual void displacements(FieldSnapshot& s, int mesh, Eigen::VectorXd& u_m) const {
+    (void)s;
+    displacements(mesh, u_m);
+  }
+  // The body `mesh` belongs to (index into FieldSnapshot::bodies), -1 if inert.
+  virtual int body_index(int mesh) const { (void)mesh; return -1; }
 
-  // --- added by issue 4 (interaction) ---
   // Meshes that take part: a mesh with no fixed node that is not tied to a host (e.g. the
   // embedded mesh with coupling off) is inert: never touched, displacement zero.
   virtual bool mesh_active(int mesh) const = 0;

@@ -1,8 +1,5 @@
 #include "server/scene/scene.hpp"
 
-#include "server/mesh/generate.hpp"
-#include "server/mesh/io.hpp"
-
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 
@@ -113,19 +110,6 @@ Scene read_scene(const std::filesystem::path& path) {
   return parse_scene(text.str(), path.string());
 }
 
-fem::Material to_material(const Material& material, const std::string& what) {
-  fem::Material m;
-  m.youngs_modulus_pa = material.youngs_modulus_pa();
-  m.poisson_ratio = material.poisson_ratio();
-  m.name = material.name().empty() ? what : material.name();
-  try {
-    m.validate();
-  } catch (const std::invalid_argument& e) {
-    throw std::runtime_error(what + ": " + e.what());
-  }
-  return m;
-}
-
 void validate_scene(const Scene& scene, const std::string& source) {
   if (scene.meshes_size() == 0) fail(source, "meshes", "a scene needs at least one mesh");
   std::set<std::string> ids;
@@ -156,7 +140,20 @@ void validate_scene(const Scene& scene, const std::string& source) {
       }
     }
     if (!m.has_material()) fail(source, f + ".material", "missing");
-    to_material(m.material(), source + ": " + f + ".material");
+    {
+      const auto& mat = m.material();
+      if (!std::isfinite(mat.youngs_modulus_pa()) || !(mat.youngs_modulus_pa() > 0.0)) {
+        std::ostringstream msg;
+        msg << mat.youngs_modulus_pa() << " must be finite and > 0 (unit Pa)";
+        fail(source, f + ".material.youngs_modulus_pa", msg.str());
+      }
+      if (!std::isfinite(mat.poisson_ratio()) || !(mat.poisson_ratio() > -1.0) ||
+          !(mat.poisson_ratio() < 0.5)) {
+        std::ostringstream msg;
+        msg << mat.poisson_ratio() << " is outside (-1, 0.5)";
+        fail(source, f + ".material.poisson_ratio", msg.str());
+      }
+    }
     for (int r = 0; r < m.fixed_size(); ++r) {
       check_region(m.fixed(r), source, f + ".fixed[" + std::to_string(r) + "]");
     }
@@ -184,6 +181,13 @@ void validate_scene(const Scene& scene, const std::string& source) {
     check_mesh_ref(p.mesh(), f + ".mesh");
     check_region(p.region(), source, f + ".region");
     check_vec(p.displacement_m(), source, f + ".displacement_m");
+    std::set<char> held;
+    for (char c : p.components()) {
+      if (c != 'x' && c != 'y' && c != 'z')
+        fail(source, f + ".components", "'" + p.components() + "': give a subset of \"xyz\"");
+      if (!held.insert(c).second)
+        fail(source, f + ".components", "'" + p.components() + "': component repeated");
+    }
   }
   std::set<std::string> tool_ids;
   for (int i = 0; i < scene.tools_size(); ++i) {
@@ -208,105 +212,62 @@ void validate_scene(const Scene& scene, const std::string& source) {
   }
 }
 
+namespace {
+double or_default(double value, double fallback) { return value > 0.0 ? value : fallback; }
+}  // namespace
+
+Settings read_settings(const Scene& scene, const std::string& source) {
+  Settings s;
+  s.name = scene.name();
+  s.description = scene.description();
+  s.source = source;
+  const auto& fx = scene.effects();
+  switch (fx.tier()) {
+    case Effects::LINEAR: s.effects.tier = Tier::kLinear; break;
+    case Effects::COROTATIONAL: s.effects.tier = Tier::kCorotational; break;
+    case Effects::NONLINEAR: s.effects.tier = Tier::kNonlinear; break;
+    default: fail(source, "effects.tier", "unknown tier " + std::to_string(fx.tier()));
+  }
+  s.effects.coupling = fx.coupling();
+  s.effects.tool_contact = fx.tool_contact();
+  s.effects.deformation_output = fx.deformation_output();
+  const Settings defaults;
+  s.rates.step_hz = or_default(scene.rates().step_hz(), defaults.rates.step_hz);
+  s.rates.viewer_hz = or_default(scene.rates().viewer_hz(), defaults.rates.viewer_hz);
+  s.rates.status_hz = or_default(scene.rates().status_hz(), defaults.rates.status_hz);
+  const auto& h = scene.haptics();
+  s.haptics.force_scale = or_default(h.force_scale(), defaults.haptics.force_scale);
+  s.haptics.workspace_scale = or_default(h.workspace_scale(), defaults.haptics.workspace_scale);
+  s.haptics.max_force_n = or_default(h.max_force_n(), defaults.haptics.max_force_n);
+  for (const auto& t : scene.tools()) {
+    ToolDef d;
+    d.id = t.id();
+    d.tip_radius_m = t.tip_radius_m();
+    d.shaft_radius_m = t.shaft_radius_m();
+    d.shaft_length_m = t.shaft_length_m();
+    d.max_speed_m_per_s = or_default(t.max_speed_m_per_s(), ToolDef{}.max_speed_m_per_s);
+    s.tools.push_back(d);
+  }
+  s.image.file = scene.image().file();
+  if (!s.image.file.empty() && std::filesystem::path(s.image.file).is_relative()) {
+    s.image.file = (std::filesystem::absolute(source).parent_path() / s.image.file)
+                       .lexically_normal()
+                       .string();
+  }
+  s.image.file_unit_m = scene.image().file_unit_m();
+  s.max_stations = scene.max_stations() > 0 ? scene.max_stations() : defaults.max_stations;
+  return s;
+}
+
+Settings load_settings(const std::filesystem::path& path) {
+  return read_settings(read_scene(path), path.string());
+}
+
 int find_mesh(const Scene& scene, const std::string& id) {
   for (int i = 0; i < scene.meshes_size(); ++i) {
     if (scene.meshes(i).id() == id) return i;
   }
   return -1;
-}
-
-std::vector<int> select_nodes(const mesh::TetMesh& mesh, const Region& region,
-                              const std::string& what) {
-  std::vector<int> nodes;
-  const auto& x = mesh.vertices();
-  const int n = static_cast<int>(x.size());
-  switch (region.select_case()) {
-    case Region::kNodes:
-      for (int id : region.nodes().ids()) {
-        if (id < 0 || id >= n) {
-          throw std::runtime_error(what + ": node id " + std::to_string(id) +
-                                   " out of range (mesh has " + std::to_string(n) + " nodes)");
-        }
-        nodes.push_back(id);
-      }
-      break;
-    case Region::kBox: {
-      const auto lo = to_vec3(region.box().min_m()), hi = to_vec3(region.box().max_m());
-      for (int i = 0; i < n; ++i) {
-        if ((x[i].array() >= lo.array()).all() && (x[i].array() <= hi.array()).all()) {
-          nodes.push_back(i);
-        }
-      }
-      break;
-    }
-    case Region::kHalfSpace: {
-      const auto p = to_vec3(region.half_space().point_m());
-      const auto nrm = to_vec3(region.half_space().normal()).normalized();
-      for (int i = 0; i < n; ++i) {
-        if ((x[i] - p).dot(nrm) <= 0.0) nodes.push_back(i);
-      }
-      break;
-    }
-    case Region::SELECT_NOT_SET:
-      throw std::runtime_error(what + ": empty region");
-  }
-  std::sort(nodes.begin(), nodes.end());
-  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
-  if (nodes.empty()) throw std::runtime_error(what + ": region selects no node");
-  return nodes;
-}
-
-LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
-                     const std::string& source) {
-  const std::string what = source + ": mesh \"" + entry.id() + "\"";
-  LoadedMesh out{entry.id(), mesh::TetMesh{}, to_material(entry.material(), what + " material"),
-                 {}, entry.priority(), entry.provenance(), 0.0};
-  if (entry.source_case() == Mesh::kFile) {
-    std::filesystem::path file = entry.file();
-    if (file.is_relative()) file = scene_dir / file;
-    const double unit = entry.has_file_unit_m() ? entry.file_unit_m() : 1.0;
-    mesh::MeshData data = mesh::read_mesh(file.string(), unit);
-    if (entry.labels_size() > 0) {
-      // Keep only the tetrahedra of the requested subdomains.
-      std::set<int> keep(entry.labels().begin(), entry.labels().end());
-      std::vector<mesh::Tet> tets;
-      std::vector<int> labels;
-      for (std::size_t t = 0; t < data.tets.size(); ++t) {
-        if (keep.count(data.tet_labels[t])) {
-          tets.push_back(data.tets[t]);
-          labels.push_back(data.tet_labels[t]);
-        }
-      }
-      if (tets.empty()) throw std::runtime_error(what + ": no tetrahedron has the given labels");
-      data.tets = std::move(tets);
-      data.tet_labels = std::move(labels);
-    }
-    mesh::BuildOptions build;
-    build.source = file.string();
-    out.mesh = mesh::TetMesh::build(std::move(data.vertices_m), std::move(data.tets), build);
-    out.mesh.set_tet_labels(std::move(data.tet_labels));
-  } else {
-    const auto& g = entry.generate();
-    mesh::MeshingOptions options;
-    options.target_vertices = g.target_vertices();
-    options.cell_size_m = g.cell_size_m();
-    options.seed = g.seed();
-    mesh::GeneratedMesh generated =
-        g.has_box() ? mesh::generate_box(to_vec3(g.box().min_m()), to_vec3(g.box().max_m()), options)
-                    : mesh::generate_cylinder(to_vec3(g.cylinder().base_center_m()),
-                                              to_vec3(g.cylinder().axis_m()),
-                                              g.cylinder().radius_m(), options);
-    out.mesh = std::move(generated.mesh);
-    out.generator_cell_size_m = generated.cell_size_m;
-  }
-  for (int r = 0; r < entry.fixed_size(); ++r) {
-    auto nodes = select_nodes(out.mesh, entry.fixed(r), what + " fixed[" + std::to_string(r) + "]");
-    out.fixed_nodes.insert(out.fixed_nodes.end(), nodes.begin(), nodes.end());
-  }
-  std::sort(out.fixed_nodes.begin(), out.fixed_nodes.end());
-  out.fixed_nodes.erase(std::unique(out.fixed_nodes.begin(), out.fixed_nodes.end()),
-                        out.fixed_nodes.end());
-  return out;
 }
 
 }  // namespace neurosim::scene

@@ -1,5 +1,5 @@
 // The neurosim-server command line (server.hpp run_main).
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 #include "server/service/server.hpp"
 
 #include <dlfcn.h>
@@ -45,8 +45,7 @@ void single_thread_blas() {
 
 }  // namespace
 
-int run_main(int argc, char** argv, const SimulationFactory& factory,
-             const FieldWorkerFactory& field_worker) {
+int run_main(int argc, char** argv, const SimulationFactory& factory) {
   ServerOptions opt;
   double duration_s = 0;
   for (int i = 1; i < argc; ++i) {
@@ -102,15 +101,13 @@ int run_main(int argc, char** argv, const SimulationFactory& factory,
 
   try {
     const auto t0 = std::chrono::steady_clock::now();
-    const scene::Scene sc = scene::read_scene(opt.scene_path);
-    auto sim = factory(sc, opt.scene_path);
+    const scene::Model model = scene::load_model(opt.scene_path);
+    auto sim = factory(model);
     const double build_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::cerr << "neurosim-server: simulation built in " << build_s << " s\n";
     if (g_stop.load()) return 0;
-    std::unique_ptr<FieldWorker> worker;
-    if (field_worker && sc.effects().deformation_output()) worker = field_worker(*sim);
-    Server server(sc, std::move(sim), opt, std::cerr, std::move(worker));
+    Server server(model, std::move(sim), opt, std::cerr);
     server.start();
     const auto started = std::chrono::steady_clock::now();
     // Polled: the signal handler only sets a flag; stop() runs here on a normal thread.

@@ -2,7 +2,6 @@
 
 #include "idl/wire/deformation_codec.hpp"
 #include "idl/wire/dds.hpp"
-#include "server/scene/scene.hpp"
 #include "server/service/pose_handoff.hpp"
 #include "server/service/tool_filter.hpp"
 
@@ -37,7 +36,7 @@ using interaction::ToolPose;
 namespace {
 
 constexpr int kMaxStationsLimit = 64;  // SimStatus.stations is sequence<StationStatus, 64>
-constexpr double kDefaultMaxSpeed = 2.0;  // m/s, scene.proto Tool.max_speed_m_per_s default
+const double kDefaultMaxSpeed = scene::ToolDef{}.max_speed_m_per_s;  // unit m/s
 
 std::int64_t mono_ns() {
   timespec ts{};
@@ -52,61 +51,28 @@ timespec to_timespec(std::int64_t ns) {
   return ts;
 }
 
-double or_default(double v, double d) { return v > 0 ? v : d; }
-
-const char* tier_name(scene::Effects::Tier t) {
+neurosim_Tier wire_tier(scene::Tier t) {
   switch (t) {
-    case scene::Effects::LINEAR: return "linear";
-    case scene::Effects::COROTATIONAL: return "corotational";
-    case scene::Effects::NONLINEAR: return "nonlinear";
-    default: return "linear";
+    case scene::Tier::kLinear: return neurosim_TIER_LINEAR;
+    case scene::Tier::kCorotational: return neurosim_TIER_COROTATIONAL;
+    case scene::Tier::kNonlinear: return neurosim_TIER_NONLINEAR;
   }
+  throw std::invalid_argument("unknown elasticity tier");
 }
 
-neurosim_Tier wire_tier(scene::Effects::Tier t) {
-  switch (t) {
-    case scene::Effects::COROTATIONAL: return neurosim_TIER_COROTATIONAL;
-    case scene::Effects::NONLINEAR: return neurosim_TIER_NONLINEAR;
-    default: return neurosim_TIER_LINEAR;
-  }
-}
-
-// ToolPose::tool (scene tool index) is being added by issue 4; set it when it is there.
-template <class P, class = void>
-struct HasToolIndex : std::false_type {};
-template <class P>
-struct HasToolIndex<P, std::void_t<decltype(std::declval<P&>().tool)>> : std::true_type {};
-template <class P>
-void set_tool_index(P& pose, int tool) {
-  if constexpr (HasToolIndex<P>::value) pose.tool = tool;
-  (void)pose;
-  (void)tool;
-}
-
-// Simulation::setup_stats() (load-time costs) is being added by issue 4; log it when there.
-template <class S, class = void>
-struct HasSetupStats : std::false_type {};
-template <class S>
-struct HasSetupStats<S, std::void_t<decltype(std::declval<const S&>().setup_stats())>> : std::true_type {};
-template <class S>
-std::string describe_setup(const S& sim) {
-  if constexpr (HasSetupStats<S>::value) {
-    const auto& st = sim.setup_stats();
-    std::ostringstream os;
-    os << "physics built in " << st.total_s << " s: meshes " << st.load_meshes_s << " s, factor "
-       << st.factor_s << " s, ";
-    if (st.fusion_s == 0 && st.tied_nodes == 0)
-      os << "inclusion decision: not run (no coupling)";
-    else
-      os << "inclusion decision + coupling map " << st.fusion_s << " s, condense " << st.condense_s
-         << " s, boundary columns " << st.boundary_s << " s, coupling operator " << st.operator_s
-         << " s (" << st.boundary_nodes << " boundary nodes, " << st.tied_nodes << " tied nodes)";
-    os << ", contact columns " << st.columns_s << " s";
-    return os.str();
-  } else {
-    (void)sim;
-    return {};
-  }
+std::string describe_setup(const interaction::Simulation& sim) {
+  const auto& st = sim.setup_stats();
+  std::ostringstream os;
+  os << "physics built in " << st.total_s << " s: meshes " << st.load_meshes_s << " s, factor "
+     << st.factor_s << " s, ";
+  if (st.fusion_s == 0 && st.tied_nodes == 0)
+    os << "inclusion decision: not run (no coupling)";
+  else
+    os << "inclusion decision + coupling map " << st.fusion_s << " s, condense " << st.condense_s
+       << " s, boundary columns " << st.boundary_s << " s, coupling operator " << st.operator_s
+       << " s (" << st.boundary_nodes << " boundary nodes, " << st.tied_nodes << " tied nodes)";
+  os << ", contact columns " << st.columns_s << " s";
+  return os.str();
 }
 
 enum SlotState : int { kFree = 0, kActive = 1, kLeaving = 2 };
@@ -133,17 +99,26 @@ struct StationSlot {
 }  // namespace
 
 struct Server::Impl {
-  Impl(const scene::Scene& sc, std::unique_ptr<interaction::Simulation> s, ServerOptions o,
-       std::ostream& l, std::unique_ptr<FieldWorker> fw)
-      : scene(sc), sim(std::move(s)), opt(std::move(o)), log_stream(l), field_worker(std::move(fw)) {}
+  Impl(const scene::Model& model, std::unique_ptr<interaction::Simulation> s, ServerOptions o,
+       std::ostream& l)
+      : settings(model), sim(std::move(s)), opt(std::move(o)), log_stream(l) {
+    for (const auto& m : model.meshes)
+      mesh_info.push_back(MeshInfo{m.id, m.material, m.priority, m.provenance});
+  }
 
   // ---- Model (built once) --------------------------------------------------------------------
-  scene::Scene scene;
+  scene::Settings settings;
+  struct MeshInfo {  // what MeshTopology says of each scene mesh
+    std::string id;
+    fem::Material material;
+    int priority;
+    std::string provenance;
+  };
+  std::vector<MeshInfo> mesh_info;
   std::unique_ptr<interaction::Simulation> sim;
   ServerOptions opt;
   std::ostream& log_stream;
   std::mutex log_mutex;
-  std::unique_ptr<FieldWorker> field_worker;  // null: full-field solves in the step thread
 
   double step_hz{1000}, viewer_hz{30}, status_hz{1};
   std::int64_t period_ns{1000000};
@@ -182,6 +157,7 @@ struct Server::Impl {
   std::atomic<bool> full_frame_pending{false};  // a new viewer matched: next frames FULL
   // Field worker handshake: the step thread posts a job only when the worker is idle.
   std::atomic<bool> field_busy{false};
+  interaction::FieldSnapshot field_snapshot;  // written by the step thread while the field thread is idle
   std::uint64_t field_job_step{0};
   std::int64_t field_job_time_ns{0};
   std::mutex field_mutex;
@@ -238,7 +214,7 @@ struct Server::Impl {
   void one_step();
   void retire(int i);
   void publish_deformation(std::uint64_t step, std::int64_t now_ns);
-  void encode_and_write(std::uint64_t step, std::int64_t now_ns, bool use_worker);
+  void encode_and_write(std::uint64_t step, std::int64_t now_ns);
   void field_loop();
   void publish_status(std::int64_t now_mono);
   void dispose_all();
@@ -246,47 +222,47 @@ struct Server::Impl {
 
 // ---------------------------------------------------------------------------------------------
 void Server::Impl::configure() {
-  const auto& r = scene.rates();
-  step_hz = or_default(r.step_hz(), 1000.0);
-  viewer_hz = or_default(r.viewer_hz(), 30.0);
-  status_hz = or_default(r.status_hz(), 1.0);
+  const auto& r = settings.rates;
+  step_hz = r.step_hz;
+  viewer_hz = r.viewer_hz;
+  status_hz = r.status_hz;
   if (!(std::isfinite(step_hz) && std::isfinite(viewer_hz) && std::isfinite(status_hz)))
     throw std::runtime_error(opt.scene_path + ": rates: not finite");
   period_ns = static_cast<std::int64_t>(std::llround(1e9 / step_hz));
   if (period_ns < 1000) throw std::runtime_error(opt.scene_path + ": rates.step_hz: above 1 MHz");
   viewer_every = std::max<std::uint64_t>(1, std::llround(step_hz / viewer_hz));
   status_every = std::max<std::uint64_t>(1, std::llround(step_hz / status_hz));
-  max_stations = scene.max_stations() > 0 ? scene.max_stations() : 8;
+  max_stations = settings.max_stations;
   if (max_stations > kMaxStationsLimit)
     throw std::runtime_error(opt.scene_path + ": max_stations: " + std::to_string(max_stations) +
                              " is above " + std::to_string(kMaxStationsLimit));
-  const auto& fx = scene.effects();
-  tool_contact = fx.tool_contact();
-  deformation_output = fx.deformation_output();
+  const auto& fx = settings.effects;
+  tool_contact = fx.tool_contact;
+  deformation_output = fx.deformation_output;
   std::string e;
   auto add = [&](bool on, const char* name) {
     if (!on) return;
     if (!e.empty()) e += ',';
     e += name;
   };
-  add(fx.tool_contact(), "contact");
-  add(fx.coupling(), "coupling");
-  add(fx.deformation_output(), "deformation");
+  add(fx.tool_contact, "contact");
+  add(fx.coupling, "coupling");
+  add(fx.deformation_output, "deformation");
   effects_text = e;
-  for (const auto& t : scene.tools()) {
-    tool_ids.push_back(t.id());
-    tool_max_speed.push_back(or_default(t.max_speed_m_per_s(), kDefaultMaxSpeed));
+  for (const auto& t : settings.tools) {
+    tool_ids.push_back(t.id);
+    tool_max_speed.push_back(t.max_speed_m_per_s);
   }
   if (sim == nullptr) throw std::runtime_error("Server: no simulation");
-  if (sim->num_meshes() != scene.meshes_size())
+  if (sim->num_meshes() != static_cast<int>(mesh_info.size()))
     throw std::runtime_error(opt.scene_path + ": the simulation has " +
                              std::to_string(sim->num_meshes()) + " meshes, the scene " +
-                             std::to_string(scene.meshes_size()));
+                             std::to_string(mesh_info.size()));
 
   const std::string setup = describe_setup(*sim);
   if (!setup.empty()) log(setup);
   std::ostringstream s;
-  s << "scene '" << scene.name() << "' (" << opt.scene_path << "): tier " << tier_name(fx.tier())
+  s << "scene '" << settings.name << "' (" << opt.scene_path << "): tier " << scene::tier_name(fx.tier)
     << ", effects [" << effects_text << "], step " << step_hz << " Hz, viewer " << viewer_hz
     << " Hz, status " << status_hz << " Hz, max " << max_stations << " stations";
   log(s.str());
@@ -341,16 +317,16 @@ void Server::Impl::create_entities() {
     log("built: Deformation writer, " + std::to_string(sim->num_meshes()) + " encoders (" +
         std::to_string(viewer_hz) + " Hz, FULL frame every " + std::to_string(opt.full_frame_period) +
         " frames); full-field solves only while a viewer is matched, " +
-        (field_worker ? "on a worker thread" : "in the step thread"));
+        "on the field thread from a snapshot of each step's forces");
   } else {
     log("not built: Deformation (effects.deformation_output off): no full-field solves");
   }
 
   // Status: strings and buffers set once.
   wire::set_string(status->server_id, opt.server_id, "server_id");
-  wire::set_string(status->scene_name, scene.name());
+  wire::set_string(status->scene_name, settings.name);
   wire::set_string(status->effects, effects_text);
-  status->tier = wire_tier(scene.effects().tier());
+  status->tier = wire_tier(settings.effects.tier);
   status->step_rate_target_hz = step_hz;
   status->viewer_rate_hz = deformation_output ? viewer_hz : 0.0;
   status->status_rate_hz = status_hz;
@@ -366,11 +342,13 @@ void Server::Impl::publish_topologies() {
   for (int m = 0; m < sim->num_meshes(); ++m) {
     const auto& mesh = sim->mesh(m);
     const auto& id = sim->mesh_id(m);
-    const int si = scene::find_mesh(scene, id);
+    const MeshInfo* info = nullptr;
+    for (const auto& mi : mesh_info)
+      if (mi.id == id) info = &mi;
     wire::Sample<neurosim_MeshTopology> t;
     wire::set_string(t->mesh_id, id, "mesh_id");
     t->revision = 1;
-    wire::set_string(t->scene_name, scene.name());
+    wire::set_string(t->scene_name, settings.name);
     std::vector<double> v;
     v.reserve(3 * mesh.num_vertices());
     for (const auto& x : mesh.vertices()) v.insert(v.end(), {x.x(), x.y(), x.z()});
@@ -383,22 +361,18 @@ void Server::Impl::publish_topologies() {
     tris.reserve(3 * mesh.surface().size());
     for (const auto& tr : mesh.surface()) tris.insert(tris.end(), tr.begin(), tr.end());
     wire::assign(t->surface_triangles, tris);
-    if (si >= 0) {
-      const auto& e = scene.meshes(si);
-      wire::set_string(t->material_name, e.material().name());
-      t->youngs_modulus_pa = e.material().youngs_modulus_pa();
-      t->poisson_ratio = e.material().poisson_ratio();
-      t->priority = e.priority();
-      wire::set_string(t->provenance, e.provenance());
+    if (info != nullptr) {
+      wire::set_string(t->material_name, info->material.name);
+      t->youngs_modulus_pa = info->material.youngs_modulus_pa;
+      t->poisson_ratio = info->material.poisson_ratio;
+      t->priority = info->priority;
+      wire::set_string(t->provenance, info->provenance);
     } else {
       wire::set_string(t->material_name, "");
       wire::set_string(t->provenance, "");
     }
-    std::string image = scene.image().file();
-    if (!image.empty() && std::filesystem::path(image).is_relative())
-      image = (std::filesystem::absolute(opt.scene_path).parent_path() / image).lexically_normal().string();
-    wire::set_string(t->volume_image_file, image);
-    t->volume_image_unit_m = scene.image().file_unit_m();
+    wire::set_string(t->volume_image_file, settings.image.file);
+    t->volume_image_unit_m = settings.image.file_unit_m;
     topologies->write(*t);
     log("published MeshTopology '" + id + "': " + std::to_string(mesh.num_vertices()) +
         " vertices, " + std::to_string(mesh.num_tets()) + " tetrahedra, " +
@@ -601,7 +575,7 @@ void Server::Impl::one_step() {
     const double w = p.orientation[0], x = p.orientation[1], y = p.orientation[2],
                  z = p.orientation[3];
     tp.axis = interaction::Vec3(2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y));
-    set_tool_index(tp, p.tool);
+    tp.tool = p.tool;
     slot_of_pose[n++] = static_cast<int>(i);
   }
   if (n > 0) {
@@ -653,16 +627,12 @@ void Server::Impl::publish_deformation(std::uint64_t step, std::int64_t now_ns) 
   if (matched > last_matched_viewers) full_frame_pending = true;
   last_matched_viewers = matched;
   if (matched == 0) return;
-  if (!field_worker) {
-    encode_and_write(step, now_ns, false);
-    return;
-  }
   // Worker still on the previous frame: skip this one rather than wait.
   if (field_busy.load(std::memory_order_acquire)) {
     ++deformation_skipped;
     return;
   }
-  field_worker->snapshot(*sim);
+  sim->snapshot(field_snapshot);
   field_busy.store(true, std::memory_order_release);
   {
     std::lock_guard<std::mutex> lk(field_mutex);
@@ -673,15 +643,12 @@ void Server::Impl::publish_deformation(std::uint64_t step, std::int64_t now_ns) 
   field_cv.notify_one();
 }
 
-void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns, bool use_worker) {
+void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns) {
   if (full_frame_pending.exchange(false))
     for (auto& e : encoders) e.force_full_next();
   for (int m = 0; m < sim->num_meshes(); ++m) {
     auto& u = u_m[static_cast<std::size_t>(m)];
-    if (use_worker)
-      field_worker->displacements(*sim, m, u);
-    else
-      sim->displacements(m, u);
+    sim->displacements(field_snapshot, m, u);
     ++full_field_solves;
     auto& out = *deform_out[static_cast<std::size_t>(m)];
     encoders[static_cast<std::size_t>(m)].encode(u.data(), static_cast<std::size_t>(u.size()), step,
@@ -706,7 +673,7 @@ void Server::Impl::field_loop() {
         step = field_job_step;
         t = field_job_time_ns;
       }
-      encode_and_write(step, t, true);
+      encode_and_write(step, t);
       field_busy.store(false, std::memory_order_release);
     }
   } catch (const std::exception& e) {
@@ -782,10 +749,9 @@ void Server::Impl::dispose_all() {
 }
 
 // ---------------------------------------------------------------------------------------------
-Server::Server(const scene::Scene& scene, std::unique_ptr<interaction::Simulation> sim,
-               ServerOptions options, std::ostream& log, std::unique_ptr<FieldWorker> field_worker)
-    : impl_(std::make_unique<Impl>(scene, std::move(sim), std::move(options), log,
-                                   std::move(field_worker))) {
+Server::Server(const scene::Model& model, std::unique_ptr<interaction::Simulation> sim,
+               ServerOptions options, std::ostream& log)
+    : impl_(std::make_unique<Impl>(model, std::move(sim), std::move(options), log)) {
   impl_->configure();
 }
 
@@ -807,7 +773,7 @@ void Server::start() {
   d.step_us_count = 0;
   d.dds_thread = std::thread([&d] { d.dds_loop(); });
   d.step_thread = std::thread([&d] { d.step_loop(); });
-  if (d.field_worker && d.deformation_output) d.field_thread = std::thread([&d] { d.field_loop(); });
+  if (d.deformation_output) d.field_thread = std::thread([&d] { d.field_loop(); });
   d.log("serving (DDS domain " + (d.opt.domain >= 0 ? std::to_string(d.opt.domain) : std::string("default")) +
         ", server id '" + d.opt.server_id + "')");
 }

@@ -10,8 +10,8 @@
 // Topics and QoS come from neurosim::wire (idl/wire/qos.cpp).
 #pragma once
 
-#include "scene.pb.h"
 #include "server/interaction/simulation.hpp"
+#include "server/scene/model.hpp"
 
 #include <atomic>
 #include <cstdint>
@@ -31,21 +31,6 @@ struct ServerOptions {
   std::uint32_t full_frame_period{30};  // Deformation FULL frame every this many frames
 };
 
-// Full-field solves off the step thread (optional): the step thread copies what the solve
-// needs right after a step (snapshot, cheap); a worker thread computes the displacements from
-// that copy while the next steps run. Without one, Simulation::displacements runs in the step.
-class FieldWorker {
- public:
-  virtual ~FieldWorker() = default;
-  // Step thread, after Simulation::step.
-  virtual void snapshot(const interaction::Simulation& sim) = 0;
-  // Worker thread: displacements of `mesh` for the last snapshot (3N, unit m). Must not touch
-  // state that Simulation::step writes.
-  virtual void displacements(const interaction::Simulation& sim, int mesh, Eigen::VectorXd& u_m) = 0;
-};
-using FieldWorkerFactory =
-    std::function<std::unique_ptr<FieldWorker>(const interaction::Simulation& sim)>;
-
 // Counters the server exposes to tests (also published in SimStatus).
 struct ServerCounters {
   std::uint64_t steps{0};
@@ -60,10 +45,12 @@ struct ServerCounters {
 
 class Server {
  public:
-  // The simulation must have been built from `scene` (mesh ids in the same order). Logs what it
-  // builds to `log` (one line each). Throws std::runtime_error on a bad scene / DDS failure.
-  Server(const scene::Scene& scene, std::unique_ptr<interaction::Simulation> sim,
-         ServerOptions options, std::ostream& log, std::unique_ptr<FieldWorker> field_worker = nullptr);
+  // The simulation must have been built from `model` (mesh ids in the same order). Logs what it
+  // builds to `log` (one line each). With effects.deformation_output the displacement fields are
+  // solved on a field thread from a snapshot of each step's forces (Simulation::snapshot).
+  // Throws std::runtime_error on a bad scene / DDS failure.
+  Server(const scene::Model& model, std::unique_ptr<interaction::Simulation> sim,
+         ServerOptions options, std::ostream& log);
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
@@ -82,16 +69,15 @@ class Server {
   std::unique_ptr<Impl> impl_;
 };
 
-using SimulationFactory = std::function<std::unique_ptr<interaction::Simulation>(
-    const scene::Scene& scene, const std::string& scene_path)>;
+using SimulationFactory =
+    std::function<std::unique_ptr<interaction::Simulation>(const scene::Model& model)>;
 
 // The neurosim-server command line:
 //   neurosim-server --scene FILE [--duration SECONDS] [--domain ID] [--server-id NAME]
 //                   [--topic-prefix P]
-// Sets OPENBLAS_NUM_THREADS=1 (unless set), installs SIGINT/SIGTERM handlers, builds the
-// simulation with `factory`, serves until a signal or the duration. Returns the exit status.
-// `field_worker` (optional) moves the Deformation solves off the step thread.
-int run_main(int argc, char** argv, const SimulationFactory& factory,
-             const FieldWorkerFactory& field_worker = {});
+// Sets OPENBLAS_NUM_THREADS=1 (unless set), installs SIGINT/SIGTERM handlers, compiles the
+// scene, builds the simulation with `factory`, serves until a signal or the duration. Returns
+// the exit status.
+int run_main(int argc, char** argv, const SimulationFactory& factory);
 
 }  // namespace neurosim::service

@@ -4,7 +4,7 @@
 #include "server/fem/calculix.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/simulation.hpp"
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 
 #include "test_support.hpp"
 
@@ -124,7 +124,8 @@ TEST(SolveCli, CoupledSceneMatchesTheMonolithicTiedSystem) {
   ASSERT_TRUE(s.effects().coupling());
   s.mutable_effects()->set_tool_contact(false);
   s.clear_tools();
-  const auto sim = interaction::Simulation::build(s, scene_path.string());
+  scene::Model model = scene::compile(s, scene_path.string());
+  const auto sim = interaction::Simulation::build(model);
   const int a = scene::find_mesh(s, "cube"), b = scene::find_mesh(s, "cylinder");
   const interaction::CoupledBody* body = sim->body_of(a);
   ASSERT_NE(body, nullptr);

@@ -29,7 +29,7 @@ namespace neurosim::interaction {
 namespace {
 
 void expect_warm_step_does_not_allocate(const testing::SceneSpec& spec) {
-  auto sim = Simulation::build(testing::make_scene(spec), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(spec));
   std::vector<ToolPose> poses(2);
   auto set = [&](double d0, double d1) {
     poses[0].tip_m = Vec3(0.1 + spec.tip_radius_m - d0, 0.05, 0.05);

@@ -1,9 +1,8 @@
 // Small cube/cylinder scenes (paper Figure 8c at test size) built from scene text.
 #pragma once
 
-#include "scene.pb.h"
 #include "server/interaction/simulation.hpp"
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 
 #include <memory>
 #include <sstream>
@@ -27,6 +26,7 @@ struct SceneSpec {
   // 0.025 to 0.075 m), coupled by this kind
   // ("TIE" or "SLIDING"); empty: none.
   std::string rod_kind{};
+  std::string tier{"LINEAR"};  // effects.tier
 };
 
 // Cube [0, 0.1]^3 m fixed at z = 0; cylinder r = 15 mm along y through (0.05, *, 0.05), 60 mm long.
@@ -59,13 +59,13 @@ inline std::string scene_text(const SceneSpec& s) {
   }
   o << "tools { id: \"probe\" tip_radius_m: " << s.tip_radius_m
     << " shaft_radius_m: 0.002 shaft_length_m: 0.12 max_speed_m_per_s: 2 }\n"
-    << "effects { tier: LINEAR coupling: " << (s.coupling ? "true" : "false")
+    << "effects { tier: " << s.tier << " coupling: " << (s.coupling ? "true" : "false")
     << " tool_contact: true deformation_output: true }\n";
   return o.str();
 }
 
-inline scene::Scene make_scene(const SceneSpec& s) {
-  return scene::parse_scene(scene_text(s), "test.scene");
+inline scene::Model make_scene(const SceneSpec& s) {
+  return scene::compile(scene::parse_scene(scene_text(s), "test.scene"), "test.scene");
 }
 
 // Tool tip on the cube's right face (x = 0.1) at (y, z) = (0.05, 0.05), pushed `depth_m` in -x.
@@ -86,7 +86,7 @@ struct Stepped {
 inline Stepped run(const SceneSpec& spec, const std::vector<ToolPose>& poses,
                    const SimulationOptions& options = {}) {
   Stepped s;
-  s.sim = Simulation::build(make_scene(spec), "test.scene", options);
+  s.sim = Simulation::build(make_scene(spec), options);
   s.sim->step(poses, s.contacts, s.stats);
   return s;
 }

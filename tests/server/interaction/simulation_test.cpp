@@ -106,9 +106,8 @@ TEST(interaction_simulation, ForceEqualsStaticSolverReaction) {
   // Reference: the same nodes prescribed to the displacements the contact produced.
   const auto scene = testing::make_scene(spec);
   const auto& m = s.sim->mesh(0);
-  const auto fixed = scene::select_nodes(m, scene.meshes(0).fixed(0), "fixed");
-  fem::StaticSolver solver(
-      m, fem::MaterialMap::uniform(scene::to_material(scene.meshes(0).material(), "cube")), fixed);
+  const auto& fixed = scene.meshes[0].fixed_nodes;
+  fem::StaticSolver solver(m, fem::MaterialMap::uniform(scene.meshes[0].material), fixed);
   Eigen::VectorXd ud(3 * c.nodes.size());
   for (std::size_t k = 0; k < c.nodes.size(); ++k)
     ud.segment<3>(3 * k) = u.segment<3>(3 * c.nodes[k]);
@@ -132,13 +131,11 @@ TEST(interaction_simulation, CoupledForceEqualsMonolithicKkt) {
   const auto& ma = s.sim->mesh(0);
   const auto& mb = s.sim->mesh(1);
   const auto& fixed = s.sim->fixed_nodes(0);  // the scene's plus the carved-out interior nodes
-  const auto ka = fem::assemble_stiffness(
-      ma, fem::MaterialMap::uniform(scene::to_material(scene.meshes(0).material(), "a")));
-  const auto kb = fem::assemble_stiffness(
-      mb, fem::MaterialMap::uniform(scene::to_material(scene.meshes(1).material(), "b")));
+  const auto ka = fem::assemble_stiffness(ma, fem::MaterialMap::uniform(scene.meshes[0].material));
+  const auto kb = fem::assemble_stiffness(mb, fem::MaterialMap::uniform(scene.meshes[1].material));
   const auto surface = fusion::TriangleSurface::of(mb);
   // The coupling map comes from the host before carving (same vertex ids).
-  const auto whole = scene::load_mesh(scene.meshes(0), ".", "test.scene");
+  const auto& whole = scene.meshes[0];
   ASSERT_EQ(whole.mesh.num_vertices(), ma.num_vertices());
   const auto boundary = fusion::find_new_boundary(whole.mesh, surface);
   const auto map = fusion::build_coupling_map(whole.mesh.vertices(), boundary, surface);
@@ -285,7 +282,7 @@ TEST(interaction_simulation, IterativeBaselineMatchesExact) {
 }
 
 TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
-  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   std::vector<ToolContact> c0, c1;
   StepStats st;
   const ToolPose p = push_right(0.003);
@@ -307,7 +304,7 @@ TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
 }
 
 TEST(interaction_simulation, UnilateralNoPull) {
-  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   std::vector<ToolContact> c;
   StepStats st;
   sim->step({push_right(-0.001)}, c, st);  // 1 mm clear of the surface
@@ -324,7 +321,7 @@ TEST(interaction_simulation, UnilateralNoPull) {
 }
 
 TEST(interaction_simulation, RejectsNonFinitePose) {
-  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   std::vector<ToolContact> c;
   StepStats st;
   ToolPose p = push_right(0.002);
@@ -339,7 +336,7 @@ TEST(interaction_simulation, RejectsNonFinitePose) {
 }
 
 TEST(interaction_simulation, DeterministicSteps) {
-  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   std::vector<ToolContact> a, b;
   StepStats st;
   sim->step({push_right(0.003)}, a, st);
@@ -382,7 +379,7 @@ TEST(interaction_stability, DeepPush30Percent) {
 }
 
 TEST(interaction_stability, ToolJumps10cm) {
-  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   std::vector<ToolContact> c;
   StepStats st;
   sim->step({push_right(-0.002)}, c, st);
@@ -396,7 +393,7 @@ TEST(interaction_stability, ToolJumps10cm) {
 }
 
 TEST(interaction_stability, ContactOnSliver) {
-  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   const auto& m = sim->mesh(0);
   // The worst-shaped tetrahedron with a face on the free surface; push at that face's centre.
   int worst = -1;
@@ -435,7 +432,7 @@ TEST(interaction_stability, ContactOnSliver) {
 }
 
 TEST(interaction_stability, TwoToolsOnTheSameNode) {
-  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   std::vector<ToolContact> one, two;
   StepStats st;
   sim->step({push_right(0.003)}, one, st);
@@ -453,7 +450,7 @@ TEST(interaction_stability, TwoToolsOnTheSameNode) {
 }
 
 TEST(interaction_stability, ToolInsideTheEmbeddedMesh) {
-  auto sim = Simulation::build(testing::make_scene(SceneSpec{}), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   std::vector<ToolContact> c;
   StepStats st;
   ToolPose p;
@@ -467,4 +464,21 @@ TEST(interaction_stability, ToolInsideTheEmbeddedMesh) {
 }
 
 }  // namespace
+// A tier this build does not implement is refused at load, naming it; never run as linear.
+TEST(interaction_simulation, UnimplementedTierIsRefused) {
+  for (const char* tier : {"COROTATIONAL", "NONLINEAR"}) {
+    SceneSpec spec;
+    spec.tier = tier;
+    try {
+      Simulation::build(testing::make_scene(spec));
+      FAIL() << tier << " was built";
+    } catch (const std::runtime_error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(tier), std::string::npos) << msg;
+      EXPECT_NE(msg.find("test.scene"), std::string::npos) << msg;
+      EXPECT_NE(msg.find("not implemented"), std::string::npos) << msg;
+    }
+  }
+}
+
 }  // namespace neurosim::interaction

@@ -85,7 +85,7 @@ TEST(interaction_sliding, RejectsIterativeMethod) {
   SceneSpec spec = sliding_spec();
   spec.iterative = true;
   try {
-    Simulation::build(testing::make_scene(spec), "test.scene");
+    Simulation::build(testing::make_scene(spec));
     FAIL() << "ITERATIVE with SLIDING was accepted";
   } catch (const std::runtime_error& ex) {
     EXPECT_NE(std::string(ex.what()).find("cube / cylinder"), std::string::npos) << ex.what();
@@ -165,7 +165,7 @@ TEST(interaction_sliding, PulledSideSeparatesWithoutForce) {
 TEST(interaction_sliding, ClearanceLeavesEmbeddedMeshStill) {
   SimulationOptions geometric;
   geometric.sliding_geometric_gap = true;
-  auto probe = Simulation::build(testing::make_scene(sliding_spec()), "test.scene", geometric);
+  auto probe = Simulation::build(testing::make_scene(sliding_spec()), geometric);
   std::vector<SlidingPairState> pairs;
   probe->sliding_pairs(kCylinder, pairs);
   double smallest = std::numeric_limits<double>::infinity(), largest = 0.0;
@@ -249,7 +249,7 @@ TEST(interaction_sliding, SofterThanTieWhereTangentialRowsAreMissing) {
 // The contact stiffness handed to the haptic client includes the sliding rows (finite
 // difference of the force along the push, same active sets).
 TEST(interaction_sliding, StiffnessMatchesFiniteDifference) {
-  auto sim = Simulation::build(testing::make_scene(sliding_spec()), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(sliding_spec()));
   std::vector<ToolContact> c0, c1;
   StepStats s0, s1;
   const ToolPose p = push_right(0.003);
@@ -270,8 +270,8 @@ TEST(interaction_sliding, StiffnessMatchesFiniteDifference) {
 // Warm start from the last step and a cold start give the same answer; withdrawing the tool
 // releases everything.
 TEST(interaction_sliding, DeterministicAndReleases) {
-  auto a = Simulation::build(testing::make_scene(sliding_spec()), "test.scene");
-  auto b = Simulation::build(testing::make_scene(sliding_spec()), "test.scene");
+  auto a = Simulation::build(testing::make_scene(sliding_spec()));
+  auto b = Simulation::build(testing::make_scene(sliding_spec()));
   std::vector<ToolContact> ca, cb;
   StepStats st;
   a->step({push_right(0.004)}, ca, st);
@@ -299,7 +299,7 @@ TEST(interaction_sliding, NonConvergenceReportedLastGoodKept) {
   SimulationOptions few;
   few.lcp_max_iterations = 3;
   few.lcp_iterations_per_sliding_row = 0;
-  auto sim = Simulation::build(testing::make_scene(sliding_spec()), "test.scene", few);
+  auto sim = Simulation::build(testing::make_scene(sliding_spec()), few);
   std::vector<ToolContact> c;
   StepStats st;
   sim->step({push_right(depth)}, c, st);
@@ -424,7 +424,7 @@ TEST(interaction_sliding_stability, StiffRatioNearlyIncompressibleLargeMotion) {
   SceneSpec spec = sliding_spec();
   spec.nu = 0.499;
   spec.embedded_e_pa = 1.0e10;
-  auto sim = Simulation::build(testing::make_scene(spec), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(spec));
   std::vector<ToolContact> c;
   StepStats st;
   // Deep push (30 % of the cube), a 10 cm jump through the body and back, withdrawal.
@@ -436,7 +436,7 @@ TEST(interaction_sliding_stability, StiffRatioNearlyIncompressibleLargeMotion) {
 }
 
 TEST(interaction_sliding_stability, TwoToolsAndToolInsideTheEmbeddedMesh) {
-  auto sim = Simulation::build(testing::make_scene(sliding_spec()), "test.scene");
+  auto sim = Simulation::build(testing::make_scene(sliding_spec()));
   std::vector<ToolContact> c;
   StepStats st;
   ToolPose inside;
@@ -454,8 +454,8 @@ TEST(interaction_sliding, InactiveSetPathMatchesReferencePath) {
   SimulationOptions fast_opt, ref_opt;
   fast_opt.sliding_inactive_set_always = true;
   ref_opt.sliding_inactive_set = false;
-  auto fast = Simulation::build(testing::make_scene(sliding_spec()), "test.scene", fast_opt);
-  auto ref = Simulation::build(testing::make_scene(sliding_spec()), "test.scene", ref_opt);
+  auto fast = Simulation::build(testing::make_scene(sliding_spec()), fast_opt);
+  auto ref = Simulation::build(testing::make_scene(sliding_spec()), ref_opt);
   std::vector<ToolContact> cf, cr;
   StepStats sf, sr;
   std::vector<SlidingPairState> pf, pr;

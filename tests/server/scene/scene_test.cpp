@@ -1,5 +1,5 @@
 // Scene files: parsing errors name file, line and field; regions; generated meshes.
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 
 #include "test_support.hpp"
 

@@ -4,7 +4,7 @@
 #include "tests/server/service/fake_simulation.hpp"
 
 int main(int argc, char** argv) {
-  return neurosim::service::run_main(argc, argv, [](const neurosim::scene::Scene& scene, const std::string&) {
-    return neurosim::service::testing::make_fake(scene);
+  return neurosim::service::run_main(argc, argv, [](const neurosim::scene::Model& model) {
+    return neurosim::service::testing::make_fake(model);
   });
 }

@@ -3,7 +3,7 @@
 // the in-process fake, late joiner, rejected samples and refused stations, a station vanishing
 // mid-contact, effects (no viewer → no full-field solves; deformation off → not built), bad
 // scene, --duration. Each test starts its own server on a private DDS domain.
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 #include "tests/server/service/fake_simulation.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
@@ -20,7 +20,7 @@ st::Setup fake_setup() {
   s.exe = nt::bin_dir() / "service_test_fake_server";
   s.scene = nt::source_dir() / "tests/server/service/data/fake_box.scene";
   s.make_reference = [scene = s.scene] {
-    return st::make_fake(neurosim::scene::read_scene(scene));
+    return st::make_fake(neurosim::scene::load_model(scene));
   };
   s.startup_timeout_s = 20;
   return s;

@@ -41,15 +41,11 @@ mesh::TetMesh box_mesh(const mesh::Vec3& lo, const mesh::Vec3& hi, int n) {
 
 }  // namespace
 
-FakeSimulation::FakeSimulation(const scene::Scene& scene) {
-  for (const auto& m : scene.meshes()) {
-    mesh::Vec3 lo(0, 0, 0), hi(1, 1, 1);
-    if (m.has_generate() && m.generate().has_box()) {
-      const auto& b = m.generate().box();
-      lo = {b.min_m().x(), b.min_m().y(), b.min_m().z()};
-      hi = {b.max_m().x(), b.max_m().y(), b.max_m().z()};
-    }
-    ids_.push_back(m.id());
+FakeSimulation::FakeSimulation(const scene::Model& model) {
+  for (const auto& m : model.meshes) {
+    mesh::Vec3 lo, hi;
+    m.mesh.bounds(lo, hi);
+    ids_.push_back(m.id);
     meshes_.push_back(box_mesh(lo, hi, 3));
   }
   if (meshes_.empty()) throw std::runtime_error("FakeSimulation: the scene has no mesh");
@@ -61,8 +57,8 @@ FakeSimulation::FakeSimulation(const scene::Scene& scene) {
   y_hi_ = hi.y();
   z_lo_ = lo.z();
   z_hi_ = hi.z();
-  if (scene.tools_size() > 0 && scene.tools(0).tip_radius_m() > 0)
-    tip_radius_m_ = scene.tools(0).tip_radius_m();
+  if (!model.tools.empty() && model.tools[0].tip_radius_m > 0)
+    tip_radius_m_ = model.tools[0].tip_radius_m;
   depth_.reserve(64);
 }
 
@@ -115,8 +111,8 @@ void FakeSimulation::displacements(int m, Eigen::VectorXd& u_m) const {
         -last_max_depth_m_ * (me.vertices()[v].x() - x_min_) / (x_max_ - x_min_);
 }
 
-std::unique_ptr<interaction::Simulation> make_fake(const scene::Scene& scene) {
-  return std::make_unique<FakeSimulation>(scene);
+std::unique_ptr<interaction::Simulation> make_fake(const scene::Model& model) {
+  return std::make_unique<FakeSimulation>(model);
 }
 
 }  // namespace neurosim::service::testing

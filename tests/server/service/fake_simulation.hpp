@@ -1,6 +1,6 @@
 // Test-only Simulation with an analytic contact law, so the DDS plumbing of the service can be
-// tested without the physics of issue 4: every scene mesh becomes a small structured box mesh
-// over the mesh's generator box (or the unit cube), and the FIRST mesh's +x face is a half-space
+// tested without the physics: every scene mesh becomes a small structured box mesh over the
+// compiled mesh's bounding box, and the FIRST mesh's +x face is a half-space
 // spring: penetration d = (x_max + r_tip) - tip.x > 0 inside the face's y/z extent gives
 // force (k d, 0, 0) on the tool, stiffness -k e_x e_x^T, normal +x.
 // Stations feel each other: each tool's force is scaled by (1 + kCross * sum of the other
@@ -14,14 +14,6 @@
 #include <string>
 #include <vector>
 
-// The issue 4 implementation extends the contract (setup_stats, body_of, ...); it ships
-// coupled_body.hpp alongside, which tells the two versions of simulation.hpp apart.
-#if __has_include("server/interaction/coupled_body.hpp")
-#define NEUROSIM_FAKE_EXTENDED_CONTRACT 1
-#else
-#define NEUROSIM_FAKE_EXTENDED_CONTRACT 0
-#endif
-
 namespace neurosim::service::testing {
 
 class FakeSimulation : public interaction::Simulation {
@@ -29,7 +21,7 @@ class FakeSimulation : public interaction::Simulation {
   static constexpr double kStiffness = 2000.0;  // N/m
   static constexpr double kCross = 0.05;        // dimensionless
 
-  explicit FakeSimulation(const scene::Scene& scene);
+  explicit FakeSimulation(const scene::Model& model);
   ~FakeSimulation() override;
 
   int num_meshes() const override { return static_cast<int>(meshes_.size()); }
@@ -40,7 +32,6 @@ class FakeSimulation : public interaction::Simulation {
             interaction::StepStats& stats) override;
   void displacements(int m, Eigen::VectorXd& u_m) const override;
 
-#if NEUROSIM_FAKE_EXTENDED_CONTRACT
   bool mesh_active(int) const override { return true; }
   double tie_residual_m() const override { return 0.0; }
   const interaction::SetupStats& setup_stats() const override { return setup_; }
@@ -57,7 +48,6 @@ class FakeSimulation : public interaction::Simulation {
     pairs.clear();
   }
   double sliding_penetration_m() const override { return 0.0; }
-#endif
 
   long displacement_calls() const { return displacement_calls_.load(); }
 
@@ -69,12 +59,10 @@ class FakeSimulation : public interaction::Simulation {
   double last_max_depth_m_{0};
   std::vector<double> depth_;  // scratch, per tool
   mutable std::atomic<long> displacement_calls_{0};
-#if NEUROSIM_FAKE_EXTENDED_CONTRACT
   interaction::SetupStats setup_{};
   std::vector<int> no_nodes_;
-#endif
 };
 
-std::unique_ptr<interaction::Simulation> make_fake(const scene::Scene& scene);
+std::unique_ptr<interaction::Simulation> make_fake(const scene::Model& model);
 
 }  // namespace neurosim::service::testing

@@ -3,7 +3,7 @@
 // in-process neurosim::interaction Simulation to 1e-9 relative; a late joiner gets MeshTopology
 // and a FULL Deformation frame; NaN/inf/jump samples are rejected and counted in SimStatus; the
 // server survives a station vanishing mid-contact and shuts down cleanly on SIGTERM.
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
 #include <fstream>
@@ -19,7 +19,7 @@ st::Setup real_setup() {
   s.exe = nt::bin_dir() / "neurosim-server";
   s.scene = nt::source_dir() / "scenes/cube_cylinder.scene";
   s.make_reference = [scene = s.scene] {
-    return neurosim::interaction::Simulation::build(neurosim::scene::read_scene(scene), scene.string());
+    return neurosim::interaction::Simulation::build(neurosim::scene::load_model(scene));
   };
   s.startup_timeout_s = 240;  // meshing + factorization + columns on a shared 2-core machine
   return s;

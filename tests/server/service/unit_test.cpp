@@ -118,7 +118,7 @@ TEST(service_tool_filter, RefusesBadLimits) {
 }
 
 TEST(service_command_line, BadArgumentsExitTwo) {
-  auto never = [](const neurosim::scene::Scene&, const std::string&) -> std::unique_ptr<neurosim::interaction::Simulation> {
+  auto never = [](const neurosim::scene::Model&) -> std::unique_ptr<neurosim::interaction::Simulation> {
     ADD_FAILURE() << "no simulation may be built";
     return nullptr;
   };

@@ -2,7 +2,7 @@
 #include "tools/model/model.hpp"
 #include "server/mesh/io.hpp"
 #include "server/mesh/quality.hpp"
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>

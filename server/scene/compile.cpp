@@ -1,0 +1,264 @@
+// Scene -> Model: meshes built, node sets resolved, couplings checked (see compile.hpp).
+#include "server/scene/compile.hpp"
+
+#include "server/mesh/generate.hpp"
+#include "server/mesh/io.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <stdexcept>
+
+namespace neurosim::scene {
+
+fem::Material to_material(const Material& material, const std::string& what) {
+  fem::Material m;
+  m.youngs_modulus_pa = material.youngs_modulus_pa();
+  m.poisson_ratio = material.poisson_ratio();
+  m.name = material.name().empty() ? what : material.name();
+  try {
+    m.validate();
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(what + ": " + e.what());
+  }
+  return m;
+}
+
+std::vector<int> select_nodes(const mesh::TetMesh& mesh, const Region& region,
+                              const std::string& what) {
+  std::vector<int> nodes;
+  const auto& x = mesh.vertices();
+  const int n = static_cast<int>(x.size());
+  switch (region.select_case()) {
+    case Region::kNodes:
+      for (int id : region.nodes().ids()) {
+        if (id < 0 || id >= n) {
+          throw std::runtime_error(what + ": node id " + std::to_string(id) +
+                                   " out of range (mesh has " + std::to_string(n) + " nodes)");
+        }
+        nodes.push_back(id);
+      }
+      break;
+    case Region::kBox: {
+      const auto lo = to_vec3(region.box().min_m()), hi = to_vec3(region.box().max_m());
+      for (int i = 0; i < n; ++i) {
+        if ((x[i].array() >= lo.array()).all() && (x[i].array() <= hi.array()).all()) {
+          nodes.push_back(i);
+        }
+      }
+      break;
+    }
+    case Region::kHalfSpace: {
+      const auto p = to_vec3(region.half_space().point_m());
+      const auto nrm = to_vec3(region.half_space().normal()).normalized();
+      for (int i = 0; i < n; ++i) {
+        if ((x[i] - p).dot(nrm) <= 0.0) nodes.push_back(i);
+      }
+      break;
+    }
+    case Region::SELECT_NOT_SET:
+      throw std::runtime_error(what + ": empty region");
+  }
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  if (nodes.empty()) throw std::runtime_error(what + ": region selects no node");
+  return nodes;
+}
+
+LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
+                     const std::string& source) {
+  const std::string what = source + ": mesh \"" + entry.id() + "\"";
+  LoadedMesh out;
+  out.id = entry.id();
+  out.material = to_material(entry.material(), what + " material");
+  out.priority = entry.priority();
+  out.provenance = entry.provenance();
+  out.material_source = entry.material().source();
+  if (entry.source_case() == Mesh::kFile) {
+    std::filesystem::path file = entry.file();
+    if (file.is_relative()) file = scene_dir / file;
+    const double unit = entry.has_file_unit_m() ? entry.file_unit_m() : 1.0;
+    mesh::MeshData data = mesh::read_mesh(file.string(), unit);
+    if (entry.labels_size() > 0) {
+      // Keep only the tetrahedra of the requested subdomains.
+      std::set<int> keep(entry.labels().begin(), entry.labels().end());
+      std::vector<mesh::Tet> tets;
+      std::vector<int> labels;
+      for (std::size_t t = 0; t < data.tets.size(); ++t) {
+        if (keep.count(data.tet_labels[t])) {
+          tets.push_back(data.tets[t]);
+          labels.push_back(data.tet_labels[t]);
+        }
+      }
+      if (tets.empty()) throw std::runtime_error(what + ": no tetrahedron has the given labels");
+      data.tets = std::move(tets);
+      data.tet_labels = std::move(labels);
+    }
+    mesh::BuildOptions build;
+    build.source = file.string();
+    out.mesh = mesh::TetMesh::build(std::move(data.vertices_m), std::move(data.tets), build);
+    out.mesh.set_tet_labels(std::move(data.tet_labels));
+  } else {
+    const auto& g = entry.generate();
+    mesh::MeshingOptions options;
+    options.target_vertices = g.target_vertices();
+    options.cell_size_m = g.cell_size_m();
+    options.seed = g.seed();
+    mesh::GeneratedMesh generated =
+        g.has_box() ? mesh::generate_box(to_vec3(g.box().min_m()), to_vec3(g.box().max_m()), options)
+                    : mesh::generate_cylinder(to_vec3(g.cylinder().base_center_m()),
+                                              to_vec3(g.cylinder().axis_m()),
+                                              g.cylinder().radius_m(), options);
+    out.mesh = std::move(generated.mesh);
+    out.generator_cell_size_m = generated.cell_size_m;
+  }
+  for (int r = 0; r < entry.fixed_size(); ++r) {
+    auto nodes = select_nodes(out.mesh, entry.fixed(r), what + " fixed[" + std::to_string(r) + "]");
+    out.fixed_nodes.insert(out.fixed_nodes.end(), nodes.begin(), nodes.end());
+  }
+  std::sort(out.fixed_nodes.begin(), out.fixed_nodes.end());
+  out.fixed_nodes.erase(std::unique(out.fixed_nodes.begin(), out.fixed_nodes.end()),
+                        out.fixed_nodes.end());
+  return out;
+}
+
+namespace {
+
+CouplingDef compile_coupling(const Scene& scene, const Model& model, int c,
+                             const std::string& source) {
+  const auto& cp = scene.couplings(c);
+  const std::string what = source + ": couplings[" + std::to_string(c) + "] (" + cp.host() +
+                           " / " + cp.embedded() + ")";
+  CouplingDef def;
+  def.host = model.find_mesh(cp.host());
+  def.embedded = model.find_mesh(cp.embedded());
+  if (def.host < 0 || def.embedded < 0 || def.host == def.embedded)
+    throw std::runtime_error(what + ": unknown or identical meshes");
+  switch (cp.kind()) {
+    case Coupling::TIE: def.kind = CouplingKind::kTie; break;
+    case Coupling::SLIDING: def.kind = CouplingKind::kSliding; break;
+    default:
+      throw std::runtime_error(what + ": unknown coupling kind " + std::to_string(cp.kind()));
+  }
+  switch (cp.method()) {
+    case Coupling::EXACT: def.method = CouplingMethod::kExact; break;
+    case Coupling::ITERATIVE: def.method = CouplingMethod::kIterative; break;
+    default:
+      throw std::runtime_error(what + ": unknown coupling method " + std::to_string(cp.method()));
+  }
+  if (def.kind == CouplingKind::kSliding && def.method == CouplingMethod::kIterative) {
+    throw std::runtime_error(what +
+                             ": method ITERATIVE is the tie baseline; SLIDING is solved exactly "
+                             "(method EXACT)");
+  }
+  // Priority decides which mesh gets the new boundary (paper 2.4): the embedded mesh (the vessel)
+  // has the higher one; equal priorities would make the overlap ambiguous.
+  const int ph = model.meshes[def.host].priority, pe = model.meshes[def.embedded].priority;
+  if (ph == pe) {
+    throw std::runtime_error(what + ": equal priorities (" + std::to_string(ph) +
+                             ") make the overlap ambiguous; the embedded mesh needs the higher one");
+  }
+  if (ph > pe) {
+    throw std::runtime_error(what + ": the host must have the lower priority (host " +
+                             std::to_string(ph) + ", embedded " + std::to_string(pe) + ")");
+  }
+  return def;
+}
+
+}  // namespace
+
+Model compile(const Scene& scene, const std::string& source) {
+  validate_scene(scene, source);
+  Model model;
+  static_cast<Settings&>(model) = read_settings(scene, source);
+  const std::filesystem::path dir = std::filesystem::path(source).parent_path();
+  for (int i = 0; i < scene.meshes_size(); ++i)
+    model.meshes.push_back(load_mesh(scene.meshes(i), dir, source));
+
+  // Couplings: roles, one host per embedded mesh, no nesting.
+  std::vector<int> host_of(model.meshes.size(), -1);
+  std::vector<char> is_host(model.meshes.size(), 0);
+  for (int c = 0; c < scene.couplings_size(); ++c) {
+    const CouplingDef def = compile_coupling(scene, model, c, source);
+    if (host_of[def.embedded] >= 0) {
+      throw std::runtime_error(source + ": couplings[" + std::to_string(c) + "]: mesh " +
+                               model.meshes[def.embedded].id + " is embedded twice");
+    }
+    host_of[def.embedded] = def.host;
+    is_host[def.host] = 1;
+    model.couplings.push_back(def);
+  }
+  for (std::size_t m = 0; m < model.meshes.size(); ++m) {
+    if (is_host[m] && host_of[m] >= 0) {
+      throw std::runtime_error(source + ": mesh " + model.meshes[m].id +
+                               " is both host and embedded (nested couplings are not supported)");
+    }
+    if (is_host[m] && model.effects.coupling && model.meshes[m].fixed_nodes.empty()) {
+      throw std::runtime_error(source + ": host mesh " + model.meshes[m].id +
+                               " has no fixed nodes (it must hold its embedded meshes)");
+    }
+  }
+  if (model.effects.tool_contact && model.tools.empty())
+    throw std::runtime_error(source + ": effects.tool_contact is set but the scene has no tools");
+
+  // Loads and prescribed displacements, resolved on the meshes they name.
+  for (int i = 0; i < scene.loads_size(); ++i) {
+    const auto& l = scene.loads(i);
+    LoadDef def;
+    def.mesh = model.find_mesh(l.mesh());
+    const auto& lm = model.meshes[def.mesh];
+    def.nodes = select_nodes(lm.mesh, l.region(), source + ": loads[" + std::to_string(i) + "]");
+    def.force_per_node_n = to_vec3(l.force_n());
+    if (l.distribution() == Load::TOTAL_SPLIT_EQUALLY)
+      def.force_per_node_n /= static_cast<double>(def.nodes.size());
+    model.loads.push_back(std::move(def));
+  }
+  for (int i = 0; i < scene.prescribed_size(); ++i) {
+    const auto& p = scene.prescribed(i);
+    const std::string what = source + ": prescribed[" + std::to_string(i) + "]";
+    PrescribedDef def;
+    def.mesh = model.find_mesh(p.mesh());
+    def.nodes = select_nodes(model.meshes[def.mesh].mesh, p.region(), what);
+    def.displacement_m = to_vec3(p.displacement_m());
+    if (!p.components().empty()) {
+      def.components = {false, false, false};
+      for (char c : p.components()) def.components[c - 'x'] = true;
+    }
+    // A node held twice with different values is a contradiction, not a choice.
+    for (std::size_t j = 0; j < model.prescribed.size(); ++j) {
+      const auto& other = model.prescribed[j];
+      if (other.mesh != def.mesh) continue;
+      std::vector<int> both;
+      std::set_intersection(def.nodes.begin(), def.nodes.end(), other.nodes.begin(),
+                            other.nodes.end(), std::back_inserter(both));
+      for (int node : both) {
+        for (int a = 0; a < 3; ++a) {
+          if (def.components[a] && other.components[a] &&
+              def.displacement_m[a] != other.displacement_m[a]) {
+            throw std::runtime_error(what + ": node " + std::to_string(node) + " of mesh " +
+                                     p.mesh() + " is also held by prescribed[" +
+                                     std::to_string(j) + "] with another " +
+                                     std::string(1, static_cast<char>('x' + a)) + " value");
+          }
+        }
+      }
+    }
+    // Fixed (all components zero) and prescribed: refused unless the prescribed value is zero.
+    const auto& fixed = model.meshes[def.mesh].fixed_nodes;
+    std::vector<int> both;
+    std::set_intersection(def.nodes.begin(), def.nodes.end(), fixed.begin(), fixed.end(),
+                          std::back_inserter(both));
+    if (!both.empty()) {
+      throw std::runtime_error(what + ": node " + std::to_string(both.front()) + " of mesh " +
+                               p.mesh() + " is both fixed and prescribed");
+    }
+    model.prescribed.push_back(std::move(def));
+  }
+  return model;
+}
+
+Model load_model(const std::filesystem::path& path) {
+  return compile(read_scene(path), path.string());
+}
+
+}  // namespace neurosim::scene

@@ -1,0 +1,34 @@
+// A validated scene compiled into a Model (model.hpp): meshes read or generated, fixed regions,
+// loads and prescribed displacements resolved to node sets, couplings resolved and checked.
+// Every scene check that needs the meshes lives here; the rest is in scene.cpp.
+#pragma once
+
+#include "server/scene/model.hpp"
+#include "server/scene/scene.hpp"
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace neurosim::scene {
+
+// Throws std::runtime_error naming the scene file, the field and the element on bad input
+// ("x.scene: couplings[0] (brain / artery): the host must have the lower priority").
+Model compile(const Scene& scene, const std::string& source);
+// read_scene + compile.
+Model load_model(const std::filesystem::path& path);
+
+// Builds one mesh entry: reads the file (relative paths are relative to scene_dir) or runs
+// the generator, then resolves the fixed regions. `source` is the scene file for messages.
+LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
+                     const std::string& source);
+
+// Nodes of `mesh` selected by `region` (sorted, unique). `what` names the region in messages;
+// a region that selects nothing is an error (a typo in a box should not pass silently).
+std::vector<int> select_nodes(const mesh::TetMesh& mesh, const Region& region,
+                              const std::string& what);
+
+// Scene material to the FEM material (validated; errors name `what`).
+fem::Material to_material(const Material& material, const std::string& what);
+
+}  // namespace neurosim::scene

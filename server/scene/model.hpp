@@ -1,0 +1,73 @@
+// A scene compiled into plain C++ (MuJoCo's mjModel: built once, constant afterwards): meshes
+// built with their materials and fixed nodes, couplings resolved to mesh indices and checked
+// (roles by priority, one host per embedded mesh, no nesting), tools, effects, rates, haptics,
+// loads and prescribed displacements resolved to node sets. No protobuf or DDS type: the physics
+// (server/interaction) and the static solver read this, never the scene file.
+// Made by server/scene/compile.hpp (every scene check lives there and in scene.cpp).
+#pragma once
+
+#include "server/fem/material.hpp"
+#include "server/mesh/tet_mesh.hpp"
+#include "server/scene/settings.hpp"
+
+#include <array>
+#include <string>
+#include <vector>
+
+namespace neurosim::scene {
+
+// A scene mesh, built: geometry, material and fixed nodes resolved.
+struct LoadedMesh {
+  std::string id;
+  mesh::TetMesh mesh;
+  fem::Material material;
+  std::vector<int> fixed_nodes;  // sorted, unique
+  int priority{0};               // higher wins in an overlap (paper 2.4: vessel over brain)
+  std::string provenance;
+  std::string material_source;        // where E and nu come from
+  double generator_cell_size_m{0.0};  // for generated meshes: the mesher's cell size, unit m
+};
+
+enum class CouplingKind { kTie, kSliding };
+enum class CouplingMethod { kExact, kIterative };
+
+// Two overlapping meshes: the embedded one (higher priority) keeps its volume, the host gets the
+// new boundary S' around it.
+struct CouplingDef {
+  int host{-1};      // mesh index
+  int embedded{-1};  // mesh index
+  CouplingKind kind{CouplingKind::kTie};
+  CouplingMethod method{CouplingMethod::kExact};  // kIterative: the paper's baseline (ties only)
+};
+
+// Nodal forces for static solves (distribution resolved: the force on every listed node).
+struct LoadDef {
+  int mesh{-1};
+  std::vector<int> nodes;  // sorted, unique
+  mesh::Vec3 force_per_node_n{mesh::Vec3::Zero()};  // unit N
+};
+
+// Prescribed displacement of some components of a node set (static solves; CalculiX's
+// *BOUNDARY NSET,first,last): the components not held stay free.
+struct PrescribedDef {
+  int mesh{-1};
+  std::vector<int> nodes;  // sorted, unique
+  mesh::Vec3 displacement_m{mesh::Vec3::Zero()};  // unit m (only held components are used)
+  std::array<bool, 3> components{{true, true, true}};  // x, y, z held
+};
+
+struct Model : Settings {
+  std::vector<LoadedMesh> meshes;        // scene order
+  std::vector<CouplingDef> couplings;    // scene order (applied when effects.coupling)
+  std::vector<LoadDef> loads;            // scene order
+  std::vector<PrescribedDef> prescribed;  // scene order
+
+  // Index of the mesh with this id, or -1.
+  int find_mesh(const std::string& id) const {
+    for (std::size_t i = 0; i < meshes.size(); ++i)
+      if (meshes[i].id == id) return static_cast<int>(i);
+    return -1;
+  }
+};
+
+}  // namespace neurosim::scene
