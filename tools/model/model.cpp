@@ -5,7 +5,7 @@
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/triangle_surface.hpp"
 #include "server/mesh/io.hpp"
-#include "server/scene/scene.hpp"
+#include "server/scene/compile.hpp"
 #include "tools/model/mesh3.hpp"
 #include "tools/model/mri_mask.hpp"
 
