@@ -1,6 +1,7 @@
 #include "server/fem/calculix.hpp"
 
 #include <sys/wait.h>
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
@@ -62,6 +63,31 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
   if (!loads.forces_n.allFinite()) {
     throw std::invalid_argument("write_calculix_input: non-finite force");
   }
+  try {
+    expand_prescribed(loads.prescribed_sets, static_cast<int>(n), loads.fixed_nodes);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("write_calculix_input: ") + e.what());
+  }
+  std::vector<std::vector<int>> set_nodes;  // sorted, unique node ids of each prescribed set
+  {
+    std::vector<char> per_node(n, 0);
+    for (int v : loads.prescribed_nodes) {
+      per_node[v] = 1;
+    }
+    for (std::size_t k = 0; k < loads.prescribed_sets.size(); ++k) {
+      std::vector<int> ids = loads.prescribed_sets[k].nodes;
+      std::sort(ids.begin(), ids.end());
+      ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+      for (int v : ids) {
+        if (per_node[v]) {
+          throw std::invalid_argument("write_calculix_input: prescribed[" + std::to_string(k) +
+                                      "]: node " + std::to_string(v) +
+                                      " is also in prescribed_nodes");
+        }
+      }
+      set_nodes.push_back(std::move(ids));
+    }
+  }
 
   std::ofstream out(inp_file);
   if (!out) {
@@ -106,9 +132,20 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
   }
   std::vector<int> rf_nodes = loads.fixed_nodes;
   rf_nodes.insert(rf_nodes.end(), loads.prescribed_nodes.begin(), loads.prescribed_nodes.end());
+  for (const auto& ids : set_nodes) {
+    rf_nodes.insert(rf_nodes.end(), ids.begin(), ids.end());
+  }
+  std::sort(rf_nodes.begin(), rf_nodes.end());
+  rf_nodes.erase(std::unique(rf_nodes.begin(), rf_nodes.end()), rf_nodes.end());
   if (!loads.fixed_nodes.empty()) {
     out << "*NSET, NSET=NFIX\n";
     write_id_list(out, loads.fixed_nodes);
+  }
+  for (std::size_t k = 0; k < set_nodes.size(); ++k) {
+    out << "** prescribed[" << k << "]: components "
+        << components_string(loads.prescribed_sets[k].components) << "\n*NSET, NSET=NP" << k
+        << "\n";
+    write_id_list(out, set_nodes[k]);
   }
   if (!rf_nodes.empty()) {
     out << "*NSET, NSET=NRF\n";
@@ -124,6 +161,17 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
       for (int a = 0; a < 3; ++a) {
         out << loads.prescribed_nodes[k] + 1 << ", " << a + 1 << ", " << a + 1 << ", "
             << loads.prescribed_displacements_m[3 * k + a] << "\n";
+      }
+    }
+  }
+  if (!set_nodes.empty()) {
+    out << "*BOUNDARY\n";
+    for (std::size_t k = 0; k < set_nodes.size(); ++k) {
+      const PrescribedDofs& p = loads.prescribed_sets[k];
+      for (int a = 0; a < 3; ++a) {
+        if (p.components[a]) {
+          out << "NP" << k << ", " << a + 1 << ", " << a + 1 << ", " << p.displacement_m[a] << "\n";
+        }
       }
     }
   }

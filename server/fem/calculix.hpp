@@ -3,6 +3,7 @@
 #pragma once
 
 #include "server/fem/material.hpp"
+#include "server/fem/prescribed.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
 #include <Eigen/Core>
@@ -18,12 +19,18 @@ struct CalculixLoads {
   std::vector<int> fixed_nodes;                // u = 0 in x, y, z
   std::vector<int> prescribed_nodes;           // u given in x, y, z
   Eigen::VectorXd prescribed_displacements_m;  // 3 per prescribed node, node-major, unit m
-  Eigen::VectorXd forces_n;                    // empty or 3N nodal forces, unit N
+  // Prescribed by component (only the marked components held, the others free); validated
+  // as StaticSolver::solve_prescribed_dofs does (expand_prescribed against fixed_nodes), and
+  // no node may also be in prescribed_nodes.
+  std::vector<PrescribedDofs> prescribed_sets;
+  Eigen::VectorXd forces_n;  // empty or 3N nodal forces, unit N
 };
 
 // Writes a C3D4 deck: *NODE (id = node + 1), *ELEMENT per material (ELSET Ek, id = tet + 1),
 // *MATERIAL Mk / *ELASTIC and *SOLID SECTION per used material, then one *STATIC step with
 // *BOUNDARY, *CLOAD, *NODE PRINT U (all nodes) and RF (fixed + prescribed nodes, set NRF).
+// prescribed_sets[k] becomes node set NPk and one *BOUNDARY line "NPk, a, a, value" per
+// prescribed component a (1 = x, 2 = y, 3 = z); ccx leaves the other components free.
 // Numbers are written with 17 significant digits. Throws on non-finite or out-of-range input.
 void write_calculix_input(const std::filesystem::path& inp_file, const mesh::TetMesh& mesh,
                           const MaterialMap& materials, const CalculixLoads& loads);

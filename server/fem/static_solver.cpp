@@ -321,15 +321,17 @@ void StaticSolver::check_residual(const Eigen::VectorXd& u_m, const Eigen::Vecto
                                   const std::vector<char>* constrained) const {
   Eigen::VectorXd& r = impl_->full;
   r.noalias() = k_ * u_m;
+  // Scale: the applied forces or K u over all dofs (the reactions included), so that a problem
+  // loaded only by prescribed displacements (f = 0 and K u ~ 0 on the free dofs) has one.
   double res2 = 0.0, ref2 = 0.0, ku2 = 0.0;
   for (int d = 0; d < num_dofs(); ++d) {
+    ku2 += r[d] * r[d];
     if (reduced_index_[d] < 0 || (constrained && (*constrained)[d])) {
       continue;
     }
     const double f = forces_n.size() ? forces_n[d] : 0.0;
     res2 += (r[d] - f) * (r[d] - f);
     ref2 += f * f;
-    ku2 += r[d] * r[d];
   }
   const double scale = std::sqrt(std::max(ref2, ku2));
   if (std::sqrt(res2) > options_.residual_tolerance * scale) {
@@ -397,11 +399,50 @@ void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) c
 PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
                                                   const Eigen::VectorXd& displacements_m,
                                                   const Eigen::VectorXd& forces_n) const {
-  const int ndof = num_dofs();
   if (displacements_m.size() != 3 * static_cast<Eigen::Index>(nodes.size())) {
     throw std::invalid_argument(
         "StaticSolver::solve_prescribed: " + std::to_string(displacements_m.size()) +
         " displacement values for " + std::to_string(nodes.size()) + " nodes (need 3 each)");
+  }
+  std::vector<char> seen(num_nodes_, 0);
+  std::vector<int> dofs(3 * nodes.size());
+  for (std::size_t k = 0; k < nodes.size(); ++k) {
+    const int v = nodes[k];
+    if (v < 0 || v >= num_nodes_) {
+      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) +
+                                  " out of range [0, " + std::to_string(num_nodes_) + ")");
+    }
+    if (seen[v]) {
+      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) +
+                                  " given twice");
+    }
+    seen[v] = 1;
+    for (int a = 0; a < 3; ++a) {
+      dofs[3 * k + a] = 3 * v + a;
+    }
+  }
+  return solve_prescribed_per_dof(dofs, displacements_m, forces_n);
+}
+
+PrescribedSolution StaticSolver::solve_prescribed_dofs(
+    const std::vector<PrescribedDofs>& prescribed, const Eigen::VectorXd& forces_n) const {
+  PrescribedDofList list;
+  try {
+    list = expand_prescribed(prescribed, num_nodes_, fixed_nodes_);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("StaticSolver::solve_prescribed_dofs: ") + e.what());
+  }
+  return solve_prescribed_per_dof(list.dofs, list.values_m, forces_n);
+}
+
+PrescribedSolution StaticSolver::solve_prescribed_per_dof(const std::vector<int>& dofs,
+                                                          const Eigen::VectorXd& values_m,
+                                                          const Eigen::VectorXd& forces_n) const {
+  const int ndof = num_dofs();
+  if (values_m.size() != static_cast<Eigen::Index>(dofs.size())) {
+    throw std::invalid_argument(
+        "StaticSolver::solve_prescribed: " + std::to_string(values_m.size()) +
+        " displacement values for " + std::to_string(dofs.size()) + " dofs (need 1 each)");
   }
   if (forces_n.size() != 0) {
     check_forces(forces_n, "forces");
@@ -413,31 +454,30 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
     }
   }
   Eigen::VectorXd u = Eigen::VectorXd::Zero(ndof);
-  std::vector<char> prescribed(num_nodes_, 0);
-  std::vector<int> free_prescribed;  // prescribed nodes that are free in the factor
-  for (std::size_t k = 0; k < nodes.size(); ++k) {
-    const int v = nodes[k];
-    if (v < 0 || v >= num_nodes_) {
-      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) +
-                                  " out of range [0, " + std::to_string(num_nodes_) + ")");
+  std::vector<char> prescribed(ndof, 0);
+  std::vector<int> free_prescribed;  // prescribed dofs that are free in the factor
+  for (std::size_t k = 0; k < dofs.size(); ++k) {
+    const int d = dofs[k];
+    if (d < 0 || d >= ndof) {
+      throw std::invalid_argument("StaticSolver::solve_prescribed: dof " + std::to_string(d) +
+                                  " (node " + std::to_string(d / 3) +
+                                  ") out of range [0, 3N = " + std::to_string(ndof) + ")");
     }
-    if (prescribed[v]) {
-      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) +
-                                  " given twice");
+    if (prescribed[d]) {
+      throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(d / 3) +
+                                  " axis " + std::to_string(d % 3) + " given twice");
     }
-    prescribed[v] = 1;
-    for (int a = 0; a < 3; ++a) {
-      const double value = displacements_m[3 * k + a];
-      if (!std::isfinite(value)) {
-        throw std::invalid_argument(
-            "StaticSolver::solve_prescribed: non-finite displacement at node " + std::to_string(v) +
-            " axis " + std::to_string(a));
-      }
-      u[3 * v + a] = value;
-      constrained[3 * v + a] = 1;
+    prescribed[d] = 1;
+    const double value = values_m[static_cast<Eigen::Index>(k)];
+    if (!std::isfinite(value)) {
+      throw std::invalid_argument(
+          "StaticSolver::solve_prescribed: non-finite displacement at node " +
+          std::to_string(d / 3) + " axis " + std::to_string(d % 3));
     }
-    if (!is_fixed_node(v)) {
-      free_prescribed.push_back(static_cast<int>(k));
+    u[d] = value;
+    constrained[d] = 1;
+    if (reduced_index_[d] >= 0) {
+      free_prescribed.push_back(d);
     }
   }
 
@@ -455,15 +495,14 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
   solve_reduced(b, u0);
 
   if (!free_prescribed.empty()) {
-    // Prescribed free nodes: multipliers lam (their reaction forces) with
+    // Prescribed free dofs: multipliers lam (their reaction forces) with
     // (E^T K_ff^-1 E) lam = ubar - E^T u0, then u_f = u0 + K_ff^-1 E lam.
-    const int m = 3 * static_cast<int>(free_prescribed.size());
+    const int m = static_cast<int>(free_prescribed.size());
     Eigen::VectorXd target(m);
     std::vector<int> rows(m);
     for (int c = 0; c < m; ++c) {
-      const int v = nodes[free_prescribed[c / 3]];
-      rows[c] = reduced_index_[3 * v + c % 3];
-      target[c] = u[3 * v + c % 3] - u0(rows[c], 0);
+      rows[c] = reduced_index_[free_prescribed[c]];
+      target[c] = u[free_prescribed[c]] - u0(rows[c], 0);
     }
     // S = E^T K_ff^-1 E by block solves of kBlock unit columns (memory nf x kBlock, not nf x m).
     constexpr int kBlock = 64;
@@ -485,7 +524,7 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
     Eigen::LLT<Eigen::MatrixXd> schur(s);
     if (schur.info() != Eigen::Success) {
       throw std::runtime_error(
-          "StaticSolver::solve_prescribed: compliance block of the prescribed nodes is not "
+          "StaticSolver::solve_prescribed: compliance block of the prescribed dofs is not "
           "positive definite");
     }
     const Eigen::VectorXd lam = schur.solve(target);

@@ -4,6 +4,7 @@
 
 #include "server/fem/assembly.hpp"
 #include "server/fem/material.hpp"
+#include "server/fem/prescribed.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
 #include <Eigen/Core>
@@ -53,8 +54,10 @@ struct ConditionEstimate {
 
 struct PrescribedSolution {
   Eigen::VectorXd displacement_m;  // 3N, unit m
-  // 3N, unit N: force the supports exert on the body, r = K u - f, at fixed and prescribed
-  // nodes; exactly zero elsewhere.
+  // 3N, unit N: force the supports exert on the body, r = K u - f, at the constrained dofs
+  // (all components of fixed nodes, the prescribed components of prescribed nodes); exactly
+  // zero elsewhere, including the free components of a prescribed node (K u - f is round-off
+  // there).
   Eigen::VectorXd reaction_n;
 };
 
@@ -85,10 +88,29 @@ class StaticSolver {
   // optional forces (empty or 3N). Prescribed nodes that are fixed nodes are eliminated;
   // others are imposed through the Schur complement of the factor, so no refactorization is
   // ever needed: cost 3|P| extra solves (in blocks of 64) and a dense 3|P| x 3|P| Cholesky, so
-  // for large fixed-in-time sets (hundreds of nodes) pass them in fixed_nodes instead.
+  // for large fixed-in-time sets (hundreds of nodes) pass them in fixed_nodes instead. All
+  // three components of every node are prescribed (solve_prescribed_dofs for a subset).
   PrescribedSolution solve_prescribed(const std::vector<int>& nodes,
                                       const Eigen::VectorXd& displacements_m,
                                       const Eigen::VectorXd& forces_n = Eigen::VectorXd()) const;
+
+  // Prescribed displacements by component (PrescribedDofs: a node set, a displacement and the
+  // components it holds; the other components are free unknowns), plus optional forces (empty
+  // or 3N). Validated by expand_prescribed against fixed_nodes(): a node both fixed and
+  // prescribed, a component prescribed twice with different values, no node or no component
+  // in a definition are refused with std::invalid_argument naming the definition and the node.
+  // Cost as solve_prescribed, with 3|P| replaced by the number of prescribed components.
+  PrescribedSolution solve_prescribed_dofs(
+      const std::vector<PrescribedDofs>& prescribed,
+      const Eigen::VectorXd& forces_n = Eigen::VectorXd()) const;
+
+  // Per-dof form: dofs (3 * node + axis, each at most once) take values_m (one per dof); the
+  // other components of their nodes are free unless the node is fixed. A dof of a fixed node
+  // may be given (its value replaces 0, as in solve_prescribed). Throws std::invalid_argument
+  // naming node and axis for a dof out of range, given twice or with a non-finite value.
+  PrescribedSolution solve_prescribed_per_dof(
+      const std::vector<int>& dofs, const Eigen::VectorXd& values_m,
+      const Eigen::VectorXd& forces_n = Eigen::VectorXd()) const;
 
   // Reduced (free-dof) system, for Compliance and coupling code.
   // X = K_ff^-1 B for a dense B (num_free_dofs x m): all columns in one CHOLMOD call.

@@ -27,13 +27,27 @@ struct Comparison {
   double max_u_m{0.0};
 };
 
-// Solves with neurosim and with ccx, compares.
+// Solves with neurosim and with ccx, compares. Prescribed by component (prescribed_sets) goes
+// through StaticSolver::solve_prescribed_dofs, with prescribed_nodes as all-component sets.
 Comparison compare_with_ccx(const std::string& tag, const mesh::TetMesh& m, const MaterialMap& mats,
-                            const CalculixLoads& loads, ConditionEstimate* cond = nullptr) {
+                            const CalculixLoads& loads, ConditionEstimate* cond = nullptr,
+                            PrescribedSolution* ours_out = nullptr,
+                            CalculixResult* ccx_out = nullptr) {
   const StaticSolver solver(m, mats, loads.fixed_nodes);
-  const auto ours =
-      solver.solve_prescribed(loads.prescribed_nodes, loads.prescribed_displacements_m,
-                              loads.forces_n.size() ? loads.forces_n : Eigen::VectorXd());
+  const Eigen::VectorXd forces = loads.forces_n.size() ? loads.forces_n : Eigen::VectorXd();
+  PrescribedSolution ours;
+  if (loads.prescribed_sets.empty()) {
+    ours =
+        solver.solve_prescribed(loads.prescribed_nodes, loads.prescribed_displacements_m, forces);
+  } else {
+    std::vector<PrescribedDofs> sets = loads.prescribed_sets;
+    for (std::size_t k = 0; k < loads.prescribed_nodes.size(); ++k) {
+      sets.push_back({{loads.prescribed_nodes[k]},
+                      loads.prescribed_displacements_m.segment<3>(3 * k),
+                      kAllComponents});
+    }
+    ours = solver.solve_prescribed_dofs(sets, forces);
+  }
   if (cond) {
     *cond = solver.estimate_condition(500, 1e-6);
   }
@@ -56,6 +70,12 @@ Comparison compare_with_ccx(const std::string& tag, const mesh::TetMesh& m, cons
   std::printf("%-28s nodes %6zu tets %7zu  max|u| %.4e m  u rel diff %.3e  RF rel diff %.3e\n",
               tag.c_str(), m.num_vertices(), m.num_tets(), c.max_u_m, c.u_rel, c.rf_rel);
   std::filesystem::remove_all(dir);
+  if (ours_out) {
+    *ours_out = ours;
+  }
+  if (ccx_out) {
+    *ccx_out = ccx;
+  }
   return c;
 }
 
@@ -74,6 +94,43 @@ TEST(FemCalculix, DeckWriterAndDatReader) {
   loads.forces_n[0] = std::nan("");
   EXPECT_THROW(write_calculix_input(dir / "b.inp", m, MaterialMap::uniform({1e6, 0.3, "x"}), loads),
                std::invalid_argument);
+  // Prescribed by component: one node set per definition, *BOUNDARY lines for the prescribed
+  // components only.
+  loads.forces_n[0] = 0.0;
+  loads.prescribed_sets = {{{6, 7}, {9.0, 0.0, -1e-3}, parse_components("z")},
+                           {{4}, {0.000244140625, 0.0, 0.0}, parse_components("xy")}};
+  write_calculix_input(dir / "c.inp", m, MaterialMap::uniform({1e6, 0.3, "x"}), loads);
+  {
+    std::ifstream in_c(dir / "c.inp");
+    const std::string deck_c((std::istreambuf_iterator<char>(in_c)),
+                             std::istreambuf_iterator<char>());
+    EXPECT_NE(deck_c.find("*NSET, NSET=NP0\n7, 8\n"), std::string::npos) << deck_c;
+    EXPECT_NE(deck_c.find("*NSET, NSET=NP1\n5\n"), std::string::npos) << deck_c;
+    EXPECT_NE(
+        deck_c.find("*BOUNDARY\nNP0, 3, 3, -0.001\nNP1, 1, 1, 0.000244140625\nNP1, 2, 2, 0\n"),
+        std::string::npos)
+        << deck_c;
+    EXPECT_EQ(deck_c.find("NP0, 1, 1"), std::string::npos) << deck_c;
+    EXPECT_NE(deck_c.find("*NSET, NSET=NRF\n1, 2, 3, 5, 7, 8\n"), std::string::npos) << deck_c;
+  }
+  // A node both fixed and prescribed, or one component given two values, is refused by name.
+  loads.prescribed_sets.push_back({{2}, {0.0, 0.0, -1e-3}, parse_components("z")});
+  try {
+    write_calculix_input(dir / "d.inp", m, MaterialMap::uniform({1e6, 0.3, "x"}), loads);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("prescribed[2]: node 2 is both fixed"), std::string::npos)
+        << e.what();
+  }
+  loads.prescribed_sets.back() = {{7}, {0.0, 0.0, -2e-3}, parse_components("z")};
+  try {
+    write_calculix_input(dir / "d.inp", m, MaterialMap::uniform({1e6, 0.3, "x"}), loads);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("node 7 component z prescribed twice"), std::string::npos)
+        << e.what();
+  }
+  loads.prescribed_sets.clear();
   // A malformed .dat names file and line.
   {
     std::ofstream bad(dir / "bad.dat");
@@ -124,6 +181,85 @@ TEST(FemCalculix, CubeWithForcesAndPrescribedDisplacementsMatches) {
       compare_with_ccx("cube", m, MaterialMap::uniform({1e6, 0.4, "brain"}), loads);
   EXPECT_LE(c.u_rel, 1e-6);
   EXPECT_LE(c.rf_rel, 1e-6);
+}
+
+TEST(FemCalculix, BlockPressedByUzOnlyMatches) {
+  // Bottom fixed, the whole top pressed down 1 mm by prescribing only uz (CalculiX: NSET, 3, 3):
+  // the top is free to spread sideways (Poisson expansion), with no lateral reaction.
+  const auto m = box_mesh(BoxSpec{8, 8, 6, {0, 0, 0}, {0.1, 0.1, 0.06}, 0.2, 31});
+  CalculixLoads loads;
+  loads.fixed_nodes = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
+  const auto top = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.06 - 1e-12; });
+  loads.prescribed_sets = {{top, {0.0, 0.0, -1e-3}, parse_components("z")}};
+  PrescribedSolution ours;
+  CalculixResult ccx;
+  const Comparison c = compare_with_ccx("press_uz", m, MaterialMap::uniform({1e6, 0.4, "brain"}),
+                                        loads, nullptr, &ours, &ccx);
+  EXPECT_LE(c.u_rel, 1e-6);
+  EXPECT_LE(c.rf_rel, 1e-6);
+  double lateral = 0.0, lateral_ccx = 0.0, rz = 0.0, free_rf = 0.0, free_rf_ccx = 0.0;
+  for (int v : top) {
+    EXPECT_EQ(ours.displacement_m[3 * v + 2], -1e-3);
+    lateral = std::max(lateral, ours.displacement_m.segment<2>(3 * v).cwiseAbs().maxCoeff());
+    lateral_ccx = std::max(lateral_ccx, ccx.displacement_m.segment<2>(3 * v).cwiseAbs().maxCoeff());
+    rz = std::max(rz, std::abs(ours.reaction_n[3 * v + 2]));
+    free_rf = std::max(free_rf, ours.reaction_n.segment<2>(3 * v).cwiseAbs().maxCoeff());
+    EXPECT_TRUE(ccx.has_reaction[v]);
+    free_rf_ccx = std::max(free_rf_ccx, ccx.reaction_n.segment<2>(3 * v).cwiseAbs().maxCoeff());
+  }
+  const Eigen::VectorXd ku =
+      StaticSolver(m, MaterialMap::uniform({1e6, 0.4, "brain"}), loads.fixed_nodes).stiffness() *
+      ours.displacement_m;
+  double free_ku = 0.0;
+  for (int v : top) {
+    free_ku = std::max(free_ku, ku.segment<2>(3 * v).cwiseAbs().maxCoeff());
+  }
+  std::printf(
+      "press_uz: top lateral max |u| %.4e m (ccx %.4e m), max |RF_z| %.4e N, free "
+      "components: reported %.1e N, |K u| %.3e N, ccx RF %.3e N\n",
+      lateral, lateral_ccx, rz, free_rf, free_ku, free_rf_ccx);
+  // Not clamped: the top spreads by ~nu * strain * half-width ~ 1e-4 m at its edges.
+  EXPECT_GT(lateral, 2e-5);
+  EXPECT_GT(lateral_ccx, 2e-5);
+  EXPECT_EQ(free_rf, 0.0);
+  EXPECT_LE(free_ku, 1e-9 * rz);
+  EXPECT_LE(free_rf_ccx, 1e-6 * rz);
+}
+
+TEST(FemCalculix, RollersAndPartialPressWithForcesMatch) {
+  // Bottom fixed; the x = 0 face held in x only, the y = 0 face in y only (rollers, value 0);
+  // a patch of the top pushed 2 mm down in z only; a lateral load on the x = max face. Nodes on
+  // both a roller face and the patch (or both rollers) hold two components from two sets.
+  const auto m = box_mesh(BoxSpec{8, 8, 8, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, 8});
+  CalculixLoads loads;
+  loads.fixed_nodes = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
+  const auto x0 =
+      nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-12 && p.z() > 1e-12; });
+  const auto y0 =
+      nodes_where(m, [](const Eigen::Vector3d& p) { return p.y() < 1e-12 && p.z() > 1e-12; });
+  const auto patch = nodes_where(m, [](const Eigen::Vector3d& p) {
+    return p.z() > 0.1 - 1e-12 && p.x() < 0.0376 && p.y() < 0.0376;
+  });
+  loads.prescribed_sets = {{x0, {0.0, 0.0, 0.0}, parse_components("x")},
+                           {y0, {0.0, 0.0, 0.0}, parse_components("y")},
+                           {patch, {0.0, 0.0, -2e-3}, parse_components("z")}};
+  loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
+  for (int v : nodes_where(
+           m, [](const Eigen::Vector3d& p) { return p.x() > 0.1 - 1e-12 && p.z() > 0.05; })) {
+    loads.forces_n[3 * v + 1] = 0.2;
+  }
+  PrescribedSolution ours;
+  const Comparison c = compare_with_ccx(
+      "rollers_press", m, MaterialMap::uniform({1e6, 0.45, "brain"}), loads, nullptr, &ours);
+  EXPECT_LE(c.u_rel, 1e-6);
+  EXPECT_LE(c.rf_rel, 1e-6);
+  // The rollers hold only their normal component: the faces slide in their plane.
+  double slide = 0.0;
+  for (int v : x0) {
+    EXPECT_EQ(ours.displacement_m[3 * v], 0.0);
+    slide = std::max(slide, std::abs(ours.displacement_m[3 * v + 2]));
+  }
+  EXPECT_GT(slide, 1e-4);
 }
 
 TEST(FemCalculix, NearlyIncompressibleMatches) {

@@ -1,5 +1,6 @@
 // Static solver: patch test, equilibrium of reactions, prescribed displacements through
-// elimination and through the Schur complement, singular and non-finite input.
+// elimination and through the Schur complement, prescribed by component (only some of x, y, z
+// held), singular and non-finite input.
 #include "server/fem/static_solver.hpp"
 #include "fem_test_meshes.hpp"
 
@@ -197,6 +198,144 @@ TEST(FemStaticSolver, PrescribedFreeNodesMatchEliminatedOnes) {
   for (int v : right) {
     EXPECT_LE((b.displacement_m.segment<3>(3 * v) - d.segment<3>(0)).norm(), 1e-15);
   }
+}
+
+// A block fixed at its bottom, its top pressed down by prescribing only uz: ux, uy at the top
+// are free unknowns (the top spreads by Poisson expansion), with zero reaction there.
+TEST(FemStaticSolver, PrescribedOnlySomeComponentsLeavesTheOthersFree) {
+  const auto m = box_mesh(BoxSpec{5, 5, 4, {0, 0, 0}, {0.05, 0.05, 0.04}, 0.2, 21});
+  const auto bottom = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
+  const auto top = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.04 - 1e-9; });
+  SolverOptions opt;
+  opt.check_residual = true;
+  opt.residual_tolerance = 1e-9;
+  const StaticSolver solver(m, MaterialMap::uniform(kBrain), bottom, opt);
+  const PrescribedDofs press{top, {0.0, 0.0, -1e-3}, parse_components("z")};
+  const auto sol = solver.solve_prescribed_dofs({press});
+  const Eigen::VectorXd residual = solver.stiffness() * sol.displacement_m;  // K u - f, f = 0
+  double max_reaction = 0.0, max_free_residual = 0.0, max_lateral = 0.0;
+  Eigen::Vector3d top_force = Eigen::Vector3d::Zero(), bottom_force = Eigen::Vector3d::Zero();
+  for (int v : top) {
+    EXPECT_EQ(sol.displacement_m[3 * v + 2], -1e-3);
+    max_lateral = std::max(max_lateral, sol.displacement_m.segment<2>(3 * v).cwiseAbs().maxCoeff());
+    // Reported: the z reaction only; x, y are free (exactly zero reported, round-off in K u).
+    EXPECT_EQ(sol.reaction_n[3 * v], 0.0);
+    EXPECT_EQ(sol.reaction_n[3 * v + 1], 0.0);
+    EXPECT_EQ(sol.reaction_n[3 * v + 2], residual[3 * v + 2]);
+    max_reaction = std::max(max_reaction, std::abs(residual[3 * v + 2]));
+    max_free_residual =
+        std::max(max_free_residual, residual.segment<2>(3 * v).cwiseAbs().maxCoeff());
+    top_force += sol.reaction_n.segment<3>(3 * v);
+  }
+  for (int v : bottom) {
+    EXPECT_EQ(sol.displacement_m.segment<3>(3 * v).norm(), 0.0);
+    bottom_force += sol.reaction_n.segment<3>(3 * v);
+  }
+  std::printf(
+      "uz-only press: max lateral |u| at top %.3e m, max |Kz u| %.3e N, max free-component "
+      "|K u| %.3e N, top force (%.4e %.4e %.4e) N\n",
+      max_lateral, max_reaction, max_free_residual, top_force.x(), top_force.y(), top_force.z());
+  // Not clamped: nu = 0.4 under ~2.5 % compression spreads the top by ~1e-4 m at its edges.
+  EXPECT_GT(max_lateral, 1e-5);
+  EXPECT_LE(max_free_residual, 1e-10 * max_reaction);
+  // Pressing down needs a downward force on the top; the bottom pushes back.
+  EXPECT_LT(top_force.z(), 0.0);
+  EXPECT_LE((top_force + bottom_force).norm(), 1e-10 * std::abs(top_force.z()));
+  // No lateral force at the top at all: x, y there carry no constraint.
+  EXPECT_EQ(top_force.head<2>().norm(), 0.0);
+
+  // Clamping all three components is a different (stiffer) problem.
+  const auto clamped = solver.solve_prescribed_dofs({{top, {0.0, 0.0, -1e-3}}});
+  for (int v : top) {
+    EXPECT_EQ(clamped.displacement_m.segment<2>(3 * v).norm(), 0.0);
+  }
+  double clamped_z = 0.0;
+  for (int v : top) {
+    clamped_z += clamped.reaction_n[3 * v + 2];
+  }
+  EXPECT_LT(clamped_z, top_force.z());  // more force to press a clamped top as far
+
+  // The per-dof form gives the same answer.
+  std::vector<int> dofs;
+  for (int v : top) {
+    dofs.push_back(3 * v + 2);
+  }
+  const auto per_dof =
+      solver.solve_prescribed_per_dof(dofs, Eigen::VectorXd::Constant(dofs.size(), -1e-3));
+  EXPECT_EQ((per_dof.displacement_m - sol.displacement_m).cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(FemStaticSolver, AllComponentsDefaultMatchesNodeForm) {
+  const auto m = box_mesh(BoxSpec{4, 3, 3, {0, 0, 0}, {0.04, 0.03, 0.03}, 0.2, 9});
+  const auto left = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() < 1e-9; });
+  const auto right = nodes_where(m, [](const Eigen::Vector3d& p) { return p.x() > 0.04 - 1e-9; });
+  const StaticSolver solver(m, MaterialMap::uniform(kBrain), left);
+  const Eigen::Vector3d d(1e-3, 2e-4, -5e-4);
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
+  f[3 * 30 + 2] = -0.5;
+  Eigen::VectorXd values(3 * right.size());
+  for (std::size_t k = 0; k < right.size(); ++k) {
+    values.segment<3>(3 * k) = d;
+  }
+  const auto a = solver.solve_prescribed(right, values, f);
+  PrescribedDofs all;  // components default: x, y, z
+  all.nodes = right;
+  all.displacement_m = d;
+  const auto b = solver.solve_prescribed_dofs({all}, f);
+  const auto c = solver.solve_prescribed_dofs({{right, d, parse_components("zyx")}}, f);
+  EXPECT_EQ((a.displacement_m - b.displacement_m).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ((a.reaction_n - b.reaction_n).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ((a.displacement_m - c.displacement_m).cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(FemStaticSolver, ConflictingPrescribedDofsAreRefusedNamingTheNode) {
+  const auto m = box_mesh(BoxSpec{2, 2, 2});
+  const auto fixed = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
+  const StaticSolver solver(m, MaterialMap::uniform(kBrain), fixed);
+  const Components z = parse_components("z");
+  // Fixed and prescribed (only z): refused, not silently clamped or overridden.
+  expect_message(
+      [&] {
+        solver.solve_prescribed_dofs({{{22, fixed[1]}, {0, 0, -1e-3}, z}});
+      },
+      "node " + std::to_string(fixed[1]) + " is both fixed");
+  // Twice with different values.
+  expect_message(
+      [&] {
+        solver.solve_prescribed_dofs({{{22, 23}, {0, 0, -1e-3}, z}, {{23}, {0, 0, -2e-3}, z}});
+      },
+      "node 23 component z prescribed twice with different values");
+  expect_message(
+      [&] {
+        solver.solve_prescribed_dofs({{{22}, {0, 0, -1e-3}, {false, false, false}}});
+      },
+      "no component");
+  expect_message([&] { solver.solve_prescribed_dofs({{{}, {0, 0, -1e-3}, z}}); }, "no node");
+  expect_message(
+      [&] {
+        solver.solve_prescribed_dofs({{{99}, {0, 0, -1e-3}, z}});
+      },
+      "node 99 out of range");
+  // Twice with the same value is one constraint.
+  const auto once = solver.solve_prescribed_dofs({{{22}, {0, 0, -1e-3}, z}});
+  const auto twice =
+      solver.solve_prescribed_dofs({{{22}, {0, 0, -1e-3}, z}, {{22}, {0, 0, -1e-3}, z}});
+  EXPECT_EQ((once.displacement_m - twice.displacement_m).cwiseAbs().maxCoeff(), 0.0);
+  // Per-dof form: a dof given twice, out of range, non-finite.
+  expect_message(
+      [&] {
+        solver.solve_prescribed_per_dof({3 * 22 + 2, 3 * 22 + 2}, Eigen::VectorXd::Zero(2));
+      },
+      "node 22 axis 2 given twice");
+  expect_message([&] { solver.solve_prescribed_per_dof({3 * 27}, Eigen::VectorXd::Zero(1)); },
+                 "dof 81 (node 27) out of range");
+  expect_message(
+      [&] {
+        solver.solve_prescribed_per_dof({3 * 22}, Eigen::VectorXd::Constant(1, std::nan("")));
+      },
+      "non-finite displacement at node 22 axis 0");
+  expect_message([&] { solver.solve_prescribed_per_dof({3 * 22}, Eigen::VectorXd::Zero(2)); },
+                 "2 displacement values for 1 dofs");
 }
 
 // Two disconnected boxes in one TetMesh (two meshes' materials, stiffness ratio 1e4).
