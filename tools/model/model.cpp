@@ -254,7 +254,7 @@ ModelResult build_model(const ModelOptions& o) {
   s.set_name(o.name);
   std::ostringstream desc;
   const Eigen::Vector3d world0 = (mask.image_to_world * Eigen::Vector4d(0, 0, 0, 1)).head<3>();
-  desc << "Patient model (issue 7): brain from the Colin27 MRI (" << o.mri_path
+  desc << "Patient model: brain from the Colin27 MRI (" << o.mri_path
        << ") with a generated right middle cerebral artery; built by neurosim-model --seed "
        << o.seed << " --cell-size " << o.brain_cell_size_mm << " --material "
        << (o.material == MaterialSet::Paper ? "paper" : "literature")

@@ -1,4 +1,4 @@
-// The patient model (issue 7): brain mesh from the Colin27 MRI, a generated artery tube inside
+// The patient model: brain mesh from the Colin27 MRI, a generated artery tube inside
 // it, fixed nodes at the skull base, materials, and the scene file that ties them together.
 #pragma once
 
