@@ -149,7 +149,7 @@ void set_material(scene::Material* m, MaterialSet set, bool artery) {
     m->set_name("paper");
     m->set_youngs_modulus_pa(1.0e6);
     m->set_poisson_ratio(0.4);
-    m->set_source("Seed paper, section 3: E = 1.0 MPa, nu = 0.4 applied to the model");
+    m->set_source("Mesh fusion paper, section 3: E = 1.0 MPa, nu = 0.4 applied to the model");
   } else if (!artery) {
     m->set_name("brain_literature");
     m->set_youngs_modulus_pa(3.0e3);

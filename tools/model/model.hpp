@@ -16,7 +16,7 @@ using mesh::Vec3;
 
 enum class MaterialSet {
   Literature,  // brain E = 3 kPa, nu = 0.45; artery E = 1 MPa, nu = 0.45
-  Paper,       // the seed paper's E = 1 MPa, nu = 0.4 for both
+  Paper,       // the mesh fusion paper's E = 1 MPa, nu = 0.4 for both
 };
 
 struct ModelOptions {
