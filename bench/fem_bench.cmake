@@ -1,4 +1,4 @@
-# fem_bench (issue 2): assembly, CHOLMOD factorization, compliance columns (single vs block),
+# fem_bench: assembly, CHOLMOD factorization, compliance columns (single vs block),
 # factor memory for a series of cube meshes up to ~25k tetrahedra. `fem_bench --csv` for CSV.
 add_executable(fem_bench ${CMAKE_CURRENT_LIST_DIR}/fem_bench.cpp)
 target_link_libraries(fem_bench PRIVATE neurosim::fem neurosim_warnings)

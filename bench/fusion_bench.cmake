@@ -1,4 +1,4 @@
-# fusion_bench (issue 3): the paper's Table 3 side by side with brute force and the fast
+# fusion_bench: the paper's Table 3 side by side with brute force and the fast
 # inclusion decision, plus a brain-sized pair. `fusion_bench --csv` prints the table.
 if(TARGET neurosim::fusion_models)
   add_executable(fusion_bench ${CMAKE_CURRENT_LIST_DIR}/fusion_bench.cpp)

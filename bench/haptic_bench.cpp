@@ -1,4 +1,4 @@
-// haptic_bench (issue 6 "Benchmark"): the 1 kHz haptic loop for S seconds against a server,
+// haptic_bench: the 1 kHz haptic loop for S seconds against a server,
 // once at normal priority and once with SCHED_FIFO (where permitted), printing the loop summary.
 //
 //   haptic_bench [--seconds S] [--modes normal,fifo] [--server PATH --scene FILE] [--csv]

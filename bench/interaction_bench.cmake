@@ -1,4 +1,4 @@
-# interaction_bench (issue 4): contact step with the exact tie, full-field displacement and the
+# interaction_bench: contact step with the exact tie, full-field displacement and the
 # iterative baseline on the cube/cylinder and a brain-sized scene. `interaction_bench --csv`.
 if(TARGET neurosim::interaction)
   add_executable(interaction_bench ${CMAKE_CURRENT_LIST_DIR}/interaction_bench.cpp)

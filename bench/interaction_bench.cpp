@@ -1,4 +1,4 @@
-// interaction_bench (issue 4): time per contact step with the exact tie (compliance columns
+// interaction_bench: time per contact step with the exact tie (compliance columns
 // cached), full-field displacement, the iterative baseline on the same rows, and the same scene
 // with the coupling kind SLIDING (frictionless unilateral pairs solved with the tool contact).
 //   interaction_bench [--csv] [--steps N] [--sliding-steps N] [--quick] [--residual-csv FILE]
@@ -113,7 +113,7 @@ int main(int argc, char** argv) {
     residual_out << "scenario,iteration,relative_residual\n";
   }
   if (!csv)
-    std::cout << "# interaction_bench (issue 4): per-step times in us; set-up details on stderr\n";
+    std::cout << "# interaction_bench: per-step times in us; set-up details on stderr\n";
   std::cout << "scenario,host_tets,embedded_tets,boundary_nodes,contact_nodes,method,p50_us,p99_us,"
                "tie_residual\n";
   for (auto& sc : scenarios) {

@@ -1,4 +1,4 @@
-# latency_bench (issue 5): ToolState written → the ContactModel answering it read, over loopback
+# latency_bench: ToolState written → the ContactModel answering it read, over loopback
 # DDS, with a real neurosim-server child process and N scripted stations.
 #   latency_bench --stations N --seconds S --csv
 if(TARGET neurosim::wire AND TARGET neurosim-server)

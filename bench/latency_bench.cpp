@@ -1,4 +1,4 @@
-// latency_bench (issue 5): starts neurosim-server on a bundled scene (child process, private DDS
+// latency_bench: starts neurosim-server on a bundled scene (child process, private DDS
 // domain, loopback) and N scripted stations (one participant and thread each, 1 kHz on absolute
 // deadlines, every tool pressing into the cube's +x face), and measures for each ToolState the
 // time until the ContactModel answering it (tool_sequence) is read by that station.
@@ -216,7 +216,8 @@ int main(int argc, char** argv) {
     usage();
     return 2;
   }
-  // Loopback only (DDS_NOTES.md): the bench sets it for itself and the server when unset.
+  // Loopback only (docs/ARCHITECTURE.md "DDS"): the bench sets it for itself and the server
+  // when unset.
   setenv("CYCLONEDDS_URI", NEUROSIM_LOOPBACK_URI, 0);
   std::random_device rd;
   const int domain = 20 + static_cast<int>(rd() % 200);

@@ -1,4 +1,4 @@
-# resample_bench (issue 7): the MRI resampled through the deformed brain/artery model (three
+# resample_bench: the MRI resampled through the deformed brain/artery model (three
 # slices through the tool tip, the whole volume; full and incremental). `resample_bench --csv`.
 # VTK reads the NIfTI MRI here only; the library neurosim::resample stays Eigen-only.
 if(TARGET neurosim::resample AND TARGET neurosim::scene)

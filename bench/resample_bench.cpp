@@ -1,4 +1,4 @@
-// resample_bench (issue 7): resampling of the real MRI through the deformed brain/artery model.
+// resample_bench: resampling of the real MRI through the deformed brain/artery model.
 //   resample_bench [--csv] [--frames N] [--volume-runs N] [--scene FILE] [--sigma-mm S]
 //                  [--step-mm D] [--push-mm A] [--cell-factor F]
 // A tool pushes a local patch of the brain surface: a Gaussian displacement bump (sigma S mm,
@@ -320,7 +320,7 @@ int main(int argc, char** argv) {
                 percentile(r->cpu_ms, 0.99), r->samples, r->total, r->moved);
   }
   if (!csv) {
-    std::printf("target (issue 7): slices3 <= 10 ms per frame on one core\n");
+    std::printf("target: slices3 <= 10 ms per frame on one core\n");
   }
   return 0;
 }

@@ -1,4 +1,4 @@
-# viewer_bench (issue 7): neurosim-viewer's frame rate (surfaces + slices, volume rendering) and
+# viewer_bench: neurosim-viewer's frame rate (surfaces + slices, volume rendering) and
 # slice resample time per frame on the brain/artery scene, offscreen under Xvfb, no DDS.
 #   xvfb-run -a build/bin/viewer_bench [--frames N] [--size WxH] [--csv]
 if(TARGET neurosim::viewer AND TARGET neurosim::scene)

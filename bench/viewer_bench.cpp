@@ -1,4 +1,4 @@
-// viewer_bench (issue 7): frame rate of neurosim-viewer's pipeline on this machine (software
+// viewer_bench: frame rate of neurosim-viewer's pipeline on this machine (software
 // OpenGL under Xvfb), no DDS: the brain/artery scene's meshes are loaded directly and a tool
 // dents the brain (a smooth 10 mm wide dent, depth varying frame to frame so every frame
 // resamples), with the MRI the scene names.

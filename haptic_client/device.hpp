@@ -1,4 +1,4 @@
-// Haptic devices (issue 6 "Devices"): scripted motions, a simulated hand holding the stylus,
+// Haptic devices: scripted motions, a simulated hand holding the stylus,
 // replay of a recording, and the Phantom Omni (only where OpenHaptics is found at build time).
 //
 // Device frame: metres around the device centre; the loop maps it to the scene with the

@@ -167,7 +167,7 @@ ForceOutput ForceModel::step(const ForceInput& in) {
 
   Eigen::Vector3d fd = Eigen::Vector3d::Zero();
   if (has_current_ && gain_ > 0) {
-    // Extrapolate the newest model; blend offset from the model change (issue 6 "blend").
+    // Extrapolate the newest model; blend offset from the model change.
     const Eigen::Vector3d f = extrapolate(current_, in.position_m) + blend_offset_;
     fd = cfg_.force_scale * f;
     const Eigen::Vector3d& n = current_.normal;

@@ -1,4 +1,4 @@
-// The haptic client's local force model (ARCHITECTURE.md "Haptic client", issue 6 "The loop"):
+// The haptic client's local force model (docs/ARCHITECTURE.md "haptic_client"):
 // extrapolation of the newest server ContactModel, F = f0 + K (x - x0), blended on a new model,
 // with passivity-limited stiffness and damping, device clamp, per-tick step bound, ramp-in,
 // model watchdog, server-gone and NaN handling.

@@ -1,4 +1,4 @@
-// The 1 kHz haptic loop (issue 6 "The loop"): each tick read the device, publish the ToolState,
+// The 1 kHz haptic loop: each tick read the device, publish the ToolState,
 // take the newest ContactModel without blocking, compute the force (ForceModel), command it,
 // record the sample, update the metrics. run_realtime() paces ticks with clock_nanosleep on
 // absolute deadlines; run_simulated() calls the same tick with simulated time (tests).

@@ -1,4 +1,4 @@
-// neurosim-haptic: one haptic station (issue 6).
+// neurosim-haptic: one haptic station.
 //   neurosim-haptic --station ID --device SPEC [--duration SECONDS] [--summary FILE.json]
 //                   [--record FILE]
 //   extra: [--scene FILE] (haptics factors, scene name) [--tool ID] [--origin X,Y,Z]

@@ -1,4 +1,4 @@
-// Loop metrics (issue 6 "Metrics"): period histogram, deadline misses, model age, force step.
+// Loop metrics: period histogram, deadline misses, model age, force step.
 // Fixed-size histograms allocated once: recording a tick allocates nothing.
 #pragma once
 
@@ -52,8 +52,8 @@ class LoopMetrics {
   std::uint64_t samples_ = 0;
 };
 
-// The summary JSON of --summary, exactly the issue's keys; model_age_p99_ms is null when no
-// model was ever in use.
+// The summary JSON of --summary, exactly the keys listed in haptic_client/README.md;
+// model_age_p99_ms is null when no model was ever in use.
 std::string summary_json(const LoopSummary& s);
 void write_summary_json(const std::string& file, const LoopSummary& s);
 

@@ -4,7 +4,7 @@
 //
 // The HD servo thread (1 kHz, owned by OpenHaptics) exchanges the newest reading and force
 // with the neurosim loop through lock-free slots; the device's own force clamping and ramping
-// are enabled as issue 6 asks.
+// are enabled too, on top of ForceModel's clamp and ramp-in.
 #include "haptic_client/device.hpp"
 #include "haptic_client/latest_slot.hpp"
 

@@ -8,7 +8,7 @@
 
 namespace neurosim::testing {
 
-// Root of the source tree (scenes/, tests/data/, ../shared reference files).
+// Root of the source tree (scenes/, tests/data/, bench/data/).
 inline std::filesystem::path source_dir() { return NEUROSIM_SOURCE_DIR; }
 // Where the built programs are (build/bin).
 inline std::filesystem::path bin_dir() { return NEUROSIM_BIN_DIR; }

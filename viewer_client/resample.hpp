@@ -1,4 +1,4 @@
-// Resampling of the MRI through the deformed meshes (issue 7, ARCHITECTURE.md "Viewer client").
+// Resampling of the MRI through the deformed meshes (docs/ARCHITECTURE.md "viewer_client").
 //
 // A sample point p of the deformed scene is mapped back to the rest configuration through the
 // deformed tetrahedron that contains it: barycentric weights w of p in the deformed tetrahedron

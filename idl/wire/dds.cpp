@@ -14,7 +14,8 @@ namespace {
 
 dds_entity_t create_participant(const ParticipantOptions& o) {
   const char* uri = std::getenv("CYCLONEDDS_URI");
-  // Network rule: loopback unless a configuration is chosen explicitly (DDS_NOTES.md).
+  // Network rule: loopback unless a configuration is chosen explicitly
+  // (docs/ARCHITECTURE.md "DDS").
   if ((uri == nullptr || *uri == '\0') && !o.allow_unset_config)
     throw std::runtime_error(
         "CYCLONEDDS_URI is not set: refusing to start DDS on Cyclone's default network "

@@ -126,7 +126,7 @@ class ReaderBase {
   std::uint32_t matched_writers() const;
   bool wait_for_writers(std::uint32_t n, dds_duration_t timeout) const;
   // Reads (and resets) the liveliness_changed status: a dead writer shows as alive_count
-  // dropping (DDS_NOTES: detect death with this, not with instance state).
+  // dropping (detect death with this, not with instance state: see qos.hpp).
   Liveliness liveliness() const;
 
  protected:

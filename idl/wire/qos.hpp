@@ -1,4 +1,4 @@
-// QoS profiles of every neurosim topic, in ONE place (issue 5 "QoS", DDS_NOTES.md).
+// QoS profiles of every neurosim topic, in ONE place (docs/ARCHITECTURE.md "DDS").
 //
 //   topic          reliability  durability       history     liveliness (writer)  autodispose
 //   ToolState      best effort  volatile         keep-last 1 automatic 500 ms     on
@@ -10,7 +10,8 @@
 // History is per instance (key), so keep-last 1 means the newest sample of each station/mesh.
 // Readers request the default (infinite) liveliness lease, which matches any writer's offer.
 // No deadline QoS anywhere: after a missed deadline Cyclone 0.10.2 stops reporting writer loss
-// through instance state (DDS_NOTES.md); death is detected with liveliness_changed instead.
+// through instance state (docs/ARCHITECTURE.md "DDS"); death is detected with
+// liveliness_changed instead.
 #pragma once
 
 #include "idl/wire/types.hpp"

@@ -5,8 +5,8 @@
 // - A face of A "intersects B" when the closed face triangle and a closed surface triangle of B
 //   share at least one point (touching, shared vertices/edges and coplanar overlap count).
 // - For each tetrahedron of A, count its faces that intersect B; if 0 < count < 4 its other
-//   faces are candidates (Algorithm 1 counts face/triangle pairs; we count faces, as issue 3
-//   states, so a face crossing two of B's triangles is one face).
+//   faces are candidates (Algorithm 1 counts face/triangle pairs; we count faces,
+//   so a face crossing two of B's triangles is one face).
 // - A candidate face touches no triangle of B, so it lies entirely inside or entirely outside
 //   the closed surface; it is kept when its vertices are outside (tested on one vertex by
 //   segment parity with exact orientation predicates).

@@ -1,6 +1,6 @@
 // The haptic loop in simulated time (no DDS, no sleeping): the simulated hand against a stiff
 // half-space does not oscillate, recordings replay to the identical ToolState sequence, the
-// bundled script recordings replay, the summary JSON has the keys.
+// bundled script recordings replay, the summary JSON has exactly the documented keys.
 #include "haptic_client/loop.hpp"
 #include "fake_server.hpp"
 #include "haptic_client/latest_slot.hpp"
@@ -93,7 +93,7 @@ TEST(haptic_loop, SimulatedHandAgainstStiffnessDoesNotOscillate) {
 }
 
 TEST(haptic_loop, SimulatedHandAgainstStiffTissueIsRenderedAtThePassiveLimit) {
-  // Tissue 15x stiffer than the device may render: the model (f0 and K) is scaled to 700 N/m,
+  // Tissue, 15x stiffer than the device may render: the model (f0 and K) is scaled to 700 N/m,
   // so the closed loop behaves as against 700 N/m and settles.
   nh::ForceModelConfig force;
   nh::HandParams hand;

@@ -1,4 +1,4 @@
-// The haptic client against the real neurosim-server (issue 6 "Tests"): killing the server
+// The haptic client against the real neurosim-server: killing the server
 // mid-contact fades the force to zero in time; replaying one recording twice against fresh
 // servers gives identical ContactModel sequences.
 //

@@ -1,4 +1,4 @@
-// neurosim::wire over Cyclone DDS (loopback): typed round trips, the QoS contracts of issue 5
+// neurosim::wire over Cyclone DDS (loopback): typed round trips, the QoS contracts of qos.hpp
 // (keep-last 1, transient-local late joiner, liveliness of SimStatus), dispose, waitset wake,
 // the CYCLONEDDS_URI rule, and errors.
 #include "idl/wire/dds.hpp"
@@ -117,7 +117,7 @@ TEST(wire_dds, ContactModelRoundTrip) {
 
 TEST(wire_dds, DeformationRoundTripBrainSized) {
   Loop<neurosim_Deformation> l;
-  const std::size_t nv = 5400;  // the brain mesh's vertex count (ARCHITECTURE.md)
+  const std::size_t nv = 5400;  // about the brain mesh's vertex count (~5k, the paper's size)
   std::vector<float> u(3 * nv);
   for (float& x : u) x = static_cast<float>(1e-3 * rnd());
   std::vector<short> q(3 * nv);

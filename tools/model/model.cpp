@@ -149,7 +149,7 @@ void set_material(scene::Material* m, MaterialSet set, bool artery) {
     m->set_name("paper");
     m->set_youngs_modulus_pa(1.0e6);
     m->set_poisson_ratio(0.4);
-    m->set_source("Seed paper, section 3: E = 1.0 MPa, nu = 0.4 applied to the model");
+    m->set_source("Mesh fusion paper, section 3: E = 1.0 MPa, nu = 0.4 applied to the model");
   } else if (!artery) {
     m->set_name("brain_literature");
     m->set_youngs_modulus_pa(3.0e3);
@@ -254,7 +254,7 @@ ModelResult build_model(const ModelOptions& o) {
   s.set_name(o.name);
   std::ostringstream desc;
   const Eigen::Vector3d world0 = (mask.image_to_world * Eigen::Vector4d(0, 0, 0, 1)).head<3>();
-  desc << "Patient model (issue 7): brain from the Colin27 MRI (" << o.mri_path
+  desc << "Patient model: brain from the Colin27 MRI (" << o.mri_path
        << ") with a generated right middle cerebral artery; built by neurosim-model --seed "
        << o.seed << " --cell-size " << o.brain_cell_size_mm << " --material "
        << (o.material == MaterialSet::Paper ? "paper" : "literature")

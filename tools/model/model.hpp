@@ -1,4 +1,4 @@
-// The patient model (issue 7): brain mesh from the Colin27 MRI, a generated artery tube inside
+// The patient model: brain mesh from the Colin27 MRI, a generated artery tube inside
 // it, fixed nodes at the skull base, materials, and the scene file that ties them together.
 #pragma once
 
@@ -16,7 +16,7 @@ using mesh::Vec3;
 
 enum class MaterialSet {
   Literature,  // brain E = 3 kPa, nu = 0.45; artery E = 1 MPa, nu = 0.45
-  Paper,       // the seed paper's E = 1 MPa, nu = 0.4 for both
+  Paper,       // the mesh fusion paper's E = 1 MPa, nu = 0.4 for both
 };
 
 struct ModelOptions {

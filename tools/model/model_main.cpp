@@ -1,4 +1,4 @@
-// neurosim-model: builds the brain/artery scene from the Colin27 MRI (issue 7).
+// neurosim-model: builds the brain/artery scene from the Colin27 MRI.
 #include "tools/model/model.hpp"
 
 #include <cstdlib>

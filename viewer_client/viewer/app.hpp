@@ -1,4 +1,4 @@
-// neurosim-viewer's run loop (issue 7): DDS -> state -> pipeline -> window or PNG frames.
+// neurosim-viewer's run loop: DDS -> state -> pipeline -> window or PNG frames.
 #pragma once
 
 #include "viewer_client/viewer/options.hpp"

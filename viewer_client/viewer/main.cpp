@@ -1,4 +1,4 @@
-// neurosim-viewer: the navigation / observer station (issue 7). See options.cpp for the usage.
+// neurosim-viewer: the navigation / observer station. See options.cpp for the usage.
 #include "viewer_client/viewer/app.hpp"
 
 #include <signal.h>

@@ -1,4 +1,4 @@
-// neurosim-viewer command line (issue 7): what to show, where to write frames, which DDS domain.
+// neurosim-viewer command line: what to show, where to write frames, which DDS domain.
 #pragma once
 
 #include <string>

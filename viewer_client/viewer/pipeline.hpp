@@ -1,4 +1,4 @@
-// State -> resampled MRI -> VTK scene, once per frame (issue 7). Owns the resampler and the
+// State -> resampled MRI -> VTK scene, once per frame. Owns the resampler and the
 // renderer; rebuilds them when the topology changes (a new server, a late join), loads the MRI
 // the topology names (once per file) and keeps rendering without it when it is missing.
 #pragma once

@@ -1,4 +1,4 @@
-// VTK scene of the viewer (issue 7): deformed surfaces, tools coloured by force, and the
+// VTK scene of the viewer: deformed surfaces, tools coloured by force, and the
 // resampled MRI, in one render window.
 //   navigation: 2x2 viewports: 3D (surfaces, tool, the three slice planes) | axial
 //                              coronal                                     | sagittal

@@ -1,4 +1,4 @@
-// What the viewer knows about the simulation (issue 7): mesh topologies, their newest decoded
+// What the viewer knows about the simulation: mesh topologies, their newest decoded
 // displacements, the tools (pose from ToolState, force from ContactModel) and the server's
 // liveliness. Fed from DDS samples (dds_client.hpp) or directly (tests, benchmark); no VTK here.
 //

@@ -1,4 +1,4 @@
-// neurosim-model (issue 7): meshes valid, quality reported, artery inside the brain, scene loads.
+// neurosim-model: meshes valid, quality reported, artery inside the brain, scene loads.
 #include "tools/model/model.hpp"
 #include "server/mesh/io.hpp"
 #include "server/mesh/quality.hpp"

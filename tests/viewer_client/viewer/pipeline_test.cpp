@@ -1,4 +1,4 @@
-// Viewer pipeline without a server (issue 7): a missing or unreadable MRI renders the surfaces
+// Viewer pipeline without a server: a missing or unreadable MRI renders the surfaces
 // with a warning naming the file; the slices follow the tool; the command line's errors.
 #include "viewer_client/viewer/pipeline.hpp"
 #include "viewer_test_util.hpp"

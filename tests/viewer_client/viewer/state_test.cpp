@@ -1,4 +1,4 @@
-// Viewer state and command line (issue 7): topology/deformation ingestion, malformed samples
+// Viewer state and command line: topology/deformation ingestion, malformed samples
 // counted and ignored, the paper's tool colour rule, option errors.
 #include "viewer_client/viewer/state.hpp"
 #include "idl/wire/deformation_codec.hpp"

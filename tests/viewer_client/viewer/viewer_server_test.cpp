@@ -1,4 +1,4 @@
-// The viewer against the real neurosim-server on the brain/artery scene (issue 7 "Tests"):
+// The viewer against the real neurosim-server on the brain/artery scene:
 //  - a render with the tool pushing the brain differs from the undeformed render around the
 //    pushed spot and nowhere else beyond noise (in-process pipeline, both modes);
 //  - neurosim-viewer joining late still gets the topology and the deformation;
