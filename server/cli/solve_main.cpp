@@ -121,14 +121,6 @@ MeshLoads gather_loads(const neurosim::scene::Model& model, int mesh_index) {
   return out;
 }
 
-bool all_components(const MeshLoads& loads) {
-  for (const auto& [node, h] : loads.prescribed) {
-    (void)node;
-    if (!(h.components[0] && h.components[1] && h.components[2])) return false;
-  }
-  return true;
-}
-
 // Summary lines shared by both paths: largest displacement, equilibrium of the supports.
 void print_summary(const MeshResult& r, const Eigen::VectorXd& f,
                    const std::map<int, Held>& prescribed) {
@@ -160,8 +152,7 @@ void print_summary(const MeshResult& r, const Eigen::VectorXd& f,
 }
 
 // One mesh on its own (no coupling): factor, solve, reactions at fixed and prescribed nodes.
-MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& loads,
-                       const std::string& what) {
+MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& loads) {
   const int n = static_cast<int>(lm.mesh.num_vertices());
   const auto t1 = std::chrono::steady_clock::now();
   neurosim::fem::StaticSolver solver(lm.mesh, neurosim::fem::MaterialMap::uniform(lm.material),
@@ -179,19 +170,13 @@ MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& l
     for (int node : lm.fixed_nodes)
       r.reaction_n.segment<3>(3 * node) = residual.segment<3>(3 * node);
   } else {
-    if (!all_components(loads)) {
-      throw std::runtime_error(what +
-                               ": prescribed displacements of some components only are solved "
-                               "on coupled bodies only in this build");
-    }
-    std::vector<int> nodes;
-    Eigen::VectorXd d(3 * loads.prescribed.size());
-    for (const auto& [node, held] : loads.prescribed) {
-      d.segment<3>(3 * nodes.size()) = held.displacement_m;
-      nodes.push_back(node);
+    // Held components only; the others stay free unknowns.
+    std::vector<neurosim::fem::PrescribedDofs> held;
+    for (const auto& [node, hold] : loads.prescribed) {
+      held.push_back(neurosim::fem::PrescribedDofs{{node}, hold.displacement_m, hold.components});
       r.constrained[node] = 1;
     }
-    auto sol = solver.solve_prescribed(nodes, d, loads.f);
+    auto sol = solver.solve_prescribed_dofs(held, loads.f);
     r.u_m = std::move(sol.displacement_m);
     r.reaction_n = std::move(sol.reaction_n);
   }
@@ -469,7 +454,7 @@ int run(int argc, char** argv) {
       std::cout << "  no load or prescribed displacement: at rest, not solved\n";
       continue;
     }
-    MeshResult r = solve_alone(lm, loads, what);
+    MeshResult r = solve_alone(lm, loads);
     if (!r.u_m.allFinite() || !r.reaction_n.allFinite()) {
       throw std::runtime_error(what + ": solution is not finite");
     }

@@ -57,38 +57,27 @@ void expect_agrees_with_calculix(const fs::path& scene_path, const std::string& 
   const CsvRows csv = read_csv(dir / "out" / "displacement.csv");
   EXPECT_EQ(csv.header, "node,x,y,z,ux,uy,uz");
 
-  // The same mesh (the generator is seeded), loads and constraints, in process.
-  const scene::Scene s = scene::read_scene(scene_path);
-  const auto& entry = s.meshes(scene::find_mesh(s, mesh_id));
-  const auto lm = scene::load_mesh(entry, scene_path.parent_path(), scene_path.string());
+  // The same mesh (the generator is seeded), loads and constraints, from the compiled scene.
+  const scene::Model model = scene::load_model(scene_path);
+  const int mi = model.find_mesh(mesh_id);
+  ASSERT_GE(mi, 0);
+  const auto& lm = model.meshes[static_cast<std::size_t>(mi)];
   const int n = static_cast<int>(lm.mesh.num_vertices());
   ASSERT_EQ(csv.rows.size(), static_cast<std::size_t>(n));
 
   fem::CalculixLoads loads;
   loads.fixed_nodes = lm.fixed_nodes;
   loads.forces_n = Eigen::VectorXd::Zero(3 * n);
-  for (const auto& l : s.loads()) {
-    if (l.mesh() != mesh_id) continue;
-    const auto nodes = scene::select_nodes(lm.mesh, l.region(), "load");
-    mesh::Vec3 f = scene::to_vec3(l.force_n());
-    if (l.distribution() == scene::Load::TOTAL_SPLIT_EQUALLY)
-      f /= static_cast<double>(nodes.size());
-    for (int node : nodes) loads.forces_n.segment<3>(3 * node) += f;
+  for (const auto& l : model.loads) {
+    if (l.mesh != mi) continue;
+    for (int node : l.nodes) loads.forces_n.segment<3>(3 * node) += l.force_per_node_n;
   }
-  std::vector<double> prescribed;
-  for (const auto& p : s.prescribed()) {
-    if (p.mesh() != mesh_id) continue;
-    for (int node : scene::select_nodes(lm.mesh, p.region(), "prescribed")) {
-      loads.prescribed_nodes.push_back(node);
-      const mesh::Vec3 d = scene::to_vec3(p.displacement_m());
-      prescribed.insert(prescribed.end(), {d.x(), d.y(), d.z()});
-    }
+  for (const auto& p : model.prescribed) {
+    if (p.mesh != mi) continue;
+    loads.prescribed_sets.push_back(fem::PrescribedDofs{p.nodes, p.displacement_m, p.components});
   }
-  loads.prescribed_displacements_m =
-      Eigen::Map<Eigen::VectorXd>(prescribed.data(), prescribed.size());
   const auto ccx =
       fem::run_calculix(dir / "ccx", "job", lm.mesh, fem::MaterialMap::uniform(lm.material), loads);
-
   double max_u = 0.0, max_diff = 0.0;
   for (int i = 0; i < n; ++i) {
     // Same node numbering and coordinates.
@@ -101,10 +90,33 @@ void expect_agrees_with_calculix(const fs::path& scene_path, const std::string& 
     }
   }
   ASSERT_GT(max_u, 0.0);
+  // Reactions of every constrained node (fixed and prescribed): ccx's RF is K u at the node, so
+  // a load applied there is added back to ours (K u - f).
+  const CsvRows rf = read_csv(dir / "out" / "reactions.csv");
+  EXPECT_EQ(rf.header, "node,x,y,z,rx,ry,rz");
+  double max_rf = 0.0, max_rf_diff = 0.0;
+  std::size_t compared = 0;
+  for (const auto& row : rf.rows) {
+    const int node = static_cast<int>(row[0]);
+    ASSERT_TRUE(node >= 0 && node < n);
+    if (!ccx.has_reaction[static_cast<std::size_t>(node)]) continue;
+    ++compared;
+    for (int a = 0; a < 3; ++a) {
+      const double ours = row[4 + a] + loads.forces_n[3 * node + a];
+      max_rf = std::max(max_rf, std::abs(ccx.reaction_n[3 * node + a]));
+      max_rf_diff = std::max(max_rf_diff, std::abs(ours - ccx.reaction_n[3 * node + a]));
+    }
+  }
+  EXPECT_GT(compared, 0u);
   std::cout << scene_path.filename().string() << " / " << mesh_id << ": " << n
             << " nodes, max |u| = " << max_u
-            << " m, max |u - u_ccx| / max |u| = " << max_diff / max_u << "\n";
+            << " m, max |u - u_ccx| / max |u| = " << max_diff / max_u << ", " << compared
+            << " reactions, max |r - r_ccx| / max |r| = "
+            << (max_rf > 0 ? max_rf_diff / max_rf : 0.0) << "\n";
   EXPECT_LE(max_diff / max_u, tolerance);
+  if (max_rf > 0) {
+    EXPECT_LE(max_rf_diff / max_rf, 10 * tolerance);
+  }
   fs::remove_all(dir);
 }
 
@@ -301,6 +313,60 @@ loads { mesh: "beam" region { box { min_m { x: 0.0999999 y: -1 z: -1 } max_m { x
 )";
   }
   expect_agrees_with_calculix(dir / "beam.scene", "beam", 1e-6);
+  fs::remove_all(dir);
+}
+
+// A validation case as CalculiX writes it: *BOUNDARY NTOP,3,3 (only uz held on the top face,
+// ux and uy free), the bottom fixed. The top spreads sideways (Poisson), so the free components
+// really were free.
+TEST(SolveCli, BlockPressedOnUzOnlyAgreesWithCalculix) {
+  const auto dir = testing::temp_dir("press_z_scene");
+  {
+    std::ofstream out(dir / "press_z.scene");
+    out << R"(name: "press_z"
+meshes {
+  id: "block"
+  generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.02 y: 0.02 z: 0.02 } } cell_size_m: 0.004 seed: 3 }
+  material { youngs_modulus_pa: 3000 poisson_ratio: 0.45 }
+  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 1 z: 1e-9 } } }
+}
+prescribed { mesh: "block" region { box { min_m { x: -1 y: -1 z: 0.0199999 } max_m { x: 1 y: 1 z: 1 } } }
+             displacement_m { z: -0.001 } components: "z" }
+)";
+  }
+  expect_agrees_with_calculix(dir / "press_z.scene", "block", 1e-6);
+  // The pressed nodes moved sideways: ux, uy were not held.
+  ASSERT_EQ(run_solve(dir / "press_z.scene", dir / "out"), 0);
+  const CsvRows csv = read_csv(dir / "out" / "displacement.csv");
+  double max_lateral = 0.0;
+  for (const auto& row : csv.rows)
+    if (row[3] > 0.0199999) max_lateral = std::max({max_lateral, std::abs(row[4]), std::abs(row[5])});
+  EXPECT_GT(max_lateral, 1e-5) << "top face did not spread: ux/uy were clamped";
+  fs::remove_all(dir);
+}
+
+// A components string that is not a subset of "xyz" is refused naming the field.
+TEST(SolveCli, BadComponentsAreRefused) {
+  const auto dir = testing::temp_dir("bad_components");
+  {
+    std::ofstream out(dir / "bad_components.scene");
+    out << R"(name: "bad"
+meshes {
+  id: "block"
+  generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.02 y: 0.02 z: 0.02 } } cell_size_m: 0.01 }
+  material { youngs_modulus_pa: 3000 poisson_ratio: 0.45 }
+  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 1 z: 1e-9 } } }
+}
+prescribed { mesh: "block" region { box { min_m { x: -1 y: -1 z: 0.0199999 } max_m { x: 1 y: 1 z: 1 } } }
+             displacement_m { z: -0.001 } components: "zw" }
+)";
+  }
+  EXPECT_NE(run_solve(dir / "bad_components.scene", dir / "out"), 0);
+  std::ifstream log(dir.string() + "/out.log");
+  std::stringstream text;
+  text << log.rdbuf();
+  EXPECT_NE(text.str().find("bad_components.scene"), std::string::npos) << text.str();
+  EXPECT_NE(text.str().find("prescribed[0].components"), std::string::npos) << text.str();
   fs::remove_all(dir);
 }
 
