@@ -22,9 +22,6 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// Unit right-hand sides per CHOLMOD block solve (BLAS-3 inside the supernodes).
-constexpr int kBlockColumns = 63;
-
 }  // namespace
 
 std::vector<mesh::Vec3> surface_vertex_normals(const mesh::TetMesh& m) {
@@ -93,7 +90,6 @@ void CoupledBody::select_contact_nodes() {
     contact_nodes_.push_back(v);
     contact_normals_.push_back(normals[v]);
   }
-  column_of_.assign(contact_nodes_.size(), -1);
 }
 
 void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded,
@@ -227,6 +223,9 @@ void CoupledBody::finalize() {
       if (!cache_file.empty()) save_cache(cache_file);
     }
   }
+  // The baseline's operator (P = L_bb K_add, relaxation) at load, not on first use.
+  if (iterative_requested_ && m3 > 0)
+    iterative_ = std::make_unique<IterativeTie>(*this, iterative_options_);
   compute_sliding_operator();
 }
 
@@ -475,125 +474,51 @@ void CoupledBody::save_cache(const std::string& file) const {
               << "\n";
 }
 
-void CoupledBody::ensure_columns(const std::vector<int>& slots) {
-  if (!finalized_) throw std::logic_error("CoupledBody::ensure_columns before finalize");
-  std::vector<int> missing;
-  for (int s : slots) {
-    if (s < 0 || s >= static_cast<int>(contact_nodes_.size())) {
-      throw std::invalid_argument("CoupledBody::ensure_columns: contact slot " + std::to_string(s) +
-                                  " out of range");
-    }
-    if (column_of_[s] < 0) missing.push_back(s);
-  }
-  std::sort(missing.begin(), missing.end());
-  missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
+void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::MatrixXd& x) const {
+  if (!finalized_) throw std::logic_error("CoupledBody::solve_contact_columns before finalize");
   const auto& reduced = solver_->reduced_index();
   const int nf = solver_->num_free_dofs();
-  const int s3 = 3 * static_cast<int>(contact_nodes_.size());
   const int m3 = static_cast<int>(l_bb_.rows());
-  constexpr int kNodes = kBlockColumns / 3;
-  const int n3 = 3 * static_cast<int>(host_->num_vertices());
-  Eigen::MatrixXd rhs, x, lb, glb;
-  for (std::size_t first = 0; first < missing.size(); first += kNodes) {
-    const int n = static_cast<int>(std::min<std::size_t>(kNodes, missing.size() - first));
-    rhs.setZero(nf, 3 * n);
-    for (int j = 0; j < n; ++j)
-      for (int a = 0; a < 3; ++a)
-        rhs(reduced[3 * contact_nodes_[missing[first + j]] + a], 3 * j + a) = 1.0;
-    if (m3 > 0) {
-      // Coupled column in one solve: L (e_i + P_b^T f_b) with the tie's boundary force
-      // f_b = -G L_A[b, i] (Woodbury on the tie stiffness: L = L_A - L_A[:,b] G L_A[b,:]).
-      lb.resize(m3, 3 * n);
-      for (int j = 0; j < n; ++j)
-        lb.middleCols(3 * j, 3) = l_sb_.middleRows(3 * missing[first + j], 3).transpose();
-      apply_coupling(lb, glb);
-      for (int r = 0; r < m3; ++r) {
-        const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
-        if (red >= 0) rhs.row(red) -= glb.row(r);
-      }
-    }
-    solver_->solve_reduced(rhs, x);
-    for (int j = 0; j < n; ++j) {
-      Eigen::Matrix<double, Eigen::Dynamic, 3> col(s3, 3);
-      for (int r = 0; r < s3; ++r)
-        for (int a = 0; a < 3; ++a)
-          col(r, a) = x(reduced[3 * contact_nodes_[r / 3] + r % 3], 3 * j + a);
-      column_of_[missing[first + j]] = static_cast<int>(columns_.size());
-      columns_.push_back(std::move(col));
-      if (!sliding_rows_.empty()) sliding_columns_.push_back(j_slide_ * x.middleCols(3 * j, 3));
-      if (keep_full_columns_) {
-        Eigen::Matrix<double, Eigen::Dynamic, 3> full =
-            Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(n3, 3);
-        for (int r = 0; r < nf; ++r) full.row(solver_->free_dofs()[r]) = x.block<1, 3>(r, 3 * j);
-        full_columns_.push_back(std::move(full));
-      }
+  const int n = static_cast<int>(slots.size());
+  for (int s : slots) {
+    if (s < 0 || s >= static_cast<int>(contact_nodes_.size())) {
+      throw std::invalid_argument("CoupledBody::solve_contact_columns: contact slot " +
+                                  std::to_string(s) + " out of range");
     }
   }
+  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nf, 3 * n), lb, glb;
+  for (int j = 0; j < n; ++j)
+    for (int a = 0; a < 3; ++a) rhs(reduced[3 * contact_nodes_[slots[j]] + a], 3 * j + a) = 1.0;
+  if (m3 > 0) {
+    // Coupled column in one solve: L (e_i + P_b^T f_b) with the tie's boundary force
+    // f_b = -G L_A[b, i] (Woodbury on the tie stiffness: L = L_A - L_A[:,b] G L_A[b,:]).
+    lb.resize(m3, 3 * n);
+    for (int j = 0; j < n; ++j) lb.middleCols(3 * j, 3) = l_sb_.middleRows(3 * slots[j], 3).transpose();
+    apply_coupling(lb, glb);
+    for (int r = 0; r < m3; ++r) {
+      const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
+      if (red >= 0) rhs.row(red) -= glb.row(r);
+    }
+  }
+  solver_->solve_reduced(rhs, x);
 }
 
-void CoupledBody::set_iterative(double tolerance, int max_iterations) {
-  if (!(tolerance > 0.0) || max_iterations < 1) {
+void CoupledBody::set_iterative(const IterativeOptions& options) {
+  if (finalized_) throw std::logic_error("CoupledBody::set_iterative after finalize");
+  if (!(options.tolerance > 0.0) || options.max_iterations < 1) {
     throw std::invalid_argument(
         "CoupledBody::set_iterative: tolerance must be > 0, iterations >= 1");
   }
-  iterative_tolerance_ = tolerance;
-  iterative_max_iterations_ = max_iterations;
+  iterative_requested_ = true;
+  iterative_options_ = options;
 }
 
 void CoupledBody::apply_coupling(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const {
-  if (!(iterative_tolerance_ > 0.0)) {
-    out.noalias() = g_ * in;
+  if (iterative_) {
+    iterative_->apply(in, out);
     return;
   }
-  // Baseline (paper 2.6): the boundary displacement u_b of A under the tie found by relaxed
-  // fixed-point iteration of u_b = in - L_bb K_add u_b; then G in = K_add u_b.
-  if (p_.rows() != l_bb_.rows()) {
-    p_ = l_bb_ * k_add_;
-    Eigen::VectorXd x = Eigen::VectorXd::Ones(p_.rows()).normalized();
-    double rho = 0.0;
-    for (int it = 0; it < 500; ++it) {
-      const Eigen::VectorXd y = p_ * x;
-      const double next = y.norm();
-      if (next == 0.0) break;
-      x = y / next;
-      const bool done = std::abs(next - rho) <= 1e-6 * next;
-      rho = next;
-      if (done) break;
-    }
-    omega_ = 2.0 / (2.0 + rho);
-  }
-  Eigen::MatrixXd u = in, next;
-  for (Eigen::Index c = 0; c < in.cols(); ++c) {
-    const double scale = std::max(in.col(c).norm(), 1e-300);
-    bool converged = false;
-    int it = 0;
-    while (it < iterative_max_iterations_) {
-      ++it;
-      const Eigen::VectorXd target = in.col(c) - p_ * u.col(c);
-      const double change = omega_ * (target - u.col(c)).norm();
-      u.col(c) = (1.0 - omega_) * u.col(c) + omega_ * target;
-      if (change <= iterative_tolerance_ * scale) {
-        converged = true;
-        break;
-      }
-    }
-    iterative_report_.max_iterations = std::max(iterative_report_.max_iterations, it);
-    iterative_report_.solves += 1;
-    if (!converged) iterative_report_.unconverged += 1;
-  }
-  out.noalias() = k_add_ * u;
-}
-
-bool CoupledBody::full_field_from_columns(const std::vector<int>& slots,
-                                          const std::vector<mesh::Vec3>& forces_n,
-                                          Eigen::VectorXd& u_host_m) const {
-  if (!keep_full_columns_) return false;
-  for (int s : slots)
-    if (s < 0 || s >= static_cast<int>(column_of_.size()) || column_of_[s] < 0) return false;
-  u_host_m.setZero(3 * static_cast<int>(host_->num_vertices()));
-  for (std::size_t k = 0; k < slots.size(); ++k)
-    u_host_m.noalias() += full_columns_[column_of_[slots[k]]] * forces_n[k];
-  return true;
+  out.noalias() = g_ * in;
 }
 
 void CoupledBody::host_displacement(const std::vector<int>& slots,

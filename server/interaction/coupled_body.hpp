@@ -12,6 +12,7 @@
 
 #include "server/fem/material.hpp"
 #include "server/fem/static_solver.hpp"
+#include "server/interaction/iterative_tie.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
 #include <Eigen/Core>
@@ -83,10 +84,8 @@ class CoupledBody {
   const std::vector<HostSlidingRow>& sliding_rows() const { return sliding_rows_; }
   // W_A (rows x rows), unit m/N.
   const Eigen::MatrixXd& sliding_compliance() const { return w_slide_; }
-  // J_A L[:, slot] (rows x 3) of a contact slot whose columns are cached, unit m/N.
-  const Eigen::Matrix<double, Eigen::Dynamic, 3>& sliding_block(int slot) const {
-    return sliding_columns_[column_of_[slot]];
-  }
+  // J_A on the host's free dofs (sliding rows x free dofs, dimensionless).
+  const Eigen::SparseMatrix<double, Eigen::RowMajor>& sliding_operator() const { return j_slide_; }
   // Coupled host displacement (ties included) for arbitrary nodal forces (3N_A, unit N), unit m.
   // Two sparse solves when the body has ties, one otherwise; the matrix form solves all its
   // columns (3N_A x k load cases) as one block.
@@ -101,16 +100,14 @@ class CoupledBody {
   void finalize();
   bool cache_hit() const { return cache_hit_; }
 
-  // Baseline instead of the factored operator: G is applied by the paper-style iteration on the
-  // boundary (relaxed fixed point, stops when an update is below tolerance x |rhs|). Results
-  // then differ from the exact ones by about that tolerance; for comparison only.
-  void set_iterative(double tolerance, int max_iterations);
-  struct IterativeReport {
-    int solves{0};          // right-hand sides iterated
-    int max_iterations{0};  // most iterations one needed
-    int unconverged{0};     // stopped at max_iterations
-  };
-  const IterativeReport& iterative_report() const { return iterative_report_; }
+  // Baseline instead of the factored operator (before finalize): G is applied by the
+  // paper-style iteration on the boundary (IterativeTie::apply, built at finalize). Results then
+  // differ from the exact ones by about the tolerance; for comparison only.
+  void set_iterative(const IterativeOptions& options);
+  // Counters of the iterations so far (all zero for the exact operator).
+  IterativeReport iterative_report() const {
+    return iterative_ ? iterative_->report() : IterativeReport{};
+  }
 
   int host_index() const { return host_index_; }
   const mesh::TetMesh& host() const { return *host_; }
@@ -124,23 +121,11 @@ class CoupledBody {
   const std::vector<mesh::Vec3>& contact_normals() const { return contact_normals_; }
   int contact_slot(int host_node) const { return contact_slot_[host_node]; }
 
-  // Coupled compliance block L(i, j) (3x3, unit m/N) between contact slots i and j; the
-  // columns of j must be cached (ensure_columns).
-  Eigen::Matrix3d block(int slot_i, int slot_j) const {
-    return columns_[column_of_[slot_j]].block<3, 3>(3 * slot_i, 0);
-  }
-  bool has_columns(int slot) const { return column_of_[slot] >= 0; }
-  // Computes the coupled compliance columns of the given slots that are missing (block solves).
-  void ensure_columns(const std::vector<int>& slots);
-  std::size_t cached_columns() const { return columns_.size(); }
-  // Also keep the full coupled columns (3N x 3 per contact node, memory!) so that the host's
-  // full field for contact forces is a sum of cached columns instead of a sparse solve.
-  // Set before the first ensure_columns.
-  void set_keep_full_columns(bool keep) { keep_full_columns_ = keep; }
-  // u_host = sum_k L[:, slot_k] f_k from the cached full columns; false if one is missing.
-  bool full_field_from_columns(const std::vector<int>& slots,
-                               const std::vector<mesh::Vec3>& forces_n,
-                               Eigen::VectorXd& u_host_m) const;
+  // Coupled compliance columns for unit forces at the given contact slots: X (free dofs x 3n,
+  // the reduced index of host_solver()), one block solve (ContactColumns caches them).
+  void solve_contact_columns(const std::vector<int>& slots, Eigen::MatrixXd& x) const;
+  // Unit right-hand sides per CHOLMOD block solve (BLAS-3 inside the supernodes).
+  static constexpr int kBlockColumns = 63;
 
   // Full fields for nodal forces on contact slots (force_n per slot, unit N): host displacement
   // (3N_A) and, per tie, B's displacement (3N_B), unit m. Also returns the boundary displacement.
@@ -174,16 +159,10 @@ class CoupledBody {
   Eigen::MatrixXd l_sb_;        // L_A[contact dofs, b] (3s x 3m), unit m/N
   Eigen::MatrixXd k_add_;       // sum over ties of J^T S_B J (3m x 3m), unit N/m
   Eigen::MatrixXd g_;           // (I + K_add L_bb)^-1 K_add (3m x 3m), unit N/m
-  std::vector<int> column_of_;  // contact slot -> index in columns_ or -1
-  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> columns_;  // coupled L[contact dofs, slot]
-  bool keep_full_columns_{false};
-  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>>
-      full_columns_;  // coupled L[:, slot], same order
   std::vector<HostSlidingRow> sliding_rows_;
   std::vector<char> sliding_node_;                        // A node -> on a sliding row
   Eigen::SparseMatrix<double, Eigen::RowMajor> j_slide_;  // J_A on the free dofs (rows x nf)
   Eigen::MatrixXd w_slide_;                               // J_A L J_A^T, unit m/N
-  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> sliding_columns_;  // per cached column
   // X = coupled L B for free-dof right-hand sides (ties by Woodbury: two solves).
   void coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const;
   void compute_sliding_operator();
@@ -192,11 +171,9 @@ class CoupledBody {
   fem::Material material_;
   std::string cache_dir_;
   bool cache_hit_{false};
-  double iterative_tolerance_{0.0};  // 0: exact (factored G)
-  int iterative_max_iterations_{0};
-  mutable Eigen::MatrixXd p_;  // L_bb K_add, built on first iterative use
-  mutable double omega_{1.0};
-  mutable IterativeReport iterative_report_;
+  bool iterative_requested_{false};
+  IterativeOptions iterative_options_;
+  std::unique_ptr<IterativeTie> iterative_;  // the baseline, built at finalize (null: exact G)
   // out = G in (exact) or its iterative approximation.
   void apply_coupling(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const;
   void select_contact_nodes();

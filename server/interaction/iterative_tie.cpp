@@ -1,5 +1,7 @@
 #include "server/interaction/iterative_tie.hpp"
 
+#include "server/interaction/coupled_body.hpp"
+
 #include <Eigen/LU>
 
 #include <cmath>
@@ -72,6 +74,31 @@ IterativeResult IterativeTie::solve(const std::vector<int>& slots,
     }
   }
   return r;
+}
+
+void IterativeTie::apply(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const {
+  Eigen::MatrixXd u = in;
+  for (Eigen::Index c = 0; c < in.cols(); ++c) {
+    const double scale = std::max(in.col(c).norm(), 1e-300);
+    bool converged = false;
+    int it = 0;
+    while (it < options_.max_iterations) {
+      ++it;
+      const Eigen::VectorXd target = in.col(c) - p_ * u.col(c);
+      const double change = omega_ * (target - u.col(c)).norm();
+      u.col(c) = (1.0 - omega_) * u.col(c) + omega_ * target;
+      if (change <= options_.tolerance * scale) {
+        converged = true;
+        break;
+      }
+    }
+    int seen = max_iterations_.load();
+    while (it > seen && !max_iterations_.compare_exchange_weak(seen, it)) {
+    }
+    solves_.fetch_add(1);
+    if (!converged) unconverged_.fetch_add(1);
+  }
+  out.noalias() = body_.boundary_stiffness() * u;
 }
 
 }  // namespace neurosim::interaction

@@ -4,20 +4,29 @@
 //   u_b <- (1 - w) u_b + w (v - L_bb K_add u_b),  v = L_A[b, c] f_c,
 // whose fixed point is the exact tie solution (I + L_bb K_add) u_b = v. Kept for comparison
 // only (iterations and time to reach the exact method's accuracy), never the default.
+// A body built with CoupledBody::set_iterative applies its coupling operator through apply().
 #pragma once
-
-#include "server/interaction/coupled_body.hpp"
 
 #include <Eigen/Core>
 
+#include <atomic>
 #include <vector>
 
 namespace neurosim::interaction {
+
+class CoupledBody;  // server/interaction/coupled_body.hpp
 
 struct IterativeOptions {
   int max_iterations{10000};
   double tolerance{1e-12};  // relative to |v|: stop when |u_b - exact| / |v| <= tolerance
   double relaxation{0.0};   // w; 0: 2 / (2 + rho) with rho = spectral radius of L_bb K_add
+};
+
+// Counters of apply() (the iterations a body's coupled solves needed).
+struct IterativeReport {
+  int solves{0};          // right-hand sides iterated
+  int max_iterations{0};  // most iterations one needed
+  int unconverged{0};     // stopped at max_iterations
 };
 
 struct IterativeResult {
@@ -39,12 +48,20 @@ class IterativeTie {
   Eigen::VectorXd exact(const std::vector<int>& slots,
                         const std::vector<Eigen::Vector3d>& forces_n) const;
   double relaxation() const { return omega_; }
+  // out = G in by the iteration, per column: u_b <- (1 - w) u_b + w (in - P u_b) until an update
+  // is below tolerance x |in| (or max_iterations), then G in = K_add u_b. Thread-safe (const;
+  // the counters are atomic).
+  void apply(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const;
+  IterativeReport report() const {
+    return {solves_.load(), max_iterations_.load(), unconverged_.load()};
+  }
 
  private:
   const CoupledBody& body_;
   IterativeOptions options_;
   Eigen::MatrixXd p_;  // L_bb K_add
   double omega_{1.0};
+  mutable std::atomic<int> solves_{0}, max_iterations_{0}, unconverged_{0};
   Eigen::VectorXd load(const std::vector<int>& slots,
                        const std::vector<Eigen::Vector3d>& forces_n) const;
 };

@@ -5,6 +5,7 @@
 #include "server/fusion/coupling_map.hpp"
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/triangle_surface.hpp"
+#include "server/interaction/contact_columns.hpp"
 #include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/sliding_coupling.hpp"
@@ -125,6 +126,7 @@ class SimulationImpl final : public Simulation {
   };
   struct BodyEntry {
     std::unique_ptr<CoupledBody> body;
+    std::unique_ptr<ContactColumns> columns;  // filled on first touch (or at load)
     PointGrid grid;
     std::vector<mesh::Vec3> rest_m;  // per contact slot
     double max_penetration_m{0.0};
@@ -325,10 +327,10 @@ SimulationImpl::SimulationImpl(const scene::Model& model, const SimulationOption
       throw std::runtime_error(source_ + ": mesh " + lm.id + ": " + ex.what());
     }
     setup_.factor_s += b.body->timing().factor_s;
-    b.body->set_keep_full_columns(options_.cache_full_field_columns);
     b.body->set_cache_dir(options_.compliance_cache_dir);
     if (iterative_host[m])
-      b.body->set_iterative(options_.iterative_tolerance, options_.iterative_max_iterations);
+      b.body->set_iterative(IterativeOptions{options_.iterative_max_iterations,
+                                             options_.iterative_tolerance, 0.0});
     meshes_[m].body = static_cast<int>(bodies_.size());
     bodies_.push_back(std::move(b));
   }
@@ -386,6 +388,7 @@ SimulationImpl::SimulationImpl(const scene::Model& model, const SimulationOption
   }
   for (auto& b : bodies_) {
     b.body->finalize();
+    b.columns = std::make_unique<ContactColumns>(*b.body, options_.cache_full_field_columns);
     const auto& tm = b.body->timing();
     setup_.condense_s += tm.condense_s;
     setup_.boundary_s += tm.boundary_s;
@@ -414,7 +417,7 @@ SimulationImpl::SimulationImpl(const scene::Model& model, const SimulationOption
       t0 = Clock::now();
       std::vector<int> all(b.rest_m.size());
       for (std::size_t s = 0; s < all.size(); ++s) all[s] = static_cast<int>(s);
-      b.body->ensure_columns(all);
+      b.columns->ensure(all);
       setup_.columns_s += seconds_since(t0);
     }
   }
@@ -599,13 +602,13 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   // Coupled compliance columns of new contact nodes (cached after the first touch).
   for (auto& m : missing_) m.clear();
   for (const Row& r : rows_)
-    if (!bodies_[r.body].body->has_columns(r.slot)) missing_[r.body].push_back(r.slot);
+    if (!bodies_[r.body].columns->has(r.slot)) missing_[r.body].push_back(r.slot);
   stats.columns_computed = 0;
   for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
     if (missing_[bi].empty()) continue;
-    const std::size_t before = bodies_[bi].body->cached_columns();
-    bodies_[bi].body->ensure_columns(missing_[bi]);
-    stats.columns_computed += static_cast<int>(bodies_[bi].body->cached_columns() - before);
+    const std::size_t before = bodies_[bi].columns->size();
+    bodies_[bi].columns->ensure(missing_[bi]);
+    stats.columns_computed += static_cast<int>(bodies_[bi].columns->size() - before);
   }
 
   // Delassus operator on the contact rows: W_rs = n_r^T L(r, s) n_s (coupled compliance, unit
@@ -622,8 +625,9 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
       double v = 0.0;
       if (c.body == a.body) {
         const Vec3& nc_ = body_a.contact_normals()[c.slot];
-        v = 0.5 * (na.dot(body_a.block(a.slot, c.slot) * nc_) +
-                   nc_.dot(body_a.block(c.slot, a.slot) * na));
+        const auto& cols = *bodies_[a.body].columns;
+        v = 0.5 * (na.dot(cols.block(a.slot, c.slot) * nc_) +
+                   nc_.dot(cols.block(c.slot, a.slot) * na));
       }
       w_(i, ns + s) = v;
       w_(ns + s, i) = v;
@@ -634,7 +638,7 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     if (rows_a > 0) {
       const int o = bodies_[a.body].sliding_offset;
       const Vec3 push = -na;
-      w_.col(i).segment(o, rows_a).noalias() = body_a.sliding_block(a.slot) * push;
+      w_.col(i).segment(o, rows_a).noalias() = bodies_[a.body].columns->sliding_block(a.slot) * push;
     }
     w_.row(i).head(ns) = w_.col(i).head(ns).transpose();
   }
@@ -760,7 +764,7 @@ void SimulationImpl::host_field(const BodyEntry& b, const std::vector<int>& slot
                                 std::to_string(n3) + " dofs");
   }
   if (!sliding_force && nodal_forces_n.size() == 0) {
-    if (!use_columns || !b.body->full_field_from_columns(slots, forces_n, u_host_m))
+    if (!use_columns || !b.columns->full_field(slots, forces_n, u_host_m))
       b.body->host_displacement(slots, forces_n, u_host_m);
     return;
   }

@@ -1,0 +1,69 @@
+#include "server/interaction/contact_columns.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+namespace neurosim::interaction {
+
+ContactColumns::ContactColumns(const CoupledBody& body, bool keep_full_columns)
+    : body_(&body), keep_full_(keep_full_columns) {
+  column_of_.assign(body.contact_nodes().size(), -1);
+}
+
+void ContactColumns::ensure(const std::vector<int>& slots) {
+  std::vector<int> missing;
+  for (int s : slots) {
+    if (s < 0 || s >= static_cast<int>(column_of_.size())) {
+      throw std::invalid_argument("ContactColumns::ensure: contact slot " + std::to_string(s) +
+                                  " out of range");
+    }
+    if (column_of_[s] < 0) missing.push_back(s);
+  }
+  std::sort(missing.begin(), missing.end());
+  missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
+  if (missing.empty()) return;
+  const auto& solver = body_->host_solver();
+  const auto& reduced = solver.reduced_index();
+  const auto& contact = body_->contact_nodes();
+  const int nf = solver.num_free_dofs();
+  const int s3 = 3 * static_cast<int>(contact.size());
+  const int n3 = 3 * static_cast<int>(body_->host().num_vertices());
+  const bool sliding = body_->num_sliding_rows() > 0;
+  const std::size_t chunk = static_cast<std::size_t>(CoupledBody::kBlockColumns / 3);
+  Eigen::MatrixXd x;
+  for (std::size_t first = 0; first < missing.size(); first += chunk) {
+    const std::size_t n = std::min(chunk, missing.size() - first);
+    const std::vector<int> part(missing.begin() + static_cast<std::ptrdiff_t>(first),
+                                missing.begin() + static_cast<std::ptrdiff_t>(first + n));
+    body_->solve_contact_columns(part, x);
+    for (std::size_t j = 0; j < n; ++j) {
+      const int c = 3 * static_cast<int>(j);
+      Columns col(s3, 3);
+      for (int r = 0; r < s3; ++r)
+        for (int a = 0; a < 3; ++a) col(r, a) = x(reduced[3 * contact[r / 3] + r % 3], c + a);
+      column_of_[part[j]] = static_cast<int>(columns_.size());
+      columns_.push_back(std::move(col));
+      if (sliding) sliding_columns_.push_back(body_->sliding_operator() * x.middleCols(c, 3));
+      if (keep_full_) {
+        Columns full = Columns::Zero(n3, 3);
+        for (int r = 0; r < nf; ++r) full.row(solver.free_dofs()[r]) = x.block<1, 3>(r, c);
+        full_columns_.push_back(std::move(full));
+      }
+    }
+  }
+}
+
+bool ContactColumns::full_field(const std::vector<int>& slots,
+                                const std::vector<mesh::Vec3>& forces_n,
+                                Eigen::VectorXd& u_host_m) const {
+  if (!keep_full_) return false;
+  for (int s : slots)
+    if (s < 0 || s >= static_cast<int>(column_of_.size()) || column_of_[s] < 0) return false;
+  u_host_m.setZero(3 * static_cast<int>(body_->host().num_vertices()));
+  for (std::size_t k = 0; k < slots.size(); ++k)
+    u_host_m.noalias() += full_columns_[column_of_[slots[k]]] * forces_n[k];
+  return true;
+}
+
+}  // namespace neurosim::interaction
