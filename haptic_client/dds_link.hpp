@@ -3,7 +3,7 @@
 // SimStatus liveliness (server gone / back).
 #pragma once
 
-#include "haptic_client/latest_slot.hpp"
+#include "common/triple_buffer.hpp"
 #include "haptic_client/link.hpp"
 
 #include <atomic>
@@ -56,8 +56,8 @@ class DdsLink : public Link {
   void run_publisher();
   struct Impl;
   std::unique_ptr<Impl> impl_;
-  LatestSlot<ContactModelData> slot_;
-  LatestSlot<ToolSample> outgoing_;
+  common::TripleBuffer<ContactModelData> slot_;
+  common::TripleBuffer<ToolSample> outgoing_;
   std::atomic<bool> alive_{true};
   std::atomic<bool> stop_{false};
   std::atomic<std::uint64_t> models_{0}, rejected_{0}, lost_{0}, seen_{0}, write_errors_{0};
