@@ -30,11 +30,11 @@ struct DdsLink::Impl {
 
   explicit Impl(const DdsLinkOptions& o)
       : opt(o),
-        tool_topic(pp, o.tool_topic),
+        tool_topic(pp, wire::topic_name<neurosim_ToolState>(o.topic_prefix)),
         tools(pp, tool_topic),
-        model_topic(pp, o.model_topic),
+        model_topic(pp, wire::topic_name<neurosim_ContactModel>(o.topic_prefix)),
         models(pp, model_topic),
-        status_topic(pp, o.status_topic),
+        status_topic(pp, wire::topic_name<neurosim_SimStatus>(o.topic_prefix)),
         status(pp, status_topic),
         ws(pp) {
     wire::set_string(sample->station_id, o.station_id, "station_id");

@@ -17,10 +17,9 @@ namespace neurosim::haptic {
 struct DdsLinkOptions {
   std::string station_id;
   std::string tool_id = "probe";
-  // Topic names (defaults: the wire contract); tests use unique names.
-  std::string tool_topic = "neurosim_ToolState";
-  std::string model_topic = "neurosim_ContactModel";
-  std::string status_topic = "neurosim_SimStatus";
+  // Topics are wire::topic_name<T>(topic_prefix): the server's names under its --topic-prefix
+  // (empty: the wire contract's names); tests use a unique prefix.
+  std::string topic_prefix;
   // ToolStates are written by a publisher thread (the loop only posts them lock-free), at this
   // SCHED_FIFO priority where permitted (0: normal priority), so DDS locks never stall the loop.
   int publisher_rt_priority = 70;

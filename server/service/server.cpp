@@ -288,17 +288,17 @@ void Server::Impl::create_entities() {
   if (opt.domain >= 0) po.domain = static_cast<dds_domainid_t>(opt.domain);
   pp.emplace(po);
   const std::string& p = opt.topic_prefix;
-  topo_topic.emplace(*pp, p + wire::TopicTraits<neurosim_MeshTopology>::name);
+  topo_topic.emplace(*pp, wire::topic_name<neurosim_MeshTopology>(p));
   topologies.emplace(*pp, *topo_topic);
-  status_topic.emplace(*pp, p + wire::TopicTraits<neurosim_SimStatus>::name);
+  status_topic.emplace(*pp, wire::topic_name<neurosim_SimStatus>(p));
   status_writer.emplace(*pp, *status_topic);
   waitset.emplace(*pp);
   log("built: MeshTopology writer (" + std::to_string(sim->num_meshes()) +
       " meshes), SimStatus writer");
 
   if (tool_contact) {
-    tool_topic.emplace(*pp, p + wire::TopicTraits<neurosim_ToolState>::name);
-    model_topic.emplace(*pp, p + wire::TopicTraits<neurosim_ContactModel>::name);
+    tool_topic.emplace(*pp, wire::topic_name<neurosim_ToolState>(p));
+    model_topic.emplace(*pp, wire::topic_name<neurosim_ContactModel>(p));
     tools.emplace(*pp, *tool_topic);
     models.emplace(*pp, *model_topic);
     waitset->attach_data(*tools, 1);
@@ -319,7 +319,7 @@ void Server::Impl::create_entities() {
   }
 
   if (deformation_output) {
-    deform_topic.emplace(*pp, p + wire::TopicTraits<neurosim_Deformation>::name);
+    deform_topic.emplace(*pp, wire::topic_name<neurosim_Deformation>(p));
     deformations.emplace(*pp, *deform_topic);
     wire::DeformationEncoderOptions eo;
     eo.full_frame_period = opt.full_frame_period;
