@@ -22,6 +22,20 @@ int report_usage_error(const std::string& program, const std::string& message) {
   return report_usage_error(program, message, std::cerr);
 }
 
+namespace {
+
+// CLI11 says "--opt: 1 required FLOAT missing" for an option given without its value.
+std::string missing_value(const std::string& what) {
+  const auto colon = what.find(": ");
+  const std::string tail = " missing";
+  if (colon != std::string::npos && what.size() > tail.size() &&
+      what.compare(what.size() - tail.size(), tail.size(), tail) == 0)
+    return what.substr(0, colon) + " needs a value";
+  return what;
+}
+
+}  // namespace
+
 Parser::Parser(std::string program, std::string description)
     : program_(std::move(program)), app_(std::move(description), program_) {
   app_.set_version_flag("--version", program_ + " " + version(), "Print the version and exit");
@@ -41,6 +55,8 @@ bool Parser::parse_or_throw(int argc, const char* const* argv, std::ostream& out
   } catch (const CLI::CallForVersion& e) {
     out << e.what() << "\n";
     return false;
+  } catch (const CLI::ArgumentMismatch& e) {
+    throw UsageError(missing_value(e.what()));
   } catch (const CLI::ParseError& e) {
     throw UsageError(e.what());
   } catch (const UsageError&) {

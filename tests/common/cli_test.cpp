@@ -94,6 +94,7 @@ TEST(common_cli, UsageErrorsExitTwoInOneStyle) {
   EXPECT_NE(run({"--duration", "-1"}, o).err.find("--duration"), std::string::npos);
   EXPECT_NE(run({"--domain", "999"}, o).err.find("[0, 230]"), std::string::npos);
   EXPECT_NE(run({"--bogus"}, o).err.find("--bogus"), std::string::npos);
+  EXPECT_NE(run({"--duration"}, o).err.find("prog: --duration needs a value"), std::string::npos);
   EXPECT_NE(run({"--origin", "1,2"}, o).err.find("X,Y,Z"), std::string::npos);
   EXPECT_NE(run({"--flag"}, o).err.find("--flag needs --name"), std::string::npos);
 }
