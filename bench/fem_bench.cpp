@@ -4,6 +4,7 @@
 // compliance column, 300 columns one by one vs as block solves (blocks of 32, 64, 300), and
 // the factor's size. Bottom face fixed; columns are the dofs of top-surface nodes.
 #include "common/cli.hpp"
+#include "common/clock.hpp"
 #include "server/fem/assembly.hpp"
 #include "server/fem/compliance.hpp"
 #include "server/fem/static_solver.hpp"
@@ -21,11 +22,8 @@
 namespace {
 
 using namespace neurosim;
-using Clock = std::chrono::steady_clock;
-
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+using common::Clock;
+using common::ms_since;
 
 // Best of `reps` runs of f, in ms.
 template <class F>

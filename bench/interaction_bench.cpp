@@ -7,6 +7,7 @@
 // default LCP path, inverse of the sliding block at load) and `sliding_ref` (the reference path,
 // factor of the active rows), unless --no-sliding-ref.
 #include "common/cli.hpp"
+#include "common/clock.hpp"
 #include "common/stats.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/iterative_tie.hpp"
@@ -116,7 +117,7 @@ int main(int argc, char** argv) {
     for (int start = 0; start < 2; ++start) {
       const auto t0 = Clock::now();
       auto built = ni::Simulation::build(sc.scene, sc.path, options);
-      const double build_s = std::chrono::duration<double>(Clock::now() - t0).count();
+      const double build_s = neurosim::common::seconds_since(t0);
       const auto& st = built->setup_stats();
       // Coupling set-up: everything after the meshes exist (mesh generation is the mesher's cost).
       coupling_setup_s[start] = build_s - st.load_meshes_s;
@@ -144,7 +145,7 @@ int main(int argc, char** argv) {
     const auto tw = Clock::now();
     for (int k = 0; k < 200; ++k) sim->step({pose(k)}, contacts, stats);  // warm-up: columns cached
     std::cerr << sc.name << ": warm-up (first touches, columns computed) "
-              << std::chrono::duration<double>(Clock::now() - tw).count() << " s\n";
+              << neurosim::common::seconds_since(tw) << " s\n";
     std::vector<double> times;
     std::vector<ni::ToolPose> one(1);
     int max_nodes = 0, failures = 0;

@@ -6,6 +6,7 @@
 // Prints per mode: frames per second (resample + render), mean slice/volume resample time per
 // frame, mean render time, and the first (full) resample.
 #include "common/cli.hpp"
+#include "common/clock.hpp"
 #include "server/scene/scene.hpp"
 #include "viewer_client/viewer/pipeline.hpp"
 
@@ -103,7 +104,7 @@ Result run(nv::Mode mode, nv::ViewerState state, int frames, int w, int h, bool 
     r.render_ms += t.render_ms;
     r.samples += static_cast<double>(t.samples_recomputed);
   }
-  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double s = neurosim::common::seconds_since(t0);
   r.frames = frames;
   r.fps = frames / s;
   r.resample_ms /= frames;

@@ -37,7 +37,7 @@ const char* kFooter =
     "headers: node,x,y,z,ux,uy,uz and node,x,y,z,rx,ry,rz (reactions: force the supports exert\n"
     "on the body).";
 
-using common::seconds_since;
+using neurosim::common::seconds_since;
 
 struct MeshResult {
   Eigen::VectorXd u_m;
