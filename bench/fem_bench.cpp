@@ -3,6 +3,8 @@
 // Per mesh: pattern build + assembly, CHOLMOD analysis + supernodal factorization, one
 // compliance column, 300 columns one by one vs as block solves (blocks of 32, 64, 300), and
 // the factor's size. Bottom face fixed; columns are the dofs of top-surface nodes.
+#include "common/cli.hpp"
+#include "common/clock.hpp"
 #include "server/fem/assembly.hpp"
 #include "server/fem/compliance.hpp"
 #include "server/fem/static_solver.hpp"
@@ -14,18 +16,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <cstring>
 #include <string>
 #include <vector>
 
 namespace {
 
 using namespace neurosim;
-using Clock = std::chrono::steady_clock;
-
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+using common::Clock;
+using common::ms_since;
 
 // Best of `reps` runs of f, in ms.
 template <class F>
@@ -129,16 +127,10 @@ Row run(const Case& c) {
 
 int main(int argc, char** argv) {
   bool csv = false, quick = false;
-  for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--csv")) {
-      csv = true;
-    } else if (!std::strcmp(argv[i], "--quick")) {
-      quick = true;
-    } else {
-      std::fprintf(stderr, "usage: fem_bench [--csv] [--quick]\n");
-      return 2;
-    }
-  }
+  neurosim::cli::Parser cli("fem_bench", "Assembly, factorization and solve times of the FEM.");
+  cli->add_flag("--csv", csv, "print CSV");
+  cli->add_flag("--quick", quick, "small cases only");
+  if (auto rc = cli.parse(argc, argv)) return *rc;
   std::vector<Case> cases;
   // Structured cubes (0.1 m, n^3 cells x 6 Kuhn tetrahedra), up to 16^3 x 6 = 24576 tetrahedra.
   for (int n : {4, 6, 8, 10, 12, 16}) {

@@ -5,6 +5,9 @@
 //
 //   fusion_bench [--csv] [--min-vertices N] [--max-vertices N] [--repeats R] [--no-brain]
 //                [--no-brute] [--table PATH]
+#include "common/cli.hpp"
+#include "common/clock.hpp"
+#include "common/stats.hpp"
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/paper_models.hpp"
 
@@ -23,19 +26,11 @@
 namespace {
 
 using namespace neurosim;
-using Clock = std::chrono::steady_clock;
-
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
+using common::Clock;
+using common::ms_since;
 // CPU time of this thread (ms): what one core spends, not what a loaded machine's scheduler
 // adds on top (the machine is shared).
-double thread_cpu_ms() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
-}
+using common::thread_cpu_ms;
 
 bool same(const fusion::NewBoundary& a, const fusion::NewBoundary& b) {
   return a.triangles == b.triangles && a.source_tet == b.source_tet &&
@@ -78,11 +73,9 @@ Row measure(const std::string& label, const fusion::MeshPair& pair, double paper
     times.push_back(thread_cpu_ms() - c1);
     wall.push_back(ms_since(t0));
   }
-  std::sort(wall.begin(), wall.end());
-  r.fast_wall_ms = wall[wall.size() / 2];
-  std::sort(times.begin(), times.end());
-  r.fast_ms = times[times.size() / 2];
-  r.fast_min_ms = times.front();
+  r.fast_wall_ms = common::percentile(wall, 0.5);
+  r.fast_ms = common::percentile(times, 0.5);
+  r.fast_min_ms = *std::min_element(times.begin(), times.end());
   // Where the time goes: without B's validation (closedness sort, collinearity), and with one
   // hierarchy descent per face instead of one per tetrahedron.
   auto median_of = [&](const fusion::InclusionOptions& o) {
@@ -93,8 +86,7 @@ Row measure(const std::string& label, const fusion::MeshPair& pair, double paper
       t.push_back(thread_cpu_ms() - c2);
       if (v.triangles != fast.triangles) throw std::logic_error(label + ": option changed S'");
     }
-    std::sort(t.begin(), t.end());
-    return t[t.size() / 2];
+    return common::percentile(t, 0.5);
   };
   fusion::InclusionOptions o;
   o.validate_embedded = false;
@@ -125,33 +117,21 @@ int main(int argc, char** argv) {
     bool csv = false, brain = true, brute = true;
     int min_vertices = 0, max_vertices = 1 << 30, repeats = 21;
     std::string table = std::string(NEUROSIM_SOURCE_DIR) + "/bench/data/paper_table3.csv";
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto value = [&]() -> std::string {
-        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-        return argv[++i];
-      };
-      if (a == "--csv")
-        csv = true;
-      else if (a == "--no-brain")
-        brain = false;
-      else if (a == "--no-brute")
-        brute = false;  // for profiling the fast path only
-      else if (a == "--max-vertices")
-        max_vertices = std::stoi(value());
-      else if (a == "--min-vertices")
-        min_vertices = std::stoi(value());
-      else if (a == "--repeats")
-        repeats = std::max(1, std::stoi(value()));
-      else if (a == "--table")
-        table = value();
-      else {
-        std::cerr
-            << "usage: fusion_bench [--csv] [--min-vertices N] [--max-vertices N] [--repeats R] "
-               "[--no-brain] [--no-brute] [--table PATH]\n";
-        return 2;
-      }
-    }
+    bool no_brain = false, no_brute = false;
+    neurosim::cli::Parser cli("fusion_bench",
+                              "The new boundary S' on the paper's Table 3 pairs (and a brain-sized "
+                              "pair), fast path vs brute force.");
+    cli->add_flag("--csv", csv, "print CSV");
+    cli->add_option("--min-vertices", min_vertices, "smallest cube (vertices)");
+    cli->add_option("--max-vertices", max_vertices, "largest cube (vertices)");
+    cli->add_option("--repeats", repeats, "runs per row (at least 1)")->capture_default_str();
+    cli->add_flag("--no-brain", no_brain, "no brain-sized row");
+    cli->add_flag("--no-brute", no_brute, "no brute-force reference (profiling the fast path)");
+    cli->add_option("--table", table, "the paper's Table 3 as CSV")->capture_default_str();
+    if (auto rc = cli.parse(argc, argv)) return *rc;
+    brain = !no_brain;
+    brute = !no_brute;
+    repeats = std::max(1, repeats);
     std::vector<Row> rows;
     for (const fusion::PaperRow& p : fusion::read_paper_table3(table)) {
       if (p.cube_vertices > max_vertices || p.cube_vertices < min_vertices) continue;

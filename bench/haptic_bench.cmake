@@ -3,6 +3,6 @@
 # priority and with SCHED_FIFO where permitted.
 if(TARGET neurosim::haptic)
   add_executable(haptic_bench ${CMAKE_CURRENT_LIST_DIR}/haptic_bench.cpp)
-  target_link_libraries(haptic_bench PRIVATE neurosim::haptic neurosim_warnings)
+  target_link_libraries(haptic_bench PRIVATE neurosim::haptic neurosim::common neurosim_warnings)
   target_include_directories(haptic_bench PRIVATE ${NEUROSIM_SOURCE_DIR} ${NEUROSIM_SOURCE_DIR}/tests/haptic_client)
 endif()

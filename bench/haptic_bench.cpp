@@ -7,6 +7,7 @@
 // thread answering with a half-space spring): the loop, DDS and scheduling are real, the physics
 // is not. With --server, neurosim-server is started on --scene with a private topic prefix.
 // CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml).
+#include "common/cli.hpp"
 #include "fake_dds_server.hpp"
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
@@ -16,6 +17,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <array>
 #include <cstdio>
 #include <iostream>
 #include <sstream>
@@ -26,14 +28,6 @@ extern char** environ;
 namespace nh = neurosim::haptic;
 
 namespace {
-
-Eigen::Vector3d vec(const std::string& s) {
-  Eigen::Vector3d v;
-  char c1 = 0, c2 = 0;
-  std::istringstream is(s);
-  if (!(is >> v.x() >> c1 >> v.y() >> c2 >> v.z())) throw std::invalid_argument("bad vector " + s);
-  return v;
-}
 
 pid_t spawn_server(const std::string& path, const std::string& scene, const std::string& prefix,
                    double seconds) {
@@ -55,37 +49,28 @@ int main(int argc, char** argv) {
   std::string modes = "normal,fifo", server, scene, spec = "hand:press";
   bool csv = false;
   nh::LoopConfig base;
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto val = [&] {
-        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-        return std::string(argv[++i]);
-      };
-      if (a == "--seconds")
-        seconds = std::stod(val());
-      else if (a == "--modes")
-        modes = val();
-      else if (a == "--server")
-        server = val();
-      else if (a == "--scene")
-        scene = val();
-      else if (a == "--device")
-        spec = val();
-      else if (a == "--origin")
-        base.workspace_origin_m = vec(val());
-      else if (a == "--up")
-        base.workspace_up = vec(val());
-      else if (a == "--csv")
-        csv = true;
-      else
-        throw std::invalid_argument("unknown option " + a);
-    }
-    if (!server.empty() && scene.empty()) throw std::invalid_argument("--server needs --scene");
-  } catch (const std::exception& e) {
-    std::cerr << "haptic_bench: " << e.what() << "\n";
-    return 2;
-  }
+  std::array<double, 3> origin{}, up{};
+  neurosim::cli::Parser cli("haptic_bench",
+                            "The 1 kHz haptic loop against the fake or the real server.");
+  cli->add_option("--seconds", seconds, "seconds per mode")
+      ->check(neurosim::cli::positive())
+      ->capture_default_str();
+  cli->add_option("--modes", modes, "comma-separated: normal, fifo")->capture_default_str();
+  cli->add_option("--server", server, "neurosim-server to run (default: a fake server thread)");
+  cli->add_option("--scene", scene, "scene for --server");
+  cli->add_option("--device", spec, "device SPEC")->capture_default_str();
+  auto* origin_opt =
+      neurosim::cli::add_triple(cli.app(), "--origin", origin, "as neurosim-haptic");
+  auto* up_opt = neurosim::cli::add_triple(cli.app(), "--up", up, "as neurosim-haptic");
+  cli->add_flag("--csv", csv, "print CSV");
+  cli.check([&] {
+    if (!server.empty() && scene.empty())
+      throw neurosim::cli::UsageError("--server needs --scene");
+  });
+  if (auto rc = cli.parse(argc, argv)) return *rc;
+  if (origin_opt->count() > 0)
+    base.workspace_origin_m = Eigen::Vector3d(origin[0], origin[1], origin[2]);
+  if (up_opt->count() > 0) base.workspace_up = Eigen::Vector3d(up[0], up[1], up[2]);
   std::printf(csv ? "mode,server,samples,period_p50_us,period_p99_us,period_max_us,misses_over_1ms,"
                     "model_age_p99_ms,max_force_step_n,sched\n"
                   : "%-7s %-6s %8s %9s %9s %10s %8s %12s %10s %s\n",
@@ -98,19 +83,15 @@ int main(int argc, char** argv) {
     try {
       const std::string prefix =
           "hbench" + std::to_string(::getpid()) + "_" + std::to_string(run++) + "_";
-      nh::testing::Topics topics{prefix + "neurosim_ToolState", prefix + "neurosim_ContactModel",
-                                 prefix + "neurosim_SimStatus"};
       std::unique_ptr<nh::testing::FakeDdsServer> fake;
       pid_t pid = 0;
       if (server.empty())
-        fake = std::make_unique<nh::testing::FakeDdsServer>(topics, nh::testing::HalfSpace{});
+        fake = std::make_unique<nh::testing::FakeDdsServer>(prefix, nh::testing::HalfSpace{});
       else
         pid = spawn_server(server, scene, prefix, seconds + 60);
       nh::DdsLinkOptions o;
       o.station_id = "bench";
-      o.tool_topic = topics.tool;
-      o.model_topic = topics.model;
-      o.status_topic = topics.status;
+      o.topic_prefix = prefix;
       if (mode != "fifo") o.publisher_rt_priority = o.receiver_rt_priority = 0;  // all unprivileged
       nh::DdsLink link(o);
       if (!link.wait_for_server(60)) std::cerr << "haptic_bench: no server within 60 s\n";

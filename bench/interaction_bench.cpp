@@ -6,6 +6,9 @@
 // --csv prints only the table; set-up times and notes go to stderr. SLIDING rows: `sliding` (the
 // default LCP path, inverse of the sliding block at load) and `sliding_ref` (the reference path,
 // factor of the active rows), unless --no-sliding-ref.
+#include "common/cli.hpp"
+#include "common/clock.hpp"
+#include "common/stats.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/iterative_tie.hpp"
 #include "server/interaction/simulation.hpp"
@@ -16,7 +19,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -38,13 +40,7 @@ struct Scenario {
   double depth_m;          // mean indentation, unit m
 };
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const std::size_t i =
-      std::min(v.size() - 1, static_cast<std::size_t>(std::ceil(p * v.size())) - 1);
-  return v[i];
-}
+using neurosim::common::percentile;
 
 std::string brain_like_scene() {
   // Paper Table 2b sizes: brain 5367 vertices / 25103 tets, artery 1644 / 4449. Stand-ins: a box
@@ -70,27 +66,18 @@ int main(int argc, char** argv) {
   std::string only;        // one scenario by name
   bool sliding_ref = true;
   std::string residual_csv;
-  for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--csv"))
-      csv = true;
-    else if (!std::strcmp(argv[i], "--quick"))
-      quick = true;
-    else if (!std::strcmp(argv[i], "--steps") && i + 1 < argc)
-      steps = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--sliding-steps") && i + 1 < argc)
-      sliding_steps = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--residual-csv") && i + 1 < argc)
-      residual_csv = argv[++i];
-    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc)
-      only = argv[++i];
-    else if (!std::strcmp(argv[i], "--no-sliding-ref"))
-      sliding_ref = false;
-    else {
-      std::cerr << "usage: interaction_bench [--csv] [--steps N] [--sliding-steps N] [--quick] "
-                   "[--residual-csv FILE] [--only SCENARIO] [--no-sliding-ref]\n";
-      return 2;
-    }
-  }
+  bool no_sliding_ref = false;
+  neurosim::cli::Parser cli("interaction_bench",
+                            "Per-step contact solve: exact vs iterative coupling, sliding.");
+  cli->add_flag("--csv", csv, "print CSV");
+  cli->add_option("--steps", steps, "steps per scenario")->capture_default_str();
+  cli->add_option("--sliding-steps", sliding_steps, "steps of the sliding rows (default: --steps)");
+  cli->add_flag("--quick", quick, "small cases only");
+  cli->add_option("--residual-csv", residual_csv, "write the iterative residuals as CSV");
+  cli->add_option("--only", only, "one scenario by name");
+  cli->add_flag("--no-sliding-ref", no_sliding_ref, "no sliding reference solve");
+  if (auto rc = cli.parse(argc, argv)) return *rc;
+  sliding_ref = !no_sliding_ref;
   if (sliding_steps < 0) sliding_steps = steps;
   std::vector<Scenario> scenarios;
   const std::string cube_path = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/cube_cylinder.scene";
@@ -131,7 +118,7 @@ int main(int argc, char** argv) {
     for (int start = 0; start < 2; ++start) {
       const auto t0 = Clock::now();
       auto built = ni::Simulation::build(sc.model, options);
-      const double build_s = std::chrono::duration<double>(Clock::now() - t0).count();
+      const double build_s = neurosim::common::seconds_since(t0);
       const auto& st = built->setup_stats();
       // Coupling set-up: everything after the meshes exist (mesh generation is the mesher's cost).
       coupling_setup_s[start] = build_s - st.load_meshes_s;
@@ -159,7 +146,7 @@ int main(int argc, char** argv) {
     const auto tw = Clock::now();
     for (int k = 0; k < 200; ++k) sim->step({pose(k)}, contacts, stats);  // warm-up: columns cached
     std::cerr << sc.name << ": warm-up (first touches, columns computed) "
-              << std::chrono::duration<double>(Clock::now() - tw).count() << " s\n";
+              << neurosim::common::seconds_since(tw) << " s\n";
     std::vector<double> times;
     std::vector<ni::ToolPose> one(1);
     int max_nodes = 0, failures = 0;

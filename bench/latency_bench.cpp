@@ -11,6 +11,9 @@
 //   lost           ContactModels the server wrote for a station that the station never read
 //                  (gaps in ContactModel.server_step), all stations
 //   server_cpu_pct server process CPU time / wall time over the measurement, % of one core
+#include "common/cli.hpp"
+#include "common/clock.hpp"
+#include "common/stats.hpp"
 #include "idl/wire/dds.hpp"
 
 #include <fcntl.h>
@@ -43,11 +46,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::int64_t mono_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
-}
+using neurosim::common::monotonic_ns;
 
 // utime + stime of a process, unit s.
 double process_cpu_s(pid_t pid) {
@@ -142,10 +141,10 @@ void run_station(int domain, int k, int n, const Window& window, std::atomic<int
   s->orientation[0] = 1;
   std::uint64_t seq = 0, answered = 0, last_step = 0;
   out.latency_us.reserve(static_cast<std::size_t>((measure_to - measure_from) / 1000000 + 1000));
-  std::int64_t next = mono_ns();
+  std::int64_t next = monotonic_ns();
   const std::int64_t t_start = next;
   while (next < measure_to + 200000000LL) {
-    const std::int64_t now = mono_ns();
+    const std::int64_t now = monotonic_ns();
     if (now >= next) {
       // Press 1.5 to 2.5 mm into the face (tip radius 3 mm), slowly in and out.
       const double t = 1e-9 * static_cast<double>(now - t_start);
@@ -154,7 +153,7 @@ void run_station(int domain, int k, int n, const Window& window, std::atomic<int
       s->position_m[2] = base[2];
       s->sequence_number = ++seq;
       s->source_time_ns = dds_time();
-      sent_at[seq % kRing] = mono_ns();
+      sent_at[seq % kRing] = monotonic_ns();
       w.write(*s);
       if (now >= measure_from && now < measure_to) ++out.sent;
       next += 1000000;
@@ -163,7 +162,7 @@ void run_station(int domain, int k, int n, const Window& window, std::atomic<int
     ws.wait(next - now);
     for (const auto& rx : r.take()) {
       if (!rx.valid()) continue;
-      const std::int64_t got = mono_ns();
+      const std::int64_t got = monotonic_ns();
       const auto& m = rx.data;
       if (got >= measure_from && got < measure_to) {
         if (last_step != 0 && m.server_step > last_step + 1) out.lost += m.server_step - last_step - 1;
@@ -176,48 +175,34 @@ void run_station(int domain, int k, int n, const Window& window, std::atomic<int
   }
 }
 
-double quantile(std::vector<double>& v, double q) {
-  if (v.empty()) return NAN;
-  const auto k = static_cast<std::size_t>(std::min<double>(static_cast<double>(v.size() - 1), q * static_cast<double>(v.size())));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
-}
 
-void usage() {
-  std::cerr << "usage: latency_bench --stations N --seconds S [--csv] [--scene FILE] [--server EXE] [--warmup S]\n"
-               "                     [--viewer]  (also subscribe to Deformation: full-field solves run)\n";
-}
 
 }  // namespace
 
 int main(int argc, char** argv) {
   Options o;
   o.server = fs::read_symlink("/proc/self/exe").parent_path() / "neurosim-server";
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto val = [&] {
-        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-        return std::string(argv[++i]);
-      };
-      if (a == "--stations") o.stations = std::stoi(val());
-      else if (a == "--seconds") o.seconds = std::stod(val());
-      else if (a == "--warmup") o.warmup_s = std::stod(val());
-      else if (a == "--scene") o.scene = val();
-      else if (a == "--server") o.server = val();
-      else if (a == "--csv") o.csv = true;
-      else if (a == "--viewer") o.viewer = true;
-      else throw std::invalid_argument("unknown argument " + a);
-    }
-    if (o.stations < 1 || o.stations > 8) throw std::invalid_argument("--stations must be 1..8");
-    if (!(o.seconds > 0)) throw std::invalid_argument("--seconds must be > 0");
-  } catch (const std::exception& e) {
-    std::cerr << "latency_bench: " << e.what() << "\n";
-    usage();
-    return 2;
-  }
-  // Loopback only (docs/ARCHITECTURE.md "DDS"): the bench sets it for itself and the server
-  // when unset.
+  std::string scene = o.scene.string(), server = o.server.string();
+  neurosim::cli::Parser cli("latency_bench",
+                            "ToolState to ContactModel latency over DDS on loopback.");
+  cli->add_option("--stations", o.stations, "stations 1..8")
+      ->check(neurosim::cli::in_range(1, 8))
+      ->capture_default_str();
+  cli->add_option("--seconds", o.seconds, "measured seconds")
+      ->check(neurosim::cli::positive())
+      ->capture_default_str();
+  cli->add_option("--warmup", o.warmup_s, "warm-up seconds")
+      ->check(neurosim::cli::finite())
+      ->capture_default_str();
+  cli->add_option("--scene", scene, "scene file")->capture_default_str();
+  cli->add_option("--server", server, "neurosim-server executable")->capture_default_str();
+  cli->add_flag("--csv", o.csv, "print CSV");
+  cli->add_flag("--viewer", o.viewer,
+                "also subscribe to Deformation (full-field solves run)");
+  if (auto rc = cli.parse(argc, argv)) return *rc;
+  o.scene = scene;
+  o.server = server;
+  // Loopback only (docs/ARCHITECTURE.md "DDS"): the bench sets it for itself and the server when unset.
   setenv("CYCLONEDDS_URI", NEUROSIM_LOOPBACK_URI, 0);
   std::random_device rd;
   const int domain = 20 + static_cast<int>(rd() % 200);
@@ -293,16 +278,12 @@ int main(int argc, char** argv) {
     while (n_ready.load() < o.stations &&
            std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count() < 60)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    const std::int64_t from = mono_ns() + static_cast<std::int64_t>(o.warmup_s * 1e9);
+    const std::int64_t from = monotonic_ns() + static_cast<std::int64_t>(o.warmup_s * 1e9);
     const std::int64_t to = from + static_cast<std::int64_t>(o.seconds * 1e9);
     window.from = from;
     window.to = to;
     go = true;
-    auto sleep_until = [](std::int64_t t) {
-      const timespec ts{static_cast<time_t>(t / 1000000000LL), static_cast<long>(t % 1000000000LL)};
-      while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) != 0) {
-      }
-    };
+    const auto sleep_until = [](std::int64_t t) { neurosim::common::sleep_until_ns(t); };
     sleep_until(from);
     const double cpu0 = process_cpu_s(pid);
     sleep_until(to);
@@ -330,8 +311,8 @@ int main(int argc, char** argv) {
     }
     const double cpu_pct = 100.0 * (cpu1 - cpu0) / o.seconds;
     const std::size_t samples = all.size();
-    const double mx = all.empty() ? NAN : *std::max_element(all.begin(), all.end());
-    const double p50 = quantile(all, 0.5), p99 = quantile(all, 0.99);
+    const neurosim::common::Percentiles pc = neurosim::common::percentiles(all);
+    const double mx = pc.max, p50 = pc.p50, p99 = pc.p99;
     if (o.csv) {
       std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct\n");
       std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f\n", o.stations, samples, p50, p99, mx,

@@ -3,12 +3,12 @@
 // Columns: shape, paper_vertices, vertices, vertex_error_pct, paper_tets, tets, attempts,
 // cell_size_mm, min_dihedral_deg, seconds. Paper tetrahedron counts are only known for
 // Table 2a (cube 1812 / 8324, cylinder 206 / 699); elsewhere they are left empty.
+#include "common/cli.hpp"
 #include "server/mesh/generate.hpp"
 #include "server/mesh/quality.hpp"
 
 #include <chrono>
 #include <cstdio>
-#include <cstring>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -17,7 +17,10 @@
 using neurosim::mesh::Vec3;
 
 int main(int argc, char** argv) {
-  const bool csv = argc > 1 && std::strcmp(argv[1], "--csv") == 0;
+  bool csv = false;
+  neurosim::cli::Parser cli("meshgen_bench", "Mesh generation of the paper's cube/cylinder pairs.");
+  cli->add_flag("--csv", csv, "print CSV");
+  if (auto rc = cli.parse(argc, argv)) return *rc;
   std::vector<int> cube_sizes;
   std::ifstream table(std::string(NEUROSIM_SOURCE_DIR) + "/bench/data/paper_table3.csv");
   std::string line;

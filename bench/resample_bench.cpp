@@ -15,21 +15,17 @@
 // p50/p99 in ms over the runs (wall, and CPU time of the thread: the machine may be shared);
 // samples = mean samples recomputed per run (of samples_total);
 // moved_tets = mean tetrahedra reported moved per run. One thread. --csv prints only the table.
+#include "common/cli.hpp"
+#include "common/clock.hpp"
+#include "common/stats.hpp"
 #include "server/scene/compile.hpp"
 #include "viewer_client/resample.hpp"
-
-#include <vtkImageCast.h>
-#include <vtkImageData.h>
-#include <vtkNIFTIImageReader.h>
-#include <vtkSmartPointer.h>
-
-#include <time.h>
+#include "viewer_client/viewer/image_io.hpp"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <stdexcept>
@@ -38,68 +34,21 @@
 #include <vector>
 
 namespace nv = neurosim::viewer;
-using Clock = std::chrono::steady_clock;
+using neurosim::common::Clock;
 using Eigen::Vector3d;
 
 namespace {
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const std::size_t i =
-      std::min(v.size() - 1, static_cast<std::size_t>(std::ceil(p * v.size())) - 1);
-  return v[i];
-}
-
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-
-// CPU time of this thread, unit ms (the machine is shared: wall time includes waiting).
-double thread_cpu_ms() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
+using neurosim::common::ms_since;
+using neurosim::common::percentile;
+// CPU time of this thread (the machine is shared: wall time includes waiting).
+using neurosim::common::thread_cpu_ms;
 
 // Wall and CPU time of one timed section.
 struct Timer {
   Clock::time_point wall = Clock::now();
   double cpu = thread_cpu_ms();
 };
-
-// The NIfTI volume as an ImageGrid in VTK image coordinates (the meshes' frame), unit m.
-nv::ImageGrid read_mri(const std::string& path, double unit_m) {
-  if (!std::filesystem::is_regular_file(path)) {
-    throw std::runtime_error(path + ": no such MRI file (Debian package mricron-data)");
-  }
-  auto reader = vtkSmartPointer<vtkNIFTIImageReader>::New();
-  if (!reader->CanReadFile(path.c_str())) {
-    throw std::runtime_error(path + ": not a NIfTI file vtkNIFTIImageReader can read");
-  }
-  reader->SetFileName(path.c_str());
-  auto cast = vtkSmartPointer<vtkImageCast>::New();
-  cast->SetInputConnection(reader->GetOutputPort());
-  cast->SetOutputScalarTypeToFloat();
-  cast->Update();
-  vtkImageData* im = cast->GetOutput();
-  if (im == nullptr || im->GetNumberOfPoints() == 0 || im->GetNumberOfScalarComponents() != 1) {
-    throw std::runtime_error(path + ": cannot read a scalar volume");
-  }
-  nv::ImageGrid g;
-  double spacing[3], origin[3];
-  im->GetDimensions(g.dims.data());
-  im->GetSpacing(spacing);
-  im->GetOrigin(origin);
-  for (int a = 0; a < 3; ++a) {
-    g.spacing_m[a] = spacing[a] * unit_m;
-    g.origin_m[a] = origin[a] * unit_m;
-  }
-  const auto* v = static_cast<const float*>(im->GetScalarPointer());
-  g.values.assign(v, v + static_cast<std::size_t>(g.dims[0]) * g.dims[1] * g.dims[2]);
-  g.validate();
-  return g;
-}
 
 struct Row {
   explicit Row(std::string n) : name(std::move(n)) {}
@@ -124,37 +73,27 @@ int main(int argc, char** argv) {
   double sigma_mm = 5.0, step_mm = 0.05, push_mm = 4.0;
   nv::SamplerOptions options;
   std::string scene_path = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/brain_artery.scene";
-  for (int i = 1; i < argc; ++i) {
-    const auto next = [&](const char* what) -> const char* {
-      if (i + 1 >= argc) throw std::invalid_argument(std::string(what) + " needs a value");
-      return argv[++i];
-    };
-    if (!std::strcmp(argv[i], "--csv"))
-      csv = true;
-    else if (!std::strcmp(argv[i], "--frames"))
-      frames = std::max(1, std::atoi(next("--frames")));
-    else if (!std::strcmp(argv[i], "--volume-runs"))
-      volume_runs = std::max(1, std::atoi(next("--volume-runs")));
-    else if (!std::strcmp(argv[i], "--scene"))
-      scene_path = next("--scene");
-    else if (!std::strcmp(argv[i], "--sigma-mm"))
-      sigma_mm = std::atof(next("--sigma-mm"));
-    else if (!std::strcmp(argv[i], "--step-mm"))
-      step_mm = std::atof(next("--step-mm"));
-    else if (!std::strcmp(argv[i], "--push-mm"))
-      push_mm = std::atof(next("--push-mm"));
-    else if (!std::strcmp(argv[i], "--cell-factor"))
-      options.grid_cell_factor = std::atof(next("--cell-factor"));
-    else {
-      std::cerr << "usage: resample_bench [--csv] [--frames N] [--volume-runs N] [--scene FILE]"
-                   " [--sigma-mm S] [--step-mm D] [--push-mm A] [--cell-factor F]\n";
-      return 2;
-    }
-  }
-  if (!(sigma_mm > 0) || !(step_mm > 0) || !(push_mm > 0)) {
-    std::cerr << "resample_bench: sigma, step and push must be positive\n";
-    return 2;
-  }
+  neurosim::cli::Parser cli("resample_bench",
+                            "The MRI resampled through the deformed brain/artery model.");
+  cli->add_flag("--csv", csv, "print only the table");
+  cli->add_option("--frames", frames, "frames of the push (at least 1)")->capture_default_str();
+  cli->add_option("--volume-runs", volume_runs, "volume runs (at least 1)")->capture_default_str();
+  cli->add_option("--scene", scene_path, "scene file")->capture_default_str();
+  cli->add_option("--sigma-mm", sigma_mm, "bump width S, unit mm")
+      ->check(neurosim::cli::positive())
+      ->capture_default_str();
+  cli->add_option("--step-mm", step_mm, "push per frame D, unit mm")
+      ->check(neurosim::cli::positive())
+      ->capture_default_str();
+  cli->add_option("--push-mm", push_mm, "deepest push A, unit mm")
+      ->check(neurosim::cli::positive())
+      ->capture_default_str();
+  cli->add_option("--cell-factor", options.grid_cell_factor, "search grid cell factor")
+      ->check(neurosim::cli::finite())
+      ->capture_default_str();
+  if (auto rc = cli.parse(argc, argv)) return *rc;
+  frames = std::max(1, frames);
+  volume_runs = std::max(1, volume_runs);
 
   // The scene's meshes (built as the server builds them) and its MRI.
   const auto t_load = Clock::now();
@@ -176,7 +115,7 @@ int main(int argc, char** argv) {
     std::cerr << scene_path << ": needs a mesh 'brain' and an image\n";
     return 1;
   }
-  nv::ImageGrid image = read_mri(scene.image().file(), scene.image().file_unit_m());
+  nv::ImageGrid image = nv::load_nifti(scene.image().file(), scene.image().file_unit_m());
   const double load_ms = ms_since(t_load);
 
   // Tool: the brain surface vertex farthest along +x near the middle of the lateral surface

@@ -5,6 +5,8 @@
 //   xvfb-run -a build/bin/viewer_bench [--scene FILE] [--frames N] [--size WxH] [--csv]
 // Prints per mode: frames per second (resample + render), mean slice/volume resample time per
 // frame, mean render time, and the first (full) resample.
+#include "common/cli.hpp"
+#include "common/clock.hpp"
 #include "server/scene/compile.hpp"
 #include "viewer_client/viewer/pipeline.hpp"
 
@@ -102,7 +104,7 @@ Result run(nv::Mode mode, nv::ViewerState state, int frames, int w, int h, bool 
     r.render_ms += t.render_ms;
     r.samples += static_cast<double>(t.samples_recomputed);
   }
-  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double s = neurosim::common::seconds_since(t0);
   r.frames = frames;
   r.fps = frames / s;
   r.resample_ms /= frames;
@@ -117,25 +119,23 @@ int main(int argc, char** argv) {
   std::string scene = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/brain_artery.scene";
   int frames = 40, w = 960, h = 720;
   bool csv = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--scene" && i + 1 < argc) {
-      scene = argv[++i];
-    } else if (a == "--frames" && i + 1 < argc) {
-      frames = std::atoi(argv[++i]);
-    } else if (a == "--size" && i + 1 < argc) {
-      if (std::sscanf(argv[++i], "%dx%d", &w, &h) != 2) w = 0;
-    } else if (a == "--csv") {
-      csv = true;
-    } else {
-      std::cerr << "usage: viewer_bench [--scene FILE] [--frames N] [--size WxH] [--csv]\n";
-      return 2;
-    }
-  }
-  if (frames <= 0 || w < 64 || h < 64) {
-    std::cerr << "viewer_bench: --frames must be > 0 and --size at least 64x64\n";
-    return 2;
-  }
+  std::string size = "960x720";
+  neurosim::cli::Parser cli("viewer_bench",
+                            "neurosim-viewer's frame rates offscreen (run under xvfb-run -a).");
+  cli->add_option("--scene", scene, "scene file")->capture_default_str();
+  cli->add_option("--frames", frames, "frames per case (> 0)")
+      ->check(neurosim::cli::in_range(1, 1e9))
+      ->capture_default_str();
+  cli->add_option("--size", size, "frame size WxH (at least 64x64)")->capture_default_str();
+  cli->add_flag("--csv", csv, "print CSV");
+  cli.check([&] {
+    char x = 0;
+    char rest = 0;
+    if (std::sscanf(size.c_str(), "%d%c%d%c", &w, &x, &h, &rest) != 3 || x != 'x' || w < 64 ||
+        h < 64)
+      throw neurosim::cli::UsageError("--size: expected WxH of at least 64x64, got '" + size + "'");
+  });
+  if (auto rc = cli.parse(argc, argv)) return *rc;
   if (std::getenv("DISPLAY") == nullptr) {
     std::cerr << "viewer_bench: no X display: run under xvfb-run -a\n";
     return 2;

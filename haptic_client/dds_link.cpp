@@ -1,5 +1,6 @@
 #include "haptic_client/dds_link.hpp"
 
+#include "common/clock.hpp"
 #include "idl/wire/dds.hpp"
 
 #include <pthread.h>
@@ -10,11 +11,7 @@
 namespace neurosim::haptic {
 
 namespace {
-std::int64_t realtime_ns() {
-  timespec t{};
-  clock_gettime(CLOCK_REALTIME, &t);
-  return static_cast<std::int64_t>(t.tv_sec) * 1000000000LL + t.tv_nsec;
-}
+using common::realtime_ns;
 constexpr dds_attach_t kModels = 1, kStatus = 2, kStatusLiveliness = 3;
 }  // namespace
 
@@ -33,11 +30,11 @@ struct DdsLink::Impl {
 
   explicit Impl(const DdsLinkOptions& o)
       : opt(o),
-        tool_topic(pp, o.tool_topic),
+        tool_topic(pp, wire::topic_name<neurosim_ToolState>(o.topic_prefix)),
         tools(pp, tool_topic),
-        model_topic(pp, o.model_topic),
+        model_topic(pp, wire::topic_name<neurosim_ContactModel>(o.topic_prefix)),
         models(pp, model_topic),
-        status_topic(pp, o.status_topic),
+        status_topic(pp, wire::topic_name<neurosim_SimStatus>(o.topic_prefix)),
         status(pp, status_topic),
         ws(pp) {
     wire::set_string(sample->station_id, o.station_id, "station_id");
@@ -68,7 +65,7 @@ DdsLink::~DdsLink() {
 }
 
 void DdsLink::publish(const ToolSample& s) {
-  outgoing_.write(s);
+  outgoing_.publish(s);
   sem_post(&impl_->pending);
 }
 
@@ -142,7 +139,7 @@ void DdsLink::run() {
       m.server_step = c->server_step;
       if (c->tool_sample_rejected) rejected_.fetch_add(1);
       models_.fetch_add(1);
-      slot_.write(m);
+      slot_.publish(m);
     }
     if (r.has(kStatus)) im.status.take();  // content not needed here: liveliness tells us
     if (r.has(kStatusLiveliness) || r.timed_out()) {

@@ -3,7 +3,7 @@
 // SimStatus liveliness (server gone / back).
 #pragma once
 
-#include "haptic_client/latest_slot.hpp"
+#include "common/triple_buffer.hpp"
 #include "haptic_client/link.hpp"
 
 #include <atomic>
@@ -17,10 +17,9 @@ namespace neurosim::haptic {
 struct DdsLinkOptions {
   std::string station_id;
   std::string tool_id = "probe";
-  // Topic names (defaults: the wire contract); tests use unique names.
-  std::string tool_topic = "neurosim_ToolState";
-  std::string model_topic = "neurosim_ContactModel";
-  std::string status_topic = "neurosim_SimStatus";
+  // Topics are wire::topic_name<T>(topic_prefix): the server's names under its --topic-prefix
+  // (empty: the wire contract's names); tests use a unique prefix.
+  std::string topic_prefix;
   // ToolStates are written by a publisher thread (the loop only posts them lock-free), at this
   // SCHED_FIFO priority where permitted (0: normal priority), so DDS locks never stall the loop.
   int publisher_rt_priority = 70;
@@ -56,8 +55,8 @@ class DdsLink : public Link {
   void run_publisher();
   struct Impl;
   std::unique_ptr<Impl> impl_;
-  LatestSlot<ContactModelData> slot_;
-  LatestSlot<ToolSample> outgoing_;
+  common::TripleBuffer<ContactModelData> slot_;
+  common::TripleBuffer<ToolSample> outgoing_;
   std::atomic<bool> alive_{true};
   std::atomic<bool> stop_{false};
   std::atomic<std::uint64_t> models_{0}, rejected_{0}, lost_{0}, seen_{0}, write_errors_{0};

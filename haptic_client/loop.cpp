@@ -1,5 +1,7 @@
 #include "haptic_client/loop.hpp"
 
+#include "common/clock.hpp"
+
 #include <Eigen/Geometry>
 
 #include <pthread.h>
@@ -15,24 +17,8 @@
 
 namespace neurosim::haptic {
 
-namespace {
-
-std::int64_t to_ns(const timespec& t) {
-  return static_cast<std::int64_t>(t.tv_sec) * 1000000000LL + t.tv_nsec;
-}
-timespec from_ns(std::int64_t ns) {
-  timespec t{};
-  t.tv_sec = static_cast<time_t>(ns / 1000000000LL);
-  t.tv_nsec = static_cast<long>(ns % 1000000000LL);
-  return t;
-}
-std::int64_t clock_ns(clockid_t c) {
-  timespec t{};
-  clock_gettime(c, &t);
-  return to_ns(t);
-}
-
-}  // namespace
+using common::monotonic_ns;
+using common::realtime_ns;
 
 HapticLoop::HapticLoop(const LoopConfig& config, Device& device, Link* link, Recorder* recorder)
     : cfg_(config), device_(device), link_(link), recorder_(recorder), fm_(config.force) {
@@ -169,24 +155,22 @@ RealtimeInfo HapticLoop::run_realtime(double duration_s, const std::atomic<bool>
   }
   const double T = cfg_.force.period_s;
   const auto T_ns = static_cast<std::int64_t>(std::llround(T * 1e9));
-  std::int64_t deadline = clock_ns(CLOCK_MONOTONIC) + T_ns;
+  std::int64_t deadline = monotonic_ns() + T_ns;
   std::int64_t prev_start = -1;
   for (std::uint64_t k = 0;; ++k) {
     const double t = static_cast<double>(k) * T;
     if (duration_s > 0 && t >= duration_s) break;
     if (stop != nullptr && stop->load(std::memory_order_relaxed)) break;
     if (device_.finished(t)) break;
-    const timespec ts = from_ns(deadline);
-    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-    }
-    const std::int64_t start = clock_ns(CLOCK_MONOTONIC);
+    common::sleep_until_ns(deadline);
+    const std::int64_t start = monotonic_ns();
     const double period = prev_start < 0 ? -1 : 1e-9 * static_cast<double>(start - prev_start);
     prev_start = start;
-    tick(clock_ns(CLOCK_REALTIME), t, period, 1e-9 * static_cast<double>(start - deadline));
+    tick(realtime_ns(), t, period, 1e-9 * static_cast<double>(start - deadline));
     deadline += T_ns;
     // Far behind (machine stalled): re-anchor instead of a burst of catch-up ticks.
-    if (clock_ns(CLOCK_MONOTONIC) - deadline > 100 * T_ns) {
-      deadline = clock_ns(CLOCK_MONOTONIC) + T_ns;
+    if (monotonic_ns() - deadline > 100 * T_ns) {
+      deadline = monotonic_ns() + T_ns;
       ++info.resyncs;
     }
   }

@@ -5,13 +5,16 @@
 //          [--up X,Y,Z] [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]
 //          [--topic-prefix P] [--trace FILE.csv]
 // SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract) | hand:SCRIPT
+// --help lists the options, --version prints the version; usage errors exit 2.
+#include "common/cli.hpp"
+#include "common/clock.hpp"
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
 
 #include "server/scene/scene.hpp"
 
 
-#include <time.h>
+#include <array>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -31,48 +34,10 @@ std::atomic<bool> g_stop{false};
 void on_signal(int) { g_stop = true; }
 void warn(const char* m) { std::fprintf(stderr, "neurosim-haptic: warning: %s\n", m); }
 
-const char* kUsage =
-    "usage: neurosim-haptic --station ID --device SPEC [--duration SECONDS] [--summary FILE.json]\n"
-    "                       [--record FILE] [--scene FILE] [--tool ID] [--origin X,Y,Z] [--up "
-    "X,Y,Z]\n"
-    "                       [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]\n"
-    "                       [--topic-prefix P]  (P prepended to every topic name, as "
-    "neurosim-server's)\n"
-    "                       [--trace FILE.csv]  (every tick: time, position, force, model age, "
-    "gain)\n"
-    "  SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, "
-    "circle,\n"
-    "        retract). Scripts press along device -z onto a surface at device z = 0; --origin "
-    "puts\n"
-    "        that point in the scene (m) and --up is the surface's outward normal there.\n";
-
-Eigen::Vector3d parse_vec(const std::string& opt, const std::string& s) {
-  Eigen::Vector3d v;
-  char c1 = 0, c2 = 0;
-  std::istringstream is(s);
-  if (!(is >> v.x() >> c1 >> v.y() >> c2 >> v.z()) || c1 != ',' || c2 != ',' || !v.allFinite())
-    throw std::invalid_argument(opt + ": expected X,Y,Z (finite numbers), got '" + s + "'");
-  return v;
-}
-
-double parse_double(const std::string& opt, const std::string& s) {
-  std::size_t pos = 0;
-  double v = 0;
-  try {
-    v = std::stod(s, &pos);
-  } catch (...) {
-    pos = 0;
-  }
-  if (pos != s.size() || !std::isfinite(v))
-    throw std::invalid_argument(opt + ": not a number: '" + s + "'");
-  return v;
-}
-
-std::int64_t realtime_ns() {
-  timespec t{};
-  clock_gettime(CLOCK_REALTIME, &t);
-  return static_cast<std::int64_t>(t.tv_sec) * 1000000000LL + t.tv_nsec;
-}
+const char* kSpecHelp =
+    "SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, circle,\n"
+    "      retract). Scripts press along device -z onto a surface at device z = 0; --origin puts\n"
+    "      that point in the scene (m) and --up is the surface's outward normal there.";
 
 }  // namespace
 
@@ -80,58 +45,39 @@ int main(int argc, char** argv) {
   std::string station, spec, summary_file, record_file, scene_file, tool = "probe", label,
                                                                     topic_prefix, trace_file;
   double duration = 0, wait_server = 5;
-  bool use_server = true;
+  bool no_server = false, no_rt = false;
+  std::array<double, 3> origin{}, up{};
   nh::LoopConfig cfg;
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto val = [&]() -> std::string {
-        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-        return argv[++i];
-      };
-      if (a == "--station")
-        station = val();
-      else if (a == "--device")
-        spec = val();
-      else if (a == "--duration")
-        duration = parse_double(a, val());
-      else if (a == "--summary")
-        summary_file = val();
-      else if (a == "--record")
-        record_file = val();
-      else if (a == "--scene")
-        scene_file = val();
-      else if (a == "--tool")
-        tool = val();
-      else if (a == "--origin")
-        cfg.workspace_origin_m = parse_vec(a, val());
-      else if (a == "--up")
-        cfg.workspace_up = parse_vec(a, val());
-      else if (a == "--label")
-        label = val();
-      else if (a == "--no-server")
-        use_server = false;
-      else if (a == "--topic-prefix")
-        topic_prefix = val();
-      else if (a == "--trace")
-        trace_file = val();
-      else if (a == "--no-rt")
-        cfg.realtime_priority = false;
-      else if (a == "--wait-server")
-        wait_server = parse_double(a, val());
-      else if (a == "-h" || a == "--help") {
-        std::cout << kUsage;
-        return 0;
-      } else
-        throw std::invalid_argument("unknown option " + a);
-    }
-    if (station.empty() || spec.empty())
-      throw std::invalid_argument("--station and --device are required");
-    if (duration < 0) throw std::invalid_argument("--duration must be >= 0");
-  } catch (const std::exception& e) {
-    std::cerr << "neurosim-haptic: " << e.what() << "\n" << kUsage;
-    return 2;
-  }
+  neurosim::cli::Parser cli("neurosim-haptic", "One haptic station: the 1 kHz force loop.");
+  cli->add_option("--station", station, "station id")->required();
+  cli->add_option("--device", spec, "device SPEC (below)")->required();
+  cli->add_option("--duration", duration, "stop after S seconds (default 0: until a signal)")
+      ->check(neurosim::cli::non_negative());
+  cli->add_option("--summary", summary_file, "write the loop summary as JSON");
+  cli->add_option("--record", record_file, "record the session");
+  cli->add_option("--scene", scene_file, "scene file (haptics factors, scene name)");
+  cli->add_option("--tool", tool, "tool id")->capture_default_str();
+  auto* origin_opt = neurosim::cli::add_triple(cli.app(), "--origin", origin,
+                                               "where device z = 0 is in the scene, unit m");
+  auto* up_opt =
+      neurosim::cli::add_triple(cli.app(), "--up", up, "the surface's outward normal there");
+  cli->add_option("--label", label, "recording label");
+  cli->add_flag("--no-server", no_server, "run without DDS (no force from a server)");
+  cli->add_flag("--no-rt", no_rt, "no SCHED_FIFO for the loop and the DDS threads");
+  cli->add_option("--wait-server", wait_server, "wait this long for a server, unit s")
+      ->check(neurosim::cli::finite())
+      ->capture_default_str();
+  cli->add_option("--topic-prefix", topic_prefix,
+                  "prepended to every topic name, as neurosim-server's");
+  cli->add_option("--trace", trace_file,
+                  "every tick as CSV: time, position, force, model age, gain");
+  cli->footer(kSpecHelp);
+  if (auto rc = cli.parse(argc, argv)) return *rc;
+  if (origin_opt->count() > 0)
+    cfg.workspace_origin_m = Eigen::Vector3d(origin[0], origin[1], origin[2]);
+  if (up_opt->count() > 0) cfg.workspace_up = Eigen::Vector3d(up[0], up[1], up[2]);
+  if (no_rt) cfg.realtime_priority = false;
+  const bool use_server = !no_server;
 
   try {
     std::string scene_name;
@@ -152,9 +98,7 @@ int main(int argc, char** argv) {
       o.station_id = station;
       o.tool_id = tool;
       if (!cfg.realtime_priority) o.publisher_rt_priority = o.receiver_rt_priority = 0;  // --no-rt
-      o.tool_topic = topic_prefix + o.tool_topic;
-      o.model_topic = topic_prefix + o.model_topic;
-      o.status_topic = topic_prefix + o.status_topic;
+      o.topic_prefix = topic_prefix;
       link = std::make_unique<nh::DdsLink>(o);
       if (wait_server > 0 && !link->wait_for_server(wait_server))
         std::cerr << "neurosim-haptic: no server seen within " << wait_server
@@ -165,7 +109,7 @@ int main(int argc, char** argv) {
       if (label.empty()) label = "made with " + device->kind() + " by neurosim-haptic";
       recorder = std::make_unique<nh::Recorder>(
           record_file, nh::session_header(cfg, *device, station, tool, scene_name, scene_file,
-                                          label, realtime_ns()));
+                                          label, neurosim::common::realtime_ns()));
     }
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);

@@ -1,37 +1,11 @@
 #include "haptic_client/metrics.hpp"
 
+#include "common/json.hpp"
+
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <fstream>
-#include <sstream>
-#include <stdexcept>
 
 namespace neurosim::haptic {
-
-Histogram::Histogram(double bin_width, std::size_t bins) : width_(bin_width), bins_(bins, 0) {}
-
-void Histogram::add(double v) {
-  if (!std::isfinite(v) || v < 0) v = 0;
-  const double b = v / width_;
-  const std::size_t i =
-      b >= static_cast<double>(bins_.size() - 1) ? bins_.size() - 1 : static_cast<std::size_t>(b);
-  ++bins_[i];
-  ++n_;
-  max_ = std::max(max_, v);
-}
-
-double Histogram::quantile(double p) const {
-  if (n_ == 0) return 0;
-  const auto rank = static_cast<std::uint64_t>(std::ceil(p * static_cast<double>(n_)));
-  std::uint64_t acc = 0;
-  for (std::size_t i = 0; i < bins_.size(); ++i) {
-    acc += bins_[i];
-    if (acc >= std::max<std::uint64_t>(rank, 1))
-      return std::min(max_, width_ * static_cast<double>(i + 1));
-  }
-  return max_;
-}
 
 // 1 us bins up to 200 ms; 10 us bins up to 10 s.
 LoopMetrics::LoopMetrics() : period_us_(1.0, 200000), model_age_ms_(0.01, 1000000) {}
@@ -57,28 +31,26 @@ LoopSummary LoopMetrics::summary() const {
   return s;
 }
 
-std::string summary_json(const LoopSummary& s) {
-  std::ostringstream o;
-  o.precision(9);
-  o << "{\n  \"period_p50_us\": " << s.period_p50_us
-    << ",\n  \"period_p99_us\": " << s.period_p99_us
-    << ",\n  \"period_max_us\": " << s.period_max_us
-    << ",\n  \"misses_over_1ms\": " << s.misses_over_1ms << ",\n  \"model_age_p99_ms\": ";
-  if (s.model_age_p99_ms < 0)
-    o << "null";
-  else
-    o << s.model_age_p99_ms;
-  o << ",\n  \"max_force_step_n\": " << s.max_force_step_n << ",\n  \"samples\": " << s.samples
-    << "\n}\n";
-  return o.str();
+namespace {
+
+common::Json to_json(const LoopSummary& s) {
+  common::Json j;
+  j["period_p50_us"] = s.period_p50_us;
+  j["period_p99_us"] = s.period_p99_us;
+  j["period_max_us"] = s.period_max_us;
+  j["misses_over_1ms"] = s.misses_over_1ms;
+  j["model_age_p99_ms"] = s.model_age_p99_ms < 0 ? common::Json() : common::Json(s.model_age_p99_ms);
+  j["max_force_step_n"] = s.max_force_step_n;
+  j["samples"] = s.samples;
+  return j;
 }
 
+}  // namespace
+
+std::string summary_json(const LoopSummary& s) { return common::to_text(to_json(s)); }
+
 void write_summary_json(const std::string& file, const LoopSummary& s) {
-  std::ofstream f(file);
-  if (!f) throw std::runtime_error(file + ": cannot open for writing the summary");
-  f << summary_json(s);
-  f.close();
-  if (!f) throw std::runtime_error(file + ": write failed");
+  common::write_json(file, to_json(s));
 }
 
 }  // namespace neurosim::haptic

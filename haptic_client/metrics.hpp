@@ -1,30 +1,13 @@
 // Loop metrics: period histogram, deadline misses, model age, force step.
-// Fixed-size histograms allocated once: recording a tick allocates nothing.
+// Fixed-size histograms (common::Histogram) allocated once: recording a tick allocates nothing.
 #pragma once
 
+#include "common/stats.hpp"
+
 #include <cstdint>
-#include <iosfwd>
 #include <string>
-#include <vector>
 
 namespace neurosim::haptic {
-
-// Histogram with fixed bins [0, bin*count); larger values go to the last bin, max kept exactly.
-class Histogram {
- public:
-  Histogram(double bin_width, std::size_t bins);
-  void add(double v);
-  std::uint64_t count() const { return n_; }
-  double max() const { return max_; }
-  // Upper edge of the bin holding the p-quantile (p in [0,1]); 0 when empty.
-  double quantile(double p) const;
-
- private:
-  double width_;
-  std::vector<std::uint32_t> bins_;
-  std::uint64_t n_ = 0;
-  double max_ = 0;
-};
 
 struct LoopSummary {
   double period_p50_us = 0;
@@ -45,8 +28,8 @@ class LoopMetrics {
   LoopSummary summary() const;
 
  private:
-  Histogram period_us_;
-  Histogram model_age_ms_;
+  common::Histogram period_us_;
+  common::Histogram model_age_ms_;
   std::uint64_t misses_ = 0;
   double max_step_ = 0;
   std::uint64_t samples_ = 0;

@@ -6,7 +6,7 @@
 // with the neurosim loop through lock-free slots; the device's own force clamping and ramping
 // are enabled too, on top of ForceModel's clamp and ramp-in.
 #include "haptic_client/device.hpp"
-#include "haptic_client/latest_slot.hpp"
+#include "common/triple_buffer.hpp"
 
 #include <HD/hd.h>
 
@@ -64,7 +64,7 @@ class OmniDevice : public Device {
     reading_slot_.take(last_reading_);  // keep the previous reading if no new one
     return last_reading_;
   }
-  void command(const Eigen::Vector3d& force_n) override { force_slot_.write(force_n); }
+  void command(const Eigen::Vector3d& force_n) override { force_slot_.publish(force_n); }
 
  private:
   static HDCallbackCode HDCALLBACK servo(void* self_ptr) {
@@ -84,7 +84,7 @@ class OmniDevice : public Device {
     const Eigen::Quaterniond q(rot);
     r.orientation = {q.w(), q.x(), q.y(), q.z()};
     r.buttons = static_cast<std::uint32_t>(buttons);
-    self->reading_slot_.write(r);
+    self->reading_slot_.publish(r);
     self->force_slot_.take(self->servo_force_);
     HDdouble f[3] = {self->servo_force_.x(), self->servo_force_.y(), self->servo_force_.z()};
     hdSetDoublev(HD_CURRENT_FORCE, f);
@@ -100,8 +100,8 @@ class OmniDevice : public Device {
   double max_force_ = 3.3;
   HHD hhd_ = HD_INVALID_HANDLE;
   HDSchedulerHandle servo_ = 0;
-  LatestSlot<DeviceReading> reading_slot_;
-  LatestSlot<Eigen::Vector3d> force_slot_;
+  common::TripleBuffer<DeviceReading> reading_slot_;
+  common::TripleBuffer<Eigen::Vector3d> force_slot_;
   DeviceReading last_reading_;
   Eigen::Vector3d servo_force_ = Eigen::Vector3d::Zero();
 };

@@ -149,7 +149,7 @@ inline InstanceChange change_of(const dds_sample_info_t& info) {
 template <class T>
 class Topic {
  public:
-  explicit Topic(const Participant& pp, std::string name = TopicTraits<T>::name)
+  explicit Topic(const Participant& pp, std::string name = topic_name<T>())
       : e_(create_topic(pp, TopicTraits<T>::descriptor(), name, TopicTraits<T>::profile)),
         name_(std::move(name)) {}
   dds_entity_t handle() const { return e_.get(); }

@@ -50,6 +50,14 @@ NEUROSIM_WIRE_TOPIC(neurosim_MeshTopology, "neurosim_MeshTopology", Profile::Mes
 NEUROSIM_WIRE_TOPIC(neurosim_SimStatus, "neurosim_SimStatus", Profile::SimStatus, server_id)
 #undef NEUROSIM_WIRE_TOPIC
 
+// The one topic-naming scheme: the name of T's topic is prefix + TopicTraits<T>::name, where the
+// prefix is neurosim-server's --topic-prefix (empty by default) and every client uses the same
+// one (tests give each run its own prefix so runs never meet).
+template <class T>
+std::string topic_name(const std::string& prefix = std::string()) {
+  return prefix + TopicTraits<T>::name;
+}
+
 // Owns one generated sample (zero-initialised) and frees its contents on destruction.
 template <class T>
 class Sample {

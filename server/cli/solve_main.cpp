@@ -1,6 +1,8 @@
 // neurosim-solve: linear static solve of a scene (loads and prescribed displacements).
 // Writes, per solved mesh, displacement.csv, reactions.csv and result.vtu; the first solved
 // mesh (or --mesh ID) also at the top of --out, which is what verification scripts read.
+#include "common/cli.hpp"
+#include "common/clock.hpp"
 #include "server/fem/assembly.hpp"
 #include "server/fem/static_solver.hpp"
 #include "server/interaction/coupled_body.hpp"
@@ -23,22 +25,19 @@ using neurosim::mesh::Vec3;
 
 namespace {
 
-void usage(std::ostream& out) {
-  out << "usage: neurosim-solve --scene FILE --out DIR [--mesh ID] [--uncoupled] [--quiet]\n"
-         "  Linear static solve of every mesh the scene loads or constrains (SI units).\n"
-         "  With effects.coupling, a host and the meshes TIE-coupled to it are solved as one\n"
-         "  body (exact tie, the host carved as the server carves it); --uncoupled solves every\n"
-         "  mesh on its own. SLIDING couplings are not applied (their meshes are solved on\n"
-         "  their own, with a note). Loads and prescribed displacements go on hosts or\n"
-         "  uncoupled meshes. Writes DIR/<mesh>/{displacement.csv,reactions.csv,result.vtu}\n"
-         "  and copies the first solved mesh (or --mesh ID) to DIR/displacement.csv,\n"
-         "  DIR/reactions.csv, DIR/result.vtu. CSV headers: node,x,y,z,ux,uy,uz and\n"
-         "  node,x,y,z,rx,ry,rz (reactions: force the supports exert on the body).\n";
-}
+const char* kDescription =
+    "Linear static solve of every mesh the scene loads or constrains (SI units).\n"
+    "With effects.coupling, a host and the meshes TIE-coupled to it are solved as one body\n"
+    "(exact tie, the host carved as the server carves it); --uncoupled solves every mesh on its\n"
+    "own. SLIDING couplings are not applied (their meshes are solved on their own, with a\n"
+    "note). Loads and prescribed displacements go on hosts or uncoupled meshes.";
+const char* kFooter =
+    "Writes DIR/<mesh>/{displacement.csv,reactions.csv,result.vtu} and copies the first solved\n"
+    "mesh (or --mesh ID) to DIR/displacement.csv, DIR/reactions.csv, DIR/result.vtu. CSV\n"
+    "headers: node,x,y,z,ux,uy,uz and node,x,y,z,rx,ry,rz (reactions: force the supports exert\n"
+    "on the body).";
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
+using neurosim::common::seconds_since;
 
 struct MeshResult {
   Eigen::VectorXd u_m;
@@ -330,36 +329,9 @@ void print_mesh_header(const std::string& id, const neurosim::mesh::TetMesh& mes
             << std::defaultfloat << "  quality: " << q.summary() << "\n";
 }
 
-int run(int argc, char** argv) {
-  std::string scene_path, out_dir, only_mesh;
-  bool quiet = false, uncoupled = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--scene")
-      scene_path = value();
-    else if (a == "--out")
-      out_dir = value();
-    else if (a == "--mesh")
-      only_mesh = value();
-    else if (a == "--uncoupled")
-      uncoupled = true;
-    else if (a == "--quiet")
-      quiet = true;
-    else if (a == "-h" || a == "--help") {
-      usage(std::cout);
-      return 0;
-    } else
-      throw std::invalid_argument("unknown argument " + a);
-  }
-  if (scene_path.empty() || out_dir.empty()) {
-    usage(std::cerr);
-    return 2;
-  }
-  const auto t_start = std::chrono::steady_clock::now();
+int run(const std::string& scene_path, const std::string& out_dir, const std::string& only_mesh,
+        bool quiet, bool uncoupled) {
+  const auto t_start = neurosim::common::Clock::now();
   const neurosim::scene::Model model = neurosim::scene::load_model(scene_path);
   const double load_s = seconds_since(t_start);
   if (!only_mesh.empty() && model.find_mesh(only_mesh) < 0) {
@@ -489,8 +461,18 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string scene_path, out_dir, only_mesh;
+  bool quiet = false, uncoupled = false;
+  neurosim::cli::Parser cli("neurosim-solve", kDescription);
+  cli->add_option("--scene", scene_path, "scene file")->required();
+  cli->add_option("--out", out_dir, "output folder DIR")->required();
+  cli->add_option("--mesh", only_mesh, "the mesh copied to the top of DIR");
+  cli->add_flag("--uncoupled", uncoupled, "every mesh on its own");
+  cli->add_flag("--quiet", quiet, "less output");
+  cli->footer(kFooter);
+  if (auto rc = cli.parse(argc, argv)) return *rc;
   try {
-    return run(argc, argv);
+    return run(scene_path, out_dir, only_mesh, quiet, uncoupled);
   } catch (const std::exception& e) {
     std::cerr << "neurosim-solve: error: " << e.what() << "\n";
     return 1;

@@ -1,5 +1,8 @@
 #include "server/fem/static_solver.hpp"
 
+#include "common/clock.hpp"
+#include "server/fem/power_iteration.hpp"
+
 #include <Eigen/Cholesky>
 #include <Eigen/CholmodSupport>
 #include <Eigen/Eigenvalues>
@@ -19,10 +22,8 @@ namespace neurosim::fem {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using common::Clock;
+using common::seconds_since;
 
 // Eigen's supernodal LL^T with access to CHOLMOD's factor and common (for solve2, memory, rcond).
 class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> {
@@ -573,51 +574,37 @@ ConditionEstimate StaticSolver::estimate_condition(int max_iterations, double to
   }
   std::mt19937 rng(12345);
   std::uniform_real_distribution<double> dist(-1.0, 1.0);
-  Eigen::VectorXd v(nf);
+  Eigen::VectorXd start_max(nf), start_min(nf);
   for (int r = 0; r < nf; ++r) {
-    v[r] = dist(rng);
+    start_max[r] = dist(rng);
   }
-  v.normalize();
-  Eigen::VectorXd full = Eigen::VectorXd::Zero(num_dofs()), kv(num_dofs());
+  for (int r = 0; r < nf; ++r) {
+    start_min[r] = dist(rng);
+  }
   // Power iteration: lambda_max of K_ff.
-  double lambda = 0.0;
-  Eigen::VectorXd w(nf);
-  for (int it = 0; it < max_iterations; ++it) {
-    for (int r = 0; r < nf; ++r) {
-      full[free_dofs_[r]] = v[r];
-    }
-    kv.noalias() = k_ * full;
-    for (int r = 0; r < nf; ++r) {
-      w[r] = kv[free_dofs_[r]];
-    }
-    const double next = v.dot(w);
-    v = w.normalized();
-    est.iterations = it + 1;
-    if (std::abs(next - lambda) <= tolerance * std::abs(next)) {
-      lambda = next;
-      break;
-    }
-    lambda = next;
-  }
-  est.lambda_max = lambda;
+  Eigen::VectorXd full = Eigen::VectorXd::Zero(num_dofs()), kv(num_dofs());
+  const PowerIteration hi = power_iteration(
+      [&](const Eigen::VectorXd& v, Eigen::VectorXd& w) {
+        for (int r = 0; r < nf; ++r) {
+          full[free_dofs_[r]] = v[r];
+        }
+        kv.noalias() = k_ * full;
+        for (int r = 0; r < nf; ++r) {
+          w[r] = kv[free_dofs_[r]];
+        }
+      },
+      start_max, max_iterations, tolerance);
+  est.lambda_max = hi.lambda;
+  est.iterations = hi.iterations;
   // Inverse iteration: 1 / lambda_min is the largest eigenvalue of K_ff^-1.
-  for (int r = 0; r < nf; ++r) {
-    v[r] = dist(rng);
-  }
-  v.normalize();
   Eigen::MatrixXd x;
-  double mu = 0.0;
-  for (int it = 0; it < max_iterations; ++it) {
-    solve_reduced(v, x);
-    const double next = v.dot(x.col(0));
-    v = x.col(0).normalized();
-    if (std::abs(next - mu) <= tolerance * std::abs(next)) {
-      mu = next;
-      break;
-    }
-    mu = next;
-  }
-  est.lambda_min = 1.0 / mu;
+  const PowerIteration lo = power_iteration(
+      [&](const Eigen::VectorXd& v, Eigen::VectorXd& w) {
+        solve_reduced(v, x);
+        w = x.col(0);
+      },
+      start_min, max_iterations, tolerance);
+  est.lambda_min = 1.0 / lo.lambda;
   est.condition = est.lambda_max / est.lambda_min;
   return est;
 }

@@ -5,6 +5,8 @@
 //   neurosim-fusion --brain-like [--out DIR]      brain-sized stand-in pair (fusion_bench's row)
 //   neurosim-fusion --host A.mesh --embedded B.mesh [--unit-m U] [--out DIR]
 // --save-meshes also writes the generated pairs as Medit files (PREFIX_host.mesh, ...).
+// --help lists the options; usage errors exit 2.
+#include "common/cli.hpp"
 #include "server/fusion/coupling_map.hpp"
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/paper_models.hpp"
@@ -22,17 +24,7 @@
 namespace {
 
 using namespace neurosim;
-
-int usage() {
-  std::cerr << "usage:\n"
-               "  neurosim-fusion --figure11 [--out DIR]\n"
-               "  neurosim-fusion --cube-vertices N [--out DIR]\n"
-               "  neurosim-fusion --brain-like [--out DIR]\n"
-               "  (generated pairs: --save-meshes writes them as Medit .mesh too)\n"
-               "  neurosim-fusion --host A.mesh --embedded B.mesh [--unit-m U] [--out DIR]\n"
-               "writes PREFIX_host.vtu, PREFIX_embedded_surface.vtu, PREFIX_new_boundary.vtu\n";
-  return 2;
-}
+namespace cli = neurosim::cli;
 
 void run(const mesh::TetMesh& host, const mesh::TetMesh& embedded, const std::string& prefix,
          bool save_meshes) {
@@ -70,44 +62,43 @@ void run(const mesh::TetMesh& host, const mesh::TetMesh& embedded, const std::st
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string out = ".", host_path, embedded_path;
+  std::vector<int> cube_vertices;
+  double unit_m = 1.0;
+  bool figure11 = false, brain_like = false, save_meshes = false;
+  cli::Parser p("neurosim-fusion",
+                "The new boundary S' of a host mesh around an embedded one: writes "
+                "PREFIX_host.vtu, PREFIX_embedded_surface.vtu, PREFIX_new_boundary.vtu.");
+  p->add_flag("--figure11", figure11, "paper Figure 11: cubes of 195 and 1521 vertices");
+  p->add_option("--cube-vertices", cube_vertices,
+                "one cube/cylinder pair of N cube vertices (Figure 8c placement; repeatable)")
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  p->add_flag("--brain-like", brain_like, "brain-sized stand-in pair (fusion_bench's row)");
+  p->add_flag("--save-meshes", save_meshes,
+              "generated pairs: also write them as Medit .mesh (PREFIX_host.mesh, ...)");
+  p->add_option("--host", host_path, "host mesh file");
+  p->add_option("--embedded", embedded_path, "embedded mesh file");
+  p->add_option("--unit-m", unit_m, "mesh file unit, in m")
+      ->check(cli::positive())
+      ->capture_default_str();
+  p->add_option("--out", out, "output folder")->capture_default_str();
+  if (auto rc = p.parse(argc, argv)) return *rc;
+  std::vector<int> cubes;
+  if (figure11) cubes = {195, 1521};
+  cubes.insert(cubes.end(), cube_vertices.begin(), cube_vertices.end());
+  const int modes = (cubes.empty() ? 0 : 1) + (brain_like ? 1 : 0) +
+                    (host_path.empty() && embedded_path.empty() ? 0 : 1);
+  if (modes != 1)
+    return p.usage_error(
+        "give one of --figure11 / --cube-vertices N, --brain-like, --host A.mesh --embedded "
+        "B.mesh");
+  if (!host_path.empty() && embedded_path.empty())
+    return p.usage_error("--host needs --embedded");
+  if (host_path.empty() && !embedded_path.empty())
+    return p.usage_error("--embedded needs --host");
   try {
-    std::string out = ".", host_path, embedded_path;
-    std::vector<int> cubes;
-    double unit_m = 1.0;
-    bool brain_like = false, save_meshes = false;
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto value = [&]() -> std::string {
-        if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
-        return argv[++i];
-      };
-      if (a == "--figure11") {
-        cubes.push_back(195);
-        cubes.push_back(1521);
-      } else if (a == "--cube-vertices") {
-        cubes.push_back(std::stoi(value()));
-      } else if (a == "--brain-like") {
-        brain_like = true;
-      } else if (a == "--save-meshes") {
-        save_meshes = true;
-      } else if (a == "--host") {
-        host_path = value();
-      } else if (a == "--embedded") {
-        embedded_path = value();
-      } else if (a == "--unit-m") {
-        unit_m = std::stod(value());
-      } else if (a == "--out") {
-        out = value();
-      } else {
-        return usage();
-      }
-    }
-    const int modes = (cubes.empty() ? 0 : 1) + (brain_like ? 1 : 0) +
-                      (host_path.empty() && embedded_path.empty() ? 0 : 1);
-    if (modes != 1) return usage();
     std::filesystem::create_directories(out);
     if (!host_path.empty()) {
-      if (embedded_path.empty()) return usage();
       const mesh::TetMesh a = mesh::load_tet_mesh(host_path, unit_m);
       const mesh::TetMesh b = mesh::load_tet_mesh(embedded_path, unit_m);
       run(a, b, (std::filesystem::path(out) / "fusion").string(), false);

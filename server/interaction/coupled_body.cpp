@@ -1,5 +1,7 @@
 #include "server/interaction/coupled_body.hpp"
 
+#include "common/clock.hpp"
+
 #include <Eigen/SparseCore>
 
 #include <algorithm>
@@ -18,9 +20,7 @@ namespace neurosim::interaction {
 
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
+using common::seconds_since;
 
 }  // namespace
 

@@ -6,6 +6,7 @@
 // the right and from the left), fig14_force.csv/.png (reaction force vs push depth, with and
 // without coupling), fig13_residual.csv/.png (iterative baseline residual per iteration) and
 // .vtu frames of both meshes (deformed positions, displacement_m) for ParaView.
+#include "common/cli.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/iterative_tie.hpp"
 #include "server/interaction/simulation.hpp"
@@ -13,7 +14,6 @@
 #include "server/scene/compile.hpp"
 
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -55,28 +55,22 @@ int main(int argc, char** argv) {
   double max_depth = 0.01;
   double tip_radius = 0.02;  // the paper pushes a patch of the face, not one node
   int frames = 8;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--scene" && i + 1 < argc)
-      scene_path = argv[++i];
-    else if (a == "--out" && i + 1 < argc)
-      out = argv[++i];
-    else if (a == "--max-depth" && i + 1 < argc)
-      max_depth = std::atof(argv[++i]);
-    else if (a == "--frames" && i + 1 < argc)
-      frames = std::atoi(argv[++i]);
-    else if (a == "--tip-radius" && i + 1 < argc)
-      tip_radius = std::atof(argv[++i]);
-    else {
-      std::cerr << "usage: neurosim-figures [--scene FILE] [--out DIR] [--max-depth M] [--frames "
-                   "N] [--tip-radius M (0: the scene's)]\n";
-      return 2;
-    }
-  }
-  if (!(max_depth > 0.0) || frames < 1) {
-    std::cerr << "neurosim-figures: --max-depth must be > 0 and --frames >= 1\n";
-    return 2;
-  }
+  std::string out_dir = out.string();
+  neurosim::cli::Parser cli("neurosim-figures",
+                            "The paper's Figures 10, 13 and 14 on the cube/cylinder scene.");
+  cli->add_option("--scene", scene_path, "scene file")->capture_default_str();
+  cli->add_option("--out", out_dir, "output folder")->capture_default_str();
+  cli->add_option("--max-depth", max_depth, "deepest push, unit m")
+      ->check(neurosim::cli::positive())
+      ->capture_default_str();
+  cli->add_option("--frames", frames, "push frames (>= 1)")
+      ->check(neurosim::cli::in_range(1, 1e9))
+      ->capture_default_str();
+  cli->add_option("--tip-radius", tip_radius, "tool tip radius, unit m (0: the scene's)")
+      ->check(neurosim::cli::finite())
+      ->capture_default_str();
+  if (auto rc = cli.parse(argc, argv)) return *rc;
+  out = out_dir;
   try {
     fs::create_directories(out);
     auto model = neurosim::scene::load_model(scene_path);

@@ -1,6 +1,7 @@
 #include "server/interaction/iterative_tie.hpp"
 
 #include "server/interaction/coupled_body.hpp"
+#include "server/fem/power_iteration.hpp"
 
 #include <Eigen/LU>
 
@@ -19,19 +20,10 @@ IterativeTie::IterativeTie(const CoupledBody& body, const IterativeOptions& opti
   if (!(omega_ > 0.0)) {
     // rho(L_bb K_add) by power iteration; its eigenvalues are real and >= 0 (similar to an SPD
     // form).
-    Eigen::VectorXd x = Eigen::VectorXd::Ones(p_.rows()).normalized();
-    double rho = 0.0;
-    for (int it = 0; it < 500; ++it) {
-      const Eigen::VectorXd y = p_ * x;
-      const double next = y.norm();
-      if (next == 0.0) break;
-      x = y / next;
-      if (std::abs(next - rho) <= 1e-6 * next) {
-        rho = next;
-        break;
-      }
-      rho = next;
-    }
+    const double rho =
+        fem::power_iteration([&](const Eigen::VectorXd& x, Eigen::VectorXd& y) { y.noalias() = p_ * x; },
+                             Eigen::VectorXd::Ones(p_.rows()), 500, 1e-6)
+            .lambda;
     omega_ = 2.0 / (2.0 + rho);
   }
 }

@@ -2,6 +2,7 @@
 // sliding_coupling.hpp) -> per-step LCP of the tool contact rows and the sliding rows together.
 #include "server/interaction/simulation.hpp"
 
+#include "common/clock.hpp"
 #include "server/fusion/coupling_map.hpp"
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/triangle_surface.hpp"
@@ -23,11 +24,8 @@ namespace neurosim::interaction {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using common::Clock;
+using common::seconds_since;
 
 // One unilateral contact row: a contactable node of a body against one tool.
 struct Row {

@@ -1,5 +1,7 @@
 #include "server/service/server.hpp"
 
+#include "common/clock.hpp"
+#include "common/stats.hpp"
 #include "idl/wire/deformation_codec.hpp"
 #include "idl/wire/dds.hpp"
 #include "server/service/pose_handoff.hpp"
@@ -38,18 +40,7 @@ namespace {
 constexpr int kMaxStationsLimit = 64;  // SimStatus.stations is sequence<StationStatus, 64>
 const double kDefaultMaxSpeed = scene::ToolDef{}.max_speed_m_per_s;  // unit m/s
 
-std::int64_t mono_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
-}
-
-timespec to_timespec(std::int64_t ns) {
-  timespec ts{};
-  ts.tv_sec = static_cast<time_t>(ns / 1000000000LL);
-  ts.tv_nsec = static_cast<long>(ns % 1000000000LL);
-  return ts;
-}
+using common::monotonic_ns;
 
 neurosim_Tier wire_tier(scene::Tier t) {
   switch (t) {
@@ -82,7 +73,7 @@ enum SlotState : int { kFree = 0, kActive = 1, kLeaving = 2 };
 struct StationSlot {
   std::atomic<int> state{kFree};
   char station_id[neurosim_ID_MAX + 1]{};  // written by the DDS thread before state = Active
-  TripleBuffer<PoseSample> pose;
+  common::TripleBuffer<PoseSample> pose;
   std::atomic<bool> last_rejected{false};
   std::atomic<std::uint64_t> accepted{0}, rejected_nonfinite{0}, rejected_jump{0}, last_sequence{0};
   std::atomic<bool> in_contact{false};  // written by the step thread
@@ -273,17 +264,17 @@ void Server::Impl::create_entities() {
   if (opt.domain >= 0) po.domain = static_cast<dds_domainid_t>(opt.domain);
   pp.emplace(po);
   const std::string& p = opt.topic_prefix;
-  topo_topic.emplace(*pp, p + wire::TopicTraits<neurosim_MeshTopology>::name);
+  topo_topic.emplace(*pp, wire::topic_name<neurosim_MeshTopology>(p));
   topologies.emplace(*pp, *topo_topic);
-  status_topic.emplace(*pp, p + wire::TopicTraits<neurosim_SimStatus>::name);
+  status_topic.emplace(*pp, wire::topic_name<neurosim_SimStatus>(p));
   status_writer.emplace(*pp, *status_topic);
   waitset.emplace(*pp);
   log("built: MeshTopology writer (" + std::to_string(sim->num_meshes()) +
       " meshes), SimStatus writer");
 
   if (tool_contact) {
-    tool_topic.emplace(*pp, p + wire::TopicTraits<neurosim_ToolState>::name);
-    model_topic.emplace(*pp, p + wire::TopicTraits<neurosim_ContactModel>::name);
+    tool_topic.emplace(*pp, wire::topic_name<neurosim_ToolState>(p));
+    model_topic.emplace(*pp, wire::topic_name<neurosim_ContactModel>(p));
     tools.emplace(*pp, *tool_topic);
     models.emplace(*pp, *model_topic);
     waitset->attach_data(*tools, 1);
@@ -304,7 +295,7 @@ void Server::Impl::create_entities() {
   }
 
   if (deformation_output) {
-    deform_topic.emplace(*pp, p + wire::TopicTraits<neurosim_Deformation>::name);
+    deform_topic.emplace(*pp, wire::topic_name<neurosim_Deformation>(p));
     deformations.emplace(*pp, *deform_topic);
     wire::DeformationEncoderOptions eo;
     eo.full_frame_period = opt.full_frame_period;
@@ -514,16 +505,14 @@ void Server::Impl::step_loop() {
     log(rc == 0 ? std::string("step thread: SCHED_FIFO priority 50")
                 : std::string("step thread: no real-time priority (") + std::strerror(rc) +
                       "), running SCHED_OTHER");
-    start_mono_ns = mono_ns();
+    start_mono_ns = monotonic_ns();
     last_status_mono_ns = start_mono_ns;
     std::int64_t next = start_mono_ns;
     while (run.load(std::memory_order_relaxed)) {
       next += period_ns;
-      const timespec ts = to_timespec(next);
-      while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-      }
+      common::sleep_until_ns(next);
       if (!run.load(std::memory_order_relaxed)) break;
-      const std::int64_t t0 = mono_ns();
+      const std::int64_t t0 = monotonic_ns();
       const std::int64_t late = t0 - next;
       if (late > period_ns) {
         ++deadline_misses;
@@ -531,7 +520,7 @@ void Server::Impl::step_loop() {
         if (late > 20 * period_ns) next = t0;
       }
       one_step();
-      const std::int64_t t1 = mono_ns();
+      const std::int64_t t1 = monotonic_ns();
       if (step_us_count < step_us.size()) step_us[step_us_count++] = 1e-3 * static_cast<double>(t1 - t0);
       if (steps.load(std::memory_order_relaxed) % status_every == 0) publish_status(t1);
     }
@@ -688,11 +677,7 @@ void Server::Impl::publish_status(std::int64_t now_mono) {
     std::copy(step_us.begin(), step_us.begin() + static_cast<std::ptrdiff_t>(n), step_us_sorted.begin());
     auto b = step_us_sorted.begin();
     auto e = b + static_cast<std::ptrdiff_t>(n);
-    const auto at = [&](double q) {
-      auto k = b + static_cast<std::ptrdiff_t>(std::min(n - 1, static_cast<std::size_t>(q * static_cast<double>(n))));
-      std::nth_element(b, k, e);
-      return *k;
-    };
+    const auto at = [&](double q) { return common::percentile_in_place(b, e, q); };
     st.step_time_p50_us = at(0.5);
     st.step_time_p99_us = at(0.99);
     st.step_time_max_us = *std::max_element(b, e);

@@ -2,10 +2,11 @@
 // participant answering ToolStates with half-space ContactModels and writing SimStatus):
 // models reach the loop, killing the server mid-contact fades the force to zero in time, and
 // the client picks the server up again when it returns.
-#include "idl/wire/dds.hpp"
+#include "common/clock.hpp"
 #include "fake_dds_server.hpp"
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
+#include "idl/wire/dds.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -23,28 +24,23 @@ using Eigen::Vector3d;
 namespace {
 
 using neurosim::haptic::testing::FakeDdsServer;
-using neurosim::haptic::testing::Topics;
 
 std::string unique(const char* base) {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
   return std::string(base) + "_" + info->name() + "_" + std::to_string(::getpid());
 }
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
+using neurosim::common::seconds_since;
 
 }  // namespace
 
 TEST(haptic_dds, KillingServerMidContactFadesForceAndReconnects) {
-  const Topics topics{unique("hap_tool"), unique("hap_model"), unique("hap_status")};
+  const std::string prefix = unique("hap") + "_";
   nh::DdsLinkOptions o;
   o.station_id = "station-" + std::to_string(::getpid());
-  o.tool_topic = topics.tool;
-  o.model_topic = topics.model;
-  o.status_topic = topics.status;
+  o.topic_prefix = prefix;
   nh::DdsLink link(o);
-  auto server = std::make_unique<FakeDdsServer>(topics, nh::testing::HalfSpace{});
+  auto server = std::make_unique<FakeDdsServer>(prefix, nh::testing::HalfSpace{});
   ASSERT_TRUE(link.wait_for_server(10.0));
 
   // The tool held 2 mm into the tissue: 1.4 N once ramped in.
@@ -84,7 +80,7 @@ TEST(haptic_dds, KillingServerMidContactFadesForceAndReconnects) {
   EXPECT_FALSE(link.server_alive()) << "SimStatus liveliness did not report the server gone";
   EXPECT_TRUE(wait_force(0.0, 1.0));
   // Phase 4: a new server; the client reconnects and ramps back in.
-  server = std::make_unique<FakeDdsServer>(topics, nh::testing::HalfSpace{});
+  server = std::make_unique<FakeDdsServer>(prefix, nh::testing::HalfSpace{});
   EXPECT_TRUE(wait_force(1.4, 5.0)) << "no contact force after the server came back";
   EXPECT_TRUE(link.server_alive());
   stop = true;

@@ -17,20 +17,16 @@ namespace neurosim::haptic::testing {
 namespace wire = neurosim::wire;
 using Eigen::Vector3d;
 
-struct Topics {
-  std::string tool, model, status;
-};
-
 // Answers every ToolState at once with the half-space model; SimStatus every 100 ms.
 class FakeDdsServer {
  public:
-  FakeDdsServer(const Topics& t, HalfSpace tissue) : tissue_(tissue) {
+  FakeDdsServer(const std::string& topic_prefix, HalfSpace tissue) : tissue_(tissue) {
     pp_ = std::make_unique<wire::Participant>();
-    tt_ = std::make_unique<wire::Topic<neurosim_ToolState>>(*pp_, t.tool);
+    tt_ = std::make_unique<wire::Topic<neurosim_ToolState>>(*pp_, wire::topic_name<neurosim_ToolState>(topic_prefix));
     tools_ = std::make_unique<wire::Reader<neurosim_ToolState>>(*pp_, *tt_);
-    mt_ = std::make_unique<wire::Topic<neurosim_ContactModel>>(*pp_, t.model);
+    mt_ = std::make_unique<wire::Topic<neurosim_ContactModel>>(*pp_, wire::topic_name<neurosim_ContactModel>(topic_prefix));
     models_ = std::make_unique<wire::Writer<neurosim_ContactModel>>(*pp_, *mt_);
-    st_ = std::make_unique<wire::Topic<neurosim_SimStatus>>(*pp_, t.status);
+    st_ = std::make_unique<wire::Topic<neurosim_SimStatus>>(*pp_, wire::topic_name<neurosim_SimStatus>(topic_prefix));
     status_ = std::make_unique<wire::Writer<neurosim_SimStatus>>(*pp_, *st_);
     ws_ = std::make_unique<wire::Waitset>(*pp_);
     ws_->attach_data(*tools_, 1);

@@ -3,7 +3,6 @@
 // bundled script recordings replay, the summary JSON has exactly the documented keys.
 #include "haptic_client/loop.hpp"
 #include "fake_server.hpp"
-#include "haptic_client/latest_slot.hpp"
 #include "idl/wire/recording_io.hpp"
 #include "test_support.hpp"
 
@@ -234,34 +233,6 @@ TEST(haptic_loop, DeviceSpecs) {
       EXPECT_NE(std::string(e.what()).find("not built in"), std::string::npos) << e.what();
     }
   }
-}
-
-TEST(haptic_loop, LatestSlotHandsOverWholeNewestValues) {
-  // Producer writes (i, i, i, ...) fast; the consumer must never see a torn or older value.
-  struct V {
-    std::uint64_t a[8];
-  };
-  nh::LatestSlot<V> slot;
-  constexpr std::uint64_t kN = 200000;
-  std::thread producer([&] {
-    for (std::uint64_t i = 1; i <= kN; ++i) {
-      V v;
-      for (auto& x : v.a) x = i;
-      slot.write(v);
-    }
-  });
-  std::uint64_t last = 0, taken = 0;
-  V v{};
-  while (last < kN) {
-    if (!slot.take(v)) continue;
-    for (auto x : v.a) ASSERT_EQ(x, v.a[0]) << "torn value";
-    ASSERT_GT(v.a[0], last) << "older or repeated value";
-    last = v.a[0];
-    ++taken;
-  }
-  producer.join();
-  EXPECT_GT(taken, 0u);
-  EXPECT_FALSE(slot.take(v)) << "nothing new after the last value";
 }
 
 TEST(haptic_loop, RecorderDropsInsteadOfBlockingTheLoop) {

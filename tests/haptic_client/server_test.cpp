@@ -5,6 +5,7 @@
 // The server is NEUROSIM_SERVER (environment) or <bin>/neurosim-server; the test is skipped when
 // neither exists, or when the server exits by itself before answering (e.g. built without
 // physics) — the reason is printed. Each server runs with its own --topic-prefix.
+#include "common/clock.hpp"
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
 #include "idl/wire/dds.hpp"
@@ -35,9 +36,7 @@ using Eigen::Vector3d;
 
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
+using neurosim::common::seconds_since;
 
 fs::path server_binary() {
   if (const char* e = std::getenv("NEUROSIM_SERVER"); e != nullptr && *e != '\0') return e;
@@ -87,9 +86,7 @@ class ServerProcess {
     nh::DdsLinkOptions o;
     o.station_id = station;
     o.tool_id = "probe";
-    o.tool_topic = prefix_ + o.tool_topic;
-    o.model_topic = prefix_ + o.model_topic;
-    o.status_topic = prefix_ + o.status_topic;
+    o.topic_prefix = prefix_;
     return o;
   }
 
@@ -148,7 +145,7 @@ std::map<std::uint64_t, ModelRecord> replay_against_fresh_server(const fs::path&
   ServerProcess server(prefix, log);
   // A second reader (besides the client's) collecting every ContactModel.
   wire::Participant pp;
-  wire::Topic<neurosim_ContactModel> topic(pp, prefix + "neurosim_ContactModel");
+  wire::Topic<neurosim_ContactModel> topic(pp, wire::topic_name<neurosim_ContactModel>(prefix));
   // Keep-all: a starved collector thread must not lose models to keep-last-1 overwriting.
   wire::Qos qos = wire::reader_qos(wire::Profile::ContactModel);
   dds_qset_history(qos.get(), DDS_HISTORY_KEEP_ALL, 0);

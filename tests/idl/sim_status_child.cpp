@@ -1,20 +1,23 @@
 // Child of wire_dds.KilledServerProcessSeenWithinOneSecond: publishes SimStatus "child" on the
-// topic named by argv[1] every 100 ms until killed, for at most 20 s (bounded if orphaned).
+// topic named by its argument every 100 ms until killed, for at most 20 s (bounded if orphaned).
+#include "common/cli.hpp"
 #include "idl/wire/dds.hpp"
 
 #include <chrono>
 #include <cstdio>
+#include <string>
 #include <thread>
 
 int main(int argc, char** argv) {
   namespace ns = neurosim::wire;
-  if (argc != 2) {
-    std::fprintf(stderr, "usage: %s TOPIC\n", argv[0]);
-    return 2;
-  }
+  std::string topic;
+  neurosim::cli::Parser cli("wire_test_sim_status_child",
+                            "Publishes SimStatus \"child\" every 100 ms for at most 20 s.");
+  cli->add_option("topic", topic, "topic name TOPIC")->required();
+  if (auto rc = cli.parse(argc, argv)) return *rc;
   try {
     ns::Participant pp;
-    ns::Topic<neurosim_SimStatus> t(pp, argv[1]);
+    ns::Topic<neurosim_SimStatus> t(pp, topic);
     ns::Writer<neurosim_SimStatus> w(pp, t);
     ns::Sample<neurosim_SimStatus> s;
     ns::set_string(s->server_id, "child");

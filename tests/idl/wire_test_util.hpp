@@ -1,6 +1,7 @@
 // Helpers for the neurosim::wire tests.
 #pragma once
 
+#include "common/clock.hpp"
 #include "idl/wire/dds.hpp"
 
 #include <gtest/gtest.h>
@@ -18,9 +19,7 @@ inline std::string unique_topic(const char* base) {
   return std::string(base) + "_" + info->name() + "_" + std::to_string(::getpid());
 }
 
-inline double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
+using neurosim::common::seconds_since;
 
 // Takes from r until pred(batch) is true or the timeout passes; returns whether it was.
 template <class T, class Pred>

@@ -1,6 +1,7 @@
 // The brain/artery patient model: MRI mask -> meshes -> checks -> scene file.
 #include "tools/model/model.hpp"
 
+#include "common/clock.hpp"
 #include "scene.pb.h"
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/triangle_surface.hpp"
@@ -25,10 +26,8 @@
 namespace neurosim::model {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using common::Clock;
+using common::seconds_since;
 
 constexpr double kMmToM = 1e-3;
 

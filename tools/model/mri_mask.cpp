@@ -1,9 +1,9 @@
-// Brain mask from the T1 volume: VTK reads and thresholds, a flood fill cleans up.
+// Brain mask from the T1 volume: neurosim::nifti reads, VTK thresholds, a flood fill cleans up.
 #include "tools/model/mri_mask.hpp"
 
+#include "common/nifti.hpp"
+
 #include <vtkImageThreshold.h>
-#include <vtkMatrix4x4.h>
-#include <vtkNIFTIImageReader.h>
 
 #include <algorithm>
 #include <array>
@@ -74,30 +74,20 @@ BrainMask load_brain_mask(const std::string& path, double threshold) {
   if (!std::filesystem::is_regular_file(path)) {
     throw std::runtime_error(path + ": no such MRI file (Debian package mricron-data)");
   }
-  auto reader = vtkSmartPointer<vtkNIFTIImageReader>::New();
-  if (!reader->CanReadFile(path.c_str())) {
-    throw std::runtime_error(path + ": not a NIfTI file vtkNIFTIImageReader can read");
-  }
-  reader->SetFileName(path.c_str());
-  reader->Update();
-  vtkImageData* t1 = reader->GetOutput();
-  if (reader->GetErrorCode() != 0 || t1 == nullptr || t1->GetNumberOfPoints() == 0 ||
-      t1->GetNumberOfScalarComponents() != 1) {
-    throw std::runtime_error(path + ": cannot read a scalar volume");
-  }
+  const nifti::Volume mri = nifti::read(path);
+  vtkImageData* t1 = mri.image;
 
   BrainMask mask;
-  t1->GetDimensions(mask.dims.data());
-  t1->GetSpacing(mask.spacing_mm.data());
-  t1->GetOrigin(mask.origin_mm.data());
-  // VTK's sform/qform matrices map the reader's data coordinates to NIfTI world coordinates.
-  vtkMatrix4x4* world = reader->GetSFormMatrix();
-  if (world == nullptr) world = reader->GetQFormMatrix();
-  if (world != nullptr) {
-    mask.has_world = true;
+  mask.dims = mri.dims;
+  mask.spacing_mm = mri.spacing;
+  mask.origin_mm = mri.origin;
+  // The sform/qform matrix maps the reader's data coordinates to NIfTI world coordinates.
+  mask.has_world = mri.has_world;
+  if (mri.has_world)
     for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) mask.image_to_world(r, c) = world->GetElement(r, c);
-  }
+      for (int c = 0; c < 4; ++c)
+        mask.image_to_world(r, c) =
+            mri.image_to_world[static_cast<std::size_t>(r)][static_cast<std::size_t>(c)];
 
   // T1 >= threshold: brain tissue and the CSF inside the brain-extracted volume.
   auto thr = vtkSmartPointer<vtkImageThreshold>::New();

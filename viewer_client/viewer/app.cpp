@@ -1,5 +1,7 @@
 #include "viewer_client/viewer/app.hpp"
 
+#include "common/clock.hpp"
+#include "common/json.hpp"
 #include "viewer_client/viewer/dds_client.hpp"
 #include "viewer_client/viewer/pipeline.hpp"
 
@@ -16,10 +18,8 @@ namespace neurosim::viewer {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using common::Clock;
+using common::seconds_since;
 
 std::string status_line(const ViewerOptions& o, const ViewerState& s, std::uint64_t frame,
                         bool has_image) {
@@ -47,32 +47,31 @@ struct Totals {
 
 void write_summary(const std::string& path, const ViewerOptions& o, const ViewerState& s,
                    const Totals& t, double run_s, std::ostream& log) {
-  std::ofstream f(path);
-  if (!f) {
-    log << "neurosim-viewer: warning: " << path << ": cannot write the summary\n";
-    return;
-  }
   const ViewerCounters& c = s.counters();
   const double n = t.frames > 0 ? static_cast<double>(t.frames) : 1.0;
-  f << "{\n"
-    << "  \"mode\": \"" << to_string(o.mode) << "\",\n"
-    << "  \"frames\": " << t.frames << ",\n"
-    << "  \"run_s\": " << run_s << ",\n"
-    << "  \"resample_ms_mean\": " << t.resample_ms / n << ",\n"
-    << "  \"resample_ms_max\": " << t.max_resample_ms << ",\n"
-    << "  \"render_ms_mean\": " << t.render_ms / n << ",\n"
-    << "  \"samples_recomputed_mean\": " << t.samples / n << ",\n"
-    << "  \"meshes\": " << s.meshes().size() << ",\n"
-    << "  \"topologies\": " << c.topologies << ",\n"
-    << "  \"deformations\": " << c.deformations << ",\n"
-    << "  \"deformations_waiting\": " << c.deformations_waiting << ",\n"
-    << "  \"tool_states\": " << c.tool_states << ",\n"
-    << "  \"contact_models\": " << c.contact_models << ",\n"
-    << "  \"malformed\": " << c.malformed() << ",\n"
-    << "  \"server_seen\": " << c.server_seen << ",\n"
-    << "  \"server_lost\": " << c.server_lost << ",\n"
-    << "  \"max_displacement_m\": " << s.max_displacement_m() << "\n"
-    << "}\n";
+  common::Json j;
+  j["mode"] = to_string(o.mode);
+  j["frames"] = t.frames;
+  j["run_s"] = run_s;
+  j["resample_ms_mean"] = t.resample_ms / n;
+  j["resample_ms_max"] = t.max_resample_ms;
+  j["render_ms_mean"] = t.render_ms / n;
+  j["samples_recomputed_mean"] = t.samples / n;
+  j["meshes"] = s.meshes().size();
+  j["topologies"] = c.topologies;
+  j["deformations"] = c.deformations;
+  j["deformations_waiting"] = c.deformations_waiting;
+  j["tool_states"] = c.tool_states;
+  j["contact_models"] = c.contact_models;
+  j["malformed"] = c.malformed();
+  j["server_seen"] = c.server_seen;
+  j["server_lost"] = c.server_lost;
+  j["max_displacement_m"] = s.max_displacement_m();
+  try {
+    common::write_json(path, j);
+  } catch (const std::exception& e) {
+    log << "neurosim-viewer: warning: " << e.what() << " (the summary)\n";
+  }
 }
 
 }  // namespace

@@ -41,11 +41,11 @@ struct DdsClient::Impl {
 
   explicit Impl(const DdsClientOptions& o)
       : pp(participant_options(o)),
-        topo_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_MeshTopology>::name),
-        deform_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_Deformation>::name),
-        tool_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_ToolState>::name),
-        model_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_ContactModel>::name),
-        status_topic(pp, o.topic_prefix + wire::TopicTraits<neurosim_SimStatus>::name),
+        topo_topic(pp, wire::topic_name<neurosim_MeshTopology>(o.topic_prefix)),
+        deform_topic(pp, wire::topic_name<neurosim_Deformation>(o.topic_prefix)),
+        tool_topic(pp, wire::topic_name<neurosim_ToolState>(o.topic_prefix)),
+        model_topic(pp, wire::topic_name<neurosim_ContactModel>(o.topic_prefix)),
+        status_topic(pp, wire::topic_name<neurosim_SimStatus>(o.topic_prefix)),
         topologies(pp, topo_topic),
         deformations(pp, deform_topic, deformation_reader_qos(), wire::ReaderOptions{128}),
         tools(pp, tool_topic),

@@ -1,8 +1,9 @@
 #include "viewer_client/viewer/image_io.hpp"
 
-#include <vtkDataArray.h>
+#include "common/nifti.hpp"
+#include "common/stats.hpp"
+
 #include <vtkImageData.h>
-#include <vtkNIFTIImageReader.h>
 #include <vtkNew.h>
 #include <vtkPNGWriter.h>
 #include <vtkPointData.h>
@@ -19,32 +20,14 @@ ImageGrid load_nifti(const std::string& path, double unit_m) {
   if (!(std::isfinite(unit_m) && unit_m > 0))
     throw std::runtime_error(path + ": image unit " + std::to_string(unit_m) +
                              " m is not positive");
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    throw std::runtime_error(path + ": image file not found");
-  vtkNew<vtkNIFTIImageReader> reader;
-  if (!reader->CanReadFile(path.c_str()))
-    throw std::runtime_error(path + ": not a NIfTI file VTK can read");
-  reader->SetFileName(path.c_str());
-  reader->Update();
-  vtkImageData* im = reader->GetOutput();
-  vtkDataArray* s = im != nullptr ? im->GetPointData()->GetScalars() : nullptr;
-  if (s == nullptr) throw std::runtime_error(path + ": no voxel values read");
-  int dims[3];
-  double spacing[3], origin[3];
-  im->GetDimensions(dims);
-  im->GetSpacing(spacing);
-  im->GetOrigin(origin);
+  const nifti::Volume v = nifti::read(path);
   ImageGrid g;
-  for (int a = 0; a < 3; ++a) {
-    g.dims[static_cast<std::size_t>(a)] = dims[a];
-    g.spacing_m[a] = spacing[a] * unit_m;
-    g.origin_m[a] = origin[a] * unit_m;
+  for (std::size_t a = 0; a < 3; ++a) {
+    g.dims[a] = v.dims[a];
+    g.spacing_m[static_cast<Eigen::Index>(a)] = v.spacing[a] * unit_m;
+    g.origin_m[static_cast<Eigen::Index>(a)] = v.origin[a] * unit_m;
   }
-  const vtkIdType n = s->GetNumberOfTuples();
-  g.values.resize(static_cast<std::size_t>(n));
-  for (vtkIdType i = 0; i < n; ++i)
-    g.values[static_cast<std::size_t>(i)] = static_cast<float>(s->GetComponent(i, 0));
+  g.values = v.float_values();
   try {
     g.validate();
   } catch (const std::exception& e) {
@@ -93,9 +76,7 @@ std::pair<float, float> display_range(const ImageGrid& image) {
   for (std::size_t i = 0; i < image.values.size(); i += 7)  // a sparse sample is enough
     if (image.values[i] > 0 && std::isfinite(image.values[i])) v.push_back(image.values[i]);
   if (v.empty()) return {0.0F, 1.0F};
-  const auto k = static_cast<std::size_t>(0.995 * static_cast<double>(v.size() - 1));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  const float hi = v[k];
+  const float hi = common::percentile_in_place(v.begin(), v.end(), 0.995);
   return {0.0F, hi > 0 ? hi : 1.0F};
 }
 

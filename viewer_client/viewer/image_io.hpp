@@ -10,9 +10,9 @@
 
 namespace neurosim::viewer {
 
-// Reads a NIfTI volume (.nii / .nii.gz) with vtkNIFTIImageReader: VTK image coordinates (voxel
-// index times spacing, origin 0, as the scene's meshes use) times unit_m give metres. Throws
-// std::runtime_error naming the file when it is missing or unreadable.
+// Reads a NIfTI volume (.nii / .nii.gz) with neurosim::nifti (common/nifti.hpp): VTK image
+// coordinates (voxel index times spacing, origin 0, as the scene's meshes use) times unit_m give
+// metres. Throws std::runtime_error naming the file when it is missing or unreadable.
 ImageGrid load_nifti(const std::string& path, double unit_m);
 
 // Every step-th voxel (a coarser grid over the same extent), for volume rendering.

@@ -1,4 +1,6 @@
-// neurosim-viewer: the navigation / observer station. See options.cpp for the usage.
+// neurosim-viewer: the navigation / observer station. `neurosim-viewer --help` lists the
+// options (options.cpp); usage errors exit 2.
+#include "common/cli.hpp"
 #include "viewer_client/viewer/app.hpp"
 
 #include <signal.h>
@@ -17,13 +19,9 @@ int main(int argc, char** argv) {
   try {
     bool help = false;
     options = nv::parse_options(argc, argv, help);
-    if (help) {
-      std::cout << nv::usage();
-      return 0;
-    }
-  } catch (const std::exception& e) {
-    std::cerr << "neurosim-viewer: " << e.what() << "\n" << nv::usage();
-    return 2;
+    if (help) return 0;
+  } catch (const std::invalid_argument& e) {
+    return neurosim::cli::report_usage_error("neurosim-viewer", e.what());
   }
   struct sigaction sa {};
   sa.sa_handler = on_signal;

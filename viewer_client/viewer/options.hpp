@@ -30,11 +30,9 @@ struct ViewerOptions {
   bool overlay = true;        // status text in the frame
 };
 
-// Parses argv (without argv[0] handling beyond skipping it). Throws std::invalid_argument with a
-// message naming the option on any bad or missing value or unknown option. Sets help = true and
-// returns defaults for -h/--help.
+// Parses argv (common/cli: CLI11). Throws std::invalid_argument (cli::UsageError) with a message
+// naming the option on any bad or missing value or unknown option. For --help or --version it
+// prints the help or version on stdout, sets help = true and returns defaults.
 ViewerOptions parse_options(int argc, const char* const* argv, bool& help);
-
-const char* usage();
 
 }  // namespace neurosim::viewer

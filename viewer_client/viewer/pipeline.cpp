@@ -1,5 +1,6 @@
 #include "viewer_client/viewer/pipeline.hpp"
 
+#include "common/clock.hpp"
 #include "viewer_client/viewer/image_io.hpp"
 
 #include <algorithm>
@@ -9,11 +10,7 @@
 
 namespace neurosim::viewer {
 
-namespace {
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-}  // namespace
+using common::ms_since;
 
 Pipeline::Pipeline(const PipelineOptions& options, Warn warn)
     : opt_(options),

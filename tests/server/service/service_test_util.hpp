@@ -2,6 +2,7 @@
 // client on the server's private domain, scripted tool poses.
 #pragma once
 
+#include "common/clock.hpp"
 #include "idl/wire/dds.hpp"
 #include "test_support.hpp"
 
@@ -29,11 +30,8 @@
 namespace neurosim::service::testing {
 
 namespace wire = neurosim::wire;
-using Clock = std::chrono::steady_clock;
-
-inline double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using neurosim::common::Clock;
+using neurosim::common::seconds_since;
 
 // A DDS domain of its own per test run, so parallel tests and other people's processes on the
 // loopback never see each other's samples.
@@ -333,8 +331,7 @@ class StationThread {
  private:
   void loop() {
     wire::Sample<neurosim_ToolState> s;
-    timespec next{};
-    clock_gettime(CLOCK_MONOTONIC, &next);
+    std::int64_t next = neurosim::common::monotonic_ns();
     const auto t0 = Clock::now();
     std::uint64_t seq = 0;
     while (run_ && seconds_since(t0) < seconds_) {
@@ -345,12 +342,8 @@ class StationThread {
       }
       fill_tool(*s, id_.c_str(), ++seq, p.data(), dds_time());
       writer_.write(*s);
-      next.tv_nsec += 1000000;
-      if (next.tv_nsec >= 1000000000) {
-        next.tv_nsec -= 1000000000;
-        ++next.tv_sec;
-      }
-      clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
+      next += 1000000;
+      neurosim::common::sleep_until_ns(next);
     }
   }
   wire::Writer<neurosim_ToolState> writer_;

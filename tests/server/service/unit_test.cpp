@@ -1,20 +1,16 @@
-// Unit tests of the service's building blocks: the newest-pose triple buffer and the ToolState
-// filter (non-finite values, jumps beyond the maximum speed).
+// Unit tests of the service's building blocks: the ToolState filter (non-finite values, jumps
+// beyond the maximum speed) and the command line. The newest-pose triple buffer is
+// common::TripleBuffer (tests/common/triple_buffer_test.cpp).
 #include "idl/wire/types.hpp"
-#include "server/service/pose_handoff.hpp"
 #include "server/service/server.hpp"
 #include "server/service/tool_filter.hpp"
 
 #include <gtest/gtest.h>
 
-#include <atomic>
 #include <cmath>
 #include <limits>
-#include <thread>
 
-using neurosim::service::PoseSample;
 using neurosim::service::ToolFilter;
-using neurosim::service::TripleBuffer;
 using neurosim::service::Verdict;
 
 namespace {
@@ -28,56 +24,6 @@ neurosim_ToolState tool(double x, std::int64_t t_ns) {
 }
 
 }  // namespace
-
-TEST(service_triple_buffer, NewestWinsAndConsumeReportsFreshness) {
-  TripleBuffer<int> b;
-  EXPECT_FALSE(b.consume());
-  b.publish(1);
-  b.publish(2);
-  b.publish(3);
-  ASSERT_TRUE(b.consume());
-  EXPECT_EQ(b.newest(), 3);
-  EXPECT_FALSE(b.consume());
-  EXPECT_EQ(b.newest(), 3);
-  b.publish(4);
-  ASSERT_TRUE(b.consume());
-  EXPECT_EQ(b.newest(), 4);
-}
-
-// Producer and consumer on two threads: the consumer never sees a torn sample or a sample
-// older than one it already saw.
-TEST(service_triple_buffer, TwoThreadsNoTearingNoGoingBack) {
-  TripleBuffer<PoseSample> b;
-  constexpr std::uint64_t kN = 200000;
-  std::atomic<bool> done{false};
-  std::thread producer([&] {
-    for (std::uint64_t i = 1; i <= kN; ++i) {
-      PoseSample p;
-      p.sequence = i;
-      for (double& x : p.position_m) x = static_cast<double>(i);
-      for (double& q : p.orientation) q = static_cast<double>(i);
-      b.publish(p);
-    }
-    done = true;
-  });
-  std::uint64_t last = 0, seen = 0;
-  for (;;) {
-    const bool finished = done.load();
-    if (!b.consume()) {
-      if (finished) break;  // everything published before `done` has been seen
-      continue;
-    }
-    const PoseSample& p = b.newest();
-    ASSERT_GT(p.sequence, last);
-    for (double x : p.position_m) ASSERT_EQ(x, static_cast<double>(p.sequence));
-    for (double q : p.orientation) ASSERT_EQ(q, static_cast<double>(p.sequence));
-    last = p.sequence;
-    ++seen;
-  }
-  producer.join();
-  EXPECT_EQ(last, kN) << "the newest sample must arrive";
-  EXPECT_GT(seen, 0u);
-}
 
 TEST(service_tool_filter, RejectsNonFiniteAnywhere) {
   const double nan = std::numeric_limits<double>::quiet_NaN();

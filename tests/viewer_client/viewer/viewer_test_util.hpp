@@ -2,6 +2,7 @@
 // processes (neurosim-server, neurosim-viewer) with logs, and the brain press point.
 #pragma once
 
+#include "common/clock.hpp"
 #include "test_support.hpp"
 #include "viewer_client/viewer/state.hpp"
 
@@ -26,9 +27,7 @@ extern char** environ;
 
 namespace neurosim::testing {
 
-inline double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
+using neurosim::common::seconds_since;
 
 inline std::string slurp(const std::filesystem::path& p) {
   std::ifstream f(p);
