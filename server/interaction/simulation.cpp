@@ -80,68 +80,46 @@ std::vector<char> tets_inside(const mesh::TetMesh& host, const std::vector<mesh:
   return outside;  // now: inside
 }
 
-class SimulationImpl final : public Simulation {
+}  // namespace
+
+// A scene mesh in the physics: the loaded (possibly carved) mesh and its place in a body.
+struct MeshEntry {
+  std::unique_ptr<scene::LoadedMesh> loaded;  // stable address: bodies point into it
+  int body{-1};                               // body it belongs to (host or tied), -1: inert
+  int tie{-1};                                // tie index in that body when embedded (TIE)
+  int slide{-1};                              // slide index in that body (SLIDING)
+};
+
+// A body (host + tied and sliding meshes), constant after build.
+struct BodyModel {
+  std::unique_ptr<CoupledBody> body;
+  PointGrid grid;
+  std::vector<mesh::Vec3> rest_m;  // per contact slot
+  double max_penetration_m{0.0};
+  double validity_radius_m{0.0};
+  // SLIDING couplings hosted by the body: B's part, and where its rows start among the body's
+  // sliding rows (CoupledBody::sliding_rows); the body's rows start at sliding_offset in the LCP.
+  std::vector<std::unique_ptr<SlidingCoupling>> slides;
+  std::vector<int> slide_first_row;
+  int sliding_offset{0};
+};
+
+// What a step changes on a body.
+struct BodyState {
+  std::unique_ptr<ContactColumns> columns;  // filled on first touch (or when the state is made)
+  std::vector<long long> stamp;  // per contact slot: last tool query that saw it
+  std::vector<int> row_of_slot;  // per contact slot: row in this step or -1
+  // Last good step's contact forces on the body, per slot (unit N), and sliding row forces.
+  std::vector<int> force_slots;
+  std::vector<mesh::Vec3> forces_n;
+  Eigen::VectorXd sliding_lambda;
+};
+
+// The constant physics model: meshes, bodies (factorizations, coupling operators, contact
+// geometry), tool shapes. Built once from the scene's Model; never written by a step.
+class Model {
  public:
-  SimulationImpl(const scene::Model& model, const SimulationOptions& options);
-
-  int num_meshes() const override { return static_cast<int>(meshes_.size()); }
-  const std::string& mesh_id(int m) const override { return entry(m).loaded->id; }
-  const mesh::TetMesh& mesh(int m) const override { return entry(m).loaded->mesh; }
-  bool mesh_active(int m) const override { return entry(m).body >= 0; }
-  const SetupStats& setup_stats() const override { return setup_; }
-  const std::vector<int>& fixed_nodes(int m) const override { return entry(m).loaded->fixed_nodes; }
-  int num_tools() const override { return static_cast<int>(tools_.size()); }
-
-  void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts,
-            StepStats& stats) override;
-  void displacements(int mesh, Eigen::VectorXd& u_m) const override;
-  double tie_residual_m() const override;
-  const CoupledBody* body_of(int m) const override {
-    const int b = entry(m).body;
-    return b < 0 ? nullptr : bodies_[b].body.get();
-  }
-  void last_contact_forces(int m, std::vector<int>& slots,
-                           std::vector<Vec3>& forces_n) const override {
-    slots.clear();
-    forces_n.clear();
-    const int b = entry(m).body;
-    if (b < 0) return;
-    slots = bodies_[b].force_slots;
-    forces_n = bodies_[b].forces_n;
-  }
-  void sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const override;
-  double sliding_penetration_m() const override;
-  void snapshot(FieldSnapshot& s) const override;
-  void displacements(FieldSnapshot& s, int mesh, Eigen::VectorXd& u_m) const override;
-  int body_index(int m) const override { return entry(m).body; }
-
- private:
-  struct MeshEntry {
-    std::unique_ptr<scene::LoadedMesh> loaded;  // stable address: bodies point into it
-    int body{-1};                               // body it belongs to (host or tied), -1: inert
-    int tie{-1};                                // tie index in that body when embedded (TIE)
-    int slide{-1};                              // slide index in that body (SLIDING)
-  };
-  struct BodyEntry {
-    std::unique_ptr<CoupledBody> body;
-    std::unique_ptr<ContactColumns> columns;  // filled on first touch (or at load)
-    PointGrid grid;
-    std::vector<mesh::Vec3> rest_m;  // per contact slot
-    double max_penetration_m{0.0};
-    double validity_radius_m{0.0};
-    std::vector<long long> stamp;  // per contact slot: last tool query that saw it
-    std::vector<int> row_of_slot;  // per contact slot: row in this step or -1
-    // Last good step's contact forces on the body, per slot (unit N).
-    std::vector<int> force_slots;
-    std::vector<mesh::Vec3> forces_n;
-    // SLIDING couplings hosted by the body: B's part, and where its rows start among the body's
-    // sliding rows (CoupledBody::sliding_rows); the body's rows start at sliding_offset in the
-    // LCP. Last good step's row forces (unit N).
-    std::vector<std::unique_ptr<SlidingCoupling>> slides;
-    std::vector<int> slide_first_row;
-    int sliding_offset{0};
-    Eigen::VectorXd sliding_lambda;
-  };
+  Model(const scene::Model& model, const SimulationOptions& options);
 
   const MeshEntry& entry(int m) const {
     if (m < 0 || m >= static_cast<int>(meshes_.size())) {
@@ -149,18 +127,12 @@ class SimulationImpl final : public Simulation {
     }
     return meshes_[m];
   }
-  void reserve_workspace(int tools);
-  void collect_rows(int tool, const ToolPose& pose, const Vec3& axis);
   // Host field (ties included) for contact forces on slots, sliding row forces and other nodal
-  // forces (may be empty); the cached full columns only when `use_columns` (stepping thread).
-  void host_field(const BodyEntry& b, const std::vector<int>& slots,
+  // forces (may be empty); from cached full columns when `columns` has them (stepping thread).
+  void host_field(const BodyModel& b, const std::vector<int>& slots,
                   const std::vector<Vec3>& forces_n, const Eigen::VectorXd& sliding_lambda_n,
-                  const Eigen::VectorXd& nodal_forces_n, bool use_columns,
+                  const Eigen::VectorXd& nodal_forces_n, const ContactColumns* columns,
                   Eigen::VectorXd& u_host_m) const;
-  // Host field for the last good step (stepping thread).
-  void host_field(const BodyEntry& b, Eigen::VectorXd& u_host_m) const {
-    host_field(b, b.force_slots, b.forces_n, b.sliding_lambda, Eigen::VectorXd(), true, u_host_m);
-  }
   // Field of mesh `m` (entry e) from its body's host field.
   void mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
                   const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
@@ -168,11 +140,37 @@ class SimulationImpl final : public Simulation {
   SimulationOptions options_;
   std::string source_;
   std::vector<MeshEntry> meshes_;
-  std::vector<BodyEntry> bodies_;
+  std::vector<BodyModel> bodies_;
   std::vector<ToolShape> tools_;
   SetupStats setup_;
+  int num_sliding_{0};  // sliding rows, first in the LCP
+};
 
-  // Step workspace (sized once per tool count).
+// Everything a step changes (MuJoCo's mjData): per body the contact-compliance cache and the
+// last good forces; the rows, the Delassus operator and the LCP with its warm start; the last
+// good answer per tool. Sized at construction and per tool count, no allocation once warmed up.
+class State {
+ public:
+  // The compliance columns of every contactable node when options.precompute_contact_columns,
+  // and, with sliding rows, the step workspace and the inverse of their constant block.
+  explicit State(const Model& m);
+  void step(const Model& m, const std::vector<ToolPose>& poses,
+            std::vector<ToolContact>& contacts, StepStats& stats);
+  // Host field for the last good step (stepping thread: may use the cached full columns).
+  void host_field(const Model& m, int body, Eigen::VectorXd& u_host_m) const {
+    const BodyState& bs = bodies_[body];
+    m.host_field(m.bodies_[body], bs.force_slots, bs.forces_n, bs.sliding_lambda,
+                 Eigen::VectorXd(), bs.columns.get(), u_host_m);
+  }
+
+  std::vector<BodyState> bodies_;
+  double columns_s_{0.0};  // compliance columns computed at construction, unit s
+  double sliding_s_{0.0};  // step workspace and constant sliding block at construction, unit s
+
+ private:
+  void reserve_workspace(const Model& m, int tools);
+  void collect_rows(const Model& m, int tool, const ToolPose& pose, const Vec3& axis);
+
   long long stamp_counter_{0};
   std::vector<int> candidates_;
   std::vector<Row> tool_rows_;
@@ -180,7 +178,6 @@ class SimulationImpl final : public Simulation {
   std::vector<std::vector<int>> missing_;
   Eigen::MatrixXd w_;
   Eigen::VectorXd delta_, lambda_;
-  int num_sliding_{0};                // sliding rows, first in the LCP
   std::vector<char> sliding_active_;  // per sliding row: carried a force in the last good step
   std::vector<char> warm_;            // LCP warm start
   ContactLcp lcp_;
@@ -188,7 +185,73 @@ class SimulationImpl final : public Simulation {
   std::vector<ToolContact> last_good_;
 };
 
-SimulationImpl::SimulationImpl(const scene::Model& model, const SimulationOptions& options)
+std::shared_ptr<const Model> build_model(const scene::Model& model,
+                                         const SimulationOptions& options) {
+  return std::make_shared<const Model>(model, options);
+}
+void StateDeleter::operator()(State* state) const { delete state; }
+StatePtr make_state(const Model& model) { return StatePtr(new State(model)); }
+void step(const Model& model, State& state, const std::vector<ToolPose>& poses,
+          std::vector<ToolContact>& contacts, StepStats& stats) {
+  state.step(model, poses, contacts, stats);
+}
+
+namespace {
+
+class SimulationImpl final : public Simulation {
+ public:
+  SimulationImpl(const scene::Model& model, const SimulationOptions& options)
+      : model_(build_model(model, options)), state_(make_state(*model_)) {
+    setup_ = model_->setup_;
+    setup_.columns_s += state_->columns_s_;
+    setup_.sliding_s += state_->sliding_s_;
+    setup_.total_s += state_->columns_s_ + state_->sliding_s_;
+  }
+
+  int num_meshes() const override { return static_cast<int>(model_->meshes_.size()); }
+  const std::string& mesh_id(int m) const override { return model_->entry(m).loaded->id; }
+  const mesh::TetMesh& mesh(int m) const override { return model_->entry(m).loaded->mesh; }
+  bool mesh_active(int m) const override { return model_->entry(m).body >= 0; }
+  const SetupStats& setup_stats() const override { return setup_; }
+  const std::vector<int>& fixed_nodes(int m) const override {
+    return model_->entry(m).loaded->fixed_nodes;
+  }
+  int num_tools() const override { return static_cast<int>(model_->tools_.size()); }
+
+  void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts,
+            StepStats& stats) override {
+    interaction::step(*model_, *state_, poses, contacts, stats);
+  }
+  void displacements(int mesh, Eigen::VectorXd& u_m) const override;
+  double tie_residual_m() const override;
+  const CoupledBody* body_of(int m) const override {
+    const int b = model_->entry(m).body;
+    return b < 0 ? nullptr : model_->bodies_[b].body.get();
+  }
+  void last_contact_forces(int m, std::vector<int>& slots,
+                           std::vector<Vec3>& forces_n) const override {
+    slots.clear();
+    forces_n.clear();
+    const int b = model_->entry(m).body;
+    if (b < 0) return;
+    slots = state_->bodies_[b].force_slots;
+    forces_n = state_->bodies_[b].forces_n;
+  }
+  void sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const override;
+  double sliding_penetration_m() const override;
+  void snapshot(FieldSnapshot& s) const override;
+  void displacements(FieldSnapshot& s, int mesh, Eigen::VectorXd& u_m) const override;
+  int body_index(int m) const override { return model_->entry(m).body; }
+
+ private:
+  std::shared_ptr<const Model> model_;
+  StatePtr state_;
+  SetupStats setup_;
+};
+
+}  // namespace
+
+Model::Model(const scene::Model& model, const SimulationOptions& options)
     : options_(options), source_(model.source) {
   const auto t_start = Clock::now();
   if (options_.max_contact_nodes_per_tool < 1 || options_.lcp_max_iterations < 1 ||
@@ -317,7 +380,7 @@ SimulationImpl::SimulationImpl(const scene::Model& model, const SimulationOption
         throw std::runtime_error(source_ + ": host mesh " + lm.id + " has no fixed nodes");
       continue;  // floating and untied: inert (cannot carry a contact force)
     }
-    BodyEntry b;
+    BodyModel b;
     try {
       b.body =
           std::make_unique<CoupledBody>(static_cast<int>(m), lm.mesh, lm.material, lm.fixed_nodes);
@@ -386,7 +449,6 @@ SimulationImpl::SimulationImpl(const scene::Model& model, const SimulationOption
   }
   for (auto& b : bodies_) {
     b.body->finalize();
-    b.columns = std::make_unique<ContactColumns>(*b.body, options_.cache_full_field_columns);
     const auto& tm = b.body->timing();
     setup_.condense_s += tm.condense_s;
     setup_.boundary_s += tm.boundary_s;
@@ -394,7 +456,6 @@ SimulationImpl::SimulationImpl(const scene::Model& model, const SimulationOption
     setup_.sliding_s += tm.sliding_s;
     b.sliding_offset = num_sliding_;
     num_sliding_ += b.body->num_sliding_rows();
-    b.sliding_lambda.setZero(b.body->num_sliding_rows());
     if (b.body->cache_hit()) ++setup_.cache_hits;
     setup_.boundary_nodes += static_cast<int>(b.body->boundary_nodes().size());
     for (const auto& tie : b.body->ties())
@@ -409,36 +470,46 @@ SimulationImpl::SimulationImpl(const scene::Model& model, const SimulationOption
     b.max_penetration_m =
         options_.max_penetration_m > 0.0 ? options_.max_penetration_m : 0.45 * (hi - lo).minCoeff();
     b.validity_radius_m = 0.5 * edge;
-    b.stamp.assign(b.rest_m.size(), -1);
-    b.row_of_slot.assign(b.rest_m.size(), -1);
-    if (options_.precompute_contact_columns) {
-      t0 = Clock::now();
-      std::vector<int> all(b.rest_m.size());
-      for (std::size_t s = 0; s < all.size(); ++s) all[s] = static_cast<int>(s);
-      b.columns->ensure(all);
-      setup_.columns_s += seconds_since(t0);
-    }
   }
 
   if (model.effects.tool_contact) {
     for (const auto& tool : model.tools)
       tools_.push_back(ToolShape{tool.tip_radius_m, tool.shaft_radius_m, tool.shaft_length_m});
   }
-  missing_.resize(bodies_.size());
   setup_.sliding_rows = num_sliding_;
-  sliding_active_.assign(num_sliding_, 0);
-  // Sliding rows: the step workspace and the inverse of their block at load, not in step 1.
-  if (num_sliding_ > 0) {
-    t0 = Clock::now();
-    reserve_workspace(std::max<int>(1, static_cast<int>(tools_.size())));
-    setup_.sliding_s += seconds_since(t0);
-  }
   setup_.total_s = seconds_since(t_start);
 }
 
-void SimulationImpl::reserve_workspace(int tools) {
-  const int max_contact = std::max(1, tools * options_.max_contact_nodes_per_tool);
-  const int max_rows = num_sliding_ + max_contact;
+State::State(const Model& m) {
+  bodies_.resize(m.bodies_.size());
+  for (std::size_t i = 0; i < m.bodies_.size(); ++i) {
+    const BodyModel& b = m.bodies_[i];
+    BodyState& bs = bodies_[i];
+    bs.columns = std::make_unique<ContactColumns>(*b.body, m.options_.cache_full_field_columns);
+    bs.stamp.assign(b.rest_m.size(), -1);
+    bs.row_of_slot.assign(b.rest_m.size(), -1);
+    bs.sliding_lambda.setZero(b.body->num_sliding_rows());
+    if (m.options_.precompute_contact_columns) {
+      const auto t0 = Clock::now();
+      std::vector<int> all(b.rest_m.size());
+      for (std::size_t s = 0; s < all.size(); ++s) all[s] = static_cast<int>(s);
+      bs.columns->ensure(all);
+      columns_s_ += seconds_since(t0);
+    }
+  }
+  missing_.resize(m.bodies_.size());
+  sliding_active_.assign(m.num_sliding_, 0);
+  // Sliding rows: the step workspace and the inverse of their block at load, not in step 1.
+  if (m.num_sliding_ > 0) {
+    const auto t0 = Clock::now();
+    reserve_workspace(m, std::max<int>(1, static_cast<int>(m.tools_.size())));
+    sliding_s_ += seconds_since(t0);
+  }
+}
+
+void State::reserve_workspace(const Model& m, int tools) {
+  const int max_contact = std::max(1, tools * m.options_.max_contact_nodes_per_tool);
+  const int max_rows = m.num_sliding_ + max_contact;
   if (max_rows <= lcp_.capacity()) return;
   lcp_.reserve(max_rows);
   w_.setZero(max_rows, max_rows);
@@ -447,7 +518,7 @@ void SimulationImpl::reserve_workspace(int tools) {
   warm_.assign(max_rows, 0);
   rows_.reserve(max_contact);
   // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
-  for (const auto& b : bodies_) {
+  for (const auto& b : m.bodies_) {
     const int o = b.sliding_offset, ns = b.body->num_sliding_rows();
     if (ns == 0) continue;
     w_.block(o, o, ns, ns) = b.body->sliding_compliance();
@@ -459,32 +530,33 @@ void SimulationImpl::reserve_workspace(int tools) {
     }
   }
   std::size_t surface = 0;
-  for (const auto& b : bodies_) surface += b.rest_m.size();
+  for (const auto& b : m.bodies_) surface += b.rest_m.size();
   candidates_.reserve(2 * surface);  // tip and shaft queries may both list a node
   tool_rows_.reserve(surface);
   for (auto& b : bodies_) {
     b.force_slots.reserve(max_rows);
     b.forces_n.reserve(max_rows);
   }
-  for (auto& m : missing_) m.reserve(max_rows);
+  for (auto& list : missing_) list.reserve(max_rows);
   last_good_.resize(tools);
-  for (auto& c : last_good_) c.nodes.reserve(options_.max_contact_nodes_per_tool);
+  for (auto& c : last_good_) c.nodes.reserve(m.options_.max_contact_nodes_per_tool);
   // The inverse of the constant sliding block, once (its size does not depend on the tools).
-  if (num_sliding_ > 0 && !lcp_constant_block_) {
+  if (m.num_sliding_ > 0 && !lcp_constant_block_) {
     lcp_constant_block_ = true;
-    lcp_.use_inactive_set(options_.sliding_inactive_set, options_.sliding_inactive_set_always);
-    if (options_.sliding_inactive_set) lcp_.set_constant_block(w_, num_sliding_);
+    lcp_.use_inactive_set(m.options_.sliding_inactive_set, m.options_.sliding_inactive_set_always);
+    if (m.options_.sliding_inactive_set) lcp_.set_constant_block(w_, m.num_sliding_);
   }
 }
 
-void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& axis) {
-  const ToolShape& shape = tools_[pose.tool];
+void State::collect_rows(const Model& m, int tool, const ToolPose& pose, const Vec3& axis) {
+  const ToolShape& shape = m.tools_[pose.tool];
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   const bool shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
-  const double margin = options_.candidate_margin * shape.tip_radius_m;
+  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
   tool_rows_.clear();
-  for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
-    auto& b = bodies_[bi];
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
+    const auto& b = m.bodies_[bi];
+    auto& bs = bodies_[bi];
     const long long stamp = ++stamp_counter_;
     candidates_.clear();
     const double reach = shape.tip_radius_m + b.max_penetration_m;
@@ -497,8 +569,8 @@ void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& ax
     const auto& normals = b.body->contact_normals();
     const std::size_t first = tool_rows_.size();
     for (int s : candidates_) {
-      if (b.stamp[s] == stamp) continue;
-      b.stamp[s] = stamp;
+      if (bs.stamp[s] == stamp) continue;
+      bs.stamp[s] = stamp;
       const Vec3& x = b.rest_m[s];
       const Vec3& n = normals[s];
       // Depth along the node's inward normal to the tip sphere, or to the shaft capsule.
@@ -549,24 +621,24 @@ void SimulationImpl::collect_rows(int tool, const ToolPose& pose, const Vec3& ax
   }
   // The deepest rows of this tool, deterministic order.
   const std::size_t keep =
-      std::min<std::size_t>(tool_rows_.size(), options_.max_contact_nodes_per_tool);
+      std::min<std::size_t>(tool_rows_.size(), m.options_.max_contact_nodes_per_tool);
   std::partial_sort(tool_rows_.begin(), tool_rows_.begin() + keep, tool_rows_.end(), deeper);
   for (std::size_t k = 0; k < keep; ++k) {
     const Row& r = tool_rows_[k];
-    auto& b = bodies_[r.body];
-    const int existing = b.row_of_slot[r.slot];
+    auto& bs = bodies_[r.body];
+    const int existing = bs.row_of_slot[r.slot];
     if (existing >= 0) {
       // Two tools on one node: one row (same normal); the deeper tool carries it.
       if (r.depth_m > rows_[existing].depth_m) rows_[existing] = r;
       continue;
     }
-    b.row_of_slot[r.slot] = static_cast<int>(rows_.size());
+    bs.row_of_slot[r.slot] = static_cast<int>(rows_.size());
     rows_.push_back(r);
   }
 }
 
-void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts,
-                          StepStats& stats) {
+void State::step(const Model& m, const std::vector<ToolPose>& poses,
+                 std::vector<ToolContact>& contacts, StepStats& stats) {
   const auto t0 = Clock::now();
   const int nt = static_cast<int>(poses.size());
   // Inputs first: nothing changes on a bad pose.
@@ -578,27 +650,27 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     }
     if (p.axis.norm() < 1e-12)
       throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " axis is zero");
-    if (p.tool < 0 || p.tool >= static_cast<int>(tools_.size())) {
-      if (!tools_.empty() || p.tool != 0) {
+    if (p.tool < 0 || p.tool >= static_cast<int>(m.tools_.size())) {
+      if (!m.tools_.empty() || p.tool != 0) {
         throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) +
                                     " refers to scene tool " + std::to_string(p.tool) + " of " +
-                                    std::to_string(tools_.size()));
+                                    std::to_string(m.tools_.size()));
       }
     }
   }
-  reserve_workspace(nt);
+  reserve_workspace(m, nt);
   if (static_cast<int>(contacts.size()) != nt) contacts.resize(nt);
   rows_.clear();
-  if (!tools_.empty()) {
-    for (int t = 0; t < nt; ++t) collect_rows(t, poses[t], poses[t].axis.normalized());
+  if (!m.tools_.empty()) {
+    for (int t = 0; t < nt; ++t) collect_rows(m, t, poses[t], poses[t].axis.normalized());
   }
   const int nc = static_cast<int>(rows_.size());
-  const int ns = num_sliding_;  // sliding rows first (constant block of W), then contact rows
+  const int ns = m.num_sliding_;  // sliding rows first (constant block of W), then contact rows
   const int n = ns + nc;
   for (const Row& r : rows_) bodies_[r.body].row_of_slot[r.slot] = -1;
 
   // Coupled compliance columns of new contact nodes (cached after the first touch).
-  for (auto& m : missing_) m.clear();
+  for (auto& list : missing_) list.clear();
   for (const Row& r : rows_)
     if (!bodies_[r.body].columns->has(r.slot)) missing_[r.body].push_back(r.slot);
   stats.columns_computed = 0;
@@ -615,7 +687,7 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   for (int r = 0; r < nc; ++r) {
     const Row& a = rows_[r];
     const int i = ns + r;
-    const auto& body_a = *bodies_[a.body].body;
+    const auto& body_a = *m.bodies_[a.body].body;
     const Vec3& na = body_a.contact_normals()[a.slot];
     delta_[i] = a.depth_m;
     for (int s = r; s < nc; ++s) {
@@ -634,7 +706,7 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     w_.col(i).head(ns).setZero();
     const int rows_a = body_a.num_sliding_rows();
     if (rows_a > 0) {
-      const int o = bodies_[a.body].sliding_offset;
+      const int o = m.bodies_[a.body].sliding_offset;
       const Vec3 push = -na;
       w_.col(i).segment(o, rows_a).noalias() = bodies_[a.body].columns->sliding_block(a.slot) * push;
     }
@@ -644,11 +716,11 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   for (int k = 0; k < ns; ++k) warm_[k] = sliding_active_[k];
   for (int r = 0; r < nc; ++r) warm_[ns + r] = delta_[ns + r] > 0.0 ? 1 : 0;
   const int max_iterations =
-      options_.lcp_max_iterations + options_.lcp_iterations_per_sliding_row * ns;
+      m.options_.lcp_max_iterations + m.options_.lcp_iterations_per_sliding_row * ns;
   // The sliding block of W never changes: its active (or inactive) set and factor carry over
-  // between steps; with options_.sliding_inactive_set its inverse was computed at load.
+  // between steps; with m.options_.sliding_inactive_set its inverse was computed at load.
   const LcpResult lcp =
-      lcp_.solve(w_, delta_, n, options_.lcp_tolerance, max_iterations, lambda_, &warm_, ns);
+      lcp_.solve(w_, delta_, n, m.options_.lcp_tolerance, max_iterations, lambda_, &warm_, ns);
 
   stats.contact_rows = nc;
   stats.sliding_rows = ns;
@@ -673,18 +745,20 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     sliding_active_[k] = lambda_[k] > 0.0 ? 1 : 0;
     stats.sliding_active += sliding_active_[k];
   }
-  for (auto& b : bodies_) {
-    b.force_slots.clear();
-    b.forces_n.clear();
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
+    const auto& b = m.bodies_[bi];
+    auto& bs = bodies_[bi];
+    bs.force_slots.clear();
+    bs.forces_n.clear();
     const int rows_b = b.body->num_sliding_rows();
-    if (rows_b > 0) b.sliding_lambda = lambda_.segment(b.sliding_offset, rows_b);
+    if (rows_b > 0) bs.sliding_lambda = lambda_.segment(b.sliding_offset, rows_b);
   }
   for (int r = 0; r < nc; ++r) {
     const double l = lambda_[ns + r];
     if (l <= 0.0) continue;
-    auto& b = bodies_[rows_[r].body];
-    b.force_slots.push_back(rows_[r].slot);
-    b.forces_n.push_back(-l * b.body->contact_normals()[rows_[r].slot]);  // inward on the tissue
+    auto& bs = bodies_[rows_[r].body];
+    bs.force_slots.push_back(rows_[r].slot);
+    bs.forces_n.push_back(-l * m.bodies_[rows_[r].body].body->contact_normals()[rows_[r].slot]);  // inward on the tissue
   }
   for (int t = 0; t < nt; ++t) {
     ToolContact& c = contacts[t];
@@ -699,7 +773,7 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     // Main body: the one carrying most of this tool's force.
     int main_body = -1;
     double best = 0.0;
-    for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+    for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
       double sum = 0.0;
       for (int r = 0; r < nc; ++r)
         if (rows_[r].tool == t && rows_[r].body == static_cast<int>(bi)) sum += lambda_[ns + r];
@@ -710,7 +784,7 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     }
     for (int r = 0; r < nc; ++r) {
       if (rows_[r].tool != t || !(lambda_[ns + r] > 0.0)) continue;
-      const auto& body = *bodies_[rows_[r].body].body;
+      const auto& body = *m.bodies_[rows_[r].body].body;
       c.force_n += lambda_[ns + r] * body.contact_normals()[rows_[r].slot];
       if (rows_[r].body == main_body) c.nodes.push_back(body.contact_nodes()[rows_[r].slot]);
     }
@@ -721,19 +795,19 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
       if (active[j] < ns) continue;
       const Row& rj = rows_[active[j] - ns];
       if (rj.tool != t) continue;
-      const Vec3& nj = bodies_[rj.body].body->contact_normals()[rj.slot];
+      const Vec3& nj = m.bodies_[rj.body].body->contact_normals()[rj.slot];
       for (int k = 0; k < na; ++k) {
         if (active[k] < ns) continue;
         const Row& rk = rows_[active[k] - ns];
         if (rk.tool != t) continue;
-        const Vec3& nk = bodies_[rk.body].body->contact_normals()[rk.slot];
+        const Vec3& nk = m.bodies_[rk.body].body->contact_normals()[rk.slot];
         c.stiffness_n_per_m.noalias() -= inv(j, k) * nj * nk.transpose();
       }
     }
     c.in_contact = main_body >= 0;
     if (c.in_contact) {
-      c.mesh = bodies_[main_body].body->host_index();
-      c.validity_radius_m = bodies_[main_body].validity_radius_m;
+      c.mesh = m.bodies_[main_body].body->host_index();
+      c.validity_radius_m = m.bodies_[main_body].validity_radius_m;
       const double f = c.force_n.norm();
       if (f > 0.0) c.normal = c.force_n / f;
     } else {
@@ -748,11 +822,10 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
   stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
 }
 
-void SimulationImpl::host_field(const BodyEntry& b, const std::vector<int>& slots,
-                                const std::vector<Vec3>& forces_n,
-                                const Eigen::VectorXd& sliding_lambda_n,
-                                const Eigen::VectorXd& nodal_forces_n, bool use_columns,
-                                Eigen::VectorXd& u_host_m) const {
+void Model::host_field(const BodyModel& b, const std::vector<int>& slots,
+                       const std::vector<Vec3>& forces_n, const Eigen::VectorXd& sliding_lambda_n,
+                       const Eigen::VectorXd& nodal_forces_n, const ContactColumns* columns,
+                       Eigen::VectorXd& u_host_m) const {
   const bool sliding_force = sliding_lambda_n.size() > 0 && sliding_lambda_n.maxCoeff() > 0.0;
   const int n3 = 3 * static_cast<int>(b.body->host().num_vertices());
   if (nodal_forces_n.size() != 0 && nodal_forces_n.size() != n3) {
@@ -762,7 +835,7 @@ void SimulationImpl::host_field(const BodyEntry& b, const std::vector<int>& slot
                                 std::to_string(n3) + " dofs");
   }
   if (!sliding_force && nodal_forces_n.size() == 0) {
-    if (!use_columns || !b.columns->full_field(slots, forces_n, u_host_m))
+    if (columns == nullptr || !columns->full_field(slots, forces_n, u_host_m))
       b.body->host_displacement(slots, forces_n, u_host_m);
     return;
   }
@@ -780,9 +853,9 @@ void SimulationImpl::host_field(const BodyEntry& b, const std::vector<int>& slot
   b.body->coupled_displacement(f, u_host_m);
 }
 
-void SimulationImpl::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
-                                const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const {
-  const BodyEntry& b = bodies_[e.body];
+void Model::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
+                       const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const {
+  const BodyModel& b = bodies_[e.body];
   if (e.slide >= 0) {
     const auto& sl = *b.slides[e.slide];
     const Eigen::VectorXd lambda =
@@ -799,83 +872,88 @@ void SimulationImpl::mesh_field(const MeshEntry& e, const Eigen::VectorXd& slidi
   b.body->embedded_displacement(e.tie, u_host_m, u_m);
 }
 
+namespace {
+
 void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
-  const MeshEntry& e = entry(m);
+  const MeshEntry& e = model_->entry(m);
   if (e.body < 0) {
     u_m.setZero(3 * static_cast<int>(e.loaded->mesh.num_vertices()));
     return;
   }
-  const BodyEntry& b = bodies_[e.body];
+  const BodyState& bs = state_->bodies_[e.body];
   if (e.slide >= 0) {  // B's field depends on the sliding forces only
-    mesh_field(e, b.sliding_lambda, Eigen::VectorXd(), u_m);
+    model_->mesh_field(e, bs.sliding_lambda, Eigen::VectorXd(), u_m);
     return;
   }
   if (e.tie < 0) {
-    host_field(b, u_m);
+    state_->host_field(*model_, e.body, u_m);
     return;
   }
   Eigen::VectorXd u_host;
-  host_field(b, u_host);
-  mesh_field(e, b.sliding_lambda, u_host, u_m);
+  state_->host_field(*model_, e.body, u_host);
+  model_->mesh_field(e, bs.sliding_lambda, u_host, u_m);
 }
 
 void SimulationImpl::snapshot(FieldSnapshot& s) const {
-  s.bodies.resize(bodies_.size());
-  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+  const auto& bodies = state_->bodies_;
+  s.bodies.resize(bodies.size());
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
     auto& out = s.bodies[i];
-    const auto& b = bodies_[i];
-    out.slots = b.force_slots;
-    out.forces_n = b.forces_n;
-    out.sliding_lambda_n = b.sliding_lambda;
+    out.slots = bodies[i].force_slots;
+    out.forces_n = bodies[i].forces_n;
+    out.sliding_lambda_n = bodies[i].sliding_lambda;
     out.nodal_forces_n.resize(0);
     out.host_done = false;
   }
 }
 
 void SimulationImpl::displacements(FieldSnapshot& s, int m, Eigen::VectorXd& u_m) const {
-  const MeshEntry& e = entry(m);
+  const MeshEntry& e = model_->entry(m);
   if (e.body < 0) {
     u_m.setZero(3 * static_cast<int>(e.loaded->mesh.num_vertices()));
     return;
   }
-  if (s.bodies.size() != bodies_.size()) {
-    throw std::invalid_argument(source_ + ": field snapshot has " +
+  if (s.bodies.size() != model_->bodies_.size()) {
+    throw std::invalid_argument(model_->source_ + ": field snapshot has " +
                                 std::to_string(s.bodies.size()) + " bodies, the model " +
-                                std::to_string(bodies_.size()));
+                                std::to_string(model_->bodies_.size()));
   }
   auto& sb = s.bodies[e.body];
-  const BodyEntry& b = bodies_[e.body];
   if (e.slide < 0 && !sb.host_done) {
-    host_field(b, sb.slots, sb.forces_n, sb.sliding_lambda_n, sb.nodal_forces_n, false,
-               sb.u_host_m);
+    // Never the step's column cache: this may run on another thread than step().
+    model_->host_field(model_->bodies_[e.body], sb.slots, sb.forces_n, sb.sliding_lambda_n,
+                       sb.nodal_forces_n, nullptr, sb.u_host_m);
     sb.host_done = true;
   }
-  mesh_field(e, sb.sliding_lambda_n, sb.u_host_m, u_m);
+  model_->mesh_field(e, sb.sliding_lambda_n, sb.u_host_m, u_m);
 }
 
 void SimulationImpl::sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const {
   pairs.clear();
-  const MeshEntry& e = entry(m);
+  const MeshEntry& e = model_->entry(m);
   if (e.slide < 0) return;
-  const BodyEntry& b = bodies_[e.body];
+  const BodyModel& b = model_->bodies_[e.body];
+  const auto& lambda = state_->bodies_[e.body].sliding_lambda;
   const auto& sl = *b.slides[e.slide];
   const int first = b.slide_first_row[e.slide];
   for (int k = 0; k < sl.size(); ++k) {
     const auto& p = sl.pairs()[k];
     pairs.push_back(SlidingPairState{p.embedded_node, p.host_nodes, p.weights, p.normal,
-                                     p.initial_gap_m, b.sliding_lambda[first + k]});
+                                     p.initial_gap_m, lambda[first + k]});
   }
 }
 
 double SimulationImpl::sliding_penetration_m() const {
   double worst = 0.0;
   Eigen::VectorXd u_host, u_emb;
-  for (const auto& b : bodies_) {
+  for (std::size_t bi = 0; bi < model_->bodies_.size(); ++bi) {
+    const BodyModel& b = model_->bodies_[bi];
     if (b.slides.empty()) continue;
-    host_field(b, u_host);
+    const auto& lambda = state_->bodies_[bi].sliding_lambda;
+    state_->host_field(*model_, static_cast<int>(bi), u_host);
     for (std::size_t i = 0; i < b.slides.size(); ++i) {
       const auto& sl = *b.slides[i];
-      sl.displacement(b.sliding_lambda.segment(b.slide_first_row[i], sl.size()), u_emb);
+      sl.displacement(lambda.segment(b.slide_first_row[i], sl.size()), u_emb);
       for (int k = 0; k < sl.size(); ++k) worst = std::max(worst, -sl.gap(k, u_host, u_emb));
     }
   }
@@ -885,9 +963,10 @@ double SimulationImpl::sliding_penetration_m() const {
 double SimulationImpl::tie_residual_m() const {
   double worst = 0.0;
   Eigen::VectorXd u_host, u_emb;
-  for (const auto& b : bodies_) {
+  for (std::size_t bi = 0; bi < model_->bodies_.size(); ++bi) {
+    const BodyModel& b = model_->bodies_[bi];
     if (b.body->ties().empty()) continue;
-    host_field(b, u_host);
+    state_->host_field(*model_, static_cast<int>(bi), u_host);
     for (std::size_t t = 0; t < b.body->ties().size(); ++t) {
       b.body->embedded_displacement(static_cast<int>(t), u_host, u_emb);
       worst = std::max(worst, b.body->tie_residual(static_cast<int>(t), u_host, u_emb));

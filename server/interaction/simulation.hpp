@@ -148,6 +148,28 @@ struct SetupStats {
   int sliding_rows{0};    // unilateral rows of SLIDING couplings (all couplings)
 };
 
+// The physics split as MuJoCo splits mjModel and mjData: a constant Model built once from the
+// scene (meshes, factorizations, coupling operators, contact geometry, tool shapes) and a State
+// holding everything a step changes (contact rows, LCP warm start and factor, forces, last good
+// answer, the contact-compliance cache). Defined in simulation.cpp; Simulation below owns one of
+// each and is what the service and the tools call.
+class Model;
+class State;
+struct StateDeleter {
+  void operator()(State* state) const;
+};
+using StatePtr = std::unique_ptr<State, StateDeleter>;
+// Throws as Simulation::build does. Shared: one constant Model may serve several States.
+std::shared_ptr<const Model> build_model(const scene::Model& model,
+                                         const SimulationOptions& options = {});
+// A fresh State for `model` (precomputed contact columns and the constant sliding block when the
+// options ask for them). The model must outlive it.
+StatePtr make_state(const Model& model);
+// One step for all tools at once (several stations feel each other): poses in, one result per
+// tool out (contacts.size() == poses.size()). Writes only `state`; no allocation once warmed up.
+void step(const Model& model, State& state, const std::vector<ToolPose>& poses,
+          std::vector<ToolContact>& contacts, StepStats& stats);
+
 class Simulation {
  public:
   // Builds only what model.effects asks for (no coupling → no inclusion decision, ...).

@@ -481,4 +481,32 @@ TEST(interaction_simulation, UnimplementedTierIsRefused) {
   }
 }
 
+// The Model/State split: one constant Model serves independent States; a State's answer depends
+// only on the Model and the poses it is stepped with (not on another State's steps), and equals
+// the Simulation's.
+TEST(interaction_simulation, OneModelServesIndependentStates) {
+  const SceneSpec spec;
+  const auto model = build_model(testing::make_scene(spec));
+  auto a = make_state(*model);
+  auto b = make_state(*model);
+  std::vector<ToolContact> ca, cb, cs;
+  StepStats st;
+  step(*model, *a, {push_right(0.004)}, ca, st);
+  ASSERT_TRUE(ca[0].in_contact);
+  step(*model, *b, {push_right(0.002)}, cb, st);
+  step(*model, *b, {push_right(0.006)}, cb, st);
+  step(*model, *b, {push_right(0.004)}, cb, st);
+  const double f = ca[0].force_n.norm();
+  EXPECT_LE((cb[0].force_n - ca[0].force_n).norm(), 1e-9 * f);
+  EXPECT_LE((cb[0].stiffness_n_per_m - ca[0].stiffness_n_per_m).norm(),
+            1e-9 * ca[0].stiffness_n_per_m.norm());
+  // State a is untouched by b's steps: the same pose again gives the same answer.
+  const Vec3 before = ca[0].force_n;
+  step(*model, *a, {push_right(0.004)}, ca, st);
+  EXPECT_LE((ca[0].force_n - before).norm(), 1e-12 * f);
+  auto sim = Simulation::build(testing::make_scene(spec));
+  sim->step({push_right(0.004)}, cs, st);
+  EXPECT_LE((cs[0].force_n - before).norm(), 1e-12 * f);
+}
+
 }  // namespace neurosim::interaction

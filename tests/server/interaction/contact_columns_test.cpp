@@ -1,0 +1,66 @@
+// ContactColumns: the cached coupled compliance columns of a body without ties equal the host's
+// compliance from independent solves (CoupledBody::host_block), the full-column field equals the
+// sparse-solve field, and only missing columns are computed.
+#include "server/interaction/contact_columns.hpp"
+
+#include "server/mesh/generate.hpp"
+
+#include <gtest/gtest.h>
+
+namespace neurosim::interaction {
+namespace {
+
+struct Block {
+  mesh::TetMesh mesh;
+  std::vector<int> fixed;
+  std::unique_ptr<CoupledBody> body;
+};
+
+Block make_block() {
+  Block b;
+  mesh::MeshingOptions o;
+  o.cell_size_m = 0.01;
+  o.seed = 1;
+  b.mesh = mesh::generate_box({0, 0, 0}, {0.04, 0.04, 0.04}, o).mesh;
+  for (std::size_t v = 0; v < b.mesh.num_vertices(); ++v)
+    if (b.mesh.vertices()[v].z() < 1e-9) b.fixed.push_back(static_cast<int>(v));
+  fem::Material m;
+  m.youngs_modulus_pa = 3000.0;
+  m.poisson_ratio = 0.45;
+  m.name = "block";
+  b.body = std::make_unique<CoupledBody>(0, b.mesh, m, b.fixed);
+  b.body->finalize();
+  return b;
+}
+
+TEST(interaction_contact_columns, BlocksEqualIndependentSolvesAndOnlyMissingAreComputed) {
+  const Block b = make_block();
+  const int slots = static_cast<int>(b.body->contact_nodes().size());
+  ASSERT_GT(slots, 10);
+  ContactColumns cols(*b.body, true);
+  EXPECT_EQ(cols.size(), 0u);
+  const std::vector<int> touched{0, 3, slots - 1};
+  cols.ensure(touched);
+  EXPECT_EQ(cols.size(), 3u);
+  cols.ensure({3, 0});  // cached: nothing new
+  EXPECT_EQ(cols.size(), 3u);
+  EXPECT_FALSE(cols.has(1));
+  for (int i : touched) {
+    for (int j : touched) {
+      const Eigen::Matrix3d ref = b.body->host_block(i, j);
+      EXPECT_LE((cols.block(i, j) - ref).norm(), 1e-9 * ref.norm()) << i << ", " << j;
+    }
+  }
+  // The field of forces on cached slots: sum of full columns = one sparse solve.
+  const std::vector<mesh::Vec3> forces{{0.0, 0.0, -0.1}, {0.02, 0.0, 0.0}, {0.0, -0.05, 0.01}};
+  Eigen::VectorXd from_columns, from_solve;
+  ASSERT_TRUE(cols.full_field(touched, forces, from_columns));
+  b.body->host_displacement(touched, forces, from_solve);
+  EXPECT_LE((from_columns - from_solve).norm(), 1e-9 * from_solve.norm());
+  // A slot without columns: no field from columns, never a wrong one.
+  EXPECT_FALSE(cols.full_field({1}, {{0.0, 0.0, 1.0}}, from_columns));
+  EXPECT_THROW(cols.ensure({slots}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
