@@ -213,14 +213,15 @@ void CoupledBody::finalize() {
       std::snprintf(name, sizeof name, "coupling_%016llx.bin",
                     static_cast<unsigned long long>(cache_key()));
       cache_file = (std::filesystem::path(cache_dir_) / name).string();
-      if (load_cache(cache_file)) {
+      if (load_boundary_operator(cache_file, cache_key(), 3 * static_cast<int>(boundary_nodes_.size()),
+                                 3 * static_cast<int>(contact_nodes_.size()), op_)) {
         cache_hit_ = true;
         timing_.boundary_s = seconds_since(t0);
       }
     }
     if (!cache_hit_) {
       compute_boundary_operator();
-      if (!cache_file.empty()) save_cache(cache_file);
+      if (!cache_file.empty()) save_boundary_operator(cache_file, cache_key(), op_);
     }
   }
   // The baseline's operator (P = L_bb K_add, relaxation) at load, not on first use.
@@ -231,7 +232,7 @@ void CoupledBody::finalize() {
 
 void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const {
   solver_->solve_reduced(b, x);
-  const int m3 = static_cast<int>(l_bb_.rows());
+  const int m3 = static_cast<int>(op_.l_bb.rows());
   if (m3 == 0) return;
   // Woodbury on the tie stiffness: L b = L_A (b - P_b^T G (L_A b)[b]).
   const auto& reduced = solver_->reduced_index();
@@ -310,8 +311,8 @@ void CoupledBody::compute_boundary_operator() {
   const int m3 = 3 * static_cast<int>(boundary_nodes_.size());
   const int s3 = 3 * static_cast<int>(contact_nodes_.size());
   // Compliance columns of A at the boundary dofs (paper Eq. 5, L_bb and L_cb), by block solves.
-  l_bb_.setZero(m3, m3);
-  l_sb_.setZero(s3, m3);
+  op_.l_bb.setZero(m3, m3);
+  op_.l_sb.setZero(s3, m3);
   const auto& reduced = solver_->reduced_index();
   const int nf = solver_->num_free_dofs();
   std::vector<int> cols;
@@ -331,17 +332,17 @@ void CoupledBody::compute_boundary_operator() {
       const int c = cols[first + j];
       for (int r = 0; r < m3; ++r) {
         const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
-        if (red >= 0) l_bb_(r, c) = x(red, j);
+        if (red >= 0) op_.l_bb(r, c) = x(red, j);
       }
-      for (int r = 0; r < s3; ++r) l_sb_(r, c) = x(reduced[3 * contact_nodes_[r / 3] + r % 3], j);
+      for (int r = 0; r < s3; ++r) op_.l_sb(r, c) = x(reduced[3 * contact_nodes_[r / 3] + r % 3], j);
     }
   }
-  l_bb_ = (0.5 * (l_bb_ + l_bb_.transpose())).eval();
+  op_.l_bb = (0.5 * (op_.l_bb + op_.l_bb.transpose())).eval();
   timing_.boundary_s = seconds_since(t0);
 
   // Coupling operator: K_add = sum J^T S_B J, G = (I + K_add L_bb)^-1 K_add, factored once.
   t0 = std::chrono::steady_clock::now();
-  k_add_.setZero(m3, m3);
+  op_.k_add.setZero(m3, m3);
   for (const auto& tie : ties_) {
     const int t = static_cast<int>(tie.tied_nodes.size());
     Eigen::SparseMatrix<double> j(3 * t, m3);
@@ -355,130 +356,45 @@ void CoupledBody::compute_boundary_operator() {
     // J^T S_B J = J^T K_ss J - (K_is J)^T K_ii^-1 (K_is J): one solve with 3m right-hand sides.
     const Eigen::SparseMatrix<double> jt = j.transpose();
     const Eigen::SparseMatrix<double> ssj = jt * (tie.k_ss * j);
-    k_add_ += Eigen::MatrixXd(ssj);
+    op_.k_add += Eigen::MatrixXd(ssj);
     if (tie.k_is.rows() > 0) {
       const Eigen::MatrixXd kj = Eigen::MatrixXd(tie.k_is * j);
       Eigen::MatrixXd xi;
       tie.interior->solve_reduced(kj, xi);
-      k_add_.noalias() -= kj.transpose() * xi;
+      op_.k_add.noalias() -= kj.transpose() * xi;
     }
   }
-  k_add_ = (0.5 * (k_add_ + k_add_.transpose())).eval();
+  op_.k_add = (0.5 * (op_.k_add + op_.k_add.transpose())).eval();
   Eigen::MatrixXd m = Eigen::MatrixXd::Identity(m3, m3);
-  m.noalias() += k_add_ * l_bb_;
+  m.noalias() += op_.k_add * op_.l_bb;
   Eigen::PartialPivLU<Eigen::MatrixXd> lu(m);
-  g_ = lu.solve(k_add_);
-  g_ = (0.5 * (g_ + g_.transpose())).eval();
-  if (!g_.allFinite()) throw std::runtime_error("CoupledBody: coupling operator is not finite");
+  op_.g = lu.solve(op_.k_add);
+  op_.g = (0.5 * (op_.g + op_.g.transpose())).eval();
+  if (!op_.g.allFinite()) throw std::runtime_error("CoupledBody: coupling operator is not finite");
   timing_.operator_s = seconds_since(t0);
 }
 
-namespace {
-
-// FNV-1a, 64 bit: the cache key over every input that changes the boundary operator.
-void mix(std::uint64_t& h, const void* data, std::size_t bytes) {
-  const auto* p = static_cast<const unsigned char*>(data);
-  for (std::size_t i = 0; i < bytes; ++i) {
-    h ^= p[i];
-    h *= 1099511628211ull;
-  }
-}
-template <class T>
-void mix_vector(std::uint64_t& h, const std::vector<T>& v) {
-  const std::uint64_t n = v.size();
-  mix(h, &n, sizeof n);
-  if (!v.empty()) mix(h, v.data(), v.size() * sizeof(T));
-}
-void mix_mesh(std::uint64_t& h, const mesh::TetMesh& m, const fem::Material& mat) {
-  mix_vector(h, m.vertices());
-  mix_vector(h, m.tets());
-  mix(h, &mat.youngs_modulus_pa, sizeof(double));
-  mix(h, &mat.poisson_ratio, sizeof(double));
-}
-
-constexpr char kCacheMagic[8] = {'N', 'S', 'C', 'P', 'L', 'v', '1', '\0'};
-
-}  // namespace
-
 std::uint64_t CoupledBody::cache_key() const {
-  std::uint64_t h = 1469598103934665603ull;
-  mix_mesh(h, *host_, material_);
-  mix_vector(h, solver_->fixed_nodes());
-  mix_vector(h, boundary_nodes_);
-  mix_vector(h, contact_nodes_);
+  CacheKey key;
+  key.add_mesh(*host_, material_);
+  key.add(solver_->fixed_nodes());
+  key.add(boundary_nodes_);
+  key.add(contact_nodes_);
   for (const auto& tie : ties_) {
-    mix_mesh(h, *tie.geometry, tie.material);
-    mix_vector(h, tie.fixed_nodes);
-    mix_vector(h, tie.tied_nodes);
-    mix_vector(h, tie.host_slots);
-    mix_vector(h, tie.weights);
+    key.add_mesh(*tie.geometry, tie.material);
+    key.add(tie.fixed_nodes);
+    key.add(tie.tied_nodes);
+    key.add(tie.host_slots);
+    key.add(tie.weights);
   }
-  return h;
-}
-
-bool CoupledBody::load_cache(const std::string& file) {
-  std::ifstream in(file, std::ios::binary);
-  if (!in) return false;
-  char magic[8];
-  std::uint64_t key = 0;
-  std::int32_t m3 = 0, s3 = 0;
-  in.read(magic, sizeof magic);
-  in.read(reinterpret_cast<char*>(&key), sizeof key);
-  in.read(reinterpret_cast<char*>(&m3), sizeof m3);
-  in.read(reinterpret_cast<char*>(&s3), sizeof s3);
-  if (!in || std::memcmp(magic, kCacheMagic, sizeof magic) != 0 || key != cache_key() ||
-      m3 != 3 * static_cast<int>(boundary_nodes_.size()) ||
-      s3 != 3 * static_cast<int>(contact_nodes_.size())) {
-    return false;
-  }
-  l_bb_.resize(m3, m3);
-  l_sb_.resize(s3, m3);
-  k_add_.resize(m3, m3);
-  g_.resize(m3, m3);
-  for (Eigen::MatrixXd* mat : {&l_bb_, &l_sb_, &k_add_, &g_})
-    in.read(reinterpret_cast<char*>(mat->data()),
-            static_cast<std::streamsize>(mat->size() * sizeof(double)));
-  if (!in || !l_bb_.allFinite() || !l_sb_.allFinite() || !k_add_.allFinite() || !g_.allFinite()) {
-    std::cerr << "CoupledBody: ignoring damaged compliance cache " << file << "\n";
-    return false;
-  }
-  return true;
-}
-
-void CoupledBody::save_cache(const std::string& file) const {
-  std::error_code ec;
-  std::filesystem::create_directories(std::filesystem::path(file).parent_path(), ec);
-  const std::string tmp = file + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    const std::uint64_t key = cache_key();
-    const std::int32_t m3 = static_cast<std::int32_t>(l_bb_.rows()),
-                       s3 = static_cast<std::int32_t>(l_sb_.rows());
-    out.write(kCacheMagic, sizeof kCacheMagic);
-    out.write(reinterpret_cast<const char*>(&key), sizeof key);
-    out.write(reinterpret_cast<const char*>(&m3), sizeof m3);
-    out.write(reinterpret_cast<const char*>(&s3), sizeof s3);
-    for (const Eigen::MatrixXd* mat : {&l_bb_, &l_sb_, &k_add_, &g_})
-      out.write(reinterpret_cast<const char*>(mat->data()),
-                static_cast<std::streamsize>(mat->size() * sizeof(double)));
-    if (!out) {
-      std::cerr << "CoupledBody: could not write compliance cache " << tmp
-                << " (continuing without it)\n";
-      return;
-    }
-  }
-  // Atomic replace: a concurrent reader sees the old file or the whole new one.
-  std::filesystem::rename(tmp, file, ec);
-  if (ec)
-    std::cerr << "CoupledBody: could not store compliance cache " << file << ": " << ec.message()
-              << "\n";
+  return key.value();
 }
 
 void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::MatrixXd& x) const {
   if (!finalized_) throw std::logic_error("CoupledBody::solve_contact_columns before finalize");
   const auto& reduced = solver_->reduced_index();
   const int nf = solver_->num_free_dofs();
-  const int m3 = static_cast<int>(l_bb_.rows());
+  const int m3 = static_cast<int>(op_.l_bb.rows());
   const int n = static_cast<int>(slots.size());
   for (int s : slots) {
     if (s < 0 || s >= static_cast<int>(contact_nodes_.size())) {
@@ -493,7 +409,7 @@ void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::Ma
     // Coupled column in one solve: L (e_i + P_b^T f_b) with the tie's boundary force
     // f_b = -G L_A[b, i] (Woodbury on the tie stiffness: L = L_A - L_A[:,b] G L_A[b,:]).
     lb.resize(m3, 3 * n);
-    for (int j = 0; j < n; ++j) lb.middleCols(3 * j, 3) = l_sb_.middleRows(3 * slots[j], 3).transpose();
+    for (int j = 0; j < n; ++j) lb.middleCols(3 * j, 3) = op_.l_sb.middleRows(3 * slots[j], 3).transpose();
     apply_coupling(lb, glb);
     for (int r = 0; r < m3; ++r) {
       const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
@@ -518,7 +434,7 @@ void CoupledBody::apply_coupling(const Eigen::MatrixXd& in, Eigen::MatrixXd& out
     iterative_->apply(in, out);
     return;
   }
-  out.noalias() = g_ * in;
+  out.noalias() = op_.g * in;
 }
 
 void CoupledBody::host_displacement(const std::vector<int>& slots,
@@ -528,7 +444,7 @@ void CoupledBody::host_displacement(const std::vector<int>& slots,
     throw std::invalid_argument("CoupledBody::host_displacement: sizes differ");
   const int n3 = 3 * static_cast<int>(host_->num_vertices());
   Eigen::VectorXd f = Eigen::VectorXd::Zero(n3);
-  const int m3 = static_cast<int>(l_bb_.rows());
+  const int m3 = static_cast<int>(op_.l_bb.rows());
   Eigen::VectorXd v = Eigen::VectorXd::Zero(m3);
   for (std::size_t k = 0; k < slots.size(); ++k) {
     const int s = slots[k];
@@ -537,14 +453,14 @@ void CoupledBody::host_displacement(const std::vector<int>& slots,
                                   std::to_string(k));
     }
     f.segment<3>(3 * contact_nodes_[s]) += forces_n[k];
-    if (m3 > 0) v.noalias() += l_sb_.middleRows(3 * s, 3).transpose() * forces_n[k];
+    if (m3 > 0) v.noalias() += op_.l_sb.middleRows(3 * s, 3).transpose() * forces_n[k];
   }
   if (m3 > 0) {
     // Boundary displacement of the coupled body, then B's force on A: f_b = -K_add u_b.
     Eigen::MatrixXd gv;
     apply_coupling(v, gv);
-    const Eigen::VectorXd u_b = v - l_bb_ * gv.col(0);
-    const Eigen::VectorXd f_b = -(k_add_ * u_b);
+    const Eigen::VectorXd u_b = v - op_.l_bb * gv.col(0);
+    const Eigen::VectorXd f_b = -(op_.k_add * u_b);
     for (int r = 0; r < m3; ++r) f[3 * boundary_nodes_[r / 3] + r % 3] += f_b[r];
   }
   solver_->solve(f, u_host_m);

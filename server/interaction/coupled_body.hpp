@@ -12,6 +12,7 @@
 
 #include "server/fem/material.hpp"
 #include "server/fem/static_solver.hpp"
+#include "server/interaction/boundary_cache.hpp"
 #include "server/interaction/iterative_tie.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
@@ -138,9 +139,9 @@ class CoupledBody {
 
   const CoupledBodyTiming& timing() const { return timing_; }
   // Boundary blocks (for the iterative baseline): L_A[b,b], K_add, rows of L_A at contact x b.
-  const Eigen::MatrixXd& boundary_compliance() const { return l_bb_; }
-  const Eigen::MatrixXd& boundary_stiffness() const { return k_add_; }
-  const Eigen::MatrixXd& contact_boundary_compliance() const { return l_sb_; }
+  const Eigen::MatrixXd& boundary_compliance() const { return op_.l_bb; }
+  const Eigen::MatrixXd& boundary_stiffness() const { return op_.k_add; }
+  const Eigen::MatrixXd& contact_boundary_compliance() const { return op_.l_sb; }
   // Host-only compliance L_A(i, j) of contact slots (3x3), from one solve per call (reference).
   Eigen::Matrix3d host_block(int slot_i, int slot_j) const;
 
@@ -155,10 +156,7 @@ class CoupledBody {
   std::vector<int> contact_nodes_;
   std::vector<int> contact_slot_;  // A node -> contact slot or -1
   std::vector<mesh::Vec3> contact_normals_;
-  Eigen::MatrixXd l_bb_;        // L_A[b, b] (3m x 3m), unit m/N
-  Eigen::MatrixXd l_sb_;        // L_A[contact dofs, b] (3s x 3m), unit m/N
-  Eigen::MatrixXd k_add_;       // sum over ties of J^T S_B J (3m x 3m), unit N/m
-  Eigen::MatrixXd g_;           // (I + K_add L_bb)^-1 K_add (3m x 3m), unit N/m
+  BoundaryOperator op_;  // L_bb, L_cb, K_add, G (boundary_cache.hpp)
   std::vector<HostSlidingRow> sliding_rows_;
   std::vector<char> sliding_node_;                        // A node -> on a sliding row
   Eigen::SparseMatrix<double, Eigen::RowMajor> j_slide_;  // J_A on the free dofs (rows x nf)
@@ -179,8 +177,6 @@ class CoupledBody {
   void select_contact_nodes();
   void compute_boundary_operator();
   std::uint64_t cache_key() const;
-  bool load_cache(const std::string& file);
-  void save_cache(const std::string& file) const;
 };
 
 // Area-weighted outward vertex normals of a mesh's surface (unit; zero where no face).
