@@ -92,13 +92,17 @@ void CoupledBody::select_contact_nodes() {
   }
 }
 
-void CoupledBody::add_tie(int mesh_index, const mesh::TetMesh& embedded,
-                          const fem::Material& material, const std::vector<int>& embedded_fixed,
-                          const std::vector<int>& embedded_surface_nodes,
-                          const std::vector<std::array<int, 3>>& tri_nodes,
-                          const std::vector<std::array<double, 3>>& weights,
-                          double max_map_distance_m) {
+void CoupledBody::add_tie(const TieDefinition& def) {
   if (finalized_) throw std::logic_error("CoupledBody::add_tie after finalize");
+  if (def.embedded == nullptr) throw std::invalid_argument("CoupledBody::add_tie: no mesh");
+  const int mesh_index = def.mesh;
+  const mesh::TetMesh& embedded = *def.embedded;
+  const fem::Material& material = def.material;
+  const std::vector<int>& embedded_fixed = def.fixed_nodes;
+  const std::vector<int>& embedded_surface_nodes = def.surface_nodes;
+  const std::vector<std::array<int, 3>>& tri_nodes = def.tri_nodes;
+  const std::vector<std::array<double, 3>>& weights = def.weights;
+  const double max_map_distance_m = def.max_map_distance_m;
   if (tri_nodes.size() != embedded_surface_nodes.size() ||
       weights.size() != embedded_surface_nodes.size()) {
     throw std::invalid_argument("CoupledBody::add_tie: coupling map sizes differ");

@@ -46,6 +46,19 @@ struct EmbeddedTie {
   Eigen::SparseMatrix<double> k_is;
 };
 
+// An embedded mesh B to tie to the host: B's free surface nodes and, per node, the S' triangle of
+// A it is tied to (A's node ids) with barycentric weights (the coupling map, paper 2.6).
+struct TieDefinition {
+  int mesh{-1};  // index of B in the simulation
+  const mesh::TetMesh* embedded{nullptr};  // must outlive the body
+  fem::Material material;
+  std::vector<int> fixed_nodes;               // B's own fixed nodes
+  std::vector<int> surface_nodes;             // B's nodes to tie
+  std::vector<std::array<int, 3>> tri_nodes;  // per surface node: A's node ids
+  std::vector<std::array<double, 3>> weights;
+  double max_map_distance_m{0.0};  // largest node-to-S' distance of the map, unit m
+};
+
 // Host side of one row of a sliding coupling (sliding_coupling.hpp): the row measures
 // n . sum_a w_a u_A(node_a), the normal motion of a point of S' (dimensionless weights, unit n).
 struct HostSlidingRow {
@@ -70,11 +83,7 @@ class CoupledBody {
 
   // Adds an embedded mesh tied through the map (B's surface node -> S' triangle of A, weights).
   // tri_nodes[k]: A's node ids of the triangle node k of B is tied to.
-  void add_tie(int mesh_index, const mesh::TetMesh& embedded, const fem::Material& material,
-               const std::vector<int>& embedded_fixed,
-               const std::vector<int>& embedded_surface_nodes,
-               const std::vector<std::array<int, 3>>& tri_nodes,
-               const std::vector<std::array<double, 3>>& weights, double max_map_distance_m);
+  void add_tie(const TieDefinition& tie);
 
   // Registers the host side of sliding rows (before finalize; the rows of all calls are stacked,
   // returns the index of the first one). Their S' nodes are not contactable; finalize computes

@@ -425,9 +425,9 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       t0 = Clock::now();
       try {
         const int first = body.body->add_sliding_rows(rows, what);
-        body.slides.push_back(std::make_unique<SlidingCoupling>(
-            static_cast<int>(m), emb.mesh, emb.material, emb.fixed_nodes, std::move(pairs),
-            options_.sliding_anchor_ratio, what + ": mesh " + emb.id));
+        body.slides.push_back(std::make_unique<SlidingCoupling>(SlidingDefinition{
+            static_cast<int>(m), &emb.mesh, emb.material, emb.fixed_nodes, std::move(pairs),
+            options_.sliding_anchor_ratio, what + ": mesh " + emb.id}));
         body.slide_first_row.push_back(first);
       } catch (const std::invalid_argument& ex) {
         throw std::runtime_error(ex.what());
@@ -438,8 +438,9 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       continue;
     }
     try {
-      body.body->add_tie(static_cast<int>(m), emb.mesh, emb.material, emb.fixed_nodes,
-                         p.embedded_nodes, p.tris, p.weights, p.max_distance_m);
+      body.body->add_tie(TieDefinition{static_cast<int>(m), &emb.mesh, emb.material,
+                                       emb.fixed_nodes, p.embedded_nodes, p.tris, p.weights,
+                                       p.max_distance_m});
     } catch (const std::exception& ex) {
       throw std::runtime_error(source_ + ": coupling " + meshes_[h].loaded->id + " / " + emb.id +
                                ": " + ex.what());

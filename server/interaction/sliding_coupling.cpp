@@ -153,12 +153,11 @@ void EmbeddedCompliance::apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd&
   u_m = x + f.r * (rigid / f.kappa);
 }
 
-SlidingCoupling::SlidingCoupling(int mesh_index, const mesh::TetMesh& embedded,
-                                 const fem::Material& material,
-                                 const std::vector<int>& embedded_fixed,
-                                 std::vector<SlidingPair> pairs, double anchor_ratio,
-                                 const std::string& what)
-    : mesh_(mesh_index), geometry_(&embedded), pairs_(std::move(pairs)) {
+SlidingCoupling::SlidingCoupling(SlidingDefinition def)
+    : mesh_(def.mesh), geometry_(def.embedded), pairs_(std::move(def.pairs)) {
+  const std::string& what = def.what;
+  if (geometry_ == nullptr) throw std::invalid_argument(what + ": no embedded mesh");
+  const mesh::TetMesh& embedded = *geometry_;
   const int nb = static_cast<int>(embedded.num_vertices());
   if (pairs_.empty()) throw std::invalid_argument(what + ": no sliding pair");
   for (std::size_t k = 0; k < pairs_.size(); ++k) {
@@ -171,7 +170,8 @@ SlidingCoupling::SlidingCoupling(int mesh_index, const mesh::TetMesh& embedded,
     }
   }
   compliance_ =
-      std::make_unique<EmbeddedCompliance>(embedded, material, embedded_fixed, anchor_ratio, what);
+      std::make_unique<EmbeddedCompliance>(embedded, def.material, def.fixed_nodes,
+                                           def.anchor_ratio, what);
   // W_B(s, t) = n_s . L_B(k_s, k_t) n_t, by block solves with unit normal forces.
   const int ns = size();
   w_b_.setZero(ns, ns);

@@ -71,12 +71,21 @@ class EmbeddedCompliance {
   int dofs_{0};
 };
 
+// The embedded mesh B of a sliding coupling and its pairs.
+struct SlidingDefinition {
+  int mesh{-1};  // index of B in the simulation
+  const mesh::TetMesh* embedded{nullptr};  // must outlive the coupling
+  fem::Material material;
+  std::vector<int> fixed_nodes;     // B's own fixed nodes
+  std::vector<SlidingPair> pairs;   // one per free surface node of B
+  double anchor_ratio{1e-6};        // a floating B: rigid-mode anchor / mean diagonal stiffness
+  std::string what;                 // names the coupling in messages
+};
+
 class SlidingCoupling {
  public:
-  // pairs: one per free surface node of B (checked: finite, unit normals, g0 >= 0).
-  SlidingCoupling(int mesh_index, const mesh::TetMesh& embedded, const fem::Material& material,
-                  const std::vector<int>& embedded_fixed, std::vector<SlidingPair> pairs,
-                  double anchor_ratio, const std::string& what);
+  // Pairs checked: finite, unit normals, g0 >= 0. Throws std::invalid_argument naming `what`.
+  explicit SlidingCoupling(SlidingDefinition def);
 
   int mesh() const { return mesh_; }
   const mesh::TetMesh& geometry() const { return *geometry_; }
