@@ -472,7 +472,6 @@ void SimulationImpl::reserve_workspace(int tools) {
   // The inverse of the constant sliding block, once (its size does not depend on the tools).
   if (num_sliding_ > 0 && !lcp_constant_block_) {
     lcp_constant_block_ = true;
-    lcp_.use_inactive_set(options_.sliding_inactive_set, options_.sliding_inactive_set_always);
     if (options_.sliding_inactive_set) lcp_.set_constant_block(w_, num_sliding_);
   }
 }
@@ -647,8 +646,13 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
       options_.lcp_max_iterations + options_.lcp_iterations_per_sliding_row * ns;
   // The sliding block of W never changes: its active (or inactive) set and factor carry over
   // between steps; with options_.sliding_inactive_set its inverse was computed at load.
-  const LcpResult lcp =
-      lcp_.solve(w_, delta_, n, options_.lcp_tolerance, max_iterations, lambda_, &warm_, ns);
+  LcpOptions lcp_options;
+  lcp_options.tolerance = options_.lcp_tolerance;
+  lcp_options.max_iterations = max_iterations;
+  lcp_options.path = !options_.sliding_inactive_set        ? LcpPath::reference
+                     : options_.sliding_inactive_set_always ? LcpPath::inactive_set
+                                                            : LcpPath::automatic;
+  const LcpResult lcp = lcp_.solve(LcpProblem{&w_, &delta_, n, ns, &warm_}, lcp_options, lambda_);
 
   stats.contact_rows = nc;
   stats.sliding_rows = ns;
@@ -664,10 +668,6 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
     return;
   }
-  lcp_.invert_active(ns);  // the stiffness needs the contact rows' columns only
-  const auto& active = lcp_.active_rows();
-  const Eigen::MatrixXd& inv = lcp_.active_inverse();
-  const int na = lcp_.num_active();
   stats.sliding_active = 0;
   for (int k = 0; k < ns; ++k) {
     sliding_active_[k] = lambda_[k] > 0.0 ? 1 : 0;
@@ -717,19 +717,10 @@ void SimulationImpl::step(const std::vector<ToolPose>& poses, std::vector<ToolCo
     // Contact stiffness dF/dx = -N (W_AA^-1)_cc N^T over this tool's active rows (flat-contact
     // linearization: the depth changes by -n.dx per row; active sliding rows stay active, so
     // the contact block of the inverse of the whole active block is the stiffness).
-    for (int j = 0; j < na; ++j) {
-      if (active[j] < ns) continue;
-      const Row& rj = rows_[active[j] - ns];
-      if (rj.tool != t) continue;
-      const Vec3& nj = bodies_[rj.body].body->contact_normals()[rj.slot];
-      for (int k = 0; k < na; ++k) {
-        if (active[k] < ns) continue;
-        const Row& rk = rows_[active[k] - ns];
-        if (rk.tool != t) continue;
-        const Vec3& nk = bodies_[rk.body].body->contact_normals()[rk.slot];
-        c.stiffness_n_per_m.noalias() -= inv(j, k) * nj * nk.transpose();
-      }
-    }
+    c.stiffness_n_per_m = lcp_.contact_stiffness(ns, [&](int row) -> const Vec3* {
+      const Row& r = rows_[row - ns];
+      return r.tool == t ? &bodies_[r.body].body->contact_normals()[r.slot] : nullptr;
+    });
     c.in_contact = main_body >= 0;
     if (c.in_contact) {
       c.mesh = bodies_[main_body].body->host_index();
