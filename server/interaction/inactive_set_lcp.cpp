@@ -109,7 +109,7 @@ void InactiveSetLcp::size_workspace() {
   e_.setZero(cap);
   l_.setZero(cap);
   zrow_.setZero(cap + 1);
-  columns_.setZero(cap, cap);
+  columns_.setZero(std::max(capacity_, cap), cap);  // stride: capacity (fixes the dot rounding)
   wanted_.assign(cap, 0);
   if (static_cast<int>(status_.size()) < capacity_) status_.assign(capacity_, 0);
   carry_ = false;
