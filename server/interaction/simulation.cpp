@@ -544,7 +544,6 @@ void State::reserve_workspace(const Model& m, int tools) {
   // The inverse of the constant sliding block, once (its size does not depend on the tools).
   if (m.num_sliding_ > 0 && !lcp_constant_block_) {
     lcp_constant_block_ = true;
-    lcp_.use_inactive_set(m.options_.sliding_inactive_set, m.options_.sliding_inactive_set_always);
     if (m.options_.sliding_inactive_set) lcp_.set_constant_block(w_, m.num_sliding_);
   }
 }
@@ -720,8 +719,13 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
       m.options_.lcp_max_iterations + m.options_.lcp_iterations_per_sliding_row * ns;
   // The sliding block of W never changes: its active (or inactive) set and factor carry over
   // between steps; with m.options_.sliding_inactive_set its inverse was computed at load.
-  const LcpResult lcp =
-      lcp_.solve(w_, delta_, n, m.options_.lcp_tolerance, max_iterations, lambda_, &warm_, ns);
+  LcpOptions lcp_options;
+  lcp_options.tolerance = m.options_.lcp_tolerance;
+  lcp_options.max_iterations = max_iterations;
+  lcp_options.path = !m.options_.sliding_inactive_set        ? LcpPath::reference
+                     : m.options_.sliding_inactive_set_always ? LcpPath::inactive_set
+                                                              : LcpPath::automatic;
+  const LcpResult lcp = lcp_.solve(LcpProblem{&w_, &delta_, n, ns, &warm_}, lcp_options, lambda_);
 
   stats.contact_rows = nc;
   stats.sliding_rows = ns;
@@ -737,10 +741,6 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
     return;
   }
-  lcp_.invert_active(ns);  // the stiffness needs the contact rows' columns only
-  const auto& active = lcp_.active_rows();
-  const Eigen::MatrixXd& inv = lcp_.active_inverse();
-  const int na = lcp_.num_active();
   stats.sliding_active = 0;
   for (int k = 0; k < ns; ++k) {
     sliding_active_[k] = lambda_[k] > 0.0 ? 1 : 0;
@@ -792,19 +792,10 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     // Contact stiffness dF/dx = -N (W_AA^-1)_cc N^T over this tool's active rows (flat-contact
     // linearization: the depth changes by -n.dx per row; active sliding rows stay active, so
     // the contact block of the inverse of the whole active block is the stiffness).
-    for (int j = 0; j < na; ++j) {
-      if (active[j] < ns) continue;
-      const Row& rj = rows_[active[j] - ns];
-      if (rj.tool != t) continue;
-      const Vec3& nj = m.bodies_[rj.body].body->contact_normals()[rj.slot];
-      for (int k = 0; k < na; ++k) {
-        if (active[k] < ns) continue;
-        const Row& rk = rows_[active[k] - ns];
-        if (rk.tool != t) continue;
-        const Vec3& nk = m.bodies_[rk.body].body->contact_normals()[rk.slot];
-        c.stiffness_n_per_m.noalias() -= inv(j, k) * nj * nk.transpose();
-      }
-    }
+    c.stiffness_n_per_m = lcp_.contact_stiffness(ns, [&](int row) -> const Vec3* {
+      const Row& r = rows_[row - ns];
+      return r.tool == t ? &m.bodies_[r.body].body->contact_normals()[r.slot] : nullptr;
+    });
     c.in_contact = main_body >= 0;
     if (c.in_contact) {
       c.mesh = m.bodies_[main_body].body->host_index();

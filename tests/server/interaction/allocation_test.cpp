@@ -69,8 +69,8 @@ TEST(interaction_allocation, WarmSlidingStepDoesNotAllocate) {
 }
 
 // The LCP's inactive-set path for a constant leading block (ContactLcp::set_constant_block): no
-// allocation per solve, with new trailing rows every solve (coupling columns not cached yet),
-// pivots both ways, and a switch to the reference path and back.
+// allocation per solve and per contact stiffness, with new trailing rows every solve (coupling
+// columns not cached yet), pivots both ways, and a switch to the reference path and back.
 TEST(interaction_allocation, ConstantBlockLcpDoesNotAllocate) {
   const int ns = 50, cap = 62, dim = 70;
   Eigen::MatrixXd rows(cap, dim);
@@ -92,18 +92,24 @@ TEST(interaction_allocation, ConstantBlockLcpDoesNotAllocate) {
   hybrid.reserve(cap);
   ASSERT_TRUE(fast.set_constant_block(w, ns));
   ASSERT_TRUE(hybrid.set_constant_block(w, ns));
-  fast.use_inactive_set(true, true);
+  LcpOptions options;
+  options.tolerance = 1e-12;
+  options.max_iterations = 2000;
   int inactive_path = 0;
+  const Eigen::Vector3d normal(0.6, 0.0, 0.8);
   auto run = [&](ContactLcp& lcp, int step) {
     fill(step, w);
     const double shift = step % 20 < 10 ? 4e-4 : -6e-4;  // many leading rows pushed, then few
     for (int i = 0; i < cap; ++i) d[i] = 1e-3 * std::sin(0.9 * i + 0.2 * step) + shift;
     for (int i = 0; i < cap; ++i) warm[i] = i < ns ? (lam[i] > 0.0 ? 1 : 0) : d[i] > 0.0;
     const int n = ns + 4 + step % 8;
-    const LcpResult r = lcp.solve(w, d, n, 1e-12, 2000, lam, &warm, ns);
-    lcp.invert_active(ns);
+    options.path = &lcp == &fast ? LcpPath::inactive_set : LcpPath::automatic;
+    const LcpResult r = lcp.solve(LcpProblem{&w, &d, n, ns, &warm}, options, lam);
     inactive_path += lcp.last_solve_inactive_set() ? 1 : 0;
-    return r.converged;
+    if (!r.converged) return false;
+    const Eigen::Matrix3d k = lcp.contact_stiffness(
+        ns, [&](int row) -> const Eigen::Vector3d* { return row % 2 == 0 ? &normal : nullptr; });
+    return k.allFinite();
   };
   for (ContactLcp* lcp : {&fast, &hybrid}) {
     for (int step = 0; step < 3; ++step) ASSERT_TRUE(run(*lcp, step));

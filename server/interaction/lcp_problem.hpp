@@ -1,0 +1,71 @@
+// The small dense LCP of the unilateral tool contact (and the sliding rows solved with it):
+// find lambda >= 0 with
+//   w = W lambda - delta >= 0,  lambda . w = 0
+// (W: effective contact compliance on the candidate rows, unit m/N, symmetric positive
+// definite; delta: penetration depth per row, unit m; lambda: normal force per row, unit N).
+// W SPD makes the solution unique. Types shared by the two solvers (active_set_lcp.hpp, the
+// reference path; inactive_set_lcp.hpp, the path for a constant leading block) and by their
+// front, ContactLcp (contact_lcp.hpp).
+#pragma once
+
+#include <Eigen/Core>
+
+#include <vector>
+
+namespace neurosim::interaction {
+
+// One LCP. Rows [0, rows) of the inputs are used; the matrix and vectors may be larger (a
+// workspace sized once).
+struct LcpProblem {
+  const Eigen::MatrixXd* compliance{nullptr};  // W (top-left rows x rows block), unit m/N
+  const Eigen::VectorXd* depth{nullptr};       // delta (first rows entries), unit m
+  int rows{0};
+  // Rows [0, stable_rows) have the same entries of W as in the previous solve (e.g. the constant
+  // block of sliding-coupling rows; their delta may change): their active (or inactive) set and
+  // its factor are taken over from the previous solve; initial_active then applies to the other
+  // rows only.
+  int stable_rows{0};
+  // Warm start (optional, first rows entries, nonzero: active): e.g. the last step's active set,
+  // instead of the rows with delta > 0. The pivoting is finite from any start.
+  const std::vector<char>* initial_active{nullptr};
+};
+
+// Which solver takes a problem whose stable rows are the constant block (ContactLcp).
+enum class LcpPath {
+  automatic,     // the inactive-set path when most leading rows start active, else the reference
+                 // path (the factor goes to the smaller set; hysteresis)
+  reference,     // the active-set reference path always
+  inactive_set,  // the inactive-set path whatever the warm start (tests)
+};
+
+struct LcpOptions {
+  // Relative: to max |delta| for the slack w, to max lambda for the forces.
+  double tolerance{1e-12};
+  int max_iterations{200};  // pivots (inactive-set path: block-pivoting passes)
+  LcpPath path{LcpPath::automatic};
+};
+
+struct LcpResult {
+  bool converged{false};
+  int iterations{0};           // pivots (each one Cholesky of the active block); inactive-set path:
+                               // block-pivoting passes (each flips one or more rows)
+  int active{0};               // rows with lambda > 0
+  double max_violation{0.0};   // max(-w, -lambda, 0) relative to max |delta|
+  bool dependent_rows{false};  // a row of the active block was (numerically) dependent
+};
+
+// A block of the inverse of the active block W_AA (unit N/m) between chosen active rows: entry
+// (a, b) for LCP rows rows[a], rows[b], a, b < count. Workspace sized by reserve(capacity).
+struct ActiveBlockInverse {
+  std::vector<int> rows;
+  int count{0};
+  Eigen::MatrixXd inverse;
+
+  void reserve(int capacity) {
+    if (static_cast<int>(rows.size()) >= capacity) return;
+    rows.assign(capacity, 0);
+    inverse.setZero(capacity, capacity);
+  }
+};
+
+}  // namespace neurosim::interaction
