@@ -8,9 +8,7 @@
 #include "server/fem/assembly.hpp"
 #include "server/fem/compliance.hpp"
 #include "server/fem/static_solver.hpp"
-#ifdef NEUROSIM_HAVE_MESHGEN
 #include "server/mesh/generate.hpp"
-#endif
 #include "tests/server/fem/fem_test_meshes.hpp"
 
 #include <algorithm>
@@ -140,7 +138,6 @@ int main(int argc, char** argv) {
     fem::testing::BoxSpec s{n, n, n, {0, 0, 0}, {0.1, 0.1, 0.1}};
     cases.push_back({"grid " + std::to_string(n) + "^3", fem::testing::box_mesh(s)});
   }
-#ifdef NEUROSIM_HAVE_MESHGEN
   // The paper's cube series (Table 3, 50..1812 vertices: a subset) and a brain-sized cube, CGAL
   // Mesh_3.
   for (int target : {50, 207, 535, 1013, 1812, 5300}) {
@@ -152,7 +149,6 @@ int main(int argc, char** argv) {
     auto g = mesh::generate_box({0, 0, 0}, {0.1, 0.1, 0.1}, o);
     cases.push_back({"cgal " + std::to_string(target), std::move(g.mesh)});
   }
-#endif
   if (csv) {
     std::printf(
         "mesh,nodes,tets,free_dofs,pattern_ms,assemble_ms,analyze_ms,factorize_ms,column_ms,"

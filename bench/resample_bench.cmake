@@ -2,12 +2,8 @@
 # slices through the tool tip, the whole volume; full and incremental). `resample_bench --csv`.
 # The NIfTI MRI is read as the viewer reads it (viewer::load_nifti over neurosim::nifti); the
 # library neurosim::resample stays Eigen-only.
-if(TARGET neurosim::viewer AND TARGET neurosim::scene)
-  add_executable(resample_bench ${CMAKE_CURRENT_LIST_DIR}/resample_bench.cpp)
-  target_link_libraries(resample_bench PRIVATE neurosim::viewer neurosim::resample neurosim::scene
-                                               neurosim::common neurosim_warnings)
-  target_include_directories(resample_bench PRIVATE ${NEUROSIM_SOURCE_DIR})
-  target_compile_definitions(resample_bench PRIVATE NEUROSIM_SOURCE_DIR="${NEUROSIM_SOURCE_DIR}")
-else()
-  message(STATUS "resample_bench: needs neurosim::viewer (VTK) and neurosim::scene, bench skipped")
-endif()
+add_executable(resample_bench ${CMAKE_CURRENT_LIST_DIR}/resample_bench.cpp)
+target_link_libraries(resample_bench PRIVATE neurosim::viewer neurosim::resample neurosim::scene
+                                             neurosim::common neurosim_warnings)
+target_include_directories(resample_bench PRIVATE ${NEUROSIM_SOURCE_DIR})
+target_compile_definitions(resample_bench PRIVATE NEUROSIM_SOURCE_DIR="${NEUROSIM_SOURCE_DIR}")

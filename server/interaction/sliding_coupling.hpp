@@ -1,5 +1,5 @@
 // Frictionless sliding contact between a host mesh A (through its new boundary S') and an
-// embedded mesh B that is not bonded to it (issue 4, coupling kind SLIDING): the meshes may
+// embedded mesh B that is not bonded to it (coupling kind SLIDING): the meshes may
 // separate but not interpenetrate.
 //
 // One unilateral normal row per surface node k of B, paired with its closest point on S'

@@ -1,4 +1,4 @@
-// neurosim-server core (issue 5 "Server"): a Simulation (Model built once) stepped at the
+// neurosim-server core: a Simulation (Model built once) stepped at the
 // scene rate on its own thread with absolute deadlines, stations on DDS.
 //
 //   DDS thread : waitset on ToolState → join/leave stations, filter samples (NaN/inf, jumps),

@@ -1,4 +1,4 @@
-// Checks each incoming ToolState before it may reach the physics (issue 5 "Bad input"):
+// Checks each incoming ToolState before it may reach the physics (bad input from a station):
 // non-finite or unusable values and jumps faster than the tool's maximum speed are rejected,
 // and the station keeps its last good pose.
 #pragma once

@@ -347,7 +347,7 @@ TEST(interaction_simulation, DeterministicSteps) {
   EXPECT_EQ(a[0].nodes, b[0].nodes);
 }
 
-// --- stability (issue 4): finite, bounded, the LCP converges or says it did not ---
+// --- stability: finite, bounded, the LCP converges or says it did not ---
 
 constexpr double kBoundN = 1e4;  // E_max x (0.1 m)^2: the whole cross-section at 100 % strain
 

@@ -1,8 +1,9 @@
-// issue 5 "Done when": the real neurosim-server on scenes/cube_cylinder.scene (child process,
-// private DDS domain on loopback, bounded): ContactModels along a scripted tool path match the
-// in-process neurosim::interaction Simulation to 1e-9 relative; a late joiner gets MeshTopology
-// and a FULL Deformation frame; NaN/inf/jump samples are rejected and counted in SimStatus; the
-// server survives a station vanishing mid-contact and shuts down cleanly on SIGTERM.
+// The service's acceptance tests: the real neurosim-server on scenes/cube_cylinder.scene
+// (child process, private DDS domain on loopback, bounded): ContactModels along a scripted tool
+// path match the in-process neurosim::interaction Simulation to 1e-9 relative; a late joiner
+// gets MeshTopology and a FULL Deformation frame; NaN/inf/jump samples are rejected and counted
+// in SimStatus; the server survives a station vanishing mid-contact and shuts down cleanly on
+// SIGTERM.
 #include "server/scene/compile.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 

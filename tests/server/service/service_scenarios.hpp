@@ -1,4 +1,4 @@
-// The issue 5 "Done when" scenarios, run against a server binary (the real neurosim-server or
+// The service's acceptance scenarios, run against a server binary (the real neurosim-server or
 // the fake-physics test server): scripted tool path vs the in-process solver, late joiner,
 // rejected samples, a station vanishing mid-contact, clean SIGTERM. Every wait is bounded.
 #pragma once
