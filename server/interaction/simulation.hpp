@@ -1,8 +1,8 @@
-// The simulation Model the server steps: meshes, factorizations, coupling operators and tool
-// contact, built once from a scene; a step solves every station's tool contact together.
-//
-// CONTRACT between the interaction component (implements it) and the service (calls it).
-// Extend freely; do not change the meaning of what is here without telling the lead.
+// The physics the server steps: a constant Model (meshes, factorizations, coupling operators,
+// contact geometry, tools) built once from a scene::Model, a State that each step changes, the
+// step that solves every station's tool contact together, and the displacement fields.
+// Simulation is the contract between this component and its callers (the service, the tools,
+// the tests): extend it freely, keep the meaning of what is here.
 #pragma once
 
 #include "server/mesh/tet_mesh.hpp"
@@ -26,7 +26,7 @@ using Mat3 = Eigen::Matrix3d;
 struct ToolPose {
   Vec3 tip_m{Vec3::Zero()};  // centre of the spherical tip
   Vec3 axis{Vec3::UnitZ()};  // unit vector from the tip towards the handle (shaft direction)
-  int tool{0};               // index into scene.tools() (tip and shaft radii); added by issue 4
+  int tool{0};               // index into the scene's tools (tip and shaft radii)
 };
 
 // What a step returns for one tool.
@@ -48,7 +48,7 @@ struct StepStats {
   int contact_rows{0};
   bool converged{true};
   // Contact nodes touched for the first time in this step: their coupled compliance columns were
-  // computed (block solves, milliseconds) inside the step (issue 4).
+  // computed (block solves, milliseconds) inside the step.
   int columns_computed{0};
   int sliding_rows{0};    // unilateral rows of SLIDING couplings in this step's LCP
   int sliding_active{0};  // of which carry a force
