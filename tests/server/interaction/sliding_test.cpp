@@ -487,4 +487,37 @@ TEST(interaction_sliding, InactiveSetPathMatchesReferencePath) {
 }
 
 }  // namespace
+// A SLIDING coupling serves viewers: the field snapshot (the server's field thread) gives every
+// mesh, the sliding-embedded one included, the same displacements as the stepping-thread path,
+// and the embedded mesh moves when the host pushes it through the sliding rows.
+TEST(interaction_sliding, FieldSnapshotServesEveryMesh) {
+  auto sim = Simulation::build(testing::make_scene(sliding_spec()));
+  std::vector<ToolContact> c;
+  StepStats st;
+  sim->step({push_right(0.006)}, c, st);
+  ASSERT_TRUE(c[0].in_contact);
+  ASSERT_GT(st.sliding_active, 0);
+  FieldSnapshot snap;
+  sim->snapshot(snap);
+  sim->step({push_right(0.001)}, c, st);  // a later step does not change the snapshot's fields
+  for (int m = 0; m < sim->num_meshes(); ++m) {
+    Eigen::VectorXd from_snapshot, now;
+    sim->displacements(snap, m, from_snapshot);
+    ASSERT_EQ(from_snapshot.size(), 3 * static_cast<Eigen::Index>(sim->mesh(m).num_vertices()));
+    ASSERT_TRUE(from_snapshot.allFinite()) << sim->mesh_id(m);
+    EXPECT_GT(from_snapshot.cwiseAbs().maxCoeff(), 1e-5) << sim->mesh_id(m) << " did not move";
+    sim->displacements(m, now);  // the 1 mm step
+    EXPECT_GT((from_snapshot - now).cwiseAbs().maxCoeff(), 1e-5) << sim->mesh_id(m);
+  }
+  // Stepped back to the snapshot's pose, the stepping-thread fields equal the snapshot's.
+  sim->step({push_right(0.006)}, c, st);
+  for (int m = 0; m < sim->num_meshes(); ++m) {
+    Eigen::VectorXd from_snapshot, now;
+    sim->displacements(snap, m, from_snapshot);
+    sim->displacements(m, now);
+    EXPECT_LE((from_snapshot - now).cwiseAbs().maxCoeff(), 1e-9 * now.cwiseAbs().maxCoeff())
+        << sim->mesh_id(m);
+  }
+}
+
 }  // namespace neurosim::interaction
