@@ -31,14 +31,7 @@ meshes {
          "\n}\n" + extra;
 }
 
-std::string message_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "";
-}
+using testing::message_of;
 
 Model compile_text(const std::string& text, const std::string& source = "c.scene") {
   return compile(parse_scene(text, source), source);

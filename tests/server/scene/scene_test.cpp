@@ -20,14 +20,7 @@ meshes {
 }
 )";
 
-std::string message_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "";
-}
+using testing::message_of;
 
 TEST(Scene, BundledSceneParsesAndValidates) {
   const auto path = testing::source_dir() / "scenes" / "cube_cylinder.scene";
