@@ -4,6 +4,7 @@
 #include "server/fem/material.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
+#include <Eigen/Core>
 #include <Eigen/SparseCore>
 
 #include <vector>
@@ -23,6 +24,22 @@ class StiffnessAssembler {
   // refilled in place afterwards. Throws std::invalid_argument for an invalid material map or
   // an inverted / degenerate / non-finite tetrahedron (naming it), or a mesh of another size.
   void assemble(const mesh::TetMesh& mesh, const MaterialMap& materials, SparseMatrix& k) const;
+
+  // Adds an element matrix (dof 3 a + i, a local node of tetrahedron `tet`) into the value
+  // array of a matrix with this pattern (nonlinear tangents, assembled element by element).
+  void add_element(std::size_t tet, const Eigen::Matrix<double, 12, 12>& k_e, double* values) const {
+    const int* start = block_start_.data() + tet * 48;
+    for (int a = 0; a < 4; ++a) {
+      for (int b = 0; b < 4; ++b) {
+        for (int j = 0; j < 3; ++j) {
+          double* dst = values + start[(4 * a + b) * 3 + j];
+          for (int i = 0; i < 3; ++i) {
+            dst[i] += k_e(3 * a + i, 3 * b + j);
+          }
+        }
+      }
+    }
+  }
 
   // Pattern of K (values zero): (3N x 3N).
   const SparseMatrix& pattern() const { return pattern_; }

@@ -63,6 +63,9 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
   if (!loads.forces_n.allFinite()) {
     throw std::invalid_argument("write_calculix_input: non-finite force");
   }
+  if (loads.step.increments < 1 || loads.step.increments > 10000) {
+    throw std::invalid_argument("write_calculix_input: step.increments must be in [1, 10000]");
+  }
   try {
     expand_prescribed(loads.prescribed_sets, static_cast<int>(n), loads.fixed_nodes);
   } catch (const std::invalid_argument& e) {
@@ -126,9 +129,15 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
       continue;
     }
     const Material& mat = materials.materials[m];
-    out << "** material " << m << ": " << mat.name << "\n*MATERIAL, NAME=M" << m << "\n*ELASTIC\n"
-        << mat.youngs_modulus_pa << ", " << mat.poisson_ratio << "\n*SOLID SECTION, ELSET=E" << m
-        << ", MATERIAL=M" << m << "\n";
+    out << "** material " << m << ": " << mat.name << "\n*MATERIAL, NAME=M" << m << "\n";
+    if (loads.step.neo_hookean_nlgeom) {
+      const double e = mat.youngs_modulus_pa, nu = mat.poisson_ratio;
+      out << "*HYPERELASTIC, NEO HOOKE\n"
+          << e / (4.0 * (1.0 + nu)) << ", " << 6.0 * (1.0 - 2.0 * nu) / e << "\n";
+    } else {
+      out << "*ELASTIC\n" << mat.youngs_modulus_pa << ", " << mat.poisson_ratio << "\n";
+    }
+    out << "*SOLID SECTION, ELSET=E" << m << ", MATERIAL=M" << m << "\n";
   }
   std::vector<int> rf_nodes = loads.fixed_nodes;
   rf_nodes.insert(rf_nodes.end(), loads.prescribed_nodes.begin(), loads.prescribed_nodes.end());
@@ -151,7 +160,16 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
     out << "*NSET, NSET=NRF\n";
     write_id_list(out, rf_nodes);
   }
-  out << "*STEP\n*STATIC\n";
+  if (loads.step.neo_hookean_nlgeom) {
+    const double inc = 1.0 / loads.step.increments;
+    // Initial increment, step time 1, minimum increment, maximum increment; residual and
+    // correction criteria 1e-9 (ccx's defaults 5e-3 / 1e-2 would stop far from converged).
+    out << "*STEP, NLGEOM, INC=" << 100 * loads.step.increments << "\n*STATIC\n"
+        << inc << ", 1.0, " << inc * 1e-4 << ", " << inc << "\n"
+        << "*CONTROLS, PARAMETERS=FIELD\n1e-9, 1e-9\n";
+  } else {
+    out << "*STEP\n*STATIC\n";
+  }
   if (!loads.fixed_nodes.empty()) {
     out << "*BOUNDARY\nNFIX, 1, 3\n";
   }
@@ -224,6 +242,10 @@ CalculixResult read_calculix_dat(const std::filesystem::path& dat_file, std::siz
       // ..."
       if (line.compare(first, 13, "displacements") == 0) {
         block = Block::kU;
+        const auto at = line.find("time");
+        if (at == std::string::npos || !(std::istringstream(line.substr(at + 4)) >> r.time)) {
+          fail("no step time in block header");
+        }
       } else if (line.compare(first, 6, "forces") == 0) {
         block = Block::kRF;
       } else {
@@ -302,7 +324,13 @@ CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::st
     throw std::runtime_error("run_calculix: ccx reported an error in " + work_dir.string() + ":\n" +
                              tail);
   }
-  return read_calculix_dat(dat, mesh.num_vertices());
+  CalculixResult result = read_calculix_dat(dat, mesh.num_vertices());
+  if (std::abs(result.time - 1.0) > 1e-9) {
+    throw std::runtime_error("run_calculix: ccx stopped at step time " +
+                             std::to_string(result.time) + " of 1 in " + work_dir.string() +
+                             ":\n" + tail);
+  }
+  return result;
 }
 
 }  // namespace neurosim::fem

@@ -14,7 +14,17 @@
 
 namespace neurosim::fem {
 
-// Boundary conditions and loads of one linear static step.
+// The analysis of the step. Default: linear elastic, small strain (*ELASTIC, *STATIC). The
+// nonlinear tier's reference: *HYPERELASTIC, NEO HOOKE with C10 = E / (4 (1 + nu)) and
+// D1 = 6 (1 - 2 nu) / E per material, in a *STEP, NLGEOM with `increments` equal initial
+// increments (ccx may cut them back) and tight *CONTROLS so that ccx's answer is converged
+// well below the comparison tolerance.
+struct CalculixStep {
+  bool neo_hookean_nlgeom{false};
+  int increments{10};
+};
+
+// Boundary conditions and loads of one static step.
 struct CalculixLoads {
   std::vector<int> fixed_nodes;                // u = 0 in x, y, z
   std::vector<int> prescribed_nodes;           // u given in x, y, z
@@ -23,7 +33,8 @@ struct CalculixLoads {
   // as StaticSolver::solve_prescribed_dofs does (expand_prescribed against fixed_nodes), and
   // no node may also be in prescribed_nodes.
   std::vector<PrescribedDofs> prescribed_sets;
-  Eigen::VectorXd forces_n;  // empty or 3N nodal forces, unit N
+  Eigen::VectorXd forces_n;  // empty or 3N nodal forces, unit N (dead loads in NLGEOM)
+  CalculixStep step;
 };
 
 // Writes a C3D4 deck: *NODE (id = node + 1), *ELEMENT per material (ELSET Ek, id = tet + 1),
@@ -41,9 +52,13 @@ struct CalculixResult {
   // constrained dof is not subtracted, so compare with StaticSolver's reaction_n + forces_n.
   Eigen::VectorXd reaction_n;
   std::vector<char> has_reaction;  // per node: ccx printed RF for it
+  // Step time of the last printed block (ccx prints every increment; the last one is kept):
+  // 1 when the step completed.
+  double time{0.0};
 };
 
-// Reads the displacements and the reaction forces printed by *NODE PRINT into a .dat file.
+// Reads the displacements and the reaction forces printed by *NODE PRINT into a .dat file (the
+// last increment's when there are several).
 // Throws std::runtime_error naming the file and line on a malformed or incomplete file.
 CalculixResult read_calculix_dat(const std::filesystem::path& dat_file, std::size_t num_nodes);
 
@@ -53,7 +68,8 @@ struct CalculixRunOptions {
 };
 
 // Writes <work_dir>/<job>.inp, runs `ccx -i <job>` with cwd work_dir (bounded by timeout_s,
-// one thread), reads <job>.dat. Throws std::runtime_error with the tail of ccx's log on failure.
+// one thread), reads <job>.dat. Throws std::runtime_error with the tail of ccx's log on failure,
+// including an NLGEOM step that stopped before its end (time < 1).
 CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::string& job,
                             const mesh::TetMesh& mesh, const MaterialMap& materials,
                             const CalculixLoads& loads, const CalculixRunOptions& options = {});

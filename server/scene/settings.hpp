@@ -3,21 +3,16 @@
 // server/scene (scene.hpp read_settings); a haptic station reads only this part of a scene.
 #pragma once
 
+#include "server/fem/tier.hpp"
+
 #include <string>
 #include <vector>
 
 namespace neurosim::scene {
 
-// Elasticity tier a scene asks for (the physics refuses a tier it does not implement).
-enum class Tier { kLinear, kCorotational, kNonlinear };
-inline const char* tier_name(Tier tier) {
-  switch (tier) {
-    case Tier::kLinear: return "LINEAR";
-    case Tier::kCorotational: return "COROTATIONAL";
-    case Tier::kNonlinear: return "NONLINEAR";
-  }
-  return "UNKNOWN";
-}
+// Elasticity tier a scene asks for (header-only enum shared with the physics).
+using fem::Tier;
+using fem::tier_name;
 
 // Which effects the simulation builds and runs (nothing else is built).
 struct EffectsDef {

@@ -1,0 +1,66 @@
+// Internal forces, strain energy and tangent stiffness of a tetrahedral mesh in one elasticity
+// tier (elastic_law.hpp), for a displacement field u (3N, dof 3 node + axis, unit m). Constant
+// after construction (the rest geometry and materials); every evaluation takes u and writes
+// into caller-owned buffers. Linear tetrahedra: F = I + sum_a u_a grad(N_a)^T is constant per
+// element, nodal force f_a = V P grad(N_a), element tangent V B^T (dP/dF) B.
+#pragma once
+
+#include "server/fem/assembly.hpp"
+#include "server/fem/elastic_law.hpp"
+#include "server/fem/material.hpp"
+#include "server/mesh/tet_mesh.hpp"
+
+#include <Eigen/Core>
+
+#include <vector>
+
+namespace neurosim::fem {
+
+// What one evaluation saw over all elements.
+struct ElasticForcesReport {
+  int clamped_elements{0};   // NONLINEAR: elements evaluated at clamped stretches
+  int inverted_elements{0};  // det F <= 0
+  // Largest principal Green-Lagrange strain magnitude over the elements (dimensionless).
+  double max_strain{0.0};
+};
+
+class ElasticForces {
+ public:
+  // Throws std::invalid_argument for an invalid material map or a degenerate element (named).
+  ElasticForces(const mesh::TetMesh& mesh, const MaterialMap& materials, Tier tier);
+
+  Tier tier() const { return tier_; }
+  int num_nodes() const { return num_nodes_; }
+  int num_dofs() const { return 3 * num_nodes_; }
+  std::size_t num_tets() const { return tets_.size(); }
+
+  // F of tetrahedron `tet` at displacement u (unit m).
+  Eigen::Matrix3d deformation_gradient(std::size_t tet, const Eigen::VectorXd& u_m) const;
+
+  // Total strain energy sum_e V_e W(F_e), unit J.
+  double energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report = nullptr) const;
+  // Internal nodal forces dE/du (3N, unit N): the forces the body needs applied to hold u.
+  void internal_force(const Eigen::VectorXd& u_m, Eigen::VectorXd& f_n,
+                      ElasticForcesReport* report = nullptr) const;
+  // Tangent stiffness d^2E/du^2 (3N x 3N, unit N/m) in the assembler's pattern (k gets the
+  // pattern on first use, values refilled in place). project_psd: every element tangent made
+  // positive semidefinite (Newton far from equilibrium).
+  void tangent(const Eigen::VectorXd& u_m, bool project_psd, SparseMatrix& k,
+               ElasticForcesReport* report = nullptr) const;
+
+  const StiffnessAssembler& assembler() const { return assembler_; }
+
+ private:
+  Tier tier_;
+  int num_nodes_{0};
+  std::vector<mesh::Tet> tets_;
+  std::vector<Eigen::Matrix<double, 4, 3>> gradients_;  // per tet, row a: grad N_a (1/m)
+  std::vector<double> volume_m3_;
+  std::vector<int> law_index_;  // per tet: index into laws_
+  std::vector<LawConstants> laws_;
+  StiffnessAssembler assembler_;
+
+  void check_size(const Eigen::VectorXd& u_m, const char* what) const;
+};
+
+}  // namespace neurosim::fem

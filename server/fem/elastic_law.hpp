@@ -1,0 +1,64 @@
+// The elasticity tiers as stress laws of the deformation gradient F (3x3, dimensionless):
+// strain-energy density W(F) (unit J/m^3 = Pa), first Piola-Kirchhoff stress P = dW/dF (Pa) and
+// its derivative dP/dF (Pa). Every tier uses the same isotropic Material (E, nu).
+//
+//   LINEAR        small strain: eps = sym(F) - I, W = mu eps:eps + lambda/2 tr(eps)^2. Not
+//                 invariant under rotation (a rigid rotation strains it).
+//   COROTATIONAL  the linear law in the element's rotated frame: F = R S (polar, rotation-variant
+//                 SVD so flat and inverted elements keep a proper rotation), W = mu |F - R|^2 +
+//                 lambda/2 tr(S - I)^2, P = 2 mu (F - R) + lambda tr(S - I) R, which is exactly
+//                 R K0 (R^T x - X) per element. dP/dF includes dR (exact tangent).
+//   NONLINEAR     compressible neo-Hookean as CalculiX and Abaqus write it (*HYPERELASTIC,
+//                 NEO HOOKE): W = C10 (J^-2/3 I1 - 3) + (J - 1)^2 / D1 with C10 = mu / 2 =
+//                 E / (4 (1 + nu)) and D1 = 2 / K = 6 (1 - 2 nu) / E. Robust to inversion by
+//                 clamping the principal stretches (Irving, Teran, Fedkiw 2004): when the
+//                 smallest signed principal stretch of F is below kMinStretch, the law is
+//                 evaluated at F^ = U diag(max(sigma, kMinStretch)) V^T and extended to first
+//                 order (W(F^) + P(F^) : (F - F^), P = P(F^)), with the tangent of F^ projected
+//                 to positive semidefinite. Elements with J >= kStretchCheckJ are never
+//                 clamped (all their stretches are far above kMinStretch in any deformation
+//                 this simulator sees), so only nearly collapsed elements pay for the SVD; an
+//                 unclamped element follows CalculiX's law exactly.
+#pragma once
+
+#include "server/fem/material.hpp"
+#include "server/fem/tier.hpp"
+
+#include <Eigen/Core>
+
+
+namespace neurosim::fem {
+
+inline constexpr double kMinStretch = 0.1;     // neo-Hookean clamp, dimensionless
+inline constexpr double kStretchCheckJ = 0.5;  // det F below which stretches are checked
+
+// Constants of one material for every tier.
+struct LawConstants {
+  double lambda_pa{0.0};  // Lame's first parameter, unit Pa
+  double mu_pa{0.0};      // shear modulus, unit Pa
+  double c10_pa{0.0};     // neo-Hookean C10 = mu / 2, unit Pa
+  double d1_per_pa{0.0};  // neo-Hookean D1 = 2 / K, unit 1/Pa
+
+  // Validates the material (Material::validate) and derives the constants.
+  static LawConstants of(const Material& material);
+};
+
+using StressTangent = Eigen::Matrix<double, 9, 9>;  // dP/dF, vec column-major: i + 3 j
+
+// What an evaluation did (for reports: clamped elements are not exact neo-Hookean).
+struct LawEvaluation {
+  bool clamped{false};  // NONLINEAR only: a principal stretch was clamped
+};
+
+// W(F), unit J/m^3.
+double energy_density(Tier tier, const LawConstants& c, const Eigen::Matrix3d& f,
+                      LawEvaluation* eval = nullptr);
+// P(F), unit Pa.
+Eigen::Matrix3d first_piola(Tier tier, const LawConstants& c, const Eigen::Matrix3d& f,
+                            LawEvaluation* eval = nullptr);
+// dP/dF (9x9, unit Pa), symmetric. project_psd: clip negative eigenvalues to zero (a descent
+// direction for Newton far from equilibrium); clamped neo-Hookean elements are always projected.
+void stress_tangent(Tier tier, const LawConstants& c, const Eigen::Matrix3d& f, bool project_psd,
+                    StressTangent& dp_df, LawEvaluation* eval = nullptr);
+
+}  // namespace neurosim::fem

@@ -1,0 +1,99 @@
+// Static equilibrium of one mesh in any elasticity tier: find u with f_int(u) = f_ext on the
+// free dofs, fixed nodes at 0 and prescribed components at their values. Newton's method on the
+// total potential E(u) - f_ext . u, with a backtracking line search (Armijo on the potential, or
+// a decrease of the residual when the potential is flat to round-off) and load increments that
+// are cut back when an increment fails to converge. The tangent K_ff is refactorized by CHOLMOD
+// (supernodal LL^T) at every iteration, reusing the one symbolic analysis made at construction
+// (the constrained dofs, hence the pattern, never change). An indefinite tangent (compression
+// with buckling modes, clamped elements) is replaced by the one with every element tangent
+// projected to positive semidefinite, so each step is a descent direction.
+//
+// Not thread-safe: an EquilibriumSolver holds its factorization and scratch (one per thread).
+#pragma once
+
+#include "server/fem/elastic_forces.hpp"
+#include "server/fem/prescribed.hpp"
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace neurosim::fem {
+
+struct EquilibriumDefinition {
+  const mesh::TetMesh* mesh{nullptr};  // only used during construction
+  MaterialMap materials;
+  Tier tier{Tier::kNonlinear};
+  std::vector<int> fixed_nodes;  // u = 0 in x, y, z
+  // Prescribed components (values at load factor 1); the constrained dofs are fixed here, the
+  // values may be changed later with set_prescribed_values.
+  std::vector<PrescribedDofs> prescribed;
+};
+
+struct NewtonOptions {
+  // Load increments: 0 chooses them (four to start, cut back and regrown as Newton allows);
+  // N > 0 starts with N equal increments (still cut back when one fails).
+  int increments{0};
+  // Converged when max |r_free| <= tolerance * force scale, the force scale being the largest
+  // of max |f_ext|, max |reaction| and 1e-6 E_max h^2 (h: cube root of the mean element
+  // volume), unit N. Dimensionless.
+  double tolerance{1e-10};
+  int max_iterations{40};  // per increment
+  int max_cutbacks{12};    // halvings of one increment before the solve fails
+};
+
+struct NewtonIncrement {
+  double load_factor{0.0};        // reached at the end of the increment, in (0, 1]
+  std::vector<double> residual_n;  // max |r_free| before each iteration and after the last, N
+  int projected_iterations{0};     // iterations that needed the projected tangent
+  int line_search_halvings{0};
+  int cutbacks{0};  // failed attempts before this increment converged
+};
+
+struct EquilibriumResult {
+  Eigen::VectorXd displacement_m;  // 3N, unit m
+  // 3N, unit N: force the supports exert on the body, f_int(u) - f_ext at constrained dofs,
+  // zero elsewhere (as StaticSolver's PrescribedSolution).
+  Eigen::VectorXd reaction_n;
+  std::vector<NewtonIncrement> increments;
+  ElasticForcesReport elements;  // at the solution
+  double force_scale_n{0.0};     // of the convergence test at load factor 1
+};
+
+class EquilibriumSolver {
+ public:
+  // Throws std::invalid_argument for bad input (mesh, material, node ids, prescribed sets as
+  // expand_prescribed) and when nothing is constrained (rigid-body modes).
+  explicit EquilibriumSolver(const EquilibriumDefinition& definition);
+  ~EquilibriumSolver();
+  EquilibriumSolver(const EquilibriumSolver&) = delete;
+  EquilibriumSolver& operator=(const EquilibriumSolver&) = delete;
+
+  // Full load path from u = 0 to load factor 1 (forces_n: empty or 3N dead loads, unit N;
+  // prescribed values and forces both scaled by the load factor). Throws std::runtime_error
+  // when an increment does not converge after max_cutbacks halvings (the message gives the
+  // load factor reached and the last residual).
+  EquilibriumResult solve(const Eigen::VectorXd& forces_n, const NewtonOptions& options = {});
+
+  // Newton at load factor 1 from a given start (u_m: 3N, warm start, overwritten with the
+  // answer; its constrained dofs are set to their values). No increments; returns the residual
+  // history. Throws std::runtime_error if it does not converge in max_iterations.
+  NewtonIncrement solve_from(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m,
+                             const NewtonOptions& options = {});
+
+  // Values of the prescribed components, in the order of expand_prescribed's dofs.
+  void set_prescribed_values(const Eigen::VectorXd& values_m);
+  const std::vector<int>& prescribed_dofs() const;
+  const std::vector<int>& free_dofs() const;      // reduced -> dof
+  const std::vector<int>& reduced_index() const;  // dof -> reduced or -1
+  const ElasticForces& forces() const;
+  Tier tier() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace neurosim::fem
