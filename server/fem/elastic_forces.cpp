@@ -13,19 +13,19 @@ namespace neurosim::fem {
 
 namespace {
 
-// Largest |principal Green-Lagrange strain| = max |(lambda_i(F^T F) - 1) / 2|.
-double green_strain_magnitude(const Eigen::Matrix3d& f) {
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(f.transpose() * f,
-                                                           Eigen::EigenvaluesOnly);
+// Largest |principal Green-Lagrange strain|, E = (H + H^T + H^T H) / 2.
+double green_strain_magnitude(const Eigen::Matrix3d& h) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(
+      0.5 * (h + h.transpose() + h.transpose() * h), Eigen::EigenvaluesOnly);
   const Eigen::Vector3d e = eig.eigenvalues();
-  return 0.5 * std::max(std::abs(e(0) - 1.0), std::abs(e(2) - 1.0));
+  return std::max(std::abs(e(0)), std::abs(e(2)));
 }
 
-void note(ElasticForcesReport* report, const Eigen::Matrix3d& f, const LawEvaluation& eval) {
+void note(ElasticForcesReport* report, const Eigen::Matrix3d& h, const LawEvaluation& eval) {
   if (!report) return;
   if (eval.clamped) ++report->clamped_elements;
-  if (f.determinant() <= 0.0) ++report->inverted_elements;
-  report->max_strain = std::max(report->max_strain, green_strain_magnitude(f));
+  if ((Eigen::Matrix3d::Identity() + h).determinant() <= 0.0) ++report->inverted_elements;
+  report->max_strain = std::max(report->max_strain, green_strain_magnitude(h));
 }
 
 }  // namespace
@@ -61,9 +61,9 @@ void ElasticForces::check_size(const Eigen::VectorXd& u_m, const char* what) con
   }
 }
 
-Eigen::Matrix3d ElasticForces::deformation_gradient(std::size_t tet,
-                                                    const Eigen::VectorXd& u_m) const {
-  Eigen::Matrix3d f = Eigen::Matrix3d::Identity();
+Eigen::Matrix3d ElasticForces::displacement_gradient(std::size_t tet,
+                                                     const Eigen::VectorXd& u_m) const {
+  Eigen::Matrix3d f = Eigen::Matrix3d::Zero();
   const auto& t = tets_[tet];
   for (int a = 0; a < 4; ++a) {
     f.noalias() += u_m.segment<3>(3 * t[a]) * gradients_[tet].row(a);
@@ -75,7 +75,7 @@ double ElasticForces::energy(const Eigen::VectorXd& u_m, ElasticForcesReport* re
   check_size(u_m, "energy");
   double e_total = 0.0;
   for (std::size_t e = 0; e < tets_.size(); ++e) {
-    const Eigen::Matrix3d f = deformation_gradient(e, u_m);
+    const Eigen::Matrix3d f = displacement_gradient(e, u_m);
     LawEvaluation eval;
     e_total += volume_m3_[e] * energy_density(tier_, laws_[law_index_[e]], f, &eval);
     note(report, f, eval);
@@ -88,7 +88,7 @@ void ElasticForces::internal_force(const Eigen::VectorXd& u_m, Eigen::VectorXd& 
   check_size(u_m, "internal_force");
   f_n.setZero(num_dofs());
   for (std::size_t e = 0; e < tets_.size(); ++e) {
-    const Eigen::Matrix3d f = deformation_gradient(e, u_m);
+    const Eigen::Matrix3d f = displacement_gradient(e, u_m);
     LawEvaluation eval;
     const Eigen::Matrix3d p = first_piola(tier_, laws_[law_index_[e]], f, &eval);
     note(report, f, eval);
@@ -112,7 +112,7 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
   Eigen::Matrix<double, 9, 12> b;
   Eigen::Matrix<double, 12, 12> k_e;
   for (std::size_t e = 0; e < tets_.size(); ++e) {
-    const Eigen::Matrix3d f = deformation_gradient(e, u_m);
+    const Eigen::Matrix3d f = displacement_gradient(e, u_m);
     LawEvaluation eval;
     stress_tangent(tier_, laws_[law_index_[e]], f, project_psd, c, &eval);
     note(report, f, eval);

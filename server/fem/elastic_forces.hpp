@@ -2,7 +2,8 @@
 // tier (elastic_law.hpp), for a displacement field u (3N, dof 3 node + axis, unit m). Constant
 // after construction (the rest geometry and materials); every evaluation takes u and writes
 // into caller-owned buffers. Linear tetrahedra: F = I + sum_a u_a grad(N_a)^T is constant per
-// element, nodal force f_a = V P grad(N_a), element tangent V B^T (dP/dF) B.
+// element, nodal force f_a = V P grad(N_a), element tangent V B^T (dP/dF) B. The laws take
+// H = F - I, formed directly from u (full precision for small strains).
 #pragma once
 
 #include "server/fem/assembly.hpp"
@@ -34,8 +35,8 @@ class ElasticForces {
   int num_dofs() const { return 3 * num_nodes_; }
   std::size_t num_tets() const { return tets_.size(); }
 
-  // F of tetrahedron `tet` at displacement u (unit m).
-  Eigen::Matrix3d deformation_gradient(std::size_t tet, const Eigen::VectorXd& u_m) const;
+  // H = grad u = F - I of tetrahedron `tet` at displacement u (unit m), dimensionless.
+  Eigen::Matrix3d displacement_gradient(std::size_t tet, const Eigen::VectorXd& u_m) const;
 
   // Total strain energy sum_e V_e W(F_e), unit J.
   double energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report = nullptr) const;

@@ -28,13 +28,13 @@ namespace {
 using Mat3 = Eigen::Matrix3d;
 
 // ---- LINEAR ----------------------------------------------------------------------------------
-double linear_energy(const LawConstants& c, const Mat3& f) {
-  const Mat3 eps = 0.5 * (f + f.transpose()) - Mat3::Identity();
+double linear_energy(const LawConstants& c, const Mat3& h) {
+  const Mat3 eps = 0.5 * (h + h.transpose());
   const double tr = eps.trace();
   return c.mu_pa * eps.squaredNorm() + 0.5 * c.lambda_pa * tr * tr;
 }
-Mat3 linear_stress(const LawConstants& c, const Mat3& f) {
-  const Mat3 eps = 0.5 * (f + f.transpose()) - Mat3::Identity();
+Mat3 linear_stress(const LawConstants& c, const Mat3& h) {
+  const Mat3 eps = 0.5 * (h + h.transpose());
   return 2.0 * c.mu_pa * eps + c.lambda_pa * eps.trace() * Mat3::Identity();
 }
 Mat3 linear_dstress(const LawConstants& c, const Mat3& df) {
@@ -51,6 +51,34 @@ Mat3 corot_stress(const LawConstants& c, const RotationVariantSvd& s, const Mat3
   const Mat3 r = s.u * s.v.transpose();
   return 2.0 * c.mu_pa * (f - r) + c.lambda_pa * (s.sigma.sum() - 3.0) * r;
 }
+// Accurate path for det F >= kStretchCheckJ: S - I = sqrt(I + C') - I with C' = F^T F - I =
+// H + H^T + H^T H formed from H, eigenvalues c_i mapped by c / (1 + sqrt(1 + c)) (no
+// cancellation), R = F S^-1. Strains of 1e-9 keep full relative precision.
+struct CorotAccurate {
+  Mat3 s_minus_i;
+  Mat3 r;
+};
+CorotAccurate corot_accurate(const Mat3& h) {
+  const Mat3 cp = h + h.transpose() + h.transpose() * h;
+  const Eigen::SelfAdjointEigenSolver<Mat3> eig(cp);
+  Eigen::Vector3d d;
+  for (int i = 0; i < 3; ++i) {
+    const double ci = eig.eigenvalues()(i);
+    d(i) = ci / (1.0 + std::sqrt(1.0 + ci));
+  }
+  CorotAccurate a;
+  a.s_minus_i = eig.eigenvectors() * d.asDiagonal() * eig.eigenvectors().transpose();
+  a.r = (Mat3::Identity() + h) * (Mat3::Identity() + a.s_minus_i).inverse();
+  return a;
+}
+double corot_energy_accurate(const LawConstants& c, const CorotAccurate& a) {
+  const double tr = a.s_minus_i.trace();
+  return c.mu_pa * a.s_minus_i.squaredNorm() + 0.5 * c.lambda_pa * tr * tr;
+}
+Mat3 corot_stress_accurate(const LawConstants& c, const CorotAccurate& a) {
+  return a.r * (2.0 * c.mu_pa * a.s_minus_i + c.lambda_pa * a.s_minus_i.trace() * Mat3::Identity());
+}
+
 // dR = U W V^T with W skew, W_ij = (M_ij - M_ji) / (sigma_i + sigma_j), M = U^T dF V.
 Mat3 corot_dstress(const LawConstants& c, const RotationVariantSvd& s, const Mat3& df) {
   const Mat3 r = s.u * s.v.transpose();
@@ -71,18 +99,29 @@ Mat3 corot_dstress(const LawConstants& c, const RotationVariantSvd& s, const Mat
 }
 
 // ---- NONLINEAR (neo-Hookean, F with det F > 0) -----------------------------------------------
-double nh_energy(const LawConstants& c, const Mat3& f) {
-  const double j = f.determinant();
-  const double i1 = f.squaredNorm();
-  return c.c10_pa * (std::pow(j, -2.0 / 3.0) * i1 - 3.0) + (j - 1.0) * (j - 1.0) / c.d1_per_pa;
+// From H (F = I + H) without cancellation: J - 1 = tr H + (tr^2 H - tr H^2) / 2 + det H,
+// I1 - 3 = 2 tr H + |H|^2, J^-2/3 - 1 = expm1(-2/3 log1p(J - 1)), and P's deviatoric part
+// 2 C10 J^-2/3 dev(b) F^-T with dev(b) = dev(H + H^T + H H^T).
+double j_minus_one(const Mat3& h) {
+  const double tr = h.trace();
+  return tr + 0.5 * (tr * tr - (h * h).trace()) + h.determinant();
 }
-Mat3 nh_stress(const LawConstants& c, const Mat3& f) {
-  const double j = f.determinant();
+double nh_energy(const LawConstants& c, const Mat3& h) {
+  const double jm1 = j_minus_one(h);
+  const double am1 = std::expm1(-2.0 / 3.0 * std::log1p(jm1));  // J^-2/3 - 1
+  const double i1m3 = 2.0 * h.trace() + h.squaredNorm();
+  const double i1bar_m3 = 3.0 * am1 + (1.0 + am1) * i1m3;
+  return c.c10_pa * i1bar_m3 + jm1 * jm1 / c.d1_per_pa;
+}
+Mat3 nh_stress(const LawConstants& c, const Mat3& h) {
+  const Mat3 f = Mat3::Identity() + h;
+  const double jm1 = j_minus_one(h);
+  const double j = 1.0 + jm1;
   const double a = std::pow(j, -2.0 / 3.0);
-  const double i1 = f.squaredNorm();
+  const Mat3 bm = h + h.transpose() + h * h.transpose();  // b - I
+  const Mat3 dev_b = bm - (bm.trace() / 3.0) * Mat3::Identity();
   const Mat3 finv_t = f.inverse().transpose();
-  return 2.0 * c.c10_pa * a * (f - (i1 / 3.0) * finv_t) +
-         (2.0 / c.d1_per_pa) * (j - 1.0) * j * finv_t;
+  return 2.0 * c.c10_pa * a * dev_b * finv_t + (2.0 / c.d1_per_pa) * jm1 * j * finv_t;
 }
 Mat3 nh_dstress(const LawConstants& c, const Mat3& f, const Mat3& df) {
   const double j = f.determinant();
@@ -101,18 +140,81 @@ Mat3 nh_dstress(const LawConstants& c, const Mat3& f, const Mat3& df) {
          k * ((2.0 * j - 1.0) * dj * finv_t + (j * j - j) * dfinv_t);
 }
 
-// Clamped F^ when the neo-Hookean law must not be evaluated at F itself.
-bool nh_clamp(const Mat3& f, Mat3& f_hat) {
+// Neo-Hookean in principal stretches (J = s0 s1 s2 > 0): gradient dW/ds and Hessian.
+Eigen::Vector3d nh_principal_gradient(const LawConstants& c, const Eigen::Vector3d& sg) {
+  const double j = sg.prod(), a = std::pow(j, -2.0 / 3.0), i1 = sg.squaredNorm();
+  Eigen::Vector3d g;
+  for (int i = 0; i < 3; ++i) {
+    g(i) = c.c10_pa * a * (2.0 * sg(i) - 2.0 / 3.0 * i1 / sg(i)) +
+           (2.0 / c.d1_per_pa) * (j - 1.0) * j / sg(i);
+  }
+  return g;
+}
+Mat3 nh_principal_hessian(const LawConstants& c, const Eigen::Vector3d& sg) {
+  const double j = sg.prod(), a = std::pow(j, -2.0 / 3.0), i1 = sg.squaredNorm();
+  Mat3 hs;
+  for (int i = 0; i < 3; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const double d = i == k ? 1.0 : 0.0;
+      const double t1 = -2.0 / 3.0 * a / sg(k) * (2.0 * sg(i) - 2.0 / 3.0 * i1 / sg(i)) +
+                        a * (2.0 * d - 4.0 / 3.0 * sg(k) / sg(i) + 2.0 / 3.0 * i1 * d / (sg(i) * sg(i)));
+      const double t2 = (2.0 * j - 1.0) * j / (sg(k) * sg(i)) - (j * j - j) * d / (sg(i) * sg(i));
+      hs(i, k) = c.c10_pa * t1 + (2.0 / c.d1_per_pa) * t2;
+    }
+  }
+  return hs;
+}
+
+// Clamped evaluation (Irving, Teran, Fedkiw 2004, energy form): with s^ = max(s, kMinStretch),
+// W^(s) = W(s^) + g(s^) . (s - s^), a C1 extension symmetric in s, so P = U diag(dW^/ds) V^T
+// stays the exact gradient of W^ (the line search sees a consistent potential):
+// dW^/ds_k = g_k(s^) + [k unclamped] sum_{j clamped} Hess_jk(s^) (s_j - s^_j).
+struct NhClamp {
+  bool clamped{false};
+  RotationVariantSvd svd;
+  Eigen::Vector3d s_hat;
+};
+NhClamp nh_clamp(const Mat3& h) {
+  NhClamp r;
+  const Mat3 f = Mat3::Identity() + h;
   if (f.determinant() >= kStretchCheckJ) {
-    return false;
+    return r;
   }
-  RotationVariantSvd s = rotation_variant_svd(f);
-  if (s.sigma.minCoeff() >= kMinStretch) {
-    return false;
+  r.svd = rotation_variant_svd(f);
+  if (r.svd.sigma.minCoeff() >= kMinStretch) {
+    return r;
   }
-  s.sigma = s.sigma.cwiseMax(kMinStretch);
-  f_hat = s.u * s.sigma.asDiagonal() * s.v.transpose();
-  return true;
+  r.clamped = true;
+  r.s_hat = r.svd.sigma.cwiseMax(kMinStretch);
+  return r;
+}
+// As nh_clamp but always through the SVD (finite differences around a clamped state).
+NhClamp nh_clamp_forced(const Mat3& h) {
+  NhClamp r;
+  r.svd = rotation_variant_svd(Mat3::Identity() + h);
+  r.clamped = true;
+  r.s_hat = r.svd.sigma.cwiseMax(kMinStretch);
+  return r;
+}
+double nh_clamped_energy(const LawConstants& c, const NhClamp& k) {
+  const Eigen::Vector3d& s = k.s_hat;
+  const double j = s.prod();
+  const double w = c.c10_pa * (std::pow(j, -2.0 / 3.0) * s.squaredNorm() - 3.0) +
+                   (j - 1.0) * (j - 1.0) / c.d1_per_pa;
+  return w + nh_principal_gradient(c, s).dot(k.svd.sigma - s);
+}
+Mat3 nh_clamped_stress(const LawConstants& c, const NhClamp& k) {
+  Eigen::Vector3d g = nh_principal_gradient(c, k.s_hat);
+  const Mat3 hs = nh_principal_hessian(c, k.s_hat);
+  const Eigen::Vector3d excess = k.svd.sigma - k.s_hat;  // < 0 where clamped, 0 elsewhere
+  Eigen::Vector3d g_ext = g;
+  for (int kk = 0; kk < 3; ++kk) {
+    if (excess(kk) != 0.0) continue;  // clamped direction: g_k(s^) only
+    for (int j = 0; j < 3; ++j) {
+      g_ext(kk) += hs(j, kk) * excess(j);
+    }
+  }
+  return k.svd.u * g_ext.asDiagonal() * k.svd.v.transpose();
 }
 
 template <typename DStress>
@@ -142,56 +244,76 @@ void check_finite(const Mat3& f) {
 
 }  // namespace
 
-double energy_density(Tier tier, const LawConstants& c, const Mat3& f, LawEvaluation* eval) {
-  check_finite(f);
+double energy_density(Tier tier, const LawConstants& c, const Mat3& h, LawEvaluation* eval) {
+  check_finite(h);
   switch (tier) {
-    case Tier::kLinear: return linear_energy(c, f);
-    case Tier::kCorotational: return corot_energy(c, rotation_variant_svd(f));
+    case Tier::kLinear: return linear_energy(c, h);
+    case Tier::kCorotational:
+      if ((Mat3::Identity() + h).determinant() >= kStretchCheckJ) {
+        return corot_energy_accurate(c, corot_accurate(h));
+      }
+      return corot_energy(c, rotation_variant_svd(Mat3::Identity() + h));
     case Tier::kNonlinear: {
-      Mat3 f_hat;
-      const bool clamped = nh_clamp(f, f_hat);
-      if (eval) eval->clamped = clamped;
-      if (!clamped) return nh_energy(c, f);
-      return nh_energy(c, f_hat) + nh_stress(c, f_hat).cwiseProduct(f - f_hat).sum();
+      const NhClamp k = nh_clamp(h);
+      if (eval) eval->clamped = k.clamped;
+      return k.clamped ? nh_clamped_energy(c, k) : nh_energy(c, h);
     }
   }
   throw std::invalid_argument("energy_density: unknown tier");
 }
 
-Mat3 first_piola(Tier tier, const LawConstants& c, const Mat3& f, LawEvaluation* eval) {
-  check_finite(f);
+Mat3 first_piola(Tier tier, const LawConstants& c, const Mat3& h, LawEvaluation* eval) {
+  check_finite(h);
   switch (tier) {
-    case Tier::kLinear: return linear_stress(c, f);
-    case Tier::kCorotational: return corot_stress(c, rotation_variant_svd(f), f);
+    case Tier::kLinear: return linear_stress(c, h);
+    case Tier::kCorotational: {
+      const Mat3 f = Mat3::Identity() + h;
+      if (f.determinant() >= kStretchCheckJ) {
+        return corot_stress_accurate(c, corot_accurate(h));
+      }
+      return corot_stress(c, rotation_variant_svd(f), f);
+    }
     case Tier::kNonlinear: {
-      Mat3 f_hat;
-      const bool clamped = nh_clamp(f, f_hat);
-      if (eval) eval->clamped = clamped;
-      return nh_stress(c, clamped ? f_hat : f);
+      const NhClamp k = nh_clamp(h);
+      if (eval) eval->clamped = k.clamped;
+      return k.clamped ? nh_clamped_stress(c, k) : nh_stress(c, h);
     }
   }
   throw std::invalid_argument("first_piola: unknown tier");
 }
 
-void stress_tangent(Tier tier, const LawConstants& c, const Mat3& f, bool project_psd,
+void stress_tangent(Tier tier, const LawConstants& c, const Mat3& h, bool project_psd,
                     StressTangent& dp_df, LawEvaluation* eval) {
-  check_finite(f);
+  check_finite(h);
   switch (tier) {
     case Tier::kLinear:
       tangent_columns([&](const Mat3& df) { return linear_dstress(c, df); }, dp_df);
       return;  // constant and positive definite for a valid material: nothing to project
     case Tier::kCorotational: {
-      const RotationVariantSvd s = rotation_variant_svd(f);
+      const RotationVariantSvd s = rotation_variant_svd(Mat3::Identity() + h);
       tangent_columns([&](const Mat3& df) { return corot_dstress(c, s, df); }, dp_df);
       break;
     }
     case Tier::kNonlinear: {
-      Mat3 f_hat;
-      const bool clamped = nh_clamp(f, f_hat);
-      if (eval) eval->clamped = clamped;
-      const Mat3& at = clamped ? f_hat : f;
-      tangent_columns([&](const Mat3& df) { return nh_dstress(c, at, df); }, dp_df);
-      project_psd = project_psd || clamped;
+      const NhClamp k = nh_clamp(h);
+      if (eval) eval->clamped = k.clamped;
+      if (!k.clamped) {
+        const Mat3 f = Mat3::Identity() + h;
+        tangent_columns([&](const Mat3& df) { return nh_dstress(c, f, df); }, dp_df);
+      } else {
+        // Nearly collapsed element (rare): central differences of the clamped stress, which
+        // is C0 in F; only the Newton direction depends on it, and it is projected below.
+        const double step = 1e-7 * (1.0 + h.norm());
+        tangent_columns(
+            [&](const Mat3& df) {
+              return ((nh_clamped_stress(c, nh_clamp_forced(h + step * df)) -
+                       nh_clamped_stress(c, nh_clamp_forced(h - step * df))) /
+                      (2.0 * step))
+                  .eval();
+            },
+            dp_df);
+        project_psd = true;
+      }
       break;
     }
   }

@@ -1,4 +1,6 @@
-// The elasticity tiers as stress laws of the deformation gradient F (3x3, dimensionless):
+// The elasticity tiers as stress laws of the displacement gradient H = grad u (3x3,
+// dimensionless; F = I + H is the deformation gradient). Every law is written in H so that
+// small strains keep full relative precision (forming F = I + H first would lose eps / strain):
 // strain-energy density W(F) (unit J/m^3 = Pa), first Piola-Kirchhoff stress P = dW/dF (Pa) and
 // its derivative dP/dF (Pa). Every tier uses the same isotropic Material (E, nu).
 //
@@ -12,10 +14,11 @@
 //                 NEO HOOKE): W = C10 (J^-2/3 I1 - 3) + (J - 1)^2 / D1 with C10 = mu / 2 =
 //                 E / (4 (1 + nu)) and D1 = 2 / K = 6 (1 - 2 nu) / E. Robust to inversion by
 //                 clamping the principal stretches (Irving, Teran, Fedkiw 2004): when the
-//                 smallest signed principal stretch of F is below kMinStretch, the law is
-//                 evaluated at F^ = U diag(max(sigma, kMinStretch)) V^T and extended to first
-//                 order (W(F^) + P(F^) : (F - F^), P = P(F^)), with the tangent of F^ projected
-//                 to positive semidefinite. Elements with J >= kStretchCheckJ are never
+//                 smallest signed principal stretch s of F is below kMinStretch, the energy is
+//                 W(s^) + dW/ds(s^) . (s - s^) with s^ = max(s, kMinStretch), a C1 extension
+//                 whose exact gradient is P (so forces and energy stay consistent for the line
+//                 search); its tangent (finite differences of P) is projected to positive
+//                 semidefinite. Elements with J >= kStretchCheckJ are never
 //                 clamped (all their stretches are far above kMinStretch in any deformation
 //                 this simulator sees), so only nearly collapsed elements pay for the SVD; an
 //                 unclamped element follows CalculiX's law exactly.
@@ -50,15 +53,15 @@ struct LawEvaluation {
   bool clamped{false};  // NONLINEAR only: a principal stretch was clamped
 };
 
-// W(F), unit J/m^3.
-double energy_density(Tier tier, const LawConstants& c, const Eigen::Matrix3d& f,
+// W(I + H), unit J/m^3.
+double energy_density(Tier tier, const LawConstants& c, const Eigen::Matrix3d& h,
                       LawEvaluation* eval = nullptr);
-// P(F), unit Pa.
-Eigen::Matrix3d first_piola(Tier tier, const LawConstants& c, const Eigen::Matrix3d& f,
+// P(I + H), unit Pa.
+Eigen::Matrix3d first_piola(Tier tier, const LawConstants& c, const Eigen::Matrix3d& h,
                             LawEvaluation* eval = nullptr);
-// dP/dF (9x9, unit Pa), symmetric. project_psd: clip negative eigenvalues to zero (a descent
+// dP/dF at F = I + H (9x9, unit Pa), symmetric. project_psd: clip negative eigenvalues to zero (a descent
 // direction for Newton far from equilibrium); clamped neo-Hookean elements are always projected.
-void stress_tangent(Tier tier, const LawConstants& c, const Eigen::Matrix3d& f, bool project_psd,
+void stress_tangent(Tier tier, const LawConstants& c, const Eigen::Matrix3d& h, bool project_psd,
                     StressTangent& dp_df, LawEvaluation* eval = nullptr);
 
 }  // namespace neurosim::fem
