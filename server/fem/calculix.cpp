@@ -132,8 +132,11 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
     out << "** material " << m << ": " << mat.name << "\n*MATERIAL, NAME=M" << m << "\n";
     if (loads.step.neo_hookean_nlgeom) {
       const double e = mat.youngs_modulus_pa, nu = mat.poisson_ratio;
-      out << "*HYPERELASTIC, NEO HOOKE\n"
-          << e / (4.0 * (1.0 + nu)) << ", " << 6.0 * (1.0 - 2.0 * nu) / e << "\n";
+      // ccx reads at most 20 characters per number: 13 significant digits fit.
+      std::ostringstream line;
+      line << std::setprecision(13) << e / (4.0 * (1.0 + nu)) << ", "
+           << 6.0 * (1.0 - 2.0 * nu) / e;
+      out << "*HYPERELASTIC, NEO HOOKE\n" << line.str() << "\n";
     } else {
       out << "*ELASTIC\n" << mat.youngs_modulus_pa << ", " << mat.poisson_ratio << "\n";
     }
@@ -164,8 +167,10 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
     const double inc = 1.0 / loads.step.increments;
     // Initial increment, step time 1, minimum increment, maximum increment; residual and
     // correction criteria 1e-9 (ccx's defaults 5e-3 / 1e-2 would stop far from converged).
+    std::ostringstream line;  // ccx: at most 20 characters per number
+    line << std::setprecision(13) << inc << ", 1.0, " << inc * 1e-4 << ", " << inc;
     out << "*STEP, NLGEOM, INC=" << 100 * loads.step.increments << "\n*STATIC\n"
-        << inc << ", 1.0, " << inc * 1e-4 << ", " << inc << "\n"
+        << line.str() << "\n"
         << "*CONTROLS, PARAMETERS=FIELD\n1e-9, 1e-9\n";
   } else {
     out << "*STEP\n*STATIC\n";
