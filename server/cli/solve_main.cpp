@@ -1,9 +1,11 @@
-// neurosim-solve: linear static solve of a scene (loads and prescribed displacements).
+// neurosim-solve: static solve of a scene (loads and prescribed displacements) in an elasticity
+// tier: linear (one factorization), corotational or nonlinear (Newton with load increments).
 // Writes, per solved mesh, displacement.csv, reactions.csv and result.vtu; the first solved
 // mesh (or --mesh ID) also at the top of --out, which is what verification scripts read.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "server/fem/assembly.hpp"
+#include "server/fem/equilibrium_solver.hpp"
 #include "server/fem/static_solver.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/simulation.hpp"
@@ -26,7 +28,10 @@ using neurosim::mesh::Vec3;
 namespace {
 
 const char* kDescription =
-    "Linear static solve of every mesh the scene loads or constrains (SI units).\n"
+    "Static solve of every mesh the scene loads or constrains (SI units), in the scene's\n"
+    "elasticity tier or --tier: linear, corotational, nonlinear (CalculiX's neo-Hookean).\n"
+    "The corotational and nonlinear tiers use Newton with load increments (--increments N,\n"
+    "default: chosen and cut back until Newton converges) and print the residual per increment.\n"
     "With effects.coupling, a host and the meshes TIE-coupled to it are solved as one body\n"
     "(exact tie, the host carved as the server carves it); --uncoupled solves every mesh on its\n"
     "own. SLIDING couplings are not applied (their meshes are solved on their own, with a\n"
@@ -186,6 +191,50 @@ MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& l
   return r;
 }
 
+// One mesh on its own in the corotational or nonlinear tier: Newton with load increments.
+MeshResult solve_alone_tier(const neurosim::scene::LoadedMesh& lm, const MeshLoads& loads,
+                            neurosim::fem::Tier tier, int increments) {
+  const int n = static_cast<int>(lm.mesh.num_vertices());
+  MeshResult r;
+  r.constrained.assign(n, 0);
+  for (int node : lm.fixed_nodes) r.constrained[node] = 1;
+  std::vector<neurosim::fem::PrescribedDofs> held;
+  for (const auto& [node, hold] : loads.prescribed) {
+    held.push_back(neurosim::fem::PrescribedDofs{{node}, hold.displacement_m, hold.components});
+    r.constrained[node] = 1;
+  }
+  const auto t1 = std::chrono::steady_clock::now();
+  neurosim::fem::EquilibriumSolver solver({&lm.mesh,
+                                           neurosim::fem::MaterialMap::uniform(lm.material),
+                                           tier, lm.fixed_nodes, held});
+  neurosim::fem::NewtonOptions options;
+  options.increments = increments;
+  const neurosim::fem::EquilibriumResult sol = solver.solve(loads.f, options);
+  const double solve_s = seconds_since(t1);
+  int iterations = 0;
+  for (std::size_t i = 0; i < sol.increments.size(); ++i) {
+    const auto& inc = sol.increments[i];
+    iterations += static_cast<int>(inc.residual_n.size()) - 1;
+    std::cout << "  increment " << i + 1 << " load factor " << std::setprecision(4)
+              << inc.load_factor << ": Newton residual (N)";
+    for (double res : inc.residual_n) std::cout << ' ' << std::setprecision(3) << res;
+    if (inc.cutbacks > 0) std::cout << " (after " << inc.cutbacks << " cutback(s))";
+    if (inc.projected_iterations > 0) {
+      std::cout << " (" << inc.projected_iterations << " projected-tangent step(s))";
+    }
+    std::cout << '\n';
+  }
+  std::cout << std::setprecision(6) << "  " << neurosim::fem::tier_name(tier) << ": "
+            << sol.increments.size() << " increments, " << iterations
+            << " Newton iterations, tolerance " << options.tolerance * sol.force_scale_n
+            << " N, largest strain " << sol.elements.max_strain << ", "
+            << sol.elements.clamped_elements << " clamped / " << sol.elements.inverted_elements
+            << " inverted elements; solve " << solve_s << " s\n";
+  r.u_m = sol.displacement_m;
+  r.reaction_n = sol.reaction_n;
+  return r;
+}
+
 // A host and the meshes tied to it, solved as one body through the exact coupled compliance
 // (interaction::CoupledBody): u = L_c (f + F_P), with the prescribed nodes' forces F_P from the
 // 3p x 3p block of L_c at those nodes (one block solve of 3p columns). Reactions at the host's
@@ -329,21 +378,35 @@ void print_mesh_header(const std::string& id, const neurosim::mesh::TetMesh& mes
             << std::defaultfloat << "  quality: " << q.summary() << "\n";
 }
 
-int run(const std::string& scene_path, const std::string& out_dir, const std::string& only_mesh,
-        bool quiet, bool uncoupled) {
+struct RunOptions {
+  std::string scene_path, out_dir, only_mesh, tier;  // tier: empty = the scene's
+  bool quiet{false}, uncoupled{false};
+  int increments{0};
+};
+
+int run(const RunOptions& opt) {
+  const std::string& scene_path = opt.scene_path;
+  const std::string& out_dir = opt.out_dir;
+  const std::string& only_mesh = opt.only_mesh;
+  const bool quiet = opt.quiet, uncoupled = opt.uncoupled;
   const auto t_start = neurosim::common::Clock::now();
   const neurosim::scene::Model model = neurosim::scene::load_model(scene_path);
   const double load_s = seconds_since(t_start);
   if (!only_mesh.empty() && model.find_mesh(only_mesh) < 0) {
     throw std::invalid_argument(scene_path + ": --mesh " + only_mesh + ": no such mesh");
   }
-  // A static solve of another elasticity tier would silently be a linear one: refused.
-  if (model.effects.tier != neurosim::scene::Tier::kLinear) {
-    throw std::runtime_error(scene_path + ": effects.tier " +
-                             neurosim::scene::tier_name(model.effects.tier) +
-                             " is not implemented by neurosim-solve (implemented: LINEAR)");
+  neurosim::fem::Tier tier = model.effects.tier;
+  if (!opt.tier.empty()) {
+    const auto parsed = neurosim::fem::parse_tier(opt.tier);
+    if (!parsed) {
+      throw std::invalid_argument("--tier " + opt.tier +
+                                  ": expected linear, corotational or nonlinear");
+    }
+    tier = *parsed;
   }
-  std::cout << "scene " << model.name << " (" << scene_path << ")\n";
+  std::cout << "scene " << model.name << " (" << scene_path << "), tier "
+            << neurosim::fem::tier_name(tier) << (opt.tier.empty() ? " (scene)" : " (--tier)")
+            << "\n";
   const int num_meshes = static_cast<int>(model.meshes.size());
   // Per mesh (scene order): the result, the mesh it refers to and its fixed nodes.
   struct Solved {
@@ -363,6 +426,13 @@ int run(const std::string& scene_path, const std::string& out_dir, const std::st
   if (has_couplings && uncoupled && !quiet) {
     std::cout << "note: --uncoupled: the scene's couplings are not applied; every mesh is solved "
                  "on its own\n";
+  }
+  if (coupled && tier != neurosim::fem::Tier::kLinear) {
+    // Never run as another tier: a coupled nonlinear static solve is refused, not linearized.
+    throw std::runtime_error(scene_path + ": tier " + neurosim::fem::tier_name(tier) +
+                             " with the scene's TIE couplings is not implemented by "
+                             "neurosim-solve (LINEAR solves coupled bodies; --uncoupled solves "
+                             "every mesh on its own in any tier)");
   }
   if (coupled) {
     auto static_model = model;
@@ -426,7 +496,9 @@ int run(const std::string& scene_path, const std::string& out_dir, const std::st
       std::cout << "  no load or prescribed displacement: at rest, not solved\n";
       continue;
     }
-    MeshResult r = solve_alone(lm, loads);
+    MeshResult r = tier == neurosim::fem::Tier::kLinear
+                       ? solve_alone(lm, loads)
+                       : solve_alone_tier(lm, loads, tier, opt.increments);
     if (!r.u_m.allFinite() || !r.reaction_n.allFinite()) {
       throw std::runtime_error(what + ": solution is not finite");
     }
@@ -461,18 +533,22 @@ int run(const std::string& scene_path, const std::string& out_dir, const std::st
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string scene_path, out_dir, only_mesh;
-  bool quiet = false, uncoupled = false;
+  RunOptions opt;
   neurosim::cli::Parser cli("neurosim-solve", kDescription);
-  cli->add_option("--scene", scene_path, "scene file")->required();
-  cli->add_option("--out", out_dir, "output folder DIR")->required();
-  cli->add_option("--mesh", only_mesh, "the mesh copied to the top of DIR");
-  cli->add_flag("--uncoupled", uncoupled, "every mesh on its own");
-  cli->add_flag("--quiet", quiet, "less output");
+  cli->add_option("--scene", opt.scene_path, "scene file")->required();
+  cli->add_option("--out", opt.out_dir, "output folder DIR")->required();
+  cli->add_option("--mesh", opt.only_mesh, "the mesh copied to the top of DIR");
+  cli->add_option("--tier", opt.tier, "linear | corotational | nonlinear (default: the scene's)")
+      ->check(CLI::IsMember({"linear", "corotational", "nonlinear"}, CLI::ignore_case));
+  cli->add_option("--increments", opt.increments,
+                  "initial load increments of the corotational / nonlinear solve (0: automatic)")
+      ->check(CLI::Range(0, 100000));
+  cli->add_flag("--uncoupled", opt.uncoupled, "every mesh on its own");
+  cli->add_flag("--quiet", opt.quiet, "less output");
   cli->footer(kFooter);
   if (auto rc = cli.parse(argc, argv)) return *rc;
   try {
-    return run(scene_path, out_dir, only_mesh, quiet, uncoupled);
+    return run(opt);
   } catch (const std::exception& e) {
     std::cerr << "neurosim-solve: error: " << e.what() << "\n";
     return 1;

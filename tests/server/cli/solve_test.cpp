@@ -48,11 +48,14 @@ int run_solve(const fs::path& scene, const fs::path& out, const std::string& ext
   return std::system(cmd.c_str());
 }
 
-// Solves `scene` with neurosim-solve and the same problem (mesh `mesh_id`) with ccx.
+// Solves `scene` with neurosim-solve and the same problem (mesh `mesh_id`) with ccx (linear, or
+// with `nlgeom` the neo-Hookean NLGEOM step against `--tier nonlinear`).
 void expect_agrees_with_calculix(const fs::path& scene_path, const std::string& mesh_id,
-                                 double tolerance) {
+                                 double tolerance, bool nlgeom = false) {
   const auto dir = testing::temp_dir("solve_ccx");
-  ASSERT_EQ(run_solve(scene_path, dir / "out", "--uncoupled --mesh " + mesh_id), 0)
+  ASSERT_EQ(run_solve(scene_path, dir / "out",
+                      "--uncoupled --mesh " + mesh_id + (nlgeom ? " --tier nonlinear" : "")),
+            0)
       << "see " << (dir / "out").string() << ".log";
   const CsvRows csv = read_csv(dir / "out" / "displacement.csv");
   EXPECT_EQ(csv.header, "node,x,y,z,ux,uy,uz");
@@ -76,6 +79,7 @@ void expect_agrees_with_calculix(const fs::path& scene_path, const std::string& 
     if (p.mesh != mi) continue;
     loads.prescribed_sets.push_back(fem::PrescribedDofs{p.nodes, p.displacement_m, p.components});
   }
+  loads.step.neo_hookean_nlgeom = nlgeom;
   const auto ccx =
       fem::run_calculix(dir / "ccx", "job", lm.mesh, fem::MaterialMap::uniform(lm.material), loads);
   double max_u = 0.0, max_diff = 0.0;
@@ -342,6 +346,51 @@ prescribed { mesh: "block" region { box { min_m { x: -1 y: -1 z: 0.0199999 } max
   for (const auto& row : csv.rows)
     if (row[3] > 0.0199999) max_lateral = std::max({max_lateral, std::abs(row[4]), std::abs(row[5])});
   EXPECT_GT(max_lateral, 1e-5) << "top face did not spread: ux/uy were clamped";
+  fs::remove_all(dir);
+}
+
+// The same block pressed 30 % of its height in the nonlinear tier against CalculiX's NLGEOM
+// neo-Hookean solution; the log shows the Newton residual of every increment.
+TEST(SolveCli, BlockPressedThirtyPercentNonlinearTierAgreesWithCalculix) {
+  const auto dir = testing::temp_dir("press_nl_scene");
+  {
+    std::ofstream out(dir / "press_nl.scene");
+    out << R"(name: "press_nl"
+meshes {
+  id: "block"
+  generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.02 y: 0.02 z: 0.02 } } cell_size_m: 0.004 seed: 3 }
+  material { youngs_modulus_pa: 3000 poisson_ratio: 0.45 }
+  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 1 z: 1e-9 } } }
+}
+prescribed { mesh: "block" region { box { min_m { x: -1 y: -1 z: 0.0199999 } max_m { x: 1 y: 1 z: 1 } } }
+             displacement_m { z: -0.006 } components: "z" }
+)";
+  }
+  expect_agrees_with_calculix(dir / "press_nl.scene", "block", 1e-4, /*nlgeom=*/true);
+  ASSERT_EQ(run_solve(dir / "press_nl.scene", dir / "out", "--tier nonlinear --increments 3"), 0);
+  std::ifstream log(dir.string() + "/out.log");
+  std::stringstream text;
+  text << log.rdbuf();
+  EXPECT_NE(text.str().find("tier NONLINEAR (--tier)"), std::string::npos) << text.str();
+  EXPECT_NE(text.str().find("increment 3 load factor 1: Newton residual"), std::string::npos)
+      << text.str();
+  // A tier name the build does not know is refused.
+  EXPECT_NE(run_solve(dir / "press_nl.scene", dir / "bad", "--tier hyperelastic"), 0);
+  fs::remove_all(dir);
+}
+
+// A coupled scene in a nonlinear tier is refused by the static solver, never run as linear.
+TEST(SolveCli, CoupledSceneInANonlinearTierIsRefused) {
+  const auto dir = testing::temp_dir("solve_tie_nl");
+  EXPECT_NE(run_solve(testing::source_dir() / "scenes" / "cube_cylinder.scene", dir / "out",
+                      "--tier corotational"),
+            0);
+  std::ifstream log(dir.string() + "/out.log");
+  std::stringstream text;
+  text << log.rdbuf();
+  EXPECT_NE(text.str().find("COROTATIONAL with the scene's TIE couplings is not implemented"),
+            std::string::npos)
+      << text.str();
   fs::remove_all(dir);
 }
 
