@@ -23,38 +23,83 @@ struct Failure : std::runtime_error {
 
 struct EquilibriumSolver::Impl {
   std::string where;
-  ElasticForces forces;
-  std::vector<int> constrained_dofs;  // ascending: fixed nodes' dofs and prescribed dofs
-  Eigen::VectorXd constrained_values;  // at load factor 1, per constrained dof
-  std::vector<int> prescribed_dofs;   // the prescribed subset (expand_prescribed order)
-  std::vector<int> prescribed_slot;   // per prescribed dof: index into constrained_dofs
-  std::vector<int> free_dofs;
-  std::vector<int> reduced_index;
-  double stiffness_force_scale{0.0};  // 1e-6 E_max h^2, unit N
+  std::vector<ElasticForces> bodies;  // host first, then the tied meshes
+  std::vector<int> offset;            // per body: first stacked dof
+  int ndof{0};                        // stacked dofs
+  // Tie elimination u = T q: q holds every stacked dof except the tied ones (which follow
+  // their host triangle). q index <-> stacked dof; tie_terms: (tied dof, host dof, weight).
+  struct TieTerm {
+    int tied_dof, host_dof;
+    double weight;
+  };
+  std::vector<TieTerm> tie_terms;
+  std::vector<int> q_dof;    // q index -> stacked dof
+  std::vector<int> q_index;  // stacked dof -> q index or -1 (tied)
+  SparseMatrix t;            // T (ndof x nq); empty when nothing is tied
+  SparseMatrix k_stacked;    // block-diagonal tangent of all bodies (ties present)
+  SparseMatrix kq;           // T^T K T (ties present)
 
-  SparseMatrix k;                 // full tangent (assembler pattern)
-  SparseMatrix kff;               // lower triangle of the free block
-  std::vector<int> kff_source;    // kff value p <- k value kff_source[p]
+  std::vector<int> constrained_dofs;   // q indices, ascending: fixed dofs and prescribed dofs
+  Eigen::VectorXd constrained_values;  // at load factor 1, per constrained dof
+  std::vector<int> prescribed_dofs;    // host dofs (expand_prescribed order)
+  std::vector<int> prescribed_slot;    // per prescribed dof: index into constrained_dofs
+  std::vector<int> free_dofs;          // reduced -> stacked dof
+  std::vector<int> free_q;             // reduced -> q index
+  std::vector<int> reduced_index;      // stacked dof -> reduced or -1
+  double stiffness_force_scale{0.0};   // 1e-6 E_max h^2, unit N
+
+  std::vector<SparseMatrix> k_body;  // per body tangent (assembler pattern)
+  SparseMatrix kff;                  // lower triangle of the free block
+  std::vector<int> kff_source;       // kff value p <- tangent value kff_source[p]
   Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> llt;
 
   // Scratch.
-  Eigen::VectorXd f_int, f_ext, r_free, delta, trial, rhs, step_full;
+  Eigen::VectorXd f_int, rq, f_ext, r_free, delta, trial, step_full, body_u, body_f;
 
-  Impl(const EquilibriumDefinition& d)
+  explicit Impl(const EquilibriumDefinition& d)
       : where("EquilibriumSolver (" + std::string(tier_name(d.tier)) + ", mesh '" +
-              (d.mesh ? d.mesh->source() : std::string("?")) + "')"),
-        forces(*d.mesh, d.materials, d.tier) {}
+              (d.mesh ? d.mesh->source() : std::string("?")) + "')") {}
 
-  double potential(const Eigen::VectorXd& u, const Eigen::VectorXd& fext) const {
-    return forces.energy(u) - fext.dot(u);
+  bool tied() const { return !tie_terms.empty(); }
+
+  double energy(const Eigen::VectorXd& u, ElasticForcesReport* report = nullptr) const {
+    double e = 0.0;
+    for (std::size_t b = 0; b < bodies.size(); ++b) {
+      ElasticForcesReport r;
+      e += bodies[b].energy(u.segment(offset[b], bodies[b].num_dofs()), report ? &r : nullptr);
+      if (report) {
+        report->clamped_elements += r.clamped_elements;
+        report->inverted_elements += r.inverted_elements;
+        report->max_strain = std::max(report->max_strain, r.max_strain);
+      }
+    }
+    return e;
   }
 
-  // max |f_ext - f_int| over the free dofs; fills f_int.
+  double potential(const Eigen::VectorXd& u, const Eigen::VectorXd& fext) const {
+    return energy(u) - fext.dot(u);
+  }
+
+  // rq := T^T (f_int(u) - f_ext) on every stacked dof of q (tied dofs: 0). Returns max |rq|
+  // over the free dofs.
   double residual(const Eigen::VectorXd& u, const Eigen::VectorXd& fext) {
-    forces.internal_force(u, f_int);
+    f_int.resize(ndof);
+    for (std::size_t b = 0; b < bodies.size(); ++b) {
+      const int nb = bodies[b].num_dofs();
+      body_u = u.segment(offset[b], nb);
+      bodies[b].internal_force(body_u, body_f);
+      f_int.segment(offset[b], nb) = body_f;
+    }
+    rq = f_int - fext;
+    for (const TieTerm& term : tie_terms) {
+      rq[term.host_dof] += term.weight * rq[term.tied_dof];
+    }
+    for (const TieTerm& term : tie_terms) {
+      rq[term.tied_dof] = 0.0;
+    }
     double r = 0.0;
-    for (std::size_t i = 0; i < free_dofs.size(); ++i) {
-      r = std::max(r, std::abs(fext[free_dofs[i]] - f_int[free_dofs[i]]));
+    for (int dof : free_dofs) {
+      r = std::max(r, std::abs(rq[dof]));
     }
     if (!std::isfinite(r)) {
       throw Failure("non-finite residual");
@@ -64,15 +109,68 @@ struct EquilibriumSolver::Impl {
 
   double force_scale(const Eigen::VectorXd& fext) const {
     double s = std::max(max_abs(fext), stiffness_force_scale);
-    for (int dof : constrained_dofs) {
-      s = std::max(s, std::abs(f_int[dof] - fext[dof]));
+    for (int qi : constrained_dofs) {
+      s = std::max(s, std::abs(rq[q_dof[qi]]));
     }
     return s;
   }
 
+  // The tangent in q space: the host's own (nothing tied) or T^T K T.
+  const SparseMatrix& tangent(const Eigen::VectorXd& u, bool project) {
+    for (std::size_t b = 0; b < bodies.size(); ++b) {
+      body_u = u.segment(offset[b], bodies[b].num_dofs());
+      bodies[b].tangent(body_u, project, k_body[b]);
+    }
+    if (!tied()) {
+      return k_body[0];
+    }
+    // Block-diagonal, columns body after body: the value array is the bodies' arrays in order.
+    double* dst = k_stacked.valuePtr();
+    for (const SparseMatrix& kb : k_body) {
+      dst = std::copy(kb.valuePtr(), kb.valuePtr() + kb.nonZeros(), dst);
+    }
+    kq = SparseMatrix(t.transpose() * k_stacked * t);
+    return kq;
+  }
+
+  // Pattern of the free block (lower triangle) and its source positions in `k` (q space).
+  void build_free_pattern(const SparseMatrix& k) {
+    const int nf = static_cast<int>(free_q.size());
+    std::vector<int> reduced_q(k.rows(), -1);
+    for (int i = 0; i < nf; ++i) reduced_q[free_q[i]] = i;
+    std::vector<int> outer(nf + 1, 0), inner;
+    kff_source.clear();
+    for (int jr = 0; jr < nf; ++jr) {
+      const int col = free_q[jr];
+      for (int p = k.outerIndexPtr()[col]; p < k.outerIndexPtr()[col + 1]; ++p) {
+        const int ir = reduced_q[k.innerIndexPtr()[p]];
+        if (ir >= jr) {
+          inner.push_back(ir);
+          kff_source.push_back(p);
+        }
+      }
+      outer[jr + 1] = static_cast<int>(inner.size());
+    }
+    kff.resize(nf, nf);
+    kff.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+    std::copy(outer.begin(), outer.end(), kff.outerIndexPtr());
+    std::copy(inner.begin(), inner.end(), kff.innerIndexPtr());
+    std::fill_n(kff.valuePtr(), inner.size(), 0.0);
+    if (nf > 0) {
+      llt.cholmod().print = 0;
+      llt.analyzePattern(kff);
+      if (llt.info() != Eigen::Success) {
+        throw std::runtime_error(where + ": CHOLMOD analysis failed");
+      }
+    }
+  }
+
   // Factorizes the free block of the tangent at u; false if not positive definite.
   bool factor(const Eigen::VectorXd& u, bool project) {
-    forces.tangent(u, project, k);
+    const SparseMatrix& k = tangent(u, project);
+    if (kff_source.empty() || kff_source.back() >= k.nonZeros()) {
+      build_free_pattern(k);  // the product's structure changed (never with a fixed pattern)
+    }
     const double* src = k.valuePtr();
     double* dst = kff.valuePtr();
     for (std::size_t p = 0; p < kff_source.size(); ++p) {
@@ -82,10 +180,17 @@ struct EquilibriumSolver::Impl {
     return llt.info() == Eigen::Success;
   }
 
+  // Tied dofs follow their host triangle.
+  void enforce_ties(Eigen::VectorXd& u) const {
+    for (const TieTerm& term : tie_terms) u[term.tied_dof] = 0.0;
+    for (const TieTerm& term : tie_terms) u[term.tied_dof] += term.weight * u[term.host_dof];
+  }
+
   void set_constrained(Eigen::VectorXd& u, double load_factor) const {
     for (std::size_t c = 0; c < constrained_dofs.size(); ++c) {
-      u[constrained_dofs[c]] = load_factor * constrained_values[c];
+      u[q_dof[constrained_dofs[c]]] = load_factor * constrained_values[c];
     }
+    enforce_ties(u);
   }
 
   // Newton at fixed external load and constrained values (already in u). Throws Failure.
@@ -106,7 +211,7 @@ struct EquilibriumSolver::Impl {
       }
       r_free.resize(nf);
       for (int i = 0; i < nf; ++i) {
-        r_free[i] = fext[free_dofs[i]] - f_int[free_dofs[i]];
+        r_free[i] = -rq[free_dofs[i]];
       }
       bool projected = false;
       if (!factor(u, false)) {
@@ -135,6 +240,7 @@ struct EquilibriumSolver::Impl {
       for (int i = 0; i < nf; ++i) {
         step_full[free_dofs[i]] = delta[i];
       }
+      enforce_ties(step_full);
       const double pi0 = potential(u, fext);
       double alpha = 1.0;
       bool accepted = false;
@@ -168,34 +274,91 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
   }
   impl_ = std::make_unique<Impl>(d);
   Impl& s = *impl_;
-  const int n = s.forces.num_nodes();
-  std::vector<int> fixed = d.fixed_nodes;
-  for (int v : fixed) {
-    if (v < 0 || v >= n) {
-      throw std::invalid_argument(s.where + ": fixed node " + std::to_string(v) +
-                                  " out of range [0, " + std::to_string(n) + ")");
+  s.bodies.emplace_back(*d.mesh, d.materials, d.tier);
+  for (std::size_t k = 0; k < d.tied.size(); ++k) {
+    if (!d.tied[k].mesh) {
+      throw std::invalid_argument(s.where + ": tied[" + std::to_string(k) + "] has no mesh");
     }
+    s.bodies.emplace_back(*d.tied[k].mesh, d.tied[k].materials, d.tier);
   }
-  std::sort(fixed.begin(), fixed.end());
-  fixed.erase(std::unique(fixed.begin(), fixed.end()), fixed.end());
-  const PrescribedDofList p = expand_prescribed(d.prescribed, n, fixed);
-  std::vector<double> value(3 * n, 0.0);
-  std::vector<char> constrained(3 * n, 0);
+  for (const ElasticForces& b : s.bodies) {
+    s.offset.push_back(s.ndof);
+    s.ndof += b.num_dofs();
+  }
+  s.k_body.resize(s.bodies.size());
+  const int n = s.bodies[0].num_nodes();
+
+  // Constrained stacked dofs: host fixed + prescribed, each tied mesh's fixed nodes.
+  std::vector<char> constrained(s.ndof, 0), is_tied(s.ndof, 0);
+  std::vector<double> value(s.ndof, 0.0);
+  auto check_fixed = [&](const std::vector<int>& fixed, int nodes, const std::string& what) {
+    std::vector<int> sorted = fixed;
+    for (int v : sorted) {
+      if (v < 0 || v >= nodes) {
+        throw std::invalid_argument(s.where + ": " + what + "fixed node " + std::to_string(v) +
+                                    " out of range [0, " + std::to_string(nodes) + ")");
+      }
+    }
+    std::sort(sorted.begin(), sorted.end());
+    sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
+    return sorted;
+  };
+  const std::vector<int> fixed = check_fixed(d.fixed_nodes, n, "");
   for (int v : fixed) {
     for (int a = 0; a < 3; ++a) constrained[3 * v + a] = 1;
   }
+  const PrescribedDofList p = expand_prescribed(d.prescribed, n, fixed);
   for (std::size_t i = 0; i < p.dofs.size(); ++i) {
     constrained[p.dofs[i]] = 1;
     value[p.dofs[i]] = p.values_m[static_cast<Eigen::Index>(i)];
   }
   s.prescribed_dofs = p.dofs;
-  s.reduced_index.assign(3 * n, -1);
-  for (int dof = 0; dof < 3 * n; ++dof) {
+  for (std::size_t k = 0; k < d.tied.size(); ++k) {
+    const TiedMeshDefinition& tm = d.tied[k];
+    const std::string what = "tied[" + std::to_string(k) + "] ";
+    const int nb = s.bodies[k + 1].num_nodes();
+    const int off = s.offset[k + 1];
+    for (int v : check_fixed(tm.fixed_nodes, nb, what)) {
+      for (int a = 0; a < 3; ++a) constrained[off + 3 * v + a] = 1;
+    }
+    if (tm.host_nodes.size() != tm.tied_nodes.size() || tm.weights.size() != tm.tied_nodes.size()) {
+      throw std::invalid_argument(s.where + ": " + what +
+                                  "needs one host triangle and weights per tied node");
+    }
+    for (std::size_t i = 0; i < tm.tied_nodes.size(); ++i) {
+      const int v = tm.tied_nodes[i];
+      if (v < 0 || v >= nb || constrained[off + 3 * v] || is_tied[off + 3 * v]) {
+        throw std::invalid_argument(s.where + ": " + what + "tied node " + std::to_string(v) +
+                                    " out of range, fixed, or tied twice");
+      }
+      for (int c = 0; c < 3; ++c) {
+        const int h = tm.host_nodes[i][c];
+        const double w = tm.weights[i][c];
+        if (h < 0 || h >= n || !std::isfinite(w)) {
+          throw std::invalid_argument(s.where + ": " + what + "tied node " + std::to_string(v) +
+                                      ": host node " + std::to_string(h) +
+                                      " out of range or weight not finite");
+        }
+        for (int a = 0; a < 3; ++a) {
+          s.tie_terms.push_back({off + 3 * v + a, 3 * h + a, w});
+        }
+      }
+      for (int a = 0; a < 3; ++a) is_tied[off + 3 * v + a] = 1;
+    }
+  }
+  s.q_index.assign(s.ndof, -1);
+  s.reduced_index.assign(s.ndof, -1);
+  for (int dof = 0; dof < s.ndof; ++dof) {
+    if (is_tied[dof]) continue;
+    const int qi = static_cast<int>(s.q_dof.size());
+    s.q_index[dof] = qi;
+    s.q_dof.push_back(dof);
     if (constrained[dof]) {
-      s.constrained_dofs.push_back(dof);
+      s.constrained_dofs.push_back(qi);
     } else {
       s.reduced_index[dof] = static_cast<int>(s.free_dofs.size());
       s.free_dofs.push_back(dof);
+      s.free_q.push_back(qi);
     }
   }
   if (s.constrained_dofs.empty()) {
@@ -205,54 +368,55 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
   }
   s.constrained_values.resize(static_cast<Eigen::Index>(s.constrained_dofs.size()));
   for (std::size_t c = 0; c < s.constrained_dofs.size(); ++c) {
-    s.constrained_values[static_cast<Eigen::Index>(c)] = value[s.constrained_dofs[c]];
+    s.constrained_values[static_cast<Eigen::Index>(c)] = value[s.q_dof[s.constrained_dofs[c]]];
   }
   for (int dof : s.prescribed_dofs) {
     s.prescribed_slot.push_back(static_cast<int>(
-        std::lower_bound(s.constrained_dofs.begin(), s.constrained_dofs.end(), dof) -
+        std::lower_bound(s.constrained_dofs.begin(), s.constrained_dofs.end(), s.q_index[dof]) -
         s.constrained_dofs.begin()));
   }
-  // Force scale of the convergence test: 1e-6 E_max h^2.
+  // Force scale of the convergence test: 1e-6 E_max h^2 (host mesh).
   double e_max = 0.0;
   for (const Material& m : d.materials.materials) e_max = std::max(e_max, m.youngs_modulus_pa);
   {
-    // Mean element volume from the rest geometry (the assembler already validated elements).
     const auto& x = d.mesh->vertices();
     double v_sum = 0.0;
-    for (const auto& t : d.mesh->tets()) {
-      v_sum += std::abs((x[t[1]] - x[t[0]]).cross(x[t[2]] - x[t[0]]).dot(x[t[3]] - x[t[0]])) / 6.0;
+    for (const auto& tet : d.mesh->tets()) {
+      v_sum += std::abs((x[tet[1]] - x[tet[0]]).cross(x[tet[2]] - x[tet[0]]).dot(x[tet[3]] - x[tet[0]])) /
+               6.0;
     }
     const double h = std::cbrt(v_sum / static_cast<double>(d.mesh->num_tets()));
     s.stiffness_force_scale = 1e-6 * e_max * h * h;
   }
 
-  // Free block pattern (lower triangle) and its source positions in the full tangent.
-  const SparseMatrix& pat = s.forces.assembler().pattern();
-  const int nf = static_cast<int>(s.free_dofs.size());
-  std::vector<int> outer(nf + 1, 0), inner;
-  for (int jr = 0; jr < nf; ++jr) {
-    const int col = s.free_dofs[jr];
-    for (int q = pat.outerIndexPtr()[col]; q < pat.outerIndexPtr()[col + 1]; ++q) {
-      const int ir = s.reduced_index[pat.innerIndexPtr()[q]];
-      if (ir >= jr) {
-        inner.push_back(ir);
-        s.kff_source.push_back(q);
+  if (!s.tied()) {
+    // q space is the host's dofs: the free block comes straight from the assembler pattern.
+    s.build_free_pattern(s.bodies[0].assembler().pattern());
+    return;
+  }
+  // T: identity on q dofs, weights on tied dofs.
+  std::vector<Eigen::Triplet<double>> triplets;
+  for (int dof = 0; dof < s.ndof; ++dof) {
+    if (s.q_index[dof] >= 0) triplets.emplace_back(dof, s.q_index[dof], 1.0);
+  }
+  for (const Impl::TieTerm& term : s.tie_terms) {
+    triplets.emplace_back(term.tied_dof, s.q_index[term.host_dof], term.weight);
+  }
+  s.t.resize(s.ndof, static_cast<int>(s.q_dof.size()));
+  s.t.setFromTriplets(triplets.begin(), triplets.end());
+  // Stacked block-diagonal pattern, then T^T K T at rest for the free-block pattern.
+  std::vector<Eigen::Triplet<double>> kt;
+  for (std::size_t b = 0; b < s.bodies.size(); ++b) {
+    const SparseMatrix& pat = s.bodies[b].assembler().pattern();
+    for (int col = 0; col < pat.outerSize(); ++col) {
+      for (SparseMatrix::InnerIterator it(pat, col); it; ++it) {
+        kt.emplace_back(s.offset[b] + it.row(), s.offset[b] + col, 1.0);
       }
     }
-    outer[jr + 1] = static_cast<int>(inner.size());
   }
-  s.kff.resize(nf, nf);
-  s.kff.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
-  std::copy(outer.begin(), outer.end(), s.kff.outerIndexPtr());
-  std::copy(inner.begin(), inner.end(), s.kff.innerIndexPtr());
-  std::fill_n(s.kff.valuePtr(), inner.size(), 0.0);
-  if (nf > 0) {
-    s.llt.cholmod().print = 0;
-    s.llt.analyzePattern(s.kff);
-    if (s.llt.info() != Eigen::Success) {
-      throw std::runtime_error(s.where + ": CHOLMOD analysis failed");
-    }
-  }
+  s.k_stacked.resize(s.ndof, s.ndof);
+  s.k_stacked.setFromTriplets(kt.begin(), kt.end());
+  s.build_free_pattern(s.tangent(Eigen::VectorXd::Zero(s.ndof), false));
 }
 
 EquilibriumSolver::~EquilibriumSolver() = default;
@@ -272,13 +436,21 @@ void EquilibriumSolver::set_prescribed_values(const Eigen::VectorXd& values_m) {
 const std::vector<int>& EquilibriumSolver::prescribed_dofs() const { return impl_->prescribed_dofs; }
 const std::vector<int>& EquilibriumSolver::free_dofs() const { return impl_->free_dofs; }
 const std::vector<int>& EquilibriumSolver::reduced_index() const { return impl_->reduced_index; }
-const ElasticForces& EquilibriumSolver::forces() const { return impl_->forces; }
-Tier EquilibriumSolver::tier() const { return impl_->forces.tier(); }
+const ElasticForces& EquilibriumSolver::forces() const { return impl_->bodies[0]; }
+int EquilibriumSolver::num_bodies() const { return static_cast<int>(impl_->bodies.size()); }
+const ElasticForces& EquilibriumSolver::body_forces(int body) const {
+  return impl_->bodies.at(static_cast<std::size_t>(body));
+}
+int EquilibriumSolver::body_offset(int body) const {
+  return impl_->offset.at(static_cast<std::size_t>(body));
+}
+int EquilibriumSolver::num_dofs() const { return impl_->ndof; }
+Tier EquilibriumSolver::tier() const { return impl_->bodies[0].tier(); }
 
 EquilibriumResult EquilibriumSolver::solve(const Eigen::VectorXd& forces_n,
                                            const NewtonOptions& options) {
   Impl& s = *impl_;
-  const int ndof = s.forces.num_dofs();
+  const int ndof = s.ndof;
   if (forces_n.size() != 0 && forces_n.size() != ndof) {
     throw std::invalid_argument(s.where + ": forces have " + std::to_string(forces_n.size()) +
                                 " entries, expected 0 or " + std::to_string(ndof));
@@ -331,10 +503,11 @@ EquilibriumResult EquilibriumSolver::solve(const Eigen::VectorXd& forces_n,
   s.residual(u, s.f_ext);
   result.force_scale_n = s.force_scale(s.f_ext);
   result.reaction_n = Eigen::VectorXd::Zero(ndof);
-  for (int dof : s.constrained_dofs) {
-    result.reaction_n[dof] = s.f_int[dof] - s.f_ext[dof];
+  for (int qi : s.constrained_dofs) {
+    const int dof = s.q_dof[qi];
+    result.reaction_n[dof] = s.rq[dof];
   }
-  s.forces.energy(u, &result.elements);
+  s.energy(u, &result.elements);
   result.displacement_m = std::move(u);
   return result;
 }
@@ -342,7 +515,7 @@ EquilibriumResult EquilibriumSolver::solve(const Eigen::VectorXd& forces_n,
 NewtonIncrement EquilibriumSolver::solve_from(const Eigen::VectorXd& forces_n,
                                               Eigen::VectorXd& u_m, const NewtonOptions& options) {
   Impl& s = *impl_;
-  const int ndof = s.forces.num_dofs();
+  const int ndof = s.ndof;
   if ((forces_n.size() != 0 && forces_n.size() != ndof) || u_m.size() != ndof ||
       !forces_n.allFinite() || !u_m.allFinite()) {
     throw std::invalid_argument(s.where + ": solve_from needs finite forces (0 or 3N) and u (3N)");

@@ -16,20 +16,36 @@
 
 #include <Eigen/Core>
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
 
 namespace neurosim::fem {
 
-struct EquilibriumDefinition {
+// A mesh tied to the host (the first mesh): each of its `tied_nodes` k follows the host,
+// u_B(k) = sum_a weights[k][a] u_A(host_nodes[k][a]) (a point of the host's boundary S').
+// The constraint is eliminated exactly (u = T q, K_q = T^T K T, r_q = T^T r).
+struct TiedMeshDefinition {
   const mesh::TetMesh* mesh{nullptr};  // only used during construction
+  MaterialMap materials;
+  std::vector<int> fixed_nodes;  // B's own supports (not tied)
+  std::vector<int> tied_nodes;
+  std::vector<std::array<int, 3>> host_nodes;
+  std::vector<std::array<double, 3>> weights;  // dimensionless, sum 1 per node
+};
+
+struct EquilibriumDefinition {
+  const mesh::TetMesh* mesh{nullptr};  // the host; only used during construction
   MaterialMap materials;
   Tier tier{Tier::kNonlinear};
   std::vector<int> fixed_nodes;  // u = 0 in x, y, z
-  // Prescribed components (values at load factor 1); the constrained dofs are fixed here, the
-  // values may be changed later with set_prescribed_values.
+  // Prescribed components on the host (values at load factor 1); the constrained dofs are
+  // fixed here, the values may be changed later with set_prescribed_values.
   std::vector<PrescribedDofs> prescribed;
+  // Meshes tied to the host, in the same tier. Displacements, forces and reactions are then
+  // stacked: the host's 3 N_A dofs, then each tied mesh's 3 N_B (body_offset).
+  std::vector<TiedMeshDefinition> tied;
 };
 
 struct NewtonOptions {
@@ -83,12 +99,16 @@ class EquilibriumSolver {
   NewtonIncrement solve_from(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m,
                              const NewtonOptions& options = {});
 
-  // Values of the prescribed components, in the order of expand_prescribed's dofs.
+  // Values of the prescribed components, in the order of expand_prescribed's dofs (host dofs).
   void set_prescribed_values(const Eigen::VectorXd& values_m);
   const std::vector<int>& prescribed_dofs() const;
   const std::vector<int>& free_dofs() const;      // reduced -> dof
   const std::vector<int>& reduced_index() const;  // dof -> reduced or -1
-  const ElasticForces& forces() const;
+  const ElasticForces& forces() const;  // the host's
+  int num_bodies() const;                // 1 + tied meshes
+  const ElasticForces& body_forces(int body) const;
+  int body_offset(int body) const;  // first stacked dof of a body
+  int num_dofs() const;             // all stacked dofs
   Tier tier() const;
 
  private:

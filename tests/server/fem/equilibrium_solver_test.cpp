@@ -130,6 +130,80 @@ TEST(FemEquilibriumSolver, InvertedElementRecoversWhenReleased) {
   }
 }
 
+// Two boxes, B on top of A, B's bottom nodes tied to A's top nodes (weights 1, 0, 0): the tied
+// pair must equal the merged mesh (one box of the same tetrahedra, B's material above) solved
+// as one body, in every tier: the tie is eliminated exactly.
+TEST(FemEquilibriumSolver, TiedMeshEqualsTheMergedMesh) {
+  const double e = 0.02;  // m
+  const mesh::TetMesh a = box_mesh({2, 2, 2, {0, 0, 0}, {e, e, e}, 0.0, 1});
+  const mesh::TetMesh b = box_mesh({2, 2, 2, {0, 0, e}, {e, e, 2 * e}, 0.0, 1});
+  const mesh::TetMesh merged = box_mesh({2, 2, 4, {0, 0, 0}, {e, e, 2 * e}, 0.0, 1});
+  const Material soft{3000.0, 0.45, "brain"}, stiff{30000.0, 0.4, "vessel"};
+  std::vector<int> tet_material;
+  for (const auto& t : merged.tets()) {
+    double z = 0.0;
+    for (int k = 0; k < 4; ++k) z += merged.vertices()[t[k]].z() / 4.0;
+    tet_material.push_back(z > e ? 1 : 0);
+  }
+  const MaterialMap merged_mats = MaterialMap::per_tet({soft, stiff}, tet_material);
+  auto node_at = [](const mesh::TetMesh& m, const Eigen::Vector3d& p) {
+    const auto ids = nodes_where(m, [&](const Eigen::Vector3d& q) { return (q - p).norm() < 1e-12; });
+    return ids.size() == 1 ? ids[0] : -1;
+  };
+  TiedMeshDefinition tie;
+  tie.mesh = &b;
+  tie.materials = MaterialMap::uniform(stiff);
+  for (int v : nodes_where(b, [&](const Eigen::Vector3d& p) { return p.z() < e + 1e-12; })) {
+    const int host = node_at(a, b.vertices()[v]);
+    ASSERT_GE(host, 0);
+    tie.tied_nodes.push_back(v);
+    tie.host_nodes.push_back({host, host, host});
+    tie.weights.push_back({1.0, 0.0, 0.0});
+  }
+  const std::vector<int> fixed_a = nodes_where(a, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
+  const std::vector<int> fixed_m =
+      nodes_where(merged, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
+  // A sideways and downward push on B's top corner (large enough to be nonlinear).
+  const Eigen::Vector3d push(0.02, 0.01, -0.05);  // N
+  const int corner_b = node_at(b, {e, e, 2 * e}), corner_m = node_at(merged, {e, e, 2 * e});
+  for (Tier tier : kTiers) {
+    EquilibriumDefinition def{&a, MaterialMap::uniform(soft), tier, fixed_a, {}, {tie}};
+    EquilibriumSolver pair(def);
+    Eigen::VectorXd f = Eigen::VectorXd::Zero(pair.num_dofs());
+    f.segment<3>(pair.body_offset(1) + 3 * corner_b) = push;
+    const EquilibriumResult rp = pair.solve(f);
+    EquilibriumSolver one({&merged, merged_mats, tier, fixed_m, {}});
+    Eigen::VectorXd fm = Eigen::VectorXd::Zero(3 * merged.num_vertices());
+    fm.segment<3>(3 * corner_m) = push;
+    const EquilibriumResult rm = one.solve(fm);
+    double diff = 0.0, rdiff = 0.0;
+    for (int body = 0; body < 2; ++body) {
+      const mesh::TetMesh& mb = body == 0 ? a : b;
+      for (std::size_t v = 0; v < mb.num_vertices(); ++v) {
+        const int w = node_at(merged, mb.vertices()[v]);
+        ASSERT_GE(w, 0);
+        diff = std::max(diff, (rp.displacement_m.segment<3>(pair.body_offset(body) + 3 * v) -
+                               rm.displacement_m.segment<3>(3 * w))
+                                  .cwiseAbs()
+                                  .maxCoeff());
+      }
+    }
+    for (int v : fixed_a) {
+      rdiff = std::max(rdiff, (rp.reaction_n.segment<3>(3 * v) -
+                               rm.reaction_n.segment<3>(3 * node_at(merged, a.vertices()[v])))
+                                  .cwiseAbs()
+                                  .maxCoeff());
+    }
+    const double max_u = rm.displacement_m.cwiseAbs().maxCoeff();
+    std::printf("%s: tied pair vs merged mesh: max |du| / max |u| = %.2e (max |u| %.2e m), "
+                "reactions %.2e N\n",
+                tier_name(tier), diff / max_u, max_u, rdiff);
+    EXPECT_GT(max_u, 1e-3) << tier_name(tier);
+    EXPECT_LT(diff, 1e-9 * max_u) << tier_name(tier);
+    EXPECT_LT(rdiff, 1e-9 * push.norm()) << tier_name(tier);
+  }
+}
+
 TEST(FemEquilibriumSolver, RefusesBadInput) {
   const mesh::TetMesh m = box_mesh({1, 1, 1, {0, 0, 0}, {0.01, 0.01, 0.01}, 0.0, 1});
   const MaterialMap mats = MaterialMap::uniform({3000.0, 0.45, "brain"});
