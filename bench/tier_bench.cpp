@@ -1,0 +1,104 @@
+// tier_bench: what each elasticity tier costs for the static equilibrium of a scene's host mesh.
+//   tier_bench [--csv] [--scene S]... [--force N]
+// Per scene and tier: set-up (assembly pattern + CHOLMOD symbolic analysis), one evaluation of
+// the internal forces and of the tangent, the first equilibrium under a tool-like load (a force
+// on the topmost surface node, in load increments) and one equilibrium update warm-started from
+// it after the load grew 5 % (what a worker refreshing the equilibrium does), with its Newton
+// iterations and the update rate it allows on one core. Best of 3 runs per timing.
+#include "common/cli.hpp"
+#include "common/clock.hpp"
+#include "server/fem/equilibrium_solver.hpp"
+#include "server/scene/compile.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace neurosim;
+using common::Clock;
+using common::ms_since;
+
+template <class F>
+double best_ms(int reps, F&& f) {
+  double best = 1e300;
+  for (int r = 0; r < reps; ++r) {
+    const auto t0 = Clock::now();
+    f();
+    best = std::min(best, ms_since(t0));
+  }
+  return best;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  bool csv = false;
+  std::vector<std::string> scenes{std::string(NEUROSIM_SOURCE_DIR) + "/scenes/cube_cylinder.scene",
+                                  std::string(NEUROSIM_SOURCE_DIR) + "/scenes/brain_artery.scene"};
+  double force_n = 0.3;
+  cli::Parser cli("tier_bench", "Static-equilibrium cost of each elasticity tier (host meshes).");
+  cli->add_flag("--csv", csv, "CSV output");
+  cli->add_option("--scene", scenes, "scene file(s)");
+  cli->add_option("--force", force_n, "tool-like force on the topmost surface node, N")
+      ->check(CLI::PositiveNumber);
+  if (auto rc = cli.parse(argc, argv)) return *rc;
+  try {
+    if (csv) {
+      std::printf("scene,mesh,tier,nodes,tets,setup_ms,force_ms,tangent_ms,first_solve_ms,"
+                  "first_iterations,update_ms,update_iterations,update_hz,max_u_mm\n");
+    } else {
+      std::printf("%-14s %-6s %-13s %6s %6s %9s %9s %10s %11s %5s %10s %5s %9s %8s\n", "scene",
+                  "mesh", "tier", "nodes", "tets", "setup ms", "force ms", "tangent ms",
+                  "first ms", "its", "update ms", "its", "update Hz", "max u mm");
+    }
+    for (const std::string& path : scenes) {
+      const scene::Model model = scene::load_model(path);
+      const scene::LoadedMesh& lm = model.meshes.front();  // the host
+      const mesh::TetMesh& m = lm.mesh;
+      int top = m.surface_vertices().front();
+      for (int v : m.surface_vertices()) {
+        if (m.vertices()[v].z() > m.vertices()[top].z()) top = v;
+      }
+      Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * m.num_vertices());
+      f[3 * top + 2] = -force_n;
+      for (fem::Tier tier : {fem::Tier::kLinear, fem::Tier::kCorotational, fem::Tier::kNonlinear}) {
+        std::unique_ptr<fem::EquilibriumSolver> solver;
+        const fem::MaterialMap mats = fem::MaterialMap::uniform(lm.material);
+        const double setup_ms = best_ms(3, [&] {
+          solver = std::make_unique<fem::EquilibriumSolver>(
+              fem::EquilibriumDefinition{&m, mats, tier, lm.fixed_nodes, {}, {}});
+        });
+        fem::EquilibriumResult first;
+        int first_its = 0;
+        const double first_ms = best_ms(3, [&] { first = solver->solve(f); });
+        for (const auto& inc : first.increments) first_its += static_cast<int>(inc.residual_n.size()) - 1;
+        Eigen::VectorXd fi;
+        fem::SparseMatrix k;
+        const double force_ms = best_ms(3, [&] { solver->forces().internal_force(first.displacement_m, fi); });
+        const double tangent_ms =
+            best_ms(3, [&] { solver->forces().tangent(first.displacement_m, false, k); });
+        int update_its = 0;
+        const Eigen::VectorXd f_more = 1.05 * f;
+        const double update_ms = best_ms(3, [&] {
+          Eigen::VectorXd u = first.displacement_m;
+          const fem::NewtonIncrement inc = solver->solve_from(f_more, u);
+          update_its = static_cast<int>(inc.residual_n.size()) - 1;
+        });
+        const double max_u_mm = 1e3 * first.displacement_m.cwiseAbs().maxCoeff();
+        const char* fmt = csv ? "%s,%s,%s,%zu,%zu,%.2f,%.3f,%.3f,%.2f,%d,%.2f,%d,%.1f,%.3f\n"
+                              : "%-14s %-6s %-13s %6zu %6zu %9.2f %9.3f %10.3f %11.2f %5d %10.2f %5d %9.1f %8.3f\n";
+        std::printf(fmt, model.name.c_str(), lm.id.c_str(), fem::tier_name(tier), m.num_vertices(),
+                    m.num_tets(), setup_ms, force_ms, tangent_ms, first_ms, first_its, update_ms,
+                    update_its, 1000.0 / update_ms, max_u_mm);
+        std::fflush(stdout);
+      }
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tier_bench: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
