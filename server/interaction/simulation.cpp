@@ -460,7 +460,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     if (b.body->cache_hit()) ++setup_.cache_hits;
     setup_.boundary_nodes += static_cast<int>(b.body->boundary_nodes().size());
     for (const auto& tie : b.body->ties())
-      setup_.tied_nodes += static_cast<int>(tie.tied_nodes.size());
+      setup_.tied_nodes += static_cast<int>(tie.tied_nodes().size());
     // Contact geometry: rest positions of contactable nodes on a grid.
     const auto& host = b.body->host();
     for (int v : b.body->contact_nodes()) b.rest_m.push_back(host.vertices()[v]);
@@ -861,7 +861,7 @@ void Model::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda
     u_m = u_host_m;
     return;
   }
-  b.body->embedded_displacement(e.tie, u_host_m, u_m);
+  b.body->ties().at(static_cast<std::size_t>(e.tie)).displacement(u_host_m, u_m);
 }
 
 namespace {
@@ -959,9 +959,9 @@ double SimulationImpl::tie_residual_m() const {
     const BodyModel& b = model_->bodies_[bi];
     if (b.body->ties().empty()) continue;
     state_->host_field(*model_, static_cast<int>(bi), u_host);
-    for (std::size_t t = 0; t < b.body->ties().size(); ++t) {
-      b.body->embedded_displacement(static_cast<int>(t), u_host, u_emb);
-      worst = std::max(worst, b.body->tie_residual(static_cast<int>(t), u_host, u_emb));
+    for (const auto& tie : b.body->ties()) {
+      tie.displacement(u_host, u_emb);
+      worst = std::max(worst, tie.residual(u_host, u_emb));
     }
   }
   return worst;
