@@ -54,25 +54,9 @@ CoupledBody::CoupledBody(int host_index, const mesh::TetMesh& host, const fem::M
 int CoupledBody::add_sliding_rows(const std::vector<HostSlidingRow>& rows,
                                   const std::string& what) {
   if (finalized_) throw std::logic_error("CoupledBody::add_sliding_rows after finalize");
+  check_sliding_rows(rows, static_cast<int>(host_->num_vertices()), what);
   const int first = static_cast<int>(sliding_rows_.size());
-  const int n = static_cast<int>(host_->num_vertices());
-  for (std::size_t k = 0; k < rows.size(); ++k) {
-    const auto& r = rows[k];
-    double sum = 0.0;
-    for (int a = 0; a < 3; ++a) {
-      if (r.nodes[a] < 0 || r.nodes[a] >= n || !std::isfinite(r.weights[a]) ||
-          r.weights[a] < -1e-12) {
-        throw std::invalid_argument(what + ": bad sliding row " + std::to_string(k) +
-                                    " (host node or weight)");
-      }
-      sum += r.weights[a];
-    }
-    if (std::abs(sum - 1.0) > 1e-9 || !r.normal.allFinite() ||
-        std::abs(r.normal.norm() - 1.0) > 1e-9) {
-      throw std::invalid_argument(what + ": sliding row " + std::to_string(k) +
-                                  " has weights summing to " + std::to_string(sum) +
-                                  " or a normal that is not unit");
-    }
+  for (const auto& r : rows) {
     for (int v : r.nodes) sliding_node_[v] = 1;
     sliding_rows_.push_back(r);
   }
@@ -135,7 +119,15 @@ void CoupledBody::finalize() {
   // The baseline's operator (P = L_bb K_add, relaxation) at load, not on first use.
   if (iterative_requested_ && m3 > 0)
     iterative_ = std::make_unique<IterativeTie>(*this, iterative_options_);
-  compute_sliding_operator();
+  if (!sliding_rows_.empty()) {
+    t0 = std::chrono::steady_clock::now();
+    sliding_ = SlidingOperator(SlidingOperatorDefinition{
+        std::move(sliding_rows_), solver_.get(),
+        [this](const Eigen::MatrixXd& b, Eigen::MatrixXd& x) { coupled_solve_reduced(b, x); },
+        kBlockColumns});
+    sliding_rows_.clear();
+    timing_.sliding_s = seconds_since(t0);
+  }
 }
 
 void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const {
@@ -156,41 +148,6 @@ void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixX
     if (red >= 0) rhs.row(red) -= gv.row(r);
   }
   solver_->solve_reduced(rhs, x);
-}
-
-void CoupledBody::compute_sliding_operator() {
-  const int ns = static_cast<int>(sliding_rows_.size());
-  if (ns == 0) return;
-  const auto t0 = std::chrono::steady_clock::now();
-  // J_A on the free dofs: row k = sum_a w_a n^T at A's nodes (fixed dofs do not move).
-  const auto& reduced = solver_->reduced_index();
-  const int nf = solver_->num_free_dofs();
-  std::vector<Eigen::Triplet<double>> entries;
-  entries.reserve(9 * ns);
-  for (int k = 0; k < ns; ++k) {
-    const auto& r = sliding_rows_[k];
-    for (int a = 0; a < 3; ++a)
-      for (int d = 0; d < 3; ++d) {
-        const int red = reduced[3 * r.nodes[a] + d];
-        if (red >= 0 && r.weights[a] * r.normal[d] != 0.0)
-          entries.emplace_back(k, red, r.weights[a] * r.normal[d]);
-      }
-  }
-  j_slide_.resize(ns, nf);
-  j_slide_.setFromTriplets(entries.begin(), entries.end());
-  // W_A = J_A L J_A^T by block solves with the rows' force patterns as right-hand sides.
-  w_slide_.setZero(ns, ns);
-  Eigen::MatrixXd rhs, x;
-  for (int first = 0; first < ns; first += kBlockColumns) {
-    const int n = std::min(kBlockColumns, ns - first);
-    rhs = Eigen::MatrixXd(j_slide_.middleRows(first, n).transpose());
-    coupled_solve_reduced(rhs, x);
-    w_slide_.middleCols(first, n).noalias() = j_slide_ * x;
-  }
-  w_slide_ = (0.5 * (w_slide_ + w_slide_.transpose())).eval();
-  if (!w_slide_.allFinite())
-    throw std::runtime_error("CoupledBody: sliding compliance is not finite");
-  timing_.sliding_s = seconds_since(t0);
 }
 
 void CoupledBody::coupled_displacement(const Eigen::MatrixXd& forces_n,

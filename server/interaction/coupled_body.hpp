@@ -13,6 +13,7 @@
 #include "server/fem/static_solver.hpp"
 #include "server/interaction/boundary_cache.hpp"
 #include "server/interaction/iterative_tie.hpp"
+#include "server/interaction/sliding_operator.hpp"
 #include "server/interaction/tie_condensation.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
@@ -27,14 +28,6 @@
 #include <vector>
 
 namespace neurosim::interaction {
-
-// Host side of one row of a sliding coupling (sliding_coupling.hpp): the row measures
-// n . sum_a w_a u_A(node_a), the normal motion of a point of S' (dimensionless weights, unit n).
-struct HostSlidingRow {
-  std::array<int, 3> nodes{};  // A's node ids (a triangle of S')
-  std::array<double, 3> weights{};
-  Eigen::Vector3d normal{Eigen::Vector3d::Zero()};
-};
 
 struct CoupledBodyTiming {
   double factor_s{0.0};    // host assembly + factorization, unit s
@@ -55,16 +48,13 @@ class CoupledBody {
   void add_tie(const TieDefinition& tie);
 
   // Registers the host side of sliding rows (before finalize; the rows of all calls are stacked,
-  // returns the index of the first one). Their S' nodes are not contactable; finalize computes
-  // W_A = J_A L J_A^T over them (coupled compliance L, ties included) and every contact column
-  // computed afterwards also records J_A L[:, slot]. Throws on a bad row (what: for messages).
+  // returns the index of the first one). Their S' nodes are not contactable; finalize builds
+  // the sliding operator over them (sliding()). Throws std::invalid_argument on a bad row
+  // (check_sliding_rows; what: for messages).
   int add_sliding_rows(const std::vector<HostSlidingRow>& rows, const std::string& what);
-  int num_sliding_rows() const { return static_cast<int>(sliding_rows_.size()); }
-  const std::vector<HostSlidingRow>& sliding_rows() const { return sliding_rows_; }
-  // W_A (rows x rows), unit m/N.
-  const Eigen::MatrixXd& sliding_compliance() const { return w_slide_; }
-  // J_A on the host's free dofs (sliding rows x free dofs, dimensionless).
-  const Eigen::SparseMatrix<double, Eigen::RowMajor>& sliding_operator() const { return j_slide_; }
+  // After finalize: the stacked rows, J_A on the free dofs, W_A = J_A L J_A^T with the coupled
+  // compliance L (ties included); contact columns add J_A L[:, slot] through it.
+  const SlidingOperator& sliding() const { return sliding_; }
   // Coupled host displacement (ties included) for arbitrary nodal forces (3N_A, unit N), unit m.
   // Two sparse solves when the body has ties, one otherwise; the matrix form solves all its
   // columns (3N_A x k load cases) as one block.
@@ -131,13 +121,11 @@ class CoupledBody {
   std::vector<int> contact_slot_;  // A node -> contact slot or -1
   std::vector<mesh::Vec3> contact_normals_;
   BoundaryOperator op_;  // L_bb, L_cb, K_add, G (boundary_cache.hpp)
-  std::vector<HostSlidingRow> sliding_rows_;
-  std::vector<char> sliding_node_;                        // A node -> on a sliding row
-  Eigen::SparseMatrix<double, Eigen::RowMajor> j_slide_;  // J_A on the free dofs (rows x nf)
-  Eigen::MatrixXd w_slide_;                               // J_A L J_A^T, unit m/N
+  std::vector<HostSlidingRow> sliding_rows_;  // added before finalize, then moved to sliding_
+  std::vector<char> sliding_node_;            // A node -> on a sliding row
+  SlidingOperator sliding_;
   // X = coupled L B for free-dof right-hand sides (ties by Woodbury: two solves).
   void coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const;
-  void compute_sliding_operator();
   CoupledBodyTiming timing_;
   bool finalized_{false};
   fem::Material material_;

@@ -456,7 +456,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     setup_.operator_s += tm.operator_s;
     setup_.sliding_s += tm.sliding_s;
     b.sliding_offset = num_sliding_;
-    num_sliding_ += b.body->num_sliding_rows();
+    num_sliding_ += b.body->sliding().size();
     if (b.body->cache_hit()) ++setup_.cache_hits;
     setup_.boundary_nodes += static_cast<int>(b.body->boundary_nodes().size());
     for (const auto& tie : b.body->ties())
@@ -489,7 +489,7 @@ State::State(const Model& m) {
     bs.columns = std::make_unique<ContactColumns>(*b.body, m.options_.cache_full_field_columns);
     bs.stamp.assign(b.rest_m.size(), -1);
     bs.row_of_slot.assign(b.rest_m.size(), -1);
-    bs.sliding_lambda.setZero(b.body->num_sliding_rows());
+    bs.sliding_lambda.setZero(b.body->sliding().size());
     if (m.options_.precompute_contact_columns) {
       const auto t0 = Clock::now();
       std::vector<int> all(b.rest_m.size());
@@ -520,9 +520,9 @@ void State::reserve_workspace(const Model& m, int tools) {
   rows_.reserve(max_contact);
   // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
   for (const auto& b : m.bodies_) {
-    const int o = b.sliding_offset, ns = b.body->num_sliding_rows();
+    const int o = b.sliding_offset, ns = b.body->sliding().size();
     if (ns == 0) continue;
-    w_.block(o, o, ns, ns) = b.body->sliding_compliance();
+    w_.block(o, o, ns, ns) = b.body->sliding().compliance();
     for (std::size_t i = 0; i < b.slides.size(); ++i) {
       const auto& sl = *b.slides[i];
       const int f = o + b.slide_first_row[i];
@@ -704,7 +704,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     }
     if (ns == 0) continue;
     w_.col(i).head(ns).setZero();
-    const int rows_a = body_a.num_sliding_rows();
+    const int rows_a = body_a.sliding().size();
     if (rows_a > 0) {
       const int o = m.bodies_[a.body].sliding_offset;
       const Vec3 push = -na;
@@ -751,7 +751,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     auto& bs = bodies_[bi];
     bs.force_slots.clear();
     bs.forces_n.clear();
-    const int rows_b = b.body->num_sliding_rows();
+    const int rows_b = b.body->sliding().size();
     if (rows_b > 0) bs.sliding_lambda = lambda_.segment(b.sliding_offset, rows_b);
   }
   for (int r = 0; r < nc; ++r) {
@@ -835,7 +835,7 @@ void Model::host_field(const BodyModel& b, const std::vector<int>& slots,
   Eigen::VectorXd f = nodal_forces_n.size() == n3 ? nodal_forces_n : Eigen::VectorXd::Zero(n3);
   for (std::size_t k = 0; k < slots.size(); ++k)
     f.segment<3>(3 * b.body->contact_nodes()[slots[k]]) += forces_n[k];
-  const auto& rows = b.body->sliding_rows();
+  const auto& rows = b.body->sliding().rows();
   for (std::size_t k = 0; k < rows.size() && sliding_force; ++k) {
     const double l = sliding_lambda_n[static_cast<int>(k)];
     if (l == 0.0) continue;
