@@ -3,19 +3,18 @@
 
 #include "common/clock.hpp"
 
+#include <Eigen/LU>
 #include <Eigen/SparseCore>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
-#include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <iostream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace neurosim::interaction {
 

@@ -18,10 +18,8 @@
 #include "server/mesh/tet_mesh.hpp"
 
 #include <Eigen/Core>
-#include <Eigen/LU>
 #include <Eigen/SparseCore>
 
-#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
