@@ -314,29 +314,29 @@ BodyResult solve_body(const neurosim::interaction::Simulation& sim,
   for (std::size_t t = 0; t < ties.size(); ++t) {
     const auto& tie = ties[t];
     MeshResult rb;
-    sim.displacements(snapshot, tie.mesh, rb.u_m);
+    sim.displacements(snapshot, tie.mesh(), rb.u_m);
     const auto k_b = neurosim::fem::assemble_stiffness(
-        *tie.geometry, neurosim::fem::MaterialMap::uniform(tie.material));
+        tie.geometry(), neurosim::fem::MaterialMap::uniform(tie.material()));
     const Eigen::VectorXd internal = k_b * rb.u_m;  // force B's elements need at its nodes
-    const int nb = static_cast<int>(tie.geometry->num_vertices());
+    const int nb = static_cast<int>(tie.geometry().num_vertices());
     rb.constrained.assign(nb, 0);
     rb.reaction_n = Eigen::VectorXd::Zero(3 * nb);
-    for (int v : tie.fixed_nodes) {
+    for (int v : tie.fixed_nodes()) {
       rb.constrained[v] = 1;
       rb.reaction_n.segment<3>(3 * v) = internal.segment<3>(3 * v);
     }
-    for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k) {
-      const Vec3 pull = internal.segment<3>(3 * tie.tied_nodes[k]);  // A holds B with this
+    for (std::size_t k = 0; k < tie.tied_nodes().size(); ++k) {
+      const Vec3 pull = internal.segment<3>(3 * tie.tied_nodes()[k]);  // A holds B with this
       for (int a = 0; a < 3; ++a) {
-        const int node = body.boundary_nodes()[tie.host_slots[k][a]];
-        coupling_on_host.segment<3>(3 * node) -= tie.weights[k][a] * pull;
+        const int node = tie.host_nodes()[k][a];
+        coupling_on_host.segment<3>(3 * node) -= tie.weights()[k][a] * pull;
       }
     }
-    const double residual = body.tie_residual(static_cast<int>(t), r.u_m, rb.u_m);
-    std::cout << std::setprecision(6) << "  tied: " << sim.mesh_id(tie.mesh) << " ("
-              << tie.tied_nodes.size() << " surface nodes on " << body.boundary_nodes().size()
+    const double residual = tie.residual(r.u_m, rb.u_m);
+    std::cout << std::setprecision(6) << "  tied: " << sim.mesh_id(tie.mesh()) << " ("
+              << tie.tied_nodes().size() << " surface nodes on " << body.boundary_nodes().size()
               << " nodes of S'), tie residual max |u_A - u_B| = " << residual << " m\n";
-    out.embedded.emplace_back(tie.mesh, std::move(rb));
+    out.embedded.emplace_back(tie.mesh(), std::move(rb));
   }
   // Reactions at the host's fixed and prescribed nodes; everywhere else the residual is the
   // solution's equilibrium error, reported.
@@ -450,9 +450,9 @@ int run(const RunOptions& opt) {
                         model.meshes[static_cast<std::size_t>(m)].material, load_s + build_s);
       const MeshLoads loads = gather_loads(model, m);
       for (const auto& tie : body->ties()) {
-        in_body[static_cast<std::size_t>(tie.mesh)] = 1;
-        if (gather_loads(model, tie.mesh).count > 0) {
-          throw std::runtime_error(scene_path + ": mesh \"" + sim->mesh_id(tie.mesh) +
+        in_body[static_cast<std::size_t>(tie.mesh())] = 1;
+        if (gather_loads(model, tie.mesh()).count > 0) {
+          throw std::runtime_error(scene_path + ": mesh \"" + sim->mesh_id(tie.mesh()) +
                                    "\" is tied to \"" + sim->mesh_id(m) +
                                    "\": neurosim-solve takes loads and prescribed displacements "
                                    "on the host only (or use --uncoupled)");

@@ -29,7 +29,7 @@ void ContactColumns::ensure(const std::vector<int>& slots) {
   const int nf = solver.num_free_dofs();
   const int s3 = 3 * static_cast<int>(contact.size());
   const int n3 = 3 * static_cast<int>(body_->host().num_vertices());
-  const bool sliding = body_->num_sliding_rows() > 0;
+  const SlidingOperator& sliding = body_->sliding();
   const std::size_t chunk = static_cast<std::size_t>(CoupledBody::kBlockColumns / 3);
   Eigen::MatrixXd x;
   for (std::size_t first = 0; first < missing.size(); first += chunk) {
@@ -44,7 +44,7 @@ void ContactColumns::ensure(const std::vector<int>& slots) {
         for (int a = 0; a < 3; ++a) col(r, a) = x(reduced[3 * contact[r / 3] + r % 3], c + a);
       column_of_[part[j]] = static_cast<int>(columns_.size());
       columns_.push_back(std::move(col));
-      if (sliding) sliding_columns_.push_back(body_->sliding_operator() * x.middleCols(c, 3));
+      if (sliding.size() > 0) sliding_columns_.emplace_back(sliding.apply(x.middleCols(c, 3)));
       if (keep_full_) {
         Columns full = Columns::Zero(n3, 3);
         for (int r = 0; r < nf; ++r) full.row(solver.free_dofs()[r]) = x.block<1, 3>(r, c);

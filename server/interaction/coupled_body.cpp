@@ -1,20 +1,20 @@
+// CoupledBody: host factor, boundary operator (Woodbury), coupled solves (see the header).
 #include "server/interaction/coupled_body.hpp"
 
 #include "common/clock.hpp"
 
+#include <Eigen/LU>
 #include <Eigen/SparseCore>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
-#include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <iostream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace neurosim::interaction {
 
@@ -53,25 +53,9 @@ CoupledBody::CoupledBody(int host_index, const mesh::TetMesh& host, const fem::M
 int CoupledBody::add_sliding_rows(const std::vector<HostSlidingRow>& rows,
                                   const std::string& what) {
   if (finalized_) throw std::logic_error("CoupledBody::add_sliding_rows after finalize");
+  check_sliding_rows(rows, static_cast<int>(host_->num_vertices()), what);
   const int first = static_cast<int>(sliding_rows_.size());
-  const int n = static_cast<int>(host_->num_vertices());
-  for (std::size_t k = 0; k < rows.size(); ++k) {
-    const auto& r = rows[k];
-    double sum = 0.0;
-    for (int a = 0; a < 3; ++a) {
-      if (r.nodes[a] < 0 || r.nodes[a] >= n || !std::isfinite(r.weights[a]) ||
-          r.weights[a] < -1e-12) {
-        throw std::invalid_argument(what + ": bad sliding row " + std::to_string(k) +
-                                    " (host node or weight)");
-      }
-      sum += r.weights[a];
-    }
-    if (std::abs(sum - 1.0) > 1e-9 || !r.normal.allFinite() ||
-        std::abs(r.normal.norm() - 1.0) > 1e-9) {
-      throw std::invalid_argument(what + ": sliding row " + std::to_string(k) +
-                                  " has weights summing to " + std::to_string(sum) +
-                                  " or a normal that is not unit");
-    }
+  for (const auto& r : rows) {
     for (int v : r.nodes) sliding_node_[v] = 1;
     sliding_rows_.push_back(r);
   }
@@ -94,120 +78,23 @@ void CoupledBody::select_contact_nodes() {
 
 void CoupledBody::add_tie(const TieDefinition& def) {
   if (finalized_) throw std::logic_error("CoupledBody::add_tie after finalize");
-  if (def.embedded == nullptr) throw std::invalid_argument("CoupledBody::add_tie: no mesh");
-  const int mesh_index = def.mesh;
-  const mesh::TetMesh& embedded = *def.embedded;
-  const fem::Material& material = def.material;
-  const std::vector<int>& embedded_fixed = def.fixed_nodes;
-  const std::vector<int>& embedded_surface_nodes = def.surface_nodes;
-  const std::vector<std::array<int, 3>>& tri_nodes = def.tri_nodes;
-  const std::vector<std::array<double, 3>>& weights = def.weights;
-  const double max_map_distance_m = def.max_map_distance_m;
-  if (tri_nodes.size() != embedded_surface_nodes.size() ||
-      weights.size() != embedded_surface_nodes.size()) {
-    throw std::invalid_argument("CoupledBody::add_tie: coupling map sizes differ");
-  }
   const auto t0 = std::chrono::steady_clock::now();
-  EmbeddedTie tie;
-  tie.mesh = mesh_index;
-  tie.geometry = &embedded;
-  tie.material = material;
-  tie.fixed_nodes = embedded_fixed;
-  std::sort(tie.fixed_nodes.begin(), tie.fixed_nodes.end());
-  tie.max_map_distance_m = max_map_distance_m;
-  std::vector<std::array<int, 3>> tris;
-  const int nb = static_cast<int>(embedded.num_vertices());
-  for (std::size_t k = 0; k < embedded_surface_nodes.size(); ++k) {
-    const int v = embedded_surface_nodes[k];
-    if (v < 0 || v >= nb) {
-      throw std::invalid_argument("CoupledBody::add_tie: embedded node " + std::to_string(v) +
-                                  " out of range");
-    }
-    // A fixed node of B stays fixed: tying it too would over-constrain A.
-    if (std::binary_search(tie.fixed_nodes.begin(), tie.fixed_nodes.end(), v)) continue;
-    double sum = 0.0;
-    for (int a = 0; a < 3; ++a) {
-      const int h = tri_nodes[k][a];
-      if (h < 0 || h >= static_cast<int>(host_->num_vertices()) || !std::isfinite(weights[k][a])) {
-        throw std::invalid_argument(
-            "CoupledBody::add_tie: bad coupling map entry for embedded node " + std::to_string(v));
-      }
-      sum += weights[k][a];
-    }
-    if (std::abs(sum - 1.0) > 1e-9) {
-      throw std::invalid_argument("CoupledBody::add_tie: weights of embedded node " +
-                                  std::to_string(v) + " sum to " + std::to_string(sum));
-    }
-    tie.tied_nodes.push_back(v);
-    tie.weights.push_back(weights[k]);
-    tris.push_back(tri_nodes[k]);
-  }
-  if (tie.tied_nodes.empty())
-    throw std::invalid_argument("CoupledBody::add_tie: no node of the embedded mesh to tie");
-
-  // Condensation of B onto its tied dofs: S_B = K_ss - K_si K_ii^-1 K_is.
-  std::vector<int> constrained = tie.fixed_nodes;
-  constrained.insert(constrained.end(), tie.tied_nodes.begin(), tie.tied_nodes.end());
-  std::sort(constrained.begin(), constrained.end());
-  const auto materials = fem::MaterialMap::uniform(material);
-  fem::SparseMatrix k_b;
-  const int t = static_cast<int>(tie.tied_nodes.size());
-  std::vector<int> tied_dof_index(3 * nb, -1);
-  for (int k = 0; k < t; ++k)
-    for (int a = 0; a < 3; ++a) tied_dof_index[3 * tie.tied_nodes[k] + a] = 3 * k + a;
-  if (static_cast<int>(constrained.size()) < nb) {
-    fem::SolverOptions opts;
-    opts.check_rigid_modes = false;  // the whole surface is fixed: no rigid mode is left
-    tie.interior = std::make_unique<fem::StaticSolver>(embedded, materials, constrained, opts);
-    k_b = tie.interior->stiffness();
-  } else {
-    k_b = fem::assemble_stiffness(embedded, materials);
-  }
-  // Blocks of K_B kept sparse: K_ss (tied x tied) and K_is (interior free x tied). S_B itself
-  // is never formed (dense 3t x 3t); finalize() condenses J^T S_B J directly.
-  std::vector<Eigen::Triplet<double>> ss, is;
-  const int nf = tie.interior ? tie.interior->num_free_dofs() : 0;
-  for (int c = 0; c < k_b.outerSize(); ++c) {
-    const int tc = tied_dof_index[c];
-    if (tc < 0) continue;
-    for (fem::SparseMatrix::InnerIterator it(k_b, c); it; ++it) {
-      const int r = static_cast<int>(it.row());
-      if (tied_dof_index[r] >= 0) {
-        ss.emplace_back(tied_dof_index[r], tc, it.value());
-      } else if (nf > 0 && tie.interior->reduced_index()[r] >= 0) {
-        is.emplace_back(tie.interior->reduced_index()[r], tc, it.value());
-      }
-    }
-  }
-  tie.k_ss.resize(3 * t, 3 * t);
-  tie.k_ss.setFromTriplets(ss.begin(), ss.end());
-  tie.k_is.resize(nf, 3 * t);
-  tie.k_is.setFromTriplets(is.begin(), is.end());
+  ties_.emplace_back(def, static_cast<int>(host_->num_vertices()));
   timing_.condense_s += seconds_since(t0);
-  pending_tri_nodes_.push_back(std::move(tris));
-  ties_.push_back(std::move(tie));
 }
 
 void CoupledBody::finalize() {
   if (finalized_) return;
   finalized_ = true;
   auto t0 = std::chrono::steady_clock::now();
-  for (const auto& tris : pending_tri_nodes_)
-    for (const auto& tri : tris)
+  for (const auto& tie : ties_)
+    for (const auto& tri : tie.host_nodes())
       boundary_nodes_.insert(boundary_nodes_.end(), tri.begin(), tri.end());
   std::sort(boundary_nodes_.begin(), boundary_nodes_.end());
   boundary_nodes_.erase(std::unique(boundary_nodes_.begin(), boundary_nodes_.end()),
                         boundary_nodes_.end());
   for (std::size_t s = 0; s < boundary_nodes_.size(); ++s)
     boundary_slot_[boundary_nodes_[s]] = static_cast<int>(s);
-  for (std::size_t i = 0; i < ties_.size(); ++i) {
-    auto& tie = ties_[i];
-    tie.host_slots.resize(tie.tied_nodes.size());
-    for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k)
-      for (int a = 0; a < 3; ++a)
-        tie.host_slots[k][a] = boundary_slot_[pending_tri_nodes_[i][k][a]];
-  }
-  pending_tri_nodes_.clear();
   select_contact_nodes();
   const int m3 = 3 * static_cast<int>(boundary_nodes_.size());
   if (m3 > 0) {
@@ -231,7 +118,15 @@ void CoupledBody::finalize() {
   // The baseline's operator (P = L_bb K_add, relaxation) at load, not on first use.
   if (iterative_requested_ && m3 > 0)
     iterative_ = std::make_unique<IterativeTie>(*this, iterative_options_);
-  compute_sliding_operator();
+  if (!sliding_rows_.empty()) {
+    t0 = std::chrono::steady_clock::now();
+    sliding_ = SlidingOperator(SlidingOperatorDefinition{
+        std::move(sliding_rows_), solver_.get(),
+        [this](const Eigen::MatrixXd& b, Eigen::MatrixXd& x) { coupled_solve_reduced(b, x); },
+        kBlockColumns});
+    sliding_rows_.clear();
+    timing_.sliding_s = seconds_since(t0);
+  }
 }
 
 void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const {
@@ -252,41 +147,6 @@ void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixX
     if (red >= 0) rhs.row(red) -= gv.row(r);
   }
   solver_->solve_reduced(rhs, x);
-}
-
-void CoupledBody::compute_sliding_operator() {
-  const int ns = static_cast<int>(sliding_rows_.size());
-  if (ns == 0) return;
-  const auto t0 = std::chrono::steady_clock::now();
-  // J_A on the free dofs: row k = sum_a w_a n^T at A's nodes (fixed dofs do not move).
-  const auto& reduced = solver_->reduced_index();
-  const int nf = solver_->num_free_dofs();
-  std::vector<Eigen::Triplet<double>> entries;
-  entries.reserve(9 * ns);
-  for (int k = 0; k < ns; ++k) {
-    const auto& r = sliding_rows_[k];
-    for (int a = 0; a < 3; ++a)
-      for (int d = 0; d < 3; ++d) {
-        const int red = reduced[3 * r.nodes[a] + d];
-        if (red >= 0 && r.weights[a] * r.normal[d] != 0.0)
-          entries.emplace_back(k, red, r.weights[a] * r.normal[d]);
-      }
-  }
-  j_slide_.resize(ns, nf);
-  j_slide_.setFromTriplets(entries.begin(), entries.end());
-  // W_A = J_A L J_A^T by block solves with the rows' force patterns as right-hand sides.
-  w_slide_.setZero(ns, ns);
-  Eigen::MatrixXd rhs, x;
-  for (int first = 0; first < ns; first += kBlockColumns) {
-    const int n = std::min(kBlockColumns, ns - first);
-    rhs = Eigen::MatrixXd(j_slide_.middleRows(first, n).transpose());
-    coupled_solve_reduced(rhs, x);
-    w_slide_.middleCols(first, n).noalias() = j_slide_ * x;
-  }
-  w_slide_ = (0.5 * (w_slide_ + w_slide_.transpose())).eval();
-  if (!w_slide_.allFinite())
-    throw std::runtime_error("CoupledBody: sliding compliance is not finite");
-  timing_.sliding_s = seconds_since(t0);
 }
 
 void CoupledBody::coupled_displacement(const Eigen::MatrixXd& forces_n,
@@ -347,27 +207,7 @@ void CoupledBody::compute_boundary_operator() {
   // Coupling operator: K_add = sum J^T S_B J, G = (I + K_add L_bb)^-1 K_add, factored once.
   t0 = std::chrono::steady_clock::now();
   op_.k_add.setZero(m3, m3);
-  for (const auto& tie : ties_) {
-    const int t = static_cast<int>(tie.tied_nodes.size());
-    Eigen::SparseMatrix<double> j(3 * t, m3);
-    std::vector<Eigen::Triplet<double>> entries;
-    entries.reserve(9 * t);
-    for (int k = 0; k < t; ++k)
-      for (int v = 0; v < 3; ++v)
-        for (int a = 0; a < 3; ++a)
-          entries.emplace_back(3 * k + a, 3 * tie.host_slots[k][v] + a, tie.weights[k][v]);
-    j.setFromTriplets(entries.begin(), entries.end());
-    // J^T S_B J = J^T K_ss J - (K_is J)^T K_ii^-1 (K_is J): one solve with 3m right-hand sides.
-    const Eigen::SparseMatrix<double> jt = j.transpose();
-    const Eigen::SparseMatrix<double> ssj = jt * (tie.k_ss * j);
-    op_.k_add += Eigen::MatrixXd(ssj);
-    if (tie.k_is.rows() > 0) {
-      const Eigen::MatrixXd kj = Eigen::MatrixXd(tie.k_is * j);
-      Eigen::MatrixXd xi;
-      tie.interior->solve_reduced(kj, xi);
-      op_.k_add.noalias() -= kj.transpose() * xi;
-    }
-  }
+  for (const auto& tie : ties_) tie.add_stiffness(boundary_slot_, op_.k_add);
   op_.k_add = (0.5 * (op_.k_add + op_.k_add.transpose())).eval();
   Eigen::MatrixXd m = Eigen::MatrixXd::Identity(m3, m3);
   m.noalias() += op_.k_add * op_.l_bb;
@@ -385,11 +225,14 @@ std::uint64_t CoupledBody::cache_key() const {
   key.add(boundary_nodes_);
   key.add(contact_nodes_);
   for (const auto& tie : ties_) {
-    key.add_mesh(*tie.geometry, tie.material);
-    key.add(tie.fixed_nodes);
-    key.add(tie.tied_nodes);
-    key.add(tie.host_slots);
-    key.add(tie.weights);
+    std::vector<std::array<int, 3>> host_slots(tie.host_nodes().size());
+    for (std::size_t k = 0; k < host_slots.size(); ++k)
+      for (int a = 0; a < 3; ++a) host_slots[k][a] = boundary_slot_[tie.host_nodes()[k][a]];
+    key.add_mesh(tie.geometry(), tie.material());
+    key.add(tie.fixed_nodes());
+    key.add(tie.tied_nodes());
+    key.add(host_slots);
+    key.add(tie.weights());
   }
   return key.value();
 }
@@ -468,38 +311,6 @@ void CoupledBody::host_displacement(const std::vector<int>& slots,
     for (int r = 0; r < m3; ++r) f[3 * boundary_nodes_[r / 3] + r % 3] += f_b[r];
   }
   solver_->solve(f, u_host_m);
-}
-
-void CoupledBody::embedded_displacement(int tie_index, const Eigen::VectorXd& u_host_m,
-                                        Eigen::VectorXd& u_m) const {
-  const auto& tie = ties_.at(tie_index);
-  const int t = static_cast<int>(tie.tied_nodes.size());
-  Eigen::VectorXd u_s(3 * t);
-  for (int k = 0; k < t; ++k) {
-    Eigen::Vector3d u = Eigen::Vector3d::Zero();
-    for (int a = 0; a < 3; ++a)
-      u += tie.weights[k][a] * u_host_m.segment<3>(3 * boundary_nodes_[tie.host_slots[k][a]]);
-    u_s.segment<3>(3 * k) = u;
-  }
-  if (tie.interior) {
-    u_m = tie.interior->solve_prescribed(tie.tied_nodes, u_s).displacement_m;
-  } else {
-    u_m.setZero(3 * static_cast<int>(tie.geometry->num_vertices()));
-    for (int k = 0; k < t; ++k) u_m.segment<3>(3 * tie.tied_nodes[k]) = u_s.segment<3>(3 * k);
-  }
-}
-
-double CoupledBody::tie_residual(int tie_index, const Eigen::VectorXd& u_host_m,
-                                 const Eigen::VectorXd& u_embedded_m) const {
-  const auto& tie = ties_.at(tie_index);
-  double worst = 0.0;
-  for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k) {
-    Eigen::Vector3d u = Eigen::Vector3d::Zero();
-    for (int a = 0; a < 3; ++a)
-      u += tie.weights[k][a] * u_host_m.segment<3>(3 * boundary_nodes_[tie.host_slots[k][a]]);
-    worst = std::max(worst, (u - u_embedded_m.segment<3>(3 * tie.tied_nodes[k])).norm());
-  }
-  return worst;
 }
 
 Eigen::Matrix3d CoupledBody::host_block(int slot_i, int slot_j) const {

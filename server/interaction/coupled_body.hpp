@@ -2,9 +2,8 @@
 //
 // Formulation (exact, no regularization, also when B floats): every free surface node k of B is
 // tied to its closest point on A's new boundary S' (barycentric weights w), u_B,k = sum w u_A.
-// B is condensed onto its tied nodes by its Schur complement S_B = K_ss - K_si K_ii^-1 K_is
-// (K_ii: B with its surface fixed, positive definite even when B has no fixed node), so B adds
-// the stiffness K_add = J^T S_B J on A's boundary dofs b. The coupled compliance is then, by
+// Each B is condensed onto its tied nodes (TieCondensation, tie_condensation.hpp) and adds the
+// stiffness K_add = J^T S_B J on A's boundary dofs b. The coupled compliance is then, by
 // Woodbury, L = L_A - L_A[:,b] G L_A[b,:] with G = (I + K_add L_bb)^-1 K_add, the coupling
 // operator factored once at load. The tie holds to round-off by construction: B's tied nodes
 // take the interpolated displacement of A, and B's interior follows from K_ii.
@@ -14,58 +13,19 @@
 #include "server/fem/static_solver.hpp"
 #include "server/interaction/boundary_cache.hpp"
 #include "server/interaction/iterative_tie.hpp"
+#include "server/interaction/sliding_operator.hpp"
+#include "server/interaction/tie_condensation.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
 #include <Eigen/Core>
-#include <Eigen/LU>
 #include <Eigen/SparseCore>
 
-#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
 
 namespace neurosim::interaction {
-
-// One embedded mesh tied to the host.
-struct EmbeddedTie {
-  int mesh{-1};  // index of B in the simulation
-  const mesh::TetMesh* geometry{nullptr};
-  fem::Material material;
-  std::vector<int> fixed_nodes;                // B's own fixed nodes (sorted)
-  std::vector<int> tied_nodes;                 // B's free surface nodes, ascending
-  std::vector<std::array<int, 3>> host_slots;  // per tied node: boundary slots of A's 3 nodes
-  std::vector<std::array<double, 3>> weights;  // barycentric weights on them
-  double max_map_distance_m{0.0};  // largest node-to-S' distance of the coupling map, unit m
-  std::unique_ptr<fem::StaticSolver>
-      interior;  // B with tied + fixed nodes fixed (null: no interior)
-  // K_B blocks (unit N/m): tied x tied, and interior free (reduced index of `interior`) x tied.
-  // The Schur complement S_B = K_ss - K_si K_ii^-1 K_is is only ever applied through J.
-  Eigen::SparseMatrix<double> k_ss;
-  Eigen::SparseMatrix<double> k_is;
-};
-
-// An embedded mesh B to tie to the host: B's free surface nodes and, per node, the S' triangle of
-// A it is tied to (A's node ids) with barycentric weights (the coupling map, paper 2.6).
-struct TieDefinition {
-  int mesh{-1};  // index of B in the simulation
-  const mesh::TetMesh* embedded{nullptr};  // must outlive the body
-  fem::Material material;
-  std::vector<int> fixed_nodes;               // B's own fixed nodes
-  std::vector<int> surface_nodes;             // B's nodes to tie
-  std::vector<std::array<int, 3>> tri_nodes;  // per surface node: A's node ids
-  std::vector<std::array<double, 3>> weights;
-  double max_map_distance_m{0.0};  // largest node-to-S' distance of the map, unit m
-};
-
-// Host side of one row of a sliding coupling (sliding_coupling.hpp): the row measures
-// n . sum_a w_a u_A(node_a), the normal motion of a point of S' (dimensionless weights, unit n).
-struct HostSlidingRow {
-  std::array<int, 3> nodes{};  // A's node ids (a triangle of S')
-  std::array<double, 3> weights{};
-  Eigen::Vector3d normal{Eigen::Vector3d::Zero()};
-};
 
 struct CoupledBodyTiming {
   double factor_s{0.0};    // host assembly + factorization, unit s
@@ -81,21 +41,18 @@ class CoupledBody {
   CoupledBody(int host_index, const mesh::TetMesh& host, const fem::Material& material,
               const std::vector<int>& host_fixed);
 
-  // Adds an embedded mesh tied through the map (B's surface node -> S' triangle of A, weights).
-  // tri_nodes[k]: A's node ids of the triangle node k of B is tied to.
+  // Adds an embedded mesh tied through the map (B's surface node -> S' triangle of A, weights):
+  // condensed onto its tied nodes at once (TieCondensation; throws what its constructor throws).
   void add_tie(const TieDefinition& tie);
 
   // Registers the host side of sliding rows (before finalize; the rows of all calls are stacked,
-  // returns the index of the first one). Their S' nodes are not contactable; finalize computes
-  // W_A = J_A L J_A^T over them (coupled compliance L, ties included) and every contact column
-  // computed afterwards also records J_A L[:, slot]. Throws on a bad row (what: for messages).
+  // returns the index of the first one). Their S' nodes are not contactable; finalize builds
+  // the sliding operator over them (sliding()). Throws std::invalid_argument on a bad row
+  // (check_sliding_rows; what: for messages).
   int add_sliding_rows(const std::vector<HostSlidingRow>& rows, const std::string& what);
-  int num_sliding_rows() const { return static_cast<int>(sliding_rows_.size()); }
-  const std::vector<HostSlidingRow>& sliding_rows() const { return sliding_rows_; }
-  // W_A (rows x rows), unit m/N.
-  const Eigen::MatrixXd& sliding_compliance() const { return w_slide_; }
-  // J_A on the host's free dofs (sliding rows x free dofs, dimensionless).
-  const Eigen::SparseMatrix<double, Eigen::RowMajor>& sliding_operator() const { return j_slide_; }
+  // After finalize: the stacked rows, J_A on the free dofs, W_A = J_A L J_A^T with the coupled
+  // compliance L (ties included); contact columns add J_A L[:, slot] through it.
+  const SlidingOperator& sliding() const { return sliding_; }
   // Coupled host displacement (ties included) for arbitrary nodal forces (3N_A, unit N), unit m.
   // Two sparse solves when the body has ties, one otherwise; the matrix form solves all its
   // columns (3N_A x k load cases) as one block.
@@ -122,7 +79,8 @@ class CoupledBody {
   int host_index() const { return host_index_; }
   const mesh::TetMesh& host() const { return *host_; }
   const fem::StaticSolver& host_solver() const { return *solver_; }
-  const std::vector<EmbeddedTie>& ties() const { return ties_; }
+  // The tied meshes in the order of add_tie: their maps, condensed stiffness and displacement.
+  const std::vector<TieCondensation>& ties() const { return ties_; }
   const std::vector<int>& boundary_nodes() const { return boundary_nodes_; }  // A ids, sorted
 
   // Contactable points (after finalize): A's free surface nodes not on S' (A ids ascending)
@@ -137,14 +95,10 @@ class CoupledBody {
   // Unit right-hand sides per CHOLMOD block solve (BLAS-3 inside the supernodes).
   static constexpr int kBlockColumns = 63;
 
-  // Full fields for nodal forces on contact slots (force_n per slot, unit N): host displacement
-  // (3N_A) and, per tie, B's displacement (3N_B), unit m. Also returns the boundary displacement.
+  // Host displacement (3N_A, unit m) for nodal forces on contact slots (force_n per slot, unit
+  // N), ties included; a tied mesh's displacement follows from it (ties()[t].displacement).
   void host_displacement(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
                          Eigen::VectorXd& u_host_m) const;
-  void embedded_displacement(int tie, const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
-  // max_k |sum w u_A - u_B,k| over the tied nodes of `tie` (unit m).
-  double tie_residual(int tie, const Eigen::VectorXd& u_host_m,
-                      const Eigen::VectorXd& u_embedded_m) const;
 
   const CoupledBodyTiming& timing() const { return timing_; }
   // Boundary blocks (for the iterative baseline): L_A[b,b], K_add, rows of L_A at contact x b.
@@ -158,21 +112,18 @@ class CoupledBody {
   int host_index_{-1};
   const mesh::TetMesh* host_{nullptr};
   std::unique_ptr<fem::StaticSolver> solver_;
-  std::vector<EmbeddedTie> ties_;
+  std::vector<TieCondensation> ties_;
   std::vector<int> boundary_nodes_;
   std::vector<int> boundary_slot_;  // A node -> slot in boundary_nodes_ or -1
-  std::vector<std::vector<std::array<int, 3>>> pending_tri_nodes_;
   std::vector<int> contact_nodes_;
   std::vector<int> contact_slot_;  // A node -> contact slot or -1
   std::vector<mesh::Vec3> contact_normals_;
   BoundaryOperator op_;  // L_bb, L_cb, K_add, G (boundary_cache.hpp)
-  std::vector<HostSlidingRow> sliding_rows_;
-  std::vector<char> sliding_node_;                        // A node -> on a sliding row
-  Eigen::SparseMatrix<double, Eigen::RowMajor> j_slide_;  // J_A on the free dofs (rows x nf)
-  Eigen::MatrixXd w_slide_;                               // J_A L J_A^T, unit m/N
+  std::vector<HostSlidingRow> sliding_rows_;  // added before finalize, then moved to sliding_
+  std::vector<char> sliding_node_;            // A node -> on a sliding row
+  SlidingOperator sliding_;
   // X = coupled L B for free-dof right-hand sides (ties by Woodbury: two solves).
   void coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const;
-  void compute_sliding_operator();
   CoupledBodyTiming timing_;
   bool finalized_{false};
   fem::Material material_;

@@ -456,11 +456,11 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     setup_.operator_s += tm.operator_s;
     setup_.sliding_s += tm.sliding_s;
     b.sliding_offset = num_sliding_;
-    num_sliding_ += b.body->num_sliding_rows();
+    num_sliding_ += b.body->sliding().size();
     if (b.body->cache_hit()) ++setup_.cache_hits;
     setup_.boundary_nodes += static_cast<int>(b.body->boundary_nodes().size());
     for (const auto& tie : b.body->ties())
-      setup_.tied_nodes += static_cast<int>(tie.tied_nodes.size());
+      setup_.tied_nodes += static_cast<int>(tie.tied_nodes().size());
     // Contact geometry: rest positions of contactable nodes on a grid.
     const auto& host = b.body->host();
     for (int v : b.body->contact_nodes()) b.rest_m.push_back(host.vertices()[v]);
@@ -489,7 +489,7 @@ State::State(const Model& m) {
     bs.columns = std::make_unique<ContactColumns>(*b.body, m.options_.cache_full_field_columns);
     bs.stamp.assign(b.rest_m.size(), -1);
     bs.row_of_slot.assign(b.rest_m.size(), -1);
-    bs.sliding_lambda.setZero(b.body->num_sliding_rows());
+    bs.sliding_lambda.setZero(b.body->sliding().size());
     if (m.options_.precompute_contact_columns) {
       const auto t0 = Clock::now();
       std::vector<int> all(b.rest_m.size());
@@ -520,9 +520,9 @@ void State::reserve_workspace(const Model& m, int tools) {
   rows_.reserve(max_contact);
   // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
   for (const auto& b : m.bodies_) {
-    const int o = b.sliding_offset, ns = b.body->num_sliding_rows();
+    const int o = b.sliding_offset, ns = b.body->sliding().size();
     if (ns == 0) continue;
-    w_.block(o, o, ns, ns) = b.body->sliding_compliance();
+    w_.block(o, o, ns, ns) = b.body->sliding().compliance();
     for (std::size_t i = 0; i < b.slides.size(); ++i) {
       const auto& sl = *b.slides[i];
       const int f = o + b.slide_first_row[i];
@@ -704,7 +704,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     }
     if (ns == 0) continue;
     w_.col(i).head(ns).setZero();
-    const int rows_a = body_a.num_sliding_rows();
+    const int rows_a = body_a.sliding().size();
     if (rows_a > 0) {
       const int o = m.bodies_[a.body].sliding_offset;
       const Vec3 push = -na;
@@ -751,7 +751,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     auto& bs = bodies_[bi];
     bs.force_slots.clear();
     bs.forces_n.clear();
-    const int rows_b = b.body->num_sliding_rows();
+    const int rows_b = b.body->sliding().size();
     if (rows_b > 0) bs.sliding_lambda = lambda_.segment(b.sliding_offset, rows_b);
   }
   for (int r = 0; r < nc; ++r) {
@@ -835,7 +835,7 @@ void Model::host_field(const BodyModel& b, const std::vector<int>& slots,
   Eigen::VectorXd f = nodal_forces_n.size() == n3 ? nodal_forces_n : Eigen::VectorXd::Zero(n3);
   for (std::size_t k = 0; k < slots.size(); ++k)
     f.segment<3>(3 * b.body->contact_nodes()[slots[k]]) += forces_n[k];
-  const auto& rows = b.body->sliding_rows();
+  const auto& rows = b.body->sliding().rows();
   for (std::size_t k = 0; k < rows.size() && sliding_force; ++k) {
     const double l = sliding_lambda_n[static_cast<int>(k)];
     if (l == 0.0) continue;
@@ -861,7 +861,7 @@ void Model::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda
     u_m = u_host_m;
     return;
   }
-  b.body->embedded_displacement(e.tie, u_host_m, u_m);
+  b.body->ties().at(static_cast<std::size_t>(e.tie)).displacement(u_host_m, u_m);
 }
 
 namespace {
@@ -959,9 +959,9 @@ double SimulationImpl::tie_residual_m() const {
     const BodyModel& b = model_->bodies_[bi];
     if (b.body->ties().empty()) continue;
     state_->host_field(*model_, static_cast<int>(bi), u_host);
-    for (std::size_t t = 0; t < b.body->ties().size(); ++t) {
-      b.body->embedded_displacement(static_cast<int>(t), u_host, u_emb);
-      worst = std::max(worst, b.body->tie_residual(static_cast<int>(t), u_host, u_emb));
+    for (const auto& tie : b.body->ties()) {
+      tie.displacement(u_host, u_emb);
+      worst = std::max(worst, tie.residual(u_host, u_emb));
     }
   }
   return worst;

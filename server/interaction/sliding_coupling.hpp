@@ -13,7 +13,8 @@
 // tangential row: the meshes slide freely along each other.
 // In constraint form: J_A row k = n_k^T (x) w on A's dofs, J_B row k = -n_k^T at B's node k, and
 // the Delassus block of the rows is W_ss = J_A L_A J_A^T + J_B L_B J_B^T. The host part is
-// CoupledBody::sliding_compliance(); this file holds B's part and B's displacement.
+// SlidingOperator::compliance() (sliding_operator.hpp); this file holds B's part and B's
+// displacement.
 //
 // B with fixed nodes: L_B = K_B^-1 with those nodes fixed. A floating B (no fixed node) has six
 // rigid modes R that frictionless contact alone may not hold (a cylinder turning about its

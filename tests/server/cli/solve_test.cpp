@@ -147,7 +147,7 @@ TEST(SolveCli, CoupledSceneMatchesTheMonolithicTiedSystem) {
   ASSERT_NE(body, nullptr);
   ASSERT_EQ(body->ties().size(), 1u);
   const auto& tie = body->ties()[0];
-  ASSERT_EQ(tie.mesh, b);
+  ASSERT_EQ(tie.mesh(), b);
   const auto& mesh_a = sim->mesh(a);
   const auto& mesh_b = sim->mesh(b);
   const int na = static_cast<int>(mesh_a.num_vertices()),
@@ -177,8 +177,8 @@ TEST(SolveCli, CoupledSceneMatchesTheMonolithicTiedSystem) {
   }
   ASSERT_GT(num_prescribed, 0);
   std::vector<int> tied_row(nb, -1);
-  for (std::size_t k = 0; k < tie.tied_nodes.size(); ++k)
-    tied_row[tie.tied_nodes[k]] = static_cast<int>(k);
+  for (std::size_t k = 0; k < tie.tied_nodes().size(); ++k)
+    tied_row[tie.tied_nodes()[k]] = static_cast<int>(k);
   int nq = 0;
   for (int d = 0; d < 3 * na; ++d)
     if (!known[d]) index[d] = nq++;
@@ -202,8 +202,8 @@ TEST(SolveCli, CoupledSceneMatchesTheMonolithicTiedSystem) {
         continue;
       }
       for (int j = 0; j < 3; ++j) {
-        const int host_dof = 3 * body->boundary_nodes()[tie.host_slots[tied_row[v]][j]] + c;
-        const double w = tie.weights[tied_row[v]][j];
+        const int host_dof = 3 * tie.host_nodes()[tied_row[v]][j] + c;
+        const double w = tie.weights()[tied_row[v]][j];
         if (index[host_dof] >= 0)
           t.emplace_back(d, index[host_dof], w);
         else
@@ -216,7 +216,7 @@ TEST(SolveCli, CoupledSceneMatchesTheMonolithicTiedSystem) {
   const auto& cube_entry = s.meshes(a);
   const auto k_a = fem::assemble_stiffness(
       mesh_a, fem::MaterialMap::uniform(scene::to_material(cube_entry.material(), "cube")));
-  const auto k_b = fem::assemble_stiffness(mesh_b, fem::MaterialMap::uniform(tie.material));
+  const auto k_b = fem::assemble_stiffness(mesh_b, fem::MaterialMap::uniform(tie.material()));
   std::vector<Eigen::Triplet<double>> kt;
   for (int k = 0; k < k_a.outerSize(); ++k)
     for (Eigen::SparseMatrix<double>::InnerIterator it(k_a, k); it; ++it)
