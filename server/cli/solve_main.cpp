@@ -191,6 +191,30 @@ MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& l
   return r;
 }
 
+// Newton's residual per increment and a summary line.
+void print_newton(const neurosim::fem::EquilibriumResult& sol, neurosim::fem::Tier tier,
+                  const neurosim::fem::NewtonOptions& options, double solve_s) {
+  int iterations = 0;
+  for (std::size_t i = 0; i < sol.increments.size(); ++i) {
+    const auto& inc = sol.increments[i];
+    iterations += static_cast<int>(inc.residual_n.size()) - 1;
+    std::cout << "  increment " << i + 1 << " load factor " << std::setprecision(4)
+              << inc.load_factor << ": Newton residual (N)";
+    for (double res : inc.residual_n) std::cout << ' ' << std::setprecision(3) << res;
+    if (inc.cutbacks > 0) std::cout << " (after " << inc.cutbacks << " cutback(s))";
+    if (inc.projected_iterations > 0) {
+      std::cout << " (" << inc.projected_iterations << " projected-tangent step(s))";
+    }
+    std::cout << '\n';
+  }
+  std::cout << std::setprecision(6) << "  " << neurosim::fem::tier_name(tier) << ": "
+            << sol.increments.size() << " increments, " << iterations
+            << " Newton iterations, tolerance " << options.tolerance * sol.force_scale_n
+            << " N, largest strain " << sol.elements.max_strain << ", "
+            << sol.elements.clamped_elements << " clamped / " << sol.elements.inverted_elements
+            << " inverted elements; solve " << solve_s << " s\n";
+}
+
 // One mesh on its own in the corotational or nonlinear tier: Newton with load increments.
 MeshResult solve_alone_tier(const neurosim::scene::LoadedMesh& lm, const MeshLoads& loads,
                             neurosim::fem::Tier tier, int increments) {
@@ -211,25 +235,7 @@ MeshResult solve_alone_tier(const neurosim::scene::LoadedMesh& lm, const MeshLoa
   options.increments = increments;
   const neurosim::fem::EquilibriumResult sol = solver.solve(loads.f, options);
   const double solve_s = seconds_since(t1);
-  int iterations = 0;
-  for (std::size_t i = 0; i < sol.increments.size(); ++i) {
-    const auto& inc = sol.increments[i];
-    iterations += static_cast<int>(inc.residual_n.size()) - 1;
-    std::cout << "  increment " << i + 1 << " load factor " << std::setprecision(4)
-              << inc.load_factor << ": Newton residual (N)";
-    for (double res : inc.residual_n) std::cout << ' ' << std::setprecision(3) << res;
-    if (inc.cutbacks > 0) std::cout << " (after " << inc.cutbacks << " cutback(s))";
-    if (inc.projected_iterations > 0) {
-      std::cout << " (" << inc.projected_iterations << " projected-tangent step(s))";
-    }
-    std::cout << '\n';
-  }
-  std::cout << std::setprecision(6) << "  " << neurosim::fem::tier_name(tier) << ": "
-            << sol.increments.size() << " increments, " << iterations
-            << " Newton iterations, tolerance " << options.tolerance * sol.force_scale_n
-            << " N, largest strain " << sol.elements.max_strain << ", "
-            << sol.elements.clamped_elements << " clamped / " << sol.elements.inverted_elements
-            << " inverted elements; solve " << solve_s << " s\n";
+  print_newton(sol, tier, options, solve_s);
   r.u_m = sol.displacement_m;
   r.reaction_n = sol.reaction_n;
   return r;
@@ -367,6 +373,57 @@ BodyResult solve_body(const neurosim::interaction::Simulation& sim,
   return out;
 }
 
+// A host and its tied meshes in the corotational or nonlinear tier: one Newton solve of all
+// meshes with the ties eliminated exactly (fem::EquilibriumSolver, u = T q), on the server's
+// carved host and coupling map. Reactions at every constrained node of every mesh.
+BodyResult solve_body_tier(const neurosim::interaction::Simulation& sim,
+                           const neurosim::interaction::CoupledBody& body,
+                           const neurosim::fem::Material& host_material, const MeshLoads& loads,
+                           neurosim::fem::Tier tier, int increments) {
+  const int h = body.host_index();
+  neurosim::fem::EquilibriumDefinition def;
+  def.mesh = &sim.mesh(h);
+  def.materials = neurosim::fem::MaterialMap::uniform(host_material);
+  def.tier = tier;
+  def.fixed_nodes = sim.fixed_nodes(h);
+  for (const auto& [node, hold] : loads.prescribed) {
+    def.prescribed.push_back(neurosim::fem::PrescribedDofs{{node}, hold.displacement_m, hold.components});
+  }
+  for (const auto& tie : body.ties()) {
+    def.tied.push_back({&tie.geometry(), neurosim::fem::MaterialMap::uniform(tie.material()),
+                        tie.fixed_nodes(), tie.tied_nodes(), tie.host_nodes(), tie.weights()});
+  }
+  neurosim::fem::EquilibriumSolver solver(def);
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
+  f.head(loads.f.size()) = loads.f;
+  neurosim::fem::NewtonOptions options;
+  options.increments = increments;
+  const auto t0 = std::chrono::steady_clock::now();
+  const neurosim::fem::EquilibriumResult sol = solver.solve(f, options);
+  print_newton(sol, tier, options, seconds_since(t0));
+  BodyResult out;
+  auto slice = [&](int b, const std::vector<int>& constrained_nodes, MeshResult& r) {
+    const int nb = solver.body_forces(b).num_dofs();
+    r.u_m = sol.displacement_m.segment(solver.body_offset(b), nb);
+    r.reaction_n = sol.reaction_n.segment(solver.body_offset(b), nb);
+    r.constrained.assign(static_cast<std::size_t>(nb / 3), 0);
+    for (int v : constrained_nodes) r.constrained[static_cast<std::size_t>(v)] = 1;
+  };
+  std::vector<int> host_constrained = def.fixed_nodes;
+  for (const auto& [node, hold] : loads.prescribed) host_constrained.push_back(node);
+  slice(0, host_constrained, out.host);
+  const auto& ties = body.ties();
+  for (std::size_t t = 0; t < ties.size(); ++t) {
+    MeshResult rb;
+    slice(static_cast<int>(t) + 1, ties[t].fixed_nodes(), rb);
+    std::cout << std::setprecision(6) << "  tied: " << sim.mesh_id(ties[t].mesh()) << " ("
+              << ties[t].tied_nodes().size() << " surface nodes), tie residual max |u_A - u_B| = "
+              << ties[t].residual(out.host.u_m, rb.u_m) << " m\n";
+    out.embedded.emplace_back(ties[t].mesh(), std::move(rb));
+  }
+  return out;
+}
+
 void print_mesh_header(const std::string& id, const neurosim::mesh::TetMesh& mesh,
                        std::size_t num_fixed, const neurosim::fem::Material& material,
                        double load_s) {
@@ -427,13 +484,6 @@ int run(const RunOptions& opt) {
     std::cout << "note: --uncoupled: the scene's couplings are not applied; every mesh is solved "
                  "on its own\n";
   }
-  if (coupled && tier != neurosim::fem::Tier::kLinear) {
-    // Never run as another tier: a coupled nonlinear static solve is refused, not linearized.
-    throw std::runtime_error(scene_path + ": tier " + neurosim::fem::tier_name(tier) +
-                             " with the scene's TIE couplings is not implemented by "
-                             "neurosim-solve (LINEAR solves coupled bodies; --uncoupled solves "
-                             "every mesh on its own in any tier)");
-  }
   if (coupled) {
     auto static_model = model;
     static_model.effects.tool_contact = false;
@@ -466,7 +516,11 @@ int run(const RunOptions& opt) {
         std::cout << "  no load or prescribed displacement: at rest, not solved\n";
         continue;
       }
-      BodyResult br = solve_body(*sim, *body, loads, what);
+      BodyResult br = tier == neurosim::fem::Tier::kLinear
+                          ? solve_body(*sim, *body, loads, what)
+                          : solve_body_tier(*sim, *body,
+                                            model.meshes[static_cast<std::size_t>(m)].material,
+                                            loads, tier, opt.increments);
       print_summary(br.host, loads.f, loads.prescribed);
       solved[m] = {true, std::move(br.host), &sim->mesh(m), sim->fixed_nodes(m)};
       for (auto& [mb, rb] : br.embedded) {
