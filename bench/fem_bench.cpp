@@ -20,20 +20,7 @@
 namespace {
 
 using namespace neurosim;
-using common::Clock;
-using common::ms_since;
-
-// Best of `reps` runs of f, in ms.
-template <class F>
-double best_ms(int reps, F&& f) {
-  double best = 1e300;
-  for (int r = 0; r < reps; ++r) {
-    const auto t0 = Clock::now();
-    f();
-    best = std::min(best, ms_since(t0));
-  }
-  return best;
-}
+using common::best_ms;
 
 struct Case {
   std::string name;

@@ -15,24 +15,8 @@
 #include <string>
 #include <vector>
 
-namespace {
-
 using namespace neurosim;
-using common::Clock;
-using common::ms_since;
-
-template <class F>
-double best_ms(int reps, F&& f) {
-  double best = 1e300;
-  for (int r = 0; r < reps; ++r) {
-    const auto t0 = Clock::now();
-    f();
-    best = std::min(best, ms_since(t0));
-  }
-  return best;
-}
-
-}  // namespace
+using common::best_ms;
 
 int main(int argc, char** argv) {
   bool csv = false;

@@ -99,6 +99,15 @@ struct MeshLoads {
   Eigen::VectorXd f;          // 3N, unit N
   std::map<int, Held> prescribed;  // node -> held components and their displacement
   int count{0};               // scene entries on this mesh
+
+  // The held components as prescribed sets (one per node), as the fem solvers take them.
+  std::vector<neurosim::fem::PrescribedDofs> held() const {
+    std::vector<neurosim::fem::PrescribedDofs> out;
+    for (const auto& [node, hold] : prescribed) {
+      out.push_back(neurosim::fem::PrescribedDofs{{node}, hold.displacement_m, hold.components});
+    }
+    return out;
+  }
 };
 
 MeshLoads gather_loads(const neurosim::scene::Model& model, int mesh_index) {
@@ -175,12 +184,8 @@ MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& l
       r.reaction_n.segment<3>(3 * node) = residual.segment<3>(3 * node);
   } else {
     // Held components only; the others stay free unknowns.
-    std::vector<neurosim::fem::PrescribedDofs> held;
-    for (const auto& [node, hold] : loads.prescribed) {
-      held.push_back(neurosim::fem::PrescribedDofs{{node}, hold.displacement_m, hold.components});
-      r.constrained[node] = 1;
-    }
-    auto sol = solver.solve_prescribed_dofs(held, loads.f);
+    for (const auto& [node, hold] : loads.prescribed) r.constrained[node] = 1;
+    auto sol = solver.solve_prescribed_dofs(loads.held(), loads.f);
     r.u_m = std::move(sol.displacement_m);
     r.reaction_n = std::move(sol.reaction_n);
   }
@@ -222,15 +227,11 @@ MeshResult solve_alone_tier(const neurosim::scene::LoadedMesh& lm, const MeshLoa
   MeshResult r;
   r.constrained.assign(n, 0);
   for (int node : lm.fixed_nodes) r.constrained[node] = 1;
-  std::vector<neurosim::fem::PrescribedDofs> held;
-  for (const auto& [node, hold] : loads.prescribed) {
-    held.push_back(neurosim::fem::PrescribedDofs{{node}, hold.displacement_m, hold.components});
-    r.constrained[node] = 1;
-  }
+  for (const auto& [node, hold] : loads.prescribed) r.constrained[node] = 1;
   const auto t1 = std::chrono::steady_clock::now();
   neurosim::fem::EquilibriumSolver solver({&lm.mesh,
                                            neurosim::fem::MaterialMap::uniform(lm.material),
-                                           tier, lm.fixed_nodes, held});
+                                           tier, lm.fixed_nodes, loads.held()});
   neurosim::fem::NewtonOptions options;
   options.increments = increments;
   const neurosim::fem::EquilibriumResult sol = solver.solve(loads.f, options);
@@ -386,9 +387,7 @@ BodyResult solve_body_tier(const neurosim::interaction::Simulation& sim,
   def.materials = neurosim::fem::MaterialMap::uniform(host_material);
   def.tier = tier;
   def.fixed_nodes = sim.fixed_nodes(h);
-  for (const auto& [node, hold] : loads.prescribed) {
-    def.prescribed.push_back(neurosim::fem::PrescribedDofs{{node}, hold.displacement_m, hold.components});
-  }
+  def.prescribed = loads.held();
   for (const auto& tie : body.ties()) {
     def.tied.push_back({&tie.geometry(), neurosim::fem::MaterialMap::uniform(tie.material()),
                         tie.fixed_nodes(), tie.tied_nodes(), tie.host_nodes(), tie.weights()});

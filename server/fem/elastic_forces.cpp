@@ -49,6 +49,7 @@ ElasticForces::ElasticForces(const mesh::TetMesh& mesh, const MaterialMap& mater
         tet_geometry({x[t[0]], x[t[1]], x[t[2]], x[t[3]]}, static_cast<int>(e));
     gradients_[e] = g.gradients;
     volume_m3_[e] = g.volume_m3;
+    total_volume_m3_ += g.volume_m3;
     law_index_[e] = materials.tet_material.empty() ? 0 : materials.tet_material[e];
   }
 }

@@ -34,6 +34,7 @@ class ElasticForces {
   int num_nodes() const { return num_nodes_; }
   int num_dofs() const { return 3 * num_nodes_; }
   std::size_t num_tets() const { return tets_.size(); }
+  double volume_m3() const { return total_volume_m3_; }  // rest volume of the mesh, unit m^3
 
   // H = grad u = F - I of tetrahedron `tet` at displacement u (unit m), dimensionless.
   Eigen::Matrix3d displacement_gradient(std::size_t tet, const Eigen::VectorXd& u_m) const;
@@ -57,6 +58,7 @@ class ElasticForces {
   std::vector<mesh::Tet> tets_;
   std::vector<Eigen::Matrix<double, 4, 3>> gradients_;  // per tet, row a: grad N_a (1/m)
   std::vector<double> volume_m3_;
+  double total_volume_m3_{0.0};
   std::vector<int> law_index_;  // per tet: index into laws_
   std::vector<LawConstants> laws_;
   StiffnessAssembler assembler_;

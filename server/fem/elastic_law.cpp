@@ -80,22 +80,33 @@ Mat3 corot_stress_accurate(const LawConstants& c, const CorotAccurate& a) {
 }
 
 // dR = U W V^T with W skew, W_ij = (M_ij - M_ji) / (sigma_i + sigma_j), M = U^T dF V.
-Mat3 corot_dstress(const LawConstants& c, const RotationVariantSvd& s, const Mat3& df) {
-  const Mat3 r = s.u * s.v.transpose();
-  const Mat3 m = s.u.transpose() * df * s.v;
+// R and 1 / (sigma_i + sigma_j) at one F, computed once per tangent.
+struct CorotPoint {
+  const RotationVariantSvd& s;
+  Mat3 r;
+  Mat3 inv_sum;  // (i, j), i < j: 1 / (sigma_i + sigma_j)
+  explicit CorotPoint(const RotationVariantSvd& svd) : s(svd), r(svd.u * svd.v.transpose()) {
+    for (int i = 0; i < 3; ++i) {
+      for (int j = i + 1; j < 3; ++j) {
+        // sigma_i + sigma_j >= 0 (only sigma_2 may be negative and |sigma_2| <= sigma_i); zero
+        // only for a collapsed element, where the rotation rate is undefined: held finite.
+        inv_sum(i, j) = 1.0 / std::max(s.sigma(i) + s.sigma(j), 1e-12);
+      }
+    }
+  }
+};
+Mat3 corot_dstress(const LawConstants& c, const CorotPoint& p, const Mat3& df) {
+  const Mat3 m = p.s.u.transpose() * df * p.s.v;
   Mat3 w = Mat3::Zero();
   for (int i = 0; i < 3; ++i) {
     for (int j = i + 1; j < 3; ++j) {
-      // sigma_i + sigma_j >= 0 (only sigma_2 may be negative and |sigma_2| <= sigma_i); zero
-      // only for a collapsed element, where the rotation rate is undefined: held finite.
-      const double denom = std::max(s.sigma(i) + s.sigma(j), 1e-12);
-      w(i, j) = (m(i, j) - m(j, i)) / denom;
+      w(i, j) = (m(i, j) - m(j, i)) * p.inv_sum(i, j);
       w(j, i) = -w(i, j);
     }
   }
-  const Mat3 dr = s.u * w * s.v.transpose();
-  return 2.0 * c.mu_pa * (df - dr) + c.lambda_pa * (r.cwiseProduct(df).sum() * r +
-                                                    (s.sigma.sum() - 3.0) * dr);
+  const Mat3 dr = p.s.u * w * p.s.v.transpose();
+  return 2.0 * c.mu_pa * (df - dr) + c.lambda_pa * (p.r.cwiseProduct(df).sum() * p.r +
+                                                    (p.s.sigma.sum() - 3.0) * dr);
 }
 
 // ---- NONLINEAR (neo-Hookean, F with det F > 0) -----------------------------------------------
@@ -123,21 +134,24 @@ Mat3 nh_stress(const LawConstants& c, const Mat3& h) {
   const Mat3 finv_t = f.inverse().transpose();
   return 2.0 * c.c10_pa * a * dev_b * finv_t + (2.0 / c.d1_per_pa) * jm1 * j * finv_t;
 }
-Mat3 nh_dstress(const LawConstants& c, const Mat3& f, const Mat3& df) {
-  const double j = f.determinant();
-  const double a = std::pow(j, -2.0 / 3.0);
-  const double i1 = f.squaredNorm();
-  const Mat3 finv = f.inverse();
-  const Mat3 finv_t = finv.transpose();
-  const double tr_finv_df = (finv * df).trace();
-  const double dj = j * tr_finv_df;
-  const double da = -2.0 / 3.0 * a * tr_finv_df;
-  const double di1 = 2.0 * f.cwiseProduct(df).sum();
-  const Mat3 dfinv_t = -finv_t * df.transpose() * finv_t;
+// What dP depends on at one F, computed once per tangent (nine directional derivatives).
+struct NhPoint {
+  Mat3 f, finv, finv_t;
+  double j, a, i1;
+  explicit NhPoint(const Mat3& f_in)
+      : f(f_in), finv(f_in.inverse()), finv_t(finv.transpose()), j(f_in.determinant()),
+        a(std::pow(j, -2.0 / 3.0)), i1(f_in.squaredNorm()) {}
+};
+Mat3 nh_dstress(const LawConstants& c, const NhPoint& p, const Mat3& df) {
+  const double tr_finv_df = (p.finv * df).trace();
+  const double dj = p.j * tr_finv_df;
+  const double da = -2.0 / 3.0 * p.a * tr_finv_df;
+  const double di1 = 2.0 * p.f.cwiseProduct(df).sum();
+  const Mat3 dfinv_t = -p.finv_t * df.transpose() * p.finv_t;
   const double k = 2.0 / c.d1_per_pa;
-  return 2.0 * c.c10_pa * (da * f + a * df) -
-         (2.0 / 3.0) * c.c10_pa * ((da * i1 + a * di1) * finv_t + a * i1 * dfinv_t) +
-         k * ((2.0 * j - 1.0) * dj * finv_t + (j * j - j) * dfinv_t);
+  return 2.0 * c.c10_pa * (da * p.f + p.a * df) -
+         (2.0 / 3.0) * c.c10_pa * ((da * p.i1 + p.a * di1) * p.finv_t + p.a * p.i1 * dfinv_t) +
+         k * ((2.0 * p.j - 1.0) * dj * p.finv_t + (p.j * p.j - p.j) * dfinv_t);
 }
 
 // Neo-Hookean in principal stretches (J = s0 s1 s2 > 0): gradient dW/ds and Hessian.
@@ -291,15 +305,16 @@ void stress_tangent(Tier tier, const LawConstants& c, const Mat3& h, bool projec
       return;  // constant and positive definite for a valid material: nothing to project
     case Tier::kCorotational: {
       const RotationVariantSvd s = rotation_variant_svd(Mat3::Identity() + h);
-      tangent_columns([&](const Mat3& df) { return corot_dstress(c, s, df); }, dp_df);
+      const CorotPoint point(s);
+      tangent_columns([&](const Mat3& df) { return corot_dstress(c, point, df); }, dp_df);
       break;
     }
     case Tier::kNonlinear: {
       const NhClamp k = nh_clamp(h);
       if (eval) eval->clamped = k.clamped;
       if (!k.clamped) {
-        const Mat3 f = Mat3::Identity() + h;
-        tangent_columns([&](const Mat3& df) { return nh_dstress(c, f, df); }, dp_df);
+        const NhPoint point(Mat3::Identity() + h);
+        tangent_columns([&](const Mat3& df) { return nh_dstress(c, point, df); }, dp_df);
       } else {
         // Nearly collapsed element (rare): central differences of the clamped stress, which
         // is C0 in F; only the Newton direction depends on it, and it is projected below.

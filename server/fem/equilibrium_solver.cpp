@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numeric>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -44,13 +43,12 @@ struct EquilibriumSolver::Impl {
   std::vector<int> prescribed_dofs;    // host dofs (expand_prescribed order)
   std::vector<int> prescribed_slot;    // per prescribed dof: index into constrained_dofs
   std::vector<int> free_dofs;          // reduced -> stacked dof
-  std::vector<int> free_q;             // reduced -> q index
-  std::vector<int> reduced_index;      // stacked dof -> reduced or -1
   double stiffness_force_scale{0.0};   // 1e-6 E_max h^2, unit N
 
   std::vector<SparseMatrix> k_body;  // per body tangent (assembler pattern)
   SparseMatrix kff;                  // lower triangle of the free block
   std::vector<int> kff_source;       // kff value p <- tangent value kff_source[p]
+  Eigen::Index tangent_nnz{0};       // stored entries of the q-space tangent (fixed structure)
   Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> llt;
 
   // Scratch.
@@ -135,13 +133,13 @@ struct EquilibriumSolver::Impl {
 
   // Pattern of the free block (lower triangle) and its source positions in `k` (q space).
   void build_free_pattern(const SparseMatrix& k) {
-    const int nf = static_cast<int>(free_q.size());
+    const int nf = static_cast<int>(free_dofs.size());
     std::vector<int> reduced_q(k.rows(), -1);
-    for (int i = 0; i < nf; ++i) reduced_q[free_q[i]] = i;
+    for (int i = 0; i < nf; ++i) reduced_q[q_index[free_dofs[i]]] = i;
     std::vector<int> outer(nf + 1, 0), inner;
-    kff_source.clear();
+    tangent_nnz = k.nonZeros();
     for (int jr = 0; jr < nf; ++jr) {
-      const int col = free_q[jr];
+      const int col = q_index[free_dofs[jr]];
       for (int p = k.outerIndexPtr()[col]; p < k.outerIndexPtr()[col + 1]; ++p) {
         const int ir = reduced_q[k.innerIndexPtr()[p]];
         if (ir >= jr) {
@@ -168,8 +166,10 @@ struct EquilibriumSolver::Impl {
   // Factorizes the free block of the tangent at u; false if not positive definite.
   bool factor(const Eigen::VectorXd& u, bool project) {
     const SparseMatrix& k = tangent(u, project);
-    if (kff_source.empty() || kff_source.back() >= k.nonZeros()) {
-      build_free_pattern(k);  // the product's structure changed (never with a fixed pattern)
+    // The structure of K (assembler pattern) and of T^T K T (a product of fixed structures) never
+    // changes, so the free-block map and the symbolic analysis made at construction hold.
+    if (k.nonZeros() != tangent_nnz) {
+      throw std::logic_error(where + ": tangent structure changed after the symbolic analysis");
     }
     const double* src = k.valuePtr();
     double* dst = kff.valuePtr();
@@ -198,6 +198,7 @@ struct EquilibriumSolver::Impl {
               NewtonIncrement& inc) {
     const int nf = static_cast<int>(free_dofs.size());
     double rnorm = residual(u, fext);
+    double pi_u = potential(u, fext);  // carried from step to step (the accepted trial's)
     inc.residual_n.assign(1, rnorm);
     for (int it = 0;; ++it) {
       if (rnorm <= opt.tolerance * force_scale(fext)) {
@@ -241,17 +242,17 @@ struct EquilibriumSolver::Impl {
         step_full[free_dofs[i]] = delta[i];
       }
       enforce_ties(step_full);
-      const double pi0 = potential(u, fext);
-      double alpha = 1.0;
+      double alpha = 1.0, pi = 0.0, r_trial = -1.0;  // r_trial >= 0: residual of `trial` known
       bool accepted = false;
       for (int h = 0; h < 30; ++h) {
         trial = u + alpha * step_full;
-        const double pi = potential(trial, fext);
-        if (std::isfinite(pi) && pi <= pi0 + 1e-4 * alpha * slope) {
+        pi = potential(trial, fext);
+        r_trial = -1.0;
+        if (std::isfinite(pi) && pi <= pi_u + 1e-4 * alpha * slope) {
           accepted = true;
         } else {
           // Near the solution the potential is flat to round-off: accept a residual decrease.
-          const double r_trial = residual(trial, fext);
+          r_trial = residual(trial, fext);
           accepted = r_trial < (1.0 - 1e-4 * alpha) * rnorm;
         }
         if (accepted) break;
@@ -262,7 +263,8 @@ struct EquilibriumSolver::Impl {
         throw Failure("line search found no decrease of the potential or the residual");
       }
       u.swap(trial);
-      rnorm = residual(u, fext);
+      pi_u = pi;
+      rnorm = r_trial >= 0.0 ? r_trial : residual(u, fext);  // rq, f_int then belong to u
       inc.residual_n.push_back(rnorm);
     }
   }
@@ -347,7 +349,6 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
     }
   }
   s.q_index.assign(s.ndof, -1);
-  s.reduced_index.assign(s.ndof, -1);
   for (int dof = 0; dof < s.ndof; ++dof) {
     if (is_tied[dof]) continue;
     const int qi = static_cast<int>(s.q_dof.size());
@@ -356,9 +357,7 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
     if (constrained[dof]) {
       s.constrained_dofs.push_back(qi);
     } else {
-      s.reduced_index[dof] = static_cast<int>(s.free_dofs.size());
       s.free_dofs.push_back(dof);
-      s.free_q.push_back(qi);
     }
   }
   if (s.constrained_dofs.empty()) {
@@ -375,19 +374,12 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
         std::lower_bound(s.constrained_dofs.begin(), s.constrained_dofs.end(), s.q_index[dof]) -
         s.constrained_dofs.begin()));
   }
-  // Force scale of the convergence test: 1e-6 E_max h^2 (host mesh).
+  // Force scale of the convergence test: 1e-6 E_max h^2, h from the host's mean element volume.
   double e_max = 0.0;
   for (const Material& m : d.materials.materials) e_max = std::max(e_max, m.youngs_modulus_pa);
-  {
-    const auto& x = d.mesh->vertices();
-    double v_sum = 0.0;
-    for (const auto& tet : d.mesh->tets()) {
-      v_sum += std::abs((x[tet[1]] - x[tet[0]]).cross(x[tet[2]] - x[tet[0]]).dot(x[tet[3]] - x[tet[0]])) /
-               6.0;
-    }
-    const double h = std::cbrt(v_sum / static_cast<double>(d.mesh->num_tets()));
-    s.stiffness_force_scale = 1e-6 * e_max * h * h;
-  }
+  const ElasticForces& host = s.bodies[0];
+  const double h = std::cbrt(host.volume_m3() / static_cast<double>(host.num_tets()));
+  s.stiffness_force_scale = 1e-6 * e_max * h * h;
 
   if (!s.tied()) {
     // q space is the host's dofs: the free block comes straight from the assembler pattern.
@@ -434,10 +426,7 @@ void EquilibriumSolver::set_prescribed_values(const Eigen::VectorXd& values_m) {
 }
 
 const std::vector<int>& EquilibriumSolver::prescribed_dofs() const { return impl_->prescribed_dofs; }
-const std::vector<int>& EquilibriumSolver::free_dofs() const { return impl_->free_dofs; }
-const std::vector<int>& EquilibriumSolver::reduced_index() const { return impl_->reduced_index; }
 const ElasticForces& EquilibriumSolver::forces() const { return impl_->bodies[0]; }
-int EquilibriumSolver::num_bodies() const { return static_cast<int>(impl_->bodies.size()); }
 const ElasticForces& EquilibriumSolver::body_forces(int body) const {
   return impl_->bodies.at(static_cast<std::size_t>(body));
 }

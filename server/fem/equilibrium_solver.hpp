@@ -102,11 +102,8 @@ class EquilibriumSolver {
   // Values of the prescribed components, in the order of expand_prescribed's dofs (host dofs).
   void set_prescribed_values(const Eigen::VectorXd& values_m);
   const std::vector<int>& prescribed_dofs() const;
-  const std::vector<int>& free_dofs() const;      // reduced -> dof
-  const std::vector<int>& reduced_index() const;  // dof -> reduced or -1
   const ElasticForces& forces() const;  // the host's
-  int num_bodies() const;                // 1 + tied meshes
-  const ElasticForces& body_forces(int body) const;
+  const ElasticForces& body_forces(int body) const;  // 0: the host, k: tied[k - 1]
   int body_offset(int body) const;  // first stacked dof of a body
   int num_dofs() const;             // all stacked dofs
   Tier tier() const;

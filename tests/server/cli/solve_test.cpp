@@ -279,20 +279,15 @@ TEST(SolveCli, LoadOnATiedEmbeddedMeshIsRefused) {
   const auto dir = testing::temp_dir("solve_tie_load");
   const fs::path scene_path = testing::source_dir() / "scenes" / "cube_cylinder.scene";
   {
-    std::ifstream in(scene_path);
-    std::stringstream text;
-    text << in.rdbuf();
     std::ofstream out(dir / "pull.scene");
-    out << text.str()
+    out << testing::slurp(scene_path)
         << "\nloads { mesh: \"cylinder\" region { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 1 y: "
            "1 z: 1 } } } force_n { x: 1 } distribution: TOTAL_SPLIT_EQUALLY }\n";
   }
   EXPECT_NE(run_solve(dir / "pull.scene", dir / "out"), 0);
-  std::ifstream log(dir.string() + "/out.log");
-  std::stringstream text;
-  text << log.rdbuf();
-  EXPECT_NE(text.str().find("\"cylinder\" is tied to \"cube\""), std::string::npos) << text.str();
-  EXPECT_NE(text.str().find("pull.scene"), std::string::npos) << text.str();
+  const std::string text = testing::slurp(dir / "out.log");
+  EXPECT_NE(text.find("\"cylinder\" is tied to \"cube\""), std::string::npos) << text;
+  EXPECT_NE(text.find("pull.scene"), std::string::npos) << text;
   fs::remove_all(dir);
 }
 
@@ -368,12 +363,10 @@ prescribed { mesh: "block" region { box { min_m { x: -1 y: -1 z: 0.0199999 } max
   }
   expect_agrees_with_calculix(dir / "press_nl.scene", "block", 1e-4, /*nlgeom=*/true);
   ASSERT_EQ(run_solve(dir / "press_nl.scene", dir / "out", "--tier nonlinear --increments 3"), 0);
-  std::ifstream log(dir.string() + "/out.log");
-  std::stringstream text;
-  text << log.rdbuf();
-  EXPECT_NE(text.str().find("tier NONLINEAR (--tier)"), std::string::npos) << text.str();
-  EXPECT_NE(text.str().find("increment 3 load factor 1: Newton residual"), std::string::npos)
-      << text.str();
+  const std::string text = testing::slurp(dir / "out.log");
+  EXPECT_NE(text.find("tier NONLINEAR (--tier)"), std::string::npos) << text;
+  EXPECT_NE(text.find("increment 3 load factor 1: Newton residual"), std::string::npos)
+      << text;
   // A tier name the build does not know is refused.
   EXPECT_NE(run_solve(dir / "press_nl.scene", dir / "bad", "--tier hyperelastic"), 0);
   fs::remove_all(dir);
@@ -385,13 +378,7 @@ prescribed { mesh: "block" region { box { min_m { x: -1 y: -1 z: 0.0199999 } max
 // meshes' displacements; at the scene's 5 mm they differ visibly and keep the tie to round-off.
 TEST(SolveCli, CoupledSceneSolvesInEveryTier) {
   const auto dir = testing::temp_dir("solve_tie_tiers");
-  std::string text;
-  {
-    std::ifstream in(testing::source_dir() / "scenes" / "cube_cylinder.scene");
-    std::stringstream ss;
-    ss << in.rdbuf();
-    text = ss.str();
-  }
+  std::string text = testing::slurp(testing::source_dir() / "scenes" / "cube_cylinder.scene");
   const std::string press = "displacement_m { x: -0.005 y: 0 z: 0 }";
   const auto at = text.find(press);
   ASSERT_NE(at, std::string::npos);
@@ -425,11 +412,9 @@ TEST(SolveCli, CoupledSceneSolvesInEveryTier) {
   ASSERT_EQ(run_solve(testing::source_dir() / "scenes" / "cube_cylinder.scene", dir / "nl5mm",
                       "--tier nonlinear"),
             0);
-  std::ifstream log(dir.string() + "/nl5mm.log");
-  std::stringstream out;
-  out << log.rdbuf();
-  EXPECT_NE(out.str().find("tier NONLINEAR (--tier)"), std::string::npos) << out.str();
-  EXPECT_NE(out.str().find("tied: cylinder"), std::string::npos) << out.str();
+  const std::string out = testing::slurp(dir / "nl5mm.log");
+  EXPECT_NE(out.find("tier NONLINEAR (--tier)"), std::string::npos) << out;
+  EXPECT_NE(out.find("tied: cylinder"), std::string::npos) << out;
   fs::remove_all(dir);
 }
 
@@ -450,11 +435,9 @@ prescribed { mesh: "block" region { box { min_m { x: -1 y: -1 z: 0.0199999 } max
 )";
   }
   EXPECT_NE(run_solve(dir / "bad_components.scene", dir / "out"), 0);
-  std::ifstream log(dir.string() + "/out.log");
-  std::stringstream text;
-  text << log.rdbuf();
-  EXPECT_NE(text.str().find("bad_components.scene"), std::string::npos) << text.str();
-  EXPECT_NE(text.str().find("prescribed[0].components"), std::string::npos) << text.str();
+  const std::string text = testing::slurp(dir / "out.log");
+  EXPECT_NE(text.find("bad_components.scene"), std::string::npos) << text;
+  EXPECT_NE(text.find("prescribed[0].components"), std::string::npos) << text;
   fs::remove_all(dir);
 }
 
@@ -466,11 +449,9 @@ TEST(SolveCli, BadSceneGivesClearErrorAndNonZeroExit) {
            "  generate { box { max_m { x: 1 y: 1 z: 1 } } cell_size_m: 0.5 } }\n";
   }
   EXPECT_NE(run_solve(dir / "bad.scene", dir / "out"), 0);
-  std::ifstream log(dir.string() + "/out.log");
-  std::stringstream text;
-  text << log.rdbuf();
-  EXPECT_NE(text.str().find("bad.scene"), std::string::npos) << text.str();
-  EXPECT_NE(text.str().find("meshes[0].material"), std::string::npos) << text.str();
+  const std::string text = testing::slurp(dir / "out.log");
+  EXPECT_NE(text.find("bad.scene"), std::string::npos) << text;
+  EXPECT_NE(text.find("meshes[0].material"), std::string::npos) << text;
   fs::remove_all(dir);
 }
 

@@ -17,17 +17,12 @@ namespace neurosim::mesh {
 namespace {
 
 namespace fs = std::filesystem;
+using neurosim::testing::slurp;
 
 std::string data(const std::string& name) {
   return (neurosim::testing::source_dir() / "tests/data/mesh" / name).string();
 }
 
-std::string slurp(const std::string& path) {
-  std::ifstream in(path);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 void spit(const std::string& path, const std::string& text) {
   std::ofstream out(path);

@@ -107,10 +107,7 @@ class ChildProcess {
     return -2;
   }
   std::string log() const {
-    std::ifstream in(log_);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
+    return neurosim::testing::slurp(log_);
   }
 
  private:

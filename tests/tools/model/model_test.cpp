@@ -18,6 +18,7 @@ using neurosim::mesh::TetMesh;
 using neurosim::mesh::Vec3;
 namespace model = neurosim::model;
 namespace scene = neurosim::scene;
+using neurosim::testing::slurp;
 
 const char* kMri = "/usr/share/mricron/templates/ch2bet.nii.gz";
 
@@ -57,12 +58,6 @@ int artery_vertices_outside(const TetMesh& brain, const TetMesh& artery) {
   return outside;
 }
 
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream in(p);
-  std::ostringstream os;
-  os << in.rdbuf();
-  return os.str();
-}
 
 class ModelTest : public ::testing::Test {
  protected:

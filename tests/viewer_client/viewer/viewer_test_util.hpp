@@ -29,12 +29,6 @@ namespace neurosim::testing {
 
 using neurosim::common::seconds_since;
 
-inline std::string slurp(const std::filesystem::path& p) {
-  std::ifstream f(p);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
 
 // A child process with stdout+stderr into a log file; killed (SIGKILL) when destroyed.
 class Child {
