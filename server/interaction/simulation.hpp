@@ -233,6 +233,13 @@ class Simulation {
   // Largest interpenetration max(0, -g) over every sliding pair for the last step, unit m
   // (full-field solves: for tests and benchmarks).
   virtual double sliding_penetration_m() const { return 0.0; }
+
+  // The elasticity tier that runs (the scene's effects.tier; never another one).
+  virtual scene::Tier tier() const { return scene::Tier::kLinear; }
+  // COROTATIONAL and NONLINEAR: equilibrium updates (the tier's field and the rotations the
+  // contact compliance is warped by) completed per second over the last second, unit Hz; 0 for
+  // LINEAR (nothing to update). Any thread.
+  virtual double tier_update_rate_hz() const { return 0.0; }
 };
 
 }  // namespace neurosim::interaction
