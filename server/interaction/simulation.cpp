@@ -10,6 +10,7 @@
 #include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/sliding_coupling.hpp"
+#include "server/interaction/tier_worker.hpp"
 #include "server/interaction/tool_geometry.hpp"
 
 #include <algorithm>
@@ -102,6 +103,9 @@ struct BodyModel {
   std::vector<std::unique_ptr<SlidingCoupling>> slides;
   std::vector<int> slide_first_row;
   int sliding_offset{0};
+  // The host's material and supports (for the COROTATIONAL and NONLINEAR tiers' equilibrium).
+  fem::Material host_material;
+  std::vector<int> host_fixed_nodes;
 };
 
 // What a step changes on a body.
@@ -136,6 +140,10 @@ class Model {
   // Field of mesh `m` (entry e) from its body's host field.
   void mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
                   const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
+  // COROTATIONAL and NONLINEAR: field of mesh entry e from its body's stacked equilibrium
+  // (host, then the tied meshes in the order of CoupledBody::ties()).
+  void tier_mesh_field(const MeshEntry& e, const Eigen::VectorXd& stacked_u_m,
+                       Eigen::VectorXd& u_m) const;
 
   SimulationOptions options_;
   std::string source_;
@@ -144,6 +152,7 @@ class Model {
   std::vector<ToolShape> tools_;
   SetupStats setup_;
   int num_sliding_{0};  // sliding rows, first in the LCP
+  scene::Tier tier_{scene::Tier::kLinear};
 };
 
 // Everything a step changes (MuJoCo's mjData): per body the contact-compliance cache and the
@@ -158,6 +167,11 @@ class State {
             std::vector<ToolContact>& contacts, StepStats& stats);
   // Host field for the last good step (stepping thread: may use the cached full columns).
   void host_field(const Model& m, int body, Eigen::VectorXd& u_host_m) const {
+    if (tier_) {
+      u_host_m = tier_->linearization(body).u_m.head(
+          3 * static_cast<Eigen::Index>(m.bodies_[body].body->host().num_vertices()));
+      return;
+    }
     const BodyState& bs = bodies_[body];
     m.host_field(m.bodies_[body], bs.force_slots, bs.forces_n, bs.sliding_lambda,
                  Eigen::VectorXd(), bs.columns.get(), u_host_m);
@@ -166,6 +180,10 @@ class State {
   std::vector<BodyState> bodies_;
   double columns_s_{0.0};  // compliance columns computed at construction, unit s
   double sliding_s_{0.0};  // step workspace and constant sliding block at construction, unit s
+  // COROTATIONAL and NONLINEAR: every body's equilibrium, following the contact forces
+  // (tier_worker.hpp); null for LINEAR.
+  std::unique_ptr<TierWorker> tier_;
+  double tier_s_{0.0};  // tier solvers (pattern, symbolic analysis) at construction, unit s
 
  private:
   void reserve_workspace(const Model& m, int tools);
@@ -183,6 +201,7 @@ class State {
   ContactLcp lcp_;
   bool lcp_constant_block_{false};  // set_constant_block done
   std::vector<ToolContact> last_good_;
+  std::vector<TierLoad> tier_loads_;  // per body, the step's contact forces for the worker
 };
 
 std::shared_ptr<const Model> build_model(const scene::Model& model,
@@ -205,7 +224,7 @@ class SimulationImpl final : public Simulation {
     setup_ = model_->setup_;
     setup_.columns_s += state_->columns_s_;
     setup_.sliding_s += state_->sliding_s_;
-    setup_.total_s += state_->columns_s_ + state_->sliding_s_;
+    setup_.total_s += state_->columns_s_ + state_->sliding_s_ + state_->tier_s_;
   }
 
   int num_meshes() const override { return static_cast<int>(model_->meshes_.size()); }
@@ -242,6 +261,10 @@ class SimulationImpl final : public Simulation {
   void snapshot(FieldSnapshot& s) const override;
   void displacements(FieldSnapshot& s, int mesh, Eigen::VectorXd& u_m) const override;
   int body_index(int m) const override { return model_->entry(m).body; }
+  scene::Tier tier() const override { return model_->tier_; }
+  double tier_update_rate_hz() const override {
+    return state_->tier_ ? state_->tier_->rate_hz() : 0.0;
+  }
 
  private:
   std::shared_ptr<const Model> model_;
@@ -259,10 +282,9 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       !std::isfinite(options_.max_penetration_m) || !(options_.candidate_margin >= 0.0)) {
     throw std::invalid_argument(source_ + ": invalid SimulationOptions");
   }
-  // Only the linear tier is implemented: any other is refused, never run as linear.
-  if (model.effects.tier != scene::Tier::kLinear) {
-    throw std::runtime_error(source_ + ": effects.tier " + scene::tier_name(model.effects.tier) +
-                             " is not implemented by this build (implemented: LINEAR)");
+  tier_ = model.effects.tier;
+  if (!(options_.tier_newton_tolerance > 0.0) || !(options_.tier_newton_tolerance < 1e-2)) {
+    throw std::invalid_argument(source_ + ": invalid SimulationOptions.tier_newton_tolerance");
   }
 
   // Meshes, in scene order (copies: a host is carved below).
@@ -282,6 +304,17 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
   std::vector<char> sliding(meshes_.size(), 0);         // embedded by a SLIDING coupling
   if (model.effects.coupling) {
     for (const auto& cp : model.couplings) {
+      // The corotational and nonlinear tiers solve ties exactly in their own Newton system;
+      // sliding pairs and the paper's iterative baseline exist in the linear tier only.
+      if (tier_ != scene::Tier::kLinear && (cp.kind == scene::CouplingKind::kSliding ||
+                                            cp.method == scene::CouplingMethod::kIterative)) {
+        throw std::runtime_error(
+            source_ + ": coupling " + model.meshes[cp.host].id + " / " +
+            model.meshes[cp.embedded].id + ": " +
+            (cp.kind == scene::CouplingKind::kSliding ? "SLIDING" : "method ITERATIVE") +
+            " is implemented in the LINEAR tier only, not in effects.tier " +
+            scene::tier_name(tier_) + " (use a TIE coupling with method EXACT)");
+      }
       host_of[cp.embedded] = cp.host;
       if (cp.method == scene::CouplingMethod::kIterative) iterative_host[cp.host] = 1;
       sliding[cp.embedded] = cp.kind == scene::CouplingKind::kSliding;
@@ -388,6 +421,8 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       throw std::runtime_error(source_ + ": mesh " + lm.id + ": " + ex.what());
     }
     setup_.factor_s += b.body->timing().factor_s;
+    b.host_material = lm.material;
+    b.host_fixed_nodes = lm.fixed_nodes;
     b.body->set_cache_dir(options_.compliance_cache_dir);
     if (iterative_host[m])
       b.body->set_iterative(IterativeOptions{options_.iterative_max_iterations,
@@ -500,6 +535,27 @@ State::State(const Model& m) {
   }
   missing_.resize(m.bodies_.size());
   sliding_active_.assign(m.num_sliding_, 0);
+  tier_loads_.resize(m.bodies_.size());
+  if (m.tier_ != scene::Tier::kLinear && !m.bodies_.empty()) {
+    const auto t0 = Clock::now();
+    std::vector<std::unique_ptr<TierEquilibrium>> eq;
+    for (const BodyModel& b : m.bodies_) {
+      TierEquilibriumDefinition d;
+      d.body = b.body.get();
+      d.host_material = b.host_material;
+      d.host_fixed_nodes = b.host_fixed_nodes;
+      d.tier = m.tier_;
+      d.newton.tolerance = m.options_.tier_newton_tolerance;
+      try {
+        eq.push_back(std::make_unique<TierEquilibrium>(d));
+      } catch (const std::exception& ex) {
+        throw std::runtime_error(m.source_ + ": mesh " +
+                                 m.meshes_[b.body->host_index()].loaded->id + ": " + ex.what());
+      }
+    }
+    tier_ = std::make_unique<TierWorker>(std::move(eq), m.options_.tier_worker_thread);
+    tier_s_ = seconds_since(t0);
+  }
   // Sliding rows: the step workspace and the inverse of their block at load, not in step 1.
   if (m.num_sliding_ > 0) {
     const auto t0 = Clock::now();
@@ -539,6 +595,10 @@ void State::reserve_workspace(const Model& m, int tools) {
     b.forces_n.reserve(max_rows);
   }
   for (auto& list : missing_) list.reserve(max_rows);
+  for (auto& l : tier_loads_) {
+    l.slots.reserve(max_rows);
+    l.forces_n.reserve(max_rows);
+  }
   last_good_.resize(tools);
   for (auto& c : last_good_) c.nodes.reserve(m.options_.max_contact_nodes_per_tool);
   // The inverse of the constant sliding block, once (its size does not depend on the tools).
@@ -659,6 +719,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     }
   }
   reserve_workspace(m, nt);
+  if (tier_) tier_->begin_step();
   if (static_cast<int>(contacts.size()) != nt) contacts.resize(nt);
   rows_.clear();
   if (!m.tools_.empty()) {
@@ -683,18 +744,23 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
 
   // Delassus operator on the contact rows: W_rs = n_r^T L(r, s) n_s (coupled compliance, unit
   // m/N); against the sliding rows of the same body, W_kr = -J_A,k L[:, r] n_r (the tool
-  // pushes along -n_r, the row measures the inward motion of the node).
+  // pushes along -n_r, the row measures the inward motion of the node). COROTATIONAL and
+  // NONLINEAR: L warped by the nodes' rotations (n -> R^T n) and the depth taken at the offset
+  // u0 of the latest equilibrium (tier_equilibrium.hpp).
   for (int r = 0; r < nc; ++r) {
     const Row& a = rows_[r];
     const int i = ns + r;
     const auto& body_a = *m.bodies_[a.body].body;
-    const Vec3& na = body_a.contact_normals()[a.slot];
+    const TierLinearization* lin = tier_ ? &tier_->linearization(a.body) : nullptr;
+    const auto& normals_a = lin ? lin->warped_normal : body_a.contact_normals();
+    const Vec3& na = normals_a[a.slot];
     delta_[i] = a.depth_m;
+    if (lin) delta_[i] += body_a.contact_normals()[a.slot].dot(lin->offset_m[a.slot]);
     for (int s = r; s < nc; ++s) {
       const Row& c = rows_[s];
       double v = 0.0;
       if (c.body == a.body) {
-        const Vec3& nc_ = body_a.contact_normals()[c.slot];
+        const Vec3& nc_ = normals_a[c.slot];
         const auto& cols = *bodies_[a.body].columns;
         v = 0.5 * (na.dot(cols.block(a.slot, c.slot) * nc_) +
                    nc_.dot(cols.block(c.slot, a.slot) * na));
@@ -761,6 +827,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     bs.force_slots.push_back(rows_[r].slot);
     bs.forces_n.push_back(-l * m.bodies_[rows_[r].body].body->contact_normals()[rows_[r].slot]);  // inward on the tissue
   }
+
   for (int t = 0; t < nt; ++t) {
     ToolContact& c = contacts[t];
     c.force_n.setZero();
@@ -810,6 +877,14 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
                                std::to_string(t));
     }
     last_good_[t] = c;
+  }
+  // The tier's equilibrium follows these forces (worker thread; or now, deterministic).
+  if (tier_) {
+    for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+      tier_loads_[bi].slots = bodies_[bi].force_slots;
+      tier_loads_[bi].forces_n = bodies_[bi].forces_n;
+    }
+    tier_->post(tier_loads_);
   }
   stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
 }
@@ -864,12 +939,32 @@ void Model::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda
   b.body->ties().at(static_cast<std::size_t>(e.tie)).displacement(u_host_m, u_m);
 }
 
+void Model::tier_mesh_field(const MeshEntry& e, const Eigen::VectorXd& stacked_u_m,
+                            Eigen::VectorXd& u_m) const {
+  const CoupledBody& body = *bodies_[e.body].body;
+  Eigen::Index first = 0;
+  for (int t = 0; t < e.tie; ++t)
+    first += 3 * static_cast<Eigen::Index>(body.ties()[t].geometry().num_vertices());
+  if (e.tie >= 0) first += 3 * static_cast<Eigen::Index>(body.host().num_vertices());
+  const Eigen::Index n = 3 * static_cast<Eigen::Index>(e.loaded->mesh.num_vertices());
+  if (stacked_u_m.size() < first + n) {
+    throw std::invalid_argument(source_ + ": tier field of mesh " + e.loaded->id + " has " +
+                                std::to_string(stacked_u_m.size()) + " values, needs " +
+                                std::to_string(first + n));
+  }
+  u_m = stacked_u_m.segment(first, n);
+}
+
 namespace {
 
 void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
   const MeshEntry& e = model_->entry(m);
   if (e.body < 0) {
     u_m.setZero(3 * static_cast<int>(e.loaded->mesh.num_vertices()));
+    return;
+  }
+  if (state_->tier_) {  // the tier's own field: the latest equilibrium
+    model_->tier_mesh_field(e, state_->tier_->linearization(e.body).u_m, u_m);
     return;
   }
   const BodyState& bs = state_->bodies_[e.body];
@@ -895,6 +990,11 @@ void SimulationImpl::snapshot(FieldSnapshot& s) const {
     out.forces_n = bodies[i].forces_n;
     out.sliding_lambda_n = bodies[i].sliding_lambda;
     out.nodal_forces_n.resize(0);
+    if (state_->tier_) {
+      out.tier_u_m = state_->tier_->linearization(static_cast<int>(i)).u_m;
+    } else {
+      out.tier_u_m.resize(0);
+    }
     out.host_done = false;
   }
 }
@@ -911,6 +1011,10 @@ void SimulationImpl::displacements(FieldSnapshot& s, int m, Eigen::VectorXd& u_m
                                 std::to_string(model_->bodies_.size()));
   }
   auto& sb = s.bodies[e.body];
+  if (sb.tier_u_m.size() > 0) {
+    model_->tier_mesh_field(e, sb.tier_u_m, u_m);
+    return;
+  }
   if (e.slide < 0 && !sb.host_done) {
     // Never the step's column cache: this may run on another thread than step().
     model_->host_field(model_->bodies_[e.body], sb.slots, sb.forces_n, sb.sliding_lambda_n,
@@ -960,7 +1064,12 @@ double SimulationImpl::tie_residual_m() const {
     if (b.body->ties().empty()) continue;
     state_->host_field(*model_, static_cast<int>(bi), u_host);
     for (const auto& tie : b.body->ties()) {
-      tie.displacement(u_host, u_emb);
+      if (state_->tier_) {
+        model_->tier_mesh_field(model_->entry(tie.mesh()),
+                                state_->tier_->linearization(static_cast<int>(bi)).u_m, u_emb);
+      } else {
+        tie.displacement(u_host, u_emb);
+      }
       worst = std::max(worst, tie.residual(u_host, u_emb));
     }
   }

@@ -76,6 +76,9 @@ struct FieldSnapshot {
     std::vector<Vec3> forces_n;          // per slot, the force on the tissue, unit N
     Eigen::VectorXd sliding_lambda_n;    // per sliding row of the body, normal force, unit N
     Eigen::VectorXd nodal_forces_n;      // optional: any other host nodal forces (3N_A), unit N
+    // COROTATIONAL and NONLINEAR tiers: the body's latest equilibrium (host, then its tied
+    // meshes), unit m; the fields are taken from it (slots and forces are those of the step).
+    Eigen::VectorXd tier_u_m;
     // The host field for these forces (3N_A, unit m), computed on the first request.
     Eigen::VectorXd u_host_m;
     bool host_done{false};
@@ -128,6 +131,13 @@ struct SimulationOptions {
   // With sliding_inactive_set: that path in every step, however few sliding rows are active
   // (otherwise the reference path takes the steps with few; tests).
   bool sliding_inactive_set_always{false};
+  // COROTATIONAL and NONLINEAR tiers (tier_equilibrium.hpp): the equilibrium follows the contact
+  // forces on a worker thread, as fast as it goes (true: the server; the step never waits), or
+  // step() updates it after its LCP (false: deterministic, each step pays a Newton solve; tests
+  // and offline replay). Either way a held tool converges to the tier's contact equilibrium.
+  bool tier_worker_thread{true};
+  // Relative Newton tolerance of those updates (fem::NewtonOptions::tolerance).
+  double tier_newton_tolerance{1e-10};
 };
 
 // Load-time cost of build(), unit s.

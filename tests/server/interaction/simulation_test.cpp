@@ -464,23 +464,6 @@ TEST(interaction_stability, ToolInsideTheEmbeddedMesh) {
 }
 
 }  // namespace
-// A tier this build does not implement is refused at load, naming it; never run as linear.
-TEST(interaction_simulation, UnimplementedTierIsRefused) {
-  for (const char* tier : {"COROTATIONAL", "NONLINEAR"}) {
-    SceneSpec spec;
-    spec.tier = tier;
-    try {
-      Simulation::build(testing::make_scene(spec));
-      FAIL() << tier << " was built";
-    } catch (const std::runtime_error& e) {
-      const std::string msg = e.what();
-      EXPECT_NE(msg.find(tier), std::string::npos) << msg;
-      EXPECT_NE(msg.find("test.scene"), std::string::npos) << msg;
-      EXPECT_NE(msg.find("not implemented"), std::string::npos) << msg;
-    }
-  }
-}
-
 // The Model/State split: one constant Model serves independent States; a State's answer depends
 // only on the Model and the poses it is stepped with (not on another State's steps), and equals
 // the Simulation's.

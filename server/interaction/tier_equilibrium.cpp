@@ -1,0 +1,144 @@
+#include "server/interaction/tier_equilibrium.hpp"
+
+#include "server/fem/polar_decomposition.hpp"
+
+#include <stdexcept>
+#include <string>
+
+namespace neurosim::interaction {
+
+namespace {
+
+std::string body_name(const CoupledBody& b) {
+  return "body of host mesh " + std::to_string(b.host_index());
+}
+
+}  // namespace
+
+TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
+    : body_(def.body), tier_(def.tier), newton_(def.newton) {
+  if (body_ == nullptr) throw std::invalid_argument("TierEquilibrium: no body");
+  if (tier_ == fem::Tier::kLinear) {
+    throw std::invalid_argument("TierEquilibrium: " + body_name(*body_) +
+                                ": the LINEAR tier has no equilibrium to update");
+  }
+  if (body_->sliding().size() > 0) {
+    throw std::invalid_argument("TierEquilibrium: " + body_name(*body_) +
+                                ": SLIDING couplings are not implemented in tier " +
+                                fem::tier_name(tier_));
+  }
+  fem::EquilibriumDefinition d;
+  d.mesh = &body_->host();
+  d.materials = fem::MaterialMap::uniform(def.host_material);
+  d.tier = tier_;
+  d.fixed_nodes = def.host_fixed_nodes;
+  for (const auto& tie : body_->ties()) {
+    d.tied.push_back({&tie.geometry(), fem::MaterialMap::uniform(tie.material()),
+                      tie.fixed_nodes(), tie.tied_nodes(), tie.host_nodes(), tie.weights()});
+  }
+  solver_ = std::make_unique<fem::EquilibriumSolver>(d);
+  slot_node_ = body_->contact_nodes();
+  u_.setZero(solver_->num_dofs());
+  f_.setZero(solver_->num_dofs());
+  rotation_.assign(slot_node_.size(), Eigen::Matrix3d::Identity());
+}
+
+TierEquilibrium::~TierEquilibrium() = default;
+
+int TierEquilibrium::num_dofs() const { return solver_->num_dofs(); }
+int TierEquilibrium::body_offset(int body) const { return solver_->body_offset(body); }
+
+void TierEquilibrium::rest(TierLinearization& out) const {
+  out.offset_m.assign(slot_node_.size(), mesh::Vec3::Zero());
+  out.warped_normal = body_->contact_normals();
+  out.u_m.setZero(solver_->num_dofs());
+  out.load.slots.clear();
+  out.load.forces_n.clear();
+  out.iterations = 0;
+  out.count = 0;
+}
+
+void TierEquilibrium::rotations(const Eigen::VectorXd& u_host_m) {
+  const mesh::TetMesh& host = body_->host();
+  const auto& offsets = host.vertex_tet_offsets();
+  const auto& list = host.vertex_tet_list();
+  const fem::ElasticForces& forces = solver_->forces();
+  for (std::size_t s = 0; s < slot_node_.size(); ++s) {
+    const int v = slot_node_[s];
+    Eigen::Matrix3d f = Eigen::Matrix3d::Zero();
+    int n = 0;
+    for (int k = offsets[v]; k < offsets[v + 1]; ++k, ++n)
+      f += forces.displacement_gradient(static_cast<std::size_t>(list[k]), u_host_m);
+    // Mean gradient of the tetrahedra around the node; its polar rotation (stable for flat and
+    // inverted elements: sign-corrected SVD).
+    rotation_[s] = n > 0 ? fem::polar_rotation(Eigen::Matrix3d::Identity() + f / n)
+                         : Eigen::Matrix3d::Identity();
+  }
+}
+
+void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
+  const int n_host = 3 * static_cast<int>(body_->host().num_vertices());
+  if (load.slots.size() != load.forces_n.size()) {
+    throw std::invalid_argument("TierEquilibrium: " + body_name(*body_) + ": " +
+                                std::to_string(load.slots.size()) + " slots, " +
+                                std::to_string(load.forces_n.size()) + " forces");
+  }
+  f_.setZero();
+  for (std::size_t k = 0; k < load.slots.size(); ++k) {
+    const int s = load.slots[k];
+    if (s < 0 || s >= static_cast<int>(slot_node_.size()) || !load.forces_n[k].allFinite()) {
+      throw std::invalid_argument("TierEquilibrium: " + body_name(*body_) +
+                                  ": bad contact load at slot " + std::to_string(s));
+    }
+    f_.segment<3>(3 * slot_node_[s]) += load.forces_n[k];
+  }
+  // Newton from the previous equilibrium (one load step: the forces change little between
+  // updates); a jump it cannot take goes the incremental load path from rest.
+  Eigen::VectorXd& u = u_host_;  // scratch for the trial
+  u = u_;
+  int iterations = 0;
+  try {
+    const fem::NewtonIncrement inc = solver_->solve_from(f_, u, newton_);
+    iterations = static_cast<int>(inc.residual_n.size()) - 1;
+  } catch (const std::runtime_error&) {
+    try {
+      const fem::EquilibriumResult r = solver_->solve(f_, newton_);
+      u = r.displacement_m;
+      for (const auto& inc : r.increments) iterations += static_cast<int>(inc.residual_n.size()) - 1;
+    } catch (const std::runtime_error& e) {
+      throw std::runtime_error("TierEquilibrium: " + body_name(*body_) + " in tier " +
+                               fem::tier_name(tier_) + ": " + e.what());
+    }
+  }
+  if (!u.allFinite()) {
+    throw std::runtime_error("TierEquilibrium: " + body_name(*body_) + ": equilibrium not finite");
+  }
+  u_.swap(u);
+
+  // Rotations at the contact slots, then u0 = u* - R C R^T f* there (C: the linear coupled
+  // compliance, ties included, one coupled solve for the rotated forces).
+  u_host_ = u_.head(n_host);
+  rotations(u_host_);
+  rotated_.resize(load.slots.size());
+  for (std::size_t k = 0; k < load.slots.size(); ++k)
+    rotated_[k] = rotation_[load.slots[k]].transpose() * load.forces_n[k];
+  if (load.slots.empty()) {
+    u_lin_.setZero(n_host);
+  } else {
+    body_->host_displacement(load.slots, rotated_, u_lin_);
+  }
+  const auto& normals = body_->contact_normals();
+  out.offset_m.resize(slot_node_.size());
+  out.warped_normal.resize(slot_node_.size());
+  for (std::size_t s = 0; s < slot_node_.size(); ++s) {
+    const int v = slot_node_[s];
+    out.offset_m[s] = u_host_.segment<3>(3 * v) - rotation_[s] * u_lin_.segment<3>(3 * v);
+    out.warped_normal[s] = rotation_[s].transpose() * normals[s];
+  }
+  out.u_m = u_;
+  out.load = load;
+  out.iterations = iterations;
+  out.count = ++count_;
+}
+
+}  // namespace neurosim::interaction

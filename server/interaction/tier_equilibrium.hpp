@@ -1,0 +1,93 @@
+// A body (host + tied meshes) in the COROTATIONAL or NONLINEAR tier, seen by the 1 kHz contact
+// step through a linearization of its latest static equilibrium (multirate compliance warping:
+// Saupin, Duriez, Cotin, Grisoni 2008; SOFA's PrecomputedConstraintCorrection with rotations).
+//
+//   slow (worker): u* = the tier's equilibrium under the contact forces f* of a recent step
+//                  (fem::EquilibriumSolver: Newton on host and tied meshes in one system, ties
+//                  eliminated exactly, warm-started from the previous answer);
+//   fast (step):   the contact LCP on the body's linear coupled compliance C warped by per-node
+//                  rotations R taken from u*:  u(f) ~ u0 + R C R^T f,  u0 = u* - R C R^T f*.
+//
+// For the forces f* the model gives u* exactly, so the step and the updates form a fixed-point
+// iteration whose fixed point is the tier's own contact equilibrium (the warping sets how fast it
+// converges, not where). Per contact slot s the step reads the warped normal m_s = R_s^T n_s (so
+// W_rs = m_r . C_rs m_s) and the offset u0_s (depth_r + n_r . u0_r). R_s: the polar rotation of
+// the mean deformation gradient of the host tetrahedra around the slot's node.
+//
+// Contact is flat and in the reference configuration in every tier (rest positions, rest
+// normals, forces along them as dead loads), so the tiers differ only in the elasticity.
+#pragma once
+
+#include "server/fem/equilibrium_solver.hpp"
+#include "server/fem/material.hpp"
+#include "server/fem/tier.hpp"
+#include "server/interaction/coupled_body.hpp"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+namespace neurosim::interaction {
+
+// Contact forces on a body: per contact slot carrying one, the force on the tissue, unit N.
+struct TierLoad {
+  std::vector<int> slots;
+  std::vector<mesh::Vec3> forces_n;
+};
+
+// What the contact step reads of a body's latest equilibrium.
+struct TierLinearization {
+  std::vector<mesh::Vec3> offset_m;       // per contact slot: u0 at its node, unit m
+  std::vector<mesh::Vec3> warped_normal;  // per contact slot: R^T n (unit)
+  // The equilibrium: host (3 N_A) then each tied mesh (TierEquilibrium::body_offset), unit m.
+  Eigen::VectorXd u_m;
+  TierLoad load;           // the forces u_m is the equilibrium of
+  int iterations{0};       // Newton iterations of the update (0 at rest)
+  std::uint64_t count{0};  // updates of this body so far
+};
+
+struct TierEquilibriumDefinition {
+  const CoupledBody* body{nullptr};  // finalized, exact ties, no sliding rows; must outlive
+  fem::Material host_material;
+  std::vector<int> host_fixed_nodes;  // of the (carved) host
+  fem::Tier tier{fem::Tier::kNonlinear};
+  fem::NewtonOptions newton{};
+};
+
+class TierEquilibrium {
+ public:
+  // Throws std::invalid_argument for a linear tier, a body with sliding rows or an iterative
+  // tie, and what fem::EquilibriumSolver throws.
+  explicit TierEquilibrium(const TierEquilibriumDefinition& def);
+  ~TierEquilibrium();
+  TierEquilibrium(const TierEquilibrium&) = delete;
+  TierEquilibrium& operator=(const TierEquilibrium&) = delete;
+
+  fem::Tier tier() const { return tier_; }
+  // The linearization at rest: u* = 0, R = I, u0 = 0 (the linear model until the first update).
+  void rest(TierLinearization& out) const;
+  // The equilibrium for `load`, warm-started from the previous one (Newton at full load; when
+  // that fails, the load path from rest in increments), and its linearization. Throws
+  // std::runtime_error (naming the body) when the tier does not converge; `out` and the warm
+  // start are then unchanged. One thread at a time.
+  void update(const TierLoad& load, TierLinearization& out);
+
+  int num_dofs() const;             // stacked: host then tied meshes
+  int body_offset(int body) const;  // 0: the host, k: the body's ties()[k - 1]
+
+ private:
+  const CoupledBody* body_;
+  fem::Tier tier_;
+  fem::NewtonOptions newton_;
+  std::unique_ptr<fem::EquilibriumSolver> solver_;
+  std::vector<int> slot_node_;  // per contact slot: host node
+  Eigen::VectorXd u_, f_, u_host_, u_lin_;  // warm start and scratch
+  std::vector<mesh::Vec3> rotated_;
+  std::vector<Eigen::Matrix3d> rotation_;  // per contact slot
+  std::uint64_t count_{0};
+  void rotations(const Eigen::VectorXd& u_host_m);
+};
+
+}  // namespace neurosim::interaction

@@ -1,0 +1,69 @@
+// Keeps every body's tier equilibrium (TierEquilibrium) following the contact forces: on its own
+// thread, as fast as it goes (the server: the 1 kHz step never waits for a Newton solve), or
+// inline after each step (deterministic: tests and offline replay).
+//
+//   step thread:  begin_step() takes the newest linearizations; linearization(b) reads them;
+//                 post(loads) hands over the step's contact forces (never blocks).
+//   worker:       newest loads -> TierEquilibrium::update per body -> publish (triple buffers:
+//                 neither side waits; a load not taken yet is replaced by a newer one).
+#pragma once
+
+#include "common/triple_buffer.hpp"
+#include "server/interaction/tier_equilibrium.hpp"
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace neurosim::interaction {
+
+class TierWorker {
+ public:
+  // One equilibrium per body (none null). threaded: the updates run on a thread started here
+  // and joined by the destructor; else post() runs them.
+  TierWorker(std::vector<std::unique_ptr<TierEquilibrium>> bodies, bool threaded);
+  ~TierWorker();
+  TierWorker(const TierWorker&) = delete;
+  TierWorker& operator=(const TierWorker&) = delete;
+
+  // Step thread. The linearizations stay the same between two begin_step() calls.
+  void begin_step();
+  const TierLinearization& linearization(int body) const;
+  // Step thread: the contact forces of a good step, one load per body. Threaded: hands them
+  // over; else updates every body now (throws what TierEquilibrium::update throws).
+  void post(const std::vector<TierLoad>& loads);
+
+  // Equilibrium updates per second of work, 1 / mean update time (all bodies) over the updates
+  // of the last second (kept while idle: a held tool needs none), unit Hz; 0 before the first.
+  // Any thread.
+  double rate_hz() const { return rate_hz_.load(std::memory_order_relaxed); }
+  std::uint64_t updates() const { return updates_.load(std::memory_order_relaxed); }
+  // Updates that did not converge (the previous equilibrium stays) and the last message.
+  std::uint64_t failures() const { return failures_.load(std::memory_order_relaxed); }
+  std::string last_error() const;
+
+ private:
+  std::vector<std::unique_ptr<TierEquilibrium>> bodies_;
+  bool threaded_;
+  common::TripleBuffer<std::vector<TierLoad>> loads_;
+  common::TripleBuffer<std::vector<TierLinearization>> published_;
+  std::vector<TierLinearization> current_;  // synchronous mode, and the worker's own copy
+  std::vector<TierLoad> pending_, solved_;  // worker: newest loads, loads of current_
+  std::atomic<bool> stop_{false};
+  std::atomic<double> rate_hz_{0.0};
+  std::atomic<std::uint64_t> updates_{0}, failures_{0};
+  mutable std::mutex error_mutex_;
+  std::string last_error_;
+  double window_start_s_{0.0}, window_busy_s_{0.0};
+  int window_updates_{0};
+  std::thread thread_;
+  // Updates every body for `loads` into current_; false (error recorded) if one failed.
+  bool update_all(const std::vector<TierLoad>& loads);
+  void run();
+};
+
+}  // namespace neurosim::interaction

@@ -1,0 +1,228 @@
+// The COROTATIONAL and NONLINEAR tiers in the Simulation (tier_equilibrium.hpp): a held tool
+// converges to the tier's own contact equilibrium. Checked against references outside the
+// multirate loop: a fresh fem::EquilibriumSolver solved from rest under the converged contact
+// forces (the field must be that equilibrium), and the contact conditions evaluated on that
+// field (no penetration anywhere, touching where the tool pushes).
+#include "server/interaction/tier_equilibrium.hpp"
+
+#include "interaction_fixtures.hpp"
+#include "server/fem/equilibrium_solver.hpp"
+#include "server/interaction/simulation.hpp"
+#include "server/interaction/tool_geometry.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <thread>
+
+namespace neurosim::interaction {
+namespace {
+
+using testing::push_right;
+using testing::SceneSpec;
+
+struct Held {
+  std::unique_ptr<Simulation> sim;
+  std::vector<ToolContact> contacts;
+  int steps{0};
+  double last_change{0.0};  // |f_k - f_k-1| / |f_k| of the last step
+};
+
+// Converged: the force changes by less than this between steps (relative). The fixed point is
+// reached to about the Newton tolerance of the updates (1e-12 here).
+constexpr double kSettled = 1e-11;
+
+// Steps one pose until the force stops changing (synchronous updates: deterministic).
+Held hold(const SceneSpec& spec, const ToolPose& pose, int max_steps = 60) {
+  SimulationOptions o;
+  o.tier_worker_thread = false;
+  o.tier_newton_tolerance = 1e-12;
+  Held h;
+  h.sim = Simulation::build(testing::make_scene(spec), o);
+  StepStats st;
+  Vec3 prev = Vec3::Constant(1e300);
+  for (h.steps = 1; h.steps <= max_steps; ++h.steps) {
+    h.sim->step({pose}, h.contacts, st);
+    const Vec3 f = h.contacts[0].force_n;
+    h.last_change = (f - prev).norm() / std::max(f.norm(), 1e-300);
+    prev = f;
+    if (h.last_change < kSettled) break;
+  }
+  return h;
+}
+
+// The equilibrium of the simulation's host and tied meshes for the last step's contact forces,
+// solved from rest in load increments by a solver of its own.
+Eigen::VectorXd reference_equilibrium(const Simulation& sim, fem::Tier tier,
+                                      const fem::Material& host_material) {
+  const int host = 0;
+  const CoupledBody& body = *sim.body_of(host);
+  fem::EquilibriumDefinition d;
+  d.mesh = &sim.mesh(host);
+  d.materials = fem::MaterialMap::uniform(host_material);
+  d.tier = tier;
+  d.fixed_nodes = sim.fixed_nodes(host);
+  for (const auto& tie : body.ties()) {
+    d.tied.push_back({&tie.geometry(), fem::MaterialMap::uniform(tie.material()),
+                      tie.fixed_nodes(), tie.tied_nodes(), tie.host_nodes(), tie.weights()});
+  }
+  fem::EquilibriumSolver solver(d);
+  std::vector<int> slots;
+  std::vector<Vec3> forces;
+  sim.last_contact_forces(host, slots, forces);
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
+  for (std::size_t k = 0; k < slots.size(); ++k)
+    f.segment<3>(3 * body.contact_nodes()[slots[k]]) += forces[k];
+  return solver.solve(f).displacement_m;
+}
+
+class Tiers : public ::testing::TestWithParam<const char*> {};
+
+// A 15 mm press (15 % of the cube's edge) held still: the force converges; the field is the
+// tier's equilibrium under that force (1e-8); on that field no contact node penetrates the tool
+// and every node carrying force touches it (1e-9 of the press); the tier differs from LINEAR.
+TEST_P(Tiers, HeldPressConvergesToTheTierContactEquilibrium) {
+  SceneSpec spec;
+  spec.tier = GetParam();
+  const fem::Tier tier = *fem::parse_tier(GetParam());
+  const double press = 0.015;
+  const ToolPose pose = push_right(press);
+  const Held h = hold(spec, pose);
+  ASSERT_LE(h.last_change, kSettled) << "not converged after " << h.steps << " steps";
+  const Simulation& sim = *h.sim;
+  EXPECT_EQ(sim.tier(), tier);
+  const ToolContact& c = h.contacts[0];
+  ASSERT_TRUE(c.in_contact);
+  ASSERT_TRUE(c.force_n.allFinite());
+
+  // The field is the tier's equilibrium for the converged forces.
+  const Eigen::VectorXd ref = reference_equilibrium(sim, tier, fem::Material{1.0e6, 0.4});
+  Eigen::VectorXd u_host, u_cyl;
+  sim.displacements(0, u_host);
+  sim.displacements(1, u_cyl);
+  ASSERT_EQ(ref.size(), u_host.size() + u_cyl.size());
+  const double scale = ref.cwiseAbs().maxCoeff();
+  EXPECT_LE((u_host - ref.head(u_host.size())).cwiseAbs().maxCoeff(), 1e-8 * scale);
+  EXPECT_LE((u_cyl - ref.tail(u_cyl.size())).cwiseAbs().maxCoeff(), 1e-8 * scale);
+  EXPECT_LE(sim.tie_residual_m(), 1e-12 * scale);
+
+  // Contact conditions on that field: depth + n . u <= 0 everywhere, = 0 where force is carried.
+  const CoupledBody& body = *sim.body_of(0);
+  std::vector<int> slots;
+  std::vector<Vec3> forces;
+  sim.last_contact_forces(0, slots, forces);
+  ASSERT_FALSE(slots.empty());
+  std::vector<char> active(body.contact_nodes().size(), 0);
+  for (int s : slots) active[s] = 1;
+  const double r = spec.tip_radius_m;
+  double worst_penetration = 0.0, worst_gap = 0.0;
+  for (std::size_t s = 0; s < body.contact_nodes().size(); ++s) {
+    const Vec3& n = body.contact_normals()[s];
+    if (n.x() < 0.9) continue;  // the pressed face only (x = 0.1)
+    const Vec3 x = body.host().vertices()[body.contact_nodes()[s]];
+    const double depth = normal_line_depth(x, n, pose.tip_m, r);
+    if (!std::isfinite(depth)) continue;  // the tool's normal line misses this node
+    const double pen = depth + n.dot(u_host.segment<3>(3 * body.contact_nodes()[s]));
+    worst_penetration = std::max(worst_penetration, pen);
+    if (active[s]) worst_gap = std::max(worst_gap, std::abs(pen));
+  }
+  EXPECT_LE(worst_penetration, 1e-9 * press);
+  EXPECT_LE(worst_gap, 1e-9 * press);
+
+  // Not linear in disguise: the linear tier's force differs.
+  SceneSpec lin = spec;
+  lin.tier = "LINEAR";
+  const Held hl = hold(lin, pose, 2);
+  const double fl = hl.contacts[0].force_n.norm(), ft = c.force_n.norm();
+  std::printf("%s: 15 mm press, force %.6g N (LINEAR %.6g N, %+.2f %%), converged in %d steps\n",
+              GetParam(), ft, fl, 100.0 * (ft - fl) / fl, h.steps);
+  EXPECT_GT(std::abs(ft - fl), 1e-3 * fl);
+}
+
+// A small press: every tier agrees with LINEAR (consistency of the linearization).
+TEST_P(Tiers, SmallPressAgreesWithLinear) {
+  SceneSpec spec;
+  spec.tier = GetParam();
+  const ToolPose pose = push_right(1e-7);
+  const Held h = hold(spec, pose);
+  SceneSpec lin = spec;
+  lin.tier = "LINEAR";
+  const Held hl = hold(lin, pose, 2);
+  const Vec3 fl = hl.contacts[0].force_n;
+  ASSERT_GT(fl.norm(), 0.0);
+  EXPECT_LE((h.contacts[0].force_n - fl).norm(), 1e-5 * fl.norm());
+}
+
+// The worker thread (the server's mode) reaches the same answer as the synchronous updates.
+TEST_P(Tiers, WorkerThreadReachesTheSynchronousAnswer) {
+  SceneSpec spec;
+  spec.tier = GetParam();
+  const ToolPose pose = push_right(0.01);
+  const Held sync = hold(spec, pose);
+  SimulationOptions o;
+  o.tier_newton_tolerance = 1e-12;
+  auto sim = Simulation::build(testing::make_scene(spec), o);  // worker thread
+  std::vector<ToolContact> c;
+  StepStats st;
+  Vec3 prev = Vec3::Zero();
+  // Settled: at least one update done and the force still for a second (the step runs at about
+  // 1 kHz, the worker as fast as it goes); at most a minute.
+  const auto t0 = std::chrono::steady_clock::now();
+  auto still_since = t0;
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60)) {
+    sim->step({pose}, c, st);
+    const auto now = std::chrono::steady_clock::now();
+    if ((c[0].force_n - prev).norm() > kSettled * c[0].force_n.norm() ||
+        sim->tier_update_rate_hz() == 0.0)
+      still_since = now;
+    if (now - still_since > std::chrono::seconds(1)) break;
+    prev = c[0].force_n;
+    std::this_thread::sleep_for(std::chrono::microseconds(1000));
+  }
+  const Vec3 fs = sync.contacts[0].force_n;
+  EXPECT_LE((c[0].force_n - fs).norm(), 1e-9 * fs.norm())
+      << c[0].force_n.transpose() << " vs " << fs.transpose();
+  EXPECT_GT(sim->tier_update_rate_hz(), 0.0);
+  EXPECT_TRUE(std::isfinite(sim->tier_update_rate_hz()));
+}
+
+INSTANTIATE_TEST_SUITE_P(interaction_tier, Tiers, ::testing::Values("COROTATIONAL", "NONLINEAR"));
+
+// What the non-linear tiers do not implement is refused at load, naming the tier and the
+// coupling; never run as another tier or another coupling.
+TEST(interaction_tier, SlidingAndIterativeAreRefusedOutsideLinear) {
+  for (const char* tier : {"COROTATIONAL", "NONLINEAR"}) {
+    for (int variant = 0; variant < 2; ++variant) {
+      SceneSpec spec;
+      spec.tier = tier;
+      spec.sliding = variant == 0;
+      spec.iterative = variant == 1;
+      try {
+        Simulation::build(testing::make_scene(spec));
+        FAIL() << tier << " variant " << variant << " was built";
+      } catch (const std::runtime_error& e) {
+        const std::string msg = e.what();
+        EXPECT_NE(msg.find(tier), std::string::npos) << msg;
+        EXPECT_NE(msg.find("test.scene"), std::string::npos) << msg;
+        EXPECT_NE(msg.find(variant == 0 ? "SLIDING" : "ITERATIVE"), std::string::npos) << msg;
+      }
+    }
+  }
+}
+
+// The linear tier has no equilibrium to update: TierEquilibrium refuses it.
+TEST(interaction_tier, TierEquilibriumRefusesLinear) {
+  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
+  TierEquilibriumDefinition d;
+  d.body = sim->body_of(0);
+  d.host_material = fem::Material{1.0e6, 0.4};
+  d.host_fixed_nodes = sim->fixed_nodes(0);
+  d.tier = fem::Tier::kLinear;
+  EXPECT_THROW(TierEquilibrium{d}, std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
