@@ -553,7 +553,10 @@ State::State(const Model& m) {
                                  m.meshes_[b.body->host_index()].loaded->id + ": " + ex.what());
       }
     }
-    tier_ = std::make_unique<TierWorker>(std::move(eq), m.options_.tier_worker_thread);
+    tier_ = std::make_unique<TierWorker>(
+        std::move(eq), m.options_.tier_worker_thread,
+        std::max<int>(1, static_cast<int>(m.tools_.size())) *
+            m.options_.max_contact_nodes_per_tool);
     tier_s_ = seconds_since(t0);
   }
   // Sliding rows: the step workspace and the inverse of their block at load, not in step 1.

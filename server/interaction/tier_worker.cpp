@@ -2,6 +2,7 @@
 
 #include "common/clock.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <stdexcept>
 
@@ -23,7 +24,8 @@ double now_s() {
 
 }  // namespace
 
-TierWorker::TierWorker(std::vector<std::unique_ptr<TierEquilibrium>> bodies, bool threaded)
+TierWorker::TierWorker(std::vector<std::unique_ptr<TierEquilibrium>> bodies, bool threaded,
+                       int max_forces_per_body)
     : bodies_(std::move(bodies)), threaded_(threaded) {
   current_.resize(bodies_.size());
   solved_.resize(bodies_.size());
@@ -32,6 +34,17 @@ TierWorker::TierWorker(std::vector<std::unique_ptr<TierEquilibrium>> bodies, boo
     bodies_[b]->rest(current_[b]);
   }
   if (threaded_) {
+    // Size the three load buffers now (the consumer side is still this thread), so that handing
+    // over a step's forces copies into capacity that is already there: no allocation in post().
+    std::vector<TierLoad> sized(bodies_.size());
+    for (auto& l : sized) {
+      l.slots.assign(static_cast<std::size_t>(std::max(1, max_forces_per_body)), 0);
+      l.forces_n.assign(l.slots.size(), mesh::Vec3::Zero());
+    }
+    for (int k = 0; k < 3; ++k) {
+      loads_.publish(sized);
+      loads_.consume();
+    }
     published_.publish(current_);
     published_.consume();
     window_start_s_ = now_s();

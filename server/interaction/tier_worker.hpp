@@ -24,8 +24,10 @@ namespace neurosim::interaction {
 class TierWorker {
  public:
   // One equilibrium per body (none null). threaded: the updates run on a thread started here
-  // and joined by the destructor; else post() runs them.
-  TierWorker(std::vector<std::unique_ptr<TierEquilibrium>> bodies, bool threaded);
+  // and joined by the destructor; else post() runs them. max_forces_per_body: the hand-over
+  // buffers are sized for that many contact forces per body (more: they grow once).
+  TierWorker(std::vector<std::unique_ptr<TierEquilibrium>> bodies, bool threaded,
+             int max_forces_per_body);
   ~TierWorker();
   TierWorker(const TierWorker&) = delete;
   TierWorker& operator=(const TierWorker&) = delete;

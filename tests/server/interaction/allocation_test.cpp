@@ -1,5 +1,6 @@
 // The step is State only: once warmed up (contact columns cached, workspace sized) it must not
-// allocate. Counts global operator new calls around step().
+// allocate. Counts operator new calls around step() on the stepping thread (the COROTATIONAL and
+// NONLINEAR tiers' worker thread allocates in its Newton solves: not the 1 kHz step).
 #include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/simulation.hpp"
 
@@ -7,18 +8,23 @@
 
 #include <gtest/gtest.h>
 
-#include <atomic>
+#include <chrono>
+#include <thread>
 #include <cmath>
 #include <cstdlib>
 #include <new>
 #include <vector>
 
 namespace {
-std::atomic<long> g_allocations{0};
+thread_local long t_allocations = 0;
+// This thread's count (the stepping thread's when called from it).
+struct ThreadCount {
+  long load() const { return t_allocations; }
+} g_allocations;
 }  // namespace
 
 void* operator new(std::size_t size) {
-  ++g_allocations;
+  ++t_allocations;
   if (void* p = std::malloc(size ? size : 1)) return p;
   throw std::bad_alloc();
 }
@@ -28,7 +34,9 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 namespace neurosim::interaction {
 namespace {
 
-void expect_warm_step_does_not_allocate(const testing::SceneSpec& spec) {
+// pause: between steps (lets a tier worker publish new linearizations during the steps).
+void expect_warm_step_does_not_allocate(const testing::SceneSpec& spec,
+                                        std::chrono::milliseconds pause = {}) {
   auto sim = Simulation::build(testing::make_scene(spec));
   std::vector<ToolPose> poses(2);
   auto set = [&](double d0, double d1) {
@@ -53,12 +61,25 @@ void expect_warm_step_does_not_allocate(const testing::SceneSpec& spec) {
   for (int k = 10; k >= 0; --k) {
     set(0.0005 * k, 0.0004 * k);
     sim->step(poses, contacts, stats);
+    std::this_thread::sleep_for(pause);
   }
+  if (sim->tier() != scene::Tier::kLinear) EXPECT_GT(sim->tier_update_rate_hz(), 0.0);
   EXPECT_EQ(g_allocations.load() - before, 0);
 }
 
 TEST(interaction_allocation, WarmStepDoesNotAllocate) {
   expect_warm_step_does_not_allocate(testing::SceneSpec{});
+}
+
+// COROTATIONAL and NONLINEAR: the step reads the worker's newest linearization (warped
+// normals, offsets) and hands its forces over, without allocating.
+TEST(interaction_allocation, WarmTierStepDoesNotAllocate) {
+  for (const char* tier : {"COROTATIONAL", "NONLINEAR"}) {
+    SCOPED_TRACE(tier);
+    testing::SceneSpec spec;
+    spec.tier = tier;
+    expect_warm_step_does_not_allocate(spec, std::chrono::milliseconds(100));
+  }
 }
 
 // SLIDING: the sliding rows join the LCP (constant block, factor kept between steps).
