@@ -9,6 +9,7 @@
 #include "server/fem/static_solver.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/simulation.hpp"
+#include "server/interaction/tier_equilibrium.hpp"
 #include "server/mesh/quality.hpp"
 #include "server/mesh/vtu.hpp"
 #include "server/scene/compile.hpp"
@@ -382,16 +383,9 @@ BodyResult solve_body_tier(const neurosim::interaction::Simulation& sim,
                            const neurosim::fem::Material& host_material, const MeshLoads& loads,
                            neurosim::fem::Tier tier, int increments) {
   const int h = body.host_index();
-  neurosim::fem::EquilibriumDefinition def;
-  def.mesh = &sim.mesh(h);
-  def.materials = neurosim::fem::MaterialMap::uniform(host_material);
-  def.tier = tier;
-  def.fixed_nodes = sim.fixed_nodes(h);
+  neurosim::fem::EquilibriumDefinition def = neurosim::interaction::equilibrium_definition(
+      body, host_material, sim.fixed_nodes(h), tier);
   def.prescribed = loads.held();
-  for (const auto& tie : body.ties()) {
-    def.tied.push_back({&tie.geometry(), neurosim::fem::MaterialMap::uniform(tie.material()),
-                        tie.fixed_nodes(), tie.tied_nodes(), tie.host_nodes(), tie.weights()});
-  }
   neurosim::fem::EquilibriumSolver solver(def);
   Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
   f.head(loads.f.size()) = loads.f;

@@ -15,6 +15,22 @@ std::string body_name(const CoupledBody& b) {
 
 }  // namespace
 
+fem::EquilibriumDefinition equilibrium_definition(const CoupledBody& body,
+                                                  const fem::Material& host_material,
+                                                  const std::vector<int>& host_fixed_nodes,
+                                                  fem::Tier tier) {
+  fem::EquilibriumDefinition d;
+  d.mesh = &body.host();
+  d.materials = fem::MaterialMap::uniform(host_material);
+  d.tier = tier;
+  d.fixed_nodes = host_fixed_nodes;
+  for (const auto& tie : body.ties()) {
+    d.tied.push_back({&tie.geometry(), fem::MaterialMap::uniform(tie.material()),
+                      tie.fixed_nodes(), tie.tied_nodes(), tie.host_nodes(), tie.weights()});
+  }
+  return d;
+}
+
 TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
     : body_(def.body), tier_(def.tier), newton_(def.newton) {
   if (body_ == nullptr) throw std::invalid_argument("TierEquilibrium: no body");
@@ -27,16 +43,8 @@ TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
                                 ": SLIDING couplings are not implemented in tier " +
                                 fem::tier_name(tier_));
   }
-  fem::EquilibriumDefinition d;
-  d.mesh = &body_->host();
-  d.materials = fem::MaterialMap::uniform(def.host_material);
-  d.tier = tier_;
-  d.fixed_nodes = def.host_fixed_nodes;
-  for (const auto& tie : body_->ties()) {
-    d.tied.push_back({&tie.geometry(), fem::MaterialMap::uniform(tie.material()),
-                      tie.fixed_nodes(), tie.tied_nodes(), tie.host_nodes(), tie.weights()});
-  }
-  solver_ = std::make_unique<fem::EquilibriumSolver>(d);
+  solver_ = std::make_unique<fem::EquilibriumSolver>(
+      equilibrium_definition(*body_, def.host_material, def.host_fixed_nodes, tier_));
   slot_node_ = body_->contact_nodes();
   u_.setZero(solver_->num_dofs());
   f_.setZero(solver_->num_dofs());

@@ -48,6 +48,13 @@ struct TierLinearization {
   std::uint64_t count{0};  // updates of this body so far
 };
 
+// The static equilibrium problem of a body in `tier`: its (carved) host with its supports and
+// every tied mesh, ties eliminated exactly (no load, nothing prescribed).
+fem::EquilibriumDefinition equilibrium_definition(const CoupledBody& body,
+                                                  const fem::Material& host_material,
+                                                  const std::vector<int>& host_fixed_nodes,
+                                                  fem::Tier tier);
+
 struct TierEquilibriumDefinition {
   const CoupledBody* body{nullptr};  // finalized, exact ties, no sliding rows; must outlive
   fem::Material host_material;

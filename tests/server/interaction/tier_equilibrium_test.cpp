@@ -60,16 +60,8 @@ Eigen::VectorXd reference_equilibrium(const Simulation& sim, fem::Tier tier,
                                       const fem::Material& host_material) {
   const int host = 0;
   const CoupledBody& body = *sim.body_of(host);
-  fem::EquilibriumDefinition d;
-  d.mesh = &sim.mesh(host);
-  d.materials = fem::MaterialMap::uniform(host_material);
-  d.tier = tier;
-  d.fixed_nodes = sim.fixed_nodes(host);
-  for (const auto& tie : body.ties()) {
-    d.tied.push_back({&tie.geometry(), fem::MaterialMap::uniform(tie.material()),
-                      tie.fixed_nodes(), tie.tied_nodes(), tie.host_nodes(), tie.weights()});
-  }
-  fem::EquilibriumSolver solver(d);
+  fem::EquilibriumSolver solver(
+      equilibrium_definition(body, host_material, sim.fixed_nodes(host), tier));
   std::vector<int> slots;
   std::vector<Vec3> forces;
   sim.last_contact_forces(host, slots, forces);
