@@ -1,6 +1,7 @@
 // The neurosim-server command line (server.hpp run_main).
 #include "common/cli.hpp"
 #include "common/clock.hpp"
+#include "server/fem/tier.hpp"
 #include "server/scene/compile.hpp"
 #include "server/service/server.hpp"
 
@@ -40,11 +41,24 @@ void single_thread_blas() {
 int run_main(int argc, char** argv, const SimulationFactory& factory) {
   ServerOptions opt;
   double duration_s = 0;
+  std::string tier_text;  // --tier as given; empty: the scene's effects.tier
   cli::Parser p("neurosim-server",
                 "The simulation service: steps the scene and serves haptic stations and viewers "
                 "over DDS.");
   p->add_option("--scene", opt.scene_path, "scene file (protobuf text, idl/scene.proto)")
       ->required();
+  // Checked with fem::parse_tier (the spelling neurosim-solve --tier takes, any case), so an
+  // unknown tier is a usage error (exit 2) before the scene is even read.
+  p->add_option("--tier", tier_text,
+                "elasticity tier: linear | corotational | nonlinear (default: the scene's "
+                "effects.tier)")
+      ->check(CLI::Validator(
+          [](std::string& value) -> std::string {
+            if (fem::parse_tier(value)) return {};
+            return "unknown elasticity tier '" + value +
+                   "' (expected linear, corotational or nonlinear)";
+          },
+          "linear|corotational|nonlinear"));
   p->add_option("--duration", duration_s,
                 "stop after S seconds (default: run until SIGINT/SIGTERM)")
       ->check(cli::positive());
@@ -66,7 +80,20 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
 
   try {
     const auto t0 = common::Clock::now();
-    const scene::Model model = scene::load_model(opt.scene_path);
+    scene::Model model = scene::load_model(opt.scene_path);
+    // --tier replaces the scene's tier before anything is built from it: the simulation, the
+    // server's start-up line and SimStatus all see the one tier that runs.
+    const scene::Tier scene_tier = model.effects.tier;
+    if (!tier_text.empty()) {
+      model.effects.tier = *fem::parse_tier(tier_text);  // validated by the option's check
+      opt.tier_source = "--tier";
+    }
+    std::cerr << "neurosim-server: tier " << scene::tier_name(model.effects.tier);
+    if (tier_text.empty())
+      std::cerr << " (from the scene's effects.tier)\n";
+    else
+      std::cerr << " (from --tier " << tier_text << "; the scene's effects.tier is "
+                << scene::tier_name(scene_tier) << ")\n";
     auto sim = factory(model);
     const double build_s = common::seconds_since(t0);
     std::cerr << "neurosim-server: simulation built in " << build_s << " s\n";

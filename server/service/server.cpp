@@ -250,12 +250,20 @@ void Server::Impl::configure() {
                              std::to_string(sim->num_meshes()) + " meshes, the scene " +
                              std::to_string(mesh_info.size()));
 
+  // Simulation::tier() promises the scene's tier and never another one; a simulation that runs
+  // another would publish a SimStatus.tier the scene (and --tier) did not ask for: refuse it.
+  if (sim->tier() != fx.tier)
+    throw std::runtime_error(opt.scene_path + ": the simulation runs tier " +
+                             scene::tier_name(sim->tier()) + ", not the tier asked for: " +
+                             scene::tier_name(fx.tier) + " (from " + opt.tier_source + ")");
+
   const std::string setup = describe_setup(*sim);
   if (!setup.empty()) log(setup);
   std::ostringstream s;
-  s << "scene '" << settings.name << "' (" << opt.scene_path << "): tier " << scene::tier_name(fx.tier)
-    << ", effects [" << effects_text << "], step " << step_hz << " Hz, viewer " << viewer_hz
-    << " Hz, status " << status_hz << " Hz, max " << max_stations << " stations";
+  s << "scene '" << settings.name << "' (" << opt.scene_path << "): tier "
+    << scene::tier_name(sim->tier()) << " (from " << opt.tier_source << "), effects ["
+    << effects_text << "], step " << step_hz << " Hz, viewer " << viewer_hz << " Hz, status "
+    << status_hz << " Hz, max " << max_stations << " stations";
   log(s.str());
 }
 
@@ -317,7 +325,6 @@ void Server::Impl::create_entities() {
   wire::set_string(status->server_id, opt.server_id, "server_id");
   wire::set_string(status->scene_name, settings.name);
   wire::set_string(status->effects, effects_text);
-  status->tier = wire_tier(settings.effects.tier);
   status->step_rate_target_hz = step_hz;
   status->viewer_rate_hz = deformation_output ? viewer_hz : 0.0;
   status->status_rate_hz = status_hz;
@@ -688,6 +695,10 @@ void Server::Impl::publish_status(std::int64_t now_mono) {
   steps_at_last_status = s_now;
   last_status_mono_ns = now_mono;
   step_us_count = 0;
+  // Tier and its update rate from the simulation at every publish: the rate changes while it
+  // runs (it is measured over the last second by the tier's own thread).
+  st.tier = wire_tier(sim->tier());
+  st.tier_update_rate_hz = sim->tier_update_rate_hz();
   st.steps = s_now;
   st.deadline_misses = deadline_misses.load();
   st.server_time_ns = dds_time();

@@ -29,6 +29,9 @@ struct ServerOptions {
   int domain{-1};                  // DDS domain id; -1: the configuration's default
   std::string topic_prefix{};      // prepended to every topic name (test isolation); "" normally
   std::uint32_t full_frame_period{30};  // Deformation FULL frame every this many frames
+  // Where the model's effects.tier came from, for the start-up log line only: "scene" or
+  // "--tier" (run_main's override). The tier itself is the simulation's (Simulation::tier()).
+  std::string tier_source{"scene"};
 };
 
 // Counters the server exposes to tests (also published in SimStatus).
@@ -73,11 +76,12 @@ using SimulationFactory =
     std::function<std::unique_ptr<interaction::Simulation>(const scene::Model& model)>;
 
 // The neurosim-server command line:
-//   neurosim-server --scene FILE [--duration SECONDS] [--domain ID] [--server-id NAME]
-//                   [--topic-prefix P]
+//   neurosim-server --scene FILE [--tier linear|corotational|nonlinear] [--duration SECONDS]
+//                   [--domain ID] [--server-id NAME] [--topic-prefix P]
 // Sets OPENBLAS_NUM_THREADS=1 (unless set), installs SIGINT/SIGTERM handlers, compiles the
-// scene, builds the simulation with `factory`, serves until a signal or the duration. Returns
-// the exit status.
+// scene, replaces its effects.tier by --tier if given, builds the simulation with `factory`,
+// serves until a signal or the duration. Returns the exit status (2: usage error, e.g. an
+// unknown --tier; 1: the scene, the simulation build or DDS failed).
 int run_main(int argc, char** argv, const SimulationFactory& factory);
 
 }  // namespace neurosim::service

@@ -21,15 +21,33 @@ namespace {
 using common::Clock;
 using common::seconds_since;
 
+// "tier NONLINEAR, equilibrium 12 Hz" ("tier LINEAR": nothing to update); "" before the first
+// SimStatus. Rates under 10 Hz keep one decimal (a slow tier's 2.5 Hz is not "3 Hz").
+std::string tier_text(const ServerStatusView& st) {
+  if (!st.received) return {};
+  std::ostringstream os;
+  os << "tier " << st.tier;
+  if (st.tier != "LINEAR") {
+    os.setf(std::ios::fixed);
+    os.precision(st.tier_update_rate_hz < 10 ? 1 : 0);
+    os << ", equilibrium " << st.tier_update_rate_hz << " Hz";
+  }
+  return os.str();
+}
+
 std::string status_line(const ViewerOptions& o, const ViewerState& s, std::uint64_t frame,
                         bool has_image) {
   std::ostringstream os;
   os.setf(std::ios::fixed);
   os.precision(2);
   os << "neurosim-viewer " << to_string(o.mode) << "  frame " << frame << "  ";
-  if (s.server_alive())
+  if (s.server_alive()) {
     os << "server live";
-  else
+    // Only while live: a gone server's tier would pass for the running one. A line of its own:
+    // the navigation mode's 3D viewport is a quarter of the frame and clips long lines.
+    const std::string tier = tier_text(s.server_status());
+    if (!tier.empty()) os << "\n" << tier;
+  } else
     os << "WAITING FOR SERVER (showing the last state)";
   os << "\nmax |u| " << s.max_displacement_m() * 1e3 << " mm";
   for (const auto& [id, t] : s.tools())
@@ -66,6 +84,12 @@ void write_summary(const std::string& path, const ViewerOptions& o, const Viewer
   j["malformed"] = c.malformed();
   j["server_seen"] = c.server_seen;
   j["server_lost"] = c.server_lost;
+  // The newest SimStatus's tier and its equilibrium update rate (null: no SimStatus received).
+  const ServerStatusView& st = s.server_status();
+  j["statuses"] = c.statuses;
+  j["server_tier"] = st.received ? common::Json(st.tier) : common::Json(nullptr);
+  j["tier_update_rate_hz"] =
+      st.received ? common::Json(st.tier_update_rate_hz) : common::Json(nullptr);
   j["max_displacement_m"] = s.max_displacement_m();
   try {
     common::write_json(path, j);
@@ -139,8 +163,15 @@ int run_viewer(const ViewerOptions& o, std::ostream& log, const std::atomic<bool
   Pipeline pipeline(popt, warn);
 
   std::uint64_t seen_topologies = 0, seen_lost = 0, seen_seen = 0;
+  std::string seen_tier;  // "server_id/tier" last logged
   auto log_events = [&] {
     const ViewerCounters& c = state.counters();
+    const ServerStatusView& st = state.server_status();
+    if (st.received && st.server_id + "/" + st.tier != seen_tier) {
+      log << "neurosim-viewer: server '" << st.server_id << "' (scene '" << st.scene_name
+          << "') runs tier " << st.tier << "\n";
+      seen_tier = st.server_id + "/" + st.tier;
+    }
     if (c.topologies != seen_topologies) {
       std::ostringstream os;
       for (const auto& m : state.meshes())
@@ -209,7 +240,10 @@ int run_viewer(const ViewerOptions& o, std::ostream& log, const std::atomic<bool
   log << "neurosim-viewer: " << totals.frames << " frames in " << run_s << " s"
       << (o.headless ? " written to " + o.out_dir : std::string()) << "; " << c.topologies
       << " topologies, " << c.deformations << " deformation frames, " << c.malformed()
-      << " malformed samples ignored, server lost " << c.server_lost << " times\n";
+      << " malformed samples ignored, server lost " << c.server_lost << " times";
+  if (state.server_status().received)
+    log << "; last SimStatus: " << tier_text(state.server_status());
+  log << "\n";
   if (!error.empty()) {
     log << "neurosim-viewer: " << error << "\n";
     return 1;

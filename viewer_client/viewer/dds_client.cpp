@@ -76,7 +76,14 @@ bool DdsClient::poll(ViewerState& state) {
     state.set_server_alive(alive);
     changed = true;
   }
-  im.status.take();  // the content is not shown; keep the reader empty so the waitset idles
+  // Every status is taken (the reader must stay empty so the waitset idles); the newest valid
+  // one is shown (tier, equilibrium rate).
+  for (;;) {
+    const auto batch = im.status.take();
+    if (batch.empty()) break;
+    for (const auto& rx : batch)
+      if (rx.valid()) changed |= state.ingest_status(rx.data);
+  }
 
   // Topologies before deformations: a frame needs its mesh.
   for (;;) {

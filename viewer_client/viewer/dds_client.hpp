@@ -1,7 +1,7 @@
 // The viewer's DDS side: readers of MeshTopology (transient-local: a late joiner gets
 // every mesh), Deformation, ToolState, ContactModel and SimStatus (liveliness: server gone /
-// back), all with the server's topic prefix. Read-only: the viewer writes nothing, so it cannot
-// disturb the simulation. poll() is non-blocking and runs on the render thread.
+// back; content: tier and its update rate), all with the server's topic prefix. Read-only: the
+// viewer writes nothing, so it cannot disturb the simulation. poll() is non-blocking and runs on the render thread.
 #pragma once
 
 #include "viewer_client/viewer/state.hpp"

@@ -8,7 +8,18 @@
 namespace neurosim::viewer {
 
 namespace {
-enum WarnKind { kTopology = 0, kDeformation = 1, kTool = 2, kContact = 3 };
+enum WarnKind { kTopology = 0, kDeformation = 1, kTool = 2, kContact = 3, kStatus = 4 };
+
+// The IDL's Tier in the scene's spelling; nullptr for a value this viewer does not know (a newer
+// server's tier, or garbage).
+const char* tier_text(neurosim_Tier t) {
+  switch (t) {
+    case neurosim_TIER_LINEAR: return "LINEAR";
+    case neurosim_TIER_COROTATIONAL: return "COROTATIONAL";
+    case neurosim_TIER_NONLINEAR: return "NONLINEAR";
+  }
+  return nullptr;
+}
 
 bool finite3(const double* v) {
   return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
@@ -224,6 +235,35 @@ bool ViewerState::ingest_contact(const neurosim_ContactModel& c) {
   }
   ++counters_.contact_models;
   return true;
+}
+
+bool ViewerState::ingest_status(const neurosim_SimStatus& st) {
+  const char* tier = tier_text(st.tier);
+  const bool rates_ok = std::isfinite(st.tier_update_rate_hz) && st.tier_update_rate_hz >= 0 &&
+                        std::isfinite(st.step_rate_measured_hz) && st.step_rate_measured_hz >= 0;
+  if (tier == nullptr || !rates_ok) {
+    ++counters_.malformed_status;
+    warn(kStatus, "ignored a malformed SimStatus from server '" + std::string(st.server_id) +
+                      "': tier " + std::to_string(static_cast<long long>(st.tier)) +
+                      (tier == nullptr ? " (unknown)" : "") + ", tier_update_rate_hz " +
+                      std::to_string(st.tier_update_rate_hz) + ", step_rate_measured_hz " +
+                      std::to_string(st.step_rate_measured_hz));
+    return false;
+  }
+  ServerStatusView& v = server_status_;
+  const std::string scene_name = st.scene_name != nullptr ? st.scene_name : "";
+  const bool changed = !v.received || v.tier != tier ||
+                       v.tier_update_rate_hz != st.tier_update_rate_hz ||
+                       v.step_rate_measured_hz != st.step_rate_measured_hz ||
+                       v.server_id != st.server_id || v.scene_name != scene_name;
+  v.received = true;
+  v.server_id = st.server_id;
+  v.scene_name = scene_name;
+  v.tier = tier;
+  v.tier_update_rate_hz = st.tier_update_rate_hz;
+  v.step_rate_measured_hz = st.step_rate_measured_hz;
+  ++counters_.statuses;
+  return changed;
 }
 
 void ViewerState::remove_station(const std::string& station) { tools_.erase(station); }

@@ -1,6 +1,7 @@
 // What the viewer knows about the simulation: mesh topologies, their newest decoded
-// displacements, the tools (pose from ToolState, force from ContactModel) and the server's
-// liveliness. Fed from DDS samples (dds_client.hpp) or directly (tests, benchmark); no VTK here.
+// displacements, the tools (pose from ToolState, force from ContactModel), the server's
+// liveliness and its newest SimStatus (elasticity tier and its update rate). Fed from DDS
+// samples (dds_client.hpp) or directly (tests, benchmark); no VTK here.
 //
 // Bad samples never throw out of ingest_*(): they are counted, the first few are reported through
 // the warning callback, and the previous state is kept.
@@ -47,6 +48,16 @@ struct ToolView {
   bool has_pose = false;
 };
 
+// The part of the newest SimStatus the viewer shows.
+struct ServerStatusView {
+  bool received = false;            // a valid SimStatus arrived (from this or an earlier server)
+  std::string server_id;
+  std::string scene_name;
+  std::string tier;                 // "LINEAR", "COROTATIONAL", "NONLINEAR" (the tier that runs)
+  double tier_update_rate_hz = 0;   // equilibrium updates per second, 0 for LINEAR, unit Hz
+  double step_rate_measured_hz = 0; // unit Hz
+};
+
 struct ViewerCounters {
   std::uint64_t topologies = 0;            // accepted MeshTopology samples
   std::uint64_t deformations = 0;          // decoded Deformation frames
@@ -57,10 +68,13 @@ struct ViewerCounters {
   std::uint64_t malformed_deformation = 0;
   std::uint64_t malformed_tool = 0;
   std::uint64_t malformed_contact = 0;
+  std::uint64_t malformed_status = 0;  // unknown tier, negative or non-finite rates
+  std::uint64_t statuses = 0;          // accepted SimStatus samples
   std::uint64_t server_seen = 0;  // SimStatus writer appeared (first time or after a loss)
   std::uint64_t server_lost = 0;  // SimStatus writer went away
   std::uint64_t malformed() const {
-    return malformed_topology + malformed_deformation + malformed_tool + malformed_contact;
+    return malformed_topology + malformed_deformation + malformed_tool + malformed_contact +
+           malformed_status;
   }
 };
 
@@ -82,6 +96,7 @@ class ViewerState {
   bool ingest_deformation(const neurosim_Deformation& d);
   bool ingest_tool(const neurosim_ToolState& s);
   bool ingest_contact(const neurosim_ContactModel& c);
+  bool ingest_status(const neurosim_SimStatus& s);
   void remove_station(const std::string& station);  // its writer left (disposed, no writers)
   void set_server_alive(bool alive);
 
@@ -99,6 +114,8 @@ class ViewerState {
   std::uint64_t topology_generation() const { return topology_generation_; }
   bool server_alive() const { return server_alive_; }
   bool server_ever_seen() const { return server_ever_seen_; }
+  // The newest valid SimStatus (kept when the server goes away; a new server's replaces it).
+  const ServerStatusView& server_status() const { return server_status_; }
   const ViewerCounters& counters() const { return counters_; }
   // Largest |u| over all meshes, unit m.
   double max_displacement_m() const;
@@ -113,12 +130,13 @@ class ViewerState {
   MeshState* find(const std::string& id);
   Warn warn_;
   int max_warnings_;
-  std::array<int, 4> warned_{};
+  std::array<int, 5> warned_{};
   std::vector<MeshState> meshes_;
   std::map<std::string, ToolView> tools_;
   std::uint64_t topology_generation_ = 0;
   bool server_alive_ = false;
   bool server_ever_seen_ = false;
+  ServerStatusView server_status_;
   ViewerCounters counters_;
   std::vector<float> scratch_;
 };

@@ -2,13 +2,16 @@
 // through the real server code in a child process (service_test_fake_server): scripted path vs
 // the in-process fake, late joiner, rejected samples and refused stations, a station vanishing
 // mid-contact, effects (no viewer → no full-field solves; deformation off → not built), bad
-// scene, --duration. Each test starts its own server on a private DDS domain.
+// scene, --duration, --tier (SimStatus.tier and tier_update_rate_hz from the simulation, unknown
+// tier refused). Each test starts its own server on a private DDS domain.
 #include "server/scene/compile.hpp"
+#include "server/service/server.hpp"
 #include "tests/server/service/fake_simulation.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
 #include <fstream>
 #include <regex>
+#include <sstream>
 
 namespace st = neurosim::service::testing;
 namespace nt = neurosim::testing;
@@ -97,4 +100,91 @@ TEST(service_fake, BadSceneExitsWithErrorNamingFileAndField) {
   const std::string log = p.log();
   EXPECT_NE(log.find("bad.scene"), std::string::npos) << log;
   EXPECT_NE(log.find("meshes[0].material"), std::string::npos) << log;
+}
+
+// --tier overrides the scene's LINEAR; SimStatus carries the simulation's tier and its update
+// rate, refilled at every publish: the fake reports 0 Hz until it has stepped and
+// kTierUpdateRateHz after, so a server that fills the fields once (or never) fails here.
+TEST(service_fake, TierFromCommandLineAndItsUpdateRateReachSimStatus) {
+  auto setup = fake_setup();
+  setup.server_args = {"--tier", "nonlinear"};
+  st::Session ses(setup, "tier", 30);
+  ASSERT_TRUE(ses.wait_ready());
+  // No station yet: nothing stepped, no equilibrium update.
+  EXPECT_TRUE(ses.status.wait_for(
+      [](const neurosim_SimStatus& s) { return s.tier == neurosim_TIER_NONLINEAR && s.tier_update_rate_hz == 0.0; },
+      5))
+      << "tier " << ses.status.last_text << "\n" << ses.server.log();
+  st::StationThread station(ses.client, "tier-1", [&](double) {
+    return std::array<double, 3>{0.102, 0.05, 0.05};
+  }, 1.0);
+  double rate = -1;
+  int tier = -1;
+  EXPECT_TRUE(ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        rate = s.tier_update_rate_hz;
+        tier = static_cast<int>(s.tier);
+        return s.tier == neurosim_TIER_NONLINEAR && s.tier_update_rate_hz == st::FakeSimulation::kTierUpdateRateHz;
+      },
+      10))
+      << "SimStatus tier " << tier << " (NONLINEAR is " << neurosim_TIER_NONLINEAR << "), tier_update_rate_hz "
+      << rate << " (the fake reports " << st::FakeSimulation::kTierUpdateRateHz << ")\n" << ses.server.log();
+  station.wait_done();
+  EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
+  const std::string log = ses.server.log();
+  EXPECT_NE(log.find("tier NONLINEAR (from --tier nonlinear; the scene's effects.tier is LINEAR)"), std::string::npos)
+      << log;
+  EXPECT_NE(log.find("tier NONLINEAR (from --tier)"), std::string::npos) << log;
+}
+
+// Without --tier the scene's tier runs (LINEAR: no equilibrium updates, 0 Hz, also after steps).
+TEST(service_fake, TierDefaultsToTheScenes) {
+  st::Session ses(fake_setup(), "tier_default", 30);
+  ASSERT_TRUE(ses.wait_ready());
+  st::StationThread station(ses.client, "tier-2", [&](double) {
+    return std::array<double, 3>{0.102, 0.05, 0.05};
+  }, 0.6);
+  station.wait_done();
+  // A status published after the station's steps (its stations list names it).
+  EXPECT_TRUE(ses.status.wait_for(
+      [](const neurosim_SimStatus& s) {
+        const auto* b = st::find_station(s, "tier-2");
+        return b != nullptr && b->samples_accepted > 0 && s.tier == neurosim_TIER_LINEAR &&
+               s.tier_update_rate_hz == 0.0;
+      },
+      10))
+      << ses.status.last_text << "\n" << ses.server.log();
+  EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
+  const std::string log = ses.server.log();
+  EXPECT_NE(log.find("tier LINEAR (from the scene's effects.tier)"), std::string::npos) << log;
+  EXPECT_NE(log.find("tier LINEAR (from scene)"), std::string::npos) << log;
+}
+
+TEST(service_fake, UnknownTierIsAUsageError) {
+  const auto dir = nt::temp_dir("service_bad_tier");
+  st::ChildProcess p(nt::bin_dir() / "service_test_fake_server",
+                     {"--scene", fake_setup().scene.string(), "--tier", "hyperelastic", "--duration", "5"},
+                     dir / "log.txt");
+  EXPECT_EQ(p.wait(20), 2);
+  const std::string log = p.log();
+  EXPECT_NE(log.find("--tier"), std::string::npos) << log;
+  EXPECT_NE(log.find("hyperelastic"), std::string::npos) << log;
+  EXPECT_NE(log.find("linear, corotational or nonlinear"), std::string::npos) << log;
+  EXPECT_EQ(log.find("simulation built"), std::string::npos) << "refused before building\n" << log;
+}
+
+// A simulation that runs another tier than the scene asks for is refused (SimStatus would
+// otherwise report a tier nobody asked for). In process: the check is in the constructor.
+TEST(service_fake, SimulationRunningAnotherTierIsRefused) {
+  const auto model = neurosim::scene::load_model(fake_setup().scene);
+  ASSERT_EQ(model.effects.tier, neurosim::scene::Tier::kLinear);
+  std::ostringstream log;
+  try {
+    neurosim::service::Server server(
+        model, std::make_unique<st::FakeSimulation>(model, neurosim::scene::Tier::kCorotational), {}, log);
+    FAIL() << "accepted a simulation running COROTATIONAL for a LINEAR scene\n" << log.str();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("runs tier COROTATIONAL, not the tier asked for: LINEAR"), std::string::npos)
+        << e.what();
+  }
 }

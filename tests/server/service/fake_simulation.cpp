@@ -41,7 +41,8 @@ mesh::TetMesh box_mesh(const mesh::Vec3& lo, const mesh::Vec3& hi, int n) {
 
 }  // namespace
 
-FakeSimulation::FakeSimulation(const scene::Model& model) {
+FakeSimulation::FakeSimulation(const scene::Model& model, std::optional<scene::Tier> runs)
+    : tier_(runs.value_or(model.effects.tier)) {
   for (const auto& m : model.meshes) {
     mesh::Vec3 lo, hi;
     m.mesh.bounds(lo, hi);
@@ -96,6 +97,7 @@ void FakeSimulation::step(const std::vector<interaction::ToolPose>& poses,
     c.iterations = 1;
   }
   last_max_depth_m_ = deepest;
+  stepped_.store(true, std::memory_order_release);
   stats.solve_us = 0;
   stats.contact_rows = 0;
   stats.converged = true;

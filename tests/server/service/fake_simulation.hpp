@@ -5,12 +5,16 @@
 // force (k d, 0, 0) on the tool, stiffness -k e_x e_x^T, normal +x.
 // Stations feel each other: each tool's force is scaled by (1 + kCross * sum of the other
 // tools' penetrations / r_tip), so results depend on all poses of a step.
+// Tier: the model's effects.tier (so neurosim-server --tier reaches it); for COROTATIONAL and
+// NONLINEAR it reports kTierUpdateRateHz once it has stepped (0 before, as a real tier before
+// its first equilibrium update), so a test sees whether SimStatus is refilled at each publish.
 #pragma once
 
 #include "server/interaction/simulation.hpp"
 
 #include <atomic>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,8 +24,12 @@ class FakeSimulation : public interaction::Simulation {
  public:
   static constexpr double kStiffness = 2000.0;  // N/m
   static constexpr double kCross = 0.05;        // dimensionless
+  static constexpr double kTierUpdateRateHz = 12.5;  // non-linear tiers, after the first step
 
-  explicit FakeSimulation(const scene::Model& model);
+  // `runs`: the tier the fake claims to run instead of the model's (tests of the server's
+  // refusal of a simulation that runs another tier than asked for).
+  explicit FakeSimulation(const scene::Model& model,
+                          std::optional<scene::Tier> runs = std::nullopt);
   ~FakeSimulation() override;
 
   int num_meshes() const override { return static_cast<int>(meshes_.size()); }
@@ -48,6 +56,12 @@ class FakeSimulation : public interaction::Simulation {
     pairs.clear();
   }
   double sliding_penetration_m() const override { return 0.0; }
+  scene::Tier tier() const override { return tier_; }
+  // Any thread (the server reads it on the step thread, start() on the main thread).
+  double tier_update_rate_hz() const override {
+    if (tier_ == scene::Tier::kLinear || !stepped_.load(std::memory_order_acquire)) return 0.0;
+    return kTierUpdateRateHz;
+  }
 
   long displacement_calls() const { return displacement_calls_.load(); }
 
@@ -59,6 +73,8 @@ class FakeSimulation : public interaction::Simulation {
   double last_max_depth_m_{0};
   std::vector<double> depth_;  // scratch, per tool
   mutable std::atomic<long> displacement_calls_{0};
+  scene::Tier tier_{scene::Tier::kLinear};
+  std::atomic<bool> stepped_{false};
   interaction::SetupStats setup_{};
   std::vector<int> no_nodes_;
 };

@@ -19,6 +19,7 @@ struct Setup {
   // Builds the same simulation in this process (the reference the server must agree with).
   std::function<std::unique_ptr<interaction::Simulation>()> make_reference;
   double startup_timeout_s{60};
+  std::vector<std::string> server_args;  // more command-line options for the server (e.g. --tier)
   // The scene's +x face the tool pushes: face x, centre y/z, tip radius (unit m).
   double face_x_m{0.1}, centre_y_m{0.05}, centre_z_m{0.05}, tip_radius_m{0.003};
 };
@@ -29,12 +30,15 @@ struct Session {
       : setup(s),
         domain(private_domain()),
         log_file(neurosim::testing::temp_dir("service_" + tag) / "server.log"),
-        server(s.exe,
-               {"--scene", s.scene.string(), "--domain", std::to_string(domain), "--duration",
-                std::to_string(duration_s)},
-               log_file),
+        server(s.exe, args(s, domain, duration_s), log_file),
         client(domain),
         status(client) {}
+  static std::vector<std::string> args(const Setup& s, int domain, double duration_s) {
+    std::vector<std::string> a{"--scene", s.scene.string(), "--domain", std::to_string(domain),
+                               "--duration", std::to_string(duration_s)};
+    a.insert(a.end(), s.server_args.begin(), s.server_args.end());
+    return a;
+  }
   // The server published its first SimStatus (it is serving).
   ::testing::AssertionResult wait_ready() {
     if (status.wait_for([](const neurosim_SimStatus&) { return true; }, setup.startup_timeout_s))

@@ -141,6 +141,47 @@ TEST(ViewerState, ServerLivelinessCounts) {
   EXPECT_EQ(s.counters().server_lost, 1u);
 }
 
+TEST(ViewerState, SimStatusTierAndRateAreKeptMalformedOnesIgnored) {
+  std::vector<std::string> warnings;
+  nv::ViewerState s([&](const std::string& m) { warnings.push_back(m); });
+  EXPECT_FALSE(s.server_status().received);
+  wire::Sample<neurosim_SimStatus> st;
+  wire::set_string(st->server_id, "srv");
+  wire::set_string(st->scene_name, "brain");
+  st->tier = neurosim_TIER_NONLINEAR;
+  st->tier_update_rate_hz = 12.5;
+  st->step_rate_measured_hz = 999.0;
+  EXPECT_TRUE(s.ingest_status(*st));
+  EXPECT_TRUE(s.server_status().received);
+  EXPECT_EQ(s.server_status().tier, "NONLINEAR");
+  EXPECT_EQ(s.server_status().tier_update_rate_hz, 12.5);
+  EXPECT_EQ(s.server_status().server_id, "srv");
+  EXPECT_EQ(s.server_status().scene_name, "brain");
+  EXPECT_FALSE(s.ingest_status(*st)) << "the same status again changes nothing";
+  st->tier = neurosim_TIER_COROTATIONAL;
+  st->tier_update_rate_hz = 3.0;
+  EXPECT_TRUE(s.ingest_status(*st));
+  EXPECT_EQ(s.server_status().tier, "COROTATIONAL");
+  EXPECT_EQ(s.server_status().tier_update_rate_hz, 3.0);
+  EXPECT_EQ(s.counters().statuses, 3u);
+
+  // A tier this viewer does not know, a NaN and a negative rate: counted, the last good kept.
+  st->tier = static_cast<neurosim_Tier>(7);
+  EXPECT_FALSE(s.ingest_status(*st));
+  st->tier = neurosim_TIER_NONLINEAR;
+  st->tier_update_rate_hz = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(s.ingest_status(*st));
+  st->tier_update_rate_hz = -1.0;
+  EXPECT_FALSE(s.ingest_status(*st));
+  EXPECT_EQ(s.counters().malformed_status, 3u);
+  EXPECT_EQ(s.counters().malformed(), 3u);
+  EXPECT_EQ(s.server_status().tier, "COROTATIONAL");
+  EXPECT_EQ(s.server_status().tier_update_rate_hz, 3.0);
+  ASSERT_EQ(warnings.size(), 3u);
+  EXPECT_NE(warnings[0].find("SimStatus from server 'srv'"), std::string::npos) << warnings[0];
+  EXPECT_NE(warnings[0].find("tier 7 (unknown)"), std::string::npos) << warnings[0];
+}
+
 TEST(ViewerOptions, GoodAndBadCommandLines) {
   bool help = false;
   const char* ok[] = {"v",        "--mode", "observe", "--headless", "--frames",       "3",

@@ -2,7 +2,10 @@
 //  - a render with the tool pushing the brain differs from the undeformed render around the
 //    pushed spot and nowhere else beyond noise (in-process pipeline, both modes);
 //  - neurosim-viewer joining late still gets the topology and the deformation;
-//  - neurosim-viewer survives the server being killed and started again.
+//  - neurosim-viewer survives the server being killed and started again;
+//  - the server's tier and its equilibrium update rate (SimStatus) reach the viewer's log and
+//    --summary (the real server code with the test-only fake physics and --tier nonlinear, which
+//    reports a non-zero rate: the real physics runs only LINEAR for now).
 // VTK renders through X here: each test runs its own Xvfb (-displayfd picks a free display).
 // Every server has its own --topic-prefix, so parallel ctest runs do not see each other.
 #include "idl/wire/dds.hpp"
@@ -283,6 +286,9 @@ TEST(ViewerServer, LateJoinerGetsTopologyAndDeformation) {
   EXPECT_GE(json_number(summary, "deformations"), 1) << summary;
   EXPECT_GT(json_number(summary, "max_displacement_m"), 0.002) << summary;
   EXPECT_EQ(json_number(summary, "malformed"), 0) << summary;
+  // The brain scene runs LINEAR: no equilibrium updates.
+  EXPECT_NE(summary.find("\"server_tier\": \"LINEAR\""), std::string::npos) << summary;
+  EXPECT_EQ(json_number(summary, "tier_update_rate_hz"), 0.0) << summary;
   EXPECT_TRUE(fs::exists(dir / "frames/frame_0000.png"));
   EXPECT_TRUE(fs::exists(dir / "frames/frame_0005.png"));
   fs::remove_all(dir);
@@ -325,5 +331,49 @@ TEST(ViewerServer, SurvivesServerRestart) {
   EXPECT_GE(json_number(summary, "server_lost"), 1) << summary;
   EXPECT_GE(json_number(summary, "server_seen"), 2) << summary;
   EXPECT_GE(json_number(summary, "topologies"), 4) << summary;
+  fs::remove_all(dir);
+}
+
+// SimStatus.tier and tier_update_rate_hz through DdsClient into the state, the viewer's log and
+// its --summary: the fake-physics server (tests/server/service) with --tier nonlinear reports
+// FakeSimulation::kTierUpdateRateHz (12.5 Hz) once a station made it step.
+TEST(ViewerServer, ShowsTheServersTierAndEquilibriumRate) {
+  nt::Xvfb x;
+  const std::string prefix = unique_prefix("t");
+  const fs::path dir = nt::temp_dir("viewer_tier");
+  nt::Child server({(nt::bin_dir() / "service_test_fake_server").string(), "--scene",
+                    (nt::source_dir() / "tests/server/service/data/fake_box.scene").string(),
+                    "--tier", "nonlinear", "--topic-prefix", prefix, "--duration", "60"},
+                   dir / "server.log");
+  // The fake box's +x face (x = 0.1 m) at the centre of its y/z extent.
+  PressingStation station(prefix, nt::PressPoint{Eigen::Vector3d(0.1, 0.05, 0.05),
+                                                 Eigen::Vector3d::UnitX()});
+  {
+    nv::DdsClient client({-1, prefix});
+    nv::ViewerState state;
+    const auto t0 = std::chrono::steady_clock::now();
+    while (nt::seconds_since(t0) < 30 && !(state.server_status().received &&
+                                           state.server_status().tier_update_rate_hz > 0)) {
+      client.wait(0.1);
+      client.poll(state);
+    }
+    ASSERT_TRUE(state.server_status().received) << "no SimStatus\n" << server.log();
+    EXPECT_EQ(state.server_status().tier, "NONLINEAR") << server.log();
+    EXPECT_EQ(state.server_status().tier_update_rate_hz, 12.5) << server.log();
+  }
+  nt::Child viewer({(nt::bin_dir() / "neurosim-viewer").string(), "--mode", "navigation",
+                    "--headless", "--frames", "3", "--fps", "4", "--out",
+                    (dir / "frames").string(), "--size", "320x240", "--topic-prefix", prefix,
+                    "--wait-server", "30", "--summary", (dir / "summary.json").string()},
+                   dir / "viewer.log");
+  ASSERT_TRUE(viewer.wait(60)) << viewer.log();
+  ASSERT_TRUE(WIFEXITED(viewer.status()) && WEXITSTATUS(viewer.status()) == 0) << viewer.log();
+  const std::string log = viewer.log();
+  EXPECT_NE(log.find("runs tier NONLINEAR"), std::string::npos) << log;
+  EXPECT_NE(log.find("last SimStatus: tier NONLINEAR, equilibrium 1"), std::string::npos) << log;
+  const std::string summary = nt::slurp(dir / "summary.json");
+  EXPECT_NE(summary.find("\"server_tier\": \"NONLINEAR\""), std::string::npos) << summary;
+  EXPECT_EQ(json_number(summary, "tier_update_rate_hz"), 12.5) << summary;
+  EXPECT_GE(json_number(summary, "statuses"), 1) << summary;
   fs::remove_all(dir);
 }
