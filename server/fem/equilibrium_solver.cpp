@@ -1,9 +1,11 @@
 #include "server/fem/equilibrium_solver.hpp"
 
+#include <Eigen/Cholesky>
 #include <Eigen/CholmodSupport>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -17,6 +19,31 @@ double max_abs(const Eigen::VectorXd& v) { return v.size() ? v.cwiseAbs().maxCoe
 struct Failure : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
+
+// Eigen's supernodal LL^T with access to CHOLMOD's factor and common: cholmod_solve2 reuses its
+// workspace from solve to solve (Eigen's solve() allocates the result and CHOLMOD's scratch at
+// every call, which the chord iterations of reuse_factorization would do dozens of times).
+class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> {
+ public:
+  cholmod_factor* factor() const { return this->m_cholmodFactor; }
+  cholmod_common& common() { return this->cholmod(); }
+};
+
+void check_options(const std::string& where, const NewtonOptions& o) {
+  if (o.increments < 0 || !(o.tolerance > 0.0) || o.max_iterations < 1 || o.max_cutbacks < 0 ||
+      o.min_iterations < 0 || o.min_iterations > o.max_iterations ||
+      (o.reuse_factorization && !(o.refactor_contraction > 0.0 && o.refactor_contraction < 1.0)) ||
+      (o.reuse_factorization && (o.anderson_depth < 0 || o.anderson_depth > 16))) {
+    std::ostringstream msg;
+    msg << where << ": bad NewtonOptions (increments " << o.increments << " >= 0, tolerance "
+        << o.tolerance << " > 0, max_iterations " << o.max_iterations << " >= 1, min_iterations "
+        << o.min_iterations << " in [0, max_iterations], max_cutbacks "
+        << o.max_cutbacks << " >= 0, refactor_contraction " << o.refactor_contraction
+        << " in (0, 1) and anderson_depth " << o.anderson_depth
+        << " in [0, 16] when reuse_factorization)";
+    throw std::invalid_argument(msg.str());
+  }
+}
 
 }  // namespace
 
@@ -49,7 +76,23 @@ struct EquilibriumSolver::Impl {
   SparseMatrix kff;                  // lower triangle of the free block
   std::vector<int> kff_source;       // kff value p <- tangent value kff_source[p]
   Eigen::Index tangent_nnz{0};       // stored entries of the q-space tangent (fixed structure)
-  Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> llt;
+  // f_int holds the internal forces at f_int_u when f_int_known (set when Newton returns): the
+  // next call, warm-started from that answer, starts without evaluating them again (one of the
+  // ~6-8 force evaluations of a reused-factor update; bitwise the same numbers).
+  Eigen::VectorXd f_int_u;
+  bool f_int_known{false};
+  bool forces_known_at(const Eigen::VectorXd& u) const {
+    return f_int_known && f_int_u.size() == u.size() && f_int_u == u;
+  }
+
+  SupernodalFactor llt;
+  // llt holds a successful factorization (of the exact or the projected tangent at some earlier
+  // u): what reuse_factorization steps with. Cleared when a factorization fails.
+  bool factor_valid{false};
+  bool factor_projected{false};
+  cholmod_dense* solve_x{nullptr};  // cholmod_solve2 result and workspace, kept across solves
+  cholmod_dense* solve_y{nullptr};
+  cholmod_dense* solve_e{nullptr};
 
   // Scratch.
   Eigen::VectorXd f_int, rq, f_ext, r_free, delta, trial, step_full, body_u, body_f;
@@ -57,6 +100,13 @@ struct EquilibriumSolver::Impl {
   explicit Impl(const EquilibriumDefinition& d)
       : where("EquilibriumSolver (" + std::string(tier_name(d.tier)) + ", mesh '" +
               (d.mesh ? d.mesh->source() : std::string("?")) + "')") {}
+  ~Impl() {
+    for (cholmod_dense** x : {&solve_x, &solve_y, &solve_e}) {
+      if (*x) cholmod_free_dense(x, &llt.common());
+    }
+  }
+  Impl(const Impl&) = delete;
+  Impl& operator=(const Impl&) = delete;
 
   bool tied() const { return !tie_terms.empty(); }
 
@@ -80,13 +130,19 @@ struct EquilibriumSolver::Impl {
 
   // rq := T^T (f_int(u) - f_ext) on every stacked dof of q (tied dofs: 0). Returns max |rq|
   // over the free dofs.
-  double residual(const Eigen::VectorXd& u, const Eigen::VectorXd& fext) {
-    f_int.resize(ndof);
-    for (std::size_t b = 0; b < bodies.size(); ++b) {
-      const int nb = bodies[b].num_dofs();
-      body_u = u.segment(offset[b], nb);
-      bodies[b].internal_force(body_u, body_f);
-      f_int.segment(offset[b], nb) = body_f;
+  // forces_known: f_int already holds f_int(u) (the internal forces are skipped).
+  double residual(const Eigen::VectorXd& u, const Eigen::VectorXd& fext,
+                  bool forces_known = false) {
+    if (!forces_known && bodies.size() == 1) {
+      bodies[0].internal_force(u, f_int);  // no copy of u into body_u
+    } else if (!forces_known) {
+      f_int.resize(ndof);
+      for (std::size_t b = 0; b < bodies.size(); ++b) {
+        const int nb = bodies[b].num_dofs();
+        body_u = u.segment(offset[b], nb);
+        bodies[b].internal_force(body_u, body_f);
+        f_int.segment(offset[b], nb) = body_f;
+      }
     }
     rq = f_int - fext;
     for (const TieTerm& term : tie_terms) {
@@ -164,7 +220,9 @@ struct EquilibriumSolver::Impl {
   }
 
   // Factorizes the free block of the tangent at u; false if not positive definite.
-  bool factor(const Eigen::VectorXd& u, bool project) {
+  bool factor(const Eigen::VectorXd& u, bool project, NewtonIncrement& inc) {
+    ++inc.factorizations;
+    factor_valid = false;
     const SparseMatrix& k = tangent(u, project);
     // The structure of K (assembler pattern) and of T^T K T (a product of fixed structures) never
     // changes, so the free-block map and the symbolic analysis made at construction hold.
@@ -177,7 +235,26 @@ struct EquilibriumSolver::Impl {
       dst[p] = src[kff_source[p]];
     }
     llt.factorize(kff);
-    return llt.info() == Eigen::Success;
+    factor_valid = llt.info() == Eigen::Success;
+    factor_projected = project;
+    return factor_valid;
+  }
+
+  // delta := K_ff^-1 r_free with the current factor (CHOLMOD's workspace reused).
+  void solve_step() {
+    cholmod_dense b{};
+    b.nrow = b.nzmax = b.d = static_cast<std::size_t>(r_free.size());
+    b.ncol = 1;
+    b.x = r_free.data();
+    b.xtype = CHOLMOD_REAL;
+    b.dtype = CHOLMOD_DOUBLE;
+    if (!cholmod_solve2(CHOLMOD_A, llt.factor(), &b, nullptr, &solve_x, nullptr, &solve_y,
+                        &solve_e, &llt.common())) {
+      throw std::runtime_error(where + ": CHOLMOD solve failed (status " +
+                               std::to_string(llt.common().status) + ")");
+    }
+    delta = Eigen::Map<const Eigen::VectorXd>(static_cast<const double*>(solve_x->x),
+                                              r_free.size());
   }
 
   // Tied dofs follow their host triangle.
@@ -193,15 +270,95 @@ struct EquilibriumSolver::Impl {
     enforce_ties(u);
   }
 
+  // Anderson acceleration of the chord iteration (reuse_factorization): the chord map
+  // u -> u + d(u), d = K_old^-1 (f_ext - f_int(u)), converges linearly at the rate of
+  // |I - K_old^-1 K(u)|; where the tangent changed (the elements under a tool), that rate is
+  // poor. Mixing the last steps (type-II Anderson, = GMRES preconditioned by K_old for a linear
+  // problem) removes those few slow components for a few dot products per iteration.
+  // Columns of the last `aa_count` iterations with the current factor (ring buffer): differences
+  // of the chord steps d and of the iterates u, on the free dofs.
+  Eigen::MatrixXd aa_dd, aa_du;
+  Eigen::VectorXd aa_prev_d, aa_prev_step, aa_chord;
+  static constexpr int kMaxAndersonDepth = 16;  // NewtonOptions::anderson_depth's limit
+  // Least-squares system, at most 16 x 16: fixed-capacity storage, no heap per iteration.
+  using SmallMatrix =
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxAndersonDepth, kMaxAndersonDepth>;
+  using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxAndersonDepth, 1>;
+  SmallMatrix aa_gram;
+  SmallVector aa_gamma, aa_rhs;
+  int aa_count{0}, aa_head{0};
+  bool aa_have_prev{false};
+
+  void aa_reset() {
+    aa_count = aa_head = 0;
+    aa_have_prev = false;
+  }
+
+  // delta (the chord step d_k) -> the accelerated step, if it is a descent direction; records
+  // d_k. Returns true if delta was changed.
+  bool aa_accelerate(int depth) {
+    const Eigen::Index nf = delta.size();
+    if (aa_dd.rows() != nf || aa_dd.cols() != depth) {
+      aa_dd.resize(nf, depth);
+      aa_du.resize(nf, depth);
+      aa_reset();
+    }
+    if (aa_have_prev) {
+      aa_dd.col(aa_head) = delta - aa_prev_d;
+      aa_du.col(aa_head) = aa_prev_step;
+      aa_head = (aa_head + 1) % depth;
+      aa_count = std::min(aa_count + 1, depth);
+    }
+    aa_prev_d = delta;
+    aa_have_prev = true;
+    if (aa_count == 0) return false;
+    // gamma = argmin |d_k - dD gamma|_2 by the normal equations (at most `depth` columns; a
+    // relative diagonal shift keeps nearly dependent columns from blowing gamma up).
+    const int m = aa_count;
+    aa_gram.resize(m, m);
+    aa_rhs.resize(m);
+    for (int i = 0; i < m; ++i) {
+      aa_rhs[i] = aa_dd.col(i).dot(delta);
+      for (int j = 0; j <= i; ++j) aa_gram(i, j) = aa_gram(j, i) = aa_dd.col(i).dot(aa_dd.col(j));
+    }
+    aa_gram.diagonal().array() += 1e-12 * aa_gram.diagonal().maxCoeff();
+    aa_gamma = Eigen::LDLT<SmallMatrix>(aa_gram).solve(aa_rhs);
+    if (!aa_gamma.allFinite()) return false;
+    aa_chord = delta;
+    for (int i = 0; i < m; ++i) {
+      delta.noalias() -= aa_gamma[i] * (aa_du.col(i) + aa_dd.col(i));
+    }
+    if (!(r_free.dot(delta) > 0.0) || !delta.allFinite()) {  // not a descent direction
+      delta = aa_chord;
+      return false;
+    }
+    return true;
+  }
+
   // Newton at fixed external load and constrained values (already in u). Throws Failure.
+  // opt.reuse_factorization: chord steps with the factor in llt (whatever u it was made at),
+  // Anderson-accelerated, until a step contracts the residual by less than
+  // opt.refactor_contraction.
   void newton(const Eigen::VectorXd& fext, Eigen::VectorXd& u, const NewtonOptions& opt,
               NewtonIncrement& inc) {
     const int nf = static_cast<int>(free_dofs.size());
-    double rnorm = residual(u, fext);
-    double pi_u = potential(u, fext);  // carried from step to step (the accepted trial's)
+    double rnorm = residual(u, fext, forces_known_at(u));
+    f_int_known = false;  // f_int follows the trials from here on
+    // Potential at u, carried from step to step; NaN = not evaluated yet. The line search tests
+    // the residual decrease first (the residual of an accepted trial is needed anyway) and the
+    // potential only when that fails: the same steps are accepted as with the potential first,
+    // without an energy evaluation per step.
+    const double unknown = std::numeric_limits<double>::quiet_NaN();
+    double pi_u = unknown;
+    bool refactor = !opt.reuse_factorization || !factor_valid;
+    const bool accelerate = opt.reuse_factorization && opt.anderson_depth > 0;
+    aa_reset();
     inc.residual_n.assign(1, rnorm);
     for (int it = 0;; ++it) {
-      if (rnorm <= opt.tolerance * force_scale(fext)) {
+      const bool converged = rnorm <= opt.tolerance * force_scale(fext);
+      if (converged && it >= opt.min_iterations) {
+        f_int_u = u;  // f_int, rq belong to u here
+        f_int_known = true;
         return;
       }
       if (it >= opt.max_iterations) {
@@ -214,57 +371,106 @@ struct EquilibriumSolver::Impl {
       for (int i = 0; i < nf; ++i) {
         r_free[i] = -rq[free_dofs[i]];
       }
-      bool projected = false;
-      if (!factor(u, false)) {
-        projected = true;
-        if (!factor(u, true)) {
+      bool fresh = false;        // the factor is the tangent at this u
+      bool accelerated = false;  // delta is an Anderson step (else the factor's own step)
+      double slope = 0.0;
+      if (!refactor) {
+        // Chord step with an earlier factor: positive definite, so a descent direction unless
+        // round-off says otherwise (then the Newton step below).
+        solve_step();
+        if (accelerate) accelerated = aa_accelerate(opt.anderson_depth);
+        slope = -r_free.dot(delta);
+        refactor = !(slope < 0.0) || !delta.allFinite();
+      }
+      if (refactor) {
+        // A step with the tangent at u (exact, or projected if the exact one is not positive
+        // definite or gives no descent direction).
+        fresh = true;
+        accelerated = false;
+        aa_reset();
+        if (!factor(u, false, inc) && !factor(u, true, inc)) {
           throw Failure(
               "projected tangent is singular (a part of the mesh free to move as a rigid body?)");
         }
-      }
-      delta = llt.solve(r_free);
-      // Directional derivative of the potential along the step: -r . delta (< 0: descent).
-      double slope = -r_free.dot(delta);
-      if (!(slope < 0.0) && !projected) {
-        projected = true;
-        if (!factor(u, true)) {
-          throw Failure("projected tangent is singular");
-        }
-        delta = llt.solve(r_free);
+        solve_step();
+        // Directional derivative of the potential along the step: -r . delta (< 0: descent).
         slope = -r_free.dot(delta);
+        if (!(slope < 0.0) && !factor_projected) {
+          if (!factor(u, true, inc)) {
+            throw Failure("projected tangent is singular");
+          }
+          solve_step();
+          slope = -r_free.dot(delta);
+        }
+        if (accelerate) aa_accelerate(opt.anderson_depth);  // records d_k only (no history)
       }
       if (!delta.allFinite()) {
         throw Failure("non-finite Newton step");
       }
-      if (projected) ++inc.projected_iterations;
-      step_full.setZero(u.size());
-      for (int i = 0; i < nf; ++i) {
-        step_full[free_dofs[i]] = delta[i];
-      }
-      enforce_ties(step_full);
-      double alpha = 1.0, pi = 0.0, r_trial = -1.0;  // r_trial >= 0: residual of `trial` known
+      auto expand_step = [&] {  // delta on the free dofs -> all stacked dofs, ties followed
+        step_full.setZero(u.size());
+        for (int i = 0; i < nf; ++i) {
+          step_full[free_dofs[i]] = delta[i];
+        }
+        enforce_ties(step_full);
+      };
+      expand_step();
+      double alpha = 1.0, pi = unknown, r_trial = 0.0;
       bool accepted = false;
       for (int h = 0; h < 30; ++h) {
         trial = u + alpha * step_full;
-        pi = potential(trial, fext);
-        r_trial = -1.0;
-        if (std::isfinite(pi) && pi <= pi_u + 1e-4 * alpha * slope) {
-          accepted = true;
-        } else {
-          // Near the solution the potential is flat to round-off: accept a residual decrease.
-          r_trial = residual(trial, fext);
-          accepted = r_trial < (1.0 - 1e-4 * alpha) * rnorm;
+        // Accepted: a decrease of the residual (near the solution the potential is flat to
+        // round-off), or Armijo on the potential.
+        r_trial = residual(trial, fext);  // rq, f_int then belong to `trial`
+        pi = unknown;
+        accepted = r_trial < (1.0 - 1e-4 * alpha) * rnorm;
+        if (!accepted) {
+          if (std::isnan(pi_u)) pi_u = potential(u, fext);
+          pi = potential(trial, fext);
+          accepted = std::isfinite(pi) && pi <= pi_u + 1e-4 * alpha * slope;
         }
         if (accepted) break;
+        if (accelerated) {
+          // The mixed step failed: the factor's own step next (history restarts from it).
+          delta = aa_chord;
+          slope = -r_free.dot(delta);
+          accelerated = false;
+          aa_count = aa_head = 0;
+          expand_step();
+          continue;
+        }
+        if (!fresh) break;
         alpha *= 0.5;
         ++inc.line_search_halvings;
+      }
+      if (!accepted && converged) {  // a step past min_iterations' demand found nothing better
+        residual(u, fext);             // rq, f_int belong to u again
+        f_int_u = u;
+        f_int_known = true;
+        return;
+      }
+      if (!accepted && !fresh) {
+        // The old factor's step is no good here: retry this iteration with a fresh tangent
+        // (rq belongs to the trial now: restore it for u).
+        refactor = true;
+        --it;
+        residual(u, fext);
+        continue;
       }
       if (!accepted) {
         throw Failure("line search found no decrease of the potential or the residual");
       }
+      if (factor_projected) ++inc.projected_iterations;
+      if (accelerate) aa_prev_step = alpha * delta;
       u.swap(trial);
       pi_u = pi;
-      rnorm = r_trial >= 0.0 ? r_trial : residual(u, fext);  // rq, f_int then belong to u
+      // Refactorize at the next iteration unless the step with the (possibly old) factor was a
+      // full one that contracted the residual well: a chord iteration costs a back-substitution
+      // and a residual (~3-8 % of a factorization on the brain mesh); at a rate worse than 1/2
+      // per step, ~30 of them are needed for 1e-9, more than a factorization saves.
+      refactor = !opt.reuse_factorization || alpha < 1.0 ||
+                 r_trial > opt.refactor_contraction * rnorm || 2 * (it + 1) >= opt.max_iterations;
+      rnorm = r_trial;
       inc.residual_n.push_back(rnorm);
     }
   }
@@ -447,10 +653,7 @@ EquilibriumResult EquilibriumSolver::solve(const Eigen::VectorXd& forces_n,
   if (!forces_n.allFinite()) {
     throw std::invalid_argument(s.where + ": non-finite force");
   }
-  if (options.increments < 0 || !(options.tolerance > 0.0) || options.max_iterations < 1 ||
-      options.max_cutbacks < 0) {
-    throw std::invalid_argument(s.where + ": bad NewtonOptions");
-  }
+  check_options(s.where, options);
   const Eigen::VectorXd f_full = forces_n.size() ? forces_n : Eigen::VectorXd::Zero(ndof);
   EquilibriumResult result;
   Eigen::VectorXd u = Eigen::VectorXd::Zero(ndof), u_try;
@@ -489,7 +692,7 @@ EquilibriumResult EquilibriumSolver::solve(const Eigen::VectorXd& forces_n,
     }
   }
   s.f_ext = f_full;
-  s.residual(u, s.f_ext);
+  s.residual(u, s.f_ext, s.forces_known_at(u));
   result.force_scale_n = s.force_scale(s.f_ext);
   result.reaction_n = Eigen::VectorXd::Zero(ndof);
   for (int qi : s.constrained_dofs) {
@@ -509,6 +712,7 @@ NewtonIncrement EquilibriumSolver::solve_from(const Eigen::VectorXd& forces_n,
       !forces_n.allFinite() || !u_m.allFinite()) {
     throw std::invalid_argument(s.where + ": solve_from needs finite forces (0 or 3N) and u (3N)");
   }
+  check_options(s.where, options);
   s.f_ext = forces_n.size() ? forces_n : Eigen::VectorXd::Zero(ndof);
   s.set_constrained(u_m, 1.0);
   NewtonIncrement inc;

@@ -3,10 +3,18 @@
 // total potential E(u) - f_ext . u, with a backtracking line search (Armijo on the potential, or
 // a decrease of the residual when the potential is flat to round-off) and load increments that
 // are cut back when an increment fails to converge. The tangent K_ff is refactorized by CHOLMOD
-// (supernodal LL^T) at every iteration, reusing the one symbolic analysis made at construction
-// (the constrained dofs, hence the pattern, never change). An indefinite tangent (compression
-// with buckling modes, clamped elements) is replaced by the one with every element tangent
-// projected to positive semidefinite, so each step is a descent direction.
+// (supernodal LL^T, METIS ordering as CHOLMOD chooses it) at every iteration, reusing the one
+// symbolic analysis made at construction (the constrained dofs, hence the pattern, never
+// change). An indefinite tangent (compression with buckling modes, clamped elements) is
+// replaced by the one with every element tangent projected to positive semidefinite, so each
+// step is a descent direction.
+//
+// Warm-started updates (NewtonOptions::reuse_factorization): the numeric factorization is
+// 70-90 % of a Newton iteration on the 14k-free-dof brain mesh (bench/RESULTS.md, "Equilibrium
+// updates"), so a worker that re-solves for slowly changing loads keeps the last factor across
+// iterations and calls and takes Anderson-accelerated chord steps u += K_old^-1 r (same
+// acceptance test, same convergence test), refactorizing only when a step contracts the
+// residual too little.
 //
 // Not thread-safe: an EquilibriumSolver holds its factorization and scratch (one per thread).
 #pragma once
@@ -57,15 +65,45 @@ struct NewtonOptions {
   // volume), unit N. Dimensionless.
   double tolerance{1e-10};
   int max_iterations{40};  // per increment
+  // Iterations taken even when the start already meets the tolerance (a step that finds no
+  // decrease there ends the solve, converged). A worker that re-solves for forces which moved by
+  // less than the tolerance still follows them (1), instead of keeping an answer that is only
+  // within the tolerance of theirs (0).
+  int min_iterations{0};
   int max_cutbacks{12};    // halvings of one increment before the solve fails
+  // Modified Newton for warm-started updates: keep the last factorized tangent (from an earlier
+  // iteration, increment or call of this solver) and step with it, u += K_old^-1 r (Anderson-
+  // accelerated, below), accepted by the same test as the line search's; the tangent is
+  // reassembled and refactorized at the current u (a full Newton step with line search) only
+  // when there is no factor yet, when a step with the old one finds no decrease, when the last
+  // step reduced max |r_free| by less than refactor_contraction (r_new > c r_old) or needed a
+  // line-search halving, and at every iteration after the first max_iterations / 2 (so a slow
+  // chord sequence cannot use up the budget). The convergence test and tolerance are the ones
+  // above: the answer is the converged equilibrium, not an approximation. Applies to solve (the
+  // factor carried from increment to increment) and solve_from. false: a fresh tangent at every
+  // iteration (full Newton, today's iterates exactly).
+  bool reuse_factorization{false};
+  // Residual ratio r_new / r_old (max norms) above which the next iteration refactorizes;
+  // dimensionless, in (0, 1). Smaller: closer to full Newton (more factorizations, fewer
+  // iterations). Only read when reuse_factorization is set.
+  double refactor_contraction{0.5};
+  // Anderson acceleration of those chord steps: the last `anderson_depth` steps with the same
+  // factor are mixed (a least-squares combination, GMRES-like), which removes the few slowly
+  // contracting components a changed tangent leaves; 0: plain chord steps. Iterations, at most
+  // 16. Only read when reuse_factorization is set.
+  int anderson_depth{5};
 };
 
 struct NewtonIncrement {
   double load_factor{0.0};        // reached at the end of the increment, in (0, 1]
   std::vector<double> residual_n;  // max |r_free| before each iteration and after the last, N
-  int projected_iterations{0};     // iterations that needed the projected tangent
+  int projected_iterations{0};     // iterations whose step used a projected tangent
   int line_search_halvings{0};
   int cutbacks{0};  // failed attempts before this increment converged
+  // Numeric factorizations of the tangent in this increment (a failed exact one followed by
+  // the projected one counts 2). Full Newton: at least one per iteration; with
+  // reuse_factorization it may be 0 (every step taken with an earlier factor).
+  int factorizations{0};
 };
 
 struct EquilibriumResult {
@@ -95,7 +133,10 @@ class EquilibriumSolver {
 
   // Newton at load factor 1 from a given start (u_m: 3N, warm start, overwritten with the
   // answer; its constrained dofs are set to their values). No increments; returns the residual
-  // history. Throws std::runtime_error if it does not converge in max_iterations.
+  // history. Throws std::runtime_error if it does not converge in max_iterations. With
+  // options.reuse_factorization, the factor left by the previous call (or solve) is the first
+  // step's: the worker's loop of small load changes then costs a few back-substitutions and
+  // residual evaluations per call instead of a factorization per iteration.
   NewtonIncrement solve_from(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m,
                              const NewtonOptions& options = {});
 

@@ -33,6 +33,12 @@ fem::EquilibriumDefinition equilibrium_definition(const CoupledBody& body,
 
 TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
     : body_(def.body), tier_(def.tier), newton_(def.newton) {
+  // Updates follow small force changes: the last factorized tangent is kept across updates
+  // (fem::NewtonOptions::reuse_factorization, refactorized when it contracts too little), and
+  // every update takes at least one step, so the equilibrium follows forces that moved by less
+  // than the tolerance and the step/update fixed point is reached to round-off.
+  newton_.reuse_factorization = true;
+  newton_.min_iterations = 1;
   if (body_ == nullptr) throw std::invalid_argument("TierEquilibrium: no body");
   if (tier_ == fem::Tier::kLinear) {
     throw std::invalid_argument("TierEquilibrium: " + body_name(*body_) +

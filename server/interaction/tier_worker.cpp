@@ -90,13 +90,13 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
     }
   }
   updates_.fetch_add(1, std::memory_order_relaxed);
-  // Rate: 1 / mean update time over the last second's updates.
+  // Rate: 1 / mean update time over this window's updates (a window lasts a second).
   window_busy_s_ += common::seconds_since(t0);
   ++window_updates_;
+  if (window_busy_s_ > 0.0)
+    rate_hz_.store(window_updates_ / window_busy_s_, std::memory_order_relaxed);
   const double t = now_s();
-  if (t - window_start_s_ >= 1.0 || window_start_s_ == 0.0) {
-    if (window_busy_s_ > 0.0)
-      rate_hz_.store(window_updates_ / window_busy_s_, std::memory_order_relaxed);
+  if (t - window_start_s_ >= 1.0) {
     window_start_s_ = t;
     window_busy_s_ = 0.0;
     window_updates_ = 0;

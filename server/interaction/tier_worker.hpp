@@ -40,7 +40,8 @@ class TierWorker {
   void post(const std::vector<TierLoad>& loads);
 
   // Equilibrium updates per second of work, 1 / mean update time (all bodies) over the updates
-  // of the last second (kept while idle: a held tool needs none), unit Hz; 0 before the first.
+  // of the current one-second window (kept while idle: a held tool, once its forces are a fixed
+  // point, needs none), unit Hz; 0 before the first.
   // Any thread.
   double rate_hz() const { return rate_hz_.load(std::memory_order_relaxed); }
   std::uint64_t updates() const { return updates_.load(std::memory_order_relaxed); }

@@ -1,7 +1,9 @@
 // Newton equilibrium in every tier: small loads agree with the linear StaticSolver (consistency
 // of the linearization), the linear tier in one iteration, quadratic convergence at the end of
 // a large-deflection solve, an element inverted by a prescribed push recovers when released,
-// nothing turns NaN at nu = 0.499, bad input is refused.
+// nothing turns NaN at nu = 0.499, bad input is refused; warm-started updates that reuse the
+// factorization (NewtonOptions::reuse_factorization) reach full Newton's answer with fewer
+// factorizations than iterations, on one mesh and on a tied pair.
 #include "server/fem/equilibrium_solver.hpp"
 
 #include "fem_test_meshes.hpp"
@@ -46,7 +48,7 @@ TEST(FemEquilibriumSolver, SmallLoadsAgreeWithTheLinearSolver) {
   const StaticSolver linear(b.mesh, mats, b.fixed);
   const Eigen::VectorXd u_lin = linear.solve(f);
   for (Tier tier : kTiers) {
-    EquilibriumSolver solver({&b.mesh, mats, tier, b.fixed, {}});
+    EquilibriumSolver solver({&b.mesh, mats, tier, b.fixed, {}, {}});
     const EquilibriumResult r = solver.solve(f);
     const double rel = testing::rel_max_diff(r.displacement_m, u_lin);
     std::printf("small load, %s tier: max |u - u_linear| / max |u_linear| = %.2e\n",
@@ -58,7 +60,7 @@ TEST(FemEquilibriumSolver, SmallLoadsAgreeWithTheLinearSolver) {
 TEST(FemEquilibriumSolver, LinearTierConvergesInOneIterationPerIncrement) {
   const Beam b = beam();
   const MaterialMap mats = MaterialMap::uniform({1.0e6, 0.4, "beam"});
-  EquilibriumSolver solver({&b.mesh, mats, Tier::kLinear, b.fixed, {}});
+  EquilibriumSolver solver({&b.mesh, mats, Tier::kLinear, b.fixed, {}, {}});
   NewtonOptions o;
   o.increments = 1;
   const EquilibriumResult r = solver.solve(tip_load(b, 5.0), o);
@@ -70,7 +72,7 @@ TEST(FemEquilibriumSolver, LargeDeflectionConvergesQuadratically) {
   const Beam b = beam();
   const MaterialMap mats = MaterialMap::uniform({1.0e6, 0.4, "beam"});
   for (Tier tier : {Tier::kCorotational, Tier::kNonlinear}) {
-    EquilibriumSolver solver({&b.mesh, mats, tier, b.fixed, {}});
+    EquilibriumSolver solver({&b.mesh, mats, tier, b.fixed, {}, {}});
     const EquilibriumResult r = solver.solve(tip_load(b, 8.0));
     double tip_w = 0.0;
     for (int v : b.tip) tip_w = std::min(tip_w, r.displacement_m[3 * v + 2]);
@@ -108,7 +110,7 @@ TEST(FemEquilibriumSolver, InvertedElementRecoversWhenReleased) {
     for (Tier tier : kTiers) {
       const std::string what = std::string(tier_name(tier)) + " nu " + std::to_string(nu);
       PrescribedDofs press{pushed, Eigen::Vector3d(0, 0, -0.015), kAllComponents};
-      EquilibriumSolver solver({&m, mats, tier, fixed, {press}});
+      EquilibriumSolver solver({&m, mats, tier, fixed, {press}, {}});
       const EquilibriumResult pressed = solver.solve({});
       ASSERT_TRUE(pressed.displacement_m.allFinite()) << what;
       ASSERT_TRUE(pressed.reaction_n.allFinite()) << what;
@@ -130,51 +132,74 @@ TEST(FemEquilibriumSolver, InvertedElementRecoversWhenReleased) {
   }
 }
 
-// Two boxes, B on top of A, B's bottom nodes tied to A's top nodes (weights 1, 0, 0): the tied
-// pair must equal the merged mesh (one box of the same tetrahedra, B's material above) solved
-// as one body, in every tier: the tie is eliminated exactly.
-TEST(FemEquilibriumSolver, TiedMeshEqualsTheMergedMesh) {
-  const double e = 0.02;  // m
+// Two boxes, B on top of A, B's bottom nodes tied to A's top nodes (weights 1, 0, 0), and the
+// merged mesh (one box of the same tetrahedra, B's material above). Built in place: the tie
+// holds a pointer to b.
+struct TiedBoxes {
+  static constexpr double e = 0.02;  // m
   const mesh::TetMesh a = box_mesh({2, 2, 2, {0, 0, 0}, {e, e, e}, 0.0, 1});
   const mesh::TetMesh b = box_mesh({2, 2, 2, {0, 0, e}, {e, e, 2 * e}, 0.0, 1});
   const mesh::TetMesh merged = box_mesh({2, 2, 4, {0, 0, 0}, {e, e, 2 * e}, 0.0, 1});
   const Material soft{3000.0, 0.45, "brain"}, stiff{30000.0, 0.4, "vessel"};
-  std::vector<int> tet_material;
-  for (const auto& t : merged.tets()) {
-    double z = 0.0;
-    for (int k = 0; k < 4; ++k) z += merged.vertices()[t[k]].z() / 4.0;
-    tet_material.push_back(z > e ? 1 : 0);
-  }
-  const MaterialMap merged_mats = MaterialMap::per_tet({soft, stiff}, tet_material);
-  auto node_at = [](const mesh::TetMesh& m, const Eigen::Vector3d& p) {
+  MaterialMap merged_mats;
+  TiedMeshDefinition tie;
+  std::vector<int> fixed_a, fixed_m;
+  int corner_b{-1}, corner_m{-1};  // B's top corner (e, e, 2e) in b and in merged
+
+  static int node_at(const mesh::TetMesh& m, const Eigen::Vector3d& p) {
     const auto ids = nodes_where(m, [&](const Eigen::Vector3d& q) { return (q - p).norm() < 1e-12; });
     return ids.size() == 1 ? ids[0] : -1;
-  };
-  TiedMeshDefinition tie;
-  tie.mesh = &b;
-  tie.materials = MaterialMap::uniform(stiff);
-  for (int v : nodes_where(b, [&](const Eigen::Vector3d& p) { return p.z() < e + 1e-12; })) {
-    const int host = node_at(a, b.vertices()[v]);
-    ASSERT_GE(host, 0);
-    tie.tied_nodes.push_back(v);
-    tie.host_nodes.push_back({host, host, host});
-    tie.weights.push_back({1.0, 0.0, 0.0});
   }
-  const std::vector<int> fixed_a = nodes_where(a, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
-  const std::vector<int> fixed_m =
-      nodes_where(merged, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
+  TiedBoxes() {
+    std::vector<int> tet_material;
+    for (const auto& t : merged.tets()) {
+      double z = 0.0;
+      for (int k = 0; k < 4; ++k) z += merged.vertices()[t[k]].z() / 4.0;
+      tet_material.push_back(z > e ? 1 : 0);
+    }
+    merged_mats = MaterialMap::per_tet({soft, stiff}, tet_material);
+    tie.mesh = &b;
+    tie.materials = MaterialMap::uniform(stiff);
+    for (int v : nodes_where(b, [&](const Eigen::Vector3d& p) { return p.z() < e + 1e-12; })) {
+      tie.tied_nodes.push_back(v);
+      const int host = node_at(a, b.vertices()[v]);  // checked by the tests (>= 0)
+      tie.host_nodes.push_back({host, host, host});
+      tie.weights.push_back({1.0, 0.0, 0.0});
+    }
+    fixed_a = nodes_where(a, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
+    fixed_m = nodes_where(merged, [](const Eigen::Vector3d& p) { return p.z() < 1e-12; });
+    corner_b = node_at(b, {e, e, 2 * e});
+    corner_m = node_at(merged, {e, e, 2 * e});
+  }
+  TiedBoxes(const TiedBoxes&) = delete;
+  TiedBoxes& operator=(const TiedBoxes&) = delete;
+  EquilibriumDefinition pair(Tier tier) const {
+    return {&a, MaterialMap::uniform(soft), tier, fixed_a, {}, {tie}};
+  }
+};
+
+// The tied pair must equal the merged mesh solved as one body, in every tier: the tie is
+// eliminated exactly.
+TEST(FemEquilibriumSolver, TiedMeshEqualsTheMergedMesh) {
+  const TiedBoxes boxes;
+  const mesh::TetMesh& a = boxes.a;
+  const mesh::TetMesh& b = boxes.b;
+  const mesh::TetMesh& merged = boxes.merged;
+  ASSERT_FALSE(boxes.tie.tied_nodes.empty());
+  for (const auto& h : boxes.tie.host_nodes) ASSERT_GE(h[0], 0);
+  ASSERT_GE(boxes.corner_b, 0);
+  ASSERT_GE(boxes.corner_m, 0);
+  auto node_at = &TiedBoxes::node_at;
   // A sideways and downward push on B's top corner (large enough to be nonlinear).
   const Eigen::Vector3d push(0.02, 0.01, -0.05);  // N
-  const int corner_b = node_at(b, {e, e, 2 * e}), corner_m = node_at(merged, {e, e, 2 * e});
   for (Tier tier : kTiers) {
-    EquilibriumDefinition def{&a, MaterialMap::uniform(soft), tier, fixed_a, {}, {tie}};
-    EquilibriumSolver pair(def);
+    EquilibriumSolver pair(boxes.pair(tier));
     Eigen::VectorXd f = Eigen::VectorXd::Zero(pair.num_dofs());
-    f.segment<3>(pair.body_offset(1) + 3 * corner_b) = push;
+    f.segment<3>(pair.body_offset(1) + 3 * boxes.corner_b) = push;
     const EquilibriumResult rp = pair.solve(f);
-    EquilibriumSolver one({&merged, merged_mats, tier, fixed_m, {}});
+    EquilibriumSolver one({&merged, boxes.merged_mats, tier, boxes.fixed_m, {}, {}});
     Eigen::VectorXd fm = Eigen::VectorXd::Zero(3 * merged.num_vertices());
-    fm.segment<3>(3 * corner_m) = push;
+    fm.segment<3>(3 * boxes.corner_m) = push;
     const EquilibriumResult rm = one.solve(fm);
     double diff = 0.0, rdiff = 0.0;
     for (int body = 0; body < 2; ++body) {
@@ -188,7 +213,7 @@ TEST(FemEquilibriumSolver, TiedMeshEqualsTheMergedMesh) {
                                   .maxCoeff());
       }
     }
-    for (int v : fixed_a) {
+    for (int v : boxes.fixed_a) {
       rdiff = std::max(rdiff, (rp.reaction_n.segment<3>(3 * v) -
                                rm.reaction_n.segment<3>(3 * node_at(merged, a.vertices()[v])))
                                   .cwiseAbs()
@@ -204,20 +229,110 @@ TEST(FemEquilibriumSolver, TiedMeshEqualsTheMergedMesh) {
   }
 }
 
+// What a worker does: solve_from again and again, warm-started from the previous answer, for a
+// load that changes a little between calls (here by 1-4 % in size and turning). Two solvers
+// side by side from the same first equilibrium: full Newton and reuse_factorization. Each
+// update must reach full Newton's answer (both converged to the same tolerance), and the
+// reusing solver must actually reuse: fewer factorizations than iterations over the sequence
+// (full Newton: at least one per iteration), none at all in the linear tier (the tangent is
+// constant, the first factor is exact). `make_load(k)` gives the k-th load (k = 0: the first).
+template <typename MakeLoad>
+void check_reuse_sequence(const EquilibriumDefinition& def, MakeLoad make_load, int updates,
+                          const std::string& what) {
+  EquilibriumSolver full(def), reuse(def);
+  // Both converged answers are within what the tolerance allows of the exact one: 1e-10 (the
+  // default) allows ~5e-10 relative in u here, so 1e-12 for a 1e-9 comparison with margin.
+  NewtonOptions full_options;
+  full_options.tolerance = 1e-12;
+  NewtonOptions reuse_options = full_options;
+  reuse_options.reuse_factorization = true;
+  const Eigen::VectorXd f0 = make_load(0);
+  const EquilibriumResult first = full.solve(f0, full_options);
+  reuse.solve(f0, full_options);  // leaves its last factor, as the worker's first full solve
+  Eigen::VectorXd u_full = first.displacement_m, u_reuse = first.displacement_m;
+  int its_full = 0, facts_full = 0, its_reuse = 0, facts_reuse = 0;
+  double worst = 0.0;
+  for (int k = 1; k <= updates; ++k) {
+    const Eigen::VectorXd f = make_load(k);
+    const NewtonIncrement a = full.solve_from(f, u_full, full_options);
+    const NewtonIncrement b = reuse.solve_from(f, u_reuse, reuse_options);
+    its_full += static_cast<int>(a.residual_n.size()) - 1;
+    facts_full += a.factorizations;
+    its_reuse += static_cast<int>(b.residual_n.size()) - 1;
+    facts_reuse += b.factorizations;
+    ASSERT_TRUE(u_reuse.allFinite()) << what;
+    const double rel = testing::rel_max_diff(u_reuse, u_full);
+    worst = std::max(worst, rel);
+    EXPECT_LT(rel, 1e-9) << what << " update " << k;
+  }
+  std::printf("%s: %d updates: full Newton %d iterations / %d factorizations, reuse %d / %d, "
+              "max |u_reuse - u_full| / max |u_full| = %.2e\n",
+              what.c_str(), updates, its_full, facts_full, its_reuse, facts_reuse, worst);
+  EXPECT_GE(facts_full, its_full) << what;
+  EXPECT_GT(its_reuse, 0) << what;
+  EXPECT_LT(facts_reuse, its_reuse) << what;
+  if (def.tier == Tier::kLinear) {
+    EXPECT_EQ(facts_reuse, 0) << what;
+  }
+}
+
+TEST(FemEquilibriumSolver, ReusedFactorizationReachesFullNewtonsAnswer) {
+  const Beam b = beam();
+  const MaterialMap mats = MaterialMap::uniform({1.0e6, 0.4, "beam"});
+  // 4 N at the tip: a large deflection (~40 % of the length in the nonlinear tiers), growing
+  // 3 % per update and turning sideways.
+  auto load = [&](int k) {
+    Eigen::VectorXd f = tip_load(b, 4.0 * (1.0 + 0.03 * k));
+    for (int v : b.tip) f[3 * v + 1] = 0.02 * k * f[3 * v + 2];
+    return f;
+  };
+  for (Tier tier : kTiers) {
+    check_reuse_sequence({&b.mesh, mats, tier, b.fixed, {}, {}}, load, 6,
+                         std::string("beam ") + tier_name(tier));
+  }
+}
+
+TEST(FemEquilibriumSolver, ReusedFactorizationOnATiedPair) {
+  const TiedBoxes boxes;
+  for (const auto& h : boxes.tie.host_nodes) ASSERT_GE(h[0], 0);
+  ASSERT_GE(boxes.corner_b, 0);
+  for (Tier tier : kTiers) {
+    const EquilibriumDefinition def = boxes.pair(tier);
+    const int ndof = EquilibriumSolver(def).num_dofs();
+    const int corner = 3 * (static_cast<int>(boxes.a.num_vertices()) + boxes.corner_b);
+    auto load = [&](int k) {
+      Eigen::VectorXd f = Eigen::VectorXd::Zero(ndof);
+      f.segment<3>(corner) = Eigen::Vector3d(0.02, 0.01 + 0.001 * k, -0.05 * (1.0 + 0.02 * k));
+      return f;
+    };
+    check_reuse_sequence(def, load, 6, std::string("tied pair ") + tier_name(tier));
+  }
+}
+
 TEST(FemEquilibriumSolver, RefusesBadInput) {
   const mesh::TetMesh m = box_mesh({1, 1, 1, {0, 0, 0}, {0.01, 0.01, 0.01}, 0.0, 1});
   const MaterialMap mats = MaterialMap::uniform({3000.0, 0.45, "brain"});
   const std::string free_body = neurosim::testing::message_of(
-      [&] { EquilibriumSolver({&m, mats, Tier::kNonlinear, {}, {}}); });
+      [&] { EquilibriumSolver({&m, mats, Tier::kNonlinear, {}, {}, {}}); });
   EXPECT_NE(free_body.find("rigid body"), std::string::npos) << free_body;
   const std::string bad_node = neurosim::testing::message_of(
-      [&] { EquilibriumSolver({&m, mats, Tier::kNonlinear, {99}, {}}); });
+      [&] { EquilibriumSolver({&m, mats, Tier::kNonlinear, {99}, {}, {}}); });
   EXPECT_NE(bad_node.find("fixed node 99"), std::string::npos) << bad_node;
-  EquilibriumSolver solver({&m, mats, Tier::kNonlinear, {0, 1, 2, 3}, {}});
+  EquilibriumSolver solver({&m, mats, Tier::kNonlinear, {0, 1, 2, 3}, {}, {}});
   EXPECT_THROW(solver.solve(Eigen::VectorXd::Zero(2)), std::invalid_argument);
   Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * m.num_vertices());
   f[20] = std::nan("");
   EXPECT_THROW(solver.solve(f), std::invalid_argument);
+  NewtonOptions reuse;
+  reuse.reuse_factorization = true;
+  reuse.refactor_contraction = 1.0;  // would never refactorize
+  Eigen::VectorXd u = Eigen::VectorXd::Zero(3 * m.num_vertices());
+  const std::string bad_option = neurosim::testing::message_of(
+      [&] { solver.solve_from(Eigen::VectorXd::Zero(u.size()), u, reuse); });
+  EXPECT_NE(bad_option.find("refactor_contraction 1"), std::string::npos) << bad_option;
+  reuse.refactor_contraction = 0.5;
+  reuse.anderson_depth = -1;
+  EXPECT_THROW(solver.solve(Eigen::VectorXd::Zero(u.size()), reuse), std::invalid_argument);
 }
 
 }  // namespace

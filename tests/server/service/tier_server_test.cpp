@@ -1,0 +1,136 @@
+// The real neurosim-server in every elasticity tier on both bundled scenes (child process,
+// private DDS domain on loopback, bounded): `--tier T`, a station presses and holds; SimStatus
+// names the tier that runs (and, for COROTATIONAL and NONLINEAR, a non-zero equilibrium update
+// rate); every ContactModel is finite; once the held force is still, it equals the in-process
+// Simulation of the same tier settled at the same pose (synchronous updates) to 1e-9 relative.
+#include "server/scene/compile.hpp"
+#include "tests/server/service/service_scenarios.hpp"
+
+#include <cmath>
+#include <cstdio>
+
+namespace st = neurosim::service::testing;
+namespace nt = neurosim::testing;
+namespace ni = neurosim::interaction;
+
+namespace {
+
+struct Press {
+  const char* scene;
+  std::array<double, 3> origin;  // a surface point, unit m
+  std::array<double, 3> up;      // outward normal there
+  double depth_m;
+};
+
+// cube: the +x face's centre (the paper's push); brain: the demo's point on the right lateral
+// surface, along its normal.
+const Press kCube{"scenes/cube_cylinder.scene", {0.1, 0.05, 0.05}, {1.0, 0.0, 0.0}, 0.004};
+const Press kBrain{"scenes/brain_artery.scene", {0.1605, 0.1125, 0.0787}, {0.963, 0.176, 0.202},
+                   0.004};
+
+neurosim_Tier wire_tier(const char* tier) {
+  const std::string t = tier;
+  return t == "linear" ? neurosim_TIER_LINEAR
+                       : t == "corotational" ? neurosim_TIER_COROTATIONAL : neurosim_TIER_NONLINEAR;
+}
+
+void press_and_hold(const Press& press, const char* tier) {
+  const auto scene = nt::source_dir() / press.scene;
+  neurosim::scene::Model model = neurosim::scene::load_model(scene);
+  model.effects.tier = *neurosim::fem::parse_tier(tier);
+  const double r = model.tools.at(0).tip_radius_m;
+  ni::Vec3 up(press.up[0], press.up[1], press.up[2]);
+  up.normalize();
+  const ni::Vec3 origin(press.origin[0], press.origin[1], press.origin[2]);
+  auto tip = [&](double depth) -> std::array<double, 3> {
+    const ni::Vec3 p = origin + (r - depth) * up;
+    return {p.x(), p.y(), p.z()};
+  };
+  const std::array<double, 3> hold = tip(press.depth_m);
+
+  st::Setup setup;
+  setup.exe = nt::bin_dir() / "neurosim-server";
+  setup.scene = scene;
+  setup.server_args = {"--tier", tier};
+  setup.startup_timeout_s = 300;  // brain: meshes, factorization, boundary operator on 2 cores
+  st::Session ses(setup, std::string("tier_") + tier, 240);
+  // The reference: the same tier in process, synchronous updates (deterministic).
+  ni::SimulationOptions sync;
+  sync.tier_worker_thread = false;
+  auto ref = ni::Simulation::build(model, sync);
+  ASSERT_TRUE(ses.wait_ready());
+  const neurosim_Tier want = wire_tier(tier);
+  ASSERT_TRUE(ses.status.wait_for([&](const neurosim_SimStatus& s) { return s.tier == want; }, 5))
+      << ses.status.last_text;
+
+  st::ModelCollector models(ses.client);
+  const double approach_s = 1.0;
+  const double hold_s = 150.0;  // at most: the test stops as soon as the force is still
+  st::StationThread station(
+      ses.client, "tier-1",
+      [&](double t) { return tip(-0.002 + (press.depth_m + 0.002) * std::min(1.0, t / approach_s)); },
+      approach_s + hold_s);
+  ASSERT_TRUE(station.writer().wait_for_readers(1, DDS_SECS(10)));
+  // Still: over the last second of models, the force moved by less than 1e-11 of itself.
+  double last_change_t = 0.0;
+  ni::Vec3 last_f = ni::Vec3::Zero();
+  std::size_t seen = 0;
+  const auto t0 = st::Clock::now();
+  bool still = false;
+  while (!still && st::seconds_since(t0) < approach_s + hold_s - 5.0) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const auto recs = models.records();
+    for (; seen < recs.size(); ++seen) {
+      const auto& m = recs[seen];
+      if (m.station != "tier-1") continue;
+      const ni::Vec3 f(m.f0[0], m.f0[1], m.f0[2]);
+      ASSERT_TRUE(f.allFinite()) << "ContactModel force not finite, seq " << m.tool_sequence;
+      for (double k : m.K) ASSERT_TRUE(std::isfinite(k)) << "stiffness not finite";
+      if ((f - last_f).norm() > 1e-11 * f.norm() || !m.in_contact) last_change_t = st::seconds_since(t0);
+      last_f = f;
+    }
+    still = st::seconds_since(t0) > approach_s + 1.0 && last_f.norm() > 0.0 &&
+            st::seconds_since(t0) - last_change_t > 1.0;
+  }
+  ASSERT_TRUE(still) << "the held force never settled; last " << last_f.transpose() << "\n"
+                     << ses.server.log();
+  double rate = 0.0;
+  ASSERT_TRUE(ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        rate = s.tier_update_rate_hz;
+        return s.tier == want;
+      },
+      5));
+  if (want == neurosim_TIER_LINEAR) {
+    EXPECT_EQ(rate, 0.0);
+  } else {
+    EXPECT_GT(rate, 0.0);
+    EXPECT_TRUE(std::isfinite(rate));
+  }
+
+  // The in-process tier settled at the held pose.
+  std::vector<ni::ToolContact> c;
+  ni::StepStats stats;
+  ni::Vec3 prev = ni::Vec3::Constant(1e300);
+  int steps = 0;
+  for (steps = 1; steps <= 200; ++steps) {
+    ref->step({st::pose_at(hold)}, c, stats);
+    if ((c[0].force_n - prev).norm() <= 1e-12 * c[0].force_n.norm()) break;
+    prev = c[0].force_n;
+  }
+  ASSERT_TRUE(c[0].in_contact);
+  const double fn = c[0].force_n.norm();
+  std::printf("%s %s: held force %.9g N (server) vs %.9g N (in process, %d steps), update rate %.2f Hz\n",
+              press.scene, tier, last_f.norm(), fn, steps, rate);
+  EXPECT_LE((last_f - c[0].force_n).norm(), 1e-9 * fn)
+      << last_f.transpose() << " vs " << c[0].force_n.transpose();
+}
+
+}  // namespace
+
+TEST(service_tier, CubeLinear) { press_and_hold(kCube, "linear"); }
+TEST(service_tier, CubeCorotational) { press_and_hold(kCube, "corotational"); }
+TEST(service_tier, CubeNonlinear) { press_and_hold(kCube, "nonlinear"); }
+TEST(service_tier, BrainLinear) { press_and_hold(kBrain, "linear"); }
+TEST(service_tier, BrainCorotational) { press_and_hold(kBrain, "corotational"); }
+TEST(service_tier, BrainNonlinear) { press_and_hold(kBrain, "nonlinear"); }
