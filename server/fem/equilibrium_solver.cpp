@@ -31,7 +31,7 @@ class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen:
 
 void check_options(const std::string& where, const NewtonOptions& o) {
   if (o.increments < 0 || !(o.tolerance > 0.0) || o.max_iterations < 1 || o.max_cutbacks < 0 ||
-      o.min_iterations < 0 || o.min_iterations > o.max_iterations ||
+      o.min_iterations < 0 || o.min_iterations > o.max_iterations || o.step_limit < 0 ||
       (o.reuse_factorization && !(o.refactor_contraction > 0.0 && o.refactor_contraction < 1.0)) ||
       (o.reuse_factorization && (o.anderson_depth < 0 || o.anderson_depth > 16))) {
     std::ostringstream msg;
@@ -361,6 +361,12 @@ struct EquilibriumSolver::Impl {
         f_int_known = true;
         return;
       }
+      if (opt.step_limit > 0 && it >= opt.step_limit) {
+        inc.converged = converged;
+        f_int_u = u;  // f_int, rq belong to u here
+        f_int_known = true;
+        return;
+      }
       if (it >= opt.max_iterations) {
         std::ostringstream msg;
         msg << "no convergence in " << opt.max_iterations << " iterations (residual " << rnorm
@@ -643,8 +649,10 @@ int EquilibriumSolver::num_dofs() const { return impl_->ndof; }
 Tier EquilibriumSolver::tier() const { return impl_->bodies[0].tier(); }
 
 EquilibriumResult EquilibriumSolver::solve(const Eigen::VectorXd& forces_n,
-                                           const NewtonOptions& options) {
+                                           const NewtonOptions& requested) {
   Impl& s = *impl_;
+  NewtonOptions options = requested;
+  options.step_limit = 0;  // a load path always converges its increments
   const int ndof = s.ndof;
   if (forces_n.size() != 0 && forces_n.size() != ndof) {
     throw std::invalid_argument(s.where + ": forces have " + std::to_string(forces_n.size()) +

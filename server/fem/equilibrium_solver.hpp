@@ -70,6 +70,11 @@ struct NewtonOptions {
   // less than the tolerance still follows them (1), instead of keeping an answer that is only
   // within the tolerance of theirs (0).
   int min_iterations{0};
+  // solve_from only. > 0: return after this many iterations even when the tolerance is not met
+  // (no error; NewtonIncrement::converged says whether it was). For a caller that iterates the
+  // updates themselves (the multirate contact loop: each update a few cheap steps, the loop's
+  // fixed point the converged equilibrium). 0: iterate to the tolerance (or max_iterations).
+  int step_limit{0};
   int max_cutbacks{12};    // halvings of one increment before the solve fails
   // Modified Newton for warm-started updates: keep the last factorized tangent (from an earlier
   // iteration, increment or call of this solver) and step with it, u += K_old^-1 r (Anderson-
@@ -100,6 +105,7 @@ struct NewtonIncrement {
   int projected_iterations{0};     // iterations whose step used a projected tangent
   int line_search_halvings{0};
   int cutbacks{0};  // failed attempts before this increment converged
+  bool converged{true};  // false only when NewtonOptions::step_limit stopped it first
   // Numeric factorizations of the tangent in this increment (a failed exact one followed by
   // the projected one counts 2). Full Newton: at least one per iteration; with
   // reuse_factorization it may be 0 (every step taken with an earlier factor).

@@ -283,8 +283,10 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     throw std::invalid_argument(source_ + ": invalid SimulationOptions");
   }
   tier_ = model.effects.tier;
-  if (!(options_.tier_newton_tolerance > 0.0) || !(options_.tier_newton_tolerance < 1e-2)) {
-    throw std::invalid_argument(source_ + ": invalid SimulationOptions.tier_newton_tolerance");
+  if (!(options_.tier_newton_tolerance > 0.0) || !(options_.tier_newton_tolerance < 1e-2) ||
+      options_.tier_update_steps < 0) {
+    throw std::invalid_argument(source_ + ": invalid SimulationOptions.tier_newton_tolerance or "
+                                "tier_update_steps");
   }
 
   // Meshes, in scene order (copies: a host is carved below).
@@ -546,6 +548,7 @@ State::State(const Model& m) {
       d.host_fixed_nodes = b.host_fixed_nodes;
       d.tier = m.tier_;
       d.newton.tolerance = m.options_.tier_newton_tolerance;
+      d.newton.step_limit = m.options_.tier_update_steps;
       try {
         eq.push_back(std::make_unique<TierEquilibrium>(d));
       } catch (const std::exception& ex) {
@@ -886,6 +889,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
       tier_loads_[bi].slots = bodies_[bi].force_slots;
       tier_loads_[bi].forces_n = bodies_[bi].forces_n;
+      tier_loads_[bi].linearization = tier_->linearization(static_cast<int>(bi)).count;
     }
     tier_->post(tier_loads_);
   }

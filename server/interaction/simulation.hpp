@@ -138,6 +138,10 @@ struct SimulationOptions {
   bool tier_worker_thread{true};
   // Relative Newton tolerance of those updates (fem::NewtonOptions::tolerance).
   double tier_newton_tolerance{1e-10};
+  // Newton steps per update at most (fem::NewtonOptions::step_limit; 0: each update converges).
+  // The step and the updates are iterated anyway, so an update need not converge: its fixed
+  // point is the same, and a few cheap steps per update refresh the rotations more often.
+  int tier_update_steps{0};
 };
 
 // Load-time cost of build(), unit s.

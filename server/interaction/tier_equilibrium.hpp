@@ -35,6 +35,7 @@ namespace neurosim::interaction {
 struct TierLoad {
   std::vector<int> slots;
   std::vector<mesh::Vec3> forces_n;
+  std::uint64_t linearization{0};  // TierLinearization::count of the model they were found with
 };
 
 // What the contact step reads of a body's latest equilibrium.
@@ -81,6 +82,7 @@ class TierEquilibrium {
   // start are then unchanged. One thread at a time.
   void update(const TierLoad& load, TierLinearization& out);
 
+  int num_slots() const { return static_cast<int>(slot_node_.size()); }  // contact slots
   int num_dofs() const;             // stacked: host then tied meshes
   int body_offset(int body) const;  // 0: the host, k: the body's ties()[k - 1]
 

@@ -3,6 +3,7 @@
 #include "common/clock.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <stdexcept>
 
@@ -10,13 +11,8 @@ namespace neurosim::interaction {
 
 namespace {
 
-bool same_loads(const std::vector<TierLoad>& a, const std::vector<TierLoad>& b) {
-  if (a.size() != b.size()) return false;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    if (a[i].slots != b[i].slots || a[i].forces_n != b[i].forces_n) return false;
-  }
-  return true;
-}
+constexpr double kMinRelaxation = 0.1;
+constexpr double kMaxRelaxation = 1.5;
 
 double now_s() {
   return std::chrono::duration<double>(common::Clock::now().time_since_epoch()).count();
@@ -28,10 +24,15 @@ TierWorker::TierWorker(std::vector<std::unique_ptr<TierEquilibrium>> bodies, boo
                        int max_forces_per_body)
     : bodies_(std::move(bodies)), threaded_(threaded) {
   current_.resize(bodies_.size());
-  solved_.resize(bodies_.size());
+  relaxed_.resize(bodies_.size());
+  relax_.resize(bodies_.size());
   for (std::size_t b = 0; b < bodies_.size(); ++b) {
     if (!bodies_[b]) throw std::invalid_argument("TierWorker: body " + std::to_string(b) + " null");
     bodies_[b]->rest(current_[b]);
+    const int n = 3 * bodies_[b]->num_slots();
+    relax_[b].f.setZero(n);
+    relax_[b].residual.setZero(n);
+    relax_[b].previous.setZero(n);
   }
   if (threaded_) {
     // Size the three load buffers now (the consumer side is still this thread), so that handing
@@ -76,13 +77,61 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
     throw std::invalid_argument("TierWorker: " + std::to_string(loads.size()) + " loads for " +
                                 std::to_string(bodies_.size()) + " bodies");
   }
-  const auto t0 = common::Clock::now();
-  bool ok = true;
+  // Fixed-point residual lambda - f per body; nothing to do for stale loads or at a fixed point.
+  bool moved = false;
   for (std::size_t b = 0; b < bodies_.size(); ++b) {
+    if (loads[b].linearization != current_[b].count) return false;
+    if (loads[b].slots.size() != loads[b].forces_n.size()) {
+      throw std::invalid_argument("TierWorker: body " + std::to_string(b) + ": " +
+                                  std::to_string(loads[b].slots.size()) + " slots, " +
+                                  std::to_string(loads[b].forces_n.size()) + " forces");
+    }
+    Relaxation& rx = relax_[b];
+    rx.residual = -rx.f;
+    for (std::size_t k = 0; k < loads[b].slots.size(); ++k) {
+      const int s = loads[b].slots[k];
+      if (s < 0 || 3 * s >= rx.f.size()) {
+        throw std::invalid_argument("TierWorker: body " + std::to_string(b) + ": contact slot " +
+                                    std::to_string(s) + " out of range");
+      }
+      rx.residual.segment<3>(3 * s) += loads[b].forces_n[k];
+    }
+    moved = moved || rx.residual.cwiseAbs().maxCoeff() > 0.0;
+  }
+  if (!moved) return false;
+  const auto t0 = common::Clock::now();
+  for (std::size_t b = 0; b < bodies_.size(); ++b) {
+    Relaxation& rx = relax_[b];
+    if (rx.has_previous) {  // Aitken: omega <- -omega r_prev . (r - r_prev) / |r - r_prev|^2
+      rx.previous = rx.residual - rx.previous;
+      const double den = rx.previous.squaredNorm();
+      const double num = (rx.residual - rx.previous).dot(rx.previous);  // r_prev . dr
+      if (den > 0.0 && std::isfinite(num / den)) {
+        rx.omega = std::clamp(-rx.omega * num / den, kMinRelaxation, kMaxRelaxation);
+      }
+    }
+    rx.f += rx.omega * rx.residual;
+    rx.previous = rx.residual;
+    rx.has_previous = true;
+    TierLoad& out = relaxed_[b];
+    out.slots.clear();
+    out.forces_n.clear();
+    for (int s = 0; 3 * s < rx.f.size(); ++s) {
+      if (rx.f.segment<3>(3 * s).cwiseAbs().maxCoeff() == 0.0) continue;
+      out.slots.push_back(s);
+      out.forces_n.push_back(rx.f.segment<3>(3 * s));
+    }
+    out.linearization = loads[b].linearization;
     try {
-      bodies_[b]->update(loads[b], current_[b]);
+      bodies_[b]->update(out, current_[b]);
     } catch (const std::exception& e) {
-      ok = false;
+      // The equilibrium stays that of its last forces: the relaxation restarts from them.
+      rx.f.setZero();
+      const TierLoad& kept = current_[b].load;
+      for (std::size_t k = 0; k < kept.slots.size(); ++k)
+        rx.f.segment<3>(3 * kept.slots[k]) = kept.forces_n[k];
+      rx.has_previous = false;
+      rx.omega = 1.0;
       failures_.fetch_add(1, std::memory_order_relaxed);
       std::lock_guard<std::mutex> lock(error_mutex_);
       last_error_ = e.what();
@@ -101,7 +150,7 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
     window_busy_s_ = 0.0;
     window_updates_ = 0;
   }
-  return ok;
+  return true;
 }
 
 void TierWorker::post(const std::vector<TierLoad>& loads) {
@@ -109,24 +158,22 @@ void TierWorker::post(const std::vector<TierLoad>& loads) {
     loads_.publish(loads);
     return;
   }
-  if (same_loads(loads, solved_)) return;  // the equilibrium already is that of these forces
   update_all(loads);
-  solved_ = loads;
 }
 
 void TierWorker::run() {
   while (!stop_.load(std::memory_order_relaxed)) {
-    // Nothing new, or the forces the current equilibrium is already for: wait a little.
-    if (!loads_.take(pending_) || same_loads(pending_, solved_)) {
-      std::this_thread::sleep_for(std::chrono::microseconds(200));
-      continue;
-    }
+    // Nothing new, stale, or a fixed point: wait a little.
+    bool updated = false;
     try {
-      if (update_all(pending_)) solved_ = pending_;
+      updated = loads_.take(pending_) && update_all(pending_);
     } catch (const std::exception& e) {  // malformed loads: recorded, the worker goes on
       failures_.fetch_add(1, std::memory_order_relaxed);
       std::lock_guard<std::mutex> lock(error_mutex_);
       last_error_ = e.what();
+    }
+    if (!updated) {
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
       continue;
     }
     published_.publish(current_);

@@ -4,8 +4,19 @@
 //
 //   step thread:  begin_step() takes the newest linearizations; linearization(b) reads them;
 //                 post(loads) hands over the step's contact forces (never blocks).
-//   worker:       newest loads -> TierEquilibrium::update per body -> publish (triple buffers:
-//                 neither side waits; a load not taken yet is replaced by a newer one).
+//   worker:       newest loads -> relaxed forces -> TierEquilibrium::update per body -> publish
+//                 (triple buffers: neither side waits; a load not taken yet is replaced by a
+//                 newer one; loads found with an older linearization than the newest are
+//                 skipped).
+//
+// The step and the updates form a fixed-point iteration on the contact forces: the step finds
+// the forces lambda for the linearization made at forces f, the update makes the next one at f'.
+// Plain f' = lambda converges only while the warped linear compliance W is within a factor two of
+// the tier's tangent compliance C_t (error factor I - W^-1 C_t); under a small tip a single node
+// can soften more than that in the corotational tier and the forces then oscillate with growing
+// amplitude. So f' = f + omega (lambda - f) with Aitken's dynamic relaxation factor (as in
+// partitioned fluid-structure coupling, Kuettler & Wall 2008), per body, clamped to
+// [kMinRelaxation, kMaxRelaxation]: the fixed point is the same, it is reached in both cases.
 #pragma once
 
 #include "common/triple_buffer.hpp"
@@ -55,7 +66,15 @@ class TierWorker {
   common::TripleBuffer<std::vector<TierLoad>> loads_;
   common::TripleBuffer<std::vector<TierLinearization>> published_;
   std::vector<TierLinearization> current_;  // synchronous mode, and the worker's own copy
-  std::vector<TierLoad> pending_, solved_;  // worker: newest loads, loads of current_
+  std::vector<TierLoad> pending_, relaxed_;  // worker: newest loads, what the update solves for
+  // Aitken relaxation per body: the forces f of the current equilibrium (3 per contact slot),
+  // the last fixed-point residual lambda - f, and the factor.
+  struct Relaxation {
+    Eigen::VectorXd f, residual, previous;
+    double omega{1.0};
+    bool has_previous{false};
+  };
+  std::vector<Relaxation> relax_;
   std::atomic<bool> stop_{false};
   std::atomic<double> rate_hz_{0.0};
   std::atomic<std::uint64_t> updates_{0}, failures_{0};
@@ -64,7 +83,9 @@ class TierWorker {
   double window_start_s_{0.0}, window_busy_s_{0.0};
   int window_updates_{0};
   std::thread thread_;
-  // Updates every body for `loads` into current_; false (error recorded) if one failed.
+  // Relaxes `loads` into relaxed_ and updates every body for them into current_. Returns false
+  // when there was nothing to do (stale loads, or a fixed point: lambda == f bitwise); a body
+  // whose update failed keeps its equilibrium (error recorded; synchronous: thrown).
   bool update_all(const std::vector<TierLoad>& loads);
   void run();
 };

@@ -63,7 +63,9 @@ void expect_warm_step_does_not_allocate(const testing::SceneSpec& spec,
     sim->step(poses, contacts, stats);
     std::this_thread::sleep_for(pause);
   }
-  if (sim->tier() != scene::Tier::kLinear) EXPECT_GT(sim->tier_update_rate_hz(), 0.0);
+  if (sim->tier() != scene::Tier::kLinear) {
+    EXPECT_GT(sim->tier_update_rate_hz(), 0.0);
+  }
   EXPECT_EQ(g_allocations.load() - before, 0);
 }
 

@@ -91,7 +91,7 @@ TEST_P(Tiers, HeldPressConvergesToTheTierContactEquilibrium) {
   ASSERT_TRUE(c.force_n.allFinite());
 
   // The field is the tier's equilibrium for the converged forces.
-  const Eigen::VectorXd ref = reference_equilibrium(sim, tier, fem::Material{1.0e6, 0.4});
+  const Eigen::VectorXd ref = reference_equilibrium(sim, tier, fem::Material{1.0e6, 0.4, "host"});
   Eigen::VectorXd u_host, u_cyl;
   sim.displacements(0, u_host);
   sim.displacements(1, u_cyl);
@@ -210,7 +210,7 @@ TEST(interaction_tier, TierEquilibriumRefusesLinear) {
   auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   TierEquilibriumDefinition d;
   d.body = sim->body_of(0);
-  d.host_material = fem::Material{1.0e6, 0.4};
+  d.host_material = fem::Material{1.0e6, 0.4, "host"};
   d.host_fixed_nodes = sim->fixed_nodes(0);
   d.tier = fem::Tier::kLinear;
   EXPECT_THROW(TierEquilibrium{d}, std::invalid_argument);
