@@ -232,7 +232,7 @@ MeshResult solve_alone_tier(const neurosim::scene::LoadedMesh& lm, const MeshLoa
   const auto t1 = std::chrono::steady_clock::now();
   neurosim::fem::EquilibriumSolver solver({&lm.mesh,
                                            neurosim::fem::MaterialMap::uniform(lm.material),
-                                           tier, lm.fixed_nodes, loads.held()});
+                                           tier, lm.fixed_nodes, loads.held(), {}});
   neurosim::fem::NewtonOptions options;
   options.increments = increments;
   const neurosim::fem::EquilibriumResult sol = solver.solve(loads.f, options);

@@ -57,7 +57,7 @@ TierErrors compare_tiers(const std::string& tag, const mesh::TetMesh& m, const M
   }
   for (Tier tier : {Tier::kLinear, Tier::kCorotational, Tier::kNonlinear}) {
     const int t = static_cast<int>(tier);
-    EquilibriumSolver solver({&m, mats, tier, loads.fixed_nodes, loads.prescribed_sets});
+    EquilibriumSolver solver({&m, mats, tier, loads.fixed_nodes, loads.prescribed_sets, {}});
     const EquilibriumResult r = solver.solve(f);
     e.u_rel[t] = testing::rel_max_diff(r.displacement_m, ccx.displacement_m);
     Eigen::VectorXd rf = Eigen::VectorXd::Zero(f.size());
