@@ -140,8 +140,10 @@ struct SimulationOptions {
   double tier_newton_tolerance{1e-10};
   // Newton steps per update at most (fem::NewtonOptions::step_limit; 0: each update converges).
   // The step and the updates are iterated anyway, so an update need not converge: its fixed
-  // point is the same, and a few cheap steps per update refresh the rotations more often.
-  int tier_update_steps{0};
+  // point is the same, and a few cheap steps per update refresh the rotations more often (brain,
+  // multirate_bench: COROTATIONAL 5 -> 25 updates/s, held force converged in 2 s instead of
+  // 23 % off; NONLINEAR ramp error 13 -> 2 %).
+  int tier_update_steps{2};
 };
 
 // Load-time cost of build(), unit s.
