@@ -28,8 +28,6 @@ VtuField make_field(std::string name, const std::vector<Vec3>& vectors) {
   return f;
 }
 
-namespace {
-
 std::string xml_escape(const std::string& s) {
   std::string out;
   for (char c : s) {
@@ -43,6 +41,8 @@ std::string xml_escape(const std::string& s) {
   }
   return out;
 }
+
+namespace {
 
 void append(std::string& out, double v) {
   char buf[32];

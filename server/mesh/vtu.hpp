@@ -21,6 +21,9 @@ VtuField make_field(std::string name, const std::vector<double>& scalars);
 VtuField make_field(std::string name, const std::vector<int>& scalars);  // labels, ids
 VtuField make_field(std::string name, const std::vector<Vec3>& vectors);
 
+// s with &, <, > and " as XML entities (attribute values and text of .vtu/.pvd files).
+std::string xml_escape(const std::string& s);
+
 // Writes an ASCII .vtu (exact round-trip doubles). Throws std::invalid_argument on a
 // non-finite point or value (naming field and index), a field of the wrong size or an index
 // out of range; std::runtime_error when the file cannot be written.
