@@ -59,8 +59,6 @@ TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
 
 TierEquilibrium::~TierEquilibrium() = default;
 
-int TierEquilibrium::num_dofs() const { return solver_->num_dofs(); }
-int TierEquilibrium::body_offset(int body) const { return solver_->body_offset(body); }
 
 void TierEquilibrium::rest(TierLinearization& out) const {
   out.offset_m.assign(slot_node_.size(), mesh::Vec3::Zero());

@@ -73,7 +73,6 @@ class TierEquilibrium {
   TierEquilibrium(const TierEquilibrium&) = delete;
   TierEquilibrium& operator=(const TierEquilibrium&) = delete;
 
-  fem::Tier tier() const { return tier_; }
   // The linearization at rest: u* = 0, R = I, u0 = 0 (the linear model until the first update).
   void rest(TierLinearization& out) const;
   // The equilibrium for `load`, warm-started from the previous one (Newton at full load; when
@@ -83,8 +82,6 @@ class TierEquilibrium {
   void update(const TierLoad& load, TierLinearization& out);
 
   int num_slots() const { return static_cast<int>(slot_node_.size()); }  // contact slots
-  int num_dofs() const;             // stacked: host then tied meshes
-  int body_offset(int body) const;  // 0: the host, k: the body's ties()[k - 1]
 
  private:
   const CoupledBody* body_;

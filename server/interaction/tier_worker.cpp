@@ -138,7 +138,6 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
       if (!threaded_) throw;
     }
   }
-  updates_.fetch_add(1, std::memory_order_relaxed);
   // Rate: 1 / mean update time over this window's updates (a window lasts a second).
   window_busy_s_ += common::seconds_since(t0);
   ++window_updates_;

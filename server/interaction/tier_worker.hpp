@@ -55,7 +55,6 @@ class TierWorker {
   // point, needs none), unit Hz; 0 before the first.
   // Any thread.
   double rate_hz() const { return rate_hz_.load(std::memory_order_relaxed); }
-  std::uint64_t updates() const { return updates_.load(std::memory_order_relaxed); }
   // Updates that did not converge (the previous equilibrium stays) and the last message.
   std::uint64_t failures() const { return failures_.load(std::memory_order_relaxed); }
   std::string last_error() const;
@@ -77,7 +76,7 @@ class TierWorker {
   std::vector<Relaxation> relax_;
   std::atomic<bool> stop_{false};
   std::atomic<double> rate_hz_{0.0};
-  std::atomic<std::uint64_t> updates_{0}, failures_{0};
+  std::atomic<std::uint64_t> failures_{0};
   mutable std::mutex error_mutex_;
   std::string last_error_;
   double window_start_s_{0.0}, window_busy_s_{0.0};
