@@ -9,7 +9,12 @@
 #   2. neurosim_mesh, neurosim_fem, neurosim_fusion or neurosim_interaction linking, directly or
 #      through any target in between, neurosim_proto or neurosim_wire;
 #   3. a haptic_client target (neurosim_haptic, neurosim-haptic) or any target defined under
-#      viewer_client/ linking, directly or not, neurosim_fem or neurosim_interaction.
+#      viewer_client/ linking, directly or not, neurosim_fem or neurosim_interaction;
+#   4. the web observer (web/) stepping outside the contracts: a source under web/ that includes a
+#      header of server/, haptic_client/, viewer_client/, tools/, bench/ or tests/, or that creates
+#      a DDS writer (`Writer<`, `dds_create_writer`: the bridge is read-only by construction), or
+#      a target defined under web/ linking, directly or not, any target of this project outside
+#      idl/, common/ and web/.
 # tests/layering/fixtures/ holds a tree and a graph with one violation of each kind
 # (ctest `layering_detects_violation`).
 cmake_minimum_required(VERSION 3.22)
@@ -142,9 +147,66 @@ foreach(_t IN LISTS _clients)
   math(EXPR _violations "${_violations} + ${_violations_add}")
 endforeach()
 
+# --- 4. The web observer: the contracts (idl/) and common/ only, no DDS writer ---------------------
+if(NOT IS_DIRECTORY "${SOURCE_DIR}/web")
+  message(FATAL_ERROR "layering: ${SOURCE_DIR}/web missing")
+endif()
+set(_web_bad_include_regex "^(server|haptic_client|viewer_client|tools|bench|tests)/")
+file(GLOB_RECURSE _web_files LIST_DIRECTORIES false
+     "${SOURCE_DIR}/web/*.h" "${SOURCE_DIR}/web/*.hpp" "${SOURCE_DIR}/web/*.cpp")
+list(FILTER _web_files EXCLUDE REGEX "/node_modules/")
+list(SORT _web_files)
+foreach(_file IN LISTS _web_files)
+  file(RELATIVE_PATH _rel "${SOURCE_DIR}" "${_file}")
+  file(STRINGS "${_file}" _lines)
+  set(_n 0)
+  foreach(_line IN LISTS _lines)
+    math(EXPR _n "${_n} + 1")
+    if(_line MATCHES "^[ \t]*#[ \t]*include[ \t]*[<\"]([^>\"]+)[>\"]")
+      set(_header "${CMAKE_MATCH_1}")
+      if(_header MATCHES "${_web_bad_include_regex}")
+        message(STATUS "layering: ${_rel}:${_n}: includes ${_header} "
+                       "(the web observer knows the contracts in idl/ and common/ only)")
+        math(EXPR _violations "${_violations} + 1")
+      endif()
+    elseif(_line MATCHES "Writer<|dds_create_writer")
+      message(STATUS "layering: ${_rel}:${_n}: creates a DDS writer (the web observer is read-only)")
+      math(EXPR _violations "${_violations} + 1")
+    endif()
+  endforeach()
+endforeach()
+
+set(_web_targets "")
+foreach(_t IN LISTS NEUROSIM_LAYERING_TARGETS)
+  set(_key "NEUROSIM_LAYERING_DIR[${_t}]")
+  if("${${_key}}" MATCHES "^web(/|$)")
+    list(APPEND _web_targets ${_t})
+  endif()
+endforeach()
+if(NOT _web_targets)
+  message(STATUS "layering: no target defined under web/ in the link graph")
+  math(EXPR _violations "${_violations} + 1")
+endif()
+foreach(_t IN LISTS _web_targets)
+  foreach(_l IN LISTS "NEUROSIM_LAYERING_CLOSURE[${_t}]")
+    if(NOT _l IN_LIST NEUROSIM_LAYERING_TARGETS)
+      continue()  # third-party (imported) libraries
+    endif()
+    set(_key "NEUROSIM_LAYERING_DIR[${_l}]")
+    set(_dir "${${_key}}")
+    if(NOT _dir STREQUAL "" AND NOT _dir MATCHES "^(idl|common|web)(/|$)")
+      _layering_chain("${_t}" "${_l}" _chain)
+      message(STATUS "layering: ${_t} links ${_l} (the web observer links idl/ and common/ only): "
+                     "${_chain}")
+      math(EXPR _violations "${_violations} + 1")
+    endif()
+  endforeach()
+endforeach()
+
 list(LENGTH _clients _n_clients)
+list(LENGTH _web_targets _n_web)
 if(_violations GREATER 0)
   message(FATAL_ERROR "layering: ${_violations} violation(s)")
 endif()
 message(STATUS "layering: OK (${_checked_files} physics-core files; 4 core and ${_n_clients} client "
-               "targets: ${_clients})")
+               "targets: ${_clients}; ${_n_web} web targets: ${_web_targets})")

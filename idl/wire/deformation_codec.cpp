@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 
@@ -31,6 +32,11 @@ void DeformationEncoder::encode(const double* u_m, std::size_t n, std::uint64_t 
     if (!std::isfinite(u_m[i]))
       throw std::invalid_argument("Deformation " + mesh_id_ + ": vertex " + std::to_string(i / 3) +
                                   " displacement is not finite");
+    // float32 on the wire; half its range so that a delta between two frames and the sum a
+    // decoder forms stay finite too.
+    if (std::abs(u_m[i]) > kMaxEncodedDisplacementM)
+      throw std::invalid_argument("Deformation " + mesh_id_ + ": vertex " + std::to_string(i / 3) +
+                                  " displacement is beyond the float32 range of the wire format");
   }
   for (std::size_t v = 0; v < vertex_count_; ++v) {
     const double* p = u_m + 3 * v;
@@ -80,13 +86,21 @@ void DeformationEncoder::encode(const double* u_m, std::size_t n, std::uint64_t 
 }
 
 bool DeformationDecoder::decode(const neurosim_Deformation& in, std::vector<float>& u_m) {
-  const std::string mesh(in.mesh_id);
+  // Bounded even if a hand-made sample lacks the terminating NUL (DDS always writes one).
+  const std::string mesh(in.mesh_id, strnlen(in.mesh_id, sizeof in.mesh_id));
   const std::size_t n = 3 * static_cast<std::size_t>(in.vertex_count);
   if (in.encoding == neurosim_ENCODING_FULL) {
     if (in.displacement_m._length != n)
       throw std::invalid_argument("Deformation " + mesh + " frame " + std::to_string(in.frame) +
                                   ": FULL frame has " + std::to_string(in.displacement_m._length) +
                                   " components, expected " + std::to_string(n));
+    // A non-finite displacement would reach the viewer's resampling and every delta after it.
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!std::isfinite(in.displacement_m._buffer[i]))
+        throw std::invalid_argument("Deformation " + mesh + " frame " + std::to_string(in.frame) +
+                                    ": FULL frame displacement of vertex " + std::to_string(i / 3) +
+                                    " is not finite");
+    }
     base_.assign(in.displacement_m._buffer, in.displacement_m._buffer + n);
     base_frame_ = in.frame;
     have_base_ = true;
@@ -105,8 +119,16 @@ bool DeformationDecoder::decode(const neurosim_Deformation& in, std::vector<floa
                                 ": delta_scale_m is not a finite non-negative number");
   if (!have_base_ || base_frame_ != in.base_frame || base_.size() != n) return false;
   u_m.resize(n);
-  for (std::size_t i = 0; i < n; ++i)
+  bool finite = true;
+  for (std::size_t i = 0; i < n; ++i) {
     u_m[i] = base_[i] + in.delta_scale_m * static_cast<float>(in.delta_q._buffer[i]);
+    finite = finite && std::isfinite(u_m[i]);
+  }
+  // A finite scale can still overflow float (3e38 x 32767): refused like a non-finite frame.
+  if (!finite)
+    throw std::invalid_argument("Deformation " + mesh + " frame " + std::to_string(in.frame) +
+                                ": delta_scale_m " + std::to_string(in.delta_scale_m) +
+                                " makes displacements overflow float");
   return true;
 }
 

@@ -12,6 +12,10 @@
 
 namespace neurosim::wire {
 
+// Largest displacement component the encoder accepts, unit m: half the float32 range, so that
+// every delta and every decoded sum stays finite.
+inline constexpr double kMaxEncodedDisplacementM = 1.7e38;
+
 struct DeformationEncoderOptions {
   std::uint32_t full_frame_period = 30;  // frames; at a 30 Hz viewer rate one FULL frame per s
   bool quantize = true;                  // false: every frame FULL
@@ -24,7 +28,8 @@ class DeformationEncoder {
                      DeformationEncoderOptions options = {});
 
   // Fills out (reusing its buffers) with the next frame of displacements u_m (3 per vertex, m).
-  // Throws std::invalid_argument on a wrong size or a non-finite component (names the vertex).
+  // Throws std::invalid_argument on a wrong size or a component that is not finite or beyond
+  // kMaxEncodedDisplacementM (names the vertex).
   void encode(const double* u_m, std::size_t n, std::uint64_t server_step,
               std::int64_t server_time_ns, neurosim_Deformation& out);
   // Make the next frame FULL (e.g. a new viewer matched).
@@ -48,7 +53,9 @@ class DeformationDecoder {
  public:
   // Writes the displacements (3 per vertex, m) into u_m. Returns false when the frame cannot be
   // decoded yet (a delta whose FULL base frame was not received: wait for the next FULL one).
-  // Throws std::invalid_argument on an inconsistent frame (sizes, encoding).
+  // Throws std::invalid_argument on an inconsistent frame (sizes, encoding, a negative or
+  // non-finite delta_scale_m) or one that would give non-finite displacements (a FULL frame with
+  // NaN or Inf, a delta that overflows float); a refused FULL frame leaves the base as it was.
   bool decode(const neurosim_Deformation& in, std::vector<float>& u_m);
 
  private:

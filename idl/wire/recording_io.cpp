@@ -1,21 +1,41 @@
 #include "idl/wire/recording_io.hpp"
 
+#include <google/protobuf/io/coded_stream.h>
 #include <google/protobuf/io/zero_copy_stream_impl.h>
 #include <google/protobuf/util/delimited_message_util.h>
 
+#include <fcntl.h>
+#include <unistd.h>
 #include <cerrno>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
-#include <fcntl.h>
 #include <stdexcept>
 #include <string>
-#include <unistd.h>
 
 namespace neurosim::wire {
 
 namespace {
 
 std::string sys_error() { return std::strerror(errno); }
+
+// One varint-length-delimited message, as ParseDelimitedFromZeroCopyStream reads it, but with
+// the declared length checked against max_bytes before any of it is read.
+enum class Delimited { kOk, kCleanEnd, kCorrupt, kTooLong };
+Delimited read_delimited(google::protobuf::MessageLite& message,
+                         google::protobuf::io::ZeroCopyInputStream* in, std::size_t max_bytes,
+                         std::uint32_t& size) {
+  google::protobuf::io::CodedInputStream coded(in);
+  const int start = coded.CurrentPosition();
+  if (!coded.ReadVarint32(&size))
+    return coded.CurrentPosition() == start ? Delimited::kCleanEnd : Delimited::kCorrupt;
+  if (size > max_bytes) return Delimited::kTooLong;
+  const auto limit = coded.PushLimit(static_cast<int>(size));
+  if (!message.MergeFromCodedStream(&coded) || !coded.ConsumedEntireMessage())
+    return Delimited::kCorrupt;
+  coded.PopLimit(limit);
+  return Delimited::kOk;
+}
 
 void check_finite(double v, const std::string& where, const char* field) {
   if (!std::isfinite(v)) throw std::invalid_argument(where + ": " + field + " is not finite");
@@ -94,19 +114,27 @@ struct RecordingReader::Impl {
   std::unique_ptr<google::protobuf::io::FileInputStream> in;
 };
 
-RecordingReader::RecordingReader(const std::filesystem::path& file)
-    : impl_(std::make_unique<Impl>()) {
+RecordingReader::RecordingReader(const std::filesystem::path& file, RecordingLimits limits)
+    : impl_(std::make_unique<Impl>()), limits_(limits) {
   impl_->file = file.string();
   const int fd = ::open(impl_->file.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) throw std::runtime_error("recording " + impl_->file + ": cannot open: " + sys_error());
   impl_->in = std::make_unique<google::protobuf::io::FileInputStream>(fd);
   impl_->in->SetCloseOnDelete(true);
-  bool clean_eof = false;
-  if (!google::protobuf::util::ParseDelimitedFromZeroCopyStream(&header_, impl_->in.get(),
-                                                                &clean_eof))
-    throw std::runtime_error("recording " + impl_->file +
-                             (clean_eof ? ": empty file, no header"
-                                        : ": header is truncated or corrupt"));
+  std::uint32_t size = 0;
+  switch (read_delimited(header_, impl_->in.get(), limits_.max_header_bytes, size)) {
+    case Delimited::kOk:
+      break;
+    case Delimited::kCleanEnd:
+      throw std::runtime_error("recording " + impl_->file + ": empty file, no header");
+    case Delimited::kCorrupt:
+      throw std::runtime_error("recording " + impl_->file + ": header is truncated or corrupt");
+    case Delimited::kTooLong:
+      throw std::runtime_error("recording " + impl_->file + ": header length " +
+                               std::to_string(size) + " bytes is above the limit of " +
+                               std::to_string(limits_.max_header_bytes) +
+                               " (not a neurosim recording?)");
+  }
   if (header_.format() != kRecordingFormat)
     throw std::runtime_error("recording " + impl_->file + ": not a neurosim recording (format '" +
                              header_.format() + "', expected '" + kRecordingFormat + "')");
@@ -116,16 +144,30 @@ RecordingReader::~RecordingReader() = default;
 
 bool RecordingReader::next(recording::Sample& sample) {
   const auto offset = impl_->in->ByteCount();
-  sample.Clear();  // the delimited parser merges into what is there
-  bool clean_eof = false;
-  if (!google::protobuf::util::ParseDelimitedFromZeroCopyStream(&sample, impl_->in.get(),
-                                                                &clean_eof)) {
-    if (clean_eof) return false;
-    throw std::runtime_error("recording " + impl_->file + ": sample " + std::to_string(count_) +
-                             " (byte offset " + std::to_string(offset) +
-                             ") is truncated or corrupt; " + std::to_string(count_) +
-                             " samples before it are good");
+  const std::string where = "recording " + impl_->file + ": sample " + std::to_string(count_) +
+                            " (byte offset " + std::to_string(offset) + ")";
+  if (static_cast<std::size_t>(offset) > limits_.max_file_bytes)
+    throw std::runtime_error(where + ": the file is larger than the limit of " +
+                             std::to_string(limits_.max_file_bytes) +
+                             " bytes (a stream that does not end?)");
+  sample.Clear();  // the parser merges into what is there
+  std::uint32_t size = 0;
+  switch (read_delimited(sample, impl_->in.get(), limits_.max_sample_bytes, size)) {
+    case Delimited::kOk:
+      break;
+    case Delimited::kCleanEnd:
+      return false;
+    case Delimited::kCorrupt:
+      throw std::runtime_error(where + " is truncated or corrupt; " + std::to_string(count_) +
+                               " samples before it are good");
+    case Delimited::kTooLong:
+      throw std::runtime_error(where + ": length " + std::to_string(size) +
+                               " bytes is above the limit of " +
+                               std::to_string(limits_.max_sample_bytes) + " for a sample");
   }
+  if (count_ >= limits_.max_samples)
+    throw std::runtime_error(where + ": more than " + std::to_string(limits_.max_samples) +
+                             " samples, the limit of a recording");
   try {
     check_sample(sample, last_time_s_,
                  "recording " + impl_->file + ": sample " + std::to_string(count_));
@@ -137,13 +179,17 @@ bool RecordingReader::next(recording::Sample& sample) {
   return true;
 }
 
-Recording read_recording(const std::filesystem::path& file) {
-  RecordingReader r(file);
-  Recording rec;
-  rec.header = r.header();
-  recording::Sample s;
-  while (r.next(s)) rec.samples.push_back(s);
-  return rec;
+Recording read_recording(const std::filesystem::path& file, RecordingLimits limits) {
+  try {
+    RecordingReader r(file, limits);
+    Recording rec;
+    rec.header = r.header();
+    recording::Sample s;
+    while (r.next(s)) rec.samples.push_back(s);
+    return rec;
+  } catch (const std::bad_alloc&) {
+    throw std::runtime_error("recording " + file.string() + ": out of memory while reading");
+  }
 }
 
 }  // namespace neurosim::wire

@@ -13,6 +13,16 @@ namespace neurosim::wire {
 // Header.format of every file this code writes and accepts.
 inline constexpr const char* kRecordingFormat = "neurosim.recording/1";
 
+// Bounds on what a reader accepts (hostile input: a file that never ends, or one whose length
+// prefixes claim gigabytes). A written Sample is about 130 bytes; a session at 1 kHz for 4 hours
+// is 14.4 million samples and about 2 GB.
+struct RecordingLimits {
+  std::size_t max_header_bytes = std::size_t{64} << 10;  // declared length of the Header, bytes
+  std::size_t max_sample_bytes = 1024;                   // declared length of one Sample, bytes
+  std::size_t max_samples = 14'400'000;                  // 4 h at 1 kHz
+  std::size_t max_file_bytes = std::size_t{4} << 30;     // unit bytes
+};
+
 // Writes a recording. The header's format field is set here; samples are checked (finite
 // values, non-decreasing time) before they are written. Throws std::runtime_error on I/O errors
 // and std::invalid_argument on bad samples, naming the file and sample index.
@@ -36,10 +46,12 @@ class RecordingWriter {
 
 // Reads a recording written by RecordingWriter. The constructor reads and checks the header.
 // next() returns false at the clean end of the file and throws std::runtime_error naming the
-// file, the sample index and the byte offset when a sample is truncated or corrupt.
+// file, the sample index and the byte offset when a sample is truncated or corrupt, or when a
+// length prefix, the sample count or the file size is beyond `limits` (checked before anything
+// is read into memory for it: the reader holds one message at a time).
 class RecordingReader {
  public:
-  explicit RecordingReader(const std::filesystem::path& file);
+  explicit RecordingReader(const std::filesystem::path& file, RecordingLimits limits = {});
   ~RecordingReader();
   RecordingReader(const RecordingReader&) = delete;
   RecordingReader& operator=(const RecordingReader&) = delete;
@@ -51,6 +63,7 @@ class RecordingReader {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+  RecordingLimits limits_;
   recording::Header header_;
   std::size_t count_ = 0;
   double last_time_s_ = 0;
@@ -61,8 +74,9 @@ struct Recording {
   std::vector<recording::Sample> samples;
 };
 
-// Whole file at once (throws as RecordingReader does).
-Recording read_recording(const std::filesystem::path& file);
+// Whole file at once (throws as RecordingReader does; running out of memory is a
+// std::runtime_error naming the file).
+Recording read_recording(const std::filesystem::path& file, RecordingLimits limits = {});
 
 // Throws std::invalid_argument("<where>: ...") if a field is not finite or time goes backwards.
 void check_sample(const recording::Sample& s, double previous_time_s, const std::string& where);

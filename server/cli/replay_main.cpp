@@ -3,7 +3,7 @@
 // time, all stations together. Writes the contact forces per step and station (forces.csv) and
 // the displacement fields as a ParaView time series (series.pvd + one .vtu per frame and mesh).
 #include "common/cli.hpp"
-#include "idl/wire/recording_io.hpp"
+#include "server/cli/replay.hpp"
 #include "server/fem/tier.hpp"
 #include "server/interaction/simulation.hpp"
 #include "server/mesh/vtu.hpp"
@@ -22,7 +22,6 @@
 #include <vector>
 
 namespace fs = std::filesystem;
-using neurosim::interaction::ToolPose;
 using neurosim::interaction::Vec3;
 
 namespace {
@@ -45,29 +44,8 @@ struct Options {
   std::string scene_path, out_dir, tier;  // tier: empty = the scene's
   std::vector<std::string> recordings;
   int every{10};
+  double max_rate_hz{0.0};  // 0: every sample time
 };
-
-struct Station {
-  std::string file;
-  std::string id;
-  int tool{0};
-  std::vector<neurosim::recording::Sample> samples;
-  std::size_t next{0};  // first sample not yet taken
-  bool started{false};
-};
-
-// The pose the live server builds from a ToolState (server/service/server.cpp): the quaternion
-// normalized, the shaft axis the tool frame's +z rotated into the scene frame.
-ToolPose pose_of(const neurosim::recording::Sample& s, int tool) {
-  ToolPose tp;
-  tp.tip_m = Vec3(s.position_m().x(), s.position_m().y(), s.position_m().z());
-  const auto& o = s.orientation();
-  const double qn = std::sqrt(o.w() * o.w() + o.x() * o.x() + o.y() * o.y() + o.z() * o.z());
-  const double w = o.w() / qn, x = o.x() / qn, y = o.y() / qn, z = o.z() / qn;
-  tp.axis = Vec3(2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y));
-  tp.tool = tool;
-  return tp;
-}
 
 std::string g17(double v) {
   char buf[40];
@@ -77,6 +55,7 @@ std::string g17(double v) {
 
 int run(const Options& opt) {
   neurosim::scene::Model model = neurosim::scene::load_model(opt.scene_path);
+  for (const auto& w : model.warnings) std::cerr << "neurosim-replay: warning: " << w << "\n";
   if (!opt.tier.empty()) model.effects.tier = *neurosim::fem::parse_tier(opt.tier);
   if (model.tools.empty()) throw std::runtime_error(opt.scene_path + ": the scene has no tools");
   if (!model.effects.tool_contact) {
@@ -85,51 +64,16 @@ int run(const Options& opt) {
   }
 
   // Recordings: one station each.
-  std::vector<Station> stations;
+  std::vector<neurosim::replay::Station> stations;
   for (const auto& file : opt.recordings) {
-    if (!fs::exists(file)) throw std::runtime_error(file + ": no such recording file");
-    neurosim::wire::Recording rec = neurosim::wire::read_recording(file);
-    Station st;
-    st.file = file;
-    st.id = rec.header.station_id().empty() ? fs::path(file).stem().string()
-                                            : rec.header.station_id();
-    const std::string& tool_id = rec.header.tool_id();
-    int tool = -1;
-    for (std::size_t t = 0; t < model.tools.size(); ++t) {
-      if (model.tools[t].id == tool_id) tool = static_cast<int>(t);
+    stations.push_back(neurosim::replay::load_station(file, model));
+    if (stations.back().samples.empty()) {
+      std::cerr << "neurosim-replay: note: " << file << ": no samples (station '"
+                << stations.back().id << "' never takes part)\n";
     }
-    if (tool < 0) {
-      std::string known;
-      for (const auto& t : model.tools) known += (known.empty() ? "" : ", ") + t.id;
-      throw std::runtime_error(file + ": tool '" + tool_id + "' is not a tool of scene " +
-                               opt.scene_path + " (" + known + ")");
-    }
-    st.tool = tool;
-    if (st.id.find_first_of(",\"\r\n") != std::string::npos) {
-      throw std::runtime_error(file + ": station id '" + st.id +
-                               "' has a comma, quote or line break (not written to forces.csv)");
-    }
-    for (const auto& other : stations) {
-      if (other.id == st.id) {
-        throw std::runtime_error(file + ": station '" + st.id + "' is also recorded in " +
-                                 other.file);
-      }
-    }
-    st.samples = std::move(rec.samples);
-    if (st.samples.empty()) {
-      std::cerr << "neurosim-replay: note: " << file << ": no samples (station '" << st.id
-                << "' never takes part)\n";
-    }
-    stations.push_back(std::move(st));
   }
-
-  // Every distinct sample time, in order.
-  std::vector<double> times;
-  for (const auto& st : stations)
-    for (const auto& s : st.samples) times.push_back(s.time_s());
-  std::sort(times.begin(), times.end());
-  times.erase(std::unique(times.begin(), times.end()), times.end());
-  if (times.empty()) throw std::runtime_error("the recordings hold no samples");
+  const std::size_t num_steps = neurosim::replay::step_times(stations, opt.max_rate_hz).size();
+  if (num_steps == 0) throw std::runtime_error("the recordings hold no samples");
 
   neurosim::interaction::SimulationOptions sim_options;
   sim_options.tier_worker_thread = false;
@@ -138,7 +82,7 @@ int run(const Options& opt) {
   std::cout << "scene " << model.name << " (" << opt.scene_path << "), tier "
             << neurosim::fem::tier_name(model.effects.tier)
             << (opt.tier.empty() ? " (scene)" : " (--tier)") << "; " << stations.size()
-            << " station(s), " << times.size() << " steps\n";
+            << " station(s), " << num_steps << " steps\n";
 
   const fs::path out(opt.out_dir);
   fs::create_directories(out);
@@ -158,41 +102,26 @@ int run(const Options& opt) {
   std::vector<Frame> frames;
   int frame_index = 0;
 
-  std::vector<ToolPose> poses;
-  std::vector<int> station_of_pose;
-  std::vector<neurosim::interaction::ToolContact> contacts;
-  neurosim::interaction::StepStats stats;
   Eigen::VectorXd u;
   int contact_rows = 0, unconverged = 0;
   double max_force = 0.0;
-  for (std::size_t k = 0; k < times.size(); ++k) {
-    const double t = times[k];
-    poses.clear();
-    station_of_pose.clear();
-    for (std::size_t i = 0; i < stations.size(); ++i) {
-      Station& st = stations[i];
-      while (st.next < st.samples.size() && st.samples[st.next].time_s() <= t) ++st.next;
-      if (st.next == 0) continue;  // not started yet: not in this step
-      poses.push_back(pose_of(st.samples[st.next - 1], st.tool));
-      station_of_pose.push_back(static_cast<int>(i));
-    }
-    sim->step(poses, contacts, stats);
-    if (!stats.converged) ++unconverged;
-    for (std::size_t p = 0; p < poses.size(); ++p) {
-      const auto& c = contacts[p];
+  neurosim::replay::run(*sim, stations, [&](const neurosim::replay::StepView& v) {
+    if (!v.stats->converged) ++unconverged;
+    for (std::size_t p = 0; p < v.poses->size(); ++p) {
+      const auto& c = (*v.contacts)[p];
+      const auto& st = stations[static_cast<std::size_t>((*v.station_of_pose)[p])];
       const Vec3 f = c.in_contact ? c.force_n : Vec3::Zero();
       if (!f.allFinite()) {
-        throw std::runtime_error(stations[static_cast<std::size_t>(station_of_pose[p])].file +
-                                 ": non-finite force at time " + g17(t) + " s");
+        throw std::runtime_error(st.file + ": non-finite force at time " + g17(v.time_s) + " s");
       }
       if (c.in_contact) ++contact_rows;
       max_force = std::max(max_force, f.norm());
-      const Vec3& x = poses[p].tip_m;
-      csv << g17(t) << ',' << stations[static_cast<std::size_t>(station_of_pose[p])].id << ','
-          << g17(x.x()) << ',' << g17(x.y()) << ',' << g17(x.z()) << ',' << g17(f.x()) << ','
-          << g17(f.y()) << ',' << g17(f.z()) << ',' << (c.in_contact ? 1 : 0) << '\n';
+      const Vec3& x = (*v.poses)[p].tip_m;
+      csv << g17(v.time_s) << ',' << st.id << ',' << g17(x.x()) << ',' << g17(x.y()) << ','
+          << g17(x.z()) << ',' << g17(f.x()) << ',' << g17(f.y()) << ',' << g17(f.z()) << ','
+          << (c.in_contact ? 1 : 0) << '\n';
     }
-    if (k % static_cast<std::size_t>(opt.every) == 0 || k + 1 == times.size()) {
+    if (v.index % static_cast<std::size_t>(opt.every) == 0 || v.index + 1 == v.count) {
       for (int m : active_meshes) {
         sim->displacements(m, u);
         std::vector<double> values(u.data(), u.data() + u.size());
@@ -201,11 +130,11 @@ int run(const Options& opt) {
         const std::string file = sim->mesh_id(m) + name;
         neurosim::mesh::write_vtu((out / file).string(), sim->mesh(m),
                                   {neurosim::mesh::VtuField{"displacement_m", 3, values}});
-        frames.push_back({t, m, file});
+        frames.push_back({v.time_s, m, file});
       }
       ++frame_index;
     }
-  }
+  }, opt.max_rate_hz);
   csv.close();
   if (!csv) throw std::runtime_error(csv_path.string() + ": write failed");
 
@@ -224,7 +153,7 @@ int run(const Options& opt) {
     pvd.close();
     if (!pvd) throw std::runtime_error(pvd_path.string() + ": write failed");
   }
-  std::cout << times.size() << " steps, " << contact_rows << " contact rows, largest |force| "
+  std::cout << num_steps << " steps, " << contact_rows << " contact rows, largest |force| "
             << max_force << " N" << (unconverged ? ", " + std::to_string(unconverged) +
                                                        " steps whose contact LCP did not converge"
                                                  : std::string())
@@ -246,6 +175,10 @@ int main(int argc, char** argv) {
   cli->add_option("--out", opt.out_dir, "output folder DIR")->required();
   cli->add_option("--every", opt.every, "write a displacement frame every N steps (default 10)")
       ->check(CLI::Range(1, 1000000000));
+  cli->add_option("--max-rate", opt.max_rate_hz,
+                  "step at most HZ times per second of recording (samples in between are "
+                  "skipped; default 0: every sample time)")
+      ->check(CLI::Range(0.0, 1e9));
   cli.check([&] {
     if (!opt.tier.empty() && !neurosim::fem::parse_tier(opt.tier)) {
       throw neurosim::cli::UsageError("--tier " + opt.tier +

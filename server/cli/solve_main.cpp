@@ -20,7 +20,9 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <limits>
 #include <map>
+#include <sstream>
 #include <string>
 
 namespace fs = std::filesystem;
@@ -428,6 +430,43 @@ void print_mesh_header(const std::string& id, const neurosim::mesh::TetMesh& mes
             << std::defaultfloat << "  quality: " << q.summary() << "\n";
 }
 
+// A solved displacement larger than this many times the scene's size is refused.
+constexpr double kMaxDisplacementToSceneSize = 100.0;
+
+// Diagonal of the bounding box of every mesh of the scene, unit m.
+double scene_diagonal_m(const neurosim::scene::Model& model) {
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& lm : model.meshes) {
+    Vec3 a, b;
+    lm.mesh.bounds(a, b);
+    lo = lo.cwiseMin(a);
+    hi = hi.cwiseMax(b);
+  }
+  return (hi - lo).norm();
+}
+
+void check_plausible(const MeshResult& r, double scene_size_m, const std::string& what) {
+  if (!r.u_m.allFinite() || !r.reaction_n.allFinite())
+    throw std::runtime_error(what + ": solution is not finite");
+  double max_u = 0.0;
+  int max_node = 0;
+  for (int i = 0; i < static_cast<int>(r.u_m.size() / 3); ++i) {
+    const double ui = r.u_m.segment<3>(3 * i).norm();
+    if (ui > max_u) {
+      max_u = ui;
+      max_node = i;
+    }
+  }
+  if (max_u > kMaxDisplacementToSceneSize * scene_size_m) {
+    std::ostringstream msg;
+    msg << what << ": max |u| = " << max_u << " m at node " << max_node << " is more than "
+        << kMaxDisplacementToSceneSize << " times the scene's size (" << scene_size_m
+        << " m, bounding-box diagonal): not a solution of this scene (check the material's E, "
+        << "the loads and the prescribed displacements)";
+    throw std::runtime_error(msg.str());
+  }
+}
+
 struct RunOptions {
   std::string scene_path, out_dir, only_mesh, tier;  // tier: empty = the scene's
   bool quiet{false}, uncoupled{false};
@@ -441,6 +480,7 @@ int run(const RunOptions& opt) {
   const bool quiet = opt.quiet, uncoupled = opt.uncoupled;
   const auto t_start = neurosim::common::Clock::now();
   const neurosim::scene::Model model = neurosim::scene::load_model(scene_path);
+  for (const auto& w : model.warnings) std::cerr << "neurosim-solve: warning: " << w << "\n";
   const double load_s = seconds_since(t_start);
   if (!only_mesh.empty() && model.find_mesh(only_mesh) < 0) {
     throw std::invalid_argument(scene_path + ": --mesh " + only_mesh + ": no such mesh");
@@ -551,6 +591,17 @@ int run(const RunOptions& opt) {
     }
     print_summary(r, loads.f, loads.prescribed);
     solved[m] = {true, std::move(r), &lm.mesh, lm.fixed_nodes};
+  }
+
+  // A result that is not finite, or that moves a node by orders of magnitude more than the
+  // scene is large, is not a solution of this scene (a material or load far beyond what the
+  // meshes can carry, a near-singular system): an error, not results.
+  const double scene_size_m = scene_diagonal_m(model);
+  for (int m = 0; m < num_meshes; ++m) {
+    const auto& s = solved[static_cast<std::size_t>(m)];
+    if (!s.done) continue;
+    check_plausible(s.result, scene_size_m,
+                    scene_path + ": mesh \"" + model.meshes[static_cast<std::size_t>(m)].id + "\"");
   }
 
   bool primary_written = false;

@@ -8,7 +8,8 @@
 namespace neurosim::interaction {
 
 namespace {
-constexpr char kCacheMagic[8] = {'N', 'S', 'C', 'P', 'L', 'v', '1', '\0'};
+// v2: G computed in the Cholesky form (coupled_body.cpp); v1 files hold the less accurate LU one.
+constexpr char kCacheMagic[8] = {'N', 'S', 'C', 'P', 'L', 'v', '2', '\0'};
 }  // namespace
 
 void CacheKey::add_bytes(const void* data, std::size_t bytes) {

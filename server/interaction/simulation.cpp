@@ -220,7 +220,9 @@ namespace {
 class SimulationImpl final : public Simulation {
  public:
   SimulationImpl(const scene::Model& model, const SimulationOptions& options)
-      : model_(build_model(model, options)), state_(make_state(*model_)) {
+      : SimulationImpl(build_model(model, options)) {}
+  explicit SimulationImpl(std::shared_ptr<const Model> model)
+      : model_(std::move(model)), state_(make_state(*model_)) {
     setup_ = model_->setup_;
     setup_.columns_s += state_->columns_s_;
     setup_.sliding_s += state_->sliding_s_;
@@ -264,6 +266,12 @@ class SimulationImpl final : public Simulation {
   scene::Tier tier() const override { return model_->tier_; }
   double tier_update_rate_hz() const override {
     return state_->tier_ ? state_->tier_->rate_hz() : 0.0;
+  }
+  std::uint64_t tier_update_failures() const override {
+    return state_->tier_ ? state_->tier_->failures() : 0;
+  }
+  std::string tier_last_error() const override {
+    return state_->tier_ ? state_->tier_->last_error() : std::string();
   }
 
  private:
@@ -725,7 +733,14 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     }
   }
   reserve_workspace(m, nt);
-  if (tier_) tier_->begin_step();
+  stats.tier_updated = false;
+  stats.tier_update_us = 0.0;
+  stats.inverted_elements = 0;
+  if (tier_) {
+    tier_->begin_step();
+    for (std::size_t bi = 0; bi < bodies_.size(); ++bi)
+      stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
+  }
   if (static_cast<int>(contacts.size()) != nt) contacts.resize(nt);
   rows_.clear();
   if (!m.tools_.empty()) {
@@ -891,7 +906,14 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
       tier_loads_[bi].forces_n = bodies_[bi].forces_n;
       tier_loads_[bi].linearization = tier_->linearization(static_cast<int>(bi)).count;
     }
-    tier_->post(tier_loads_);
+    const auto u0 = Clock::now();
+    stats.tier_updated = tier_->post(tier_loads_);
+    if (stats.tier_updated) {
+      stats.tier_update_us = std::chrono::duration<double, std::micro>(Clock::now() - u0).count();
+      stats.inverted_elements = 0;  // of the equilibrium just made
+      for (std::size_t bi = 0; bi < bodies_.size(); ++bi)
+        stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
+    }
   }
   stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
 }
@@ -1088,6 +1110,11 @@ double SimulationImpl::tie_residual_m() const {
 std::unique_ptr<Simulation> Simulation::build(const scene::Model& model,
                                               const SimulationOptions& options) {
   return std::make_unique<SimulationImpl>(model, options);
+}
+
+std::unique_ptr<Simulation> Simulation::from_model(std::shared_ptr<const Model> model) {
+  if (!model) throw std::invalid_argument("Simulation::from_model: no model");
+  return std::make_unique<SimulationImpl>(std::move(model));
 }
 
 }  // namespace neurosim::interaction

@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -52,6 +53,15 @@ struct StepStats {
   int columns_computed{0};
   int sliding_rows{0};    // unilateral rows of SLIDING couplings in this step's LCP
   int sliding_active{0};  // of which carry a force
+  // COROTATIONAL and NONLINEAR with SimulationOptions::tier_worker_thread = false: the tier's
+  // equilibrium update ran inside this step (tier_updated) and took tier_update_us of solve_us
+  // (unit us); so solve_us - tier_update_us is what the step costs with the worker thread.
+  bool tier_updated{false};
+  double tier_update_us{0.0};
+  // COROTATIONAL and NONLINEAR: elements inverted (det F <= 0) in the tier's newest equilibrium,
+  // all bodies (the field displacements() returns): large compression; the answer stays finite.
+  // 0 in LINEAR (small strain: no deformed configuration to invert).
+  int inverted_elements{0};
 };
 
 // One pair of a SLIDING coupling (server/interaction/sliding_coupling.hpp): B's surface node and
@@ -193,6 +203,9 @@ class Simulation {
   // an elasticity tier this build does not implement (never runs another tier instead).
   static std::unique_ptr<Simulation> build(const scene::Model& model,
                                            const SimulationOptions& options = {});
+  // A Simulation with a fresh State on a Model built before (build_model): several runs of one
+  // scene (benchmarks, test suites) pay the load-time solves once.
+  static std::unique_ptr<Simulation> from_model(std::shared_ptr<const Model> model);
   virtual ~Simulation() = default;
 
   virtual int num_meshes() const = 0;
@@ -256,6 +269,10 @@ class Simulation {
   // contact compliance is warped by) completed per second over the last second, unit Hz; 0 for
   // LINEAR (nothing to update). Any thread.
   virtual double tier_update_rate_hz() const { return 0.0; }
+  // Equilibrium updates that failed since build (Newton did not converge, a malformed load): the
+  // previous equilibrium stays; and the last failure's message (empty: none). Any thread.
+  virtual std::uint64_t tier_update_failures() const { return 0; }
+  virtual std::string tier_last_error() const { return {}; }
 };
 
 }  // namespace neurosim::interaction

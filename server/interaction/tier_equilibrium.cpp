@@ -67,6 +67,8 @@ void TierEquilibrium::rest(TierLinearization& out) const {
   out.load.slots.clear();
   out.load.forces_n.clear();
   out.iterations = 0;
+  out.inverted_elements = 0;
+  out.converged = true;
   out.count = 0;
 }
 
@@ -86,6 +88,19 @@ void TierEquilibrium::rotations(const Eigen::VectorXd& u_host_m) {
     rotation_[s] = n > 0 ? fem::polar_rotation(Eigen::Matrix3d::Identity() + f / n)
                          : Eigen::Matrix3d::Identity();
   }
+}
+
+int TierEquilibrium::inverted_elements() {
+  int inverted = 0;
+  for (int b = 0; b <= static_cast<int>(body_->ties().size()); ++b) {
+    const fem::ElasticForces& forces = solver_->body_forces(b);
+    u_mesh_ = u_.segment(solver_->body_offset(b), forces.num_dofs());
+    for (std::size_t t = 0; t < forces.num_tets(); ++t) {
+      const Eigen::Matrix3d h = forces.displacement_gradient(t, u_mesh_);
+      if ((Eigen::Matrix3d::Identity() + h).determinant() <= 0.0) ++inverted;
+    }
+  }
+  return inverted;
 }
 
 void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
@@ -109,9 +124,11 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   Eigen::VectorXd& u = u_host_;  // scratch for the trial
   u = u_;
   int iterations = 0;
+  bool converged = true;
   try {
     const fem::NewtonIncrement inc = solver_->solve_from(f_, u, newton_);
     iterations = static_cast<int>(inc.residual_n.size()) - 1;
+    converged = inc.converged;
   } catch (const std::runtime_error&) {
     try {
       const fem::EquilibriumResult r = solver_->solve(f_, newton_);
@@ -150,6 +167,8 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   out.u_m = u_;
   out.load = load;
   out.iterations = iterations;
+  out.converged = converged;
+  out.inverted_elements = inverted_elements();
   out.count = ++count_;
 }
 

@@ -44,8 +44,12 @@ struct TierLinearization {
   std::vector<mesh::Vec3> warped_normal;  // per contact slot: R^T n (unit)
   // The equilibrium: host (3 N_A) then each tied mesh (TierEquilibrium::body_offset), unit m.
   Eigen::VectorXd u_m;
-  TierLoad load;           // the forces u_m is the equilibrium of
-  int iterations{0};       // Newton iterations of the update (0 at rest)
+  TierLoad load;             // the forces u_m is the equilibrium of
+  int iterations{0};         // Newton iterations of the update (0 at rest)
+  int inverted_elements{0};  // elements of the body with det F <= 0 in u_m
+  // The update met the Newton tolerance (false: cut short by NewtonOptions::step_limit; the
+  // worker continues it even when the forces no longer change).
+  bool converged{true};
   std::uint64_t count{0};  // updates of this body so far
 };
 
@@ -88,12 +92,13 @@ class TierEquilibrium {
   fem::Tier tier_;
   fem::NewtonOptions newton_;
   std::unique_ptr<fem::EquilibriumSolver> solver_;
-  std::vector<int> slot_node_;  // per contact slot: host node
-  Eigen::VectorXd u_, f_, u_host_, u_lin_;  // warm start and scratch
+  std::vector<int> slot_node_;                       // per contact slot: host node
+  Eigen::VectorXd u_, f_, u_host_, u_lin_, u_mesh_;  // warm start and scratch
   std::vector<mesh::Vec3> rotated_;
   std::vector<Eigen::Matrix3d> rotation_;  // per contact slot
   std::uint64_t count_{0};
   void rotations(const Eigen::VectorXd& u_host_m);
+  int inverted_elements();  // in u_, every mesh of the body
 };
 
 }  // namespace neurosim::interaction

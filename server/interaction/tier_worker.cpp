@@ -98,21 +98,29 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
     }
     moved = moved || rx.residual.cwiseAbs().maxCoeff() > 0.0;
   }
-  if (!moved) return false;
+  // A fixed point of the forces ends the updates only once every equilibrium has converged: an
+  // update cut short by the step limit goes on for the same forces. (The tool leaving the tissue
+  // is a fixed point at once, forces 0 = 0, and would otherwise leave the tissue in the last
+  // unconverged iterate, up to 1e-5 m off rest.)
+  bool settled = true;
+  for (const TierLinearization& lin : current_) settled = settled && lin.converged;
+  if (!moved && settled) return false;
   const auto t0 = common::Clock::now();
   for (std::size_t b = 0; b < bodies_.size(); ++b) {
     Relaxation& rx = relax_[b];
-    if (rx.has_previous) {  // Aitken: omega <- -omega r_prev . (r - r_prev) / |r - r_prev|^2
-      rx.previous = rx.residual - rx.previous;
-      const double den = rx.previous.squaredNorm();
-      const double num = (rx.residual - rx.previous).dot(rx.previous);  // r_prev . dr
-      if (den > 0.0 && std::isfinite(num / den)) {
-        rx.omega = std::clamp(-rx.omega * num / den, kMinRelaxation, kMaxRelaxation);
+    if (moved) {
+      if (rx.has_previous) {  // Aitken: omega <- -omega r_prev . (r - r_prev) / |r - r_prev|^2
+        rx.previous = rx.residual - rx.previous;
+        const double den = rx.previous.squaredNorm();
+        const double num = (rx.residual - rx.previous).dot(rx.previous);  // r_prev . dr
+        if (den > 0.0 && std::isfinite(num / den)) {
+          rx.omega = std::clamp(-rx.omega * num / den, kMinRelaxation, kMaxRelaxation);
+        }
       }
+      rx.f += rx.omega * rx.residual;
+      rx.previous = rx.residual;
+      rx.has_previous = true;
     }
-    rx.f += rx.omega * rx.residual;
-    rx.previous = rx.residual;
-    rx.has_previous = true;
     TierLoad& out = relaxed_[b];
     out.slots.clear();
     out.forces_n.clear();
@@ -152,12 +160,12 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
   return true;
 }
 
-void TierWorker::post(const std::vector<TierLoad>& loads) {
+bool TierWorker::post(const std::vector<TierLoad>& loads) {
   if (threaded_) {
     loads_.publish(loads);
-    return;
+    return false;
   }
-  update_all(loads);
+  return update_all(loads);
 }
 
 void TierWorker::run() {

@@ -48,7 +48,8 @@ class TierWorker {
   const TierLinearization& linearization(int body) const;
   // Step thread: the contact forces of a good step, one load per body. Threaded: hands them
   // over; else updates every body now (throws what TierEquilibrium::update throws).
-  void post(const std::vector<TierLoad>& loads);
+  // Returns true when an update ran inside this call (synchronous worker), else false.
+  bool post(const std::vector<TierLoad>& loads);
 
   // Equilibrium updates per second of work, 1 / mean update time (all bodies) over the updates
   // of the current one-second window (kept while idle: a held tool, once its forces are a fixed
@@ -83,7 +84,8 @@ class TierWorker {
   int window_updates_{0};
   std::thread thread_;
   // Relaxes `loads` into relaxed_ and updates every body for them into current_. Returns false
-  // when there was nothing to do (stale loads, or a fixed point: lambda == f bitwise); a body
+  // when there was nothing to do (stale loads, or a fixed point: lambda == f bitwise with every
+  // equilibrium converged; one cut short by the step limit is continued); a body
   // whose update failed keeps its equilibrium (error recorded; synchronous: thrown).
   bool update_all(const std::vector<TierLoad>& loads);
   void run();

@@ -11,6 +11,7 @@
 #include <CGAL/make_mesh_3.h>
 
 #include <cmath>
+#include <iostream>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -26,6 +27,9 @@ using Tr = CGAL::Mesh_triangulation_3<Domain, CGAL::Default, CGAL::Sequential_ta
 using C3t3 = CGAL::Mesh_complex_3_in_triangulation_3<Tr, Domain::Corner_index, Domain::Curve_index>;
 using Criteria = CGAL::Mesh_criteria_3<Tr>;
 namespace params = CGAL::parameters;
+
+constexpr double kTetsPerVertex = 6.0;  // Mesh_3 at radius-edge 2: 4 (small meshes) to 6
+constexpr double kTetsPerCell = 10.0;   // per s^3 grid cell over the bounding box
 
 void check_finite(const Vec3& v, const char* what) {
   if (!v.allFinite()) {
@@ -86,9 +90,13 @@ Polyhedron cylinder_surface(const Vec3& base, const Vec3& axis, double radius, i
 struct Mesh3Run {
   TetMesh mesh;
   int vertices{0};
+  bool time_limited{false};  // a sliver step stopped at optimization_time_limit_s
 };
 Mesh3Run run_mesh3(const Polyhedron& surface, double s, const MeshingOptions& options,
                    const std::string& what, bool optimize) {
+  if (!(options.optimization_time_limit_s >= 0.0) ||
+      !std::isfinite(options.optimization_time_limit_s))
+    throw std::invalid_argument(what + ": optimization_time_limit_s must be finite and >= 0 s");
   // Mesh_3 draws from CGAL's default random generator: seed it for reproducible meshes.
   CGAL::get_default_random() = CGAL::Random(options.seed);
   Domain domain(surface);
@@ -98,21 +106,28 @@ Mesh3Run run_mesh3(const Polyhedron& surface, double s, const MeshingOptions& op
                     params::cell_radius_edge_ratio = options.cell_radius_edge_ratio,
                     params::cell_size = s);
   C3t3 c3t3 = CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(), params::no_exude());
-  // Both without a time limit (time_limit = 0): they stop when no sliver can be improved, so the
-  // mesh does not depend on how loaded the machine is (a wall-clock limit made it vary).
+  // Both stop when no sliver can be improved; the time limit is a safety bound far above what
+  // the bundled sizes need, so for them the mesh does not depend on how loaded the machine is (a
+  // tight wall-clock limit made it vary).
+  const double limit_s = options.optimization_time_limit_s;
+  bool time_limited = false;
   if (optimize && options.perturb_slivers) {
     if (!(options.perturb_sliver_bound_deg > 0.0 && options.perturb_sliver_bound_deg < 60.0)) {
       throw std::invalid_argument(what + ": perturb_sliver_bound_deg must be in (0, 60) degrees");
     }
-    CGAL::perturb_mesh_3(c3t3, domain, params::time_limit = 0,
-                         params::sliver_bound = options.perturb_sliver_bound_deg);
+    time_limited |= CGAL::perturb_mesh_3(c3t3, domain, params::time_limit = limit_s,
+                                         params::sliver_bound = options.perturb_sliver_bound_deg) ==
+                    CGAL::TIME_LIMIT_REACHED;
   }
-  if (optimize && options.exude_slivers) CGAL::exude_mesh_3(c3t3, params::time_limit = 0);
+  if (optimize && options.exude_slivers) {
+    time_limited |=
+        CGAL::exude_mesh_3(c3t3, params::time_limit = limit_s) == CGAL::TIME_LIMIT_REACHED;
+  }
   if (!optimize) {
     std::unordered_map<Tr::Vertex_handle, int> seen;
     for (auto c = c3t3.cells_in_complex_begin(); c != c3t3.cells_in_complex_end(); ++c)
       for (int k = 0; k < 4; ++k) seen.emplace(c->vertex(k), 0);
-    return {TetMesh{}, static_cast<int>(seen.size())};
+    return {TetMesh{}, static_cast<int>(seen.size()), false};
   }
   std::unordered_map<Tr::Vertex_handle, int> index;
   std::vector<Vec3> vertices;
@@ -137,21 +152,46 @@ Mesh3Run run_mesh3(const Polyhedron& surface, double s, const MeshingOptions& op
   Mesh3Run out;
   out.mesh = TetMesh::build(std::move(vertices), std::move(tets), build);
   out.vertices = static_cast<int>(out.mesh.num_vertices());
+  out.time_limited = time_limited;
+  if (time_limited) {
+    std::cerr << "warning: " << what << ": sliver optimization stopped at its time limit of "
+              << limit_s << " s (optimization_time_limit_s); the mesh may vary from run to run\n";
+  }
   return out;
 }
 
+// Refuses a request whose expected size is above options.max_tetrahedra, naming the option.
+void check_expected_size(const Vec3& extent_m, const MeshingOptions& options,
+                         const std::string& what) {
+  const double expected = expected_tetrahedra(extent_m, options);
+  if (expected <= options.max_tetrahedra) return;
+  std::ostringstream msg;
+  msg.precision(3);
+  if (options.target_vertices > 0) {
+    msg << "target_vertices: " << options.target_vertices << " gives about " << expected;
+  } else {
+    msg << "cell_size_m: " << options.cell_size_m << " m in a " << extent_m.x() << " x "
+        << extent_m.y() << " x " << extent_m.z() << " m " << what << " gives about " << expected;
+  }
+  msg << " tetrahedra, above the limit of " << options.max_tetrahedra
+      << " (max_tetrahedra); give fewer vertices or a larger cell size";
+  throw std::invalid_argument(msg.str());
+}
+
 // Search the cell size whose mesh has the vertex count closest to target.
-GeneratedMesh mesh_to_target(const Polyhedron& surface, double volume_m3,
+GeneratedMesh mesh_to_target(const Polyhedron& surface, double volume_m3, const Vec3& extent_m,
                              const MeshingOptions& options, const std::string& what) {
   if (options.target_vertices < 0) {
     throw std::invalid_argument(what + ": target_vertices must be >= 0");
   }
+  if (options.target_vertices == 0 &&
+      (!(options.cell_size_m > 0.0) || !std::isfinite(options.cell_size_m))) {
+    throw std::invalid_argument(what + ": give target_vertices > 0 or a cell size > 0 m");
+  }
+  check_expected_size(extent_m, options, what);
   if (options.target_vertices == 0) {
-    if (!(options.cell_size_m > 0.0) || !std::isfinite(options.cell_size_m)) {
-      throw std::invalid_argument(what + ": give target_vertices > 0 or a cell size > 0 m");
-    }
-    return {run_mesh3(surface, options.cell_size_m, options, what, true).mesh, options.cell_size_m,
-            1};
+    Mesh3Run run = run_mesh3(surface, options.cell_size_m, options, what, true);
+    return {std::move(run.mesh), options.cell_size_m, 1, run.time_limited};
   }
   if (options.target_vertices < 8) {
     throw std::invalid_argument(what + ": target_vertices must be at least 8");
@@ -162,12 +202,17 @@ GeneratedMesh mesh_to_target(const Polyhedron& surface, double volume_m3,
   // steps on log(vertices) against log(size) (slope about -3 for volume meshes, less when small).
   double s = std::cbrt(volume_m3 / (0.6 * target));
   double best_err = std::numeric_limits<double>::infinity();
-  GeneratedMesh best{TetMesh{}, 0.0, 0};
+  GeneratedMesh best{TetMesh{}, 0.0, 0, false};
+  // The search never tries a size whose grid estimate is above the limit either.
+  MeshingOptions at_size = options;
+  at_size.target_vertices = 0;
   double prev_log_s = 0.0, prev_log_n = 0.0;
   bool have_prev = false;
   constexpr int kMaxAttempts = 12;
   int attempts = 0;
   for (; attempts < kMaxAttempts; ++attempts) {
+    at_size.cell_size_m = s;
+    check_expected_size(extent_m, at_size, what);
     const double n = run_mesh3(surface, s, options, what, false).vertices;
     const double err = std::abs(n - target) / target;
     if (err < best_err) {
@@ -192,11 +237,21 @@ GeneratedMesh mesh_to_target(const Polyhedron& surface, double volume_m3,
   best.attempts = attempts;
   // The chosen size again, with the sliver steps and the mesh built (same seed and size: same
   // vertices).
-  best.mesh = run_mesh3(surface, best.cell_size_m, options, what, true).mesh;
+  Mesh3Run run = run_mesh3(surface, best.cell_size_m, options, what, true);
+  best.mesh = std::move(run.mesh);
+  best.optimization_time_limited = run.time_limited;
   return best;
 }
 
 }  // namespace
+
+double expected_tetrahedra(const Vec3& extent_m, const MeshingOptions& options) {
+  if (options.target_vertices > 0) return kTetsPerVertex * options.target_vertices;
+  const double s = options.cell_size_m;
+  double cells = kTetsPerCell;
+  for (int a = 0; a < 3; ++a) cells *= extent_m[a] / s + 1.0;
+  return cells;  // inf or NaN for a zero or non-finite size: never below a limit
+}
 
 GeneratedMesh generate_box(const Vec3& lo_m, const Vec3& hi_m, const MeshingOptions& options) {
   check_finite(lo_m, "box lower corner");
@@ -205,7 +260,7 @@ GeneratedMesh generate_box(const Vec3& lo_m, const Vec3& hi_m, const MeshingOpti
   if (!(size.minCoeff() > 0.0)) {
     throw std::invalid_argument("mesh generator: box must have hi > lo on every axis (m)");
   }
-  return mesh_to_target(box_surface(lo_m, hi_m), size.prod(), options, "generated box");
+  return mesh_to_target(box_surface(lo_m, hi_m), size.prod(), size, options, "generated box");
 }
 
 GeneratedMesh generate_cylinder(const Vec3& base_center_m, const Vec3& axis_m, double radius_m,
@@ -227,11 +282,16 @@ GeneratedMesh generate_cylinder(const Vec3& base_center_m, const Vec3& axis_m, d
     const double s = options.target_vertices > 0
                          ? std::cbrt(volume / (0.6 * options.target_vertices))
                          : options.cell_size_m;
-    segments = std::clamp(static_cast<int>(std::ceil(2.0 * M_PI * radius_m / (0.5 * s))), 12, 96);
+    // Clamped as a double: a tiny or zero size gives a count no int holds (or NaN).
+    const double wanted = std::ceil(2.0 * M_PI * radius_m / (0.5 * s));
+    segments = wanted >= 12.0 ? static_cast<int>(std::min(wanted, 96.0)) : 12;
   }
-  if (segments < 3) throw std::invalid_argument("mesh generator: circle_segments must be >= 3");
+  if (segments < 3 || segments > 4096)
+    throw std::invalid_argument("mesh generator: circle_segments must be in [3, 4096]");
   return mesh_to_target(cylinder_surface(base_center_m, axis_m, radius_m, segments),
-                        M_PI * radius_m * radius_m * height, options, "generated cylinder");
+                        M_PI * radius_m * radius_m * height,
+                        Vec3(2.0 * radius_m, 2.0 * radius_m, height), options,
+                        "generated cylinder");
 }
 
 }  // namespace neurosim::mesh

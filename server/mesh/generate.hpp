@@ -24,13 +24,32 @@ struct MeshingOptions {
   std::uint32_t seed{0};  // CGAL's random generator seed: same seed, same mesh
   // Facet sample count for the cylinder's polygonal approximation (per circle).
   int circle_segments{0};  // 0: chosen from the cell size
+  // A request whose expected size (expected_tetrahedra) is above this is refused before the
+  // mesher runs: an absurd cell size or box must not run for hours or exhaust memory. About a
+  // hundred times the patient model; unit tetrahedra.
+  double max_tetrahedra{2e6};
+  // Wall-clock limit of each sliver step (perturbation, then exudation), unit s; 0: none. The
+  // bundled scenes need well under a second per step, so their meshes stay reproducible (a limit
+  // that binds makes the mesh depend on the machine's load); a huge mesh stops here instead of
+  // running for hours, and GeneratedMesh says so.
+  double optimization_time_limit_s{60.0};
 };
 
 struct GeneratedMesh {
   TetMesh mesh;
   double cell_size_m{0.0};  // the size that produced it
   int attempts{0};          // mesher runs needed to approach target_vertices
+  bool optimization_time_limited{false};  // a sliver step stopped at optimization_time_limit_s
 };
+
+// Expected number of tetrahedra of a solid whose bounding box has these extents (m) meshed
+// with `options` (target_vertices, else cell_size_m): 6 per vertex, or 10 per cell of a grid of
+// the cell size over the box. Both are overestimates of what Mesh_3 makes (4 to 6 tetrahedra
+// per vertex). What max_tetrahedra is compared with before meshing.
+double expected_tetrahedra(const Vec3& extent_m, const MeshingOptions& options);
+
+// Both throw std::invalid_argument naming the option (target_vertices, cell_size_m) when the
+// expected size is above options.max_tetrahedra, before meshing.
 
 // Axis-aligned box [lo, hi] (m).
 GeneratedMesh generate_box(const Vec3& lo_m, const Vec3& hi_m, const MeshingOptions& options);

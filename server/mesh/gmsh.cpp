@@ -52,10 +52,16 @@ void no_more_on_line(TextReader& in, const char* what) {
   if (in.next_on_line(t)) in.fail(std::string("unexpected '") + std::string(t) + "' after " + what);
   in.end_line();
 }
-long long checked_count(TextReader& in, long long n, const char* what) {
-  if (n < 0 || n > 2000000000LL) in.fail(std::string("bad number of ") + what + ": " + std::to_string(n));
+// A count read from the file, checked against the bytes left in it (entries of at least
+// tokens_each numbers) before anything is allocated for it.
+long long checked_count(TextReader& in, long long n, int tokens_each, const char* what) {
+  in.check_count(n, tokens_each, what);
   return n;
 }
+
+// Numbers on one element line: tag, type, up to 100 tags and the nodes of any Gmsh element type
+// (the largest have a few hundred); more is a broken file, not a reason to grow without bound.
+constexpr std::size_t kMaxFieldsPerLine = 1024;
 
 // Skips tokens up to and including end ("$EndNodeData").
 void skip_section(TextReader& in, const std::string& end) {
@@ -119,23 +125,30 @@ struct Reader {
 
   void entities() {
     long long n[4];
-    for (int d = 0; d < 4; ++d) n[d] = checked_count(in, in.integer("number of entities"), "entities");
+    for (int d = 0; d < 4; ++d)
+      n[d] = checked_count(in, in.integer("number of entities"), 5, "entities");
     for (int d = 0; d < 4; ++d)
       for (long long i = 0; i < n[d]; ++i) {
         const long long tag = in.integer("entity tag");
         const int coords = (d == 0 && version == Version::v41) ? 3 : 6;
         for (int c = 0; c < coords; ++c) in.real("entity bounding box");
-        const long long np = checked_count(in, in.integer("number of physical tags"), "physical tags");
+        const long long np =
+            checked_count(in, in.integer("number of physical tags"), 1, "physical tags");
         for (long long p = 0; p < np; ++p) {
           const long long ptag = in.integer("physical tag");
           if (p == 0) physical[{d, tag}] = ptag;
         }
         if (d > 0) {
-          const long long nb = checked_count(in, in.integer("number of bounding entities"), "bounding entities");
+          const long long nb =
+              checked_count(in, in.integer("number of bounding entities"), 1, "bounding entities");
           for (long long b = 0; b < nb; ++b) in.integer("bounding entity tag");
         }
       }
     in.expect("$EndEntities");
+  }
+
+  void check_dimension(long long dim) {
+    if (dim < 0 || dim > 3) in.fail("entity dimension must be 0..3, got " + std::to_string(dim));
   }
 
   void add_vertex(double x, double y, double z) {
@@ -143,7 +156,7 @@ struct Reader {
   }
 
   void nodes_v2() {
-    const long long n = checked_count(in, in.integer("number of nodes"), "nodes");
+    const long long n = checked_count(in, in.integer("number of nodes"), 4, "nodes");
     no_more_on_line(in, "number of nodes");
     nodes.reserve(n);
     m.vertices_m.reserve(n);
@@ -159,8 +172,9 @@ struct Reader {
   }
 
   void nodes_v4() {
-    const long long blocks = checked_count(in, in.integer("number of node blocks"), "node blocks");
-    const long long total = checked_count(in, int_on_line(in, "number of nodes"), "nodes");
+    const long long blocks =
+        checked_count(in, in.integer("number of node blocks"), 4, "node blocks");
+    const long long total = checked_count(in, int_on_line(in, "number of nodes"), 4, "nodes");
     in.end_line();
     nodes.reserve(total);
     m.vertices_m.reserve(total);
@@ -169,8 +183,10 @@ struct Reader {
       long long dim = first_int(in, "entity dimension");
       long long tag = int_on_line(in, "entity tag");
       if (version == Version::v40) std::swap(dim, tag);  // 4.0: tag first
+      check_dimension(dim);
       const long long parametric = int_on_line(in, "parametric flag");
-      const long long n = checked_count(in, int_on_line(in, "number of nodes in block"), "nodes");
+      const long long n =
+          checked_count(in, int_on_line(in, "number of nodes in block"), 4, "nodes");
       no_more_on_line(in, "node block header");
       const int extra = parametric ? static_cast<int>(dim) : 0;
       if (version == Version::v41) {
@@ -238,7 +254,12 @@ struct Reader {
     fields.clear();
     fields.push_back(in.token(what));
     std::string_view t;
-    while (in.next_on_line(t)) fields.push_back(t);
+    while (in.next_on_line(t)) {
+      if (fields.size() == kMaxFieldsPerLine)
+        in.fail("more than " + std::to_string(kMaxFieldsPerLine) + " numbers on one " + what +
+                " line");
+      fields.push_back(t);
+    }
     in.end_line();
   }
 
@@ -252,7 +273,7 @@ struct Reader {
 
   void elements_v2() {
     if (nodes.empty()) in.fail("$Elements before $Nodes");
-    const long long n = checked_count(in, in.integer("number of elements"), "elements");
+    const long long n = checked_count(in, in.integer("number of elements"), 4, "elements");
     no_more_on_line(in, "number of elements");
     for (long long i = 0; i < n; ++i) {
       read_line("element");
@@ -278,16 +299,19 @@ struct Reader {
 
   void elements_v4() {
     if (nodes.empty()) in.fail("$Elements before $Nodes");
-    const long long blocks = checked_count(in, in.integer("number of element blocks"), "element blocks");
-    const long long total = checked_count(in, int_on_line(in, "number of elements"), "elements");
+    const long long blocks =
+        checked_count(in, in.integer("number of element blocks"), 4, "element blocks");
+    const long long total = checked_count(in, int_on_line(in, "number of elements"), 2, "elements");
     in.end_line();
     long long seen = 0;
     for (long long b = 0; b < blocks; ++b) {
       long long dim = first_int(in, "entity dimension");
       long long tag = int_on_line(in, "entity tag");
       if (version == Version::v40) std::swap(dim, tag);
+      check_dimension(dim);
       const long long type = int_on_line(in, "element type");
-      const long long n = checked_count(in, int_on_line(in, "number of elements in block"), "elements");
+      const long long n =
+          checked_count(in, int_on_line(in, "number of elements in block"), 2, "elements");
       no_more_on_line(in, "element block header");
       const auto it = physical.find({static_cast<int>(dim), tag});
       const int label = to_label(in, it != physical.end() ? it->second : tag);
@@ -308,11 +332,7 @@ struct Reader {
   }
 };
 
-}  // namespace
-
-MeshData read_gmsh(const std::string& path, double unit_m) {
-  if (!(unit_m > 0.0) || !std::isfinite(unit_m))
-    throw std::invalid_argument(path + ": unit_m must be finite and > 0");
+MeshData parse_gmsh(const std::string& path, double unit_m) {
   TextReader in(path, 0);
   MeshData m;
   m.source = path;
@@ -343,6 +363,14 @@ MeshData read_gmsh(const std::string& path, double unit_m) {
   if (!format) in.fail("empty file, not a Gmsh .msh file");
   if (m.tets.empty()) in.fail("no tetrahedra (element type 4 or 11)");
   return m;
+}
+
+}  // namespace
+
+MeshData read_gmsh(const std::string& path, double unit_m) {
+  if (!(unit_m > 0.0) || !std::isfinite(unit_m))
+    throw std::invalid_argument(path + ": unit_m must be finite and > 0");
+  return guard_out_of_memory(path, [&] { return parse_gmsh(path, unit_m); });
 }
 
 }  // namespace neurosim::mesh

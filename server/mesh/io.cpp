@@ -1,5 +1,6 @@
 // Mesh file dispatch by extension, and loading straight into a TetMesh.
 #include "server/mesh/io.hpp"
+#include "server/mesh/text_reader.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -23,9 +24,11 @@ TetMesh load_tet_mesh(const std::string& path, double unit_m, BuildOptions optio
   MeshData data = read_mesh(path, unit_m);
   if (options.source == BuildOptions{}.source) options.source = path;
   std::vector<int> labels = std::move(data.tet_labels);
-  TetMesh mesh = TetMesh::build(std::move(data.vertices_m), std::move(data.tets), options);
-  if (!labels.empty()) mesh.set_tet_labels(std::move(labels));
-  return mesh;
+  return guard_out_of_memory(path, [&] {
+    TetMesh mesh = TetMesh::build(std::move(data.vertices_m), std::move(data.tets), options);
+    if (!labels.empty()) mesh.set_tet_labels(std::move(labels));
+    return mesh;
+  });
 }
 
 MeshData to_mesh_data(const TetMesh& mesh) {

@@ -3,6 +3,15 @@
 //
 // Every reader throws std::runtime_error("path:line: what was expected") on a broken file.
 // Readers only parse: validation (finite, in range, orientation, degeneracy) is TetMesh::build.
+//
+// Hostile input (fuzz/ runs every reader on generated files): no input crashes or hangs a
+// reader, and what it allocates is bounded. A file is read whole but never beyond
+// kMaxMeshFileBytes (256 MiB, text_reader.hpp), so a FIFO or device that never ends is refused;
+// every count a header states is checked against the bytes left in the file before anything is
+// allocated for it (each number takes at least one byte), so a header claiming 4e8 vertices in
+// a small file is refused at its line; a line holds at most the numbers its format allows. So
+// the parsed data stays within about ten times the file's size. Running out of memory anyway
+// is std::runtime_error("path: out of memory while reading").
 #pragma once
 
 #include "server/mesh/tet_mesh.hpp"

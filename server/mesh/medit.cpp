@@ -54,10 +54,12 @@ int line_entry(TextReader& in, std::string_view* tokens, int max_tokens, const E
   return n;
 }
 
-long long count(TextReader& in, const std::string& section) {
+// The count of a section whose entries have tokens_each numbers, checked against the bytes
+// left in the file before the caller allocates for it.
+long long count(TextReader& in, const std::string& section, int tokens_each) {
   const long long n = in.integer("number of " + section);
-  if (n < 0 || n > 1000000000) in.fail("bad number of " + section + ": " + std::to_string(n));
   in.end_line();
+  in.check_count(n, tokens_each, section);
   return n;
 }
 
@@ -76,16 +78,12 @@ int to_label(TextReader& in, std::string_view tok) {
   return static_cast<int>(v);
 }
 
-}  // namespace
-
-MeshData read_medit(const std::string& path, double unit_m) {
-  if (!(unit_m > 0.0) || !std::isfinite(unit_m))
-    throw std::invalid_argument(path + ": unit_m must be finite and > 0");
+MeshData parse_medit(const std::string& path, double unit_m) {
   TextReader in(path, '#');
   MeshData m;
   m.source = path;
   int dimension = 3;
-  bool seen_version = false;
+  bool seen_version = false, seen_vertices = false;
   std::string_view tok;
   std::string_view f[8];
   while (in.next(tok)) {
@@ -101,7 +99,10 @@ MeshData read_medit(const std::string& path, double unit_m) {
       if (d != 3) in.fail("only 3-dimensional meshes are supported, got Dimension " + std::to_string(d));
       dimension = 3;
     } else if (key == "vertices") {
-      const long long n = count(in, "vertices");
+      // A second section would replace the vertices that earlier elements index.
+      if (seen_vertices) in.fail("second Vertices section");
+      seen_vertices = true;
+      const long long n = count(in, "vertices", 4);
       m.vertices_m.resize(n);
       for (long long i = 0; i < n; ++i) {
         const Entry what{"vertex", i, n};
@@ -121,7 +122,7 @@ MeshData read_medit(const std::string& path, double unit_m) {
       const std::string name = tet ? "tetrahedron" : "triangle";
       const long long nv = static_cast<long long>(m.vertices_m.size());
       if (nv == 0) in.fail(std::string(tok) + " before Vertices");
-      const long long n = count(in, tet ? "tetrahedra" : "triangles");
+      const long long n = count(in, tet ? "tetrahedra" : "triangles", nodes + 1);
       if (tet) {
         m.tets.reserve(m.tets.size() + n);
         m.tet_labels.reserve(m.tets.size() + n);
@@ -149,7 +150,7 @@ MeshData read_medit(const std::string& path, double unit_m) {
     } else {
       const int width = skipped_section_width(key);
       if (width < 0) in.fail("unknown Medit keyword '" + std::string(tok) + "'");
-      const long long n = count(in, std::string(tok));
+      const long long n = count(in, std::string(tok), width);
       for (long long i = 0; i < n; ++i) {
         const Entry what{std::string(tok) + " entry", i, n};
         if (line_entry(in, f, 8, what) != width)
@@ -160,6 +161,14 @@ MeshData read_medit(const std::string& path, double unit_m) {
   if (!seen_version) in.fail("empty file, not a Medit .mesh file");
   if (m.tets.empty()) in.fail("no Tetrahedra section");
   return m;
+}
+
+}  // namespace
+
+MeshData read_medit(const std::string& path, double unit_m) {
+  if (!(unit_m > 0.0) || !std::isfinite(unit_m))
+    throw std::invalid_argument(path + ": unit_m must be finite and > 0");
+  return guard_out_of_memory(path, [&] { return parse_medit(path, unit_m); });
 }
 
 namespace {

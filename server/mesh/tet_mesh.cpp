@@ -89,7 +89,9 @@ TetMesh TetMesh::build(std::vector<Vec3> vertices_m, std::vector<Tet> tets,
     Tet& tet = tets[t];
     const double vol =
         signed_volume(vertices_m[tet[0]], vertices_m[tet[1]], vertices_m[tet[2]], vertices_m[tet[3]]);
-    if (std::abs(vol) <= min_volume) {
+    // Not finite (coordinates so large that the products overflow, e.g. 1e200 m) counts as
+    // degenerate: no element can be computed from it. NaN fails every comparison, hence !(>).
+    if (!(std::abs(vol) > min_volume) || !std::isfinite(vol)) {
       degenerate.push_back(t);
     } else if (vol < 0.0) {
       std::swap(tet[2], tet[3]);
@@ -98,9 +100,9 @@ TetMesh TetMesh::build(std::vector<Vec3> vertices_m, std::vector<Tet> tets,
   }
   if (!degenerate.empty()) {
     std::ostringstream msg;
-    msg << src << ": " << degenerate.size() << " degenerate tetrahedra (|volume| <= "
-        << options.degenerate_volume_ratio << " * mean edge^3 = " << min_volume
-        << " m^3): " << id_list(degenerate);
+    msg << src << ": " << degenerate.size()
+        << " degenerate tetrahedra (|volume| <= " << options.degenerate_volume_ratio
+        << " * mean edge^3 = " << min_volume << " m^3, or not finite): " << id_list(degenerate);
     throw std::invalid_argument(msg.str());
   }
   if (!inverted.empty())

@@ -20,13 +20,19 @@ std::string stem_of(const std::string& path) {
   return path;
 }
 
-// All tokens of the next non-empty line.
-void read_line(TextReader& in, std::vector<std::string_view>& fields, const std::string& what) {
+// All tokens of the next non-empty line; more than max_fields is an error (a line never needs
+// more than its header allows, and a broken one must not grow the list without bound).
+void read_line(TextReader& in, std::vector<std::string_view>& fields, const std::string& what,
+               std::size_t max_fields) {
   fields.clear();
   std::string_view t;
   if (!in.next(t)) in.fail("unexpected end of file, expected " + what);
   fields.push_back(t);
-  while (in.next_on_line(t)) fields.push_back(t);
+  while (in.next_on_line(t)) {
+    if (fields.size() == max_fields)
+      in.fail("more than " + std::to_string(max_fields) + " numbers in " + what);
+    fields.push_back(t);
+  }
   in.end_line();
 }
 
@@ -44,11 +50,7 @@ double as_real(TextReader& in, std::string_view tok, const char* what) {
   return v;
 }
 
-}  // namespace
-
-MeshData read_tetgen(const std::string& path, double unit_m) {
-  if (!(unit_m > 0.0) || !std::isfinite(unit_m))
-    throw std::invalid_argument(path + ": unit_m must be finite and > 0");
+MeshData parse_tetgen(const std::string& path, double unit_m) {
   const std::string stem = stem_of(path);
   MeshData m;
   m.source = stem + ".node";
@@ -58,18 +60,19 @@ MeshData read_tetgen(const std::string& path, double unit_m) {
   // .node: "<#points> <dimension 3> <#attributes> <boundary markers 0|1>", then points.
   {
     TextReader in(stem + ".node", '#');
-    read_line(in, f, "the .node header");
+    read_line(in, f, "the .node header", 4);
     if (f.size() < 2 || f.size() > 4) in.fail("expected '<#points> 3 [<#attributes> [<#markers>]]'");
     const long long n = as_int(in, f[0], "number of points");
-    if (n < 1 || n > 1000000000LL) in.fail("bad number of points " + std::to_string(n));
+    if (n < 1) in.fail("bad number of points " + std::to_string(n));
     if (as_int(in, f[1], "dimension") != 3) in.fail("dimension must be 3");
     const long long nattr = f.size() > 2 ? as_int(in, f[2], "number of attributes") : 0;
     const long long nmark = f.size() > 3 ? as_int(in, f[3], "number of boundary markers") : 0;
     if (nattr < 0 || nattr > 1000 || nmark < 0 || nmark > 1) in.fail("bad attribute or marker count");
     const std::size_t width = static_cast<std::size_t>(4 + nattr + nmark);
+    in.check_count(n, static_cast<int>(width), "points");
     m.vertices_m.resize(n);
     for (long long i = 0; i < n; ++i) {
-      read_line(in, f, "point " + std::to_string(i + 1) + " of " + std::to_string(n));
+      read_line(in, f, "point " + std::to_string(i + 1) + " of " + std::to_string(n), width);
       if (f.size() != width)
         in.fail("expected " + std::to_string(width) + " numbers for a point (index, x, y, z, " +
                 std::to_string(nattr) + " attributes, " + std::to_string(nmark) + " markers), got " +
@@ -88,20 +91,21 @@ MeshData read_tetgen(const std::string& path, double unit_m) {
   // .ele: "<#tetrahedra> <nodes per tetrahedron 4|10> <#attributes>", then tetrahedra.
   {
     TextReader in(stem + ".ele", '#');
-    read_line(in, f, "the .ele header");
+    read_line(in, f, "the .ele header", 3);
     if (f.size() < 2 || f.size() > 3) in.fail("expected '<#tetrahedra> <4|10> [<#attributes>]'");
     const long long n = as_int(in, f[0], "number of tetrahedra");
-    if (n < 1 || n > 2000000000LL) in.fail("bad number of tetrahedra " + std::to_string(n));
+    if (n < 1) in.fail("bad number of tetrahedra " + std::to_string(n));
     const long long per = as_int(in, f[1], "nodes per tetrahedron");
     if (per != 4 && per != 10) in.fail("nodes per tetrahedron must be 4 or 10, got " + std::to_string(per));
     const long long nattr = f.size() > 2 ? as_int(in, f[2], "number of attributes") : 0;
     if (nattr < 0 || nattr > 1000) in.fail("bad number of attributes " + std::to_string(nattr));
     const std::size_t width = static_cast<std::size_t>(1 + per + nattr);
     const long long nv = static_cast<long long>(m.vertices_m.size());
+    in.check_count(n, static_cast<int>(width), "tetrahedra");
     m.tets.resize(n);
     m.tet_labels.assign(n, 0);
     for (long long i = 0; i < n; ++i) {
-      read_line(in, f, "tetrahedron " + std::to_string(i + 1) + " of " + std::to_string(n));
+      read_line(in, f, "tetrahedron " + std::to_string(i + 1) + " of " + std::to_string(n), width);
       if (f.size() != width)
         in.fail("expected " + std::to_string(per) + " vertex indices and " + std::to_string(nattr) +
                 " attributes after the tetrahedron index, got " + std::to_string(f.size() - 1) +
@@ -125,6 +129,14 @@ MeshData read_tetgen(const std::string& path, double unit_m) {
     }
   }
   return m;
+}
+
+}  // namespace
+
+MeshData read_tetgen(const std::string& path, double unit_m) {
+  if (!(unit_m > 0.0) || !std::isfinite(unit_m))
+    throw std::invalid_argument(path + ": unit_m must be finite and > 0");
+  return guard_out_of_memory(path, [&] { return parse_tetgen(path, unit_m); });
 }
 
 void write_tetgen(const std::string& stem, const MeshData& mesh, double unit_m) {

@@ -1,20 +1,50 @@
 #include "server/mesh/text_reader.hpp"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <stdexcept>
 
 namespace neurosim::mesh {
 
-TextReader::TextReader(std::string path, char comment) : path_(std::move(path)), comment_(comment) {
+TextReader::TextReader(std::string path, char comment, std::size_t max_bytes)
+    : path_(std::move(path)), comment_(comment) {
   std::ifstream in(path_, std::ios::binary);
   if (!in) throw std::runtime_error(path_ + ": cannot open file");
-  std::ostringstream buf;
-  buf << in.rdbuf();
+  // In chunks up to max_bytes + 1, never by the size the file claims: a FIFO or /dev/zero has
+  // none, and an endless stream must stop at the limit.
+  try {
+    // A regular file's size is known: one allocation, not the doubling of a growing string.
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(path_, ec);
+    if (!ec) text_.reserve(static_cast<std::size_t>(std::min<std::uintmax_t>(size, max_bytes)) + 1);
+    char chunk[1 << 16];
+    while (in) {
+      const std::size_t want = std::min(sizeof chunk, max_bytes + 1 - text_.size());
+      in.read(chunk, static_cast<std::streamsize>(want));
+      text_.append(chunk, static_cast<std::size_t>(in.gcount()));
+      if (text_.size() > max_bytes)
+        throw std::runtime_error(path_ + ": larger than the limit of " + std::to_string(max_bytes) +
+                                 " bytes for a mesh file (a stream that does not end?)");
+    }
+  } catch (const std::bad_alloc&) {
+    throw std::runtime_error(path_ + ": out of memory after reading " +
+                             std::to_string(text_.size()) + " bytes");
+  }
   if (in.bad()) throw std::runtime_error(path_ + ": read error");
-  text_ = buf.str();
+}
+
+void TextReader::check_count(long long n, int tokens_each, const std::string& what) const {
+  if (n < 0) fail("bad number of " + what + ": " + std::to_string(n));
+  // Every number takes at least one byte (its separators are not even counted): a count above
+  // this cannot be what the file holds. A count just above what the file holds is left to the
+  // entries, whose own error names the line where the file ends.
+  const unsigned long long per = static_cast<unsigned long long>(std::max(tokens_each, 1));
+  if (static_cast<unsigned long long>(n) > bytes_left() / per)
+    fail(std::to_string(n) + " " + what + " cannot fit in the " + std::to_string(bytes_left()) +
+         " bytes left in the file (each takes at least " + std::to_string(per) + ")");
 }
 
 void TextReader::skip_blanks(bool cross_lines) {

@@ -3,10 +3,12 @@
 
 #include "server/mesh/generate.hpp"
 #include "server/mesh/io.hpp"
+#include "server/mesh/text_reader.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <set>
+#include <sstream>
 #include <stdexcept>
 
 namespace neurosim::scene {
@@ -96,7 +98,9 @@ LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
     }
     mesh::BuildOptions build;
     build.source = file.string();
-    out.mesh = mesh::TetMesh::build(std::move(data.vertices_m), std::move(data.tets), build);
+    out.mesh = mesh::guard_out_of_memory(file.string(), [&] {
+      return mesh::TetMesh::build(std::move(data.vertices_m), std::move(data.tets), build);
+    });
     out.mesh.set_tet_labels(std::move(data.tet_labels));
   } else {
     const auto& g = entry.generate();
@@ -104,11 +108,34 @@ LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
     options.target_vertices = g.target_vertices();
     options.cell_size_m = g.cell_size_m();
     options.seed = g.seed();
-    mesh::GeneratedMesh generated =
-        g.has_box() ? mesh::generate_box(to_vec3(g.box().min_m()), to_vec3(g.box().max_m()), options)
-                    : mesh::generate_cylinder(to_vec3(g.cylinder().base_center_m()),
-                                              to_vec3(g.cylinder().axis_m()),
-                                              g.cylinder().radius_m(), options);
+    // An absurd size is refused before the mesher runs, naming the scene field (a cell size of
+    // a micrometre in a box of centimetres would mesh for days).
+    const double r = g.cylinder().radius_m();
+    const mesh::Vec3 extent =
+        g.has_box() ? mesh::Vec3(to_vec3(g.box().max_m()) - to_vec3(g.box().min_m()))
+                    : mesh::Vec3(2 * r, 2 * r, to_vec3(g.cylinder().axis_m()).norm());
+    const double expected = mesh::expected_tetrahedra(extent, options);
+    if (!(expected <= options.max_tetrahedra)) {
+      std::ostringstream msg;
+      msg.precision(3);
+      msg << what << ": generate."
+          << (options.target_vertices > 0 ? "target_vertices" : "cell_size_m") << ": about "
+          << expected << " tetrahedra expected, above the limit of " << options.max_tetrahedra
+          << " (give a larger cell_size_m or fewer target_vertices)";
+      throw std::runtime_error(msg.str());
+    }
+    mesh::GeneratedMesh generated;
+    try {
+      generated =
+          g.has_box()
+              ? mesh::generate_box(to_vec3(g.box().min_m()), to_vec3(g.box().max_m()), options)
+              : mesh::generate_cylinder(to_vec3(g.cylinder().base_center_m()),
+                                        to_vec3(g.cylinder().axis_m()), r, options);
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(what + ": generate: " + e.what());
+    } catch (const std::bad_alloc&) {
+      throw std::runtime_error(what + ": generate: out of memory while meshing");
+    }
     out.mesh = std::move(generated.mesh);
     out.generator_cell_size_m = generated.cell_size_m;
   }
@@ -123,6 +150,44 @@ LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
 }
 
 namespace {
+
+// Plausible size of one mesh of a surgical scene: the bounding-box diagonal of a head is about
+// 0.3 m and the smallest structure worth meshing (a vessel segment) about a millimetre, so a
+// mesh outside [kMinMeshDiagonalM, kMaxMeshDiagonalM] was almost certainly read in the wrong unit
+// (a file in mm read as m is 1000 times too large). A warning, not an error: the physics runs in
+// any unit, only the scene is wrong.
+constexpr double kMaxMeshDiagonalM = 2.0;
+constexpr double kMinMeshDiagonalM = 1e-3;
+
+// The size check of one built mesh; "" when its size is plausible.
+std::string size_warning(const Mesh& entry, const LoadedMesh& lm, const std::string& source) {
+  mesh::Vec3 lo, hi;
+  lm.mesh.bounds(lo, hi);
+  const mesh::Vec3 extent = hi - lo;
+  const double diagonal = extent.norm();
+  if (diagonal <= kMaxMeshDiagonalM && diagonal >= kMinMeshDiagonalM) return "";
+  const bool large = diagonal > kMaxMeshDiagonalM;
+  std::ostringstream w;
+  w.precision(4);
+  w << source << ": mesh \"" << lm.id << "\": bounding box " << extent.x() << " x " << extent.y()
+    << " x " << extent.z() << " m (diagonal " << diagonal << " m) is "
+    << (large ? "larger than " : "smaller than ") << (large ? kMaxMeshDiagonalM : kMinMeshDiagonalM)
+    << " m, implausible for a surgical scene: ";
+  if (entry.source_case() == Mesh::kFile) {
+    const double unit = entry.has_file_unit_m() ? entry.file_unit_m() : 1.0;
+    if (large && unit == 1.0) {
+      w << "is the file in mm? set file_unit_m: 0.001 on the mesh";
+    } else if (!large && unit != 1.0) {
+      w << "is the file already in m? file_unit_m is " << unit
+        << " (file coordinates x file_unit_m must be metres; remove it for a file in m)";
+    } else {
+      w << "check the file's unit: file coordinates x file_unit_m (" << unit << ") must be metres";
+    }
+  } else {
+    w << "the generator's sizes are in m (is the box or cylinder given in mm? divide by 1000)";
+  }
+  return w.str();
+}
 
 CouplingDef compile_coupling(const Scene& scene, const Model& model, int c,
                              const std::string& source) {
@@ -172,8 +237,11 @@ Model compile(const Scene& scene, const std::string& source) {
   Model model;
   static_cast<Settings&>(model) = read_settings(scene, source);
   const std::filesystem::path dir = std::filesystem::path(source).parent_path();
-  for (int i = 0; i < scene.meshes_size(); ++i)
+  for (int i = 0; i < scene.meshes_size(); ++i) {
     model.meshes.push_back(load_mesh(scene.meshes(i), dir, source));
+    std::string w = size_warning(scene.meshes(i), model.meshes.back(), source);
+    if (!w.empty()) model.warnings.push_back(std::move(w));
+  }
 
   // Couplings: roles, one host per embedded mesh, no nesting.
   std::vector<int> host_of(model.meshes.size(), -1);

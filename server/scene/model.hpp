@@ -61,6 +61,10 @@ struct Model : Settings {
   std::vector<CouplingDef> couplings;    // scene order (applied when effects.coupling)
   std::vector<LoadDef> loads;            // scene order
   std::vector<PrescribedDef> prescribed;  // scene order
+  // Input that compiles but is most likely a mistake (compile.cpp: a mesh far larger or smaller
+  // than a surgical scene, i.e. read in the wrong unit), one line each naming the scene file,
+  // the mesh and the fix. compile() never prints: the programs print them to stderr.
+  std::vector<std::string> warnings;
 
   // Index of the mesh with this id, or -1.
   int find_mesh(const std::string& id) const {

@@ -88,6 +88,53 @@ void check_positive(double value, const std::string& source, const std::string& 
   }
 }
 
+// Plausible ranges of scene values (SI units). Beyond them a value is a typo or hostile input
+// that would make the server sleep for years between steps, allocate gigabytes per status
+// period, or "solve" to displacements of astronomical size; refused naming the field and the
+// range. Generous for a surgical scene: the patient model uses E of kPa to MPa, tools of mm,
+// forces of N, rates of 1 Hz to 1 kHz.
+struct Range {
+  double lo, hi;
+  const char* unit;
+  bool zero_is_default;  // 0 (unset) means "the default", outside the range
+};
+constexpr Range kYoungsModulus{1e-3, 1e12, "Pa", false};  // below any gel to above steel (2e11)
+constexpr Range kFileUnit{1e-9, 1e3, "m", false};
+constexpr Range kCoordinate{-10.0, 10.0, "m", false};  // generated shapes, any component
+constexpr Range kLength{0.0, 10.0, "m", false};        // generated sizes
+constexpr Range kToolRadius{0.0, 0.1, "m", false};
+constexpr Range kToolLength{0.0, 1.0, "m", false};
+constexpr Range kToolSpeed{0.0, 100.0, "m/s", true};
+constexpr Range kForce{-1e6, 1e6, "N", false};          // any component of a load
+constexpr Range kDisplacement{-1.0, 1.0, "m", false};   // any component of a prescription
+constexpr Range kStepRate{10.0, 1e5, "Hz", true};       // the server refuses above 1 MHz anyway
+constexpr Range kViewerRate{0.1, 1e3, "Hz", true};
+// With the step rate, bounds the steps per status period (<= 1e6) the server keeps times for.
+constexpr Range kStatusRate{0.1, 100.0, "Hz", true};
+constexpr Range kScale{1e-3, 1e3, "", true};            // haptic force and workspace scales
+constexpr Range kMaxForce{0.0, 100.0, "N", true};
+// Far above what a 1 kHz model can step; about mesh::MeshingOptions::max_tetrahedra (2e6) at
+// the mesher's ~6 tetrahedra per vertex.
+constexpr int kMaxGeneratedVertices = 300'000;
+constexpr int kMaxStations = 64;                  // SimStatus.stations holds at most 64
+
+void check_range(double value, const Range& r, const std::string& source,
+                 const std::string& field) {
+  if (r.zero_is_default && value == 0.0) return;
+  if (std::isfinite(value) && value >= r.lo && value <= r.hi) return;
+  std::ostringstream msg;
+  msg << value << " is outside [" << r.lo << ", " << r.hi << "]" << (*r.unit ? " " : "")
+      << r.unit << (r.zero_is_default ? " (0 or unset: the default)" : "");
+  fail(source, field, msg.str());
+}
+
+void check_range(const Vec3& v, const Range& r, const std::string& source,
+                 const std::string& field) {
+  check_range(v.x(), r, source, field + ".x");
+  check_range(v.y(), r, source, field + ".y");
+  check_range(v.z(), r, source, field + ".z");
+}
+
 }  // namespace
 
 Scene parse_scene(const std::string& text, const std::string& source) {
@@ -103,11 +150,26 @@ Scene parse_scene(const std::string& text, const std::string& source) {
 }
 
 Scene read_scene(const std::filesystem::path& path) {
-  std::ifstream in(path);
+  std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error(path.string() + ": cannot open scene file");
-  std::stringstream text;
-  text << in.rdbuf();
-  return parse_scene(text.str(), path.string());
+  // Read in chunks up to the limit, never by the size the file claims: a FIFO or device that
+  // never ends stops here.
+  std::string text;
+  try {
+    char chunk[1 << 16];
+    while (in) {
+      in.read(chunk, sizeof chunk);
+      text.append(chunk, static_cast<std::size_t>(in.gcount()));
+      if (text.size() > kMaxSceneFileBytes)
+        throw std::runtime_error(path.string() + ": larger than the limit of " +
+                                 std::to_string(kMaxSceneFileBytes) +
+                                 " bytes for a scene file (a stream that does not end?)");
+    }
+    if (in.bad()) throw std::runtime_error(path.string() + ": read error");
+    return parse_scene(text, path.string());
+  } catch (const std::bad_alloc&) {
+    throw std::runtime_error(path.string() + ": out of memory while reading the scene");
+  }
 }
 
 void validate_scene(const Scene& scene, const std::string& source) {
@@ -121,32 +183,40 @@ void validate_scene(const Scene& scene, const std::string& source) {
     if (m.source_case() == Mesh::SOURCE_NOT_SET) {
       fail(source, f, "give file or generate");
     }
-    if (m.has_file_unit_m()) check_positive(m.file_unit_m(), source, f + ".file_unit_m", false);
+    if (m.has_file_unit_m()) check_range(m.file_unit_m(), kFileUnit, source, f + ".file_unit_m");
     if (m.source_case() == Mesh::kGenerate) {
       const auto& g = m.generate();
       if (g.shape_case() == Generator::SHAPE_NOT_SET) fail(source, f + ".generate", "no shape");
-      if (g.target_vertices() < 0) fail(source, f + ".generate.target_vertices", "negative");
+      if (g.target_vertices() < 0 || g.target_vertices() > kMaxGeneratedVertices) {
+        fail(source, f + ".generate.target_vertices",
+             std::to_string(g.target_vertices()) + " is outside [0, " +
+                 std::to_string(kMaxGeneratedVertices) + "] (0: use cell_size_m)");
+      }
       check_positive(g.cell_size_m(), source, f + ".generate.cell_size_m", true);
+      check_range(g.cell_size_m(), kLength, source, f + ".generate.cell_size_m");
       if (g.target_vertices() == 0 && g.cell_size_m() == 0.0) {
         fail(source, f + ".generate", "give target_vertices or cell_size_m");
       }
       if (g.has_box()) {
         check_vec(g.box().min_m(), source, f + ".generate.box.min_m");
         check_vec(g.box().max_m(), source, f + ".generate.box.max_m");
+        check_range(g.box().min_m(), kCoordinate, source, f + ".generate.box.min_m");
+        check_range(g.box().max_m(), kCoordinate, source, f + ".generate.box.max_m");
       } else {
         check_vec(g.cylinder().base_center_m(), source, f + ".generate.cylinder.base_center_m");
         check_vec(g.cylinder().axis_m(), source, f + ".generate.cylinder.axis_m");
         check_positive(g.cylinder().radius_m(), source, f + ".generate.cylinder.radius_m", false);
+        check_range(g.cylinder().base_center_m(), kCoordinate, source,
+                    f + ".generate.cylinder.base_center_m");
+        check_range(g.cylinder().axis_m(), kCoordinate, source, f + ".generate.cylinder.axis_m");
+        check_range(g.cylinder().radius_m(), kLength, source, f + ".generate.cylinder.radius_m");
       }
     }
     if (!m.has_material()) fail(source, f + ".material", "missing");
     {
       const auto& mat = m.material();
-      if (!std::isfinite(mat.youngs_modulus_pa()) || !(mat.youngs_modulus_pa() > 0.0)) {
-        std::ostringstream msg;
-        msg << mat.youngs_modulus_pa() << " must be finite and > 0 (unit Pa)";
-        fail(source, f + ".material.youngs_modulus_pa", msg.str());
-      }
+      check_range(mat.youngs_modulus_pa(), kYoungsModulus, source,
+                  f + ".material.youngs_modulus_pa");
       if (!std::isfinite(mat.poisson_ratio()) || !(mat.poisson_ratio() > -1.0) ||
           !(mat.poisson_ratio() < 0.5)) {
         std::ostringstream msg;
@@ -174,6 +244,7 @@ void validate_scene(const Scene& scene, const std::string& source) {
     check_mesh_ref(l.mesh(), f + ".mesh");
     check_region(l.region(), source, f + ".region");
     check_vec(l.force_n(), source, f + ".force_n");
+    check_range(l.force_n(), kForce, source, f + ".force_n");
   }
   for (int i = 0; i < scene.prescribed_size(); ++i) {
     const auto& p = scene.prescribed(i);
@@ -181,6 +252,7 @@ void validate_scene(const Scene& scene, const std::string& source) {
     check_mesh_ref(p.mesh(), f + ".mesh");
     check_region(p.region(), source, f + ".region");
     check_vec(p.displacement_m(), source, f + ".displacement_m");
+    check_range(p.displacement_m(), kDisplacement, source, f + ".displacement_m");
     std::set<char> held;
     for (char c : p.components()) {
       if (c != 'x' && c != 'y' && c != 'z')
@@ -199,14 +271,24 @@ void validate_scene(const Scene& scene, const std::string& source) {
     check_positive(t.shaft_radius_m(), source, f + ".shaft_radius_m", true);
     check_positive(t.shaft_length_m(), source, f + ".shaft_length_m", true);
     check_positive(t.max_speed_m_per_s(), source, f + ".max_speed_m_per_s", true);
+    check_range(t.tip_radius_m(), kToolRadius, source, f + ".tip_radius_m");
+    check_range(t.shaft_radius_m(), kToolRadius, source, f + ".shaft_radius_m");
+    check_range(t.shaft_length_m(), kToolLength, source, f + ".shaft_length_m");
+    check_range(t.max_speed_m_per_s(), kToolSpeed, source, f + ".max_speed_m_per_s");
   }
-  check_positive(scene.rates().step_hz(), source, "rates.step_hz", true);
-  check_positive(scene.rates().viewer_hz(), source, "rates.viewer_hz", true);
-  check_positive(scene.rates().status_hz(), source, "rates.status_hz", true);
-  check_positive(scene.haptics().force_scale(), source, "haptics.force_scale", true);
-  check_positive(scene.haptics().workspace_scale(), source, "haptics.workspace_scale", true);
-  check_positive(scene.haptics().max_force_n(), source, "haptics.max_force_n", true);
-  if (scene.max_stations() < 0) fail(source, "max_stations", "negative");
+  check_range(scene.rates().step_hz(), kStepRate, source, "rates.step_hz");
+  check_range(scene.rates().viewer_hz(), kViewerRate, source, "rates.viewer_hz");
+  check_range(scene.rates().status_hz(), kStatusRate, source, "rates.status_hz");
+  check_range(scene.haptics().force_scale(), kScale, source, "haptics.force_scale");
+  check_range(scene.haptics().workspace_scale(), kScale, source, "haptics.workspace_scale");
+  check_range(scene.haptics().max_force_n(), kMaxForce, source, "haptics.max_force_n");
+  check_range(scene.image().file_unit_m(), Range{kFileUnit.lo, kFileUnit.hi, "m", true}, source,
+              "image.file_unit_m");
+  if (scene.max_stations() < 0 || scene.max_stations() > kMaxStations) {
+    fail(source, "max_stations",
+         std::to_string(scene.max_stations()) + " is outside [0, " +
+             std::to_string(kMaxStations) + "] (0 or unset: the default)");
+  }
   if (scene.effects().coupling() && scene.couplings_size() == 0) {
     fail(source, "effects.coupling", "set, but the scene lists no couplings");
   }
@@ -231,6 +313,14 @@ Settings read_settings(const Scene& scene, const std::string& source) {
   s.effects.coupling = fx.coupling();
   s.effects.tool_contact = fx.tool_contact();
   s.effects.deformation_output = fx.deformation_output();
+  if (!std::isfinite(fx.max_expected_force_error()) || fx.max_expected_force_error() < 0.0 ||
+      fx.max_expected_force_error() > 10.0) {
+    std::ostringstream msg;
+    msg << fx.max_expected_force_error()
+        << " is outside [0, 10] (a fraction: 0.1 = 10 %; 0: no bound)";
+    fail(source, "effects.max_expected_force_error", msg.str());
+  }
+  s.effects.max_expected_force_error = fx.max_expected_force_error();
   const Settings defaults;
   s.rates.step_hz = or_default(scene.rates().step_hz(), defaults.rates.step_hz);
   s.rates.viewer_hz = or_default(scene.rates().viewer_hz(), defaults.rates.viewer_hz);

@@ -7,10 +7,15 @@
 
 #include <Eigen/Core>
 
+#include <cstddef>
 #include <filesystem>
 #include <string>
 
 namespace neurosim::scene {
+
+// Largest scene file read, unit bytes (scenes are a few kB of text; a FIFO or device that never
+// ends is refused at this size).
+inline constexpr std::size_t kMaxSceneFileBytes = std::size_t{16} << 20;
 
 // Reads and validates a scene file. Throws std::runtime_error naming the file, and line and
 // column for syntax errors ("scenes/x.scene:12:7: ...") or the field for invalid values
@@ -19,8 +24,10 @@ Scene read_scene(const std::filesystem::path& path);
 // The same for text already in memory; `source` names it in messages.
 Scene parse_scene(const std::string& text, const std::string& source);
 // Semantic checks on a parsed scene (ids unique and referenced ones present, materials,
-// regions, tools, rates finite and positive, components). Throws std::runtime_error naming the
-// field.
+// regions, tools, rates, components) and plausible ranges (SI units; README.md lists them:
+// E in [1, 1e12] Pa, rates.step_hz in [10, 1e5] Hz, rates.status_hz in [0.1, 100] Hz, a
+// prescribed displacement within 1 m, ...). Throws std::runtime_error naming the field and the
+// allowed range.
 void validate_scene(const Scene& scene, const std::string& source);
 
 // The settings of a validated scene with every default resolved (rates, haptics, tool speed,

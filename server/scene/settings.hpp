@@ -20,6 +20,9 @@ struct EffectsDef {
   bool coupling{false};            // inclusion decision + coupling of the scene's couplings
   bool tool_contact{false};        // unilateral contact of the tools against mesh surfaces
   bool deformation_output{false};  // displacement fields for viewers
+  // The server warns once when the tier's expected tool-force error at the current strain
+  // (fraction, from the measured table) exceeds this; 0: no bound.
+  double max_expected_force_error{0.0};
 };
 
 struct RatesDef {

@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <string>
 #include <thread>
@@ -68,9 +69,27 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
   p->add_option("--server-id", opt.server_id, "SimStatus key")->capture_default_str();
   p->add_option("--topic-prefix", opt.topic_prefix,
                 "prepend P to every topic name (test isolation)");
+  std::string accuracy_table = NEUROSIM_DEFAULT_ACCURACY_TABLE;
+  bool accuracy_table_given = false;
+  p->add_option_function<std::string>(
+       "--accuracy-table",
+       [&](const std::string& v) {
+         accuracy_table = v;
+         accuracy_table_given = true;
+       },
+       "the tiers' measured force error against strain (accuracy_bench's table; 'none': no "
+       "estimate). Default: " NEUROSIM_DEFAULT_ACCURACY_TABLE " when it exists");
   p->footer("CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs).");
   if (auto rc = p.parse(argc, argv)) return *rc;
   single_thread_blas();
+  if (accuracy_table == "none") {
+    accuracy_table.clear();
+  } else if (!accuracy_table_given && !std::filesystem::exists(accuracy_table)) {
+    std::cerr << "neurosim-server: note: no accuracy table at " << accuracy_table
+              << ": the expected force error is not reported\n";
+    accuracy_table.clear();
+  }
+  opt.accuracy_table = accuracy_table;
 
   struct sigaction sa {};
   sa.sa_handler = on_signal;
@@ -81,6 +100,7 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
   try {
     const auto t0 = common::Clock::now();
     scene::Model model = scene::load_model(opt.scene_path);
+    for (const auto& w : model.warnings) std::cerr << "neurosim-server: warning: " << w << "\n";
     // --tier replaces the scene's tier before anything is built from it: the simulation, the
     // server's start-up line and SimStatus all see the one tier that runs.
     const scene::Tier scene_tier = model.effects.tier;

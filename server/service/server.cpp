@@ -4,6 +4,8 @@
 #include "common/stats.hpp"
 #include "idl/wire/deformation_codec.hpp"
 #include "idl/wire/dds.hpp"
+#include "server/fem/strain.hpp"
+#include "server/service/accuracy_table.hpp"
 #include "server/service/pose_handoff.hpp"
 #include "server/service/tool_filter.hpp"
 
@@ -149,6 +151,8 @@ struct Server::Impl {
   // Field worker handshake: the step thread posts a job only when the worker is idle.
   std::atomic<bool> field_busy{false};
   interaction::FieldSnapshot field_snapshot;  // written by the step thread while the field thread is idle
+  bool field_job_frames{false};   // write Deformation frames (a viewer matched)
+  bool field_job_strain{false};   // measure the largest strain
   std::uint64_t field_job_step{0};
   std::int64_t field_job_time_ns{0};
   std::mutex field_mutex;
@@ -157,6 +161,14 @@ struct Server::Impl {
   std::thread field_thread;
   wire::Sample<neurosim_SimStatus> status;
   std::vector<neurosim_StationStatus> station_status;
+  // Accuracy shown where the user works: the largest strain of the fields (field thread, once
+  // per status period) and the tier's expected force error there (accuracy table).
+  std::optional<AccuracyTable> accuracy;
+  std::atomic<bool> strain_due{false};
+  std::atomic<double> field_max_strain{-1.0};
+  bool error_bound_warned{false};
+  bool beyond_table_noted{false};
+  std::uint64_t tier_failures_logged{0};
   std::vector<double> step_us, step_us_sorted;  // this status period
   std::size_t step_us_count{0};
   std::int64_t start_mono_ns{0};
@@ -205,9 +217,10 @@ struct Server::Impl {
   void one_step();
   void retire(int i);
   void publish_deformation(std::uint64_t step, std::int64_t now_ns);
-  void encode_and_write(std::uint64_t step, std::int64_t now_ns);
+  void encode_and_write(std::uint64_t step, std::int64_t now_ns, bool frames, bool strain);
   void field_loop();
   void publish_status(std::int64_t now_mono);
+  void report_accuracy(neurosim_SimStatus& st);
   void dispose_all();
 };
 
@@ -257,6 +270,17 @@ void Server::Impl::configure() {
                              scene::tier_name(sim->tier()) + ", not the tier asked for: " +
                              scene::tier_name(fx.tier) + " (from " + opt.tier_source + ")");
 
+  if (!opt.accuracy_table.empty()) {
+    accuracy = AccuracyTable::read(opt.accuracy_table);
+    log("accuracy table " + opt.accuracy_table + ": " + std::to_string(accuracy->rows().size()) +
+        " measured rows" +
+        (deformation_output ? std::string()
+                            : std::string(" (no strain measured: effects.deformation_output is "
+                                          "off, so no expected error either)")) +
+        "; the strain is measured in the fields solved for viewers, while one is matched");
+  } else {
+    log("no accuracy table: SimStatus.expected_force_error stays -1 (unknown)");
+  }
   const std::string setup = describe_setup(*sim);
   if (!setup.empty()) log(setup);
   std::ostringstream s;
@@ -628,24 +652,35 @@ void Server::Impl::publish_deformation(std::uint64_t step, std::int64_t now_ns) 
     ++deformation_skipped;
     return;
   }
+  // Once per status period the frame's fields are also measured for the largest strain.
+  const bool strain = strain_due.load(std::memory_order_relaxed);
+  if (strain) strain_due.store(false, std::memory_order_relaxed);
   sim->snapshot(field_snapshot);
   field_busy.store(true, std::memory_order_release);
   {
     std::lock_guard<std::mutex> lk(field_mutex);
     field_job_step = step;
     field_job_time_ns = now_ns;
+    field_job_frames = true;
+    field_job_strain = strain;
     field_job = true;
   }
   field_cv.notify_one();
 }
 
-void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns) {
-  if (full_frame_pending.exchange(false))
+void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns, bool frames,
+                                    bool strain) {
+  if (frames && full_frame_pending.exchange(false))
     for (auto& e : encoders) e.force_full_next();
+  double max_strain = 0.0;
   for (int m = 0; m < sim->num_meshes(); ++m) {
     auto& u = u_m[static_cast<std::size_t>(m)];
     sim->displacements(field_snapshot, m, u);
     ++full_field_solves;
+    if (strain && sim->mesh_active(m)) {
+      max_strain = std::max(max_strain, fem::max_principal_strain(sim->mesh(m), u).max_strain);
+    }
+    if (!frames) continue;
     auto& out = *deform_out[static_cast<std::size_t>(m)];
     encoders[static_cast<std::size_t>(m)].encode(u.data(), static_cast<std::size_t>(u.size()), step,
                                                  now_ns, out);
@@ -653,6 +688,7 @@ void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns) {
     deform_written[static_cast<std::size_t>(m)] = true;
     ++deformation_frames;
   }
+  if (strain) field_max_strain.store(max_strain, std::memory_order_relaxed);
 }
 
 // Field worker thread: full-field solves and Deformation writes, off the step thread.
@@ -661,6 +697,7 @@ void Server::Impl::field_loop() {
     for (;;) {
       std::uint64_t step = 0;
       std::int64_t t = 0;
+      bool frames = false, strain = false;
       {
         std::unique_lock<std::mutex> lk(field_mutex);
         field_cv.wait(lk, [&] { return field_job || !run.load(); });
@@ -668,8 +705,10 @@ void Server::Impl::field_loop() {
         field_job = false;
         step = field_job_step;
         t = field_job_time_ns;
+        frames = field_job_frames;
+        strain = field_job_strain;
       }
-      encode_and_write(step, t);
+      encode_and_write(step, t, frames, strain);
       field_busy.store(false, std::memory_order_release);
     }
   } catch (const std::exception& e) {
@@ -699,6 +738,7 @@ void Server::Impl::publish_status(std::int64_t now_mono) {
   // runs (it is measured over the last second by the tier's own thread).
   st.tier = wire_tier(sim->tier());
   st.tier_update_rate_hz = sim->tier_update_rate_hz();
+  report_accuracy(st);
   st.steps = s_now;
   st.deadline_misses = deadline_misses.load();
   st.server_time_ns = dds_time();
@@ -721,6 +761,52 @@ void Server::Impl::publish_status(std::int64_t now_mono) {
   st.samples_rejected_jump = rejected_jump.load();
   st.stations_refused = stations_refused.load();
   status_writer->write(st);
+}
+
+// Step thread, at each status: the strain the field thread measured in the fields it solved for
+// the viewers since the last one (no viewer: no field is solved, nothing is measured: -1), the
+// tier's expected error there, failed equilibrium updates; warnings logged once.
+void Server::Impl::report_accuracy(neurosim_SimStatus& st) {
+  if (deformation_output) strain_due.store(true, std::memory_order_relaxed);
+  if (last_matched_viewers == 0) field_max_strain.store(-1.0, std::memory_order_relaxed);
+  const double strain = field_max_strain.load(std::memory_order_relaxed);
+  st.max_strain = strain;
+  st.expected_force_error = -1.0;
+  if (accuracy && strain >= 0.0) {
+    const ExpectedError e = accuracy->expected(sim->tier(), strain, settings.name);
+    if (e.known) {
+      st.expected_force_error = e.force_rel_error;
+      if (e.beyond_table && !beyond_table_noted) {
+        beyond_table_noted = true;
+        std::ostringstream msg;
+        msg << "note: strain " << 100.0 * strain << " % is beyond the accuracy table's measured "
+            << "strains for tier " << scene::tier_name(sim->tier()) << " (" << e.basis
+            << "): the expected force error reported is the largest measured, "
+            << 100.0 * e.force_rel_error << " %, and may be exceeded";
+        log(msg.str());
+      }
+      const double bound = settings.effects.max_expected_force_error;
+      if (bound > 0.0 && e.force_rel_error > bound && !error_bound_warned) {
+        error_bound_warned = true;
+        std::ostringstream msg;
+        msg << "warning: tier " << scene::tier_name(sim->tier()) << " at strain "
+            << 100.0 * strain << " %: expected tool-force error ~" << 100.0 * e.force_rel_error
+            << " % exceeds the scene's bound effects.max_expected_force_error = " << 100.0 * bound
+            << " % (measured table, " << e.basis << "); a higher tier would be closer "
+            << "(docs/accuracy.md)";
+        log(msg.str());
+      }
+    }
+  }
+  const std::uint64_t failures = sim->tier_update_failures();
+  st.tier_update_failures = failures;
+  if (failures > tier_failures_logged) {
+    log("warning: " + std::to_string(failures - tier_failures_logged) +
+        " equilibrium update(s) of tier " + scene::tier_name(sim->tier()) +
+        " failed since the last status (the previous equilibrium stays); last: " +
+        sim->tier_last_error());
+    tier_failures_logged = failures;
+  }
 }
 
 void Server::Impl::dispose_all() {

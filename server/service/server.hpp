@@ -32,6 +32,10 @@ struct ServerOptions {
   // Where the model's effects.tier came from, for the start-up log line only: "scene" or
   // "--tier" (run_main's override). The tier itself is the simulation's (Simulation::tier()).
   std::string tier_source{"scene"};
+  // The tiers' measured force error against strain (AccuracyTable, written by accuracy_bench);
+  // empty: none (SimStatus.expected_force_error -1). A file that is given but unreadable or
+  // malformed is an error.
+  std::string accuracy_table{};
 };
 
 // Counters the server exposes to tests (also published in SimStatus).

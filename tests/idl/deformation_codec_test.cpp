@@ -119,6 +119,70 @@ TEST(wire_codec, RejectsBadInput) {
   EXPECT_THROW(dec.decode(*bad, out), std::invalid_argument);
 }
 
+// Frames that decode to non-finite displacements are refused, and a refused FULL frame leaves
+// the base as it was (the property fuzz/deformation_codec_fuzz.cpp checks on every frame).
+TEST(wire_codec, RejectsFramesThatDecodeToNonFiniteDisplacements) {
+  ns::DeformationDecoder dec;
+  std::vector<float> out;
+  ns::Sample<neurosim_Deformation> full;
+  ns::set_string(full->mesh_id, "brain");
+  full->vertex_count = 2;
+  full->encoding = neurosim_ENCODING_FULL;
+  full->frame = 0;
+  ns::assign(full->displacement_m, std::vector<float>{1e-3f, 0, 0, 0, 0, 0});
+  ASSERT_TRUE(dec.decode(*full, out));
+
+  ns::Sample<neurosim_Deformation> nan_full;
+  ns::set_string(nan_full->mesh_id, "brain");
+  nan_full->vertex_count = 2;
+  nan_full->encoding = neurosim_ENCODING_FULL;
+  nan_full->frame = 30;
+  ns::assign(nan_full->displacement_m,
+             std::vector<float>{0, 0, 0, 0, std::numeric_limits<float>::infinity(), 0});
+  const std::string msg = [&] {
+    try {
+      dec.decode(*nan_full, out);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  }();
+  EXPECT_NE(msg.find("brain frame 30"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("vertex 1 is not finite"), std::string::npos) << msg;
+
+  // Deltas against frame 0 still decode: the refused frame did not become the base.
+  ns::Sample<neurosim_Deformation> delta;
+  ns::set_string(delta->mesh_id, "brain");
+  delta->vertex_count = 2;
+  delta->encoding = neurosim_ENCODING_QUANTIZED_DELTA;
+  delta->frame = 1;
+  delta->base_frame = 0;
+  delta->delta_scale_m = 1e-6f;
+  ns::assign(delta->delta_q, std::vector<std::int16_t>{1000, 0, 0, 0, 0, -1000});
+  ASSERT_TRUE(dec.decode(*delta, out));
+  EXPECT_NEAR(out[0], 2e-3f, 1e-8f);
+  EXPECT_NEAR(out[5], -1e-3f, 1e-8f);
+
+  // A finite scale that overflows float once multiplied by the largest step.
+  delta->delta_scale_m = 3e38f;
+  ns::assign(delta->delta_q, std::vector<std::int16_t>{0, 0, 0, 32767, 0, 0});
+  EXPECT_THROW(dec.decode(*delta, out), std::invalid_argument);
+
+  // The encoder refuses a finite double that float32 cannot carry (it would arrive as Inf).
+  ns::DeformationEncoder enc("brain", 2, 1);
+  std::vector<double> u(6, 0.0);
+  u[4] = 1e39;
+  ns::Sample<neurosim_Deformation> s;
+  try {
+    enc.encode(u.data(), u.size(), 0, 0, *s);
+    ADD_FAILURE() << "1e39 m encoded";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("vertex 1 displacement is beyond the float32 range"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // Sequence helpers: reuse of buffers, no leaks (checked under ASan/valgrind).
 TEST(wire_codec, SequenceHelpersReuseBuffers) {
   ns::Sample<neurosim_Deformation> s;

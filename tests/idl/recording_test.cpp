@@ -3,12 +3,20 @@
 #include "idl/wire/recording_io.hpp"
 #include "test_support.hpp"
 
+#include <google/protobuf/util/delimited_message_util.h>
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <sstream>
+#include <thread>
 
 namespace ns = neurosim::wire;
 namespace rec = neurosim::recording;
@@ -141,5 +149,79 @@ TEST(wire_recording, BadSamplesAreRefusedOnWrite) {
   w.close();
   EXPECT_EQ(ns::read_recording(dir / "bad.rec").samples.size(), 1u);
   EXPECT_THROW(ns::RecordingWriter(dir / "no/such/dir/x.rec", header()), std::runtime_error);
+  std::filesystem::remove_all(dir);
+}
+
+// Hostile length prefixes: refused by their declared length, before anything is read for them.
+TEST(wire_recording, LengthPrefixesBeyondTheLimitsAreRefused) {
+  const auto dir = neurosim::testing::temp_dir("wire_rec");
+  const auto huge_header = dir / "huge_header.rec";
+  std::ofstream(huge_header, std::ios::binary) << std::string("\xff\xff\xff\xff\x07", 5) << "abc";
+  const std::string e1 = error_of([&] { ns::RecordingReader r(huge_header); });
+  EXPECT_NE(e1.find(huge_header.string() + ": header length 2147483647 bytes is above the limit of "
+                                           "65536"),
+            std::string::npos)
+      << e1;
+
+  // Sample 10 claims 1e9 bytes (varint 0x80 0x94 0xeb 0xdc 0x03), the file has 3 more.
+  const auto file = write_file(dir, 10);
+  std::ofstream(file, std::ios::binary | std::ios::app)
+      << std::string("\x80\x94\xeb\xdc\x03", 5) << "abc";
+  const std::string e2 = error_of([&] { ns::read_recording(file); });
+  EXPECT_NE(e2.find("sample 10"), std::string::npos) << e2;
+  EXPECT_NE(e2.find("length 1000000000 bytes is above the limit of 1024"), std::string::npos) << e2;
+
+  // A well-formed sample that is too long: 2000 bytes of an unknown field (number 100).
+  const auto big = dir / "big_sample.rec";
+  std::filesystem::copy_file(write_file(dir, 10), big);
+  std::string unknown =
+      std::string("\xa2\x06", 2) + std::string("\xd0\x0f", 2) + std::string(2000, 'x');
+  std::ofstream(big, std::ios::binary | std::ios::app)
+      << std::string("\xd4\x0f", 2) << unknown;  // length 2004
+  const std::string e3 = error_of([&] { ns::read_recording(big); });
+  EXPECT_NE(e3.find("sample 10"), std::string::npos) << e3;
+  EXPECT_NE(e3.find("length 2004 bytes is above the limit of 1024"), std::string::npos) << e3;
+  std::filesystem::remove_all(dir);
+}
+
+// A recording that never ends (a FIFO whose writer repeats a sample) stops at the sample and
+// byte limits instead of filling memory.
+TEST(wire_recording, EndlessStreamStopsAtTheLimits) {
+  const auto dir = neurosim::testing::temp_dir("wire_rec");
+  const std::string head = neurosim::testing::slurp(write_file(dir, 0));
+  std::ostringstream one;
+  google::protobuf::util::SerializeDelimitedToOstream(sample(1), &one);
+  const std::string repeated = one.str();
+  std::signal(SIGPIPE, SIG_IGN);  // the writer learns that the reader left through EPIPE
+  const auto endless = [&](const ns::RecordingLimits& limits) {
+    const auto fifo = dir / "endless.rec";
+    std::filesystem::remove(fifo);
+    EXPECT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+    std::thread writer([&] {
+      const int fd = ::open(fifo.c_str(), O_WRONLY);
+      if (fd < 0) return;
+      std::string block = head;
+      for (int i = 0; i < 64; ++i) block += repeated;
+      if (::write(fd, block.data(), block.size()) > 0) {
+        block = std::string();
+        for (int i = 0; i < 64; ++i) block += repeated;
+        while (::write(fd, block.data(), block.size()) > 0) {
+        }
+      }
+      ::close(fd);
+    });
+    const std::string e = error_of([&] { ns::read_recording(fifo, limits); });
+    writer.join();
+    return e;
+  };
+  ns::RecordingLimits few_samples;
+  few_samples.max_samples = 1000;
+  const std::string e1 = endless(few_samples);
+  EXPECT_NE(e1.find("sample 1000"), std::string::npos) << e1;
+  EXPECT_NE(e1.find("more than 1000 samples"), std::string::npos) << e1;
+  ns::RecordingLimits few_bytes;
+  few_bytes.max_file_bytes = 1 << 16;
+  const std::string e2 = endless(few_bytes);
+  EXPECT_NE(e2.find("larger than the limit of 65536 bytes"), std::string::npos) << e2;
   std::filesystem::remove_all(dir);
 }

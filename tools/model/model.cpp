@@ -316,6 +316,9 @@ ModelResult build_model(const ModelOptions& o) {
   fx->set_coupling(true);
   fx->set_tool_contact(true);
   fx->set_deformation_output(true);
+  // The server warns once when the tier's expected tool-force error (measured table,
+  // docs/accuracy.md) passes 10 % at the strain in the field.
+  fx->set_max_expected_force_error(0.1);
   s.mutable_rates()->set_step_hz(1000);
   s.mutable_rates()->set_viewer_hz(30);
   s.mutable_rates()->set_status_hz(1);

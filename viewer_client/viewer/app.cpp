@@ -21,16 +21,26 @@ namespace {
 using common::Clock;
 using common::seconds_since;
 
-// "tier NONLINEAR, equilibrium 12 Hz" ("tier LINEAR": nothing to update); "" before the first
-// SimStatus. Rates under 10 Hz keep one decimal (a slow tier's 2.5 Hz is not "3 Hz").
+// "tier NONLINEAR, equilibrium 12 Hz" ("tier LINEAR": nothing to update); then, once the server
+// measures it, the cost of the tier's accuracy: "tier LINEAR, strain 14 %: force error ~9 %"
+// (SimStatus max_strain and expected_force_error; the error is left out when the server has no
+// table). "" before the first SimStatus. Rates under 10 Hz keep one decimal.
 std::string tier_text(const ServerStatusView& st) {
   if (!st.received) return {};
   std::ostringstream os;
   os << "tier " << st.tier;
+  os.setf(std::ios::fixed);
   if (st.tier != "LINEAR") {
-    os.setf(std::ios::fixed);
     os.precision(st.tier_update_rate_hz < 10 ? 1 : 0);
     os << ", equilibrium " << st.tier_update_rate_hz << " Hz";
+  }
+  if (st.max_strain >= 0) {
+    os.precision(0);
+    os << ", strain " << 100.0 * st.max_strain << " %";
+    if (st.expected_force_error >= 0) {
+      os.precision(st.expected_force_error < 0.01 ? 1 : 0);
+      os << ": force error ~" << 100.0 * st.expected_force_error << " %";
+    }
   }
   return os.str();
 }
@@ -90,6 +100,11 @@ void write_summary(const std::string& path, const ViewerOptions& o, const Viewer
   j["server_tier"] = st.received ? common::Json(st.tier) : common::Json(nullptr);
   j["tier_update_rate_hz"] =
       st.received ? common::Json(st.tier_update_rate_hz) : common::Json(nullptr);
+  j["max_strain"] =
+      st.received && st.max_strain >= 0 ? common::Json(st.max_strain) : common::Json(nullptr);
+  j["expected_force_error"] = st.received && st.expected_force_error >= 0
+                                  ? common::Json(st.expected_force_error)
+                                  : common::Json(nullptr);
   j["max_displacement_m"] = s.max_displacement_m();
   try {
     common::write_json(path, j);

@@ -240,14 +240,17 @@ bool ViewerState::ingest_contact(const neurosim_ContactModel& c) {
 bool ViewerState::ingest_status(const neurosim_SimStatus& st) {
   const char* tier = tier_text(st.tier);
   const bool rates_ok = std::isfinite(st.tier_update_rate_hz) && st.tier_update_rate_hz >= 0 &&
-                        std::isfinite(st.step_rate_measured_hz) && st.step_rate_measured_hz >= 0;
+                        std::isfinite(st.step_rate_measured_hz) && st.step_rate_measured_hz >= 0 &&
+                        std::isfinite(st.max_strain) && std::isfinite(st.expected_force_error);
   if (tier == nullptr || !rates_ok) {
     ++counters_.malformed_status;
     warn(kStatus, "ignored a malformed SimStatus from server '" + std::string(st.server_id) +
                       "': tier " + std::to_string(static_cast<long long>(st.tier)) +
                       (tier == nullptr ? " (unknown)" : "") + ", tier_update_rate_hz " +
                       std::to_string(st.tier_update_rate_hz) + ", step_rate_measured_hz " +
-                      std::to_string(st.step_rate_measured_hz));
+                      std::to_string(st.step_rate_measured_hz) + ", max_strain " +
+                      std::to_string(st.max_strain) + ", expected_force_error " +
+                      std::to_string(st.expected_force_error));
     return false;
   }
   ServerStatusView& v = server_status_;
@@ -255,6 +258,8 @@ bool ViewerState::ingest_status(const neurosim_SimStatus& st) {
   const bool changed = !v.received || v.tier != tier ||
                        v.tier_update_rate_hz != st.tier_update_rate_hz ||
                        v.step_rate_measured_hz != st.step_rate_measured_hz ||
+                       v.max_strain != st.max_strain ||
+                       v.expected_force_error != st.expected_force_error ||
                        v.server_id != st.server_id || v.scene_name != scene_name;
   v.received = true;
   v.server_id = st.server_id;
@@ -262,6 +267,9 @@ bool ViewerState::ingest_status(const neurosim_SimStatus& st) {
   v.tier = tier;
   v.tier_update_rate_hz = st.tier_update_rate_hz;
   v.step_rate_measured_hz = st.step_rate_measured_hz;
+  // Negative: not measured / unknown (the server sends -1).
+  v.max_strain = st.max_strain >= 0 ? st.max_strain : -1.0;
+  v.expected_force_error = st.expected_force_error >= 0 ? st.expected_force_error : -1.0;
   ++counters_.statuses;
   return changed;
 }

@@ -56,6 +56,8 @@ struct ServerStatusView {
   std::string tier;                 // "LINEAR", "COROTATIONAL", "NONLINEAR" (the tier that runs)
   double tier_update_rate_hz = 0;   // equilibrium updates per second, 0 for LINEAR, unit Hz
   double step_rate_measured_hz = 0; // unit Hz
+  double max_strain = -1;            // largest strain in the fields (0.14 = 14 %); -1: not measured
+  double expected_force_error = -1;  // the tier's expected force error there (fraction); -1: unknown
 };
 
 struct ViewerCounters {

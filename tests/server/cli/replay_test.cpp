@@ -267,6 +267,38 @@ TEST_F(ReplayCli, StationsAreMergedByTime) {
   EXPECT_GT(b_contact, 50);
 }
 
+// --max-rate thins the step times (a slow tier replays a 1 kHz recording at fewer steps); the
+// linear tier's force depends only on the pose, so each kept step equals the full run's.
+TEST_F(ReplayCli, MaxRateThinsTheStepsAndKeepsTheLast) {
+  const fs::path& d = *dir_;
+  const std::string common = "--scene " + scene_path().string() + " --recording " +
+                             (d / "press.rec").string() + " --tier linear --every 1000";
+  Outcome r = run_replay(common + " --out " + (d / "full").string(), d / "full.log");
+  ASSERT_EQ(r.exit_code, 0) << r.log;
+  r = run_replay(common + " --max-rate 100 --out " + (d / "thin").string(), d / "thin.log");
+  ASSERT_EQ(r.exit_code, 0) << r.log;
+  const std::vector<Row> full = read_forces(d / "full" / "forces.csv");
+  const std::vector<Row> thin = read_forces(d / "thin" / "forces.csv");
+  ASSERT_EQ(full.size(), 300u);
+  ASSERT_GE(thin.size(), 30u);
+  ASSERT_LE(thin.size(), 31u);
+  EXPECT_EQ(thin.front().t, full.front().t);
+  EXPECT_EQ(thin.back().t, full.back().t);
+  std::size_t j = 0;
+  int contacts = 0;
+  for (std::size_t i = 0; i < thin.size(); ++i) {
+    if (i > 0 && i + 1 < thin.size()) EXPECT_GE(thin[i].t - thin[i - 1].t, 0.01 - 1e-12) << i;
+    while (j < full.size() && full[j].t < thin[i].t) ++j;
+    ASSERT_LT(j, full.size());
+    ASSERT_EQ(full[j].t, thin[i].t);
+    EXPECT_LE((thin[i].force - full[j].force).norm(), 1e-9 * (1.0 + full[j].force.norm())) << i;
+    contacts += thin[i].in_contact ? 1 : 0;
+  }
+  EXPECT_GT(contacts, 5);
+  r = run_replay(common + " --max-rate -1 --out " + (d / "bad").string(), d / "bad.log");
+  EXPECT_EQ(r.exit_code, 2) << r.log;
+}
+
 TEST_F(ReplayCli, UnknownTierIsAUsageError) {
   const Outcome r = run_replay("--scene " + scene_path().string() + " --recording " +
                                (*dir_ / "press.rec").string() + " --tier bogus --out " +

@@ -441,6 +441,32 @@ prescribed { mesh: "block" region { box { min_m { x: -1 y: -1 z: 0.0199999 } max
   fs::remove_all(dir);
 }
 
+// Values each within the scene validator's ranges (E = 1 Pa, 1e6 N) that together move the
+// block by ~1e10 m: not a solution of this scene. An error naming the mesh, exit non-zero, no
+// results written.
+TEST(SolveCli, ImplausibleResultIsAnErrorNotASolution) {
+  const auto dir = testing::temp_dir("implausible");
+  {
+    std::ofstream out(dir / "soft.scene");
+    out << R"(name: "soft"
+meshes {
+  id: "block"
+  generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.02 y: 0.02 z: 0.02 } } cell_size_m: 0.01 }
+  material { youngs_modulus_pa: 1 poisson_ratio: 0.3 }
+  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 1 z: 1e-9 } } }
+}
+loads { mesh: "block" region { box { min_m { x: -1 y: -1 z: 0.0199999 } max_m { x: 1 y: 1 z: 1 } } }
+        force_n { x: 1e6 } }
+)";
+  }
+  EXPECT_NE(run_solve(dir / "soft.scene", dir / "out"), 0);
+  const std::string text = testing::slurp(dir / "out.log");
+  EXPECT_NE(text.find("soft.scene: mesh \"block\": max |u| = "), std::string::npos) << text;
+  EXPECT_NE(text.find("times the scene's size"), std::string::npos) << text;
+  EXPECT_FALSE(fs::exists(dir / "out" / "displacement.csv"));
+  fs::remove_all(dir);
+}
+
 TEST(SolveCli, BadSceneGivesClearErrorAndNonZeroExit) {
   const auto dir = testing::temp_dir("bad_scene");
   {

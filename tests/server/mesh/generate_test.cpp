@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -31,6 +32,16 @@ TEST(MeshGenerate, BoxNearTargetValidAndFillsTheBox) {
   EXPECT_GT(q.min_dihedral_deg, 1.0) << q.summary();
   // A polyhedral domain with protected edges: the tetrahedra fill the box exactly.
   EXPECT_NEAR(total_volume(g.mesh), 1e-3, 1e-9);
+  EXPECT_FALSE(g.optimization_time_limited);
+  // The estimates the size limit uses are above what the mesher made (at that cell size, and
+  // for that target), by less than a factor 4 (most for small meshes, where the surface counts).
+  MeshingOptions at_size;
+  at_size.cell_size_m = g.cell_size_m;
+  const double tets = static_cast<double>(g.mesh.num_tets());
+  EXPECT_GE(expected_tetrahedra(Vec3(0.1, 0.1, 0.1), at_size), tets);
+  EXPECT_LT(expected_tetrahedra(Vec3(0.1, 0.1, 0.1), at_size), 4.0 * tets);
+  EXPECT_GE(expected_tetrahedra(Vec3(0.1, 0.1, 0.1), o), tets);
+  EXPECT_LT(expected_tetrahedra(Vec3(0.1, 0.1, 0.1), o), 4.0 * tets);
 }
 
 TEST(MeshGenerate, CylinderNearTargetAndCloseToItsVolume) {
@@ -48,8 +59,8 @@ TEST(MeshGenerate, CylinderNearTargetAndCloseToItsVolume) {
   EXPECT_GT(total_volume(g.mesh), 0.95 * exact);
 }
 
-// Same seed, same mesh: bit-identical vertices and tetrahedra (exudation runs without a wall-clock
-// limit, so machine load cannot change the result).
+// Same seed, same mesh: bit-identical vertices and tetrahedra (the sliver steps' wall-clock limit
+// is far above what this size needs, so machine load cannot change the result).
 TEST(MeshGenerate, SameSeedGivesTheSameMesh) {
   MeshingOptions o;
   o.target_vertices = 300;
@@ -64,6 +75,56 @@ TEST(MeshGenerate, SameSeedGivesTheSameMesh) {
   for (std::size_t t = 0; t < a.mesh.num_tets(); ++t) {
     ASSERT_EQ(a.mesh.tets()[t], b.mesh.tets()[t]) << "tetrahedron " << t;
   }
+  EXPECT_FALSE(a.optimization_time_limited);
+}
+
+// An absurd request is refused before the mesher runs (these would mesh for hours or run out of
+// memory), naming the option and the limit.
+TEST(MeshGenerate, AbsurdSizesAreRefusedBeforeMeshing) {
+  const auto refused = [](auto&& f) -> std::string {
+    const auto t0 = std::chrono::steady_clock::now();
+    std::string msg = "no error";
+    try {
+      f();
+    } catch (const std::invalid_argument& e) {
+      msg = e.what();
+    }
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 2.0);
+    return msg;
+  };
+  MeshingOptions tiny;
+  tiny.cell_size_m = 1e-5;
+  std::string msg = refused([&] { generate_box(Vec3::Zero(), Vec3::Ones(), tiny); });
+  EXPECT_EQ(msg.rfind("cell_size_m: 1e-05 m in a 1 x 1 x 1 m generated box gives about 1e+16 "
+                      "tetrahedra, above the limit of 2e+06 (max_tetrahedra)",
+                      0),
+            0u)
+      << msg;
+  // A cylinder this fine also overflowed the int count of rim segments before.
+  tiny.cell_size_m = 1e-12;
+  msg = refused([&] { generate_cylinder(Vec3::Zero(), Vec3(0, 1, 0), 1.0, tiny); });
+  EXPECT_EQ(msg.rfind("cell_size_m: 1e-12 m in a 2 x 2 x 1 m generated cylinder", 0), 0u) << msg;
+  MeshingOptions many;
+  many.target_vertices = 2000000000;
+  msg = refused([&] { generate_box(Vec3::Zero(), Vec3::Ones(), many); });
+  EXPECT_EQ(msg.rfind("target_vertices: 2000000000 gives about 1.2e+10 tetrahedra", 0), 0u) << msg;
+  MeshingOptions segments;
+  segments.target_vertices = 100;
+  segments.circle_segments = 1000000000;
+  msg = refused([&] { generate_cylinder(Vec3::Zero(), Vec3(0, 1, 0), 0.1, segments); });
+  EXPECT_NE(msg.find("circle_segments must be in [3, 4096]"), std::string::npos) << msg;
+}
+
+// The sliver steps stop at their wall-clock limit, and say so.
+TEST(MeshGenerate, SliverStepsStopAtTheirTimeLimit) {
+  MeshingOptions o;
+  o.cell_size_m = 0.01;
+  o.optimization_time_limit_s = 1e-6;
+  const GeneratedMesh g = generate_box(Vec3::Zero(), Vec3(0.1, 0.1, 0.1), o);
+  EXPECT_TRUE(g.optimization_time_limited);
+  EXPECT_GT(g.mesh.num_tets(), 100u);  // still a valid mesh, built and checked
+  o.optimization_time_limit_s = -1.0;
+  EXPECT_THROW(generate_box(Vec3::Zero(), Vec3(0.1, 0.1, 0.1), o), std::invalid_argument);
 }
 
 TEST(MeshGenerate, BadInputIsRefusedWithAMessage) {

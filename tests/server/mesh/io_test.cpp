@@ -245,6 +245,11 @@ TEST_F(MeshIoBroken, Medit) {
   expect_error(write("cut.mesh", first_lines(good, tet3)), tet3, "unexpected end of file");
   expect_error(write("cut.mesh", first_lines(good, tet3)), tet3, "tetrahedron 4 of 6");
   expect_error(write("key.mesh", with_line(good, 2, "Bogus 3")), 2, "unknown Medit keyword 'Bogus'");
+  // A second Vertices section after the tetrahedra would leave their indices out of range
+  // (found by fuzz/medit_fuzz.cpp).
+  const std::string again = "Vertices\n4\n0 0 0 1\n1 0 0 1\n0 1 0 1\n0 0 1 1\nEnd\n";
+  expect_error(write("twice.mesh", first_lines(good, line_of(good, "Corners") - 1) + again),
+               line_of(good, "Corners"), "second Vertices section");
   expect_error(write("empty.mesh", ""), 1, "not a Medit");
 }
 
@@ -293,6 +298,61 @@ TEST_F(MeshIoBroken, Tetgen) {
   expect_error((dir_ / "a.node").string(), 5, "'0e'");
   write("a.node", with_line(node, 5, "3  2 0 0  0.5 1"));
   expect_error((dir_ / "a.node").string(), 5, "expected point index 2, got 3");
+}
+
+// Hostile headers: a count that cannot fit in the rest of the file is refused at its line before
+// anything is allocated for it (4e8 vertices would be 9.6 GB; the child has 256 MB to spare).
+TEST_F(MeshIoBroken, HugeCountsAreRefusedBeforeAllocating) {
+  constexpr std::size_t kSpare = std::size_t{256} << 20;
+  const auto expect_refused = [&](const std::string& path, int line, const std::string& what) {
+    const std::string e =
+        neurosim::testing::message_with_memory_limit(kSpare, [&] { read_mesh(path); });
+    EXPECT_NE(e.find(path + ":" + std::to_string(line) + ": " + what), std::string::npos) << e;
+  };
+  const std::string medit = "MeshVersionFormatted 1\nDimension 3\nVertices\n";
+  expect_refused(write("v.mesh", medit + "400000000\n0 0 0 0\n"), 4,
+                 "400000000 vertices cannot fit");
+  expect_refused(write("t.mesh", medit + "1\n0 0 0 0\nTetrahedra\n1000000000000\n1 1 1 1 0\n"), 7,
+                 "1000000000000 tetrahedra cannot fit");
+  expect_refused(write("c.mesh", medit + "1\n0 0 0 0\nCorners 400000000\n1\n"), 6,
+                 "400000000 Corners cannot fit");
+  const std::string v2 = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n";
+  expect_refused(write("n.msh", v2 + "$Nodes\n400000000\n1 0 0 0\n"), 5,
+                 "400000000 nodes cannot fit");
+  expect_refused(write("e.msh", v2 + "$Nodes\n1\n1 0 0 0\n$EndNodes\n$Elements\n1000000000000\n"),
+                 9, "1000000000000 elements cannot fit");
+  const std::string v41 = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n";
+  expect_refused(write("b.msh", v41 + "$Nodes\n1 400000000 1 400000000\n3 1 0 400000000\n1\n"), 5,
+                 "400000000 nodes cannot fit");
+  expect_refused(write("k.msh", v41 + "$Nodes\n1 1 1 1\n3 1 0 400000000\n1\n0 0 0\n"), 6,
+                 "400000000 nodes cannot fit");
+  expect_refused(write("p.node", "400000000 3 0 0\n1 0 0 0\n"), 1, "400000000 points cannot fit");
+  write("q.node", "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n");
+  expect_refused(write("q.ele", "1000000000000 4 0\n1 1 2 3 4\n"), 1,
+                 "1000000000000 tetrahedra cannot fit");
+}
+
+// One line cannot grow a list of numbers without bound either.
+TEST_F(MeshIoBroken, EndlessLinesAreRefused) {
+  std::string nodes(20000, ' ');
+  for (std::size_t i = 0; i < nodes.size(); i += 2) nodes[i] = '1';
+  const std::string v2 = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 0\n$EndNodes\n";
+  expect_error(write("l.msh", v2 + "$Elements\n1\n1 4 0 " + nodes + "\n$EndElements\n"), 10,
+               "more than 1024 numbers on one element line");
+  write("l.node", "1 3 0 0\n1 0 0 0 " + nodes + "\n");
+  expect_error((dir_ / "l.node").string(), 2, "more than 4 numbers in point 1 of 1");
+}
+
+// Out of memory while reading is an error naming the file, not a crash.
+TEST_F(MeshIoBroken, OutOfMemoryNamesTheFile) {
+  std::string text = "MeshVersionFormatted 1\nDimension 3\nVertices\n2000000\n";
+  text.reserve(text.size() + 2000000 * 8 + 100);
+  for (int i = 0; i < 2000000; ++i) text += "0 0 0 0\n";
+  text += "Tetrahedra\n1\n1 2 3 4 0\nEnd\n";
+  const std::string path = write("big.mesh", text);  // 16 MB of text, 48 MB of vertices
+  const std::string e = neurosim::testing::message_with_memory_limit(std::size_t{40} << 20,
+                                                                     [&] { load_tet_mesh(path); });
+  EXPECT_EQ(e, path + ": out of memory while reading");
 }
 
 TEST(MeshIo, UnknownExtensionAndMissingFile) {

@@ -193,6 +193,16 @@ TEST(MeshBuild, NonFiniteCoordinateRefused) {
   EXPECT_NE(build_error(a.vertices, a.tets).find("vertex 5"), std::string::npos);
 }
 
+// Finite coordinates whose volume overflows to NaN (inf - inf) were accepted with a NaN volume
+// (the property fuzz/mesh_target.hpp checks; corpus/medit/nan_volume.mesh); refused as degenerate.
+TEST(MeshBuild, VolumeThatOverflowsIsRefused) {
+  const std::vector<Vec3> v{Vec3(-1e200, -1e200, -1e200), Vec3(1e200, -1e200, 1e200),
+                            Vec3(1e200, 1e200, -1e200), Vec3(-1e200, 1e200, 1e200)};
+  const std::string e = build_error(v, {Tet{0, 1, 2, 3}}, {true, 1e-12, "huge.mesh"});
+  EXPECT_NE(e.find("huge.mesh: 1 degenerate tetrahedra"), std::string::npos) << e;
+  EXPECT_NE(e.find("or not finite): 0"), std::string::npos) << e;
+}
+
 TEST(MeshBuild, IndexOutOfRangeRefused) {
   auto a = grid_cube(1, 1.0);
   a.tets[2][1] = 9;

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <functional>
+#include <sstream>
 #include <string>
 
 namespace neurosim::scene {
@@ -173,6 +174,34 @@ TEST(SceneCompile, BadComponentsNameTheField) {
     });
     EXPECT_NE(msg.find("c.scene: prescribed[0].components"), std::string::npos) << bad << ": " << msg;
   }
+}
+
+// The size check: a mesh whose bounding-box diagonal is above 2 m or below 1 mm was most likely
+// given in the wrong unit; compile() warns (scene file, mesh, size in m, the fix) and goes on.
+// (A file in mm read as m: tests/server/interaction/stability_test.cpp.)
+TEST(SceneCompile, SizeCheckWarnsAboutImplausibleMeshSizes) {
+  EXPECT_TRUE(compile_text(two_boxes("")).warnings.empty());  // 40 mm: plausible
+  auto one_box = [](double edge_m) {
+    std::ostringstream s;
+    s.precision(17);
+    s << "name: \"size\"\nmeshes { id: \"block\" generate { box { min_m { x: 0 y: 0 z: 0 } "
+      << "max_m { x: " << edge_m << " y: " << edge_m << " z: " << edge_m
+      << " } } cell_size_m: " << edge_m / 2
+      << " seed: 1 }\n  material { youngs_modulus_pa: 3000 poisson_ratio: 0.45 }\n"
+      << "  fixed { half_space { point_m { z: " << edge_m / 100 << " } normal { z: 1 } } } }\n";
+    return s.str();
+  };
+  const Model big = compile_text(one_box(1.2));  // diagonal 2.08 m
+  ASSERT_EQ(big.warnings.size(), 1u);
+  const std::string& w = big.warnings[0];
+  EXPECT_NE(w.find("c.scene: mesh \"block\""), std::string::npos) << w;
+  EXPECT_NE(w.find("diagonal 2.078 m"), std::string::npos) << w;
+  EXPECT_NE(w.find("larger than 2 m"), std::string::npos) << w;
+  EXPECT_NE(w.find("given in mm"), std::string::npos) << w;  // a generated mesh: no file unit
+  EXPECT_TRUE(compile_text(one_box(1.1)).warnings.empty());  // diagonal 1.91 m
+  const Model tiny = compile_text(one_box(5e-4));            // diagonal 0.87 mm
+  ASSERT_EQ(tiny.warnings.size(), 1u);
+  EXPECT_NE(tiny.warnings[0].find("smaller than 0.001 m"), std::string::npos) << tiny.warnings[0];
 }
 
 }  // namespace

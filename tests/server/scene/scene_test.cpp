@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <fstream>
 
 namespace neurosim::scene {
@@ -123,6 +124,77 @@ TEST(Scene, MeshFileRelativeToSceneAndUnits) {
   const std::string msg = message_of([&] { load_mesh(s2.meshes(0), dir, "b.scene"); });
   EXPECT_NE(msg.find("node id 99"), std::string::npos) << msg;
   std::filesystem::remove_all(dir);
+}
+
+// Values outside the plausible ranges are refused naming the field and the range (SI units):
+// a 31-year sleep between steps, 2e9 steps per status period (two 16 GB arrays of step times),
+// E = 1e300 Pa or a prescribed displacement of 1e30 m that would "solve successfully".
+TEST(Scene, ImplausibleValuesAreRefusedNamingFieldAndRange) {
+  const std::string load =
+      R"(loads { mesh: "box" region { nodes { ids: 0 } } force_n { z: 1e30 } })";
+  const std::string prescribed =
+      R"(prescribed { mesh: "box" region { nodes { ids: 0 } } displacement_m { x: 1e30 } })";
+  const std::string tool = R"(tools { id: "p" tip_radius_m: 10 })";
+  const struct {
+    std::string text;     // appended to kMinimal, or
+    std::string replace;  // ... this in kMinimal replaced by `with`
+    std::string with;
+    std::string expected;  // in the message
+  } cases[] = {
+      {"rates { step_hz: 1e-9 }", "", "",
+       "v.scene: rates.step_hz: 1e-09 is outside [10, 100000] Hz (0 or unset: the default)"},
+      {"rates { status_hz: 1e-6 }", "", "",
+       "v.scene: rates.status_hz: 1e-06 is outside [0.1, 100] Hz"},
+      {"rates { viewer_hz: 1e9 }", "", "",
+       "v.scene: rates.viewer_hz: 1e+09 is outside [0.1, 1000] Hz"},
+      {"", "3000", "1e300",
+       "v.scene: meshes[0].material.youngs_modulus_pa: 1e+300 is outside [0.001, 1e+12] Pa"},
+      {prescribed, "", "", "v.scene: prescribed[0].displacement_m.x: 1e+30 is outside [-1, 1] m"},
+      {load, "", "", "v.scene: loads[0].force_n.z: 1e+30 is outside [-1e+06, 1e+06] N"},
+      {"", "target_vertices: 60", "target_vertices: 2000000000",
+       "v.scene: meshes[0].generate.target_vertices: 2000000000 is outside [0, 300000]"},
+      {"", "x: 0.02", "x: 1e6",
+       "v.scene: meshes[0].generate.box.max_m.x: 1e+06 is outside [-10, 10] m"},
+      {tool, "", "", "v.scene: tools[0].tip_radius_m: 10 is outside [0, 0.1] m"},
+      {"haptics { force_scale: 1e9 }", "", "",
+       "v.scene: haptics.force_scale: 1e+09 is outside [0.001, 1000]"},
+      {"haptics { max_force_n: 1e5 }", "", "",
+       "v.scene: haptics.max_force_n: 100000 is outside [0, 100] N"},
+      {"max_stations: 100000", "", "", "v.scene: max_stations: 100000 is outside [0, 64]"},
+  };
+  for (const auto& c : cases) {
+    std::string text = std::string(kMinimal) + c.text + "\n";
+    if (!c.replace.empty()) text.replace(text.find(c.replace), c.replace.size(), c.with);
+    const std::string msg = message_of([&] { parse_scene(text, "v.scene"); });
+    EXPECT_NE(msg.find(c.expected), std::string::npos) << c.text << c.with << ": " << msg;
+  }
+  // The edges of the ranges are accepted.
+  EXPECT_NO_THROW(
+      parse_scene(std::string(kMinimal) + "rates { step_hz: 10 status_hz: 0.1 viewer_hz: 1000 }",
+                  "edge.scene"));
+}
+
+// A scene path that is a stream without end (a device, a FIFO) stops at the size limit.
+TEST(Scene, EndlessSceneFileStopsAtTheLimit) {
+  const std::string msg = message_of([] { read_scene("/dev/zero"); });
+  EXPECT_EQ(
+      msg.rfind("/dev/zero: larger than the limit of " + std::to_string(kMaxSceneFileBytes), 0), 0u)
+      << msg;
+}
+
+// A generated mesh whose expected size is absurd is refused before the mesher runs, naming the
+// mesh and the scene field (this cell size would be about 2e13 tetrahedra: never finishes).
+TEST(Scene, AbsurdGeneratedMeshIsRefusedBeforeMeshing) {
+  std::string text = kMinimal;
+  text.replace(text.find("target_vertices: 60"), 19, "cell_size_m: 1e-6");
+  const Scene s = parse_scene(text, "g.scene");
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string msg = message_of([&] { load_mesh(s.meshes(0), ".", "g.scene"); });
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+  EXPECT_NE(msg.find("g.scene: mesh \"box\": generate.cell_size_m: about 2e+13 tetrahedra "
+                     "expected, above the limit of 2e+06"),
+            std::string::npos)
+      << msg;
 }
 
 }  // namespace

@@ -46,10 +46,10 @@ TEST(service_server, SceneWithoutCouplingRunsNoInclusionDecision) {
   const auto dir = nt::temp_dir("service_effects");
   std::ifstream in(nt::source_dir() / "scenes/cube_cylinder.scene");
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const std::string on = "effects { tier: LINEAR coupling: true tool_contact: true deformation_output: true }";
+  const std::string on = "effects { tier: LINEAR coupling: true tool_contact: true deformation_output: true";
   const auto at = text.find(on);
   ASSERT_NE(at, std::string::npos) << "scenes/cube_cylinder.scene effects line changed";
-  text.replace(at, on.size(), "effects { tier: LINEAR coupling: false tool_contact: true deformation_output: false }");
+  text.replace(at, on.size(), "effects { tier: LINEAR coupling: false tool_contact: true deformation_output: false");
   const auto off_scene = dir / "no_coupling.scene";
   std::ofstream(off_scene) << text;
   const auto exe = nt::bin_dir() / "neurosim-server";

@@ -3,10 +3,16 @@
 // names the tier that runs (and, for COROTATIONAL and NONLINEAR, a non-zero equilibrium update
 // rate); every ContactModel is finite; once the held force is still, it equals the in-process
 // Simulation of the same tier settled at the same pose (synchronous updates) to 1e-9 relative.
+// The cost of the tier's accuracy in SimStatus: max_strain is the in-process field's largest
+// principal strain, expected_force_error the value the accuracy table given with
+// --accuracy-table gives at that strain (a test table: error = 20 x strain), and since that is
+// above the scene's bound (effects.max_expected_force_error) the server warns once.
+#include "server/fem/strain.hpp"
 #include "server/scene/compile.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
 #include <cmath>
+#include <fstream>
 #include <cstdio>
 
 namespace st = neurosim::service::testing;
@@ -48,10 +54,19 @@ void press_and_hold(const Press& press, const char* tier) {
   };
   const std::array<double, 3> hold = tip(press.depth_m);
 
+  // Accuracy table: for this scene and tier, 20 % force error per 1 % of strain (up to 100 %).
+  const auto table = nt::temp_dir(std::string("tier_table_") + tier) / "force_error.csv";
+  {
+    std::ofstream t(table);
+    t << "# test table\nscene,tier,max_strain,force_rel_error\n"
+      << model.name << "," << tier << ",1.0,20\n";
+  }
+  ASSERT_GT(model.effects.max_expected_force_error, 0.0) << "the bundled scenes set a bound";
+
   st::Setup setup;
   setup.exe = nt::bin_dir() / "neurosim-server";
   setup.scene = scene;
-  setup.server_args = {"--tier", tier};
+  setup.server_args = {"--tier", tier, "--accuracy-table", table.string()};
   setup.startup_timeout_s = 300;  // brain: meshes, factorization, boundary operator on 2 cores
   st::Session ses(setup, std::string("tier_") + tier, 240);
   // The reference: the same tier in process, synchronous updates (deterministic).
@@ -124,6 +139,34 @@ void press_and_hold(const Press& press, const char* tier) {
               press.scene, tier, last_f.norm(), fn, steps, rate);
   EXPECT_LE((last_f - c[0].force_n).norm(), 1e-9 * fn)
       << last_f.transpose() << " vs " << c[0].force_n.transpose();
+
+  // The largest strain of the settled fields, in process, and what SimStatus says.
+  double strain = 0.0;
+  for (int m = 0; m < ref->num_meshes(); ++m) {
+    if (!ref->mesh_active(m)) continue;
+    Eigen::VectorXd u;
+    ref->displacements(m, u);
+    strain = std::max(strain, neurosim::fem::max_principal_strain(ref->mesh(m), u).max_strain);
+  }
+  ASSERT_GT(strain, 0.0);
+  // The strain is measured in the fields solved for viewers: a Deformation reader joins.
+  neurosim::wire::Reader<neurosim_Deformation> viewer(ses.client.pp, ses.client.deform_topic);
+  double status_strain = -1.0, status_error = -1.0;
+  const bool measured = ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        status_strain = s.max_strain;
+        status_error = s.expected_force_error;
+        return std::abs(s.max_strain - strain) <= 1e-6 * strain;
+      },
+      8);
+  std::printf("%s %s: max strain %.6g (server) vs %.6g (in process), expected force error %.6g\n",
+              press.scene, tier, status_strain, strain, status_error);
+  EXPECT_TRUE(measured) << "SimStatus max_strain " << status_strain << ", in process " << strain;
+  EXPECT_NEAR(status_error, std::min(20.0, 20.0 * status_strain), 1e-12 * status_error);
+  const std::string log = ses.server.log();
+  EXPECT_NE(log.find("exceeds the scene's bound effects.max_expected_force_error"),
+            std::string::npos)
+      << log;
 }
 
 }  // namespace

@@ -182,6 +182,35 @@ TEST(ViewerState, SimStatusTierAndRateAreKeptMalformedOnesIgnored) {
   EXPECT_NE(warnings[0].find("tier 7 (unknown)"), std::string::npos) << warnings[0];
 }
 
+// SimStatus max_strain and expected_force_error (the overlay's "strain 14 %: force error ~9 %"):
+// kept; -1 (and any negative) means not measured / unknown; NaN is malformed.
+TEST(ViewerState, SimStatusStrainAndExpectedErrorAreKept) {
+  std::vector<std::string> warnings;
+  nv::ViewerState s([&](const std::string& m) { warnings.push_back(m); });
+  wire::Sample<neurosim_SimStatus> st;
+  wire::set_string(st->server_id, "srv");
+  st->tier = neurosim_TIER_LINEAR;
+  st->max_strain = -1.0;
+  st->expected_force_error = -1.0;
+  EXPECT_TRUE(s.ingest_status(*st));
+  EXPECT_EQ(s.server_status().max_strain, -1.0);
+  EXPECT_EQ(s.server_status().expected_force_error, -1.0);
+  st->max_strain = 0.14;
+  st->expected_force_error = 0.09;
+  EXPECT_TRUE(s.ingest_status(*st)) << "a new estimate is a change";
+  EXPECT_EQ(s.server_status().max_strain, 0.14);
+  EXPECT_EQ(s.server_status().expected_force_error, 0.09);
+  st->expected_force_error = -7.0;
+  EXPECT_TRUE(s.ingest_status(*st));
+  EXPECT_EQ(s.server_status().expected_force_error, -1.0);
+  st->max_strain = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(s.ingest_status(*st));
+  EXPECT_EQ(s.counters().malformed_status, 1u);
+  EXPECT_EQ(s.server_status().max_strain, 0.14);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("max_strain nan"), std::string::npos) << warnings[0];
+}
+
 TEST(ViewerOptions, GoodAndBadCommandLines) {
   bool help = false;
   const char* ok[] = {"v",        "--mode", "observe", "--headless", "--frames",       "3",

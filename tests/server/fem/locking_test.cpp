@@ -1,0 +1,249 @@
+// Volumetric locking of the linear (4-node) tetrahedra every tier uses, measured against
+// CalculiX's quadratic tetrahedra (C3D10) on the same mesh (mid-edge nodes added), and for the
+// beam against Timoshenko's beam theory, at nu = 0.45, 0.49 and 0.499 (ctest -L stability).
+//
+// The measure is the compliance of the load, delta = f . u / |f| (the work-conjugate
+// displacement, unit m): the linear tetrahedra's space is contained in the quadratic ones' on
+// the same mesh, so by Rayleigh-Ritz delta(C3D4) <= delta(C3D10) and the locking ratio
+// delta(C3D4) / delta(C3D10) lies in (0, 1]; it falls as nu -> 0.5 (linear tetrahedra lock). The
+// tests check those two facts and that the reference is sound; the ratios themselves are printed
+// and recorded (bench/RESULTS.md, "Stability suite"), not required to be anything.
+#include "fem_test_meshes.hpp"
+#include "server/fem/calculix.hpp"
+#include "server/fem/static_solver.hpp"
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace neurosim::fem {
+namespace {
+
+using testing::box_mesh;
+using testing::BoxSpec;
+
+constexpr double kBrainE = 3000.0;  // Pa, scenes/brain_artery.scene's brain
+
+// The mesh with a node at the middle of every edge: C3D10 connectivity in CalculiX's order
+// (corners 1-4, then the mid-nodes of edges 1-2, 2-3, 3-1, 1-4, 2-4, 3-4), 0-based.
+struct QuadraticMesh {
+  std::vector<mesh::Vec3> nodes;  // the corners first (same ids), then the mid-edge nodes
+  std::vector<std::array<int, 10>> elements;
+  std::map<std::pair<int, int>, int> mid;  // sorted edge -> its mid node
+};
+
+QuadraticMesh quadratic(const mesh::TetMesh& m) {
+  QuadraticMesh q;
+  q.nodes = m.vertices();
+  auto mid_node = [&](int a, int b) {
+    const auto key = std::minmax(a, b);
+    const auto it = q.mid.find(key);
+    if (it != q.mid.end()) return it->second;
+    const int id = static_cast<int>(q.nodes.size());
+    q.nodes.push_back(0.5 * (m.vertices()[a] + m.vertices()[b]));
+    q.mid.emplace(key, id);
+    return id;
+  };
+  for (const mesh::Tet& t : m.tets()) {
+    q.elements.push_back({t[0], t[1], t[2], t[3], mid_node(t[0], t[1]), mid_node(t[1], t[2]),
+                          mid_node(t[2], t[0]), mid_node(t[0], t[3]), mid_node(t[1], t[3]),
+                          mid_node(t[2], t[3])});
+  }
+  return q;
+}
+
+// A uniform traction of total force `total_n` on the surface triangles `tris` of m, as
+// consistent nodal loads: linear triangles 1/3 of the triangle's share per corner; quadratic
+// (6-node) triangles 1/3 per mid-edge node and none on the corners.
+void traction_loads(const mesh::TetMesh& m, const std::vector<mesh::Tri>& tris,
+                    const mesh::Vec3& total_n, const QuadraticMesh& q, Eigen::VectorXd& linear,
+                    Eigen::VectorXd& quad) {
+  double area = 0.0;
+  for (const auto& t : tris)
+    area += 0.5 * (m.vertices()[t[1]] - m.vertices()[t[0]])
+                      .cross(m.vertices()[t[2]] - m.vertices()[t[0]])
+                      .norm();
+  linear = Eigen::VectorXd::Zero(3 * m.num_vertices());
+  quad = Eigen::VectorXd::Zero(3 * q.nodes.size());
+  for (const auto& t : tris) {
+    const double a = 0.5 * (m.vertices()[t[1]] - m.vertices()[t[0]])
+                               .cross(m.vertices()[t[2]] - m.vertices()[t[0]])
+                               .norm();
+    const mesh::Vec3 share = total_n * (a / area) / 3.0;
+    for (int k = 0; k < 3; ++k) {
+      linear.segment<3>(3 * t[k]) += share;
+      const int mnode = q.mid.at(std::minmax(t[k], t[(k + 1) % 3]));
+      quad.segment<3>(3 * mnode) += share;
+    }
+  }
+}
+
+// Writes the C3D10 deck, runs ccx (one thread, bounded), returns all nodal displacements.
+Eigen::VectorXd solve_c3d10(const std::string& tag, const QuadraticMesh& q, const Material& mat,
+                            const std::vector<int>& fixed, const Eigen::VectorXd& loads) {
+  const auto dir = neurosim::testing::temp_dir("locking_" + tag);
+  {
+    std::ofstream out(dir / "job.inp");
+    out.precision(13);  // ccx reads at most 20 characters per number
+    out << "** neurosim locking test: " << tag << "\n*NODE, NSET=NALL\n";
+    for (std::size_t v = 0; v < q.nodes.size(); ++v)
+      out << v + 1 << ", " << q.nodes[v].x() << ", " << q.nodes[v].y() << ", " << q.nodes[v].z()
+          << "\n";
+    out << "*ELEMENT, TYPE=C3D10, ELSET=EALL\n";
+    for (std::size_t e = 0; e < q.elements.size(); ++e) {
+      out << e + 1;
+      for (int n : q.elements[e]) out << ", " << n + 1;
+      out << "\n";
+    }
+    out << "*MATERIAL, NAME=M\n*ELASTIC\n"
+        << mat.youngs_modulus_pa << ", " << mat.poisson_ratio
+        << "\n*SOLID SECTION, ELSET=EALL, MATERIAL=M\n*NSET, NSET=NFIX\n";
+    for (std::size_t i = 0; i < fixed.size(); ++i)
+      out << fixed[i] + 1 << (i + 1 == fixed.size() || i % 10 == 9 ? "\n" : ", ");
+    out << "*STEP\n*STATIC\n*BOUNDARY\nNFIX, 1, 3\n*CLOAD\n";
+    for (Eigen::Index d = 0; d < loads.size(); ++d)
+      if (loads[d] != 0.0) out << d / 3 + 1 << ", " << d % 3 + 1 << ", " << loads[d] << "\n";
+    out << "*NODE PRINT, NSET=NALL\nU\n*END STEP\n";
+  }
+  const std::string cmd = "cd '" + dir.string() +
+                          "' && OMP_NUM_THREADS=1 CCX_NPROC_EQUATION_SOLVER=1 timeout -k 5 120 "
+                          "ccx -i job > job.log 2>&1";
+  const int status = std::system(cmd.c_str());
+  const int code = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : -1;
+  const std::string log = neurosim::testing::slurp(dir / "job.log");
+  if (code != 0 || log.find("*ERROR") != std::string::npos) {
+    ADD_FAILURE() << "ccx failed (exit " << code << ", Debian package calculix-ccx):\n" << log;
+    return {};
+  }
+  const CalculixResult r = read_calculix_dat(dir / "job.dat", q.nodes.size());
+  std::filesystem::remove_all(dir);
+  return r.displacement_m;
+}
+
+struct Locking {
+  double ours_m{0.0};       // delta with linear tetrahedra (StaticSolver, as every tier)
+  double quadratic_m{0.0};  // delta with CalculiX C3D10 on the same mesh
+  double ratio() const { return ours_m / quadratic_m; }
+};
+
+// delta = f . u / |f| for both element types.
+Locking measure(const std::string& tag, const mesh::TetMesh& m, const Material& mat,
+                const std::vector<int>& fixed, const std::vector<mesh::Tri>& loaded,
+                const mesh::Vec3& total_n) {
+  const QuadraticMesh q = quadratic(m);
+  Eigen::VectorXd f_lin, f_quad;
+  traction_loads(m, loaded, total_n, q, f_lin, f_quad);
+  const StaticSolver solver(m, MaterialMap::uniform(mat), fixed);
+  const Eigen::VectorXd u = solver.solve(f_lin);
+  EXPECT_TRUE(u.allFinite()) << tag;
+  std::vector<int> fixed_quad = fixed;  // and the mid-nodes of edges between fixed corners
+  std::vector<char> is_fixed(m.num_vertices(), 0);
+  for (int v : fixed) is_fixed[v] = 1;
+  for (const auto& [edge, node] : q.mid)
+    if (is_fixed[edge.first] && is_fixed[edge.second]) fixed_quad.push_back(node);
+  const Eigen::VectorXd uq = solve_c3d10(tag, q, mat, fixed_quad, f_quad);
+  Locking l;
+  l.ours_m = f_lin.dot(u) / total_n.norm();
+  if (uq.size() == f_quad.size()) l.quadratic_m = f_quad.dot(uq) / total_n.norm();
+  return l;
+}
+
+std::vector<mesh::Tri> surface_where(const mesh::TetMesh& m,
+                                     const std::function<bool(const mesh::Vec3&)>& pred) {
+  std::vector<mesh::Tri> out;
+  for (const auto& t : m.surface()) {
+    const mesh::Vec3 c = (m.vertices()[t[0]] + m.vertices()[t[1]] + m.vertices()[t[2]]) / 3.0;
+    bool on = true;
+    for (int k = 0; k < 3; ++k) on = on && pred(m.vertices()[t[k]]);
+    if (on && pred(c)) out.push_back(t);
+  }
+  return out;
+}
+
+const std::vector<double> kPoisson{0.45, 0.49, 0.499};
+
+void report(const char* what, double nu, const Locking& l, const char* extra = "") {
+  std::printf("locking | %-34s | nu %.3f | C3D4 %.6e m | C3D10 %.6e m | ratio C3D4/C3D10 %.4f%s\n",
+              what, nu, l.ours_m, l.quadratic_m, l.ratio(), extra);
+  char key[64];
+  std::snprintf(key, sizeof key, "locking_ratio_nu_%.3f", nu);
+  ::testing::Test::RecordProperty(key, std::to_string(l.ratio()));
+}
+
+// A brain-tissue cantilever, 100 x 20 x 20 mm (20 x 4 x 4 cells), clamped at x = 0, a shear
+// traction of 1 uN along -z on its free end. Reference also Timoshenko's tip deflection
+// P L^3 / (3 E I) + P L / (k G A), k = 10 (1 + nu) / (12 + 11 nu).
+TEST(FemLocking, CantileverTipAgainstQuadraticTetrahedra) {
+  const double length = 0.1, side = 0.02, p = 1e-6;
+  BoxSpec spec{20, 4, 4};
+  spec.hi = Eigen::Vector3d(length, side, side);
+  const mesh::TetMesh m = box_mesh(spec);
+  const auto fixed = testing::nodes_where(m, [](const mesh::Vec3& x) { return x.x() < 1e-12; });
+  const auto tip = surface_where(m, [&](const mesh::Vec3& x) { return x.x() > length - 1e-12; });
+  std::vector<double> ratios;
+  for (double nu : kPoisson) {
+    const Material mat{kBrainE, nu, "brain"};
+    const Locking l = measure("cantilever", m, mat, fixed, tip, mesh::Vec3(0.0, 0.0, -p));
+    ASSERT_GT(l.quadratic_m, 0.0);
+    const double g = kBrainE / (2.0 * (1.0 + nu)), inertia = std::pow(side, 4) / 12.0;
+    const double kappa = 10.0 * (1.0 + nu) / (12.0 + 11.0 * nu);
+    const double beam = p * std::pow(length, 3) / (3.0 * kBrainE * inertia) +
+                        p * length / (kappa * g * side * side);
+    char extra[96];
+    std::snprintf(extra, sizeof extra, " | beam theory %.6e m (C3D4 %.4f, C3D10 %.4f of it)", beam,
+                  l.ours_m / beam, l.quadratic_m / beam);
+    report("cantilever tip (20x4x4 cells)", nu, l, extra);
+    // The reference is sound: quadratic tetrahedra within 8 % of beam theory. The solid is a
+    // few % stiffer than the beam: its clamped end also holds the section's warping and Poisson
+    // contraction, which beam theory lets free (at L / h = 5 that is worth several %).
+    EXPECT_NEAR(l.quadratic_m / beam, 1.0, 0.08) << nu;
+    // Rayleigh-Ritz: the linear space is inside the quadratic one.
+    EXPECT_GT(l.ratio(), 0.0);
+    EXPECT_LE(l.ratio(), 1.0 + 1e-6) << nu;
+    ratios.push_back(l.ratio());
+  }
+  // Linear tetrahedra lock more as nu -> 0.5.
+  EXPECT_LT(ratios[1], ratios[0]);
+  EXPECT_LT(ratios[2], ratios[1]);
+}
+
+// The stability suite's brain block (60 mm, 6 x 6 x 6 cells, fixed at z = 0) indented: 1 mN
+// along -x on the face x = 60 mm within 10 mm of its centre (the tool's footprint).
+TEST(FemLocking, IndentationAgainstQuadraticTetrahedra) {
+  const double edge = 0.06;
+  BoxSpec spec{6, 6, 6};
+  spec.hi = Eigen::Vector3d::Constant(edge);
+  const mesh::TetMesh m = box_mesh(spec);
+  const auto fixed = testing::nodes_where(m, [](const mesh::Vec3& x) { return x.z() < 1e-12; });
+  const mesh::Vec3 centre(edge, 0.5 * edge, 0.5 * edge);
+  const auto patch = surface_where(m, [&](const mesh::Vec3& x) {
+    return x.x() > edge - 1e-12 && (x - centre).norm() <= 0.0101;
+  });
+  ASSERT_FALSE(patch.empty());
+  std::vector<double> ratios;
+  for (double nu : kPoisson) {
+    const Locking l = measure("indentation", m, Material{kBrainE, nu, "brain"}, fixed, patch,
+                              mesh::Vec3(-1e-3, 0.0, 0.0));
+    ASSERT_GT(l.quadratic_m, 0.0);
+    report("indentation, 60 mm block (6^3 cells)", nu, l);
+    EXPECT_GT(l.ratio(), 0.0);
+    EXPECT_LE(l.ratio(), 1.0 + 1e-6) << nu;
+    ratios.push_back(l.ratio());
+  }
+  EXPECT_LT(ratios[1], ratios[0]);
+  EXPECT_LT(ratios[2], ratios[1]);
+}
+
+}  // namespace
+}  // namespace neurosim::fem

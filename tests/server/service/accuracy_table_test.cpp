@@ -1,0 +1,90 @@
+// AccuracyTable: reading accuracy_bench's table (errors name file and line) and the expected
+// error at a strain (upper envelope of the measured errors, linear in strain, from 0 at zero
+// strain; the scene's rows first, else every scene's; beyond the table the largest error).
+#include "server/service/accuracy_table.hpp"
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <stdexcept>
+
+namespace neurosim::service {
+namespace {
+
+std::filesystem::path write(const std::string& name, const std::string& text) {
+  const auto file = neurosim::testing::temp_dir("accuracy_table") / name;
+  std::ofstream(file) << text;
+  return file;
+}
+
+TEST(AccuracyTable, ReadsTheBenchTableAndInterpolates) {
+  const auto file = write("ok.csv",
+                          "# comment\n"
+                          "scene,tier,max_strain,force_rel_error\n"
+                          "cube,LINEAR,0.1,0.02\n"
+                          "cube,LINEAR,0.3,0.12\n"
+                          "cube,LINEAR,0.2,0.01\n"  // below the envelope: raised to 0.02
+                          "brain,linear,0.05,0.5\n"
+                          "cube,NONLINEAR,0.2,0\n");
+  const AccuracyTable t = AccuracyTable::read(file);
+  ASSERT_EQ(t.rows().size(), 5u);
+  // From (0, 0) to (0.1, 0.02): half way.
+  ExpectedError e = t.expected(fem::Tier::kLinear, 0.05, "cube");
+  EXPECT_TRUE(e.known);
+  EXPECT_FALSE(e.beyond_table);
+  EXPECT_NEAR(e.force_rel_error, 0.01, 1e-15);
+  EXPECT_EQ(e.basis, "cube");
+  // Envelope: 0.02 at 0.2 (not the measured 0.01), then to 0.12 at 0.3.
+  EXPECT_NEAR(t.expected(fem::Tier::kLinear, 0.2, "cube").force_rel_error, 0.02, 1e-15);
+  EXPECT_NEAR(t.expected(fem::Tier::kLinear, 0.25, "cube").force_rel_error, 0.07, 1e-15);
+  e = t.expected(fem::Tier::kLinear, 0.5, "cube");
+  EXPECT_TRUE(e.beyond_table);
+  EXPECT_NEAR(e.force_rel_error, 0.12, 1e-15);
+  // Another scene's rows only when this scene has none for the tier.
+  EXPECT_NEAR(t.expected(fem::Tier::kLinear, 0.05, "brain").force_rel_error, 0.5, 1e-15);
+  e = t.expected(fem::Tier::kNonlinear, 0.1, "brain");
+  EXPECT_TRUE(e.known);
+  EXPECT_EQ(e.basis, "every scene");
+  EXPECT_EQ(e.force_rel_error, 0.0);
+  EXPECT_FALSE(t.expected(fem::Tier::kCorotational, 0.1, "cube").known);
+}
+
+void expect_error(const std::string& text, const std::string& part) {
+  const auto file = write("bad.csv", text);
+  try {
+    AccuracyTable::read(file);
+    FAIL() << "accepted: " << text;
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(part), std::string::npos) << e.what();
+  }
+}
+
+TEST(AccuracyTable, MalformedTablesNameFileAndLine) {
+  expect_error("", "no header line");
+  expect_error("scene,tier,strain\n", "bad.csv:1: expected the header");
+  expect_error("scene,tier,max_strain,force_rel_error\ncube,LINEAR,0.1\n", "bad.csv:2: 3 fields");
+  expect_error("scene,tier,max_strain,force_rel_error\ncube,QUADRATIC,0.1,0.2\n",
+               "bad.csv:2: unknown tier 'QUADRATIC'");
+  expect_error("scene,tier,max_strain,force_rel_error\n#\ncube,LINEAR,nan,0.2\n",
+               "bad.csv:3 max_strain: 'nan'");
+  expect_error("scene,tier,max_strain,force_rel_error\ncube,LINEAR,0.1,-0.2\n",
+               "force_rel_error: '-0.2'");
+  expect_error("scene,tier,max_strain,force_rel_error\ncube,LINEAR,0.1x,0.2\n", "'0.1x'");
+  EXPECT_THROW(AccuracyTable::read("/nonexistent/force_error.csv"), std::runtime_error);
+}
+
+TEST(AccuracyTable, TheCommittedTableReads) {
+  const AccuracyTable t =
+      AccuracyTable::read(neurosim::testing::source_dir() / "share/accuracy/force_error.csv");
+  for (auto tier : {fem::Tier::kLinear, fem::Tier::kCorotational, fem::Tier::kNonlinear}) {
+    for (const char* scene : {"cube_cylinder", "brain_artery"}) {
+      const ExpectedError e = t.expected(tier, 0.1, scene);
+      EXPECT_TRUE(e.known) << fem::tier_name(tier) << " " << scene;
+      EXPECT_EQ(e.basis, scene);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace neurosim::service
