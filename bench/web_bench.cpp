@@ -64,9 +64,9 @@ MeshDef load(const std::string& id, const fs::path& file) {
   m.id = id;
   for (const auto& v : d.vertices_m) m.rest_m.insert(m.rest_m.end(), {v[0], v[1], v[2]});
   for (const auto& t : d.triangles)
-    m.triangles.insert(m.triangles.end(), {static_cast<std::int32_t>(t[0]),
-                                           static_cast<std::int32_t>(t[1]),
-                                           static_cast<std::int32_t>(t[2])});
+    m.triangles.insert(m.triangles.end(),
+                       {static_cast<std::int32_t>(t[0]), static_cast<std::int32_t>(t[1]),
+                        static_cast<std::int32_t>(t[2])});
   return m;
 }
 
@@ -221,8 +221,9 @@ class BridgeChild {
  public:
   BridgeChild(const std::string& prefix, const fs::path& log) {
     const fs::path exe = fs::read_symlink("/proc/self/exe").parent_path() / "neurosim-web";
-    std::vector<std::string> args{exe.string(), "--listen", "127.0.0.1:0", "--token", kToken,
-                                  "--topic-prefix", prefix, "--max-clients", "16", "--duration", "600"};
+    std::vector<std::string> args{exe.string(), "--listen",       "127.0.0.1:0", "--token",
+                                  kToken,       "--topic-prefix", prefix,        "--max-clients",
+                                  "16",         "--duration",     "600"};
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -236,7 +237,8 @@ class BridgeChild {
     const std::string key = "listening on http://127.0.0.1:";
     while (seconds_since(t0) < 20) {
       std::ifstream in(log);
-      const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      const std::string text((std::istreambuf_iterator<char>(in)),
+                             std::istreambuf_iterator<char>());
       const auto p = text.find(key);
       if (p != std::string::npos) {
         port_ = std::stoi(text.substr(p + key.size()));
@@ -280,8 +282,9 @@ double process_cpu_s(pid_t pid) {
 int main(int argc, char** argv) {
   double seconds = 5;
   bool csv = false;
-  neurosim::cli::Parser cli("web_bench", "Web observer: bytes per frame, frames/s to 1 and 10 "
-                                         "WebSocket clients, Deformation-to-WebSocket latency.");
+  neurosim::cli::Parser cli("web_bench",
+                            "Web observer: bytes per frame, frames/s to 1 and 10 "
+                            "WebSocket clients, Deformation-to-WebSocket latency.");
   cli->add_option("--seconds", seconds, "measurement per case, unit s")
       ->check(neurosim::cli::positive())
       ->capture_default_str();
@@ -321,8 +324,10 @@ int main(int argc, char** argv) {
     std::printf("\n");
 
     std::random_device rd;
-    const std::string prefix = "webbench" + std::to_string(getpid()) + "_" + std::to_string(rd() % 100000) + "_";
-    const fs::path log = fs::temp_directory_path() / ("web_bench_" + std::to_string(getpid()) + ".log");
+    const std::string prefix =
+        "webbench" + std::to_string(getpid()) + "_" + std::to_string(rd() % 100000) + "_";
+    const fs::path log =
+        fs::temp_directory_path() / ("web_bench_" + std::to_string(getpid()) + ".log");
     Publisher pub(prefix, meshes);
     BridgeChild bridge(prefix, log);
 
@@ -345,11 +350,13 @@ int main(int argc, char** argv) {
         const double wall = seconds_since(t0);
         const double cpu = process_cpu_s(bridge.pid()) - cpu0;
         // Per mesh: frames are counted per mesh message, so divide by the meshes.
-        const double published = static_cast<double>(pub.written() - w0) / wall / static_cast<double>(meshes.size());
+        const double published =
+            static_cast<double>(pub.written() - w0) / wall / static_cast<double>(meshes.size());
         double sum = 0, min = 1e300;
         std::vector<double> lat;
         for (auto& c : clients) {
-          const double fps = static_cast<double>(c->frames()) / wall / static_cast<double>(meshes.size());
+          const double fps =
+              static_cast<double>(c->frames()) / wall / static_cast<double>(meshes.size());
           sum += fps;
           min = std::min(min, fps);
           const auto l = c->latencies_ms();
@@ -368,8 +375,9 @@ int main(int argc, char** argv) {
       }
     }
     if (!csv)
-      std::printf("\n(frames per second per mesh: the brain and the artery each get this many; "
-                  "latency: Deformation written -> WebSocket message received, both meshes)\n");
+      std::printf(
+          "\n(frames per second per mesh: the brain and the artery each get this many; "
+          "latency: Deformation written -> WebSocket message received, both meshes)\n");
   } catch (const std::exception& e) {
     std::cerr << "web_bench: " << e.what() << "\n";
     return 1;

@@ -24,8 +24,7 @@ std::string trim(const std::string& s) {
 bool constant_time_equal(std::string_view expected, std::string_view presented) {
   unsigned diff = expected.size() == presented.size() ? 0U : 1U;
   for (std::size_t i = 0; i < expected.size(); ++i) {
-    const unsigned char p =
-        i < presented.size() ? static_cast<unsigned char>(presented[i]) : 0U;
+    const unsigned char p = i < presented.size() ? static_cast<unsigned char>(presented[i]) : 0U;
     diff |= static_cast<unsigned>(static_cast<unsigned char>(expected[i]) ^ p);
   }
   return diff == 0;

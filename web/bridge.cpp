@@ -21,8 +21,8 @@ Bridge::Bridge(const BridgeOptions& options, AccessToken token, Log log) {
   ho.max_clients = options.max_clients;
   hub_ = std::make_unique<Hub>(ho);
   dds_ = std::make_unique<DdsSource>(options.dds, *hub_, log);
-  http_ = std::make_unique<HttpServer>(options.http, std::move(token), std::move(page), *hub_,
-                                       [this] { return stats(); }, log);
+  http_ = std::make_unique<HttpServer>(
+      options.http, std::move(token), std::move(page), *hub_, [this] { return stats(); }, log);
 }
 
 // The listener goes first (no new client), then DDS (nothing more published), then the hub.
@@ -47,25 +47,25 @@ std::string Bridge::stats() const {
                        {"frames_dropped", c.frames_dropped},
                        {"bytes_sent", c.bytes_sent},
                        {"failed", c.failed}});
-  return common::Json{
-      {"clients", h.clients},
-      {"max_clients", h.max_clients},
-      {"joined", h.joined},
-      {"refused", h.refused},
-      {"per_client", std::move(clients)},
-      {"server_alive", dds_->server_alive()},
-      {"dds",
-       {{"topologies", o.topologies},
-        {"frames", o.frames},
-        {"frames_waiting", o.frames_waiting},
-        {"contacts", o.contacts},
-        {"statuses", o.statuses},
-        {"malformed", o.malformed_topology + o.malformed_frame + o.malformed_contact +
-                          o.malformed_status},
-        {"server_seen", o.server_seen},
-        {"server_lost", o.server_lost}}},
-      {"resident_kib", resident_kib()}}
-      .dump(2) + "\n";
+  return common::Json{{"clients", h.clients},
+                      {"max_clients", h.max_clients},
+                      {"joined", h.joined},
+                      {"refused", h.refused},
+                      {"per_client", std::move(clients)},
+                      {"server_alive", dds_->server_alive()},
+                      {"dds",
+                       {{"topologies", o.topologies},
+                        {"frames", o.frames},
+                        {"frames_waiting", o.frames_waiting},
+                        {"contacts", o.contacts},
+                        {"statuses", o.statuses},
+                        {"malformed", o.malformed_topology + o.malformed_frame +
+                                          o.malformed_contact + o.malformed_status},
+                        {"server_seen", o.server_seen},
+                        {"server_lost", o.server_lost}}},
+                      {"resident_kib", resident_kib()}}
+             .dump(2) +
+         "\n";
 }
 
 }  // namespace neurosim::web

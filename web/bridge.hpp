@@ -13,10 +13,10 @@
 namespace neurosim::web {
 
 struct BridgeOptions {
-  HttpServerOptions http;    // address, port, timeouts
+  HttpServerOptions http;  // address, port, timeouts
   std::size_t max_clients = 16;
-  std::string page_dir;      // the bundled page (index.html, app.js, style.css)
-  DdsSourceOptions dds;      // domain, topic prefix
+  std::string page_dir;  // the bundled page (index.html, app.js, style.css)
+  DdsSourceOptions dds;  // domain, topic prefix
 };
 
 class Bridge {

@@ -20,14 +20,15 @@ namespace neurosim::web {
 // Counters of one client (updated by the sender thread, read by /api/stats).
 struct ClientCounters {
   std::uint64_t id = 0;
-  std::string peer;                 // "address:port" of the browser
-  double connected_s = 0;           // unit s
+  std::string peer;        // "address:port" of the browser
+  double connected_s = 0;  // unit s
   std::uint64_t messages_sent = 0;
-  std::uint64_t frames_sent = 0;    // deformation frames, keyframes included
-  std::uint64_t keyframes_sent = 0; // FULL frames sent ahead of a delta the client could not decode
-  std::uint64_t frames_dropped = 0; // replaced before they could be sent (latest wins)
+  std::uint64_t frames_sent = 0;  // deformation frames, keyframes included
+  // FULL frames sent ahead of a delta the client could not decode otherwise.
+  std::uint64_t keyframes_sent = 0;
+  std::uint64_t frames_dropped = 0;  // replaced before they could be sent (latest wins)
   std::uint64_t bytes_sent = 0;
-  bool failed = false;              // a send failed: nothing more goes to this client
+  bool failed = false;  // a send failed: nothing more goes to this client
 };
 
 class ClientOutbox {

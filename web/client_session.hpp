@@ -35,8 +35,8 @@ class ClientSession {
   std::shared_ptr<ClientOutbox> outbox_;
   Send send_;
   bool have_topology_ = false;
-  std::uint32_t generation_ = 0;               // of the topology this client has
-  std::vector<std::uint64_t> full_serial_;     // per mesh index: FULL frame it can add deltas to
+  std::uint32_t generation_ = 0;            // of the topology this client has
+  std::vector<std::uint64_t> full_serial_;  // per mesh index: FULL frame it can add deltas to
 };
 
 }  // namespace neurosim::web

@@ -58,7 +58,11 @@ struct HttpServer::Impl {
   int port = 0;
 
   Impl(const HttpServerOptions& o, AccessToken t, PageFiles p, Hub& h, Stats s, Log l)
-      : options(o), token(std::move(t)), page(std::move(p)), hub(h), stats(std::move(s)),
+      : options(o),
+        token(std::move(t)),
+        page(std::move(p)),
+        hub(h),
+        stats(std::move(s)),
         log(std::move(l)) {}
 
   // The token of a request: the URL parameter `token`, else an Authorization: Bearer header.
@@ -68,8 +72,8 @@ struct HttpServer::Impl {
     const mg_request_info* ri = mg_get_request_info(conn);
     if (ri->query_string != nullptr) {
       char buf[kMaxTokenLength + 2];
-      const int n = mg_get_var(ri->query_string, std::strlen(ri->query_string), "token", buf,
-                               sizeof buf);
+      const int n =
+          mg_get_var(ri->query_string, std::strlen(ri->query_string), "token", buf, sizeof buf);
       if (n >= 0 && token.matches(std::string_view(buf, static_cast<std::size_t>(n)))) {
         from_query = true;
         return true;
@@ -84,7 +88,8 @@ struct HttpServer::Impl {
   static int begin_request(mg_connection* conn) {
     auto* im = static_cast<Impl*>(mg_get_user_data(mg_get_context(conn)));
     const mg_request_info* ri = mg_get_request_info(conn);
-    if (std::strcmp(ri->request_method, "GET") != 0 && std::strcmp(ri->request_method, "HEAD") != 0) {
+    if (std::strcmp(ri->request_method, "GET") != 0 &&
+        std::strcmp(ri->request_method, "HEAD") != 0) {
       respond(conn, 405, "Method Not Allowed", "text/plain; charset=utf-8",
               "neurosim-web is read-only: GET and HEAD only\n", "Allow: GET, HEAD\r\n");
       return 405;
@@ -187,8 +192,8 @@ struct HttpServer::Impl {
       if (c->sender.joinable()) c->sender.join();
       if (im->log)
         im->log("neurosim-web: client " + std::to_string(k.id) + " (" + k.peer + ") left after " +
-                std::to_string(static_cast<long long>(k.connected_s)) + " s: " +
-                std::to_string(k.frames_sent) + " frames sent, " +
+                std::to_string(static_cast<long long>(k.connected_s)) +
+                " s: " + std::to_string(k.frames_sent) + " frames sent, " +
                 std::to_string(k.frames_dropped) + " dropped" + (k.failed ? ", send failed" : ""));
     }
     delete c;
@@ -208,10 +213,18 @@ HttpServer::HttpServer(const HttpServerOptions& options, AccessToken token, Page
   const std::string threads = std::to_string(hub.max_clients() + 6);
   const std::string write_ms = std::to_string(static_cast<long>(options.write_timeout_s * 1000));
   const std::string ping_ms = std::to_string(static_cast<long>(options.ping_period_s * 1000));
-  const char* cfg[] = {"listening_ports",   listen.c_str(),   "num_threads",
-                       threads.c_str(),     "request_timeout_ms", write_ms.c_str(),
-                       "websocket_timeout_ms", ping_ms.c_str(), "enable_websocket_ping_pong",
-                       "yes",               "enable_keep_alive",  "no",
+  const char* cfg[] = {"listening_ports",
+                       listen.c_str(),
+                       "num_threads",
+                       threads.c_str(),
+                       "request_timeout_ms",
+                       write_ms.c_str(),
+                       "websocket_timeout_ms",
+                       ping_ms.c_str(),
+                       "enable_websocket_ping_pong",
+                       "yes",
+                       "enable_keep_alive",
+                       "no",
                        nullptr};
   mg_callbacks callbacks{};
   callbacks.begin_request = &Impl::begin_request;

@@ -2,9 +2,9 @@
 // address only, checks the access token on every request (401 without it), serves the page
 // files, /api/stats and the WebSocket /ws. Each WebSocket client gets an outbox from the Hub and
 // a sender thread (ClientSession); the (max_clients + 1)-th is told it is refused and closed
-// (close code 1013, "try again later"). A client whose socket makes no progress for
-// write_timeout_s is dropped; a silent one is pinged every ping_period_s and dropped after five
-// unanswered pings.
+// (close code 1013, "try again later"). Nothing more is sent to a client whose socket takes
+// nothing for write_timeout_s; a client that sends nothing is pinged every ping_period_s and
+// closed after five unanswered pings (browsers answer pings by themselves).
 #pragma once
 
 #include "web/access_token.hpp"

@@ -27,10 +27,14 @@ std::int32_t raw_enum(const E& field) {
 // The IDL's Tier in the scene's spelling; nullptr for a value this bridge does not know.
 const char* tier_text(std::int32_t t) {
   switch (t) {
-    case neurosim_TIER_LINEAR: return "LINEAR";
-    case neurosim_TIER_COROTATIONAL: return "COROTATIONAL";
-    case neurosim_TIER_NONLINEAR: return "NONLINEAR";
-    default: return nullptr;
+    case neurosim_TIER_LINEAR:
+      return "LINEAR";
+    case neurosim_TIER_COROTATIONAL:
+      return "COROTATIONAL";
+    case neurosim_TIER_NONLINEAR:
+      return "NONLINEAR";
+    default:
+      return nullptr;
   }
 }
 
@@ -48,7 +52,9 @@ std::array<double, 3> shaft_axis(const double* q) {
   return {a[0] / n, a[1] / n, a[2] / n};
 }
 
-common::Json array3(const std::array<double, 3>& v) { return common::Json::array({v[0], v[1], v[2]}); }
+common::Json array3(const std::array<double, 3>& v) {
+  return common::Json::array({v[0], v[1], v[2]});
+}
 
 }  // namespace
 
@@ -98,8 +104,8 @@ TopologyPtr ObserverState::ingest_topology(const neurosim_MeshTopology& t) {
                                     std::to_string(nv - 1));
       m.triangles[i] = static_cast<std::uint32_t>(tr[i]);
     }
-    const bool replaces = std::any_of(meshes_.begin(), meshes_.end(),
-                                      [&](const Mesh& o) { return o.id == m.id; });
+    const bool replaces =
+        std::any_of(meshes_.begin(), meshes_.end(), [&](const Mesh& o) { return o.id == m.id; });
     if (!replaces && meshes_.size() >= std::numeric_limits<std::uint16_t>::max())
       throw std::invalid_argument(what + ": too many meshes");
   } catch (const std::invalid_argument& e) {
@@ -113,14 +119,16 @@ TopologyPtr ObserverState::ingest_topology(const neurosim_MeshTopology& t) {
                              {"poisson_ratio", t.poisson_ratio},
                              {"priority", t.priority},
                              {"provenance", std::string(wire::get_string(t.provenance))}}
-                  .dump();
+                    .dump();
   scene_name_ = std::string(wire::get_string(t.scene_name));
-  auto it = std::find_if(meshes_.begin(), meshes_.end(), [&](const Mesh& o) { return o.id == m.id; });
+  auto it =
+      std::find_if(meshes_.begin(), meshes_.end(), [&](const Mesh& o) { return o.id == m.id; });
   if (it != meshes_.end())
     *it = std::move(m);
   else
     meshes_.push_back(std::move(m));
-  std::sort(meshes_.begin(), meshes_.end(), [](const Mesh& a, const Mesh& b) { return a.id < b.id; });
+  std::sort(meshes_.begin(), meshes_.end(),
+            [](const Mesh& a, const Mesh& b) { return a.id < b.id; });
   ++counters_.topologies;
   rebuild_topology();
   return topology_;
@@ -273,24 +281,30 @@ bool ObserverState::ingest_status(const neurosim_SimStatus& st) {
                         {"in_contact", s.in_contact},
                         {"samples_accepted", s.samples_accepted}});
   // Percentiles are NaN before the first steps: nlohmann writes them as null.
-  status_json_ = common::Json{{"server_id", std::string(st.server_id)},
-                         {"scene", std::string(wire::get_string(st.scene_name))},
-                         {"tier", tier},
-                         {"effects", std::string(wire::get_string(st.effects))},
-                         {"step_rate_target_hz", st.step_rate_target_hz},
-                         {"step_rate_measured_hz", st.step_rate_measured_hz},
-                         {"viewer_rate_hz", st.viewer_rate_hz},
-                         {"status_rate_hz", st.status_rate_hz},
-                         {"tier_update_rate_hz", st.tier_update_rate_hz},
-                         {"step_time_p50_us", st.step_time_p50_us},
-                         {"step_time_p99_us", st.step_time_p99_us},
-                         {"step_time_max_us", st.step_time_max_us},
-                         {"steps", st.steps},
-                         {"deadline_misses", st.deadline_misses},
-                         {"uptime_s", st.uptime_s},
-                         {"max_stations", st.max_stations},
-                         {"stations", std::move(stations)}}
-                     .dump();
+  status_json_ =
+      common::Json{{"server_id", std::string(st.server_id)},
+                   {"scene", std::string(wire::get_string(st.scene_name))},
+                   {"tier", tier},
+                   {"effects", std::string(wire::get_string(st.effects))},
+                   {"step_rate_target_hz", st.step_rate_target_hz},
+                   {"step_rate_measured_hz", st.step_rate_measured_hz},
+                   {"viewer_rate_hz", st.viewer_rate_hz},
+                   {"status_rate_hz", st.status_rate_hz},
+                   {"tier_update_rate_hz", st.tier_update_rate_hz},
+                   {"step_time_p50_us", st.step_time_p50_us},
+                   {"step_time_p99_us", st.step_time_p99_us},
+                   {"step_time_max_us", st.step_time_max_us},
+                   {"steps", st.steps},
+                   {"deadline_misses", st.deadline_misses},
+                   {"uptime_s", st.uptime_s},
+                   {"max_stations", st.max_stations},
+                   // -1: not measured / unknown (a NaN would become null).
+                   {"max_strain", std::isfinite(st.max_strain) ? st.max_strain : -1.0},
+                   {"expected_force_error",
+                    std::isfinite(st.expected_force_error) ? st.expected_force_error : -1.0},
+                   {"tier_update_failures", st.tier_update_failures},
+                   {"stations", std::move(stations)}}
+          .dump();
   status_received_ = true;
   ++counters_.statuses;
   return true;

@@ -22,17 +22,17 @@
 namespace neurosim::web {
 
 struct ObserverCounters {
-  std::uint64_t topologies = 0;           // accepted MeshTopology samples
-  std::uint64_t frames = 0;               // Deformation frames accepted (to be forwarded)
-  std::uint64_t frames_waiting = 0;       // no topology yet, or a delta without its FULL frame
-  std::uint64_t contacts = 0;             // accepted ContactModel samples
-  std::uint64_t statuses = 0;             // accepted SimStatus samples
+  std::uint64_t topologies = 0;      // accepted MeshTopology samples
+  std::uint64_t frames = 0;          // Deformation frames accepted (to be forwarded)
+  std::uint64_t frames_waiting = 0;  // no topology yet, or a delta without its FULL frame
+  std::uint64_t contacts = 0;        // accepted ContactModel samples
+  std::uint64_t statuses = 0;        // accepted SimStatus samples
   std::uint64_t malformed_topology = 0;
-  std::uint64_t malformed_frame = 0;      // sizes, revision, encoding, non-finite values
+  std::uint64_t malformed_frame = 0;  // sizes, revision, encoding, non-finite values
   std::uint64_t malformed_contact = 0;
-  std::uint64_t malformed_status = 0;     // unknown tier, non-finite or negative rates
-  std::uint64_t server_seen = 0;          // SimStatus writer appeared (first time or again)
-  std::uint64_t server_lost = 0;          // SimStatus writer went away
+  std::uint64_t malformed_status = 0;  // unknown tier, non-finite or negative rates
+  std::uint64_t server_seen = 0;       // SimStatus writer appeared (first time or again)
+  std::uint64_t server_lost = 0;       // SimStatus writer went away
 };
 
 // The bridge's own numbers the status message carries next to the server's.
@@ -84,11 +84,11 @@ class ObserverState {
   struct Mesh {
     std::string id;
     std::uint32_t revision = 0;
-    std::vector<float> rest_m;              // 3 per vertex, unit m
-    std::vector<std::uint32_t> triangles;   // 3 per surface triangle
-    std::string info_json;                  // material, priority, provenance (a JSON object)
-    FramePtr last_full;                     // newest FULL frame of this generation
-    std::uint64_t last_full_frame = 0;      // its Deformation.frame
+    std::vector<float> rest_m;             // 3 per vertex, unit m
+    std::vector<std::uint32_t> triangles;  // 3 per surface triangle
+    std::string info_json;                 // material, priority, provenance (a JSON object)
+    FramePtr last_full;                    // newest FULL frame of this generation
+    std::uint64_t last_full_frame = 0;     // its Deformation.frame
     std::uint64_t vertex_count() const { return rest_m.size() / 3; }
   };
   void warn(int kind, const std::string& message);

@@ -24,8 +24,8 @@ void parse_listen(const std::string& text, HttpServerOptions& http) {
   in_addr a{};
   if (inet_pton(AF_INET, address.c_str(), &a) != 1)
     throw bad("'" + address + "' is not a dotted IPv4 address");
-  if (port.empty() || port.size() > 5 || port.find_first_not_of("0123456789") != std::string::npos ||
-      std::stol(port) > 65535)
+  if (port.empty() || port.size() > 5 ||
+      port.find_first_not_of("0123456789") != std::string::npos || std::stol(port) > 65535)
     throw bad("port '" + port + "' is not a number in 0..65535");
   http.address = address;
   http.port = static_cast<int>(std::stol(port));
@@ -46,8 +46,8 @@ WebOptions parse_options(int argc, const char* const* argv, bool& help) {
   auto* tok = p->add_option("--token", token,
                             "access token (at least 16 of A-Z a-z 0-9 - . _ ~); clients give it "
                             "as ?token= or Authorization: Bearer");
-  auto* tok_file = p->add_option("--token-file", token_file,
-                                 "read the access token from the first line of F");
+  auto* tok_file =
+      p->add_option("--token-file", token_file, "read the access token from the first line of F");
   tok->excludes(tok_file);
   p->add_option("--max-clients", max_clients, "serve at most N browsers at once; more are refused")
       ->check(cli::in_range(1, 256))

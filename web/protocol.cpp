@@ -37,7 +37,8 @@ Message geometry_message(std::uint16_t mesh_index, std::uint32_t generation,
   put<std::uint32_t>(m.bytes, 4, static_cast<std::uint32_t>(n));
   put<std::uint32_t>(m.bytes, 8, static_cast<std::uint32_t>(t));
   put<std::uint32_t>(m.bytes, 12, generation);
-  if (!rest_m.empty()) std::memcpy(&m.bytes[kGeometryHeaderBytes], rest_m.data(), 4 * rest_m.size());
+  if (!rest_m.empty())
+    std::memcpy(&m.bytes[kGeometryHeaderBytes], rest_m.data(), 4 * rest_m.size());
   if (!triangles.empty())
     std::memcpy(&m.bytes[kGeometryHeaderBytes + 4 * rest_m.size()], triangles.data(),
                 4 * triangles.size());
@@ -94,8 +95,8 @@ FrameHeader parse_frame_header(const char* bytes, std::size_t size) {
       size != kFrameHeaderBytes + per * 3 * static_cast<std::size_t>(h.vertex_count))
     throw std::invalid_argument("deformation frame message of " + std::to_string(size) +
                                 " bytes does not match its header (encoding " +
-                                std::to_string(h.encoding) + ", " +
-                                std::to_string(h.vertex_count) + " vertices)");
+                                std::to_string(h.encoding) + ", " + std::to_string(h.vertex_count) +
+                                " vertices)");
   return h;
 }
 

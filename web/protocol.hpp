@@ -44,13 +44,13 @@ using MessagePtr = std::shared_ptr<const Message>;
 
 // A deformation frame as the clients get it.
 struct Frame {
-  Message message;                   // kind 2
+  Message message;  // kind 2
   std::uint16_t mesh_index = 0;
-  std::uint32_t generation = 0;      // topology generation the frame belongs to
+  std::uint32_t generation = 0;  // topology generation the frame belongs to
   bool full = true;
-  std::uint64_t full_serial = 0;     // bridge serial of the FULL frame needed: its own if FULL
+  std::uint64_t full_serial = 0;      // bridge serial of the FULL frame needed: its own if FULL
   std::shared_ptr<const Frame> base;  // DELTA: that FULL frame (null for FULL)
-  std::int64_t server_time_ns = 0;   // unit ns (Unix epoch)
+  std::int64_t server_time_ns = 0;    // unit ns (Unix epoch)
 };
 using FramePtr = std::shared_ptr<const Frame>;
 

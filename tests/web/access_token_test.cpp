@@ -14,10 +14,10 @@ namespace nt = neurosim::testing;
 TEST(AccessToken, ComparesWholeTokens) {
   const auto t = web::AccessToken::from_text("abcdefghijklmnop-1234", "--token");
   EXPECT_TRUE(t.matches("abcdefghijklmnop-1234"));
-  EXPECT_FALSE(t.matches("abcdefghijklmnop-1235"));  // last character
-  EXPECT_FALSE(t.matches("bbcdefghijklmnop-1234"));  // first character
-  EXPECT_FALSE(t.matches("abcdefghijklmnop-123"));   // a prefix
-  EXPECT_FALSE(t.matches("abcdefghijklmnop-12345")); // longer
+  EXPECT_FALSE(t.matches("abcdefghijklmnop-1235"));   // last character
+  EXPECT_FALSE(t.matches("bbcdefghijklmnop-1234"));   // first character
+  EXPECT_FALSE(t.matches("abcdefghijklmnop-123"));    // a prefix
+  EXPECT_FALSE(t.matches("abcdefghijklmnop-12345"));  // longer
   EXPECT_FALSE(t.matches(""));
 }
 
@@ -32,16 +32,20 @@ TEST(AccessToken, ConstantTimeEqualIsEquality) {
 }
 
 TEST(AccessToken, RefusesShortLongAndUnsafeTokens) {
-  EXPECT_NE(nt::message_of([] { web::AccessToken::from_text("short", "--token"); })
-                .find("--token: the access token has 5 characters, at least 16"),
+  EXPECT_NE(nt::message_of([] {
+              web::AccessToken::from_text("short", "--token");
+            }).find("--token: the access token has 5 characters, at least 16"),
             std::string::npos);
-  EXPECT_NE(nt::message_of([] { web::AccessToken::from_text(std::string(300, 'a'), "--token"); })
-                .find("longer than 256"),
+  EXPECT_NE(nt::message_of([] {
+              web::AccessToken::from_text(std::string(300, 'a'), "--token");
+            }).find("longer than 256"),
             std::string::npos);
-  EXPECT_NE(nt::message_of([] { web::AccessToken::from_text("abcdefghijklmnop&x", "--token"); })
-                .find("character 17 of the access token"),
+  EXPECT_NE(nt::message_of([] {
+              web::AccessToken::from_text("abcdefghijklmnop&x", "--token");
+            }).find("character 17 of the access token"),
             std::string::npos);
-  EXPECT_EQ(nt::message_of([] { web::AccessToken::from_text("A-Za-z0-9._~aaaaa", "--token"); }), "");
+  EXPECT_EQ(nt::message_of([] { web::AccessToken::from_text("A-Za-z0-9._~aaaaa", "--token"); }),
+            "");
 }
 
 TEST(AccessToken, ReadsTheFirstLineOfAFile) {
@@ -49,12 +53,14 @@ TEST(AccessToken, ReadsTheFirstLineOfAFile) {
   std::ofstream(dir / "t") << "  0123456789abcdefXYZ \nsecond line\n";
   EXPECT_TRUE(web::AccessToken::from_file((dir / "t").string()).matches("0123456789abcdefXYZ"));
   const std::string missing = (dir / "missing").string();
-  EXPECT_NE(nt::message_of([&] { web::AccessToken::from_file(missing); })
-                .find("--token-file " + missing + ": cannot be read"),
+  EXPECT_NE(nt::message_of([&] {
+              web::AccessToken::from_file(missing);
+            }).find("--token-file " + missing + ": cannot be read"),
             std::string::npos);
   std::ofstream(dir / "empty") << "\n";
-  EXPECT_NE(nt::message_of([&] { web::AccessToken::from_file((dir / "empty").string()); })
-                .find("empty: the access token has 0 characters"),
+  EXPECT_NE(nt::message_of([&] {
+              web::AccessToken::from_file((dir / "empty").string());
+            }).find("empty: the access token has 0 characters"),
             std::string::npos);
 }
 

@@ -11,7 +11,8 @@ using std::chrono::milliseconds;
 
 namespace {
 
-web::FramePtr frame(std::uint16_t mesh, std::uint32_t generation, std::uint64_t serial, bool full = true) {
+web::FramePtr frame(std::uint16_t mesh, std::uint32_t generation, std::uint64_t serial,
+                    bool full = true) {
   auto f = std::make_shared<web::Frame>();
   f->mesh_index = mesh;
   f->generation = generation;
@@ -33,7 +34,8 @@ web::TopologyPtr topology(std::uint32_t generation) {
 
 TEST(ClientOutbox, LatestFrameWinsPerMesh) {
   web::ClientOutbox box(1, "peer");
-  for (std::uint64_t i = 1; i <= 1000; ++i) box.put_frame(frame(static_cast<std::uint16_t>(i % 2), 1, i));
+  for (std::uint64_t i = 1; i <= 1000; ++i)
+    box.put_frame(frame(static_cast<std::uint16_t>(i % 2), 1, i));
   web::ClientOutbox::Pending p;
   ASSERT_TRUE(box.take(p, milliseconds(0)));
   ASSERT_EQ(p.frames.size(), 2U);  // one per mesh, however many were put

@@ -117,7 +117,8 @@ class HeadlessChromium {
       common::Json m = next_message(left);
       if (m.is_null()) continue;
       if (m.contains("id") && m["id"] == id) {
-        if (m.contains("error")) throw std::runtime_error("Chromium: " + method + ": " + m["error"].dump());
+        if (m.contains("error"))
+          throw std::runtime_error("Chromium: " + method + ": " + m["error"].dump());
         return m["result"];
       }
       if (m.value("method", "") == "Runtime.exceptionThrown")
@@ -131,19 +132,23 @@ class HeadlessChromium {
     const std::string session =
         call("Target.attachToTarget", {{"targetId", target}, {"flatten", true}})["sessionId"];
     call("Emulation.setDeviceMetricsOverride",
-         {{"width", width_}, {"height", height_}, {"deviceScaleFactor", 1}, {"mobile", false}}, session);
+         {{"width", width_}, {"height", height_}, {"deviceScaleFactor", 1}, {"mobile", false}},
+         session);
     call("Runtime.enable", common::Json::object(), session);
     call("Page.navigate", {{"url", url}}, session);
     return session;
   }
 
   // The value of a JavaScript expression in the page (promises awaited); throws when it throws.
-  common::Json evaluate(const std::string& session, const std::string& expression, double timeout_s = 20) {
-    const common::Json r = call("Runtime.evaluate",
-                                {{"expression", expression}, {"returnByValue", true}, {"awaitPromise", true}},
-                                session, timeout_s);
+  common::Json evaluate(const std::string& session, const std::string& expression,
+                        double timeout_s = 20) {
+    const common::Json r =
+        call("Runtime.evaluate",
+             {{"expression", expression}, {"returnByValue", true}, {"awaitPromise", true}}, session,
+             timeout_s);
     if (r.contains("exceptionDetails"))
-      throw std::runtime_error("page: " + expression.substr(0, 80) + ": " + r["exceptionDetails"].dump());
+      throw std::runtime_error("page: " + expression.substr(0, 80) + ": " +
+                               r["exceptionDetails"].dump());
     return r["result"].value("value", common::Json());
   }
 

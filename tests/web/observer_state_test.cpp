@@ -58,7 +58,7 @@ TEST(ObserverState, TopologyIsJsonThenOneGeometryPerMeshById) {
   std::memcpy(&generation, &g[12], 4);
   std::memcpy(&x3, &g[web::kGeometryHeaderBytes + 36], 4);  // vertex 3
   std::memcpy(&y3, &g[web::kGeometryHeaderBytes + 40], 4);
-  std::memcpy(&last_id, &g[g.size() - 4], 4);               // last id of the last triangle
+  std::memcpy(&last_id, &g[g.size() - 4], 4);  // last id of the last triangle
   EXPECT_EQ(index, 1);
   EXPECT_EQ(generation, 2U);
   EXPECT_FLOAT_EQ(x3, static_cast<float>(wt::strip_vertex(3)[0]));
@@ -87,7 +87,8 @@ TEST(ObserverState, FramesFullThenDeltasCarryTheirKeyframe) {
   EXPECT_EQ(delta->base, full);
   EXPECT_EQ(delta->full_serial, full->full_serial);
   EXPECT_EQ(delta->message.bytes.size(), web::kFrameHeaderBytes + 2 * 3 * m.vertices);
-  const web::FrameHeader h = web::parse_frame_header(delta->message.bytes.data(), delta->message.bytes.size());
+  const web::FrameHeader h =
+      web::parse_frame_header(delta->message.bytes.data(), delta->message.bytes.size());
   EXPECT_EQ(h.encoding, web::kEncodingDelta);
   EXPECT_EQ(h.frame, 1U);
   EXPECT_EQ(h.base_frame, 0U);
@@ -157,13 +158,15 @@ TEST(ObserverState, MalformedSamplesAreNamedAndIgnored) {
   d->vertex_count = m.vertices + 1;
   d->frame = 7;
   EXPECT_FALSE(s.ingest_deformation(*d));
-  EXPECT_NE(warnings.back().find("Deformation 'brain' frame 7: vertex_count 11, the topology has 10"),
-            std::string::npos);
+  EXPECT_NE(
+      warnings.back().find("Deformation 'brain' frame 7: vertex_count 11, the topology has 10"),
+      std::string::npos);
   d->vertex_count = m.vertices;
   const std::int32_t seven = 7;  // an encoding this bridge does not know
   std::memcpy(&d->encoding, &seven, sizeof seven);
   EXPECT_FALSE(s.ingest_deformation(*d));
-  EXPECT_NE(warnings.back().find("Deformation 'brain' frame 7: unknown encoding 7"), std::string::npos);
+  EXPECT_NE(warnings.back().find("Deformation 'brain' frame 7: unknown encoding 7"),
+            std::string::npos);
   d->encoding = neurosim_ENCODING_FULL;
   std::vector<float> u(3 * m.vertices, 0.0F);
   u[4] = std::nanf("");
@@ -219,6 +222,8 @@ TEST(ObserverState, StationsAndStatusMessages) {
   st->tier_update_rate_hz = 44.5;
   st->step_rate_measured_hz = 999;
   st->step_time_p50_us = std::nan("");  // before the first steps
+  st->max_strain = 0.14;
+  st->expected_force_error = -1;  // unknown
   ASSERT_TRUE(s.ingest_status(*st));
   web::BridgeRates r;
   r.deformation_hz = 30;
@@ -231,6 +236,8 @@ TEST(ObserverState, StationsAndStatusMessages) {
   EXPECT_EQ(j["server"]["scene"], "cube_cylinder");
   EXPECT_EQ(j["server"]["tier_update_rate_hz"], 44.5);
   EXPECT_TRUE(j["server"]["step_time_p50_us"].is_null());
+  EXPECT_EQ(j["server"]["max_strain"], 0.14);
+  EXPECT_EQ(j["server"]["expected_force_error"], -1.0);
   EXPECT_EQ(j["bridge"]["clients"], 2);
   EXPECT_EQ(j["bridge"]["deformation_hz"], 30.0);
   s.set_server_alive(false);

@@ -37,7 +37,8 @@ TEST(PageFiles, TheBuiltBundleIsCompleteAndSelfContained) {
 TEST(PageFiles, MissingFileIsNamed) {
   const auto dir = nt::temp_dir("web_page");
   std::ofstream(dir / "index.html") << "x";
-  EXPECT_NE(nt::message_of([&] { web::PageFiles::load(dir.string()); })
-                .find("page file " + (dir / "app.js").string() + " missing"),
+  EXPECT_NE(nt::message_of([&] {
+              web::PageFiles::load(dir.string());
+            }).find("page file " + (dir / "app.js").string() + " missing"),
             std::string::npos);
 }

@@ -71,7 +71,8 @@ std::string diff_expression(const std::string& a, const std::string& b, double c
          "    if (near) { ++inside; if (changed) ++changedInside; }"
          "    else { ++outside; if (changed) ++changedOutside; } }"
          "  return { width: w, height: h, inside, outside, changedInside, changedOutside };"
-         "})(" + Json(a).dump() + ", " + Json(b).dump() + ", " + std::to_string(cx) + ", " +
+         "})(" +
+         Json(a).dump() + ", " + Json(b).dump() + ", " + std::to_string(cx) + ", " +
          std::to_string(cy) + ", " + std::to_string(r) + ", " + std::to_string(threshold) + ", " +
          std::to_string(shift) + ")";
 }
@@ -84,10 +85,11 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
   std::cout << "logs and screenshots in " << dir << "\n";
   auto server = std::make_unique<wt::Child>(server_args(prefix), dir / "server.log");
   wt::BridgeProcess bridge(prefix, {}, dir / "web.log", 150);
-  wt::HeadlessChromium browser(NEUROSIM_CHROMIUM, dir / "profile", dir / "chromium.log", kWidth, kHeight);
-  const std::string session = browser.open("http://127.0.0.1:" + std::to_string(bridge.port()) +
-                                           "/?token=" + wt::kToken +
-                                           "&force_unit=5&displacement_scale_mm=2");
+  wt::HeadlessChromium browser(NEUROSIM_CHROMIUM, dir / "profile", dir / "chromium.log", kWidth,
+                               kHeight);
+  const std::string session =
+      browser.open("http://127.0.0.1:" + std::to_string(bridge.port()) + "/?token=" + wt::kToken +
+                   "&force_unit=5&displacement_scale_mm=2");
   const auto state = [&] {
     return browser.evaluate(session, "window.neurosimWeb ? window.neurosimWeb.state() : null");
   };
@@ -100,7 +102,8 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
     }
     ADD_FAILURE() << "page state not reached; last: " << s.dump() << "\nserver log:\n"
-                  << server->log() << "\nbridge log:\n" << bridge.child().log();
+                  << server->log() << "\nbridge log:\n"
+                  << bridge.child().log();
     return Json();
   };
 
@@ -133,12 +136,12 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
 
   // The station presses (4 s cycle: down in 1.5 s, held 0.5 s, up in 1.5 s; the tip's centre from
   // 9 to 1 mm outside the face, its 3 mm sphere 2 mm into it at the deepest).
-  wt::Child haptic({(nt::bin_dir() / "neurosim-haptic").string(), "--station", "web-test",
-                    "--device", "script:press", "--duration", "8", "--scene",
-                    (nt::source_dir() / "scenes/cube_cylinder.scene").string(), "--origin",
-                    "0.105,0.05,0.05", "--up", "1,0,0", "--topic-prefix", prefix, "--wait-server",
-                    "30", "--no-rt"},
-                   dir / "haptic.log");
+  wt::Child haptic(
+      {(nt::bin_dir() / "neurosim-haptic").string(), "--station", "web-test", "--device",
+       "script:press", "--duration", "8", "--scene",
+       (nt::source_dir() / "scenes/cube_cylinder.scene").string(), "--origin", "0.105,0.05,0.05",
+       "--up", "1,0,0", "--topic-prefix", prefix, "--wait-server", "30", "--no-rt"},
+      dir / "haptic.log");
   const auto force_of = [](const Json& j) {
     for (const auto& st : j["stations"])
       if (st["id"] == "web-test") return st["force_magnitude_n"].get<double>();
@@ -158,12 +161,14 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
-  ASSERT_TRUE(pressed) << "no force seen; haptic log:\n" << haptic.log() << "\nlast state: " << s.dump();
+  ASSERT_TRUE(pressed) << "no force seen; haptic log:\n"
+                       << haptic.log() << "\nlast state: " << s.dump();
   // Paused (the panel's button) the view holds the pressed state while the screenshots are taken
   // (software rendering makes each take a while; the press lasts half a second).
   browser.evaluate(session, "window.neurosimWeb.setPaused(true)");
   const Json pressed_state = state();
-  const std::string panel = browser.evaluate(session, "document.getElementById('stations').textContent");
+  const std::string panel =
+      browser.evaluate(session, "document.getElementById('stations').textContent");
   const Json u_stats = browser.evaluate(session, "window.neurosimWeb.displacementStats(0)");
   // The plot's line (the first station's colour, #4fc3f7) in the upper half of the plot.
   const int plot_pixels = browser.evaluate(
@@ -202,8 +207,9 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
   ASSERT_TRUE(cx > 0 && cx < rw && cy > 0 && cy < rh) << p.dump();
   const double radius = 70;  // px: the tip and the dent around it
   const auto diff = [&](const std::string& a, const std::string& b) {
-    return browser.evaluate(session, diff_expression("data:image/png;base64," + a,
-                                                     "data:image/png;base64," + b, cx, cy, radius, 24, 2));
+    return browser.evaluate(
+        session, diff_expression("data:image/png;base64," + a, "data:image/png;base64," + b, cx, cy,
+                                 radius, 24, 2));
   };
   const Json d_tool = diff(at_rest, with_tool);
   const Json d_dent = diff(at_rest, dent_only);
@@ -216,12 +222,14 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
   // shaft leaves the circle).
   EXPECT_GT(density(d_tool, "changedInside", "inside"), 0.04) << d_tool.dump();
   EXPECT_GT(density(d_tool, "changedInside", "inside"),
-            5 * density(d_tool, "changedOutside", "outside")) << d_tool.dump();
+            5 * density(d_tool, "changedOutside", "outside"))
+      << d_tool.dump();
   // Without the tool the dent itself shows (moved and tinted surface), and nothing else does.
   EXPECT_GE(d_dent["changedInside"].get<double>(), 40) << d_dent.dump();
   EXPECT_LT(density(d_dent, "changedOutside", "outside"), 0.001) << d_dent.dump();
   EXPECT_GT(density(d_dent, "changedInside", "inside"),
-            20 * density(d_dent, "changedOutside", "outside")) << d_dent.dump();
+            20 * density(d_dent, "changedOutside", "outside"))
+      << d_dent.dump();
 
   // The server goes away: the page keeps the last state and says so; a new server is picked up.
   haptic.wait(15);

@@ -39,8 +39,9 @@ TEST(Protocol, FullFrameLayout) {
 
 TEST(Protocol, HeaderParsingRefusesWrongSizesAndKinds) {
   const std::string tiny(10, '\0');
-  EXPECT_NE(nt::message_of([&] { web::parse_frame_header(tiny.data(), tiny.size()); })
-                .find("not a deformation frame message (10 bytes)"),
+  EXPECT_NE(nt::message_of([&] {
+              web::parse_frame_header(tiny.data(), tiny.size());
+            }).find("not a deformation frame message (10 bytes)"),
             std::string::npos);
   wire::Sample<neurosim_Deformation> d;
   d->encoding = neurosim_ENCODING_QUANTIZED_DELTA;
@@ -50,7 +51,8 @@ TEST(Protocol, HeaderParsingRefusesWrongSizesAndKinds) {
   std::string bytes = web::frame_message(*d, 0, 1).bytes;
   EXPECT_EQ(bytes.size(), web::kFrameHeaderBytes + 18);
   bytes.pop_back();
-  EXPECT_NE(nt::message_of([&] { web::parse_frame_header(bytes.data(), bytes.size()); })
-                .find("does not match its header (encoding 1, 3 vertices)"),
+  EXPECT_NE(nt::message_of([&] {
+              web::parse_frame_header(bytes.data(), bytes.size());
+            }).find("does not match its header (encoding 1, 3 vertices)"),
             std::string::npos);
 }

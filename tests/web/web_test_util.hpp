@@ -6,8 +6,8 @@
 
 #include "common/clock.hpp"
 #include "common/json.hpp"
-#include "idl/wire/deformation_codec.hpp"
 #include "idl/wire/dds.hpp"
+#include "idl/wire/deformation_codec.hpp"
 #include "test_support.hpp"
 #include "web/protocol.hpp"
 
@@ -82,7 +82,8 @@ inline TestMesh strip_mesh(const std::string& id, std::size_t n) {
 }
 
 // A smooth displacement field of the given amplitude (m), 3 per vertex.
-inline std::vector<double> displacement(std::size_t vertices, double amplitude_m, double phase = 0) {
+inline std::vector<double> displacement(std::size_t vertices, double amplitude_m,
+                                        double phase = 0) {
   std::vector<double> u(3 * vertices);
   for (std::size_t i = 0; i < u.size(); ++i)
     u[i] = amplitude_m * std::sin(0.37 * static_cast<double>(i) + phase);
@@ -319,9 +320,9 @@ inline HttpResponse http_request(int port, const std::string& method, const std:
   HttpResponse r;
   const int fd = connect_loopback(port);
   if (fd < 0) return r;
-  const std::string req = method + " " + target + " HTTP/1.1\r\nHost: 127.0.0.1:" +
-                          std::to_string(port) + "\r\nConnection: close\r\n" + extra_headers +
-                          "\r\n";
+  const std::string req = method + " " + target +
+                          " HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(port) +
+                          "\r\nConnection: close\r\n" + extra_headers + "\r\n";
   if (::send(fd, req.data(), req.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(req.size())) {
     ::close(fd);
     return r;
@@ -343,7 +344,8 @@ inline HttpResponse http_request(int port, const std::string& method, const std:
 }
 
 inline std::string upgrade_headers() {
-  return "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+  return "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: "
+         "dGhlIHNhbXBsZSBub25jZQ==\r\n"
          "Sec-WebSocket-Version: 13\r\n";
 }
 
@@ -446,7 +448,8 @@ class WsClient {
     std::lock_guard<std::mutex> lk(self->m_);
     if (op == MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) {
       if (len >= 2)
-        self->close_code_ = (static_cast<unsigned char>(data[0]) << 8) | static_cast<unsigned char>(data[1]);
+        self->close_code_ =
+            (static_cast<unsigned char>(data[0]) << 8) | static_cast<unsigned char>(data[1]);
       if (len > 2) self->close_reason_.assign(data + 2, len - 2);
       return 0;
     }
