@@ -22,6 +22,7 @@
 // error table the server reads (--table, default DIR/force_error.csv; the committed one is
 // share/accuracy/force_error.csv).
 #include "common/cli.hpp"
+#include "common/stats.hpp"
 #include "idl/wire/recording_io.hpp"
 #include "server/cli/replay.hpp"
 #include "server/fem/calculix.hpp"
@@ -104,15 +105,6 @@ struct Reference {
   Eigen::VectorXd host_u_m;
   Vec3 force_n{Vec3::Zero()};
 };
-
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const double pos = q * static_cast<double>(v.size() - 1);
-  const std::size_t i = static_cast<std::size_t>(pos);
-  const double f = pos - static_cast<double>(i);
-  return i + 1 < v.size() ? v[i] * (1 - f) + v[i + 1] * f : v[i];
-}
 
 double smoothstep(double s) {
   s = std::clamp(s, 0.0, 1.0);
@@ -497,7 +489,8 @@ int main(int argc, char** argv) {
             }
             Row row{sc.name, neurosim::fem::tier_name(cfg.tier),
                     cfg.iterations ? "iterative" : "exact", res.host_vertices, cfg.iterations,
-                    presses[pi].label, percentile(r.step_us, 0.5), percentile(r.step_us, 0.99),
+                    presses[pi].label, neurosim::common::percentile(r.step_us, 0.5),
+                    neurosim::common::percentile(r.step_us, 0.99),
                     update_hz, de, fe, r.max_strain};
             char line[512];
             std::snprintf(line, sizeof line, "%s,%s,%d,%s,%d,%s,%.1f,%.1f,%.1f,%.4g,%.4g,%.4g",

@@ -151,7 +151,6 @@ struct Server::Impl {
   // Field worker handshake: the step thread posts a job only when the worker is idle.
   std::atomic<bool> field_busy{false};
   interaction::FieldSnapshot field_snapshot;  // written by the step thread while the field thread is idle
-  bool field_job_frames{false};   // write Deformation frames (a viewer matched)
   bool field_job_strain{false};   // measure the largest strain
   std::uint64_t field_job_step{0};
   std::int64_t field_job_time_ns{0};
@@ -217,7 +216,7 @@ struct Server::Impl {
   void one_step();
   void retire(int i);
   void publish_deformation(std::uint64_t step, std::int64_t now_ns);
-  void encode_and_write(std::uint64_t step, std::int64_t now_ns, bool frames, bool strain);
+  void encode_and_write(std::uint64_t step, std::int64_t now_ns, bool strain);
   void field_loop();
   void publish_status(std::int64_t now_mono);
   void report_accuracy(neurosim_SimStatus& st);
@@ -661,16 +660,14 @@ void Server::Impl::publish_deformation(std::uint64_t step, std::int64_t now_ns) 
     std::lock_guard<std::mutex> lk(field_mutex);
     field_job_step = step;
     field_job_time_ns = now_ns;
-    field_job_frames = true;
     field_job_strain = strain;
     field_job = true;
   }
   field_cv.notify_one();
 }
 
-void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns, bool frames,
-                                    bool strain) {
-  if (frames && full_frame_pending.exchange(false))
+void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns, bool strain) {
+  if (full_frame_pending.exchange(false))
     for (auto& e : encoders) e.force_full_next();
   double max_strain = 0.0;
   for (int m = 0; m < sim->num_meshes(); ++m) {
@@ -680,7 +677,6 @@ void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns, boo
     if (strain && sim->mesh_active(m)) {
       max_strain = std::max(max_strain, fem::max_principal_strain(sim->mesh(m), u).max_strain);
     }
-    if (!frames) continue;
     auto& out = *deform_out[static_cast<std::size_t>(m)];
     encoders[static_cast<std::size_t>(m)].encode(u.data(), static_cast<std::size_t>(u.size()), step,
                                                  now_ns, out);
@@ -697,7 +693,7 @@ void Server::Impl::field_loop() {
     for (;;) {
       std::uint64_t step = 0;
       std::int64_t t = 0;
-      bool frames = false, strain = false;
+      bool strain = false;
       {
         std::unique_lock<std::mutex> lk(field_mutex);
         field_cv.wait(lk, [&] { return field_job || !run.load(); });
@@ -705,10 +701,9 @@ void Server::Impl::field_loop() {
         field_job = false;
         step = field_job_step;
         t = field_job_time_ns;
-        frames = field_job_frames;
         strain = field_job_strain;
       }
-      encode_and_write(step, t, frames, strain);
+      encode_and_write(step, t, strain);
       field_busy.store(false, std::memory_order_release);
     }
   } catch (const std::exception& e) {
