@@ -2,12 +2,15 @@
 // once at normal priority and once with SCHED_FIFO (where permitted), printing the loop summary.
 //
 //   haptic_bench [--seconds S] [--modes normal,fifo] [--server PATH --scene FILE] [--csv]
-//                [--device SPEC] [--origin X,Y,Z] [--up X,Y,Z]
+//                [--device SPEC] [--origin X,Y,Z] [--up X,Y,Z] [--spin-us 0,50] [--load N]
+// --spin-us: each mode once per value, side by side (0: sleep to the deadline, the old loop;
+// 50: sleep, then spin the last 50 µs). --load N: N busy threads run beside the loop.
 // Without --server, the ContactModels come from the test-only in-process fake server (a DDS
 // thread answering with a half-space spring): the loop, DDS and scheduling are real, the physics
 // is not. With --server, neurosim-server is started on --scene with a private topic prefix.
 // CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml).
 #include "common/cli.hpp"
+#include "cpu_load.hpp"
 #include "fake_dds_server.hpp"
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
@@ -63,6 +66,13 @@ int main(int argc, char** argv) {
       neurosim::cli::add_triple(cli.app(), "--origin", origin, "as neurosim-haptic");
   auto* up_opt = neurosim::cli::add_triple(cli.app(), "--up", up, "as neurosim-haptic");
   cli->add_flag("--csv", csv, "print CSV");
+  std::string spins = "0,50";
+  int load = 0;
+  cli->add_option("--spin-us", spins, "comma-separated spin times to compare, unit us")
+      ->capture_default_str();
+  cli->add_option("--load", load, "busy threads beside the loop (CPU starvation)")
+      ->check(CLI::Range(0, 64))
+      ->capture_default_str();
   cli.check([&] {
     if (!server.empty() && scene.empty())
       throw neurosim::cli::UsageError("--server needs --scene");
@@ -72,14 +82,27 @@ int main(int argc, char** argv) {
     base.workspace_origin_m = Eigen::Vector3d(origin[0], origin[1], origin[2]);
   if (up_opt->count() > 0) base.workspace_up = Eigen::Vector3d(up[0], up[1], up[2]);
   std::printf(csv ? "mode,server,samples,period_p50_us,period_p99_us,period_max_us,misses_over_1ms,"
-                    "model_age_p99_ms,max_force_step_n,sched\n"
-                  : "%-7s %-6s %8s %9s %9s %10s %8s %12s %10s %s\n",
+                    "model_age_p99_ms,max_force_step_n,sched,spin_us,load\n"
+                  : "%-7s %-6s %8s %9s %9s %10s %8s %12s %10s %-10s %7s %4s\n",
               "mode", "server", "samples", "p50_us", "p99_us", "max_us", "misses", "age_p99_ms",
-              "step_N", "sched");
-  std::stringstream ms(modes);
-  std::string mode;
+              "step_N", "sched", "spin_us", "load");
+  std::vector<std::pair<std::string, double>> runs;  // (mode, spin_us), side by side
+  {
+    std::stringstream ms(modes);
+    std::string m;
+    while (std::getline(ms, m, ',')) {
+      if (m != "normal" && m != "fifo") {
+        std::cerr << "haptic_bench: unknown mode '" << m << "' (normal, fifo)\n";
+        return 2;
+      }
+      std::stringstream ss(spins);
+      std::string v;
+      while (std::getline(ss, v, ',')) runs.emplace_back(m, std::stod(v));
+    }
+  }
+  const neurosim::bench::CpuLoad cpu_load(load);
   int run = 0;
-  while (std::getline(ms, mode, ',')) {
+  for (const auto& [mode, spin_us] : runs) {
     try {
       const std::string prefix =
           "hbench" + std::to_string(::getpid()) + "_" + std::to_string(run++) + "_";
@@ -98,6 +121,7 @@ int main(int argc, char** argv) {
       auto device = nh::make_device(spec);
       nh::LoopConfig cfg = base;
       cfg.realtime_priority = mode == "fifo";
+      cfg.spin_us = spin_us;
       cfg.trace_capacity =
           static_cast<std::size_t>(seconds * 1000) + 10;  // where the longest period was
       nh::HapticLoop loop(cfg, *device, &link, nullptr);
@@ -110,16 +134,16 @@ int main(int argc, char** argv) {
       const char* sched = rt.sched_fifo ? "SCHED_FIFO" : "normal";
       const char* srv = server.empty() ? "fake" : "real";
       if (csv)
-        std::printf("%s,%s,%llu,%.1f,%.1f,%.1f,%llu,%.3f,%.4f,%s\n", mode.c_str(), srv,
+        std::printf("%s,%s,%llu,%.1f,%.1f,%.1f,%llu,%.3f,%.4f,%s,%.0f,%d\n", mode.c_str(), srv,
                     static_cast<unsigned long long>(s.samples), s.period_p50_us, s.period_p99_us,
                     s.period_max_us, static_cast<unsigned long long>(s.misses_over_1ms),
-                    s.model_age_p99_ms, s.max_force_step_n, sched);
+                    s.model_age_p99_ms, s.max_force_step_n, sched, spin_us, load);
       else
-        std::printf("%-7s %-6s %8llu %9.1f %9.1f %10.1f %8llu %12.3f %10.4f %s\n", mode.c_str(),
-                    srv, static_cast<unsigned long long>(s.samples), s.period_p50_us,
-                    s.period_p99_us, s.period_max_us,
+        std::printf("%-7s %-6s %8llu %9.1f %9.1f %10.1f %8llu %12.3f %10.4f %-10s %7.0f %4d\n",
+                    mode.c_str(), srv, static_cast<unsigned long long>(s.samples),
+                    s.period_p50_us, s.period_p99_us, s.period_max_us,
                     static_cast<unsigned long long>(s.misses_over_1ms), s.model_age_p99_ms,
-                    s.max_force_step_n, sched);
+                    s.max_force_step_n, sched, spin_us, load);
       if (!rt.warning.empty()) std::fprintf(stderr, "haptic_bench: %s\n", rt.warning.c_str());
       const auto& tr = loop.trace();
       std::size_t worst = 0;

@@ -5,8 +5,9 @@
 //
 //   latency_bench --stations N --seconds S [--csv] [--scene FILE] [--server EXE] [--warmup S]
 //                 [--viewer]   also read Deformation, so the server runs its full-field solves
+//                 [--load N]   N busy threads beside server and stations (CPU starvation)
 //
-// CSV: stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct
+// CSV: stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load
 //   samples        ToolStates answered during the measurement (after the warm-up)
 //   lost           ContactModels the server wrote for a station that the station never read
 //                  (gaps in ContactModel.server_step), all stations
@@ -14,6 +15,7 @@
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "common/stats.hpp"
+#include "cpu_load.hpp"
 #include "idl/wire/dds.hpp"
 
 #include <fcntl.h>
@@ -116,7 +118,7 @@ void run_station(int domain, int k, int n, const Window& window, std::atomic<int
   wire::Topic<neurosim_ContactModel> mt(pp);
   // Only this station's models reach its reader (a haptic client reads its own key).
   wire::check(dds_set_topic_filter_and_arg(mt.handle(), own_station, id_arg.data()), "set topic filter");
-  wire::Writer<neurosim_ToolState> w(pp, tt);
+  wire::Writer<neurosim_ToolState> w(pp, tt, id);  // in the station's partition
   // History 16 instead of the profile's 1: "lost" must count models the transport lost, not
   // ones a briefly descheduled station overwrote in its own cache (e.g. two steps back to back
   // after a late server wake-up). A haptic client keeps 1: it only needs the newest.
@@ -199,6 +201,10 @@ int main(int argc, char** argv) {
   cli->add_flag("--csv", o.csv, "print CSV");
   cli->add_flag("--viewer", o.viewer,
                 "also subscribe to Deformation (full-field solves run)");
+  int load = 0;
+  cli->add_option("--load", load, "busy threads beside the measured processes")
+      ->check(neurosim::cli::in_range(0, 64))
+      ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;
   o.scene = scene;
   o.server = server;
@@ -236,6 +242,7 @@ int main(int argc, char** argv) {
   };
 
   int rc = 0;
+  const neurosim::bench::CpuLoad cpu_load(load);  // after the fork: the server starts unloaded
   try {
     // Ready = the server published SimStatus.
     wire::ParticipantOptions po;
@@ -314,12 +321,12 @@ int main(int argc, char** argv) {
     const neurosim::common::Percentiles pc = neurosim::common::percentiles(all);
     const double mx = pc.max, p50 = pc.p50, p99 = pc.p99;
     if (o.csv) {
-      std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct\n");
-      std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f\n", o.stations, samples, p50, p99, mx,
-                  static_cast<unsigned long long>(lost), cpu_pct);
+      std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load\n");
+      std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f,%d\n", o.stations, samples, p50, p99, mx,
+                  static_cast<unsigned long long>(lost), cpu_pct, load);
     } else {
-      std::printf("latency_bench: %d station(s), %.1f s on %s (server %s, DDS domain %d)\n", o.stations, o.seconds,
-                  o.scene.c_str(), o.server.c_str(), domain);
+      std::printf("latency_bench: %d station(s), %.1f s on %s (server %s, DDS domain %d), %d busy threads\n",
+                  o.stations, o.seconds, o.scene.c_str(), o.server.c_str(), domain, load);
       std::printf("  ToolStates sent %llu, answered %zu; latency p50 %.1f us, p99 %.1f us, max %.1f us\n",
                   static_cast<unsigned long long>(sent), samples, p50, p99, mx);
       std::printf("  ContactModels lost %llu; server CPU %.1f %% of one core\n", static_cast<unsigned long long>(lost),

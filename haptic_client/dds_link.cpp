@@ -8,10 +8,14 @@
 #include <semaphore.h>
 #include <time.h>
 
+#include <array>
+#include <cstring>
+
 namespace neurosim::haptic {
 
 namespace {
 using common::realtime_ns;
+using common::monotonic_ns;
 constexpr dds_attach_t kModels = 1, kStatus = 2, kStatusLiveliness = 3;
 }  // namespace
 
@@ -26,12 +30,13 @@ struct DdsLink::Impl {
   wire::Reader<neurosim_SimStatus> status;
   wire::Waitset ws;
   wire::Sample<neurosim_ToolState> sample;
+  std::array<std::uint8_t, 16> own_writer{};  // to recognise this station in SimStatus.refused
   sem_t pending;  // posted by publish() (async-signal-safe, no lock in the loop thread)
 
   explicit Impl(const DdsLinkOptions& o)
       : opt(o),
         tool_topic(pp, wire::topic_name<neurosim_ToolState>(o.topic_prefix)),
-        tools(pp, tool_topic),
+        tools(pp, tool_topic, o.station_id),  // in partition neurosim.station.<station_id>
         model_topic(pp, wire::topic_name<neurosim_ContactModel>(o.topic_prefix)),
         models(pp, model_topic),
         status_topic(pp, wire::topic_name<neurosim_SimStatus>(o.topic_prefix)),
@@ -39,6 +44,7 @@ struct DdsLink::Impl {
         ws(pp) {
     wire::set_string(sample->station_id, o.station_id, "station_id");
     wire::set_string(sample->tool_id, o.tool_id, "tool_id");
+    own_writer = tools.guid();
     ws.attach_data(models, kModels);
     ws.attach_data(status, kStatus);
     ws.attach_liveliness(status, kStatusLiveliness);
@@ -104,7 +110,29 @@ DdsLinkCounters DdsLink::counters() const {
   c.server_lost = lost_.load();
   c.server_seen = seen_.load();
   c.write_errors = write_errors_.load();
+  c.models_skipped = skipped_.load();
   return c;
+}
+
+const char* describe(Refusal r) {
+  switch (r) {
+    case Refusal::None: return "not refused";
+    case Refusal::MaxStations:
+      return "the server's station slots are all taken (max_stations); waiting for a free slot";
+    case Refusal::ParticipantLimit:
+      return "this DDS participant already holds the server's maximum of stations per participant";
+    case Refusal::Identity:
+      return "the station id is held by another writer (another neurosim-haptic with the same "
+             "--station?), or this writer's partition does not claim it";
+  }
+  return "unknown";
+}
+
+Refusal DdsLink::refusal() const {
+  const auto r = static_cast<Refusal>(refusal_.load(std::memory_order_acquire));
+  if (r == Refusal::None) return r;
+  if (realtime_ns() - refusal_time_ns_.load(std::memory_order_relaxed) > 2000000000) return Refusal::None;
+  return r;
 }
 
 bool DdsLink::wait_for_server(double timeout_s) const {
@@ -120,6 +148,10 @@ void DdsLink::run() {
   }
   ContactModelData m;
   bool had_writer = false;
+  // Liveliness lost but a model arrived within this time: the server is alive (unit ns).
+  constexpr std::int64_t kModelProvesLifeNs = 100'000'000;
+  std::int64_t last_model_ns = 0;
+  std::uint64_t last_server_step = 0;
   while (!stop_.load()) {
     const auto r = im.ws.wait(DDS_MSECS(20));
     if (stop_.load()) break;
@@ -136,19 +168,46 @@ void DdsLink::run() {
       for (int i = 0; i < 9; ++i) m.k_n_per_m(i / 3, i % 3) = c->stiffness_n_per_m[i];
       m.in_contact = c->in_contact;
       m.validity_radius_m = c->validity_radius_m;
+      // Gaps in the server's step count (a restarted server starts again from 1: no gap).
+      if (last_server_step > 0 && c->server_step > last_server_step + 1)
+        skipped_.fetch_add(c->server_step - last_server_step - 1);
+      last_server_step = c->server_step;
       m.server_step = c->server_step;
       if (c->tool_sample_rejected) rejected_.fetch_add(1);
       models_.fetch_add(1);
       slot_.publish(m);
+      // A fresh model is itself proof of life: after a stall (SIGSTOP, a frozen machine) the
+      // server's liveliness comes back up to a lease later, the force need not wait for it.
+      last_model_ns = monotonic_ns();
+      if (had_writer && !alive_.load()) {
+        alive_.store(true, std::memory_order_release);
+        seen_.fetch_add(1);
+      }
     }
-    if (r.has(kStatus)) im.status.take();  // content not needed here: liveliness tells us
+    if (r.has(kStatus)) {
+      // Server health comes from liveliness; the content says whether this station was refused.
+      for (const auto& rx : im.status.take()) {
+        if (!rx.valid()) continue;
+        for (const auto& f : wire::view(rx.data.refused)) {
+          if (im.opt.station_id != f.station_id ||
+              std::memcmp(f.writer_guid, im.own_writer.data(), 16) != 0)
+            continue;
+          const Refusal why = f.reason == neurosim_REFUSED_MAX_STATIONS       ? Refusal::MaxStations
+                              : f.reason == neurosim_REFUSED_PARTICIPANT_LIMIT ? Refusal::ParticipantLimit
+                                                                               : Refusal::Identity;
+          refusal_time_ns_.store(f.time_ns, std::memory_order_relaxed);
+          refusal_.store(static_cast<int>(why), std::memory_order_release);
+        }
+      }
+    }
     if (r.has(kStatusLiveliness) || r.timed_out()) {
       const wire::Liveliness l = im.status.liveliness();
       if (l.alive_count > 0) {
         if (!had_writer || !alive_.load()) seen_.fetch_add(1);
         had_writer = true;
         alive_.store(true, std::memory_order_release);
-      } else if (had_writer && alive_.load()) {
+      } else if (had_writer && alive_.load() &&
+                 monotonic_ns() - last_model_ns > kModelProvesLifeNs) {
         alive_.store(false, std::memory_order_release);  // server gone: loop zeroes the force
         lost_.fetch_add(1);
       }

@@ -27,12 +27,23 @@ struct DdsLinkOptions {
   int receiver_rt_priority = 60;
 };
 
+// Whether the server refused this station (SimStatus.refused lists this link's own writer).
+// MaxStations is transient (a slot may free up: the server admits the station on a later
+// sample); ParticipantLimit and Identity are not (another writer holds the id, or the
+// participant holds its maximum of stations), and neurosim-haptic exits with status 3.
+enum class Refusal { None, MaxStations, ParticipantLimit, Identity };
+const char* describe(Refusal r);
+inline bool permanent(Refusal r) { return r == Refusal::ParticipantLimit || r == Refusal::Identity; }
+
 struct DdsLinkCounters {
   std::uint64_t models_received = 0;  // for this station
   std::uint64_t models_rejected = 0;  // tool_sample_rejected set by the server
   std::uint64_t server_lost = 0;      // SimStatus writers went from alive to none
   std::uint64_t server_seen = 0;      // SimStatus writers appeared (first time or reconnect)
   std::uint64_t write_errors = 0;     // ToolState writes that failed
+  // Server steps whose ContactModel never reached this station (gaps in server_step between
+  // consecutive models: lost on the network or overwritten in the keep-last-1 reader).
+  std::uint64_t models_skipped = 0;
 };
 
 class DdsLink : public Link {
@@ -49,6 +60,9 @@ class DdsLink : public Link {
   DdsLinkCounters counters() const;
   // Blocks until a ContactModel writer (the server) is matched or the timeout passes.
   bool wait_for_server(double timeout_s) const;
+  // The newest refusal of this station's writer the server published (None: not refused, or
+  // the refusal is older than 2 s: admitted since or gone).
+  Refusal refusal() const;
 
  private:
   void run();
@@ -58,8 +72,11 @@ class DdsLink : public Link {
   common::TripleBuffer<ContactModelData> slot_;
   common::TripleBuffer<ToolSample> outgoing_;
   std::atomic<bool> alive_{true};
+  std::atomic<int> refusal_{0};                  // Refusal
+  std::atomic<std::int64_t> refusal_time_ns_{0};  // server time of that refusal (Unix epoch)
   std::atomic<bool> stop_{false};
-  std::atomic<std::uint64_t> models_{0}, rejected_{0}, lost_{0}, seen_{0}, write_errors_{0};
+  std::atomic<std::uint64_t> models_{0}, rejected_{0}, lost_{0}, seen_{0}, write_errors_{0},
+      skipped_{0};
   std::thread thread_;
   std::thread publisher_;
 };

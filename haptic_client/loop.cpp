@@ -7,6 +7,7 @@
 #include <pthread.h>
 #include <sched.h>
 #include <sys/mman.h>
+#include <sys/prctl.h>
 #include <time.h>
 
 #include <algorithm>
@@ -155,6 +156,14 @@ RealtimeInfo HapticLoop::run_realtime(double duration_s, const std::atomic<bool>
   }
   const double T = cfg_.force.period_s;
   const auto T_ns = static_cast<std::int64_t>(std::llround(T * 1e9));
+  if (!(cfg_.spin_us >= 0) || cfg_.spin_us * 1e3 >= static_cast<double>(T_ns))
+    throw std::invalid_argument("haptic loop: spin_us " + std::to_string(cfg_.spin_us) +
+                                " µs must be in [0, period)");
+  const auto spin_ns = static_cast<std::int64_t>(std::llround(cfg_.spin_us * 1e3));
+  // Normal-priority threads get 50 µs of timer slack by default; the loop wants its wake-up on
+  // time (SCHED_FIFO threads have none anyway). No system call in the loop but the clock.
+  const int old_slack = prctl(PR_GET_TIMERSLACK, 0UL, 0UL, 0UL, 0UL);
+  prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
   std::int64_t deadline = monotonic_ns() + T_ns;
   std::int64_t prev_start = -1;
   for (std::uint64_t k = 0;; ++k) {
@@ -162,8 +171,9 @@ RealtimeInfo HapticLoop::run_realtime(double duration_s, const std::atomic<bool>
     if (duration_s > 0 && t >= duration_s) break;
     if (stop != nullptr && stop->load(std::memory_order_relaxed)) break;
     if (device_.finished(t)) break;
-    common::sleep_until_ns(deadline);
-    const std::int64_t start = monotonic_ns();
+    common::sleep_until_ns(deadline - spin_ns);
+    std::int64_t start = monotonic_ns();
+    while (start < deadline) start = monotonic_ns();  // the last spin_ns: vDSO clock reads only
     const double period = prev_start < 0 ? -1 : 1e-9 * static_cast<double>(start - prev_start);
     prev_start = start;
     tick(realtime_ns(), t, period, 1e-9 * static_cast<double>(start - deadline));
@@ -175,6 +185,7 @@ RealtimeInfo HapticLoop::run_realtime(double duration_s, const std::atomic<bool>
     }
   }
   device_.command(Eigen::Vector3d::Zero());
+  if (old_slack > 0) prctl(PR_SET_TIMERSLACK, static_cast<unsigned long>(old_slack), 0UL, 0UL, 0UL);
   if (info.sched_fifo) pthread_setschedparam(pthread_self(), old_policy, &old_param);
   return info;
 }

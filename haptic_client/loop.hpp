@@ -27,6 +27,11 @@ struct LoopConfig {
   Eigen::Vector3d workspace_up = Eigen::Vector3d::UnitZ();
   bool realtime_priority = true;  // try SCHED_FIFO (warn and continue if not permitted)
   int rt_priority = 80;
+  // The loop sleeps until this long before each deadline, then spins on the clock to it, so a
+  // tick starts within a few µs of its deadline instead of the scheduler's wake-up latency
+  // (tens of µs, more on a busy machine). 0: sleep to the deadline (battery-powered laptops:
+  // spinning costs power). Unit µs, 0 ≤ spin_us < period.
+  double spin_us = 50;
   void (*warn)(const char* message) = nullptr;  // told at once when SCHED_FIFO is refused
   std::size_t trace_capacity = 0;               // ticks kept in trace() (allocated up front)
 };

@@ -3,7 +3,7 @@
 //                   [--record FILE]
 //   extra: [--scene FILE] (haptics factors, scene name) [--tool ID] [--origin X,Y,Z]
 //          [--up X,Y,Z] [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]
-//          [--topic-prefix P] [--trace FILE.csv]
+//          [--topic-prefix P] [--trace FILE.csv] [--spin-us US]
 // SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract) | hand:SCRIPT
 // --help lists the options, --version prints the version; usage errors exit 2.
 #include "common/cli.hpp"
@@ -16,6 +16,7 @@
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -25,6 +26,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 namespace nh = neurosim::haptic;
 
@@ -64,6 +66,11 @@ int main(int argc, char** argv) {
   cli->add_option("--label", label, "recording label");
   cli->add_flag("--no-server", no_server, "run without DDS (no force from a server)");
   cli->add_flag("--no-rt", no_rt, "no SCHED_FIFO for the loop and the DDS threads");
+  cli->add_option("--spin-us", cfg.spin_us,
+                  "spin on the clock this long before each tick, unit us (0: off, for laptops on "
+                  "battery)")
+      ->check(CLI::Range(0.0, 900.0))
+      ->capture_default_str();
   cli->add_option("--wait-server", wait_server, "wait this long for a server, unit s")
       ->check(neurosim::cli::finite())
       ->capture_default_str();
@@ -105,11 +112,20 @@ int main(int argc, char** argv) {
                   << " s; running anyway (force stays zero until one answers)\n";
     }
     std::unique_ptr<nh::Recorder> recorder;
+    // A recording that fails (read-only or full folder, at the start or mid-session) is said at
+    // once; the session goes on without it and the exit status is 1.
+    std::string recording_error;
     if (!record_file.empty()) {
       if (label.empty()) label = "made with " + device->kind() + " by neurosim-haptic";
-      recorder = std::make_unique<nh::Recorder>(
-          record_file, nh::session_header(cfg, *device, station, tool, scene_name, scene_file,
-                                          label, neurosim::common::realtime_ns()));
+      try {
+        recorder = std::make_unique<nh::Recorder>(
+            record_file, nh::session_header(cfg, *device, station, tool, scene_name, scene_file,
+                                            label, neurosim::common::realtime_ns()));
+      } catch (const std::runtime_error& e) {  // e.g. a read-only or full folder
+        recording_error = e.what();
+        std::cerr << "neurosim-haptic: " << recording_error
+                  << "; the session goes on without the recording\n";
+      }
     }
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);
@@ -120,9 +136,41 @@ int main(int argc, char** argv) {
                            : static_cast<std::size_t>((duration > 0 ? duration : 600) * 1000) + 10;
     cfg.warn = warn;
     nh::HapticLoop loop(cfg, *device, link.get(), recorder.get());
+    // A refusal by the server is said at once (SimStatus.refused, within ~0.2 s of the first
+    // refused sample): a permanent one ends the session (exit status 3), max_stations waits.
+    std::atomic<bool> loop_done{false};
+    std::atomic<int> refused_exit{0};
+    std::thread refusal_watch;
+    if (link) {
+      refusal_watch = std::thread([&] {
+        nh::Refusal said = nh::Refusal::None;
+        while (!loop_done.load()) {
+          const nh::Refusal r = link->refusal();
+          if (r != nh::Refusal::None && r != said) {
+            said = r;
+            std::cerr << "neurosim-haptic: error: station '" << station << "' refused by the server: "
+                      << nh::describe(r) << (nh::permanent(r) ? "; exiting\n" : "\n") << std::flush;
+            if (nh::permanent(r)) {
+              refused_exit = 3;
+              g_stop = true;
+              return;
+            }
+          }
+          std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+      });
+    }
     // Warning printed before the run (the loop itself never prints).
     const nh::RealtimeInfo rt = [&] { return loop.run_realtime(duration, &g_stop); }();
-    if (recorder) recorder->close();
+    loop_done = true;
+    if (refusal_watch.joinable()) refusal_watch.join();
+    if (recorder) {
+      try {
+        recorder->close();
+      } catch (const std::exception& e) {
+        recording_error = e.what();
+      }
+    }
 
     const nh::LoopSummary s = loop.summary();
     const auto& c = loop.force_model().counters();
@@ -132,9 +180,14 @@ int main(int argc, char** argv) {
         station.c_str(), static_cast<unsigned long long>(s.samples), s.period_p50_us,
         s.period_p99_us, s.period_max_us, static_cast<unsigned long long>(s.misses_over_1ms),
         rt.sched_fifo ? "SCHED_FIFO" : "normal");
-    if (s.model_age_p99_ms >= 0)
-      std::printf("  model age p99 %.2f ms, models accepted %llu\n", s.model_age_p99_ms,
+    if (s.model_age_p99_ms >= 0) {
+      std::printf("  model age p99 %.2f ms, models accepted %llu", s.model_age_p99_ms,
                   static_cast<unsigned long long>(c.models_accepted));
+      if (link)
+        std::printf(", server steps without a model here %llu",
+                    static_cast<unsigned long long>(link->counters().models_skipped));
+      std::printf("\n");
+    }
     else
       std::printf("  no ContactModel received\n");
     std::printf(
@@ -154,7 +207,7 @@ int main(int argc, char** argv) {
             ? 100.0 * static_cast<double>(ft.contact_ticks) / static_cast<double>(s.samples)
             : 0.0,
         ft.max_force_n, ft.mean_contact_force_n, static_cast<unsigned long long>(ft.models_seen));
-    if (recorder)
+    if (recorder && recording_error.empty())
       std::printf("  recorded %llu samples to %s (%llu dropped)\n",
                   static_cast<unsigned long long>(recorder->written()), record_file.c_str(),
                   static_cast<unsigned long long>(recorder->dropped()));
@@ -171,6 +224,11 @@ int main(int argc, char** argv) {
            << (t.in_contact ? 1 : 0) << ',' << t.model_sequence << '\n';
       if (!tf) throw std::runtime_error(trace_file + ": write failed");
     }
+    if (!recording_error.empty()) {
+      std::cerr << "neurosim-haptic: " << recording_error << "\n";
+      return 1;
+    }
+    if (refused_exit.load() != 0) return refused_exit.load();
   } catch (const std::exception& e) {
     std::cerr << "neurosim-haptic: " << e.what() << "\n";
     return 1;

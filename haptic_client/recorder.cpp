@@ -3,6 +3,7 @@
 #include "idl/wire/recording_io.hpp"
 
 #include <chrono>
+#include <cstdio>
 #include <stdexcept>
 
 namespace neurosim::haptic {
@@ -82,7 +83,14 @@ void Recorder::run() {
     }
     drain();
   } catch (const std::exception& e) {
-    error_ = e.what();
+    // Said at once (the loop goes on without the recording; push() drops from now on).
+    std::fprintf(stderr, "neurosim-haptic: %s; the session goes on without the recording\n",
+                 e.what());
+    {
+      std::lock_guard<std::mutex> lock(error_mutex_);
+      error_ = e.what();
+    }
+    failed_.store(true, std::memory_order_release);
     stop_ = true;
   }
 }
@@ -92,7 +100,7 @@ void Recorder::close() {
   closed_ = true;
   stop_.store(true, std::memory_order_release);
   if (thread_.joinable()) thread_.join();
-  if (!error_.empty()) throw std::runtime_error("recording " + file_ + ": " + error_);
+  if (failed_.load()) throw std::runtime_error(error_);
   writer_->w.close();
 }
 

@@ -45,6 +45,9 @@ class Recorder {
   void close();
   std::uint64_t dropped() const { return dropped_.load(); }
   std::uint64_t written() const { return written_.load(); }
+  // The writer hit an I/O error (disk full, read-only folder): it stopped, said so on stderr at
+  // once and removed the partial file; the loop goes on and push() drops (counted).
+  bool failed() const { return failed_.load(std::memory_order_acquire); }
 
  private:
   void run();
@@ -59,7 +62,9 @@ class Recorder {
   bool blocking_;
   struct Writer;
   std::unique_ptr<Writer> writer_;
-  std::string error_;
+  std::atomic<bool> failed_{false};
+  std::mutex error_mutex_;
+  std::string error_;  // set once under error_mutex_ before failed_
   std::thread thread_;
   bool closed_ = false;
 };

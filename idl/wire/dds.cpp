@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstring>
 #include <cstdlib>
 #include <stdexcept>
 #include <thread>
@@ -9,6 +10,14 @@
 namespace neurosim::wire {
 
 std::string loopback_config_uri() { return NEUROSIM_LOOPBACK_URI; }
+
+std::array<std::uint8_t, 16> guid_of(dds_entity_t entity) {
+  dds_guid_t g{};
+  check(dds_get_guid(entity, &g), "get GUID of entity");
+  std::array<std::uint8_t, 16> out{};
+  std::memcpy(out.data(), g.v, 16);
+  return out;
+}
 
 namespace {
 
@@ -120,7 +129,20 @@ Liveliness ReaderBase::liveliness() const {
   l.not_alive_count = st.not_alive_count;
   l.alive_count_change = st.alive_count_change;
   l.not_alive_count_change = st.not_alive_count_change;
+  l.last_publication_handle = st.last_publication_handle;
   return l;
+}
+
+MatchedPublication ReaderBase::matched_publication(dds_instance_handle_t writer) const {
+  MatchedPublication m;
+  dds_builtintopic_endpoint_t* ep = dds_get_matched_publication_data(e_.get(), writer);
+  if (ep == nullptr) return m;
+  m.matched = true;
+  std::memcpy(m.guid.data(), ep->key.v, 16);
+  std::memcpy(m.participant_guid.data(), ep->participant_key.v, 16);
+  m.partitions = partitions_of(ep->qos);
+  dds_builtintopic_free_endpoint(ep);
+  return m;
 }
 
 // ---------------------------------------------------------------------------------------------

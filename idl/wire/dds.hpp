@@ -82,9 +82,21 @@ class Participant {
 dds_entity_t create_topic(const Participant& pp, const dds_topic_descriptor_t* desc,
                           const std::string& name, Profile profile);
 
+// A DDS entity's GUID as 16 octets (e.g. a writer's, to recognise it in SimStatus.refused).
+std::array<std::uint8_t, 16> guid_of(dds_entity_t entity);
+
+// What discovery says of a writer matched with a reader (dds_get_matched_publication_data).
+struct MatchedPublication {
+  bool matched = false;  // false: no such writer matched (gone, or never was)
+  std::array<std::uint8_t, 16> guid{};
+  std::array<std::uint8_t, 16> participant_guid{};
+  std::vector<std::string> partitions;  // empty: the default partition
+};
+
 class WriterBase {
  public:
   dds_entity_t handle() const { return e_.get(); }
+  std::array<std::uint8_t, 16> guid() const { return guid_of(e_.get()); }
   const std::string& topic_name() const { return topic_; }
   // Readers currently matched (e.g. publish Deformation only while someone reads).
   std::uint32_t matched_readers() const;
@@ -112,6 +124,7 @@ struct Liveliness {
   std::uint32_t not_alive_count = 0;
   std::int32_t alive_count_change = 0;
   std::int32_t not_alive_count_change = 0;
+  dds_instance_handle_t last_publication_handle = 0;  // the writer of the newest change
   bool changed() const { return alive_count_change != 0 || not_alive_count_change != 0; }
 };
 
@@ -128,6 +141,8 @@ class ReaderBase {
   // Reads (and resets) the liveliness_changed status: a dead writer shows as alive_count
   // dropping (detect death with this, not with instance state: see qos.hpp).
   Liveliness liveliness() const;
+  // The matched writer with this instance handle (dds_sample_info_t.publication_handle).
+  MatchedPublication matched_publication(dds_instance_handle_t writer) const;
 
  protected:
   ReaderBase(const Participant& pp, dds_entity_t topic, std::string topic_name, const Qos& qos);
@@ -163,9 +178,19 @@ class Topic {
 template <class T>
 class Writer : public WriterBase {
  public:
-  // QoS from the topic's profile (qos.cpp).
+  // QoS from the topic's profile (qos.cpp). Not for ToolState: see the station constructor.
   Writer(const Participant& pp, const Topic<T>& topic)
-      : Writer(pp, topic, writer_qos(TopicTraits<T>::profile)) {}
+      : Writer(pp, topic, writer_qos(TopicTraits<T>::profile)) {
+    static_assert(TopicTraits<T>::profile != Profile::ToolState,
+                  "a ToolState writer publishes in its station's partition: "
+                  "Writer<neurosim_ToolState>(pp, topic, station_id)");
+  }
+  // ToolState only: the writer of ONE station, in its partition (tool_state_writer_qos).
+  Writer(const Participant& pp, const Topic<T>& topic, std::string_view station_id)
+      : Writer(pp, topic, tool_state_writer_qos(station_id)) {
+    static_assert(TopicTraits<T>::profile == Profile::ToolState,
+                  "only ToolState writers are per station");
+  }
   Writer(const Participant& pp, const Topic<T>& topic, const Qos& qos)
       : WriterBase(pp, topic.handle(), topic.name(), qos) {}
 

@@ -67,31 +67,82 @@ Qos topic_qos(Profile p) {
   return q;
 }
 
-Qos writer_qos(Profile p) {
-  Qos q;
-  common(q.get(), p);
+namespace {
+
+void set_liveliness_and_lifecycle(dds_qos_t* q, Profile p) {
   switch (p) {
     case Profile::ToolState:
     case Profile::ContactModel:
       // A killed station / server shows as not alive within the lease, not the 10 s default.
-      dds_qset_liveliness(q.get(), DDS_LIVELINESS_AUTOMATIC, kLivelinessLease);
+      dds_qset_liveliness(q, DDS_LIVELINESS_AUTOMATIC, kLivelinessLease);
       break;
     case Profile::SimStatus:
       // Server death → liveliness_changed; the last status stays readable (no autodispose).
-      dds_qset_liveliness(q.get(), DDS_LIVELINESS_AUTOMATIC, kLivelinessLease);
-      dds_qset_writer_data_lifecycle(q.get(), false);
+      dds_qset_liveliness(q, DDS_LIVELINESS_AUTOMATIC, kLivelinessLease);
+      dds_qset_writer_data_lifecycle(q, false);
       break;
     case Profile::Deformation:
     case Profile::MeshTopology:
       break;
   }
+}
+
+}  // namespace
+
+Qos writer_qos(Profile p) {
+  if (p == Profile::ToolState)
+    throw std::logic_error(
+        "ToolState writer without a station: its QoS is tool_state_writer_qos(station_id) (the "
+        "station's partition, idl/wire/qos.hpp)");
+  Qos q;
+  common(q.get(), p);
+  set_liveliness_and_lifecycle(q.get(), p);
   return q;
 }
 
 Qos reader_qos(Profile p) {
   Qos q;
   common(q.get(), p);
+  if (p == Profile::ToolState) {
+    const char* parts[] = {kToolStateReaderPartition};
+    dds_qset_partition(q.get(), 1, parts);
+  }
   return q;
+}
+
+std::string station_partition(std::string_view station_id) {
+  if (station_id.empty()) throw std::invalid_argument("station partition: empty station id");
+  if (station_id.size() > neurosim_ID_MAX)
+    throw std::invalid_argument("station partition: station id '" + std::string(station_id) +
+                                "' is longer than " + std::to_string(neurosim_ID_MAX) +
+                                " characters");
+  if (station_id.find_first_of("*?[]\\") != std::string_view::npos)
+    throw std::invalid_argument("station partition: station id '" + std::string(station_id) +
+                                "' has a partition wildcard character (* ? [ ] \\)");
+  return kStationPartitionPrefix + std::string(station_id);
+}
+
+Qos tool_state_writer_qos(std::string_view station_id) {
+  const std::string part = station_partition(station_id);
+  Qos q;
+  common(q.get(), Profile::ToolState);
+  set_liveliness_and_lifecycle(q.get(), Profile::ToolState);
+  const char* parts[] = {part.c_str()};
+  dds_qset_partition(q.get(), 1, parts);
+  return q;
+}
+
+std::vector<std::string> partitions_of(const dds_qos_t* qos) {
+  std::vector<std::string> out;
+  uint32_t n = 0;
+  char** ps = nullptr;
+  if (qos == nullptr || !dds_qget_partition(qos, &n, &ps)) return out;
+  for (uint32_t i = 0; i < n; ++i) {
+    out.emplace_back(ps[i] ? ps[i] : "");
+    dds_free(ps[i]);
+  }
+  dds_free(ps);
+  return out;
 }
 
 }  // namespace neurosim::wire

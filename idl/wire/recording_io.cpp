@@ -60,23 +60,38 @@ void check_sample(const recording::Sample& s, double previous_time_s, const std:
 
 // ---------------------------------------------------------------------------------------------
 struct RecordingWriter::Impl {
-  std::string file;
+  std::string file;     // the name readers see, only ever a complete recording
+  std::string partial;  // written here, renamed to `file` by close()
   int fd = -1;
   std::unique_ptr<google::protobuf::io::FileOutputStream> out;
+
+  // An I/O error: the partial file is removed (nothing half-written is left to be read back
+  // later, and a full disk gets its space back) and the error is thrown, naming the file.
+  [[noreturn]] void fail(const std::string& what, int err) {
+    if (out) {
+      out->SetCloseOnDelete(false);
+      out.reset();
+    }
+    if (fd >= 0) ::close(fd);
+    fd = -1;
+    ::unlink(partial.c_str());
+    throw std::runtime_error("recording " + file + ": " + what + ": " + std::strerror(err) +
+                             " (nothing kept)");
+  }
 };
 
 RecordingWriter::RecordingWriter(const std::filesystem::path& file, recording::Header header)
     : impl_(std::make_unique<Impl>()) {
   impl_->file = file.string();
-  impl_->fd = ::open(impl_->file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  impl_->partial = impl_->file + ".partial";
+  impl_->fd = ::open(impl_->partial.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (impl_->fd < 0)
-    throw std::runtime_error("recording " + impl_->file + ": cannot create: " + sys_error());
+    throw std::runtime_error("recording " + impl_->file + ": cannot create " + impl_->partial +
+                             ": " + sys_error());
   impl_->out = std::make_unique<google::protobuf::io::FileOutputStream>(impl_->fd);
-  impl_->out->SetCloseOnDelete(true);
   header.set_format(kRecordingFormat);
   if (!google::protobuf::util::SerializeDelimitedToZeroCopyStream(header, impl_->out.get()))
-    throw std::runtime_error("recording " + impl_->file + ": cannot write header: " +
-                             std::strerror(impl_->out->GetErrno()));
+    impl_->fail("cannot write header", impl_->out->GetErrno());
 }
 
 RecordingWriter::~RecordingWriter() {
@@ -91,21 +106,23 @@ void RecordingWriter::write(const recording::Sample& sample) {
   check_sample(sample, last_time_s_,
                "recording " + impl_->file + ": sample " + std::to_string(count_));
   if (!google::protobuf::util::SerializeDelimitedToZeroCopyStream(sample, impl_->out.get()))
-    throw std::runtime_error("recording " + impl_->file + ": cannot write sample " +
-                             std::to_string(count_) + ": " +
-                             std::strerror(impl_->out->GetErrno()));
+    impl_->fail("cannot write sample " + std::to_string(count_), impl_->out->GetErrno());
   last_time_s_ = sample.time_s();
   ++count_;
 }
 
 void RecordingWriter::close() {
   if (!impl_ || !impl_->out) return;
-  auto out = std::move(impl_->out);
-  const bool ok = out->Close();
-  const int err = out->GetErrno();
-  out->SetCloseOnDelete(false);
-  if (!ok)
-    throw std::runtime_error("recording " + impl_->file + ": cannot close: " + std::strerror(err));
+  if (!impl_->out->Flush()) impl_->fail("cannot write", impl_->out->GetErrno());
+  if (::fsync(impl_->fd) != 0) impl_->fail("cannot write", errno);
+  impl_->out.reset();  // the stream does not own the descriptor
+  if (::close(impl_->fd) != 0) {
+    impl_->fd = -1;
+    impl_->fail("cannot close", errno);
+  }
+  impl_->fd = -1;
+  if (::rename(impl_->partial.c_str(), impl_->file.c_str()) != 0)
+    impl_->fail("cannot rename " + impl_->partial + " to it", errno);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -26,10 +26,13 @@ struct RecordingLimits {
 // Writes a recording. The header's format field is set here; samples are checked (finite
 // values, non-decreasing time) before they are written. Throws std::runtime_error on I/O errors
 // and std::invalid_argument on bad samples, naming the file and sample index.
+// The samples go to "<file>.partial"; close() flushes, syncs and renames it to <file>, so <file>
+// only ever holds a complete recording (a crash leaves the .partial, never a cut <file>). An I/O
+// error (disk full, read-only folder) removes the .partial: nothing half-written is kept.
 class RecordingWriter {
  public:
   RecordingWriter(const std::filesystem::path& file, recording::Header header);
-  ~RecordingWriter();  // closes; errors at this point are lost: call close() to see them
+  ~RecordingWriter();  // closes (and renames); errors here are lost: call close() to see them
   RecordingWriter(const RecordingWriter&) = delete;
   RecordingWriter& operator=(const RecordingWriter&) = delete;
 

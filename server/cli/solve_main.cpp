@@ -171,8 +171,7 @@ void print_summary(const MeshResult& r, const Eigen::VectorXd& f,
 MeshResult solve_alone(const neurosim::scene::LoadedMesh& lm, const MeshLoads& loads) {
   const int n = static_cast<int>(lm.mesh.num_vertices());
   const auto t1 = std::chrono::steady_clock::now();
-  neurosim::fem::StaticSolver solver(lm.mesh, neurosim::fem::MaterialMap::uniform(lm.material),
-                                     lm.fixed_nodes);
+  neurosim::fem::StaticSolver solver(lm.mesh, lm.materials, lm.fixed_nodes);
   const double factor_s = seconds_since(t1);
   const auto t2 = std::chrono::steady_clock::now();
   MeshResult r;
@@ -232,9 +231,8 @@ MeshResult solve_alone_tier(const neurosim::scene::LoadedMesh& lm, const MeshLoa
   for (int node : lm.fixed_nodes) r.constrained[node] = 1;
   for (const auto& [node, hold] : loads.prescribed) r.constrained[node] = 1;
   const auto t1 = std::chrono::steady_clock::now();
-  neurosim::fem::EquilibriumSolver solver({&lm.mesh,
-                                           neurosim::fem::MaterialMap::uniform(lm.material),
-                                           tier, lm.fixed_nodes, loads.held(), {}});
+  neurosim::fem::EquilibriumSolver solver(
+      {&lm.mesh, lm.materials, tier, lm.fixed_nodes, loads.held(), {}});
   neurosim::fem::NewtonOptions options;
   options.increments = increments;
   const neurosim::fem::EquilibriumResult sol = solver.solve(loads.f, options);
@@ -517,7 +515,20 @@ int run(const RunOptions& opt) {
     std::cout << "note: --uncoupled: the scene's couplings are not applied; every mesh is solved "
                  "on its own\n";
   }
+  for (const auto& r : model.rigid) {
+    if (!quiet)
+      std::cout << "note: mesh " << r.id << " is rigid (" << r.triangles.size()
+                << " triangles, an obstacle for tools): not in the solve\n";
+  }
   if (coupled) {
+    // The coupled body carves the host: per-tissue materials do not follow the carving yet.
+    for (const auto& c : model.couplings)
+      for (int mi : {c.host, c.embedded})
+        if (!model.meshes[static_cast<std::size_t>(mi)].materials.tet_material.empty())
+          throw std::runtime_error(scene_path + ": mesh \"" +
+                                   model.meshes[static_cast<std::size_t>(mi)].id +
+                                   "\": per-tissue materials are not implemented for coupled "
+                                   "solves (use --uncoupled)");
     auto static_model = model;
     static_model.effects.tool_contact = false;
     static_model.effects.deformation_output = false;

@@ -1,8 +1,9 @@
 // The boundary operator of a coupled body and its disk cache: a second start with the same
 // meshes, materials, fixed nodes and coupling map reads the operator instead of recomputing the
 // boundary compliance solves (seconds on a brain-sized host). Files are keyed by a 64-bit FNV-1a
-// hash of everything the operator depends on; a file with another key, other sizes or
-// non-finite values is ignored (with a message when damaged), never used.
+// hash of everything the operator depends on, and carry a checksum of the matrices; a file with
+// another key, other sizes, another length, a checksum mismatch or non-finite values is ignored
+// (with a message when damaged), never used.
 #pragma once
 
 #include "server/fem/material.hpp"
@@ -47,8 +48,9 @@ class CacheKey {
 // dofs into `out`; false (out unspecified) if there is none or it does not match.
 bool load_boundary_operator(const std::string& file, std::uint64_t key, int m3, int s3,
                             BoundaryOperator& out);
-// Stores it (atomic replace: a concurrent reader sees the old file or the whole new one). A
-// failure is reported on stderr and otherwise ignored: the cache only saves time.
+// Stores it (written under a per-process temporary name, then renamed: a concurrent reader sees
+// the old file or the whole new one). A failure (disk full, read-only folder) is reported on
+// stderr, the temporary removed, and otherwise ignored: the cache only saves time.
 void save_boundary_operator(const std::string& file, std::uint64_t key,
                             const BoundaryOperator& op);
 

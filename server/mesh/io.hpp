@@ -36,6 +36,9 @@ struct MeshData {
 // Medit .mesh (as CGAL's output_to_medit writes): Vertices, Triangles, Tetrahedra with refs
 // (ref -> label). Other sections (Edges, Corners, Ridges, ...) are skipped.
 MeshData read_medit(const std::string& path, double unit_m = 1.0);
+// The same file as a triangle surface (a rigid obstacle): Triangles required, Tetrahedra
+// optional (read, not required). Closedness is checked by tri_surface.hpp, not here.
+MeshData read_medit_surface(const std::string& path, double unit_m = 1.0);
 // Gmsh .msh ASCII, format 2.x, 4.0 or 4.1. Tetrahedra (type 4; type 11 uses its 4 corners) and
 // triangles (type 2). Label: the element's physical tag, else its elementary (entity) tag.
 // Node tags may be sparse; vertices come out in file order.

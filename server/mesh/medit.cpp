@@ -78,7 +78,8 @@ int to_label(TextReader& in, std::string_view tok) {
   return static_cast<int>(v);
 }
 
-MeshData parse_medit(const std::string& path, double unit_m) {
+// surface: a triangle surface (Triangles required, Tetrahedra optional) instead of a volume mesh.
+MeshData parse_medit(const std::string& path, double unit_m, bool surface) {
   TextReader in(path, '#');
   MeshData m;
   m.source = path;
@@ -159,7 +160,8 @@ MeshData parse_medit(const std::string& path, double unit_m) {
     }
   }
   if (!seen_version) in.fail("empty file, not a Medit .mesh file");
-  if (m.tets.empty()) in.fail("no Tetrahedra section");
+  if (surface && m.triangles.empty()) in.fail("no Triangles section (a surface mesh needs one)");
+  if (!surface && m.tets.empty()) in.fail("no Tetrahedra section");
   return m;
 }
 
@@ -168,7 +170,13 @@ MeshData parse_medit(const std::string& path, double unit_m) {
 MeshData read_medit(const std::string& path, double unit_m) {
   if (!(unit_m > 0.0) || !std::isfinite(unit_m))
     throw std::invalid_argument(path + ": unit_m must be finite and > 0");
-  return guard_out_of_memory(path, [&] { return parse_medit(path, unit_m); });
+  return guard_out_of_memory(path, [&] { return parse_medit(path, unit_m, false); });
+}
+
+MeshData read_medit_surface(const std::string& path, double unit_m) {
+  if (!(unit_m > 0.0) || !std::isfinite(unit_m))
+    throw std::invalid_argument(path + ": unit_m must be finite and > 0");
+  return guard_out_of_memory(path, [&] { return parse_medit(path, unit_m, true); });
 }
 
 namespace {

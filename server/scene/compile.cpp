@@ -4,6 +4,7 @@
 #include "server/mesh/generate.hpp"
 #include "server/mesh/io.hpp"
 #include "server/mesh/text_reader.hpp"
+#include "server/mesh/tri_surface.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -146,7 +147,78 @@ LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
   std::sort(out.fixed_nodes.begin(), out.fixed_nodes.end());
   out.fixed_nodes.erase(std::unique(out.fixed_nodes.begin(), out.fixed_nodes.end()),
                         out.fixed_nodes.end());
+  resolve_tissues(entry, what, out);
   return out;
+}
+
+void resolve_tissues(const Mesh& entry, const std::string& what, LoadedMesh& out) {
+  out.materials = fem::MaterialMap::uniform(out.material);
+  out.tissues.clear();
+  if (entry.tissues_size() == 0) return;
+  // materials[0] is the mesh's; a tissue with its own material adds one.
+  std::vector<fem::Material> materials{out.material};
+  std::vector<int> material_of_tissue;
+  bool any_own = false;
+  for (int k = 0; k < entry.tissues_size(); ++k) {
+    const auto& t = entry.tissues(k);
+    TissueDef d;
+    d.label = t.label();
+    d.name = t.name();
+    d.provenance = t.provenance();
+    d.own_material = t.has_material();
+    d.material = out.material;
+    d.material_source = out.material_source;
+    if (d.own_material) {
+      d.material = to_material(t.material(), what + " tissues[" + std::to_string(k) + "] (" +
+                                                 t.name() + ") material");
+      d.material_source = t.material().source();
+      materials.push_back(d.material);
+      any_own = true;
+    }
+    material_of_tissue.push_back(d.own_material ? static_cast<int>(materials.size()) - 1 : 0);
+    out.tissues.push_back(std::move(d));
+  }
+  // Every tetrahedron belongs to a listed tissue: an unnamed label is a mismatch between the
+  // scene and the mesh file, not a default.
+  const auto& labels = out.mesh.tet_labels();
+  std::vector<int> tet_material(out.mesh.num_tets(), 0);
+  for (std::size_t t = 0; t < out.mesh.num_tets(); ++t) {
+    const int label = t < labels.size() ? labels[t] : 0;
+    int k = 0;
+    while (k < static_cast<int>(out.tissues.size()) && out.tissues[k].label != label) ++k;
+    if (k == static_cast<int>(out.tissues.size()))
+      throw std::runtime_error(what + ": tetrahedron " + std::to_string(t) + " has label " +
+                               std::to_string(label) + ", which no tissue lists");
+    tet_material[t] = material_of_tissue[k];
+  }
+  if (any_own) out.materials = fem::MaterialMap::per_tet(std::move(materials), std::move(tet_material));
+}
+
+RigidSurface load_rigid(const Mesh& entry, const std::filesystem::path& scene_dir,
+                        const std::string& source) {
+  const std::string what = source + ": mesh \"" + entry.id() + "\" (rigid)";
+  std::filesystem::path file = entry.file();
+  if (file.is_relative()) file = scene_dir / file;
+  const double unit = entry.has_file_unit_m() ? entry.file_unit_m() : 1.0;
+  mesh::MeshData data = mesh::read_medit_surface(file.string(), unit);
+  mesh::require_closed_outward(data.vertices_m, data.triangles, file.string() + " (" + what + ")");
+  RigidSurface r;
+  r.id = entry.id();
+  r.file = file.string();
+  r.provenance = entry.provenance();
+  r.vertices_m = std::move(data.vertices_m);
+  r.triangles = std::move(data.triangles);
+  r.enclosed_volume_m3 = mesh::check_closed(r.vertices_m, r.triangles).volume_m3;
+  for (const auto& o : entry.openings()) {
+    RigidOpening d;
+    d.center_m = to_vec3(o.center_m());
+    d.axis = to_vec3(o.axis()).normalized();
+    d.radius_m = o.radius_m();
+    d.half_length_m = o.half_length_m();
+    d.provenance = o.provenance();
+    r.openings.push_back(std::move(d));
+  }
+  return r;
 }
 
 namespace {
@@ -238,6 +310,10 @@ Model compile(const Scene& scene, const std::string& source) {
   static_cast<Settings&>(model) = read_settings(scene, source);
   const std::filesystem::path dir = std::filesystem::path(source).parent_path();
   for (int i = 0; i < scene.meshes_size(); ++i) {
+    if (scene.meshes(i).rigid()) {
+      model.rigid.push_back(load_rigid(scene.meshes(i), dir, source));
+      continue;
+    }
     model.meshes.push_back(load_mesh(scene.meshes(i), dir, source));
     std::string w = size_warning(scene.meshes(i), model.meshes.back(), source);
     if (!w.empty()) model.warnings.push_back(std::move(w));

@@ -23,6 +23,16 @@ Model load_model(const std::filesystem::path& path);
 LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
                      const std::string& source);
 
+// A rigid mesh entry: the Medit surface read (relative to scene_dir), checked closed and
+// outward (errors name the file and the mesh), openings resolved (axis normalised).
+RigidSurface load_rigid(const Mesh& entry, const std::filesystem::path& scene_dir,
+                        const std::string& source);
+
+// The entry's tissues resolved on a built mesh: out.tissues, and out.materials per tetrahedron
+// (uniform(out.material) unless a tissue has its own material). A tetrahedron whose label no
+// tissue lists is an error naming it. `what` names the mesh in messages.
+void resolve_tissues(const Mesh& entry, const std::string& what, LoadedMesh& out);
+
 // Nodes of `mesh` selected by `region` (sorted, unique). `what` names the region in messages;
 // a region that selects nothing is an error (a typo in a box should not pass silently).
 std::vector<int> select_nodes(const mesh::TetMesh& mesh, const Region& region,

@@ -8,6 +8,7 @@
 
 #include "server/fem/material.hpp"
 #include "server/mesh/tet_mesh.hpp"
+#include "server/scene/rigid.hpp"
 #include "server/scene/settings.hpp"
 
 #include <array>
@@ -16,11 +17,24 @@
 
 namespace neurosim::scene {
 
+// A named label of a mesh (scene Tissue): the tetrahedra with this label, their material.
+struct TissueDef {
+  int label{0};
+  std::string name;
+  bool own_material{false};  // false: the mesh's material
+  fem::Material material;    // the tissue's material (the mesh's when own_material is false)
+  std::string material_source;
+  std::string provenance;
+};
+
 // A scene mesh, built: geometry, material and fixed nodes resolved.
 struct LoadedMesh {
   std::string id;
   mesh::TetMesh mesh;
-  fem::Material material;
+  fem::Material material;  // the mesh's material (every tetrahedron's unless tissues say else)
+  // Per tetrahedron: uniform(material), or per_tet when a tissue carries its own material.
+  fem::MaterialMap materials;
+  std::vector<TissueDef> tissues;  // scene order; empty when the scene names none
   std::vector<int> fixed_nodes;  // sorted, unique
   int priority{0};               // higher wins in an overlap (paper 2.4: vessel over brain)
   std::string provenance;
@@ -61,6 +75,9 @@ struct Model : Settings {
   std::vector<CouplingDef> couplings;    // scene order (applied when effects.coupling)
   std::vector<LoadDef> loads;            // scene order
   std::vector<PrescribedDef> prescribed;  // scene order
+  // Rigid obstacles (scene meshes with `rigid`), scene order; not in `meshes` (no FEM), empty
+  // and free for a scene without them. Constant data for tool contact; compile() does none.
+  std::vector<RigidSurface> rigid;
   // Input that compiles but is most likely a mistake (compile.cpp: a mesh far larger or smaller
   // than a surgical scene, i.e. read in the wrong unit), one line each naming the scene file,
   // the mesh and the fix. compile() never prints: the programs print them to stderr.

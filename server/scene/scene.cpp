@@ -117,6 +117,8 @@ constexpr Range kMaxForce{0.0, 100.0, "N", true};
 // the mesher's ~6 tetrahedra per vertex.
 constexpr int kMaxGeneratedVertices = 300'000;
 constexpr int kMaxStations = 64;                  // SimStatus.stations holds at most 64
+constexpr Range kOpeningRadius{0.0, 0.1, "m", false};       // a craniotomy of up to 20 cm
+constexpr Range kOpeningHalfLength{0.0, 0.2, "m", false};   // through a head and beyond
 
 void check_range(double value, const Range& r, const std::string& source,
                  const std::string& field) {
@@ -133,6 +135,54 @@ void check_range(const Vec3& v, const Range& r, const std::string& source,
   check_range(v.x(), r, source, field + ".x");
   check_range(v.y(), r, source, field + ".y");
   check_range(v.z(), r, source, field + ".z");
+}
+
+
+void check_material(const Material& mat, const std::string& source, const std::string& f) {
+  check_range(mat.youngs_modulus_pa(), kYoungsModulus, source, f + ".youngs_modulus_pa");
+  if (!std::isfinite(mat.poisson_ratio()) || !(mat.poisson_ratio() > -1.0) ||
+      !(mat.poisson_ratio() < 0.5)) {
+    std::ostringstream msg;
+    msg << mat.poisson_ratio() << " is outside (-1, 0.5)";
+    fail(source, f + ".poisson_ratio", msg.str());
+  }
+}
+
+// A rigid mesh: a closed triangle surface from a file, with openings; nothing of a body.
+void check_rigid(const Mesh& m, const std::string& source, const std::string& f) {
+  if (m.source_case() != Mesh::kFile)
+    fail(source, f + ".generate", "a rigid mesh is read from a file (a closed triangle surface)");
+  if (m.has_material()) fail(source, f + ".material", "a rigid mesh has no material (remove it)");
+  if (m.fixed_size() > 0) fail(source, f + ".fixed", "a rigid mesh does not move: no fixed regions");
+  if (m.labels_size() > 0) fail(source, f + ".labels", "a rigid mesh has no tetrahedra to select");
+  if (m.tissues_size() > 0) fail(source, f + ".tissues", "a rigid mesh has no tetrahedra to label");
+  for (int k = 0; k < m.openings_size(); ++k) {
+    const auto& o = m.openings(k);
+    const std::string g = f + ".openings[" + std::to_string(k) + "]";
+    check_vec(o.center_m(), source, g + ".center_m");
+    check_range(o.center_m(), kCoordinate, source, g + ".center_m");
+    check_vec(o.axis(), source, g + ".axis");
+    if (!(to_vec3(o.axis()).norm() > 0.0)) fail(source, g + ".axis", "must be non-zero");
+    check_range(o.radius_m(), kOpeningRadius, source, g + ".radius_m");
+    if (!(o.radius_m() > 0.0)) fail(source, g + ".radius_m", "must be > 0");
+    check_range(o.half_length_m(), kOpeningHalfLength, source, g + ".half_length_m");
+    if (!(o.half_length_m() > 0.0)) fail(source, g + ".half_length_m", "must be > 0");
+  }
+}
+
+// Tissues: labels and names unique, their own materials valid.
+void check_tissues(const Mesh& m, const std::string& source, const std::string& f) {
+  std::set<int> labels;
+  std::set<std::string> names;
+  for (int k = 0; k < m.tissues_size(); ++k) {
+    const auto& t = m.tissues(k);
+    const std::string g = f + ".tissues[" + std::to_string(k) + "]";
+    if (!labels.insert(t.label()).second)
+      fail(source, g + ".label", "label " + std::to_string(t.label()) + " listed twice");
+    if (t.name().empty()) fail(source, g + ".name", "missing");
+    if (!names.insert(t.name()).second) fail(source, g + ".name", "duplicate name \"" + t.name() + "\"");
+    if (t.has_material()) check_material(t.material(), source, g + ".material");
+  }
 }
 
 }  // namespace
@@ -174,7 +224,7 @@ Scene read_scene(const std::filesystem::path& path) {
 
 void validate_scene(const Scene& scene, const std::string& source) {
   if (scene.meshes_size() == 0) fail(source, "meshes", "a scene needs at least one mesh");
-  std::set<std::string> ids;
+  std::set<std::string> ids, rigid_ids;
   for (int i = 0; i < scene.meshes_size(); ++i) {
     const auto& m = scene.meshes(i);
     const std::string f = "meshes[" + std::to_string(i) + "]";
@@ -184,6 +234,13 @@ void validate_scene(const Scene& scene, const std::string& source) {
       fail(source, f, "give file or generate");
     }
     if (m.has_file_unit_m()) check_range(m.file_unit_m(), kFileUnit, source, f + ".file_unit_m");
+    if (m.rigid()) {
+      check_rigid(m, source, f);
+      rigid_ids.insert(m.id());
+      continue;
+    }
+    if (m.openings_size() > 0) fail(source, f + ".openings", "only rigid meshes have openings");
+    check_tissues(m, source, f);
     if (m.source_case() == Mesh::kGenerate) {
       const auto& g = m.generate();
       if (g.shape_case() == Generator::SHAPE_NOT_SET) fail(source, f + ".generate", "no shape");
@@ -213,23 +270,17 @@ void validate_scene(const Scene& scene, const std::string& source) {
       }
     }
     if (!m.has_material()) fail(source, f + ".material", "missing");
-    {
-      const auto& mat = m.material();
-      check_range(mat.youngs_modulus_pa(), kYoungsModulus, source,
-                  f + ".material.youngs_modulus_pa");
-      if (!std::isfinite(mat.poisson_ratio()) || !(mat.poisson_ratio() > -1.0) ||
-          !(mat.poisson_ratio() < 0.5)) {
-        std::ostringstream msg;
-        msg << mat.poisson_ratio() << " is outside (-1, 0.5)";
-        fail(source, f + ".material.poisson_ratio", msg.str());
-      }
-    }
+    check_material(m.material(), source, f + ".material");
     for (int r = 0; r < m.fixed_size(); ++r) {
       check_region(m.fixed(r), source, f + ".fixed[" + std::to_string(r) + "]");
     }
   }
+  if (rigid_ids.size() == ids.size())
+    fail(source, "meshes", "every mesh is rigid: a scene needs at least one deformable mesh");
   auto check_mesh_ref = [&](const std::string& id, const std::string& field) {
     if (!ids.count(id)) fail(source, field, "no mesh with id \"" + id + "\"");
+    if (rigid_ids.count(id))
+      fail(source, field, "mesh \"" + id + "\" is rigid (never in the solve): no couplings, loads or prescribed displacements");
   };
   for (int i = 0; i < scene.couplings_size(); ++i) {
     const auto& c = scene.couplings(i);

@@ -12,7 +12,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
+#include <optional>
 #include <iostream>
 #include <string>
 #include <thread>
@@ -79,6 +81,24 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
        },
        "the tiers' measured force error against strain (accuracy_bench's table; 'none': no "
        "estimate). Default: " NEUROSIM_DEFAULT_ACCURACY_TABLE " when it exists");
+  p->add_option("--station-idle-timeout", opt.station_idle_timeout_s,
+                "a station that sends no ToolState for S seconds loses its slot (and its writer "
+                "its binding to the station id)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.05, 3600.0));
+  p->add_option("--max-stations-per-participant", opt.max_stations_per_participant,
+                "stations one DDS participant may hold at once")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  p->add_option("--workspace-margin", opt.workspace_margin_m,
+                "tool tips further than M metres outside the scene's bounding box are rejected")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 100.0));
+  p->add_option("--log-lines-per-second", opt.log_lines_per_second,
+                "log lines per second per cause (joins, refusals, each rejection cause); the rest "
+                "is summarised")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000));
   p->footer("CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs).");
   if (auto rc = p.parse(argc, argv)) return *rc;
   single_thread_blas();
@@ -97,10 +117,51 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
 
+  // Load phases run on a worker thread while this thread watches the signal flag: a signal
+  // during a long load (mesh generation, compliance precompute, inclusion decision) ends the
+  // process within ~0.1 s instead of after the load. The worker is not joined then (exit).
+  std::atomic<const char*> phase{"loading the scene"};
+  auto interruptible = [&](auto&& work) {
+    using R = decltype(work());
+    std::optional<R> result;
+    std::exception_ptr error;
+    std::atomic<bool> done{false};
+    std::thread worker([&] {
+      try {
+        result.emplace(work());
+      } catch (...) {
+        error = std::current_exception();
+      }
+      done.store(true);
+    });
+    while (!done.load()) {
+      if (g_stop.load()) {
+        std::cerr << "neurosim-server: signal received while " << phase.load()
+                  << ": exiting without serving\n" << std::flush;
+        std::_Exit(0);
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    worker.join();
+    if (error) std::rethrow_exception(error);
+    return std::move(*result);
+  };
+
   try {
     const auto t0 = common::Clock::now();
-    scene::Model model = scene::load_model(opt.scene_path);
+    scene::Model model = interruptible([&] { return scene::load_model(opt.scene_path); });
     for (const auto& w : model.warnings) std::cerr << "neurosim-server: warning: " << w << "\n";
+    // Scene features this server does not run yet: refused, never ignored.
+    if (!model.rigid.empty())
+      throw std::runtime_error(opt.scene_path + ": mesh \"" + model.rigid.front().id +
+                               "\" is rigid: rigid obstacle contact is not implemented in this "
+                               "build (neurosim-solve loads such scenes and leaves it out)");
+    for (const auto& m : model.meshes)
+      if (!m.materials.tet_material.empty())
+        throw std::runtime_error(opt.scene_path + ": mesh \"" + m.id +
+                                 "\": per-tissue materials are not implemented in the "
+                                 "interactive server (neurosim-solve uses them on uncoupled "
+                                 "meshes)");
     // --tier replaces the scene's tier before anything is built from it: the simulation, the
     // server's start-up line and SimStatus all see the one tier that runs.
     const scene::Tier scene_tier = model.effects.tier;
@@ -114,10 +175,14 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
     else
       std::cerr << " (from --tier " << tier_text << "; the scene's effects.tier is "
                 << scene::tier_name(scene_tier) << ")\n";
-    auto sim = factory(model);
+    phase = "building the simulation (meshes, compliance, inclusion decision)";
+    auto sim = interruptible([&] { return factory(model); });
     const double build_s = common::seconds_since(t0);
     std::cerr << "neurosim-server: simulation built in " << build_s << " s\n";
-    if (g_stop.load()) return 0;
+    if (g_stop.load()) {
+      std::cerr << "neurosim-server: signal received after the build: exiting without serving\n";
+      return 0;
+    }
     Server server(model, std::move(sim), opt, std::cerr);
     server.start();
     const auto started = common::Clock::now();

@@ -6,7 +6,9 @@
 #include "idl/wire/dds.hpp"
 #include "server/fem/strain.hpp"
 #include "server/service/accuracy_table.hpp"
+#include "server/service/log_limiter.hpp"
 #include "server/service/pose_handoff.hpp"
+#include "server/service/station_identity.hpp"
 #include "server/service/tool_filter.hpp"
 
 #include <pthread.h>
@@ -21,10 +23,10 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <optional>
-#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -77,12 +79,15 @@ struct StationSlot {
   char station_id[neurosim_ID_MAX + 1]{};  // written by the DDS thread before state = Active
   common::TripleBuffer<PoseSample> pose;
   std::atomic<bool> last_rejected{false};
-  std::atomic<std::uint64_t> accepted{0}, rejected_nonfinite{0}, rejected_jump{0}, last_sequence{0};
+  std::atomic<std::uint64_t> accepted{0}, rejected_nonfinite{0}, rejected_jump{0}, last_sequence{0},
+      rejected_workspace{0}, rejected_time{0}, rejected_sequence{0}, rejected_identity{0};
   std::atomic<bool> in_contact{false};  // written by the step thread
   // DDS thread only.
   ToolFilter filter;
   int tool{0};
-  int logged_rejections{0};
+  dds_instance_handle_t writer{0};  // the ToolState writer this station is bound to
+  Guid participant{};               // that writer's participant
+  std::int64_t last_sample_mono_ns{0};  // newest sample of the bound writer (any verdict)
   // Step thread only.
   bool step_joined{false};
   bool step_has_pose{false};
@@ -122,7 +127,10 @@ struct Server::Impl {
   std::string effects_text;
   std::vector<double> tool_max_speed;  // per scene tool, m/s
   std::vector<std::string> tool_ids;
+  Workspace workspace;                 // scene bounding box + opt.workspace_margin_m
 
+  // Declared before the participant: its topic filter points here, so it must outlive it.
+  WriterClaims claims;
   std::optional<wire::Participant> pp;
   std::optional<wire::Topic<neurosim_ToolState>> tool_topic;
   std::optional<wire::Topic<neurosim_ContactModel>> model_topic;
@@ -176,7 +184,15 @@ struct Server::Impl {
 
   // DDS thread only.
   std::unordered_map<std::string, int> slot_of_station;
-  std::set<std::string> refused;
+  std::optional<LogLimiter> log_limit;
+  std::int64_t last_sweep_mono_ns{0};
+  // Recent refusals (bounded), newest first; copied into SimStatus.refused by the step thread.
+  static constexpr std::size_t kMaxRefusals = 16;
+  static constexpr std::int64_t kRefusalMemoryNs = 5000000000;  // forgotten 5 s after the last sample
+  std::mutex refusal_mutex;
+  std::vector<neurosim_StationRefusal> refusals;
+  std::atomic<bool> status_soon{false};  // a new refusal: publish SimStatus early
+  std::atomic<std::uint64_t> suppressed_lines{0};  // log_limit's total, for the step thread
 
   std::atomic<bool> run{false};
   std::atomic<bool> started{false};
@@ -184,7 +200,10 @@ struct Server::Impl {
   mutable std::mutex error_mutex;
   std::string error_text;
   std::atomic<std::uint64_t> steps{0}, deadline_misses{0}, rejected_nonfinite{0}, rejected_jump{0},
-      stations_refused{0}, deformation_frames{0}, full_field_solves{0}, deformation_skipped{0};
+      stations_refused{0}, deformation_frames{0}, full_field_solves{0}, deformation_skipped{0},
+      rejected_workspace{0}, rejected_time{0}, rejected_sequence{0}, rejected_identity_dds{0},
+      rejected_rate{0}, stations_reclaimed{0}, unknown_ids_dropped{0};
+  std::uint64_t rejected_identity() const { return rejected_identity_dds.load() + claims.filtered(); }
   std::thread dds_thread, step_thread;
 
   void log(const std::string& line) {
@@ -212,6 +231,11 @@ struct Server::Impl {
   void dds_loop();
   void handle_tool_sample(const wire::Received<neurosim_ToolState>& rx);
   void leave(const std::string& key, const char* why);
+  void limited_log(const char* cause, const std::string& line);
+  void refuse(const std::string& key, const wire::MatchedPublication* who, dds_instance_handle_t writer,
+              neurosim_RefusalReason reason, const std::string& why);
+  std::optional<WriterInfo> writer_info(dds_instance_handle_t writer);
+  void sweep(std::int64_t now_mono);
   void step_loop();
   void one_step();
   void retire(int i);
@@ -257,6 +281,22 @@ void Server::Impl::configure() {
     tool_max_speed.push_back(t.max_speed_m_per_s);
   }
   if (sim == nullptr) throw std::runtime_error("Server: no simulation");
+  if (!(std::isfinite(opt.station_idle_timeout_s) && opt.station_idle_timeout_s >= 0.05 &&
+        opt.station_idle_timeout_s <= 3600))
+    throw std::runtime_error("station idle timeout " + std::to_string(opt.station_idle_timeout_s) +
+                             " s is outside [0.05, 3600] s");
+  if (opt.max_stations_per_participant < 1)
+    throw std::runtime_error("max stations per participant " +
+                             std::to_string(opt.max_stations_per_participant) + " is below 1");
+  if (!(std::isfinite(opt.workspace_margin_m) && opt.workspace_margin_m >= 0 && opt.workspace_margin_m <= 100))
+    throw std::runtime_error("workspace margin " + std::to_string(opt.workspace_margin_m) +
+                             " m is outside [0, 100] m");
+  if (!(std::isfinite(opt.max_future_s) && opt.max_future_s >= 0))
+    throw std::runtime_error("max future " + std::to_string(opt.max_future_s) + " s is not finite and >= 0");
+  if (!(std::isfinite(opt.max_station_rate_hz) && opt.max_station_rate_hz >= 10))
+    throw std::runtime_error("max station rate " + std::to_string(opt.max_station_rate_hz) +
+                             " Hz is not finite and >= 10 Hz");
+  log_limit.emplace(opt.log_lines_per_second);
   if (sim->num_meshes() != static_cast<int>(mesh_info.size()))
     throw std::runtime_error(opt.scene_path + ": the simulation has " +
                              std::to_string(sim->num_meshes()) + " meshes, the scene " +
@@ -279,6 +319,32 @@ void Server::Impl::configure() {
         "; the strain is measured in the fields solved for viewers, while one is matched");
   } else {
     log("no accuracy table: SimStatus.expected_force_error stays -1 (unknown)");
+  }
+  // Workspace: the bounding box of every mesh's rest vertices, enlarged by the margin.
+  for (int i = 0; i < 3; ++i) {
+    workspace.min_m[i] = std::numeric_limits<double>::max();
+    workspace.max_m[i] = -std::numeric_limits<double>::max();
+  }
+  for (int m = 0; m < sim->num_meshes(); ++m)
+    for (const auto& x : sim->mesh(m).vertices())
+      for (int i = 0; i < 3; ++i) {
+        workspace.min_m[i] = std::min(workspace.min_m[i], x[i]);
+        workspace.max_m[i] = std::max(workspace.max_m[i], x[i]);
+      }
+  for (int i = 0; i < 3; ++i) {
+    if (workspace.min_m[i] > workspace.max_m[i]) workspace.min_m[i] = workspace.max_m[i] = 0;  // no vertices
+    workspace.min_m[i] -= opt.workspace_margin_m;
+    workspace.max_m[i] += opt.workspace_margin_m;
+  }
+  {
+    std::ostringstream w;
+    w << "stations: workspace [" << workspace.min_m[0] << ", " << workspace.max_m[0] << "] x ["
+      << workspace.min_m[1] << ", " << workspace.max_m[1] << "] x [" << workspace.min_m[2] << ", "
+      << workspace.max_m[2] << "] m (scene bounding box + " << opt.workspace_margin_m
+      << " m), idle timeout " << opt.station_idle_timeout_s << " s, at most "
+      << opt.max_stations_per_participant << " per participant, at most " << opt.max_station_rate_hz
+      << " samples/s each, source time at most " << opt.max_future_s << " s ahead";
+    log(w.str());
   }
   const std::string setup = describe_setup(*sim);
   if (!setup.empty()) log(setup);
@@ -305,6 +371,8 @@ void Server::Impl::create_entities() {
 
   if (tool_contact) {
     tool_topic.emplace(*pp, wire::topic_name<neurosim_ToolState>(p));
+    // The identity filter before the reader exists (Cyclone: not thread-safe afterwards).
+    claims.install_filter(tool_topic->handle());
     model_topic.emplace(*pp, wire::topic_name<neurosim_ContactModel>(p));
     tools.emplace(*pp, *tool_topic);
     models.emplace(*pp, *model_topic);
@@ -319,7 +387,8 @@ void Server::Impl::create_entities() {
       contacts_by_count[n].resize(n);
     }
     slot_of_pose.resize(slots.size());
-    log("built: ToolState reader, ContactModel writer, " + std::to_string(max_stations) +
+    log("built: ToolState reader (partition " + std::string(wire::kToolStateReaderPartition) +
+        ", station identity filter), ContactModel writer, " + std::to_string(max_stations) +
         " station slots");
   } else {
     log("not built: stations (effects.tool_contact off): no ToolState reader, no ContactModel");
@@ -354,6 +423,8 @@ void Server::Impl::create_entities() {
   status->max_stations = static_cast<std::uint32_t>(max_stations);
   station_status.resize(slots.size());
   wire::reserve(status->stations, slots.size());
+  wire::reserve(status->refused, kMaxRefusals);
+  refusals.reserve(kMaxRefusals + 1);
   const std::size_t per_period = static_cast<std::size_t>(status_every) * 2 + 64;
   step_us.assign(per_period, 0.0);
   step_us_sorted.assign(per_period, 0.0);
@@ -417,52 +488,176 @@ void Server::Impl::dds_loop() {
       }
       if (r.has(2)) {
         const auto l = tools->liveliness();
-        if (l.not_alive_count_change > 0)
-          log("ToolState writers lost liveliness: " + std::to_string(l.not_alive_count_change) +
-              " (alive now " + std::to_string(l.alive_count) + ")");
+        if (l.not_alive_count_change > 0) {
+          limited_log("liveliness", "ToolState writers lost liveliness: " +
+                                        std::to_string(l.not_alive_count_change) + " (alive now " +
+                                        std::to_string(l.alive_count) + ")");
+          // The writer of the newest change: release its station at once (others: sweep).
+          for (auto it = slot_of_station.begin(); it != slot_of_station.end(); ++it)
+            if (slots[static_cast<std::size_t>(it->second)].writer == l.last_publication_handle) {
+              const std::string key = it->first;
+              leave(key, "its writer lost liveliness");
+              break;
+            }
+        }
       }
+      const std::int64_t now = monotonic_ns();
+      if (now - last_sweep_mono_ns >= 100000000) sweep(now);
     }
   } catch (const std::exception& e) {
     fail("DDS thread", e);
   }
 }
 
+void Server::Impl::limited_log(const char* cause, const std::string& line) {
+  std::string summary;
+  const bool ok = log_limit->allow(cause, monotonic_ns(), &summary);
+  suppressed_lines.store(log_limit->suppressed_total(), std::memory_order_relaxed);
+  if (!summary.empty()) log(summary);
+  if (ok) log(line);
+}
+
 void Server::Impl::leave(const std::string& key, const char* why) {
-  if (refused.erase(key) > 0) {
-    log("refused station '" + key + "' left (" + why + ")");
-    return;
-  }
   const auto it = slot_of_station.find(key);
   if (it == slot_of_station.end()) return;
-  slots[static_cast<std::size_t>(it->second)].state.store(kLeaving, std::memory_order_release);
-  log("station '" + key + "' left (" + why + "), slot " + std::to_string(it->second));
+  auto& s = slots[static_cast<std::size_t>(it->second)];
+  s.writer = 0;
+  s.state.store(kLeaving, std::memory_order_release);
+  limited_log("leave", "station '" + key + "' left (" + why + "), slot " + std::to_string(it->second));
   slot_of_station.erase(it);
 }
 
+// Every 100 ms: stations idle longer than the timeout or whose writer is gone free their slot;
+// cached writers that are no longer matched and old refusals are forgotten.
+void Server::Impl::sweep(std::int64_t now) {
+  last_sweep_mono_ns = now;
+  const auto idle_ns = static_cast<std::int64_t>(opt.station_idle_timeout_s * 1e9);
+  std::vector<std::pair<std::string, const char*>> gone;
+  for (const auto& [key, i] : slot_of_station) {
+    const auto& s = slots[static_cast<std::size_t>(i)];
+    if (now - s.last_sample_mono_ns > idle_ns) {
+      gone.emplace_back(key, "idle: no sample within the station idle timeout, slot reclaimed");
+    } else if (!tools->matched_publication(s.writer).matched) {
+      gone.emplace_back(key, "its writer is gone");
+    }
+  }
+  for (const auto& [key, why] : gone) {
+    if (why[0] == 'i') ++stations_reclaimed;
+    leave(key, why);
+  }
+  for (const auto h : claims.writers())
+    if (!tools->matched_publication(h).matched) claims.erase(h);
+  const std::int64_t wall = dds_time();
+  std::lock_guard<std::mutex> lk(refusal_mutex);
+  refusals.erase(std::remove_if(refusals.begin(), refusals.end(),
+                                [&](const neurosim_StationRefusal& r) { return wall - r.time_ns > kRefusalMemoryNs; }),
+                 refusals.end());
+}
+
+// The writer's claim from the cache, else from discovery (then cached). nullopt: not matched
+// (gone already) or the cache is full of live writers.
+std::optional<WriterInfo> Server::Impl::writer_info(dds_instance_handle_t writer) {
+  if (auto w = claims.find(writer)) return w;
+  const wire::MatchedPublication mp = tools->matched_publication(writer);
+  if (!mp.matched) return std::nullopt;
+  WriterInfo info;
+  info.claim = station_claim(mp.partitions).value_or(std::string());
+  info.guid = mp.guid;
+  info.participant = mp.participant_guid;
+  if (!claims.insert(writer, info)) {
+    for (const auto h : claims.writers())
+      if (!tools->matched_publication(h).matched) claims.erase(h);
+    if (!claims.insert(writer, info)) return std::nullopt;
+  }
+  return info;
+}
+
+void Server::Impl::refuse(const std::string& key, const wire::MatchedPublication* who,
+                          dds_instance_handle_t writer, neurosim_RefusalReason reason,
+                          const std::string& why) {
+  (void)who;
+  Guid guid{};
+  if (auto w = claims.find(writer)) guid = w->guid;
+  const std::int64_t wall = dds_time();
+  bool fresh = true;
+  {
+    std::lock_guard<std::mutex> lk(refusal_mutex);
+    auto it = std::find_if(refusals.begin(), refusals.end(), [&](const neurosim_StationRefusal& r) {
+      return std::memcmp(r.writer_guid, guid.data(), 16) == 0 && key == r.station_id && r.reason == reason;
+    });
+    if (it != refusals.end()) {
+      it->time_ns = wall;
+      fresh = false;
+    } else {
+      neurosim_StationRefusal r{};
+      std::strncpy(r.station_id, key.c_str(), neurosim_ID_MAX);
+      std::memcpy(r.writer_guid, guid.data(), 16);
+      r.reason = reason;
+      r.time_ns = wall;
+      refusals.insert(refusals.begin(), r);
+      if (refusals.size() > kMaxRefusals) {
+        refusals.pop_back();
+        ++unknown_ids_dropped;
+      }
+    }
+  }
+  if (!fresh) return;
+  if (reason != neurosim_REFUSED_IDENTITY) ++stations_refused;
+  status_soon.store(true, std::memory_order_release);
+  limited_log("refused", "refused station '" + key + "': " + why);
+}
+
 void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& rx) {
+  const ReceiveTime at{monotonic_ns(), dds_time()};
   const std::string key(rx.key());
+  const dds_instance_handle_t writer = rx.info.publication_handle;
+  const auto bound = slot_of_station.find(key);
   if (!rx.valid()) {
-    if (rx.disposed()) leave(key, "disposed");
-    else if (rx.no_writers()) leave(key, "no writers / liveliness lost");
+    // Only the bound writer may end its station (a dispose by another writer is ignored).
+    if (bound == slot_of_station.end()) return;
+    if (rx.no_writers()) leave(key, "no writers / liveliness lost");
+    else if (rx.disposed() && slots[static_cast<std::size_t>(bound->second)].writer == writer)
+      leave(key, "disposed");
     return;
   }
-  if (key.empty()) return;
-  auto it = slot_of_station.find(key);
+  auto identity_reject = [&](const std::string& why, bool refusal) {
+    ++rejected_identity_dds;
+    if (bound != slot_of_station.end())
+      slots[static_cast<std::size_t>(bound->second)].rejected_identity.fetch_add(1, std::memory_order_relaxed);
+    if (refusal) refuse(key, nullptr, writer, neurosim_REFUSED_IDENTITY, why);
+    else limited_log("identity", "rejected ToolState for '" + key + "': " + why);
+  };
+  const std::optional<WriterInfo> w = writer_info(writer);
+  if (!w) return identity_reject("writer not matched (gone) or too many writers", false);
+  if (key.empty() || w->claim != key)
+    return identity_reject("the writer's partition claims '" + w->claim + "', not '" + key +
+                               "' (a ToolState writer publishes in partition " +
+                               wire::kStationPartitionPrefix + "<its station_id>)",
+                           true);
+  auto it = bound;
+  if (it != slot_of_station.end() && slots[static_cast<std::size_t>(it->second)].writer != writer)
+    return identity_reject("station id bound to another writer (until that writer is gone or idle " +
+                               std::to_string(opt.station_idle_timeout_s) + " s)",
+                           true);
   if (it == slot_of_station.end()) {
-    if (refused.count(key)) return;
+    int same_participant = 0;
+    for (const auto& [k, i] : slot_of_station)
+      if (slots[static_cast<std::size_t>(i)].participant == w->participant) ++same_participant;
+    if (same_participant >= opt.max_stations_per_participant)
+      return refuse(key, nullptr, writer, neurosim_REFUSED_PARTICIPANT_LIMIT,
+                    "its DDS participant already holds " + std::to_string(same_participant) +
+                        " stations (max " + std::to_string(opt.max_stations_per_participant) +
+                        " per participant)");
     int free_slot = -1;
     for (std::size_t i = 0; i < slots.size(); ++i)
       if (slots[i].state.load(std::memory_order_acquire) == kFree) {
         free_slot = static_cast<int>(i);
         break;
       }
-    if (free_slot < 0) {
-      refused.insert(key);
-      ++stations_refused;
-      log("refused station '" + key + "': max_stations " + std::to_string(max_stations) +
-          " reached (" + std::to_string(slot_of_station.size()) + " active, some may be leaving)");
-      return;
-    }
+    if (free_slot < 0)
+      return refuse(key, nullptr, writer, neurosim_REFUSED_MAX_STATIONS,
+                    "max_stations " + std::to_string(max_stations) + " reached (" +
+                        std::to_string(slot_of_station.size()) + " active, some may be leaving)");
     auto& s = slots[static_cast<std::size_t>(free_slot)];
     std::memcpy(s.station_id, rx.data.station_id, sizeof(s.station_id));
     const std::string tool(rx.data.tool_id);
@@ -475,12 +670,23 @@ void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& 
       vmax = tool_max_speed[0];
       tool_note = " (unknown tool '" + tool + "': using '" + tool_ids[0] + "')";
     }
-    s.filter = ToolFilter(vmax);
+    ToolFilterDef fd;
+    fd.max_speed_m_per_s = vmax;
+    fd.workspace = workspace;
+    fd.max_future_s = opt.max_future_s;
+    fd.max_rate_hz = opt.max_station_rate_hz;
+    s.filter = ToolFilter(fd);
     s.tool = ti != tool_ids.end() ? static_cast<int>(ti - tool_ids.begin()) : 0;
-    s.logged_rejections = 0;
+    s.writer = writer;
+    s.participant = w->participant;
+    s.last_sample_mono_ns = at.monotonic_ns;
     s.accepted = 0;
     s.rejected_nonfinite = 0;
     s.rejected_jump = 0;
+    s.rejected_workspace = 0;
+    s.rejected_time = 0;
+    s.rejected_sequence = 0;
+    s.rejected_identity = 0;
     s.last_sequence = 0;
     s.last_rejected = false;
     s.state.store(kActive, std::memory_order_release);
@@ -488,19 +694,19 @@ void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& 
     std::ostringstream os;
     os << "station '" << key << "' joined, slot " << free_slot << ", tool '" << tool
        << "', max speed " << vmax << " m/s" << tool_note;
-    log(os.str());
+    limited_log("join", os.str());
   }
   auto& s = slots[static_cast<std::size_t>(it->second)];
-  const Verdict v = s.filter.check(rx.data);
+  s.last_sample_mono_ns = at.monotonic_ns;
+  double q[4];
+  const Verdict v = s.filter.check(rx.data, at, q);
   if (v == Verdict::Accepted) {
     PoseSample p;
     p.sequence = rx.data.sequence_number;
     p.source_time_ns = rx.data.source_time_ns;
     p.tool = s.tool;
-    const double* q = rx.data.orientation;
-    const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
     for (int i = 0; i < 3; ++i) p.position_m[i] = rx.data.position_m[i];
-    for (int i = 0; i < 4; ++i) p.orientation[i] = q[i] / qn;
+    for (int i = 0; i < 4; ++i) p.orientation[i] = q[i];
     s.pose.publish(p);
     s.accepted.fetch_add(1, std::memory_order_relaxed);
     s.last_sequence.store(p.sequence, std::memory_order_relaxed);
@@ -508,20 +714,19 @@ void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& 
     return;
   }
   s.last_rejected.store(true, std::memory_order_relaxed);
-  if (v == Verdict::NonFinite) {
-    s.rejected_nonfinite.fetch_add(1, std::memory_order_relaxed);
-    ++rejected_nonfinite;
-  } else {
-    s.rejected_jump.fetch_add(1, std::memory_order_relaxed);
-    ++rejected_jump;
+  switch (v) {
+    case Verdict::NonFinite: s.rejected_nonfinite.fetch_add(1, std::memory_order_relaxed); ++rejected_nonfinite; break;
+    case Verdict::Jump: s.rejected_jump.fetch_add(1, std::memory_order_relaxed); ++rejected_jump; break;
+    case Verdict::Workspace: s.rejected_workspace.fetch_add(1, std::memory_order_relaxed); ++rejected_workspace; break;
+    case Verdict::Time: s.rejected_time.fetch_add(1, std::memory_order_relaxed); ++rejected_time; break;
+    case Verdict::Sequence: s.rejected_sequence.fetch_add(1, std::memory_order_relaxed); ++rejected_sequence; break;
+    case Verdict::Rate: ++rejected_rate; break;
+    case Verdict::Accepted: break;
   }
-  // A station sending garbage must not flood the log.
-  if (s.logged_rejections < 5) {
-    ++s.logged_rejections;
-    log("station '" + key + "': rejected ToolState " + std::to_string(rx.data.sequence_number) +
-        " (" + to_string(v) + "), keeping the last good pose" +
-        (s.logged_rejections == 5 ? "; further rejections counted only" : ""));
-  }
+  // A station sending garbage must not flood the log: at most N lines per second per cause.
+  limited_log(to_string(v), "station '" + key + "': rejected ToolState " +
+                                std::to_string(rx.data.sequence_number) + " (" + to_string(v) +
+                                "), keeping the last good pose");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -552,7 +757,12 @@ void Server::Impl::step_loop() {
       one_step();
       const std::int64_t t1 = monotonic_ns();
       if (step_us_count < step_us.size()) step_us[step_us_count++] = 1e-3 * static_cast<double>(t1 - t0);
-      if (steps.load(std::memory_order_relaxed) % status_every == 0) publish_status(t1);
+      if (steps.load(std::memory_order_relaxed) % status_every == 0) {
+        publish_status(t1);
+      } else if (status_soon.load(std::memory_order_acquire) && t1 - last_status_mono_ns >= 200000000) {
+        // A station was refused: tell its client now, not at the next status period.
+        publish_status(t1);
+      }
     }
   } catch (const std::exception& e) {
     fail("step thread", e);
@@ -750,11 +960,28 @@ void Server::Impl::publish_status(std::int64_t now_mono) {
     ss.samples_rejected_nonfinite = s.rejected_nonfinite.load(std::memory_order_relaxed);
     ss.samples_rejected_jump = s.rejected_jump.load(std::memory_order_relaxed);
     ss.last_sequence = s.last_sequence.load(std::memory_order_relaxed);
+    ss.samples_rejected_workspace = s.rejected_workspace.load(std::memory_order_relaxed);
+    ss.samples_rejected_time = s.rejected_time.load(std::memory_order_relaxed);
+    ss.samples_rejected_sequence = s.rejected_sequence.load(std::memory_order_relaxed);
+    ss.samples_rejected_identity = s.rejected_identity.load(std::memory_order_relaxed);
   }
   wire::assign(st.stations, station_status.data(), k);
   st.samples_rejected_nonfinite = rejected_nonfinite.load();
   st.samples_rejected_jump = rejected_jump.load();
   st.stations_refused = stations_refused.load();
+  st.samples_rejected_workspace = rejected_workspace.load();
+  st.samples_rejected_time = rejected_time.load();
+  st.samples_rejected_sequence = rejected_sequence.load();
+  st.samples_rejected_identity = rejected_identity();
+  st.samples_rejected_rate = rejected_rate.load();
+  st.stations_reclaimed = stations_reclaimed.load();
+  st.unknown_ids_dropped = unknown_ids_dropped.load();
+  st.log_lines_suppressed = log_limit ? suppressed_lines.load(std::memory_order_relaxed) : 0;
+  status_soon.store(false, std::memory_order_release);
+  {
+    std::lock_guard<std::mutex> lk(refusal_mutex);
+    wire::assign(st.refused, refusals.data(), refusals.size());
+  }
   status_writer->write(st);
 }
 
@@ -875,7 +1102,11 @@ void Server::stop() {
   d.log("stopped after " + std::to_string(d.steps.load()) + " steps (" +
         std::to_string(d.deadline_misses.load()) + " deadline misses, rejected " +
         std::to_string(d.rejected_nonfinite.load()) + " non-finite + " +
-        std::to_string(d.rejected_jump.load()) + " jump samples, refused " +
+        std::to_string(d.rejected_jump.load()) + " jump + " + std::to_string(d.rejected_workspace.load()) +
+        " workspace + " + std::to_string(d.rejected_time.load()) + " time + " +
+        std::to_string(d.rejected_sequence.load()) + " sequence + " + std::to_string(d.rejected_identity()) +
+        " identity + " + std::to_string(d.rejected_rate.load()) + " rate samples, reclaimed " +
+        std::to_string(d.stations_reclaimed.load()) + " idle stations, refused " +
         std::to_string(d.stations_refused.load()) + " stations; " +
         std::to_string(d.deformation_frames.load()) + " Deformation frames, " +
         std::to_string(d.deformation_skipped.load()) + " viewer ticks skipped)");
@@ -896,6 +1127,12 @@ ServerCounters Server::counters() const {
   c.rejected_nonfinite = d.rejected_nonfinite.load();
   c.rejected_jump = d.rejected_jump.load();
   c.stations_refused = d.stations_refused.load();
+  c.rejected_workspace = d.rejected_workspace.load();
+  c.rejected_time = d.rejected_time.load();
+  c.rejected_sequence = d.rejected_sequence.load();
+  c.rejected_identity = d.rejected_identity();
+  c.rejected_rate = d.rejected_rate.load();
+  c.stations_reclaimed = d.stations_reclaimed.load();
   c.deformation_frames = d.deformation_frames.load();
   c.full_field_solves = d.full_field_solves.load();
   c.deformation_skipped = d.deformation_skipped.load();

@@ -1,8 +1,10 @@
 // neurosim-server core: a Simulation (Model built once) stepped at the
 // scene rate on its own thread with absolute deadlines, stations on DDS.
 //
-//   DDS thread : waitset on ToolState → join/leave stations, filter samples (NaN/inf, jumps),
-//                hand the newest good pose to the station's slot (triple buffer, never blocks).
+//   DDS thread : waitset on ToolState → bind each station id to the writer that claims it
+//                (station_identity.hpp), join/leave/reclaim stations, filter samples
+//                (tool_filter.hpp), hand the newest good pose to the station's slot (triple
+//                buffer, never blocks).
 //   step thread: every period: newest pose of each station → Simulation::step → ContactModel
 //                per station; Deformation per mesh at the viewer rate while a viewer is matched;
 //                SimStatus at the status rate.
@@ -36,6 +38,13 @@ struct ServerOptions {
   // empty: none (SimStatus.expected_force_error -1). A file that is given but unreadable or
   // malformed is an error.
   std::string accuracy_table{};
+  // Station identity and hostile input (docs/ARCHITECTURE.md "Station identity"):
+  double station_idle_timeout_s{2.0};      // a station with no sample this long frees its slot, unit s
+  int max_stations_per_participant{2};     // stations one DDS participant may hold at once (>= 1)
+  double workspace_margin_m{0.5};          // tool tips beyond the scene's bounding box + this are rejected, unit m
+  double max_future_s{1.0};                // source times further ahead of the server's clock are rejected, unit s
+  double max_station_rate_hz{2000.0};      // samples per second a station may send on average (burst 20)
+  int log_lines_per_second{5};             // per cause; the rest is summarised ("suppressed K lines")
 };
 
 // Counters the server exposes to tests (also published in SimStatus).
@@ -45,6 +54,12 @@ struct ServerCounters {
   std::uint64_t rejected_nonfinite{0};
   std::uint64_t rejected_jump{0};
   std::uint64_t stations_refused{0};
+  std::uint64_t rejected_workspace{0};
+  std::uint64_t rejected_time{0};
+  std::uint64_t rejected_sequence{0};
+  std::uint64_t rejected_identity{0};
+  std::uint64_t rejected_rate{0};
+  std::uint64_t stations_reclaimed{0};
   std::uint64_t deformation_frames{0};  // all meshes
   std::uint64_t full_field_solves{0};   // displacement fields computed (per mesh)
   std::uint64_t deformation_skipped{0}; // viewer ticks skipped: the field worker was still busy
@@ -82,9 +97,13 @@ using SimulationFactory =
 // The neurosim-server command line:
 //   neurosim-server --scene FILE [--tier linear|corotational|nonlinear] [--duration SECONDS]
 //                   [--domain ID] [--server-id NAME] [--topic-prefix P]
+//                   [--station-idle-timeout S] [--max-stations-per-participant N]
+//                   [--workspace-margin M] [--log-lines-per-second N]
 // Sets OPENBLAS_NUM_THREADS=1 (unless set), installs SIGINT/SIGTERM handlers, compiles the
 // scene, replaces its effects.tier by --tier if given, builds the simulation with `factory`,
-// serves until a signal or the duration. Returns the exit status (2: usage error, e.g. an
+// serves until a signal or the duration. SIGINT/SIGTERM are honoured in every phase: during the
+// scene load and the simulation build the process exits within ~0.1 s with a message naming the
+// phase (status 0, as for a signal while serving). Returns the exit status (2: usage error, e.g. an
 // unknown --tier; 1: the scene, the simulation build or DDS failed).
 int run_main(int argc, char** argv, const SimulationFactory& factory);
 

@@ -32,9 +32,16 @@ template <class T>
 struct Loop {
   ns::Participant pp;
   ns::Topic<T> topic{pp, unique_topic(ns::TopicTraits<T>::name)};
-  ns::Writer<T> writer{pp, topic};
+  ns::Writer<T> writer{make_writer()};
   ns::Reader<T> reader{pp, topic};
   ns::Waitset ws{pp};
+  // A ToolState writer is one station's, in its partition (the reader's wildcard matches it).
+  ns::Writer<T> make_writer() {
+    if constexpr (ns::TopicTraits<T>::profile == ns::Profile::ToolState)
+      return ns::Writer<T>(pp, topic, "omni-1");
+    else
+      return ns::Writer<T>(pp, topic);
+  }
   Loop() {
     ws.attach_data(reader, 1);
     EXPECT_TRUE(writer.wait_for_readers(1, kMatchTimeout));
@@ -297,7 +304,7 @@ TEST(wire_dds, ToolStateWriterGoneDisposesStation) {
   ns::Waitset ws(pp);
   ws.attach_data(r, 1);
   {
-    ns::Writer<neurosim_ToolState> w(pp, t);
+    ns::Writer<neurosim_ToolState> w(pp, t, "leaving");
     ASSERT_TRUE(w.wait_for_readers(1, kMatchTimeout));
     ns::Sample<neurosim_ToolState> s;
     ns::set_string(s->station_id, "leaving");

@@ -16,6 +16,8 @@
 
 #include <cmath>
 #include <functional>
+#include <map>
+#include <utility>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -127,6 +129,57 @@ Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm, 
       params::relative_error_bound = 1e-6, params::p_rng = &rng);
   // A facet of size h on the tube deviates about h^2 / (8 r) from it: the size criterion leads.
   return run(domain, make_criteria(cell_size_mm, 0.1 * cell_size_mm));
+}
+
+SurfaceOutput mesh_gray_surface(vtkImageData* image, const GraySurfaceOptions& o) {
+  check_size(o.facet_size_mm, "surface facet size");
+  check_size(o.facet_distance_mm, "surface facet distance");
+  if (image == nullptr || image->GetScalarType() != VTK_FLOAT) {
+    throw std::invalid_argument("mesh3: gray image must be float");
+  }
+  CGAL::get_default_random() = CGAL::Random(o.seed);
+  CGAL::Random rng(o.seed);
+  const CGAL::Image_3 cgal_image = CGAL::IO::read_vtk_image_data(image);
+  if (!cgal_image.is_valid()) throw std::runtime_error("mesh3: CGAL could not take the gray image");
+  const Domain domain = Domain::create_gray_image_mesh_domain(
+      cgal_image, params::iso_value = static_cast<float>(o.iso_value),
+      params::value_outside = 0.0f, params::relative_error_bound = 1e-6, params::p_rng = &rng);
+  // Surface criteria only: the volume is never used, so cells are not refined.
+  const Criteria criteria(params::facet_angle = o.facet_angle_deg,
+                          params::facet_size = o.facet_size_mm,
+                          params::facet_distance = o.facet_distance_mm);
+  const C3t3 c3t3 = CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(),
+                                            params::no_exude(), params::manifold());
+  // Boundary facets, each oriented out of the cell that lies in the subdomain.
+  SurfaceOutput out;
+  std::map<const void*, int> index;  // the order of first use, deterministic
+  auto vertex = [&](Tr::Vertex_handle v) {
+    auto [it, inserted] = index.emplace(&*v, static_cast<int>(out.vertices.size()));
+    if (inserted) {
+      const auto& p = v->point();
+      out.vertices.emplace_back(CGAL::to_double(p.x()), CGAL::to_double(p.y()),
+                                CGAL::to_double(p.z()));
+    }
+    return it->second;
+  };
+  for (auto f = c3t3.facets_in_complex_begin(); f != c3t3.facets_in_complex_end(); ++f) {
+    auto cell = f->first;
+    int i = f->second;
+    if (!c3t3.is_in_complex(cell)) {  // use the side inside the subdomain
+      const auto mirror = c3t3.triangulation().mirror_facet(*f);
+      cell = mirror.first;
+      i = mirror.second;
+    }
+    mesh::Tri t{vertex(cell->vertex((i + 1) & 3)), vertex(cell->vertex((i + 2) & 3)),
+                vertex(cell->vertex((i + 3) & 3))};
+    // Outward: the normal points away from the cell's fourth vertex (inside the subdomain).
+    const Vec3 &a = out.vertices[t[0]], &b = out.vertices[t[1]], &c = out.vertices[t[2]];
+    const auto& q = cell->vertex(i)->point();
+    const Vec3 inner(CGAL::to_double(q.x()), CGAL::to_double(q.y()), CGAL::to_double(q.z()));
+    if ((b - a).cross(c - a).dot(inner - a) > 0.0) std::swap(t[1], t[2]);
+    out.triangles.push_back(t);
+  }
+  return out;
 }
 
 }  // namespace neurosim::model

@@ -28,4 +28,23 @@ Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::u
 Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm, double cell_size_mm,
                       std::uint32_t seed);
 
+// A closed triangle surface (the boundary of a meshed domain), outward oriented.
+struct SurfaceOutput {
+  std::vector<Vec3> vertices;  // in the input's unit (mm)
+  std::vector<mesh::Tri> triangles;
+};
+
+struct GraySurfaceOptions {
+  double iso_value{0.5};          // the surface is where the image equals it (inside: above)
+  double facet_size_mm{10.0};     // Delaunay ball radius bound of a surface triangle, unit mm
+  double facet_distance_mm{1.5};  // triangle centre to the iso-surface, unit mm
+  double facet_angle_deg{30.0};   // lower bound of a triangle's smallest angle
+  std::uint32_t seed{1};
+};
+
+// The iso-surface of a scalar (float) image by CGAL Mesh_3 (gray image domain, manifold facet
+// topology, surface criteria only, no sliver steps): the facets of the complex between the
+// subdomain and the outside, oriented out of the subdomain. Reproducible for a seed.
+SurfaceOutput mesh_gray_surface(vtkImageData* image, const GraySurfaceOptions& options);
+
 }  // namespace neurosim::model

@@ -6,6 +6,7 @@
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/triangle_surface.hpp"
 #include "server/mesh/io.hpp"
+#include "server/mesh/tri_surface.hpp"
 #include "server/scene/compile.hpp"
 #include "tools/model/mesh3.hpp"
 #include "tools/model/mri_mask.hpp"
@@ -167,7 +168,46 @@ void set_material(scene::Material* m, MaterialSet set, bool artery) {
   }
 }
 
+// The cerebellum's own material. Values: the cerebrum's (unsure of a cerebellum-specific value,
+// so the same one is used and the source says so).
+void set_cerebellum_material(scene::Material* m, MaterialSet set) {
+  set_material(m, set, false);
+  m->set_name(set == MaterialSet::Paper ? "paper_cerebellum" : "cerebellum_literature");
+  m->set_source(
+      m->source() +
+      ". Cerebellum: the cerebrum's values, not a cerebellum-specific measurement: in vivo "
+      "elastography reports regional differences of the cerebellum (e.g. Zhang et al. 2011, J "
+      "Biomech 44:1909) but no value of it was checked for this model, so none is invented");
+}
+
+// Skull summary: the surface written, read back as the server will (mm -> m), checked closed.
+void write_skull(const std::filesystem::path& file, const SurfaceOutput& surface,
+                 SkullSummary& summary) {
+  mesh::MeshData data;
+  data.vertices_m = surface.vertices;  // written in mm: unit 1
+  data.triangles = surface.triangles;
+  data.triangle_labels.assign(surface.triangles.size(), 1);
+  mesh::write_medit(file.string(), data, 1.0);
+  const mesh::MeshData back = mesh::read_medit_surface(file.string(), kMmToM);
+  mesh::require_closed_outward(back.vertices_m, back.triangles, file.string());
+  summary.file = file;
+  summary.vertices = static_cast<int>(back.vertices_m.size());
+  summary.triangles = static_cast<int>(back.triangles.size());
+  summary.enclosed_volume_ml = mesh::check_closed(back.vertices_m, back.triangles).volume_m3 * 1e6;
+}
+
 }  // namespace
+
+OpeningMni default_suboccipital_opening() {
+  return {Vec3(28.0, -89.0, -36.0), Vec3(0.25, -0.95, -0.2).normalized(), 15.0, 25.0,
+          "suboccipital craniotomy over the right cerebellar hemisphere (the paper's Figure 16: "
+          "cerebellum seen through a hole in the skull). Centre: the posterior surface of the "
+          "right cerebellar hemisphere in the AAL atlas on Colin27 (mricron-data aal.nii.gz, "
+          "labels 92-108 Cerebelum_*_R: centroid x = 28, z = -36 MNI mm; the most posterior "
+          "labelled voxel at x 25-30, z -40..-30 is at y = -89); axis: the surface's outward "
+          "normal estimated from the same voxels (posterior, slightly lateral and inferior); "
+          "radius 15 mm, a typical small retrosigmoid/suboccipital keyhole"};
+}
 
 std::vector<Vec3> default_mca_course_mni_mm() {
   // Checked against ch2bet (T1 >= 20): every point >= 9 mm inside the mask.
@@ -228,7 +268,16 @@ ModelResult build_model(const ModelOptions& o) {
   t0 = Clock::now();
   const Mesh3Output brain3 = mesh_labeled_image(mask.labels, o.brain_cell_size_mm, o.seed);
   r.brain.seconds = seconds_since(t0);
-  const mesh::TetMesh brain = write_and_load(mesh_dir / "brain.mesh", brain3, r.brain);
+  mesh::TetMesh brain = write_and_load(mesh_dir / "brain.mesh", brain3, r.brain);
+  if (o.skull) {
+    // AAL regions per tetrahedron, written as the Medit tetrahedron reference.
+    std::vector<int> labels = label_regions(brain, mask, o.atlas);
+    r.regions = region_stats(brain, labels, mask);
+    mesh::MeshData data = mesh::read_medit((mesh_dir / "brain.mesh").string(), 1.0);
+    data.tet_labels = labels;
+    mesh::write_medit((mesh_dir / "brain.mesh").string(), data, 1.0);
+    brain.set_tet_labels(std::move(labels));
+  }
   t0 = Clock::now();
   const Mesh3Output artery3 =
       mesh_tube(centreline, o.artery_radius_mm, o.artery_cell_size_mm, o.seed);
@@ -248,6 +297,30 @@ ModelResult build_model(const ModelOptions& o) {
   // 5. Skull base plane for the fixed nodes.
   skull_base_plane(brain, o.fixed_margin_mm * kMmToM, r.fixed_plane_point_m, r.fixed_plane_normal);
 
+  // 5b. The skull, cut open at the craniotomy (image mm).
+  const OpeningMni opening =
+      o.opening_given ? OpeningMni{o.opening_center_mni_mm, o.opening_axis_mni.normalized(),
+                                   o.opening_radius_mm, o.opening_half_length_mm,
+                                   "given on the command line (--opening-*)"}
+                      : default_suboccipital_opening();
+  if (o.skull) {
+    r.has_skull = true;
+    SkullOptions so = o.skull_options;
+    so.surface.seed = o.seed;
+    CutCylinder cut;
+    cut.center_mm = world_to_image(mask, opening.center_mm);
+    cut.axis = (world_to_image(mask, opening.center_mm + opening.axis) - cut.center_mm).normalized();
+    cut.radius_mm = opening.radius_mm;
+    cut.half_length_mm = opening.half_length_mm;
+    so.openings = {cut};
+    SkullResult skull = build_skull(mask, so);
+    write_skull(mesh_dir / "skull.mesh", skull.surface, r.skull);
+    skull.surface = {};
+    r.skull.build = skull;
+    r.skull.opening_center_m = cut.center_mm * kMmToM;
+    r.skull.opening_axis = cut.axis;
+  }
+
   // 6. The scene.
   scene::Scene s;
   s.set_name(o.name);
@@ -260,6 +333,10 @@ ModelResult build_model(const ModelOptions& o) {
        << ". Mesh coordinates are the image's VTK coordinates (voxel index x spacing, mm); "
           "NIfTI world (MNI) = image + "
        << fmt(world0) << " mm.";
+  if (o.skull) {
+    desc << " Approach scene: brain tetrahedra labelled by AAL region (tissues), and the skull "
+            "as a rigid closed surface with a craniotomy (meshes[].openings).";
+  }
   s.set_description(desc.str());
   const std::string rel_dir = o.name + "/";
   {
@@ -280,6 +357,54 @@ ModelResult build_model(const ModelOptions& o) {
             "within "
          << o.fixed_margin_mm << " mm above a plane fitted to the lowest surface points)";
     m->set_provenance(prov.str());
+    if (o.skull) {
+      const std::string aal = "AAL atlas on Colin27 (" + o.atlas.path +
+                              ", labels per aal.nii.txt) sampled at each tetrahedron's centroid, "
+                              "nearest labelled voxel within " +
+                              std::to_string(static_cast<int>(o.atlas.search_mm)) + " mm";
+      auto* cerebrum = m->add_tissues();
+      cerebrum->set_label(kCerebrum);
+      cerebrum->set_name(region_name(kCerebrum));
+      cerebrum->set_provenance(aal + ": AAL 1-90; the mesh's material");
+      auto* cerebellum = m->add_tissues();
+      cerebellum->set_label(kCerebellum);
+      cerebellum->set_name(region_name(kCerebellum));
+      cerebellum->set_provenance(aal + ": AAL 91-116 (Cerebelum_* and Vermis_*)");
+      set_cerebellum_material(cerebellum->mutable_material(), o.material);
+      auto* other = m->add_tissues();
+      other->set_label(kOther);
+      other->set_name(region_name(kOther));
+      other->set_provenance(aal + ": no AAL label nearby (brainstem, which AAL lacks; CSF); the "
+                                  "mesh's material");
+    }
+  }
+  if (o.skull) {
+    auto* m = s.add_meshes();
+    m->set_id("skull");
+    m->set_file(rel_dir + "skull.mesh");
+    m->set_file_unit_m(kMmToM);
+    m->set_rigid(true);
+    const auto& so = o.skull_options;
+    std::ostringstream prov;
+    prov << "Colin27 head (" << so.head_path << ", T1 >= " << so.head_threshold
+         << ", filled) and brain mask (" << o.mri_path << "): bone shell from "
+         << so.csf_gap_mm << " mm (CSF gap) to " << so.csf_gap_mm + so.thickness_mm
+         << " mm outside the brain mask (exact distance transform), clipped to the head, cut "
+            "by the opening, largest piece; indicator Gaussian-smoothed (sigma "
+         << so.smoothing_sigma_mm << " mm) and its 0.5 level meshed by CGAL Mesh_3 (manifold, "
+            "facet size "
+         << so.surface.facet_size_mm << " mm, distance " << so.surface.facet_distance_mm
+         << " mm, seed " << o.seed << "); not segmented bone: a shell of plausible thickness";
+    m->set_provenance(prov.str());
+    auto* op = m->add_openings();
+    set_vec(op->mutable_center_m(), r.skull.opening_center_m, 1e-6);
+    set_vec(op->mutable_axis(), r.skull.opening_axis, 1e-6);
+    op->set_radius_m(opening.radius_mm * kMmToM);
+    op->set_half_length_m(opening.half_length_mm * kMmToM);
+    std::ostringstream oprov;
+    oprov << opening.source << ". MNI centre " << fmt(opening.center_mm) << " mm, axis "
+          << fmt(opening.axis, 3);
+    op->set_provenance(oprov.str());
   }
   {
     auto* m = s.add_meshes();
@@ -360,6 +485,10 @@ ModelResult build_model(const ModelOptions& o) {
   // 7. Read it back as the server does.
   const scene::Scene back = scene::read_scene(r.scene);
   for (const auto& entry : back.meshes()) {
+    if (entry.rigid()) {
+      scene::load_rigid(entry, r.scene.parent_path(), r.scene.string());
+      continue;
+    }
     const auto loaded = scene::load_mesh(entry, r.scene.parent_path(), r.scene.string());
     if (entry.id() == "brain") r.fixed_nodes = static_cast<int>(loaded.fixed_nodes.size());
   }
@@ -398,6 +527,21 @@ std::string summary(const ModelResult& r) {
      << fmt(r.fixed_plane_point_m * 1e3) << " mm, normal " << fmt(r.fixed_plane_normal, 3) << "\n";
   os << "  load case: " << r.prescribed_nodes
      << " brain nodes on the right lateral surface pushed 3 mm medially (prescribed)\n";
+  if (r.has_skull) {
+    const auto& k = r.skull;
+    os << std::setprecision(1) << "  regions (AAL): cerebrum " << r.regions.volume_ml[kCerebrum]
+       << " ml centroid MNI " << fmt(r.regions.centroid_world_mm[kCerebrum]) << ", cerebellum "
+       << r.regions.volume_ml[kCerebellum] << " ml centroid MNI "
+       << fmt(r.regions.centroid_world_mm[kCerebellum]) << ", other "
+       << r.regions.volume_ml[kOther] << " ml\n";
+    os << "  skull: " << k.vertices << " vertices, " << k.triangles
+       << " triangles, closed, bone volume " << k.enclosed_volume_ml << " ml (shell voxels "
+       << k.build.shell_volume_ml << " ml; head " << k.build.head_volume_ml << " ml; "
+       << k.build.removed_by_openings << " voxels cut by the opening, " << k.build.clipped_by_head
+       << " outside the head, " << k.build.dropped_fragments << " in fragments) masks "
+       << std::setprecision(2) << k.build.seconds_mask << " s, meshed in " << k.build.seconds_mesh
+       << " s -> " << k.file.string() << "\n";
+  }
   os << std::setprecision(2) << "  total " << r.total_seconds << " s\n";
   return os.str();
 }

@@ -4,6 +4,8 @@
 
 #include "server/mesh/quality.hpp"
 #include "server/mesh/tet_mesh.hpp"
+#include "tools/model/regions.hpp"
+#include "tools/model/skull.hpp"
 
 #include <cstdint>
 #include <filesystem>
@@ -33,7 +35,30 @@ struct ModelOptions {
   double fixed_margin_mm{10.0};  // fixed layer above the fitted skull-base plane, unit mm
   std::uint32_t seed{1};
   MaterialSet material{MaterialSet::Literature};
+  // --skull: the approach scene (default name brain_skull): the brain's tetrahedra labelled by
+  // AAL region (tissues cerebrum / cerebellum / other), and the skull as a rigid surface with a
+  // craniotomy. Off: the brain/artery scene exactly as before.
+  bool skull{false};
+  SkullOptions skull_options{};  // its openings are replaced by `opening` below
+  AtlasOptions atlas{};
+  // The craniotomy in NIfTI world (MNI) mm; default_suboccipital_opening() unless set.
+  bool opening_given{false};
+  Vec3 opening_center_mni_mm{Vec3::Zero()};
+  Vec3 opening_axis_mni{Vec3::UnitZ()};
+  double opening_radius_mm{15.0};
+  double opening_half_length_mm{25.0};
 };
+
+// The default craniotomy: suboccipital, over the right cerebellar hemisphere (the paper's
+// Figure 16 shows the cerebellum through a hole in the skull). Centre and axis in MNI mm.
+struct OpeningMni {
+  Vec3 center_mm;
+  Vec3 axis;  // unit, out of the head
+  double radius_mm;
+  double half_length_mm;
+  const char* source;
+};
+OpeningMni default_suboccipital_opening();
 
 // Right middle cerebral artery, MNI mm: M1 from the carotid terminus laterally to the genu at
 // the limen insulae, then M2 posterosuperiorly over the insula in the Sylvian fissure.
@@ -48,7 +73,20 @@ struct MeshSummary {
   double seconds{0.0};  // meshing wall time, unit s
 };
 
+struct SkullSummary {
+  std::filesystem::path file;
+  int vertices{0};
+  int triangles{0};
+  double enclosed_volume_ml{0.0};  // of the closed surface (bone volume), unit ml
+  SkullResult build;               // voxel counts, timings (surface moved out)
+  Vec3 opening_center_m{Vec3::Zero()};  // scene coordinates, unit m
+  Vec3 opening_axis{Vec3::UnitZ()};
+};
+
 struct ModelResult {
+  bool has_skull{false};
+  SkullSummary skull;
+  RegionStats regions;  // with has_skull
   MeshSummary brain;
   MeshSummary artery;
   double brain_volume_ml{0.0};      // mask volume, unit ml

@@ -6,6 +6,7 @@
 #include <iostream>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 int main(int argc, char** argv) {
   namespace cli = neurosim::cli;
@@ -42,12 +43,47 @@ int main(int argc, char** argv) {
   p->add_option("--material", material, "material set")
       ->check(CLI::IsMember({"literature", "paper"}))
       ->capture_default_str();
-  p->add_option("--name", o.name, "scene name NAME")->capture_default_str();
+  p->add_option("--name", o.name, "scene name NAME (with --skull: brain_skull unless given)")
+      ->capture_default_str();
+  bool skull = false;
+  p->add_flag("--skull,--approach", skull,
+              "write the approach scene instead: AAL brain regions (tissues) and the skull as a "
+              "rigid surface with a craniotomy (default NAME brain_skull)");
+  std::vector<double> centre, axis;
+  double radius_mm = o.opening_radius_mm;
+  p->add_option("--opening-center-mni", centre,
+                "craniotomy centre X Y Z, MNI mm (default: over the right cerebellar hemisphere)")
+      ->expected(3)
+      ->check(cli::finite());
+  p->add_option("--opening-axis-mni", axis, "craniotomy axis X Y Z, out of the head")
+      ->expected(3)
+      ->check(cli::finite());
+  p->add_option("--opening-radius", radius_mm, "craniotomy radius, unit mm")
+      ->check(cli::finite())
+      ->capture_default_str();
   p->footer(
       "Exit status 1 on error, 2 on a usage error or when an artery vertex is not inside the "
       "brain.");
   if (auto rc = p.parse(argc, argv)) return *rc;
   o.out_dir = out_dir;
+  o.skull = skull;
+  if (skull && p->count("--name") == 0) o.name = "brain_skull";
+  if ((!centre.empty() || !axis.empty() || p->count("--opening-radius") > 0) && !skull) {
+    std::cerr << "neurosim-model: --opening-* options need --skull\n";
+    return 2;
+  }
+  if (!centre.empty() || !axis.empty() || p->count("--opening-radius") > 0) {
+    const auto d = neurosim::model::default_suboccipital_opening();
+    o.opening_given = true;
+    o.opening_center_mni_mm = centre.empty() ? d.center_mm : neurosim::model::Vec3(centre[0], centre[1], centre[2]);
+    o.opening_axis_mni = axis.empty() ? d.axis : neurosim::model::Vec3(axis[0], axis[1], axis[2]);
+    o.opening_radius_mm = radius_mm;
+    o.opening_half_length_mm = d.half_length_mm;
+    if (!(o.opening_axis_mni.norm() > 0.0) || !(radius_mm > 0.0)) {
+      std::cerr << "neurosim-model: --opening-axis-mni must be non-zero and --opening-radius > 0\n";
+      return 2;
+    }
+  }
   o.seed = static_cast<std::uint32_t>(seed);
   o.material = material == "paper" ? neurosim::model::MaterialSet::Paper
                                    : neurosim::model::MaterialSet::Literature;

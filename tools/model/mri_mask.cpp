@@ -127,6 +127,20 @@ Vec3 world_to_image(const BrainMask& mask, const Vec3& world_mm) {
   return p.head<3>();
 }
 
+Vec3 image_to_world(const BrainMask& mask, const Vec3& image_mm) {
+  if (!mask.has_world) return image_mm;
+  return (mask.image_to_world * image_mm.homogeneous()).head<3>();
+}
+
+void keep_largest_component(unsigned char* voxels, const std::array<int, 3>& dims) {
+  const long long n = static_cast<long long>(dims[0]) * dims[1] * dims[2];
+  long long any = 0;
+  for (long long i = 0; i < n; ++i) any += voxels[i] = voxels[i] ? 1 : 0;
+  if (any == 0) return;
+  const auto largest = components(voxels, dims, 1, false);
+  std::copy(largest.begin(), largest.end(), voxels);
+}
+
 double depth_in_mask_mm(const BrainMask& mask, const Vec3& p, double max_mm) {
   const auto& d = mask.dims;
   const unsigned char* v = static_cast<const unsigned char*>(mask.labels->GetScalarPointer());

@@ -33,6 +33,10 @@ struct BrainMask {
 BrainMask load_brain_mask(const std::string& path, double threshold);
 
 Vec3 world_to_image(const BrainMask& mask, const Vec3& world_mm);
+Vec3 image_to_world(const BrainMask& mask, const Vec3& image_mm);
+
+// Keeps the largest face-connected component of the voxels != 0 (set to 1), clears the rest.
+void keep_largest_component(unsigned char* voxels, const std::array<int, 3>& dims);
 
 // Distance (mm) from p (image mm) to the centre of the nearest voxel outside the mask,
 // searched up to max_mm (returns max_mm when none is that close).

@@ -287,7 +287,9 @@ TEST_F(ReplayCli, MaxRateThinsTheStepsAndKeepsTheLast) {
   std::size_t j = 0;
   int contacts = 0;
   for (std::size_t i = 0; i < thin.size(); ++i) {
-    if (i > 0 && i + 1 < thin.size()) EXPECT_GE(thin[i].t - thin[i - 1].t, 0.01 - 1e-12) << i;
+    if (i > 0 && i + 1 < thin.size()) {
+      EXPECT_GE(thin[i].t - thin[i - 1].t, 0.01 - 1e-12) << i;
+    }
     while (j < full.size() && full[j].t < thin[i].t) ++j;
     ASSERT_LT(j, full.size());
     ASSERT_EQ(full[j].t, thin[i].t);

@@ -204,7 +204,7 @@ inline void bad_samples(const Setup& setup, int max_stations) {
   Session ses(setup, "bad");
   ASSERT_TRUE(ses.wait_ready());
   ModelCollector models(ses.client);
-  wire::Writer<neurosim_ToolState> w(ses.client.pp, ses.client.tool_topic);
+  wire::Writer<neurosim_ToolState> w(ses.client.pp, ses.client.tool_topic, "bad-1");
   ASSERT_TRUE(w.wait_for_readers(1, DDS_SECS(10)));
   wire::Sample<neurosim_ToolState> s;
   std::uint64_t seq = 0;
@@ -242,8 +242,9 @@ inline void bad_samples(const Setup& setup, int max_stations) {
   send_bad(good, [&](neurosim_ToolState& t) { t.position_m[0] = nan; });
   send_bad(good, [&](neurosim_ToolState& t) { t.velocity_m_per_s[2] = inf; });
   send_bad(good, [&](neurosim_ToolState& t) { t.orientation[1] = nan; });
-  // 0.5 m in a few ms is > 100 m/s, far beyond the 2 m/s maximum.
-  send_bad({good[0] + 0.5, good[1], good[2]}, [](neurosim_ToolState&) {});
+  // 0.3 m in a few ms is > 100 m/s, far beyond the 2 m/s maximum (and still inside the
+  // workspace: the scene's bounding box + 0.5 m).
+  send_bad({good[0] + 0.3, good[1], good[2]}, [](neurosim_ToolState&) {});
   if (::testing::Test::HasFatalFailure()) return;
   for (int i = 0; i < 100; ++i) send(good, nullptr);
   const std::uint64_t last_good = seq;
@@ -271,18 +272,32 @@ inline void bad_samples(const Setup& setup, int max_stations) {
 
   if (max_stations > 0) {
     // Fill the remaining slots, then one more: refused, never answered, the others still are.
+    // Each station writes with its own writer (its partition); each pair of stations from its
+    // own participant (at most 2 per participant), the refused one from another participant so
+    // it is refused for max_stations, not for its participant's limit.
     std::vector<std::string> ids;
-    for (int i = 1; i < max_stations; ++i) ids.push_back("extra-" + std::to_string(i));
+    std::vector<std::unique_ptr<Client>> participants;
+    std::vector<std::unique_ptr<wire::Writer<neurosim_ToolState>>> writers;
+    for (int i = 1; i < max_stations; ++i) {
+      ids.push_back("extra-" + std::to_string(i));
+      if (i % 2 == 1) participants.push_back(std::make_unique<Client>(ses.domain));
+      auto& c = *participants.back();
+      writers.push_back(std::make_unique<wire::Writer<neurosim_ToolState>>(c.pp, c.tool_topic, ids.back()));
+      ASSERT_TRUE(writers.back()->wait_for_readers(1, DDS_SECS(10)));
+    }
     for (int k = 0; k < 50; ++k) {
-      for (const auto& id : ids) {
-        fill_tool(*s, id.c_str(), static_cast<std::uint64_t>(k + 1), good.data(), dds_time());
-        w.write(*s);
+      for (std::size_t j = 0; j < ids.size(); ++j) {
+        fill_tool(*s, ids[j].c_str(), static_cast<std::uint64_t>(k + 1), good.data(), dds_time());
+        writers[j]->write(*s);
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
     }
+    Client other(ses.domain);
+    wire::Writer<neurosim_ToolState> refused_writer(other.pp, other.tool_topic, "refused-1");
+    ASSERT_TRUE(refused_writer.wait_for_readers(1, DDS_SECS(10)));
     for (int k = 0; k < 50; ++k) {
       fill_tool(*s, "refused-1", static_cast<std::uint64_t>(k + 1), good.data(), dds_time());
-      w.write(*s);
+      refused_writer.write(*s);
       send(good, nullptr);
     }
     EXPECT_TRUE(ses.status.wait_for(

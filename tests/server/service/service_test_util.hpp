@@ -278,7 +278,11 @@ class StatusWatcher {
     std::ostringstream os;
     os << "SimStatus steps " << s.steps << " rate " << s.step_rate_measured_hz << " Hz p50 " << s.step_time_p50_us
        << " us p99 " << s.step_time_p99_us << " us, rejected non-finite " << s.samples_rejected_nonfinite
-       << " jump " << s.samples_rejected_jump << ", refused " << s.stations_refused << ", stations:";
+       << " jump " << s.samples_rejected_jump << " workspace " << s.samples_rejected_workspace << " time "
+       << s.samples_rejected_time << " sequence " << s.samples_rejected_sequence << " identity "
+       << s.samples_rejected_identity << " rate " << s.samples_rejected_rate << ", refused " << s.stations_refused
+       << ", reclaimed " << s.stations_reclaimed << ", log lines suppressed " << s.log_lines_suppressed
+       << ", stations:";
     for (const auto& st : wire::view(s.stations))
       os << " [" << st.station_id << " accepted " << st.samples_accepted << " nonfinite "
          << st.samples_rejected_nonfinite << " jump " << st.samples_rejected_jump << " last " << st.last_sequence
@@ -303,7 +307,7 @@ class StationThread {
  public:
   StationThread(Client& c, std::string id, std::function<std::array<double, 3>(double)> pose,
                 double seconds)
-      : writer_(c.pp, c.tool_topic), id_(std::move(id)), pose_(std::move(pose)), seconds_(seconds) {
+      : writer_(c.pp, c.tool_topic, id), id_(std::move(id)), pose_(std::move(pose)), seconds_(seconds) {
     thread_ = std::thread([this] { loop(); });
   }
   ~StationThread() { join(); }

@@ -27,7 +27,7 @@ int main(int argc, char** argv) {
     o.domain = static_cast<dds_domainid_t>(domain);
     wire::Participant pp(o);
     wire::Topic<neurosim_ToolState> t(pp);
-    wire::Writer<neurosim_ToolState> w(pp, t);
+    wire::Writer<neurosim_ToolState> w(pp, t, station);  // in the station's partition
     wire::Sample<neurosim_ToolState> s;
     wire::set_string(s->station_id, station, "station_id");
     wire::set_string(s->tool_id, "probe", "tool_id");

@@ -1,8 +1,11 @@
-// Unit tests of the service's building blocks: the ToolState filter (non-finite values, jumps
-// beyond the maximum speed) and the command line. The newest-pose triple buffer is
+// Unit tests of the service's building blocks: the ToolState filter (non-finite values,
+// workspace, future times, sequence, rate, jumps beyond the maximum speed at receive times), the
+// log limiter, the partition claim and the command line. The newest-pose triple buffer is
 // common::TripleBuffer (tests/common/triple_buffer_test.cpp).
 #include "idl/wire/types.hpp"
 #include "server/service/server.hpp"
+#include "server/service/log_limiter.hpp"
+#include "server/service/station_identity.hpp"
 #include "server/service/tool_filter.hpp"
 
 #include <gtest/gtest.h>
@@ -10,7 +13,9 @@
 #include <cmath>
 #include <limits>
 
+using neurosim::service::ReceiveTime;
 using neurosim::service::ToolFilter;
+using neurosim::service::ToolFilterDef;
 using neurosim::service::Verdict;
 
 namespace {
@@ -25,42 +30,174 @@ neurosim_ToolState tool(double x, std::int64_t t_ns) {
 
 }  // namespace
 
+constexpr std::int64_t kMs = 1000000;
+constexpr std::int64_t kWall0 = 1700000000000000000;  // Unix epoch ns
+
+// Received at monotonic t_ns, wall clock kWall0 + t_ns.
+ReceiveTime at(std::int64_t t_ns) { return ReceiveTime{t_ns, kWall0 + t_ns}; }
+
+ToolFilterDef def(double vmax = 2.0, double slack = 2e-3) {
+  ToolFilterDef d;
+  d.max_speed_m_per_s = vmax;
+  d.slack_s = slack;
+  return d;
+}
+
+// A sample sent at t (sequence = t in ms + 1, source time = the wall clock then).
+neurosim_ToolState at_ms(double x, std::int64_t t_ns) {
+  auto s = tool(x, kWall0 + t_ns);
+  s.sequence_number = static_cast<std::uint64_t>(t_ns / kMs) + 1;
+  return s;
+}
+
 TEST(service_tool_filter, RejectsNonFiniteAnywhere) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const double inf = std::numeric_limits<double>::infinity();
-  ToolFilter f(2.0);
-  EXPECT_EQ(f.check(tool(0.1, 0)), Verdict::Accepted);
+  ToolFilter f(def());
+  EXPECT_EQ(f.check(at_ms(0.1, 0), at(0)), Verdict::Accepted);
   for (int field = 0; field < 10; ++field) {
-    auto s = tool(0.1, 1000000);
+    auto s = at_ms(0.1, kMs);
     double* v = field < 3 ? &s.position_m[field] : field < 6 ? &s.velocity_m_per_s[field - 3] : &s.orientation[field - 6];
     *v = field % 2 ? nan : -inf;
-    EXPECT_EQ(f.check(s), Verdict::NonFinite) << "field " << field;
+    EXPECT_EQ(f.check(s, at(kMs)), Verdict::NonFinite) << "field " << field;
   }
-  auto zero_q = tool(0.1, 1000000);
+  auto zero_q = at_ms(0.1, kMs);
   zero_q.orientation[0] = 0;
-  EXPECT_EQ(f.check(zero_q), Verdict::NonFinite);
-  EXPECT_EQ(f.check(tool(0.1, 2000000)), Verdict::Accepted);
+  EXPECT_EQ(f.check(zero_q, at(kMs)), Verdict::NonFinite);
+  EXPECT_EQ(f.check(at_ms(0.1, 2 * kMs), at(2 * kMs)), Verdict::Accepted);
 }
 
-TEST(service_tool_filter, JumpIsMeasuredFromTheLastGoodPose) {
-  ToolFilter f(2.0, 0.0);  // 2 m/s, no slack: 1 ms allows 2 mm
-  const std::int64_t ms = 1000000;
-  EXPECT_EQ(f.check(tool(0.0, 0)), Verdict::Accepted);
-  EXPECT_EQ(f.check(tool(0.0019, 1 * ms)), Verdict::Accepted);
-  EXPECT_EQ(f.check(tool(0.0100, 2 * ms)), Verdict::Jump);  // 8.1 mm in 1 ms
+TEST(service_tool_filter, JumpIsMeasuredFromTheLastGoodPoseAtReceiveTimes) {
+  ToolFilter f(def(2.0, 0.0));  // 2 m/s, no slack: 1 ms allows 2 mm
+  EXPECT_EQ(f.check(at_ms(0.0, 0), at(0)), Verdict::Accepted);
+  EXPECT_EQ(f.check(at_ms(0.0019, 1 * kMs), at(1 * kMs)), Verdict::Accepted);
+  EXPECT_EQ(f.check(at_ms(0.0100, 2 * kMs), at(2 * kMs)), Verdict::Jump);  // 8.1 mm in 1 ms
   // Still measured from 1.9 mm at 1 ms: 3.9 mm in 2 ms is allowed.
-  EXPECT_EQ(f.check(tool(0.0058, 3 * ms)), Verdict::Accepted);
-  // A time that does not advance allows no motion at all.
-  EXPECT_EQ(f.check(tool(0.0059, 3 * ms)), Verdict::Jump);
-  EXPECT_EQ(f.check(tool(0.0058, 3 * ms)), Verdict::Accepted);
+  EXPECT_EQ(f.check(at_ms(0.0058, 3 * kMs), at(3 * kMs)), Verdict::Accepted);
+  // Received at the same instant: no motion allowed at all.
+  auto s = at_ms(0.0059, 4 * kMs);
+  EXPECT_EQ(f.check(s, at(3 * kMs)), Verdict::Jump);
   f.reset();
-  EXPECT_EQ(f.check(tool(5.0, 4 * ms)), Verdict::Accepted) << "after reset the next sample is the first";
+  EXPECT_EQ(f.check(at_ms(0.5, 5 * kMs), at(5 * kMs)), Verdict::Accepted) << "after reset the next sample is the first";
+}
+
+TEST(service_tool_filter, FutureSourceTimeNeitherPassesNorWidensTheSpeedCheck) {
+  ToolFilter f(def(2.0, 0.0));
+  EXPECT_EQ(f.check(at_ms(0.0, 0), at(0)), Verdict::Accepted);
+  // Stamped 10 s later but received 1 ms later: 1 m is a jump (receive time counts), and the
+  // stamp itself is more than 1 s ahead of the server's clock.
+  auto s = at_ms(1.0, kMs);
+  s.source_time_ns = kWall0 + 10000 * kMs;
+  EXPECT_EQ(f.check(s, at(kMs)), Verdict::Time);
+  s.source_time_ns = kWall0 + 500 * kMs;  // 0.5 s ahead: allowed clock skew, but still a jump
+  EXPECT_EQ(f.check(s, at(kMs)), Verdict::Jump);
+  EXPECT_EQ(f.check(at_ms(0.001, 2 * kMs), at(2 * kMs)), Verdict::Accepted);
+}
+
+TEST(service_tool_filter, TheFirstSampleIsBoundedByTheWorkspace) {
+  ToolFilterDef d = def();
+  for (int i = 0; i < 3; ++i) {
+    d.workspace.min_m[i] = -0.5;
+    d.workspace.max_m[i] = 0.6;
+  }
+  ToolFilter f(d);
+  EXPECT_EQ(f.check(at_ms(1e308, 0), at(0)), Verdict::Workspace);
+  EXPECT_EQ(f.check(at_ms(-1e30, kMs), at(kMs)), Verdict::Workspace);
+  EXPECT_EQ(f.check(at_ms(0.61, 2 * kMs), at(2 * kMs)), Verdict::Workspace);
+  EXPECT_EQ(f.check(at_ms(0.59, 3 * kMs), at(3 * kMs)), Verdict::Accepted);
+}
+
+TEST(service_tool_filter, HugeQuaternionsAreNormalisedTinyOrZeroOnesRefused) {
+  ToolFilter f(def());
+  auto s = at_ms(0.0, 0);
+  s.orientation[0] = 1e300;
+  s.orientation[3] = 1e300;  // squared norm overflows to inf
+  double q[4] = {0, 0, 0, 0};
+  ASSERT_EQ(f.check(s, at(0), q), Verdict::Accepted);
+  EXPECT_NEAR(q[0], std::sqrt(0.5), 1e-15);
+  EXPECT_NEAR(q[3], std::sqrt(0.5), 1e-15);
+  EXPECT_EQ(q[1], 0.0);
+  auto tiny = at_ms(0.0, kMs);
+  tiny.orientation[0] = 1e-300;  // squared norm underflows to 0: still a direction
+  ASSERT_EQ(f.check(tiny, at(kMs), q), Verdict::Accepted);
+  EXPECT_DOUBLE_EQ(q[0], 1.0);
+  auto zero = at_ms(0.0, 2 * kMs);
+  zero.orientation[0] = 0;
+  EXPECT_EQ(f.check(zero, at(2 * kMs), q), Verdict::NonFinite);
+}
+
+TEST(service_tool_filter, SequenceMustIncreaseUntilANewWriter) {
+  ToolFilter f(def());
+  auto s = at_ms(0.0, 0);
+  s.sequence_number = 100;
+  EXPECT_EQ(f.check(s, at(0)), Verdict::Accepted);
+  s.sequence_number = 99;
+  s.source_time_ns += kMs;
+  EXPECT_EQ(f.check(s, at(kMs)), Verdict::Sequence);
+  s.sequence_number = 100;
+  EXPECT_EQ(f.check(s, at(2 * kMs)), Verdict::Sequence) << "a repeated number is not newer";
+  s.sequence_number = 101;
+  EXPECT_EQ(f.check(s, at(3 * kMs)), Verdict::Accepted);
+  f.reset();  // the station restarted (new writer): it starts over at 1
+  s.sequence_number = 1;
+  EXPECT_EQ(f.check(s, at(4 * kMs)), Verdict::Accepted);
+}
+
+TEST(service_tool_filter, RateAboveTheLimitIsRejectedA1kHzStationNever) {
+  ToolFilterDef d = def();
+  d.max_rate_hz = 2000;
+  d.rate_burst = 20;
+  ToolFilter fast(d), steady(d);
+  int rate = 0;
+  for (std::int64_t k = 0; k < 2000; ++k) {  // 20 kHz for 0.1 s
+    auto s = at_ms(0.0, 0);
+    s.sequence_number = static_cast<std::uint64_t>(k + 1);
+    rate += fast.check(s, at(k * 50000)) == Verdict::Rate;
+  }
+  EXPECT_GT(rate, 1700);  // ~200 + 20 of 2000 pass
+  EXPECT_LT(rate, 1800);
+  for (std::int64_t k = 0; k < 2000; ++k) {  // 1 kHz with +-0.4 ms jitter
+    const std::int64_t t = k * kMs + ((k % 2) ? 400000 : -400000);
+    auto s = at_ms(0.0, k * kMs);
+    ASSERT_EQ(steady.check(s, at(t + kMs)), Verdict::Accepted) << k;
+  }
 }
 
 TEST(service_tool_filter, RefusesBadLimits) {
-  EXPECT_THROW(ToolFilter(0.0), std::invalid_argument);
-  EXPECT_THROW(ToolFilter(std::numeric_limits<double>::quiet_NaN()), std::invalid_argument);
-  EXPECT_THROW(ToolFilter(1.0, -1.0), std::invalid_argument);
+  EXPECT_THROW(ToolFilter(def(0.0)), std::invalid_argument);
+  EXPECT_THROW(ToolFilter(def(std::numeric_limits<double>::quiet_NaN())), std::invalid_argument);
+  EXPECT_THROW(ToolFilter(def(1.0, -1.0)), std::invalid_argument);
+  ToolFilterDef d;
+  d.workspace.min_m[1] = 1;
+  d.workspace.max_m[1] = 0;
+  EXPECT_THROW(ToolFilter{d}, std::invalid_argument);
+}
+
+TEST(service_log_limiter, AtMostNLinesPerSecondPerCauseThenASummary) {
+  neurosim::service::LogLimiter lim(3);
+  std::string summary;
+  int allowed = 0;
+  for (int i = 0; i < 100; ++i) allowed += lim.allow("identity", i * kMs, &summary);
+  EXPECT_EQ(allowed, 3);
+  EXPECT_TRUE(lim.allow("workspace", 0, &summary)) << "causes are limited separately";
+  EXPECT_TRUE(lim.allow("identity", 1000 * kMs, &summary));
+  EXPECT_NE(summary.find("suppressed 97 'identity' lines"), std::string::npos) << summary;
+  EXPECT_EQ(lim.suppressed_total(), 97u);
+  EXPECT_THROW(neurosim::service::LogLimiter(0), std::invalid_argument);
+}
+
+TEST(service_station_identity, AWriterClaimsTheOneStationOfItsPartition) {
+  using neurosim::service::station_claim;
+  EXPECT_EQ(station_claim({"neurosim.station.omni-1"}).value_or("-"), "omni-1");
+  EXPECT_FALSE(station_claim({}).has_value()) << "default partition: no claim";
+  EXPECT_FALSE(station_claim({"neurosim.station.*"}).has_value()) << "a wildcard claims nothing";
+  EXPECT_FALSE(station_claim({"neurosim.station.a", "neurosim.station.b"}).has_value());
+  EXPECT_EQ(station_claim({"other", "neurosim.station.a"}).value_or("-"), "a");
+  EXPECT_FALSE(station_claim({"neurosim.station." + std::string(65, 'x')}).has_value());
+  EXPECT_EQ(neurosim::wire::station_partition("omni-1"), "neurosim.station.omni-1");
+  EXPECT_THROW(neurosim::wire::station_partition("a*"), std::invalid_argument);
+  EXPECT_THROW(neurosim::wire::station_partition(""), std::invalid_argument);
+  EXPECT_THROW(neurosim::wire::writer_qos(neurosim::wire::Profile::ToolState), std::logic_error);
 }
 
 TEST(service_command_line, BadArgumentsExitTwo) {

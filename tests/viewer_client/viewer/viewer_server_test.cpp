@@ -52,7 +52,8 @@ bool wait_for_topology(nv::DdsClient& client, nv::ViewerState& state, double tim
 class PressingStation {
  public:
   PressingStation(const std::string& prefix, const nt::PressPoint& p)
-      : pp_(), topic_(pp_, wire::topic_name<neurosim_ToolState>(prefix)), writer_(pp_, topic_) {
+      : pp_(), topic_(pp_, wire::topic_name<neurosim_ToolState>(prefix)),
+        writer_(pp_, topic_, "test-station") {
     thread_ = std::thread([this, p] { run(p); });
   }
   ~PressingStation() {

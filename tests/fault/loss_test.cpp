@@ -1,0 +1,83 @@
+// Lost packets on loopback: Cyclone DDS's own fault injection (Internal/Test/XmitLossiness,
+// packets dropped per thousand on send) in both the server and the station, at 10 % and 30 %.
+// ToolState is best effort: lost poses are simply not seen (the server answers the newest it
+// has); ContactModel is reliable keep-last-1: a lost one is superseded by the next step's, and the
+// client counts the server steps it never saw. The force must stay smooth and bounded.
+#include "fault/fault_session.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdlib>
+
+using namespace neurosim::fault_testing;
+
+namespace {
+
+// loopback.xml with XmitLossiness = per_mille; returns the file URI.
+std::string lossy_config(const fs::path& dir, int per_mille) {
+  std::string xml =
+      neurosim::testing::slurp(neurosim::testing::source_dir() / "deploy/cyclonedds/loopback.xml");
+  const std::string tag = "<Internal>";
+  const auto at = xml.find(tag);
+  if (at == std::string::npos) throw std::runtime_error("loopback.xml has no <Internal>");
+  xml.insert(at + tag.size(),
+             "<Test><XmitLossiness>" + std::to_string(per_mille) + "</XmitLossiness></Test>");
+  const fs::path file = dir / ("lossy" + std::to_string(per_mille) + ".xml");
+  std::ofstream(file) << xml;
+  return "file://" + file.string();
+}
+
+void hold_under_loss(int per_mille) {
+  Session s("floss" + std::to_string(per_mille));
+  // Every DDS participant from here on, this process's and the server's (it inherits the
+  // environment), drops that share of the packets it sends.
+  const char* old_uri = std::getenv("CYCLONEDDS_URI");
+  const std::string restore = old_uri ? old_uri : "";
+  ::setenv("CYCLONEDDS_URI", lossy_config(s.dir, per_mille).c_str(), 1);
+  auto server = s.start_server("server.log");
+  StatusProbe status(s.prefix);
+  {
+    // The press script: 4 s cycles from 4 mm above the face to 4 mm into it and back, so the
+    // force changes all the time and a lost model or pose would show as a step.
+    Station a(s, "a", 0.05, nh::make_script("press"), 60);
+    ASSERT_TRUE(a.wait_for_server(60)) << server->log();
+    ASSERT_TRUE(a.wait_force_at_least(0.2, 30)) << a.force() << " N\n" << server->log();
+    sleep_s(8.0);  // two press cycles
+    a.join();
+    const auto link = a.counters();
+    const auto sum = a.model_counters();
+    double f_max = 0;
+    for (const auto& t : a.trace()) f_max = std::max(f_max, t.force_n.norm());
+    std::printf("loss %d per mille: max |F| %.3f N, max step %.4f N; models received %llu, server "
+                "steps not seen %llu; watchdog timeouts %llu, NaN %llu\n",
+                per_mille, f_max, a.max_force_step(),
+                static_cast<unsigned long long>(link.models_received),
+                static_cast<unsigned long long>(link.models_skipped),
+                static_cast<unsigned long long>(sum.timeouts),
+                static_cast<unsigned long long>(sum.nan_outputs + sum.nan_models));
+    // Smooth and bounded: no step beyond the bound, within the device's force, never faded.
+    EXPECT_LE(a.max_force_step(), a.config().force.max_force_step_n + 1e-12);
+    EXPECT_LE(f_max, a.config().force.max_force_n + 1e-12);
+    EXPECT_GT(f_max, 0.5) << "the press never reached the cube";
+    EXPECT_EQ(sum.timeouts, 0u) << "the force faded: no model for 50 ms";
+    EXPECT_EQ(sum.nan_outputs + sum.nan_models, 0u);
+    // ContactModel loss is counted by the client (the server steps at 1 kHz, one model each).
+    EXPECT_GT(link.models_skipped, 0u) << "no lost ContactModel counted at " << per_mille;
+  }
+  // ToolState loss seen by the server: fewer poses accepted than sent.
+  ASSERT_TRUE(status.wait_for(
+      [](const neurosim_SimStatus& st) {
+        return neurosim::service::testing::find_station(st, "a") != nullptr;
+      },
+      5))
+      << status.text;
+  std::printf("%s\n", status.text.c_str());
+  server->signal_and_wait(SIGTERM, 10);
+  ::setenv("CYCLONEDDS_URI", restore.c_str(), 1);
+}
+
+}  // namespace
+
+TEST(fault_loss, TenPercentOfPacketsLost) { hold_under_loss(100); }
+TEST(fault_loss, ThirtyPercentOfPacketsLost) { hold_under_loss(300); }

@@ -1,0 +1,161 @@
+// Hostile DDS input against the real server code (service_test_fake_server, a private domain):
+// an attacker process (service_test_attacker) sends NaN/inf, 1e30 coordinates, zero quaternions,
+// future timestamps, backwards sequence numbers, 20 kHz, a spoof of the legitimate station's id
+// (bound writer and partition claim), a station beyond its participant's limit, an idle station
+// and a flood of distinct ids, while a legitimate scripted station presses the box. Every cause
+// must be counted in SimStatus, the legitimate station keeps its slot, its ContactModels keep
+// coming at an unchanged force, the server's memory stays bounded. Also: SIGTERM during the
+// load ends the server within 2 s with a message naming the phase.
+#include "server/scene/compile.hpp"
+#include "tests/server/service/fake_simulation.hpp"
+#include "tests/server/service/service_scenarios.hpp"
+
+#include <fstream>
+#include <regex>
+
+namespace st = neurosim::service::testing;
+namespace nt = neurosim::testing;
+namespace wire = neurosim::wire;
+
+namespace {
+
+// fake_box.scene with room for 8 stations (the legitimate one, two of the attacker's, ...).
+std::filesystem::path scene_with_8_stations() {
+  const auto src = nt::source_dir() / "tests/server/service/data/fake_box.scene";
+  std::string text = nt::slurp(src);
+  text = std::regex_replace(text, std::regex("max_stations: 2"), "max_stations: 8");
+  const auto dst = nt::temp_dir("service_fault_scene") / "fake_box_8.scene";
+  std::ofstream(dst) << text;
+  return dst;
+}
+
+st::Setup fake_setup(const std::filesystem::path& scene) {
+  st::Setup s;
+  s.exe = nt::bin_dir() / "service_test_fake_server";
+  s.scene = scene;
+  s.make_reference = [scene] { return st::make_fake(neurosim::scene::load_model(scene)); };
+  s.startup_timeout_s = 20;
+  return s;
+}
+
+long rss_kb(pid_t pid) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/status");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
+  return -1;
+}
+
+}  // namespace
+
+TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUnaffected) {
+  const st::Setup setup = fake_setup(scene_with_8_stations());
+  st::Session ses(setup, "fault", 40);
+  ASSERT_TRUE(ses.wait_ready());
+  st::ModelCollector models(ses.client);
+  const std::array<double, 3> press{setup.face_x_m + setup.tip_radius_m - 0.002, setup.centre_y_m,
+                                    setup.centre_z_m};
+  st::StationThread legit(ses.client, "legit-1", [&](double) { return press; }, 30);
+  ASSERT_TRUE(legit.writer().wait_for_readers(1, DDS_SECS(10)));
+  ASSERT_TRUE(models.wait_for([&] { return models.count("legit-1") > 200; }, 10)) << ses.server.log();
+  // The reference force: the first models at the held pose (all equal: a deterministic spring).
+  const auto first = [&] {
+    for (const auto& r : models.records())
+      if (r.station == "legit-1" && r.in_contact) return r;
+    return st::ModelRecord{};
+  }();
+  ASSERT_TRUE(first.in_contact) << "the legitimate station must press the box";
+  const long rss_before = rss_kb(ses.server.pid());
+  const std::size_t models_before = models.count("legit-1");
+
+  // Safe position of the attacker's own station: 5 cm outside the +x face (no contact).
+  const int flood = 20000;
+  st::ChildProcess attacker(nt::bin_dir() / "service_test_attacker",
+                            {std::to_string(ses.domain), "legit-1", std::to_string(setup.face_x_m + 0.05),
+                             std::to_string(setup.centre_y_m), std::to_string(setup.centre_z_m),
+                             std::to_string(flood)},
+                            ses.log_file.parent_path() / "attacker.log");
+  // While it attacks: the legitimate station's models keep coming (no gap over 100 ms in any
+  // of 60 windows of 100 ms) and stay in the slot.
+  std::size_t last = models.count("legit-1");
+  int stalled_windows = 0;
+  bool refusal_seen = false;
+  const auto t0 = st::Clock::now();
+  while (attacker.alive() && st::seconds_since(t0) < 20) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const std::size_t n = models.count("legit-1");
+    if (n == last) ++stalled_windows;
+    last = n;
+  }
+  EXPECT_EQ(attacker.wait(10), 0) << attacker.log();
+  EXPECT_EQ(stalled_windows, 0) << "the legitimate station went 100 ms without a model";
+  // Every cause counted; the idle attacker station reclaimed after the 2 s timeout.
+  const bool counted = ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        for (const auto& r : wire::view(s.refused))
+          if (std::string(r.station_id) == "legit-1" && r.reason == neurosim_REFUSED_IDENTITY) refusal_seen = true;
+        const auto* l = st::find_station(s, "legit-1");
+        return s.samples_rejected_nonfinite > 0 && s.samples_rejected_workspace > 0 &&
+               s.samples_rejected_time > 0 && s.samples_rejected_sequence > 0 &&
+               s.samples_rejected_identity > static_cast<std::uint64_t>(flood) / 2 &&
+               s.samples_rejected_rate > 1000 && s.stations_refused >= 1 && s.stations_reclaimed >= 1 &&
+               l != nullptr && l->samples_rejected_identity > 0 && st::find_station(s, "evil-2") == nullptr;
+      },
+      10);
+  EXPECT_TRUE(counted) << ses.status.last_text << "\n" << ses.server.log();
+  EXPECT_TRUE(refusal_seen) << "SimStatus.refused never named the spoofing writer of legit-1";
+  // The legitimate station: still in its slot, none of its own samples rejected.
+  EXPECT_TRUE(ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        const auto* l = st::find_station(s, "legit-1");
+        return l != nullptr && l->samples_rejected_nonfinite == 0 && l->samples_rejected_jump == 0 &&
+               l->samples_rejected_workspace == 0 && l->samples_rejected_time == 0 &&
+               l->samples_rejected_sequence == 0 && l->samples_accepted > 1000;
+      },
+      5))
+      << ses.status.last_text;
+  // Its force never moved: every model answers its own pose (the spoof was 5 mm deeper).
+  std::size_t compared = 0;
+  for (const auto& r : models.records()) {
+    if (r.station != "legit-1") continue;
+    ASSERT_TRUE(r.in_contact) << "seq " << r.tool_sequence;
+    ASSERT_FALSE(r.rejected) << "seq " << r.tool_sequence;
+    ASSERT_LT(r.tool_sequence, 1000000u) << "a model answers the spoofer's pose";
+    EXPECT_TRUE(st::near_rel(r.f0, first.f0, 3, 1e-12, 1e-9)) << "seq " << r.tool_sequence;
+    ++compared;
+  }
+  EXPECT_GT(models.count("legit-1"), models_before + 3000);
+  // Memory: the flood of distinct ids grows the server by far less than the 73 MB seen before.
+  const long rss_after = rss_kb(ses.server.pid());
+  EXPECT_LT(rss_after - rss_before, 16 * 1024) << "RSS " << rss_before << " kB -> " << rss_after << " kB";
+  // The log is rate limited: a few lines per cause per second, not one per sample.
+  const std::string log = ses.server.log();
+  const auto lines = std::count(log.begin(), log.end(), '\n');
+  EXPECT_LT(lines, 1000) << "log lines " << lines;
+  EXPECT_NE(log.find("suppressed"), std::string::npos);
+  std::printf("fault: %zu legit models compared, RSS %ld -> %ld kB, %ld log lines\n%s\n", compared, rss_before,
+              rss_after, static_cast<long>(lines), ses.status.last_text.c_str());
+  legit.join();
+  EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
+}
+
+TEST(service_fault, SigtermDuringTheLoadEndsTheServerWithin2s) {
+  const st::Setup setup = fake_setup(nt::source_dir() / "tests/server/service/data/fake_box.scene");
+  const int domain = st::private_domain();
+  // The fake server's factory waits this long before building (a slow load, test-only).
+  setenv("NEUROSIM_FAKE_BUILD_DELAY_S", "60", 1);
+  st::ChildProcess server(setup.exe,
+                          {"--scene", setup.scene.string(), "--domain", std::to_string(domain), "--duration", "60"},
+                          nt::temp_dir("service_fault_load") / "server.log");
+  unsetenv("NEUROSIM_FAKE_BUILD_DELAY_S");
+  const auto t_start = st::Clock::now();
+  while (server.log().find("tier LINEAR") == std::string::npos && st::seconds_since(t_start) < 10)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  ASSERT_TRUE(server.alive()) << server.log();
+  const auto t0 = st::Clock::now();
+  EXPECT_EQ(server.signal_and_wait(SIGTERM, 2.0), 0) << server.log();
+  EXPECT_LT(st::seconds_since(t0), 2.0);
+  EXPECT_NE(server.log().find("signal received while building the simulation"), std::string::npos)
+      << server.log();
+}
