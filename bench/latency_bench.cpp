@@ -6,8 +6,10 @@
 //   latency_bench --stations N --seconds S [--csv] [--scene FILE] [--server EXE] [--warmup S]
 //                 [--viewer]   also read Deformation, so the server runs its full-field solves
 //                 [--load N]   N busy threads beside server and stations (CPU starvation)
+//                 [--step-modes event,clock]  one server run per step mode, one row each
+//                              (neurosim-server --step-mode; default: event)
 //
-// CSV: stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load
+// CSV: stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load,mode
 //   samples        ToolStates answered during the measurement (after the warm-up)
 //   lost           ContactModels the server wrote for a station that the station never read
 //                  (gaps in ContactModel.server_step), all stations
@@ -205,11 +207,33 @@ int main(int argc, char** argv) {
   cli->add_option("--load", load, "busy threads beside the measured processes")
       ->check(neurosim::cli::in_range(0, 64))
       ->capture_default_str();
+  std::string modes_text = "event";
+  cli->add_option("--step-modes", modes_text,
+                  "comma-separated server step modes to compare side by side (event, clock)")
+      ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;
+  std::vector<std::string> modes;
+  {
+    std::stringstream ss(modes_text);
+    for (std::string m; std::getline(ss, m, ',');) {
+      if (m != "event" && m != "clock") {
+        std::cerr << "latency_bench: --step-modes: unknown mode '" << m << "' (event, clock)\n";
+        return 2;
+      }
+      modes.push_back(m);
+    }
+    if (modes.empty()) {
+      std::cerr << "latency_bench: --step-modes: no mode given\n";
+      return 2;
+    }
+  }
   o.scene = scene;
   o.server = server;
   // Loopback only (docs/ARCHITECTURE.md "DDS"): the bench sets it for itself and the server when unset.
   setenv("CYCLONEDDS_URI", NEUROSIM_LOOPBACK_URI, 0);
+  int rc = 0;
+  if (o.csv) std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load,mode\n");
+  for (const std::string& mode : modes) {
   std::random_device rd;
   const int domain = 20 + static_cast<int>(rd() % 200);
   const fs::path log = fs::temp_directory_path() / ("latency_bench_server_" + std::to_string(getpid()) + ".log");
@@ -217,7 +241,7 @@ int main(int argc, char** argv) {
   // The server, bounded by --duration even if this process dies.
   const double server_duration = o.startup_timeout_s + o.warmup_s + o.seconds + 30;
   std::vector<std::string> args{o.server.string(), "--scene", o.scene.string(), "--domain", std::to_string(domain),
-                                "--duration", std::to_string(server_duration), "--server-id", "latency_bench"};
+                                "--duration", std::to_string(server_duration), "--server-id", "latency_bench", "--step-mode", mode};
   std::vector<char*> av;
   for (auto& a : args) av.push_back(a.data());
   av.push_back(nullptr);
@@ -241,7 +265,6 @@ int main(int argc, char** argv) {
     waitpid(pid, nullptr, 0);
   };
 
-  int rc = 0;
   const neurosim::bench::CpuLoad cpu_load(load);  // after the fork: the server starts unloaded
   try {
     // Ready = the server published SimStatus.
@@ -321,12 +344,11 @@ int main(int argc, char** argv) {
     const neurosim::common::Percentiles pc = neurosim::common::percentiles(all);
     const double mx = pc.max, p50 = pc.p50, p99 = pc.p99;
     if (o.csv) {
-      std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load\n");
-      std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f,%d\n", o.stations, samples, p50, p99, mx,
-                  static_cast<unsigned long long>(lost), cpu_pct, load);
+      std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f,%d,%s\n", o.stations, samples, p50, p99, mx,
+                  static_cast<unsigned long long>(lost), cpu_pct, load, mode.c_str());
     } else {
-      std::printf("latency_bench: %d station(s), %.1f s on %s (server %s, DDS domain %d), %d busy threads\n",
-                  o.stations, o.seconds, o.scene.c_str(), o.server.c_str(), domain, load);
+      std::printf("latency_bench: %d station(s), %.1f s on %s (server %s, DDS domain %d), %d busy threads, step mode %s\n",
+                  o.stations, o.seconds, o.scene.c_str(), o.server.c_str(), domain, load, mode.c_str());
       std::printf("  ToolStates sent %llu, answered %zu; latency p50 %.1f us, p99 %.1f us, max %.1f us\n",
                   static_cast<unsigned long long>(sent), samples, p50, p99, mx);
       std::printf("  ContactModels lost %llu; server CPU %.1f %% of one core\n", static_cast<unsigned long long>(lost),
@@ -334,11 +356,13 @@ int main(int argc, char** argv) {
       std::printf("  server (last SimStatus): %s%s\n", step_text.c_str(),
                   o.viewer ? (", viewer matched (Deformation frames pending: " + std::to_string(frames) + ")").c_str() : "");
     }
+    std::fflush(stdout);
     if (samples == 0) throw std::runtime_error("no ContactModel answered a ToolState; server log: " + log.string());
   } catch (const std::exception& e) {
     std::cerr << "latency_bench: " << e.what() << "\n";
     rc = 1;
   }
   stop_server();
+  }
   return rc;
 }

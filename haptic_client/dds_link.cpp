@@ -1,6 +1,7 @@
 #include "haptic_client/dds_link.hpp"
 
 #include "common/clock.hpp"
+#include "common/thread_sched.hpp"
 #include "idl/wire/dds.hpp"
 
 #include <pthread.h>
@@ -76,10 +77,11 @@ void DdsLink::publish(const ToolSample& s) {
 }
 
 void DdsLink::run_publisher() {
-  if (impl_->opt.publisher_rt_priority > 0) {
-    sched_param p{};
-    p.sched_priority = impl_->opt.publisher_rt_priority;
-    pthread_setschedparam(pthread_self(), SCHED_FIFO, &p);  // best effort: normal if refused
+  {  // best effort: normal priority if refused (said in the line)
+    const auto& o = impl_->opt;
+    const std::string line = common::apply_to_this_thread(
+        {"publisher", o.publisher_thread_name, o.publisher_rt_priority, o.publisher_cpus});
+    if (o.sched_log != nullptr) o.sched_log(line.c_str());
   }
   ToolSample s;
   neurosim_ToolState& t = *impl_->sample;
@@ -103,6 +105,29 @@ void DdsLink::run_publisher() {
   }
 }
 
+std::size_t copy_contact_model(const neurosim_ContactModel& c, std::int64_t arrival_ns,
+                               ContactModelData& m) {
+  m.tool_sequence = c.tool_sequence;
+  // Age is measured against the pose the model answers (same machine clock); fall back to
+  // arrival time if the server did not echo it.
+  m.reference_time_ns = c.tool_source_time_ns > 0 ? c.tool_source_time_ns : arrival_ns;
+  for (int i = 0; i < 3; ++i) {
+    m.x0_m[i] = c.x0_position_m[i];
+    m.f0_n[i] = c.f0_n[i];
+    m.normal[i] = c.normal[i];
+  }
+  for (int i = 0; i < 9; ++i) m.k_n_per_m(i / 3, i % 3) = c.stiffness_n_per_m[i];
+  m.in_contact = c.in_contact;
+  m.validity_radius_m = c.validity_radius_m;
+  m.server_step = c.server_step;
+  // Rigid planes into the fixed array (the IDL bounds the sequence to kMaxRigidPlanes).
+  std::size_t dropped = 0;
+  m.rigid_planes.clear();
+  for (const neurosim_RigidPlane& p : wire::view(c.rigid_planes))
+    if (!m.rigid_planes.add(p.point_m, p.normal, p.penetration_m)) ++dropped;
+  return dropped;
+}
+
 DdsLinkCounters DdsLink::counters() const {
   DdsLinkCounters c;
   c.models_received = models_.load();
@@ -111,6 +136,7 @@ DdsLinkCounters DdsLink::counters() const {
   c.server_seen = seen_.load();
   c.write_errors = write_errors_.load();
   c.models_skipped = skipped_.load();
+  c.planes_dropped = planes_dropped_.load();
   return c;
 }
 
@@ -141,10 +167,11 @@ bool DdsLink::wait_for_server(double timeout_s) const {
 
 void DdsLink::run() {
   Impl& im = *impl_;
-  if (im.opt.receiver_rt_priority > 0) {
-    sched_param p{};
-    p.sched_priority = im.opt.receiver_rt_priority;
-    pthread_setschedparam(pthread_self(), SCHED_FIFO, &p);  // best effort: normal if refused
+  {  // best effort: normal priority if refused (said in the line)
+    const auto& o = im.opt;
+    const std::string line = common::apply_to_this_thread(
+        {"receiver", o.receiver_thread_name, o.receiver_rt_priority, o.receiver_cpus});
+    if (o.sched_log != nullptr) o.sched_log(line.c_str());
   }
   ContactModelData m;
   bool had_writer = false;
@@ -156,23 +183,12 @@ void DdsLink::run() {
     const auto r = im.ws.wait(DDS_MSECS(20));
     if (stop_.load()) break;
     if (const neurosim_ContactModel* c = im.models.take_newest(im.opt.station_id)) {
-      m.tool_sequence = c->tool_sequence;
-      // Age is measured against the pose the model answers (same machine clock); fall back to
-      // arrival time if the server did not echo it.
-      m.reference_time_ns = c->tool_source_time_ns > 0 ? c->tool_source_time_ns : realtime_ns();
-      for (int i = 0; i < 3; ++i) {
-        m.x0_m[i] = c->x0_position_m[i];
-        m.f0_n[i] = c->f0_n[i];
-        m.normal[i] = c->normal[i];
-      }
-      for (int i = 0; i < 9; ++i) m.k_n_per_m(i / 3, i % 3) = c->stiffness_n_per_m[i];
-      m.in_contact = c->in_contact;
-      m.validity_radius_m = c->validity_radius_m;
+      if (const std::size_t dropped = copy_contact_model(*c, realtime_ns(), m))
+        planes_dropped_.fetch_add(dropped);
       // Gaps in the server's step count (a restarted server starts again from 1: no gap).
       if (last_server_step > 0 && c->server_step > last_server_step + 1)
         skipped_.fetch_add(c->server_step - last_server_step - 1);
       last_server_step = c->server_step;
-      m.server_step = c->server_step;
       if (c->tool_sample_rejected) rejected_.fetch_add(1);
       models_.fetch_add(1);
       slot_.publish(m);

@@ -11,6 +11,9 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
+
+struct neurosim_ContactModel;  // generated (idl/neurosim.idl)
 
 namespace neurosim::haptic {
 
@@ -25,6 +28,12 @@ struct DdsLinkOptions {
   int publisher_rt_priority = 70;
   // The thread taking ContactModels, likewise (0: normal priority).
   int receiver_rt_priority = 60;
+  // Thread names (ps, top, perf) and optional CPU sets (empty: any CPU) of those two threads.
+  std::string publisher_thread_name = "nh-publish";
+  std::string receiver_thread_name = "nh-receive";
+  std::vector<int> publisher_cpus, receiver_cpus;
+  // Told once by each thread, at its start, what scheduling it was granted (or why not).
+  void (*sched_log)(const char* line) = nullptr;
 };
 
 // Whether the server refused this station (SimStatus.refused lists this link's own writer).
@@ -44,7 +53,15 @@ struct DdsLinkCounters {
   // Server steps whose ContactModel never reached this station (gaps in server_step between
   // consecutive models: lost on the network or overwritten in the keep-last-1 reader).
   std::uint64_t models_skipped = 0;
+  // Rigid planes dropped on arrival (non-finite, or normal not unit within kUnitNormalTolerance).
+  std::uint64_t planes_dropped = 0;
 };
+
+// Copies one received ContactModel into the loop's form (reference time: the answered
+// ToolState's source time, else arrival_ns). Rigid planes are checked one by one and invalid
+// ones dropped; returns how many were dropped.
+std::size_t copy_contact_model(const neurosim_ContactModel& c, std::int64_t arrival_ns,
+                               ContactModelData& m);
 
 class DdsLink : public Link {
  public:
@@ -76,7 +93,7 @@ class DdsLink : public Link {
   std::atomic<std::int64_t> refusal_time_ns_{0};  // server time of that refusal (Unix epoch)
   std::atomic<bool> stop_{false};
   std::atomic<std::uint64_t> models_{0}, rejected_{0}, lost_{0}, seen_{0}, write_errors_{0},
-      skipped_{0};
+      skipped_{0}, planes_dropped_{0};
   std::thread thread_;
   std::thread publisher_;
 };

@@ -1,6 +1,7 @@
 #include "haptic_client/force_model.hpp"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 
 #include <algorithm>
 #include <cmath>
@@ -15,6 +16,24 @@ void require(bool ok, const char* field, double value, const char* rule) {
   if (!ok)
     throw std::invalid_argument(std::string("haptic force model: ") + field + " = " +
                                 std::to_string(value) + " must be " + rule);
+}
+
+// The part of v across the active planes of a proxy result, N (N^T N)^-1 N^T v (the proxy's
+// active set has independent normals); zero along them. Fixed sizes: no allocation.
+Eigen::Vector3d across_active(const RigidPlaneSet& s, const ProxyResult& r,
+                              const Eigen::Vector3d& v) {
+  const auto normal = [&](std::size_t i) -> const Eigen::Vector3d& {
+    return s.planes[r.active_index[i]].normal;
+  };
+  if (r.active == 1) return normal(0) * normal(0).dot(v);
+  if (r.active == 2) {
+    Eigen::Matrix<double, 3, 2> n;
+    n << normal(0), normal(1);
+    const Eigen::Matrix2d g = n.transpose() * n;
+    return n * (g.inverse() * (n.transpose() * v));
+  }
+  if (r.active == 3) return v;  // three independent normals span space
+  return Eigen::Vector3d::Zero();
 }
 
 bool finite(const ContactModelData& m) {
@@ -42,6 +61,8 @@ void ForceModelConfig::validate() const {
   require(pos(model_timeout_s), "model_timeout_s", model_timeout_s, "finite and > 0");
   require(nonneg(fade_s), "fade_s", fade_s, "finite and >= 0");
   require(pos(max_force_step_n), "max_force_step_n", max_force_step_n, "finite and > 0");
+  require(std::isfinite(wall_stiffness_n_per_m) && wall_stiffness_n_per_m != 0,
+          "wall_stiffness_n_per_m", wall_stiffness_n_per_m, "finite and > 0 (or < 0: automatic)");
 }
 
 ForceModel::ForceModel(const ForceModelConfig& config) : cfg_(config) {
@@ -58,10 +79,26 @@ ForceModel::ForceModel(const ForceModelConfig& config) : cfg_(config) {
     k_device = std::min(k_device, 2 * damping_ / (T * cfg_.passivity_margin));
   // Device stiffness = force_scale * K_scene * workspace_scale.
   k_limit_scene_ = k_device / (cfg_.force_scale * cfg_.workspace_scale);
+  // The rigid wall may be as stiff as the device renders passively, not stiffer.
+  if (cfg_.wall_stiffness_n_per_m > k_device)
+    throw std::invalid_argument("haptic force model: wall_stiffness_n_per_m = " +
+                                std::to_string(cfg_.wall_stiffness_n_per_m) +
+                                " must be <= the passivity-limited device stiffness " +
+                                std::to_string(k_device) + " N/m (K < 2b/T with margin)");
+  const double k_wall_device =
+      cfg_.wall_stiffness_n_per_m > 0 ? cfg_.wall_stiffness_n_per_m : k_device;
+  k_wall_scene_ = k_wall_device / (cfg_.force_scale * cfg_.workspace_scale);
+}
+
+Eigen::Vector3d ForceModel::wall_spring(const RigidPlaneSet& planes, const Eigen::Vector3d& x,
+                                        Proxy& proxy) const {
+  if (planes.count == 0) return Eigen::Vector3d::Zero();
+  return k_wall_scene_ * (proxy.update(planes, x).proxy_m - x);
 }
 
 void ForceModel::reset() {
   has_current_ = false;
+  proxy_.reset();
   blend_offset_.setZero();
   blend_rate_ = 0;
   gain_ = 0;
@@ -87,6 +124,10 @@ bool ForceModel::accept(const ContactModelData& m, const Eigen::Vector3d& x) {
     return false;
   }
   ContactModelData next = m;
+  // Rigid planes: keep the valid ones (any Link may fill them; DdsLink has checked already).
+  next.rigid_planes.clear();
+  for (std::size_t i = 0; i < m.rigid_planes.count && i < kMaxRigidPlanes; ++i)
+    if (!next.rigid_planes.add(m.rigid_planes.planes[i])) ++counters_.planes_dropped;
   const double nn = next.normal.norm();
   if (nn > 0) next.normal /= nn;
   // Passivity: the rendered stiffness may not exceed the limit (operator norm, scene frame).
@@ -102,8 +143,11 @@ bool ForceModel::accept(const ContactModelData& m, const Eigen::Vector3d& x) {
     ++counters_.stiffness_limited;
   }
   if (has_current_ && cfg_.blend_s > 0 && x.allFinite()) {
-    // Keep rendering what we rendered: the jump becomes an offset that fades out.
-    blend_offset_ += extrapolate(current_, x) - extrapolate(next, x);
+    // Keep rendering what we rendered: the jump becomes an offset that fades out. The wall's
+    // spring too (planes moved, appeared or vanished), each plane set on its own proxy.
+    Proxy old_proxy = proxy_, new_proxy = proxy_;
+    blend_offset_ += extrapolate(current_, x) + wall_spring(current_.rigid_planes, x, old_proxy) -
+                     extrapolate(next, x) - wall_spring(next.rigid_planes, x, new_proxy);
     blend_rate_ = std::max(blend_rate_, blend_offset_.norm() / cfg_.blend_s);
   }
   current_ = next;
@@ -165,6 +209,20 @@ ForceOutput ForceModel::step(const ForceInput& in) {
   out.model_sequence = has_current_ ? current_.tool_sequence : 0;
   out.in_contact = has_current_ && current_.in_contact;
 
+  // Rigid obstacles: the proxy follows the device on the free side of the newest model's planes
+  // (stale planes too: they are rigid, valid until replaced; the gain fades them with the
+  // tissue force on a timeout).
+  out.proxy_m = in.position_m;
+  if (has_current_ && current_.rigid_planes.count > 0) {
+    const std::uint64_t infeasible = proxy_.counters().infeasible;
+    const ProxyResult& pr = proxy_.update(current_.rigid_planes, in.position_m);
+    counters_.planes_infeasible += proxy_.counters().infeasible - infeasible;
+    out.proxy_m = pr.proxy_m;
+    out.rigid_contact = pr.blocked;
+    out.active_planes = pr.active;
+    out.rigid_planes = current_.rigid_planes.count;
+  }
+
   Eigen::Vector3d fd = Eigen::Vector3d::Zero();
   if (has_current_ && gain_ > 0) {
     // Extrapolate the newest model; blend offset from the model change.
@@ -177,6 +235,22 @@ ForceOutput ForceModel::step(const ForceInput& in) {
       fd -= damping_ * vn * n;
       const double fn = fd.dot(n);
       if (fn < 0) fd -= fn * n;  // still unilateral
+    }
+    if (out.rigid_contact) {
+      // Wall: proxy spring k_wall (proxy - x) plus the passivity damping b on the velocity
+      // across the active planes (none along them: frictionless sliding). Device side.
+      const Eigen::Vector3d d = out.proxy_m - in.position_m;
+      Eigen::Vector3d fw = cfg_.force_scale * k_wall_scene_ * d;
+      const Eigen::Vector3d vd = in.velocity_m_per_s / cfg_.workspace_scale;
+      fw -= damping_ * across_active(current_.rigid_planes, proxy_.last(), vd);
+      // Unilateral: the wall pushes out, never pulls the hand in (damping while leaving).
+      const double dn = d.norm();
+      if (dn > 0) {
+        const double along = fw.dot(d) / dn;
+        if (along < 0) fw -= along * d / dn;
+      }
+      fd += fw;
+      out.wall_force_n = gain_ * fw;
     }
     // Clamp to the device first, then the gain: ramp-in and fade scale what the device renders.
     const double mag = fd.norm();

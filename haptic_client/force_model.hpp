@@ -1,11 +1,14 @@
 // The haptic client's local force model (docs/ARCHITECTURE.md "haptic_client"):
 // extrapolation of the newest server ContactModel, F = f0 + K (x - x0), blended on a new model,
 // with passivity-limited stiffness and damping, device clamp, per-tick step bound, ramp-in,
-// model watchdog, server-gone and NaN handling.
+// model watchdog, server-gone and NaN handling; rigid obstacles (the model's constraint planes)
+// rendered as a wall on a proxy (proxy.hpp) and added to the tissue force.
 //
 // Pure and allocation-free: no DDS, no clocks (time is an argument), no heap after construction,
 // so every safety rule is unit-testable in simulated time.
 #pragma once
+
+#include "haptic_client/proxy.hpp"
 
 #include <Eigen/Core>
 
@@ -25,6 +28,9 @@ struct ContactModelData {
   bool in_contact = false;
   double validity_radius_m = 0;  // extrapolate within this distance of x0 (0: no limit), unit m
   std::uint64_t server_step = 0;
+  // Rigid obstacles near the tool (ContactModel.rigid_planes), rigid: valid until replaced by
+  // the next model's planes (no validity radius), empty when none is near.
+  RigidPlaneSet rigid_planes;
 };
 
 struct ForceModelConfig {
@@ -44,6 +50,10 @@ struct ForceModelConfig {
   double ramp_in_s = 0.5;          // force gain 0 → 1 at start / after an outage, unit s
   double model_timeout_s = 0.05;   // model older than this → force fades out, unit s
   double fade_s = 0.02;            // fade-out time, unit s
+  // Wall stiffness of rigid planes (the proxy spring), device side; < 0: the passivity-limited
+  // device stiffness (max_stiffness_n_per_m, lowered to 2b/(T margin) when enforced). Above
+  // that limit is refused. Unit N/m.
+  double wall_stiffness_n_per_m = -1;
   double max_force_step_n = 0.25;  // bound on |F(k) - F(k-1)| per nominal period (a late tick
                                    // may move as far as the ticks it replaced); NaN input zeroes
                                    // at once, unit N
@@ -66,6 +76,14 @@ struct ForceOutput {
   double model_age_s = 0;            // age of the model in use, unit s
   double gain = 0;                   // ramp/watchdog gain in [0, 1]
   std::uint64_t model_sequence = 0;  // tool_sequence of the model in use
+  // Rigid obstacles: the proxy (closest free point to the device under the model's planes),
+  // whether the device is behind a plane, how many planes hold the proxy (0..3), and the wall
+  // force (spring + damper, device side, after the gain, before the clamp of the total).
+  bool rigid_contact = false;
+  Eigen::Vector3d proxy_m = Eigen::Vector3d::Zero();  // scene frame, unit m
+  std::size_t active_planes = 0;
+  std::size_t rigid_planes = 0;                            // planes in the model in use
+  Eigen::Vector3d wall_force_n = Eigen::Vector3d::Zero();  // unit N
 };
 
 struct ForceModelCounters {
@@ -76,6 +94,8 @@ struct ForceModelCounters {
   std::uint64_t server_lost = 0;        // transitions to server gone
   std::uint64_t timeouts = 0;           // transitions to a stale model
   std::uint64_t stiffness_limited = 0;  // models scaled down (f0 and K) to the passive limit
+  std::uint64_t planes_dropped = 0;     // rigid planes refused (non-finite, non-unit normal)
+  std::uint64_t planes_infeasible = 0;  // ticks whose planes left no free point
 };
 
 class ForceModel {
@@ -91,6 +111,8 @@ class ForceModel {
   // Stiffness limit in the scene frame (N/m) and damping b (N s/m, device side) in use.
   double scene_stiffness_limit() const { return k_limit_scene_; }
   double damping() const { return damping_; }
+  // Stiffness of the rigid wall in the scene frame (N/m), <= scene_stiffness_limit().
+  double wall_stiffness_scene() const { return k_wall_scene_; }
 
   // Simulated force of one model at x (scene frame, before scaling, gain, damping, clamp):
   // f0 + K (x - x0) with x - x0 limited to the validity radius, zero out of contact or when the
@@ -99,10 +121,15 @@ class ForceModel {
 
  private:
   bool accept(const ContactModelData& m, const Eigen::Vector3d& x);
+  // Wall spring of a plane set at x, simulated (scene) force k_wall (proxy - x), unit N.
+  Eigen::Vector3d wall_spring(const RigidPlaneSet& planes, const Eigen::Vector3d& x,
+                              Proxy& proxy) const;
 
   ForceModelConfig cfg_;
   double k_limit_scene_ = 0;
   double damping_ = 0;
+  double k_wall_scene_ = 0;
+  Proxy proxy_;
   ContactModelData current_{};
   bool has_current_ = false;
   // Blend: rendered = extrapolate(current) + offset; the offset (the force jump at a model

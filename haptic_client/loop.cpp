@@ -1,6 +1,7 @@
 #include "haptic_client/loop.hpp"
 
 #include "common/clock.hpp"
+#include "common/thread_sched.hpp"
 
 #include <Eigen/Geometry>
 
@@ -41,6 +42,9 @@ ForceTraceSummary HapticLoop::force_trace() const {
   f.mean_contact_force_n =
       contact_ticks_ > 0 ? contact_force_sum_ / static_cast<double>(contact_ticks_) : 0;
   f.models_seen = models_seen_;
+  f.rigid_contact_ticks = rigid_ticks_;
+  f.max_wall_force_n = max_wall_force_;
+  f.max_wall_penetration_m = max_wall_penetration_;
   return f;
 }
 
@@ -68,6 +72,8 @@ void HapticLoop::tick(std::int64_t now_ns, double t_s, double period_s, double l
   bool alive = true;
   const ContactModelData* nm = nullptr;
   if (link_ != nullptr) {
+    // The device position, also when a rigid plane holds the proxy back: the server projects it
+    // onto its own obstacles again (sending the proxy would hide how deep the hand pushes).
     link_->publish(ts);
     if (link_->take_model(model_buf_)) nm = &model_buf_;
     alive = link_->server_alive();
@@ -88,6 +94,11 @@ void HapticLoop::tick(std::int64_t now_ns, double t_s, double period_s, double l
   if (out.in_contact) {
     ++contact_ticks_;
     contact_force_sum_ += fmag;
+  }
+  if (out.rigid_contact) {
+    ++rigid_ticks_;
+    max_wall_force_ = std::max(max_wall_force_, out.wall_force_n.norm());
+    max_wall_penetration_ = std::max(max_wall_penetration_, (out.proxy_m - ts.position_m).norm());
   }
   if (out.model_sequence != last_model_seq_) {
     last_model_seq_ = out.model_sequence;
@@ -120,6 +131,10 @@ void HapticLoop::tick(std::int64_t now_ns, double t_s, double period_s, double l
     tt.in_contact = out.in_contact;
     tt.server_alive = alive;
     tt.model_sequence = out.model_sequence;
+    tt.rigid_contact = out.rigid_contact;
+    tt.proxy_m = out.proxy_m;
+    tt.wall_force_n = out.wall_force_n;
+    tt.active_planes = out.active_planes;
     trace_.push_back(tt);
   }
   last_force_norm_.store(out.force_n.norm(), std::memory_order_release);
@@ -141,10 +156,16 @@ RealtimeInfo HapticLoop::run_realtime(double duration_s, const std::atomic<bool>
   int old_policy = 0;
   sched_param old_param{};
   pthread_getschedparam(pthread_self(), &old_policy, &old_param);
+  {
+    const std::string line = common::apply_to_this_thread(
+        {"loop", cfg_.thread_name, cfg_.realtime_priority ? cfg_.rt_priority : 0, cfg_.cpus});
+    if (cfg_.sched_log != nullptr) cfg_.sched_log(line.c_str());
+  }
   if (cfg_.realtime_priority) {
+    int policy = 0;
     sched_param p{};
-    p.sched_priority = cfg_.rt_priority;
-    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &p);
+    pthread_getschedparam(pthread_self(), &policy, &p);
+    const int rc = policy == SCHED_FIFO ? 0 : EPERM;
     if (rc == 0) {
       info.sched_fifo = true;
       mlockall(MCL_CURRENT);  // fewer page faults in the loop (MCL_FUTURE could break allocation)

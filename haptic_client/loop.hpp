@@ -27,6 +27,9 @@ struct LoopConfig {
   Eigen::Vector3d workspace_up = Eigen::Vector3d::UnitZ();
   bool realtime_priority = true;  // try SCHED_FIFO (warn and continue if not permitted)
   int rt_priority = 80;
+  std::string thread_name = "nh-loop";  // the loop thread's name while run_realtime() runs
+  std::vector<int> cpus;                // its CPU set (empty: any CPU)
+  void (*sched_log)(const char* line) = nullptr;  // told once what scheduling was granted
   // The loop sleeps until this long before each deadline, then spins on the clock to it, so a
   // tick starts within a few µs of its deadline instead of the scheduler's wake-up latency
   // (tens of µs, more on a busy machine). 0: sleep to the deadline (battery-powered laptops:
@@ -47,6 +50,12 @@ struct TickTrace {
   bool in_contact = false;
   bool server_alive = true;
   std::uint64_t model_sequence = 0;
+  // Rigid obstacles: the device is behind a plane, the proxy, the wall's share of the force
+  // (device side, after the gain, before the clamp of the total), planes holding the proxy.
+  bool rigid_contact = false;
+  Eigen::Vector3d proxy_m = Eigen::Vector3d::Zero();  // scene frame
+  Eigen::Vector3d wall_force_n = Eigen::Vector3d::Zero();
+  std::size_t active_planes = 0;
 };
 
 // Force trace summary printed at exit (not part of the --summary JSON contract).
@@ -55,6 +64,9 @@ struct ForceTraceSummary {
   double max_force_n = 0;           // largest |F| commanded, unit N
   double mean_contact_force_n = 0;  // mean |F| over contact ticks, unit N
   std::uint64_t models_seen = 0;    // distinct model sequences used
+  std::uint64_t rigid_contact_ticks = 0;  // ticks with the device behind a rigid plane
+  double max_wall_force_n = 0;            // largest |wall force| (before the clamp), unit N
+  double max_wall_penetration_m = 0;      // largest |proxy - device|, scene frame, unit m
 };
 
 struct RealtimeInfo {
@@ -100,6 +112,8 @@ class HapticLoop {
   std::atomic<std::uint64_t> ticks_done_{0};
   std::uint64_t contact_ticks_ = 0, models_seen_ = 0, last_model_seq_ = 0;
   double max_force_ = 0, contact_force_sum_ = 0;
+  std::uint64_t rigid_ticks_ = 0;
+  double max_wall_force_ = 0, max_wall_penetration_ = 0;
   std::atomic<double> last_force_norm_{0};
 };
 

@@ -4,10 +4,12 @@
 //   extra: [--scene FILE] (haptics factors, scene name) [--tool ID] [--origin X,Y,Z]
 //          [--up X,Y,Z] [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]
 //          [--topic-prefix P] [--trace FILE.csv] [--spin-us US]
+//          [--rt-priority loop=80,publisher=70,receiver=60] [--rt-cpus loop=1]
 // SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract) | hand:SCRIPT
 // --help lists the options, --version prints the version; usage errors exit 2.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
+#include "common/thread_sched.hpp"
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
 
@@ -35,6 +37,7 @@ namespace {
 std::atomic<bool> g_stop{false};
 void on_signal(int) { g_stop = true; }
 void warn(const char* m) { std::fprintf(stderr, "neurosim-haptic: warning: %s\n", m); }
+void sched_line(const char* m) { std::fprintf(stderr, "neurosim-haptic: %s\n", m); }
 
 const char* kSpecHelp =
     "SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, circle,\n"
@@ -65,7 +68,21 @@ int main(int argc, char** argv) {
       neurosim::cli::add_triple(cli.app(), "--up", up, "the surface's outward normal there");
   cli->add_option("--label", label, "recording label");
   cli->add_flag("--no-server", no_server, "run without DDS (no force from a server)");
-  cli->add_flag("--no-rt", no_rt, "no SCHED_FIFO for the loop and the DDS threads");
+  auto* no_rt_opt =
+      cli->add_flag("--no-rt", no_rt, "no SCHED_FIFO for the loop and the DDS threads");
+  // The client's threads in one place: loop, publisher (ToolState), receiver (ContactModel).
+  neurosim::common::ThreadPlan threads;
+  threads.threads = {{"loop", "nh-loop", 80, {}},
+                     {"publisher", "nh-publish", 70, {}},
+                     {"receiver", "nh-receive", 60, {}}};
+  std::string rt_priority, rt_cpus;
+  cli->add_option("--rt-priority", rt_priority,
+                  "thread priorities, ROLE=P,... (roles loop, publisher, receiver; P 1..99 "
+                  "SCHED_FIFO, 0 normal; default " +
+                      threads.priorities_text() + ")")
+      ->excludes(no_rt_opt);
+  cli->add_option("--rt-cpus", rt_cpus,
+                  "CPU sets, ROLE=CPUS,... (CPUS: numbers and ranges joined by '+'; default any)");
   cli->add_option("--spin-us", cfg.spin_us,
                   "spin on the clock this long before each tick, unit us (0: off, for laptops on "
                   "battery)")
@@ -77,13 +94,26 @@ int main(int argc, char** argv) {
   cli->add_option("--topic-prefix", topic_prefix,
                   "prepended to every topic name, as neurosim-server's");
   cli->add_option("--trace", trace_file,
-                  "every tick as CSV: time, position, force, model age, gain");
+                  "every tick as CSV: time, position, force, model age, gain, rigid wall");
   cli->footer(kSpecHelp);
   if (auto rc = cli.parse(argc, argv)) return *rc;
   if (origin_opt->count() > 0)
     cfg.workspace_origin_m = Eigen::Vector3d(origin[0], origin[1], origin[2]);
   if (up_opt->count() > 0) cfg.workspace_up = Eigen::Vector3d(up[0], up[1], up[2]);
-  if (no_rt) cfg.realtime_priority = false;
+  try {
+    neurosim::common::apply_priorities(threads, rt_priority, "--rt-priority");
+    neurosim::common::apply_cpus(threads, rt_cpus, "--rt-cpus");
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "neurosim-haptic: " << e.what() << "\n";
+    return 2;
+  }
+  if (no_rt)
+    for (auto& t : threads.threads) t.priority = 0;
+  cfg.rt_priority = threads.at("loop").priority;
+  cfg.realtime_priority = cfg.rt_priority > 0;
+  cfg.thread_name = threads.at("loop").name;
+  cfg.cpus = threads.at("loop").cpus;
+  cfg.sched_log = sched_line;
   const bool use_server = !no_server;
 
   try {
@@ -104,7 +134,13 @@ int main(int argc, char** argv) {
       nh::DdsLinkOptions o;
       o.station_id = station;
       o.tool_id = tool;
-      if (!cfg.realtime_priority) o.publisher_rt_priority = o.receiver_rt_priority = 0;  // --no-rt
+      o.publisher_rt_priority = threads.at("publisher").priority;
+      o.receiver_rt_priority = threads.at("receiver").priority;
+      o.publisher_thread_name = threads.at("publisher").name;
+      o.receiver_thread_name = threads.at("receiver").name;
+      o.publisher_cpus = threads.at("publisher").cpus;
+      o.receiver_cpus = threads.at("receiver").cpus;
+      o.sched_log = sched_line;
       o.topic_prefix = topic_prefix;
       link = std::make_unique<nh::DdsLink>(o);
       if (wait_server > 0 && !link->wait_for_server(wait_server))
@@ -207,6 +243,14 @@ int main(int argc, char** argv) {
             ? 100.0 * static_cast<double>(ft.contact_ticks) / static_cast<double>(s.samples)
             : 0.0,
         ft.max_force_n, ft.mean_contact_force_n, static_cast<unsigned long long>(ft.models_seen));
+    std::printf(
+        "  rigid wall: %llu ticks in rigid contact, max wall force %.3f N, max depth behind the "
+        "proxy %.2f mm, planes dropped %llu, infeasible plane sets %llu\n",
+        static_cast<unsigned long long>(ft.rigid_contact_ticks), ft.max_wall_force_n,
+        ft.max_wall_penetration_m * 1e3,
+        static_cast<unsigned long long>(c.planes_dropped +
+                                        (link ? link->counters().planes_dropped : 0)),
+        static_cast<unsigned long long>(c.planes_infeasible));
     if (recorder && recording_error.empty())
       std::printf("  recorded %llu samples to %s (%llu dropped)\n",
                   static_cast<unsigned long long>(recorder->written()), record_file.c_str(),
@@ -215,13 +259,16 @@ int main(int argc, char** argv) {
     if (!trace_file.empty()) {
       std::ofstream tf(trace_file);
       if (!tf) throw std::runtime_error(trace_file + ": cannot open for the force trace");
-      tf << "t_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,model_age_ms,gain,in_contact,model_sequence\n";
+      tf << "t_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,model_age_ms,gain,in_contact,model_sequence,"
+            "rigid_contact,proxy_x_m,proxy_y_m,proxy_z_m,wall_fx_n,wall_fy_n,wall_fz_n\n";
       tf.precision(9);
       for (const auto& t : loop.trace())
         tf << t.t_s << ',' << t.position_m.x() << ',' << t.position_m.y() << ',' << t.position_m.z()
            << ',' << t.force_n.x() << ',' << t.force_n.y() << ',' << t.force_n.z() << ','
            << (t.model_age_s >= 0 ? t.model_age_s * 1e3 : -1) << ',' << t.gain << ','
-           << (t.in_contact ? 1 : 0) << ',' << t.model_sequence << '\n';
+           << (t.in_contact ? 1 : 0) << ',' << t.model_sequence << ',' << (t.rigid_contact ? 1 : 0)
+           << ',' << t.proxy_m.x() << ',' << t.proxy_m.y() << ',' << t.proxy_m.z() << ','
+           << t.wall_force_n.x() << ',' << t.wall_force_n.y() << ',' << t.wall_force_n.z() << '\n';
       if (!tf) throw std::runtime_error(trace_file + ": write failed");
     }
     if (!recording_error.empty()) {

@@ -99,8 +99,34 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
                 "is summarised")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
+  std::string step_mode = "event", rt_priority, rt_cpus;
+  p->add_option("--step-mode", step_mode,
+                "event: a step when a ToolState arrives (at most --max-step-rate-factor x the "
+                "scene rate; one period after the last step when none does); clock: one step per "
+                "period on the free-running clock")
+      ->check(CLI::IsMember({"event", "clock"}))
+      ->capture_default_str();
+  p->add_option("--max-step-rate-factor", opt.max_step_rate_factor,
+                "event step mode: at most this many times rates.step_hz")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 100.0));
+  p->add_option("--rt-priority", rt_priority,
+                "thread priorities, ROLE=P,... (roles step, dds, field; P 1..99 SCHED_FIFO, 0 "
+                "normal; default " + opt.threads.priorities_text() + "); refused priorities are logged, "
+                "the server runs anyway");
+  p->add_option("--rt-cpus", rt_cpus,
+                "CPU sets, ROLE=CPUS,... (CPUS: numbers and ranges joined by '+', e.g. "
+                "step=1,dds=0,field=0-1; default: any CPU)");
   p->footer("CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs).");
   if (auto rc = p.parse(argc, argv)) return *rc;
+  opt.step_mode = step_mode == "clock" ? StepMode::kClock : StepMode::kEvent;
+  try {
+    common::apply_priorities(opt.threads, rt_priority, "--rt-priority");
+    common::apply_cpus(opt.threads, rt_cpus, "--rt-cpus");
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "neurosim-server: " << e.what() << "\n";
+    return 2;
+  }
   single_thread_blas();
   if (accuracy_table == "none") {
     accuracy_table.clear();
@@ -152,16 +178,20 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
     scene::Model model = interruptible([&] { return scene::load_model(opt.scene_path); });
     for (const auto& w : model.warnings) std::cerr << "neurosim-server: warning: " << w << "\n";
     // Scene features this server does not run yet: refused, never ignored.
-    if (!model.rigid.empty())
-      throw std::runtime_error(opt.scene_path + ": mesh \"" + model.rigid.front().id +
-                               "\" is rigid: rigid obstacle contact is not implemented in this "
-                               "build (neurosim-solve loads such scenes and leaves it out)");
+    // Rigid meshes (the skull) are obstacles for the tools (Server: a tool proxy per station,
+    // ContactModel.rigid_planes). Per-tissue materials: the interactive simulation runs one
+    // material per mesh, so a tissue whose own material has the mesh's E and nu (the same
+    // physics) is accepted and any other refused, never run with the mesh's values.
     for (const auto& m : model.meshes)
-      if (!m.materials.tet_material.empty())
-        throw std::runtime_error(opt.scene_path + ": mesh \"" + m.id +
-                                 "\": per-tissue materials are not implemented in the "
-                                 "interactive server (neurosim-solve uses them on uncoupled "
-                                 "meshes)");
+      for (const auto& t : m.tissues)
+        if (t.own_material && (t.material.youngs_modulus_pa != m.material.youngs_modulus_pa ||
+                               t.material.poisson_ratio != m.material.poisson_ratio))
+          throw std::runtime_error(
+              opt.scene_path + ": mesh \"" + m.id + "\", tissue \"" + t.name + "\": material \"" +
+              t.material.name + "\" (E " + std::to_string(t.material.youngs_modulus_pa) +
+              " Pa, nu " + std::to_string(t.material.poisson_ratio) + ") differs from the mesh's \"" +
+              m.material.name + "\": per-tissue materials are not implemented in the interactive "
+              "server (neurosim-solve uses them on uncoupled meshes)");
     // --tier replaces the scene's tier before anything is built from it: the simulation, the
     // server's start-up line and SimStatus all see the one tier that runs.
     const scene::Tier scene_tier = model.effects.tier;

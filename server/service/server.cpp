@@ -5,6 +5,8 @@
 #include "idl/wire/deformation_codec.hpp"
 #include "idl/wire/dds.hpp"
 #include "server/fem/strain.hpp"
+#include "server/interaction/rigid_obstacle.hpp"
+#include "server/interaction/tool_proxy.hpp"
 #include "server/service/accuracy_table.hpp"
 #include "server/service/log_limiter.hpp"
 #include "server/service/pose_handoff.hpp"
@@ -13,6 +15,7 @@
 
 #include <pthread.h>
 #include <sched.h>
+#include <semaphore.h>
 #include <time.h>
 
 #include <algorithm>
@@ -102,6 +105,10 @@ struct Server::Impl {
       : settings(model), sim(std::move(s)), opt(std::move(o)), log_stream(l) {
     for (const auto& m : model.meshes)
       mesh_info.push_back(MeshInfo{m.id, m.material, m.priority, m.provenance});
+    // Rigid obstacles (the skull): built only when the scene has them, else null and free.
+    rigid = interaction::RigidObstacle::build(model.rigid);
+    for (const auto& t : model.tools)
+      tool_shapes.push_back({t.tip_radius_m, t.shaft_radius_m, t.shaft_length_m});
   }
 
   // ---- Model (built once) --------------------------------------------------------------------
@@ -114,6 +121,8 @@ struct Server::Impl {
   };
   std::vector<MeshInfo> mesh_info;
   std::unique_ptr<interaction::Simulation> sim;
+  std::unique_ptr<const interaction::RigidObstacle> rigid;  // null: the scene has none
+  std::vector<interaction::ToolShape> tool_shapes;          // per scene tool
   ServerOptions opt;
   std::ostream& log_stream;
   std::mutex log_mutex;
@@ -150,6 +159,9 @@ struct Server::Impl {
   std::vector<std::vector<ToolPose>> poses_by_count;            // [n] has n poses (no realloc)
   std::vector<std::vector<ToolContact>> contacts_by_count;
   std::vector<int> slot_of_pose;
+  // With rigid obstacles only: per slot the server-side proxy and the step's planes.
+  std::vector<interaction::ToolProxy> proxies;
+  std::vector<interaction::ObstaclePlanes> rigid_planes;
   std::vector<wire::DeformationEncoder> encoders;
   std::vector<wire::Sample<neurosim_Deformation>> deform_out;
   std::vector<bool> deform_written;
@@ -205,6 +217,13 @@ struct Server::Impl {
       rejected_rate{0}, stations_reclaimed{0}, unknown_ids_dropped{0};
   std::uint64_t rejected_identity() const { return rejected_identity_dds.load() + claims.filtered(); }
   std::thread dds_thread, step_thread;
+  // Event step mode: the DDS thread posts after each pose it hands to a slot; the step thread
+  // waits on it until its deadline (one semaphore: no lock on either side beyond it).
+  sem_t step_wake;
+  std::atomic<std::uint64_t> steps_on_sample{0}, steps_on_deadline{0};
+  std::int64_t viewer_period_ns{33333333}, status_period_ns{1000000000};
+  std::int64_t next_viewer_ns{0};
+  bool wait_for_sample(std::int64_t deadline_ns);
 
   void log(const std::string& line) {
     std::lock_guard<std::mutex> lk(log_mutex);
@@ -259,6 +278,14 @@ void Server::Impl::configure() {
   if (period_ns < 1000) throw std::runtime_error(opt.scene_path + ": rates.step_hz: above 1 MHz");
   viewer_every = std::max<std::uint64_t>(1, std::llround(step_hz / viewer_hz));
   status_every = std::max<std::uint64_t>(1, std::llround(step_hz / status_hz));
+  // Viewer frames and SimStatus on the clock (event step mode steps at a varying rate).
+  viewer_period_ns = static_cast<std::int64_t>(viewer_every) * period_ns;
+  status_period_ns = static_cast<std::int64_t>(status_every) * period_ns;
+  if (!(opt.max_step_rate_factor >= 1.0 && opt.max_step_rate_factor <= 100.0))
+    throw std::invalid_argument("max_step_rate_factor " + std::to_string(opt.max_step_rate_factor) +
+                                " must be in [1, 100]");
+  for (const char* role : {"step", "dds", "field"}) (void)opt.threads.at(role);  // all three named
+  if (sem_init(&step_wake, 0, 0) != 0) throw std::runtime_error("sem_init failed");
   max_stations = settings.max_stations;
   if (max_stations > kMaxStationsLimit)
     throw std::runtime_error(opt.scene_path + ": max_stations: " + std::to_string(max_stations) +
@@ -387,6 +414,19 @@ void Server::Impl::create_entities() {
       contacts_by_count[n].resize(n);
     }
     slot_of_pose.resize(slots.size());
+    if (rigid) {
+      // The proxy's planes must cover the fastest tool's travel in one step.
+      interaction::ToolProxyOptions proxy_options;
+      for (double v : tool_max_speed) proxy_options.reach_m = std::max(proxy_options.reach_m, 1.5 * v / step_hz);
+      proxy_options.max_reach_m = std::max(proxy_options.max_reach_m, proxy_options.reach_m);
+      for (std::size_t i = 0; i < slots.size(); ++i) {
+        proxies.emplace_back(*rigid, proxy_options);
+        wire::reserve(models_out[i]->rigid_planes, interaction::kMaxObstaclePlanes);
+      }
+      rigid_planes.resize(slots.size());
+      log("built: rigid obstacles (" + std::to_string(rigid->num_triangles()) +
+          " triangles), a tool proxy per station slot (reach " + std::to_string(1e3 * proxy_options.reach_m) + " mm)");
+    }
     log("built: ToolState reader (partition " + std::string(wire::kToolStateReaderPartition) +
         ", station identity filter), ContactModel writer, " + std::to_string(max_stations) +
         " station slots");
@@ -425,7 +465,8 @@ void Server::Impl::create_entities() {
   wire::reserve(status->stations, slots.size());
   wire::reserve(status->refused, kMaxRefusals);
   refusals.reserve(kMaxRefusals + 1);
-  const std::size_t per_period = static_cast<std::size_t>(status_every) * 2 + 64;
+  const std::size_t per_period =
+      static_cast<std::size_t>(static_cast<double>(status_every) * (opt.max_step_rate_factor + 1.0)) + 64;
   step_us.assign(per_period, 0.0);
   step_us_sorted.assign(per_period, 0.0);
 }
@@ -476,6 +517,7 @@ void Server::Impl::publish_topologies() {
 // DDS thread.
 void Server::Impl::dds_loop() {
   try {
+    log(common::apply_to_this_thread(opt.threads.at("dds")));
     const std::size_t max_take = 64;  // wire::ReaderOptions default
     while (run.load()) {
       const auto r = waitset->wait(DDS_MSECS(100));
@@ -708,6 +750,7 @@ void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& 
     for (int i = 0; i < 3; ++i) p.position_m[i] = rx.data.position_m[i];
     for (int i = 0; i < 4; ++i) p.orientation[i] = q[i];
     s.pose.publish(p);
+    if (opt.step_mode == StepMode::kEvent) sem_post(&step_wake);  // wake the step thread
     s.accepted.fetch_add(1, std::memory_order_relaxed);
     s.last_sequence.store(p.sequence, std::memory_order_relaxed);
     s.last_rejected.store(false, std::memory_order_relaxed);
@@ -733,31 +776,44 @@ void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& 
 // Step thread.
 void Server::Impl::step_loop() {
   try {
-    // Real-time priority where allowed (a 1 kHz loop on a shared machine); else say so.
-    sched_param sp{};
-    sp.sched_priority = 50;
-    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
-    log(rc == 0 ? std::string("step thread: SCHED_FIFO priority 50")
-                : std::string("step thread: no real-time priority (") + std::strerror(rc) +
-                      "), running SCHED_OTHER");
+    log(common::apply_to_this_thread(opt.threads.at("step")));
+    const bool event = opt.step_mode == StepMode::kEvent;
+    // Event mode: at most max_step_rate_factor × the scene rate, so a fast station (or a burst)
+    // cannot take the CPU from the others; one step serves every station's newest pose.
+    const auto min_gap_ns =
+        event ? static_cast<std::int64_t>(std::llround(static_cast<double>(period_ns) / opt.max_step_rate_factor))
+              : period_ns;
     start_mono_ns = monotonic_ns();
     last_status_mono_ns = start_mono_ns;
-    std::int64_t next = start_mono_ns;
+    next_viewer_ns = start_mono_ns + viewer_period_ns;
+    std::int64_t next = start_mono_ns + period_ns;  // this step's deadline
+    std::int64_t last_start = start_mono_ns - min_gap_ns;
     while (run.load(std::memory_order_relaxed)) {
-      next += period_ns;
-      common::sleep_until_ns(next);
+      bool on_sample = false;
+      if (event) {
+        on_sample = wait_for_sample(next);
+        if (on_sample && monotonic_ns() < last_start + min_gap_ns) common::sleep_until_ns(last_start + min_gap_ns);
+      } else {
+        common::sleep_until_ns(next);
+      }
       if (!run.load(std::memory_order_relaxed)) break;
       const std::int64_t t0 = monotonic_ns();
+      // A deadline miss: the step starts more than one period after its deadline (clock: the
+      // absolute tick; event: one period after the previous step, i.e. no step for 2 periods).
       const std::int64_t late = t0 - next;
       if (late > period_ns) {
         ++deadline_misses;
         // Far behind (e.g. the machine stalled): restart the schedule instead of bursting.
         if (late > 20 * period_ns) next = t0;
       }
+      (on_sample ? steps_on_sample : steps_on_deadline).fetch_add(1, std::memory_order_relaxed);
       one_step();
+      last_start = t0;
+      // After a sample the deadline restarts from this step; idle: absolute deadlines.
+      next = on_sample ? t0 + period_ns : next + period_ns;
       const std::int64_t t1 = monotonic_ns();
       if (step_us_count < step_us.size()) step_us[step_us_count++] = 1e-3 * static_cast<double>(t1 - t0);
-      if (steps.load(std::memory_order_relaxed) % status_every == 0) {
+      if (t1 - last_status_mono_ns >= status_period_ns) {
         publish_status(t1);
       } else if (status_soon.load(std::memory_order_acquire) && t1 - last_status_mono_ns >= 200000000) {
         // A station was refused: tell its client now, not at the next status period.
@@ -769,6 +825,19 @@ void Server::Impl::step_loop() {
   }
 }
 
+// Event step mode: waits until a pose was handed to a slot (true) or deadline_ns passes (false);
+// takes every pending post, so one step serves all the samples that arrived meanwhile.
+bool Server::Impl::wait_for_sample(std::int64_t deadline_ns) {
+  const timespec ts = common::to_timespec(std::max<std::int64_t>(deadline_ns, 0));
+  int rc = 0;
+  while ((rc = sem_clockwait(&step_wake, CLOCK_MONOTONIC, &ts)) != 0 && errno == EINTR) {
+  }
+  if (rc != 0) return false;  // ETIMEDOUT
+  while (sem_trywait(&step_wake) == 0) {
+  }
+  return true;
+}
+
 void Server::Impl::retire(int i) {
   auto& s = slots[static_cast<std::size_t>(i)];
   if (s.model_written) models->dispose(*models_out[static_cast<std::size_t>(i)]);
@@ -777,6 +846,7 @@ void Server::Impl::retire(int i) {
   s.step_has_pose = false;
   s.model_written = false;
   s.in_contact.store(false, std::memory_order_relaxed);
+  if (rigid) proxies[static_cast<std::size_t>(i)].reset();
   s.state.store(kFree, std::memory_order_release);
 }
 
@@ -805,6 +875,8 @@ void Server::Impl::one_step() {
                  z = p.orientation[3];
     tp.axis = interaction::Vec3(2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y));
     tp.tool = p.tool;
+    // The physics steps the tool held on the free side of the bone (server-side proxy).
+    if (rigid) proxies[i].constrain(tool_shapes[static_cast<std::size_t>(tp.tool)], tp, rigid_planes[i]);
     slot_of_pose[n++] = static_cast<int>(i);
   }
   if (n > 0) {
@@ -841,13 +913,29 @@ void Server::Impl::one_step() {
       std::strncpy(cm.contact_mesh_id, mid, neurosim_ID_MAX);
       cm.contact_mesh_id[neurosim_ID_MAX] = '\0';
       cm.tool_sample_rejected = s.last_rejected.load(std::memory_order_relaxed);
+      if (rigid) {
+        const interaction::ObstaclePlanes& rp = rigid_planes[i];
+        cm.rigid_planes._length = static_cast<std::uint32_t>(rp.count);
+        for (int j = 0; j < rp.count; ++j) {
+          const auto& src = rp.planes[static_cast<std::size_t>(j)];
+          neurosim_RigidPlane& dst = cm.rigid_planes._buffer[j];
+          for (int d = 0; d < 3; ++d) {
+            dst.point_m[d] = src.point_m[d];
+            dst.normal[d] = src.normal[d];
+          }
+          dst.penetration_m = src.penetration_m;
+        }
+      }
       s.in_contact.store(c.in_contact, std::memory_order_relaxed);
       models->write(cm);
       s.model_written = true;
     }
   }
   steps.store(step, std::memory_order_relaxed);
-  if (deformation_output && step % viewer_every == 0) publish_deformation(step, dds_time());
+  if (deformation_output && monotonic_ns() >= next_viewer_ns) {  // the viewer rate, on the clock
+    next_viewer_ns = std::max(next_viewer_ns + viewer_period_ns, monotonic_ns());
+    publish_deformation(step, dds_time());
+  }
 }
 
 void Server::Impl::publish_deformation(std::uint64_t step, std::int64_t now_ns) {
@@ -900,6 +988,7 @@ void Server::Impl::encode_and_write(std::uint64_t step, std::int64_t now_ns, boo
 // Field worker thread: full-field solves and Deformation writes, off the step thread.
 void Server::Impl::field_loop() {
   try {
+    log(common::apply_to_this_thread(opt.threads.at("field")));
     for (;;) {
       std::uint64_t step = 0;
       std::int64_t t = 0;
@@ -1065,6 +1154,15 @@ Server::~Server() {
   } catch (const std::exception& e) {
     impl_->log(std::string("error while stopping: ") + e.what());
   }
+  sem_destroy(&impl_->step_wake);
+}
+
+const char* step_mode_name(StepMode m) { return m == StepMode::kEvent ? "event" : "clock"; }
+
+common::ThreadPlan default_server_threads() {
+  common::ThreadPlan p;
+  p.threads = {{"step", "ns-step", 50, {}}, {"dds", "ns-dds", 45, {}}, {"field", "ns-field", 0, {}}};
+  return p;
 }
 
 void Server::start() {
@@ -1087,6 +1185,7 @@ void Server::stop() {
   if (!d.started.load() || d.stopped.exchange(true)) return;
   d.run = false;
   if (d.waitset) d.waitset->wake();
+  sem_post(&d.step_wake);  // the step thread need not wait for its deadline
   if (d.dds_thread.joinable()) d.dds_thread.join();
   if (d.step_thread.joinable()) d.step_thread.join();
   {
@@ -1109,7 +1208,9 @@ void Server::stop() {
         std::to_string(d.stations_reclaimed.load()) + " idle stations, refused " +
         std::to_string(d.stations_refused.load()) + " stations; " +
         std::to_string(d.deformation_frames.load()) + " Deformation frames, " +
-        std::to_string(d.deformation_skipped.load()) + " viewer ticks skipped)");
+        std::to_string(d.deformation_skipped.load()) + " viewer ticks skipped); " +
+        step_mode_name(d.opt.step_mode) + " step mode: " + std::to_string(d.steps_on_sample.load()) +
+        " steps on a sample, " + std::to_string(d.steps_on_deadline.load()) + " on the deadline");
 }
 
 bool Server::running() const { return impl_->run.load(); }
@@ -1136,6 +1237,8 @@ ServerCounters Server::counters() const {
   c.deformation_frames = d.deformation_frames.load();
   c.full_field_solves = d.full_field_solves.load();
   c.deformation_skipped = d.deformation_skipped.load();
+  c.steps_on_sample = d.steps_on_sample.load();
+  c.steps_on_deadline = d.steps_on_deadline.load();
   return c;
 }
 

@@ -5,7 +5,9 @@
 //                (station_identity.hpp), join/leave/reclaim stations, filter samples
 //                (tool_filter.hpp), hand the newest good pose to the station's slot (triple
 //                buffer, never blocks).
-//   step thread: every period: newest pose of each station → Simulation::step → ContactModel
+//                After each pose it signals the step thread (event step mode).
+//   step thread: when a pose arrives (at most 2× the scene rate) or one period after the last
+//                step: newest pose of each station → Simulation::step → ContactModel
 //                per station; Deformation per mesh at the viewer rate while a viewer is matched;
 //                SimStatus at the status rate.
 //
@@ -13,6 +15,7 @@
 #pragma once
 
 #include "server/interaction/simulation.hpp"
+#include "common/thread_sched.hpp"
 #include "server/scene/model.hpp"
 
 #include <atomic>
@@ -24,6 +27,13 @@
 #include <vector>
 
 namespace neurosim::service {
+
+enum class StepMode { kEvent, kClock };
+const char* step_mode_name(StepMode m);
+
+// step "ns-step" SCHED_FIFO 50, dds "ns-dds" SCHED_FIFO 45 (the ToolState receive path, below
+// the step thread), field "ns-field" normal (full-field solves must never delay a step).
+common::ThreadPlan default_server_threads();
 
 struct ServerOptions {
   std::string scene_path;          // for messages and MeshTopology
@@ -45,6 +55,16 @@ struct ServerOptions {
   double max_future_s{1.0};                // source times further ahead of the server's clock are rejected, unit s
   double max_station_rate_hz{2000.0};      // samples per second a station may send on average (burst 20)
   int log_lines_per_second{5};             // per cause; the rest is summarised ("suppressed K lines")
+  // Real-time margins (docs/ARCHITECTURE.md "Threads"):
+  //   kEvent: the step thread wakes when the DDS thread hands a pose to a slot (a semaphore), at
+  //           most max_step_rate_factor × rates.step_hz (a minimum gap between steps), and at the
+  //           step period after the last step when no sample arrives (absolute deadlines).
+  //   kClock: the free-running clock: one step every period on absolute deadlines.
+  StepMode step_mode{StepMode::kEvent};
+  double max_step_rate_factor{2.0};  // event mode: steps at most this × the scene rate (>= 1)
+  // Server threads by role "step", "dds", "field" (names, SCHED_FIFO priorities, CPUs);
+  // default_server_threads() below; --rt-priority / --rt-cpus change it.
+  common::ThreadPlan threads = default_server_threads();
 };
 
 // Counters the server exposes to tests (also published in SimStatus).
@@ -63,6 +83,10 @@ struct ServerCounters {
   std::uint64_t deformation_frames{0};  // all meshes
   std::uint64_t full_field_solves{0};   // displacement fields computed (per mesh)
   std::uint64_t deformation_skipped{0}; // viewer ticks skipped: the field worker was still busy
+  // Which wake-up started each step: a sample handed to a slot (event mode only) or the period
+  // deadline (clock mode: every step; event mode: no sample within one period).
+  std::uint64_t steps_on_sample{0};
+  std::uint64_t steps_on_deadline{0};
 };
 
 class Server {
@@ -99,6 +123,8 @@ using SimulationFactory =
 //                   [--domain ID] [--server-id NAME] [--topic-prefix P]
 //                   [--station-idle-timeout S] [--max-stations-per-participant N]
 //                   [--workspace-margin M] [--log-lines-per-second N]
+//                   [--step-mode event|clock] [--max-step-rate-factor F]
+//                   [--rt-priority step=50,dds=45,field=0] [--rt-cpus step=1,dds=0]
 // Sets OPENBLAS_NUM_THREADS=1 (unless set), installs SIGINT/SIGTERM handlers, compiles the
 // scene, replaces its effects.tier by --tier if given, builds the simulation with `factory`,
 // serves until a signal or the duration. SIGINT/SIGTERM are honoured in every phase: during the

@@ -1,5 +1,6 @@
 // Test-only stand-ins for neurosim-server: a half-space spring (tissue below a plane) answering
-// ToolStates with ContactModels, in-process (simulated time) or over DDS (a thread).
+// ToolStates with ContactModels, in-process (simulated time) or over DDS (a thread). The
+// in-process link can add rigid constraint planes (a skull) to every model.
 #pragma once
 
 #include "haptic_client/force_model.hpp"
@@ -45,6 +46,8 @@ class FakeLink : public Link {
   std::size_t latency_ticks = 2;
   bool answering = true;
   bool alive = true;
+  RigidPlaneSet planes;     // rigid obstacles sent in every model (as the server would)
+  bool send_planes = true;  // false: models without planes (the obstacle went away)
   std::vector<ToolSample> published;
 
   void publish(const ToolSample& s) override {
@@ -56,6 +59,7 @@ class FakeLink : public Link {
     const ToolSample s = pending_.front();
     pending_.pop_front();
     out = tissue.model_at(s.position_m, s.sequence_number, s.source_time_ns);
+    if (send_planes) out.rigid_planes = planes;
     return true;
   }
   bool server_alive() override { return alive; }

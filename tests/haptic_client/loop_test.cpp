@@ -280,6 +280,7 @@ TEST(haptic_loop, CommandLineRunsScriptedStationAndWritesSummary) {
           (dir / "t.csv").string(),
       out);
   ASSERT_EQ(rc, 0) << out;
+  EXPECT_NE(out.find("rigid wall: 0 ticks in rigid contact"), std::string::npos) << out;
   std::ifstream f(dir / "s.json");
   const std::string json((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   EXPECT_NE(json.find("\"samples\": 300"), std::string::npos) << json;

@@ -1,0 +1,227 @@
+// ToolProxy (the server-side god-object) on the skull of scenes/brain_skull.scene: a probe driven
+// into the skull at 0.5 m/s stays outside the bone while the device goes 10 mm deep; a jump
+// through the whole shell in one step is held on the side it came from; the same probe through
+// the craniotomy is never blocked and reaches the cerebellum with the force of the unblocked pose.
+#include "server/interaction/tool_proxy.hpp"
+
+#include "rigid_fixtures.hpp"
+#include "server/interaction/simulation.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <new>
+
+namespace {
+thread_local long t_allocations = 0;  // operator new calls on this thread
+}  // namespace
+
+void* operator new(std::size_t size) {
+  ++t_allocations;
+  if (void* p = std::malloc(size ? size : 1)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+namespace neurosim::interaction {
+namespace {
+
+using testing::probe_shape;
+using testing::skull;
+
+constexpr double kTolerance_m = 1e-4;  // accepted penetration of the physics pose: 0.1 mm
+
+// How deep the tool at `pose` is in the bone, unit m (0: clear): tip sphere and shaft samples.
+double tool_penetration(const RigidObstacle& o, const ToolPose& pose, const ToolShape& s) {
+  auto part = [&](const mesh::Vec3& c, double r) {
+    const double d = o.closest(c).distance_m;
+    return o.inside(c) ? r + d : std::max(0.0, r - d);
+  };
+  double pen = part(pose.tip_m, s.tip_radius_m);
+  for (double t = 0.0; t <= 0.03; t += 0.001) pen = std::max(pen, part(pose.tip_m + t * pose.axis, s.shaft_radius_m));
+  return pen;
+}
+
+mesh::Vec3 skull_centre() {
+  const RigidObstacle& o = skull();
+  mesh::Vec3 lo = o.vertices_m().front(), hi = lo;
+  for (const auto& v : o.vertices_m()) {
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  return 0.5 * (lo + hi);
+}
+
+TEST(interaction_tool_proxy, DrivenIntoTheSkullStaysOutside) {
+  const RigidObstacle& o = skull();
+  const ToolShape shape = probe_shape();
+  const mesh::Vec3 down(0, 0, -1);
+  const mesh::Vec3 surface = testing::first_bone(o, skull_centre() + mesh::Vec3(0, 0, 0.15), down, 0.2);
+  // From 5 mm above the tip's contact to 10 mm below the outer table, 0.5 m/s at 1 kHz.
+  const mesh::Vec3 start = surface - (shape.tip_radius_m + 0.005) * down;
+  const double travel = shape.tip_radius_m + 0.005 + 0.010;
+  ToolProxy proxy(o);
+  ObstaclePlanes planes;
+  double worst = 0.0, last_raw_pen = 0.0;
+  int steps_blocked = 0;
+  for (int k = 0; k * 0.0005 <= travel + 1e-12; ++k) {
+    ToolPose pose;
+    pose.tip_m = start + (k * 0.0005) * down;
+    pose.axis = -down;
+    const mesh::Vec3 raw = pose.tip_m;
+    proxy.constrain(shape, pose, planes);
+    worst = std::max(worst, tool_penetration(o, pose, shape));
+    last_raw_pen = planes.max_penetration_m();
+    if ((pose.tip_m - raw).norm() > 1e-6) ++steps_blocked;
+    ASSERT_TRUE(proxy.has_free());
+  }
+  // The device went 10 mm past the outer table along the line (behind the plane of the tilted
+  // surface a little more); the pose the physics steps stayed outside.
+  EXPECT_GT(last_raw_pen, 0.009);
+  EXPECT_LT(last_raw_pen, 0.010 + 2 * shape.tip_radius_m);
+  EXPECT_LT(worst, kTolerance_m);
+  EXPECT_GE(steps_blocked, 19);
+}
+
+TEST(interaction_tool_proxy, JumpThroughTheShellIsHeldWhereItCameFrom) {
+  const RigidObstacle& o = skull();
+  const ToolShape shape = probe_shape();
+  const mesh::Vec3 down(0, 0, -1);
+  const mesh::Vec3 surface = testing::first_bone(o, skull_centre() + mesh::Vec3(0, 0, 0.15), down, 0.2);
+  // Past the bone: the first free point below the outer table (the gap between bone and brain).
+  mesh::Vec3 below = surface;
+  while (o.inside(below)) below += 5e-5 * down;
+  below += 0.001 * down;
+  ASSERT_FALSE(o.inside(below));
+  ToolProxy proxy(o);
+  ObstaclePlanes planes;
+  ToolPose pose;
+  pose.axis = -down;
+  pose.tip_m = surface - (shape.tip_radius_m + 0.001) * down;
+  proxy.constrain(shape, pose, planes);
+  ASSERT_TRUE(proxy.has_free());
+  // One step from 1 mm above the bone to below it: held above.
+  pose.tip_m = below;
+  proxy.constrain(shape, pose, planes);
+  EXPECT_LT(tool_penetration(o, pose, shape), kTolerance_m);
+  // Above where the line enters the bone, not in the gap under the shell (outside too).
+  EXPECT_GT((pose.tip_m - surface).dot(-down), 0.0);
+  EXPECT_GT(planes.max_penetration_m(), 0.005);
+}
+
+// A device that moved several steps' worth at once in free space (the server missed steps) is
+// followed at once: the physics pose never lags behind an unobstructed device.
+TEST(interaction_tool_proxy, FreeJumpIsFollowedAtOnce) {
+  const RigidObstacle& o = skull();
+  const ToolShape shape = probe_shape();
+  const scene::RigidOpening& hole = testing::brain_skull_model().rigid.front().openings.front();
+  ToolProxy proxy(o);
+  ObstaclePlanes planes;
+  ToolPose pose;
+  pose.axis = hole.axis;
+  pose.tip_m = hole.center_m + 0.04 * hole.axis;
+  proxy.constrain(shape, pose, planes);
+  for (double jump : {0.004, 0.008}) {  // 4 mm then 8 mm in one step, above the 3 mm reach
+    const mesh::Vec3 raw = pose.tip_m - jump * hole.axis;
+    pose.tip_m = raw;
+    proxy.constrain(shape, pose, planes);
+    EXPECT_EQ(pose.tip_m, raw) << jump;
+    EXPECT_EQ(proxy.free_tip_m(), raw);
+  }
+}
+
+// The per-step query and projection allocate nothing once the proxy exists (the server's 1 kHz
+// step): the skull approach (planes, projection) and a pose beside the rim of the opening.
+TEST(interaction_tool_proxy, ConstrainDoesNotAllocate) {
+  const RigidObstacle& o = skull();
+  const ToolShape shape = probe_shape();
+  const mesh::Vec3 down(0, 0, -1);
+  const mesh::Vec3 surface = testing::first_bone(o, skull_centre() + mesh::Vec3(0, 0, 0.15), down, 0.2);
+  const scene::RigidOpening& hole = testing::brain_skull_model().rigid.front().openings.front();
+  ToolProxy proxy(o), rim(o);
+  ObstaclePlanes planes;
+  ToolPose pose;
+  pose.axis = -down;
+  pose.tip_m = surface - 0.007 * down;
+  proxy.constrain(shape, pose, planes);  // first pose: the free check
+  const long before = t_allocations;
+  int with_planes = 0;
+  for (int k = 0; k < 40; ++k) {
+    pose.tip_m = surface + (0.0005 * k - 0.007) * down;
+    pose.axis = -down;
+    proxy.constrain(shape, pose, planes);
+    with_planes += planes.count > 0;
+  }
+  const long mid = t_allocations;
+  for (int k = 0; k < 40; ++k) {
+    pose.axis = hole.axis;
+    pose.tip_m = hole.center_m + 0.02 * hole.axis - 0.0005 * k * hole.axis;
+    rim.constrain(shape, pose, planes);
+    with_planes += planes.count > 0;
+  }
+  const long after = t_allocations;
+  EXPECT_GT(with_planes, 30);
+  // The second proxy's first pose ran the free check (no allocation either).
+  EXPECT_EQ(mid - before, 0);
+  EXPECT_EQ(after - mid, 0);
+}
+
+// Through the craniotomy along its axis: never blocked (the physics pose is the device's), and
+// the tissue force equals a State stepped with the raw poses.
+TEST(interaction_tool_proxy, ThroughTheOpeningUnblockedToTheCerebellum) {
+  const RigidObstacle& o = skull();
+  const ToolShape shape = probe_shape();
+  const scene::Model& model = testing::brain_skull_model();
+  const scene::RigidOpening& hole = model.rigid.front().openings.front();
+  const auto sim_model = build_model(model);
+  StatePtr with_proxy = make_state(*sim_model), raw_state = make_state(*sim_model);
+  ToolProxy proxy(o);
+  ObstaclePlanes planes;
+  std::vector<ToolPose> a(1), b(1);
+  std::vector<ToolContact> ca, cb;
+  StepStats sa, sb;
+  int contact_steps = 0;
+  double max_force = 0.0;
+  const mesh::Vec3 start = hole.center_m + 0.04 * hole.axis;
+  for (int k = 0; k < 160 && contact_steps < 10; ++k) {
+    ToolPose pose;
+    pose.tip_m = start - (k * 0.0005) * hole.axis;
+    pose.axis = hole.axis;
+    b[0] = pose;
+    proxy.constrain(shape, pose, planes);
+    ASSERT_EQ(pose.tip_m, b[0].tip_m) << "blocked at step " << k;
+    EXPECT_EQ(planes.max_penetration_m(), 0.0);
+    a[0] = pose;
+    step(*sim_model, *with_proxy, a, ca, sa);
+    step(*sim_model, *raw_state, b, cb, sb);
+    ASSERT_EQ(ca[0].in_contact, cb[0].in_contact);
+    EXPECT_EQ(ca[0].force_n, cb[0].force_n);
+    if (ca[0].in_contact) {
+      ++contact_steps;
+      EXPECT_EQ(model.meshes[static_cast<std::size_t>(ca[0].mesh)].id, "brain");
+      max_force = std::max(max_force, ca[0].force_n.norm());
+    }
+  }
+  EXPECT_EQ(contact_steps, 10);
+  EXPECT_GT(max_force, 0.0);
+  // The contact is the cerebellum's (tissue label 2 around the touched nodes).
+  const auto& brain = model.meshes.front();
+  int cerebellum = -1;
+  for (std::size_t i = 0; i < brain.tissues.size(); ++i)
+    if (brain.tissues[i].name == "cerebellum") cerebellum = brain.tissues[i].label;
+  ASSERT_GE(cerebellum, 0);
+  bool touches_cerebellum = false;
+  for (int n : ca[0].nodes)
+    for (std::size_t t = 0; t < brain.mesh.num_tets() && !touches_cerebellum; ++t) {
+      const auto& tet = brain.mesh.tets()[t];
+      if (brain.mesh.tet_labels()[t] == cerebellum &&
+          (tet[0] == n || tet[1] == n || tet[2] == n || tet[3] == n))
+        touches_cerebellum = true;
+    }
+  EXPECT_TRUE(touches_cerebellum);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction

@@ -1,0 +1,261 @@
+// neurosim-server with rigid obstacles (scenes/brain_skull.scene, the skull with a suboccipital
+// craniotomy), child process on a private DDS domain on loopback, bounded: a station driving the
+// probe into the skull at 0.5 m/s gets ContactModel.rigid_planes whose penetration follows the
+// device 10 mm deep while the server's physics never touches the brain behind the bone (the raw
+// pose would); through the opening the probe reaches the brain unblocked, with the forces of the
+// in-process Simulation stepped with the same poses. A scene without rigid meshes builds no
+// obstacle and sends no planes.
+#include "server/interaction/rigid_obstacle.hpp"
+#include "server/interaction/simulation.hpp"
+#include "server/scene/compile.hpp"
+#include "tests/server/service/service_scenarios.hpp"
+
+namespace st = neurosim::service::testing;
+namespace nt = neurosim::testing;
+using namespace neurosim;
+
+namespace {
+
+struct PlaneRecord {
+  double point[3], normal[3], penetration;
+};
+struct Record {
+  std::uint64_t seq{0};
+  bool in_contact{false};
+  double f0[3]{};
+  std::string mesh;
+  std::vector<PlaneRecord> planes;
+};
+
+// One station writing a scripted path (tip and shaft axis) at 1 kHz, and every ContactModel it
+// gets, with its rigid planes.
+class Station {
+ public:
+  Station(st::Client& c, std::string id) : writer_(c.pp, c.tool_topic, id), reader_(c.pp, c.model_topic),
+                                           ws_(c.pp), id_(std::move(id)) {
+    ws_.attach_data(reader_, 1);
+  }
+  // Sends path(k) for k = 0..steps-1, one per ms, taking the models as they come; then waits a
+  // little for the last answers.
+  void run(const std::function<interaction::ToolPose(int)>& path, int steps) {
+    EXPECT_TRUE(writer_.wait_for_readers(1, DDS_SECS(10)));
+    wire::Sample<neurosim_ToolState> s;
+    std::int64_t next = common::monotonic_ns();
+    for (int k = 0; k < steps + 300; ++k) {
+      const interaction::ToolPose p = path(std::min(k, steps - 1));  // then hold the last pose
+      sent_.push_back(p);
+      const double pos[3] = {p.tip_m.x(), p.tip_m.y(), p.tip_m.z()};
+      st::fill_tool(*s, id_.c_str(), sent_.size(), pos, dds_time());
+      // Orientation taking the tool's +z onto the axis: q = (1 + z.a, z x a), normalised.
+      const interaction::Vec3& a = p.axis;
+      double q[4] = {1.0 + a.z(), -a.y(), a.x(), 0.0};
+      const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+      for (int i = 0; i < 4; ++i) s->orientation[i] = q[i] / n;
+      writer_.write(*s);
+      take();
+      next += 1000000;
+      common::sleep_until_ns(next);
+    }
+    const auto t0 = st::Clock::now();
+    while (st::seconds_since(t0) < 1.0) {
+      ws_.wait(DDS_MSECS(20));
+      take();
+    }
+  }
+  const std::vector<Record>& records() const { return recs_; }
+  const interaction::ToolPose& sent(std::uint64_t seq) const { return sent_.at(seq - 1); }
+
+ private:
+  void take() {
+    for (const auto& rx : reader_.take()) {
+      if (!rx.valid() || std::string(rx.data.station_id) != id_) continue;
+      const auto& d = rx.data;
+      Record r;
+      r.seq = d.tool_sequence;
+      r.in_contact = d.in_contact;
+      for (int i = 0; i < 3; ++i) r.f0[i] = d.f0_n[i];
+      r.mesh = d.contact_mesh_id;
+      for (std::uint32_t j = 0; j < d.rigid_planes._length; ++j) {
+        const auto& p = d.rigid_planes._buffer[j];
+        r.planes.push_back({{p.point_m[0], p.point_m[1], p.point_m[2]},
+                            {p.normal[0], p.normal[1], p.normal[2]},
+                            p.penetration_m});
+      }
+      recs_.push_back(std::move(r));
+    }
+  }
+  wire::Writer<neurosim_ToolState> writer_;
+  wire::Reader<neurosim_ContactModel> reader_;
+  wire::Waitset ws_;
+  std::string id_;
+  std::vector<interaction::ToolPose> sent_;
+  std::vector<Record> recs_;
+};
+
+const scene::Model& skull_scene() {
+  static const scene::Model m = scene::load_model(nt::source_dir() / "scenes/brain_skull.scene");
+  return m;
+}
+
+st::Setup skull_setup() {
+  st::Setup s;
+  s.exe = nt::bin_dir() / "neurosim-server";
+  s.scene = nt::source_dir() / "scenes/brain_skull.scene";
+  s.make_reference = [] { return interaction::Simulation::build(skull_scene()); };
+  s.startup_timeout_s = 240;
+  return s;
+}
+
+double max_penetration(const Record& r) {
+  double p = 0.0;
+  for (const auto& q : r.planes) p = std::max(p, q.penetration);
+  return p;
+}
+
+}  // namespace
+
+TEST(service_rigid, DrivenIntoTheSkullHeldOutsideWhileTheDeviceGoesTenMillimetresDeep) {
+  const st::Setup setup = skull_setup();
+  st::Session ses(setup, "rigid_skull", 30);
+  auto ref = setup.make_reference();
+  const auto obstacle = interaction::RigidObstacle::build(skull_scene().rigid);
+  ASSERT_TRUE(ses.wait_ready());
+  EXPECT_NE(ses.server.log().find("built: rigid obstacles (13730 triangles)"), std::string::npos)
+      << ses.server.log();
+  // Straight down onto the top of the skull: the line's entry into the bone.
+  mesh::Vec3 lo = obstacle->vertices_m().front(), hi = lo;
+  for (const auto& v : obstacle->vertices_m()) {
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  const mesh::Vec3 down(0, 0, -1);
+  mesh::Vec3 surface(0.5 * (lo.x() + hi.x()), 0.5 * (lo.y() + hi.y()), hi.z() + 0.01);
+  while (!obstacle->inside(surface)) surface += 5e-5 * down;
+  const double r_tip = skull_scene().tools.front().tip_radius_m;
+  const mesh::Vec3 start = surface - (r_tip + 0.005) * down;
+  auto at_depth = [&](double depth_m) {  // depth of the tip centre below the outer table
+    interaction::ToolPose p;
+    p.tip_m = surface + depth_m * down;
+    p.axis = -down;
+    return p;
+  };
+  // Where the raw pose would touch the brain through the bone (in-process, no obstacle): the
+  // path goes 10 mm deep, or 3 mm past that point if it is deeper, so the test can fail.
+  double brain_depth = -1.0;
+  {
+    std::vector<interaction::ToolPose> poses(1);
+    std::vector<interaction::ToolContact> contacts;
+    interaction::StepStats stats;
+    for (double d = 0.0; d <= 0.03 && brain_depth < 0; d += 0.0005) {
+      poses[0] = at_depth(d);
+      ref->step(poses, contacts, stats);
+      if (contacts[0].in_contact) brain_depth = d;
+    }
+  }
+  ASSERT_GT(brain_depth, 0.0) << "no brain under the skull top within 30 mm";
+  const double end_depth = std::max(0.010, brain_depth + 0.003);
+  const int steps = static_cast<int>((r_tip + 0.005 + end_depth) / 0.0005) + 1;  // 0.5 m/s
+  auto path = [&](int k) {
+    interaction::ToolPose p;
+    p.tip_m = start + (0.0005 * k) * down;
+    p.axis = -down;
+    return p;
+  };
+  Station station(ses.client, "skull-1");
+  station.run(path, steps);
+  const auto& recs = station.records();
+  ASSERT_GT(recs.size(), 200u) << ses.server.log();
+  double deepest = 0.0;
+  std::size_t with_planes = 0;
+  for (const auto& r : recs) {
+    EXPECT_FALSE(r.in_contact) << "seq " << r.seq << ": the brain was touched through the skull";
+    with_planes += r.planes.empty() ? 0 : 1;
+    deepest = std::max(deepest, max_penetration(r));
+    for (const auto& q : r.planes) {
+      EXPECT_NEAR(std::sqrt(q.normal[0] * q.normal[0] + q.normal[1] * q.normal[1] + q.normal[2] * q.normal[2]),
+                  1.0, 1e-9);
+      EXPECT_LE(r.planes.size(), 8u);
+    }
+  }
+  EXPECT_GT(with_planes, 100u);
+  EXPECT_GT(deepest, end_depth - 0.001);  // the device went end_depth past the outer table
+  std::printf("skull: %zu ContactModels, %zu with planes, deepest raw penetration %.2f mm (device %.1f mm "
+              "below the outer table; the brain at %.1f mm)\n",
+              recs.size(), with_planes, 1e3 * deepest, 1e3 * end_depth, 1e3 * brain_depth);
+}
+
+TEST(service_rigid, ThroughTheOpeningUnblockedWithTheInProcessForces) {
+  const st::Setup setup = skull_setup();
+  st::Session ses(setup, "rigid_opening", 30);
+  auto ref = setup.make_reference();
+  ASSERT_TRUE(ses.wait_ready());
+  const scene::RigidOpening& hole = skull_scene().rigid.front().openings.front();
+  const mesh::Vec3 start = hole.center_m + 0.04 * hole.axis;
+  auto path = [&](int k) {
+    interaction::ToolPose p;
+    p.tip_m = start - (0.0005 * k) * hole.axis;
+    p.axis = hole.axis;
+    return p;
+  };
+  // In along the axis at 0.5 m/s until 4 mm past the first touch of the brain (in-process).
+  int first_touch = -1;
+  {
+    auto probe = setup.make_reference();
+    std::vector<interaction::ToolPose> poses(1);
+    std::vector<interaction::ToolContact> contacts;
+    interaction::StepStats stats;
+    for (int k = 0; k < 200 && first_touch < 0; ++k) {
+      poses[0] = path(k);
+      probe->step(poses, contacts, stats);
+      if (contacts[0].in_contact) first_touch = k;
+    }
+  }
+  ASSERT_GT(first_touch, 0) << "the brain is not within 100 mm along the opening's axis";
+  const int steps = first_touch + 8;
+  Station station(ses.client, "hole-1");
+  station.run(path, steps);
+  std::vector<interaction::ToolPose> poses(1);
+  std::vector<interaction::ToolContact> contacts;
+  interaction::StepStats stats;
+  std::size_t compared = 0, in_contact = 0;
+  for (const auto& r : station.records()) {
+    EXPECT_EQ(max_penetration(r), 0.0) << "seq " << r.seq;
+    poses[0] = station.sent(r.seq);
+    ref->step(poses, contacts, stats);
+    const auto& c = contacts[0];
+    ASSERT_EQ(r.in_contact, c.in_contact) << "seq " << r.seq << " tip " << poses[0].tip_m.transpose()
+                                          << " server force " << r.f0[0] << " " << r.f0[1] << " " << r.f0[2]
+                                          << " planes " << r.planes.size();
+    ++compared;
+    if (!c.in_contact) continue;
+    ++in_contact;
+    EXPECT_EQ(r.mesh, "brain");
+    const interaction::Vec3 f(r.f0[0], r.f0[1], r.f0[2]);
+    EXPECT_LE((f - c.force_n).norm(), 1e-9 * c.force_n.norm()) << "seq " << r.seq;
+    if (::testing::Test::HasFailure()) break;
+  }
+  EXPECT_GT(compared, 200u);
+  EXPECT_GT(in_contact, 50u) << "the probe should reach the cerebellum";
+  std::printf("opening: %zu ContactModels compared, %zu in contact (brain touched %.1f mm along the axis "
+              "from 40 mm outside the opening's centre)\n",
+              compared, in_contact, 0.5 * first_touch);
+}
+
+// Effects: without rigid meshes nothing is built and no plane is sent.
+TEST(service_rigid, SceneWithoutRigidMeshesBuildsNoObstacle) {
+  st::Setup setup;
+  setup.exe = nt::bin_dir() / "neurosim-server";
+  setup.scene = nt::source_dir() / "scenes/cube_cylinder.scene";
+  setup.startup_timeout_s = 240;
+  st::Session ses(setup, "rigid_none", 30);
+  ASSERT_TRUE(ses.wait_ready());
+  EXPECT_EQ(ses.server.log().find("rigid obstacles"), std::string::npos) << ses.server.log();
+  Station station(ses.client, "none-1");
+  station.run([&](int) {
+    interaction::ToolPose p;
+    p.tip_m = interaction::Vec3(setup.face_x_m + 0.001, setup.centre_y_m, setup.centre_z_m);
+    return p;
+  }, 50);
+  ASSERT_GT(station.records().size(), 50u);
+  for (const auto& r : station.records()) EXPECT_TRUE(r.planes.empty());
+}
