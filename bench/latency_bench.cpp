@@ -6,6 +6,10 @@
 //   latency_bench --stations N --seconds S [--csv] [--scene FILE] [--server EXE] [--warmup S]
 //                 [--viewer]   also read Deformation, so the server runs its full-field solves
 //                 [--load N]   N busy threads beside server and stations (CPU starvation)
+//                 [--report-every S]  soak: also one row per S seconds (latency of the answers
+//                              in that interval, lost, server RSS and step p99 at its end,
+//                              non-finite ContactModels over the run), e.g. --stations 4 --viewer --seconds 600
+//                              --report-every 60
 //                 [--step-modes event,clock]  one server run per step mode, one row each
 //                              (neurosim-server --step-mode; default: event)
 //
@@ -69,6 +73,15 @@ double process_cpu_s(pid_t pid) {
   return static_cast<double>(ut + st) / static_cast<double>(sysconf(_SC_CLK_TCK));
 }
 
+// Resident set size of a process, unit kB (-1 if unknown).
+long process_rss_kb(pid_t pid) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/status");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
+  return -1;
+}
+
 struct Options {
   int stations = 1;
   double seconds = 5;
@@ -90,6 +103,9 @@ void station_point(int k, int n, double p[3]) {
 
 struct StationResult {
   std::vector<double> latency_us;
+  std::vector<std::int64_t> latency_at_ns;  // when each answer was read (CLOCK_MONOTONIC)
+  std::vector<std::pair<std::int64_t, std::uint64_t>> lost_at;  // (when, how many)
+  std::uint64_t nonfinite = 0;  // ContactModels with a NaN/inf force or stiffness
   std::uint64_t lost = 0;
   std::uint64_t sent = 0;
 };
@@ -169,9 +185,18 @@ void run_station(int domain, int k, int n, const Window& window, std::atomic<int
       const std::int64_t got = monotonic_ns();
       const auto& m = rx.data;
       if (got >= measure_from && got < measure_to) {
-        if (last_step != 0 && m.server_step > last_step + 1) out.lost += m.server_step - last_step - 1;
-        if (m.tool_sequence > answered && m.tool_sequence + kRing > seq)
+        if (last_step != 0 && m.server_step > last_step + 1) {
+          out.lost += m.server_step - last_step - 1;
+          out.lost_at.emplace_back(got, m.server_step - last_step - 1);
+        }
+        if (m.tool_sequence > answered && m.tool_sequence + kRing > seq) {
           out.latency_us.push_back(1e-3 * static_cast<double>(got - sent_at[m.tool_sequence % kRing]));
+          out.latency_at_ns.push_back(got);
+        }
+        bool finite = true;
+        for (double v : m.f0_n) finite = finite && std::isfinite(v);
+        for (double v : m.stiffness_n_per_m) finite = finite && std::isfinite(v);
+        if (!finite) ++out.nonfinite;
       }
       last_step = m.server_step;
       answered = std::max<std::uint64_t>(answered, m.tool_sequence);
@@ -206,6 +231,11 @@ int main(int argc, char** argv) {
   int load = 0;
   cli->add_option("--load", load, "busy threads beside the measured processes")
       ->check(neurosim::cli::in_range(0, 64))
+      ->capture_default_str();
+  double report_every_s = 0;
+  cli->add_option("--report-every", report_every_s,
+                  "soak: one row per this many seconds, unit s (0: none)")
+      ->check(neurosim::cli::non_negative())
       ->capture_default_str();
   std::string modes_text = "event";
   cli->add_option("--step-modes", modes_text,
@@ -316,10 +346,34 @@ int main(int argc, char** argv) {
     const auto sleep_until = [](std::int64_t t) { neurosim::common::sleep_until_ns(t); };
     sleep_until(from);
     const double cpu0 = process_cpu_s(pid);
+    // Soak rows: the server's RSS and newest step p99 at the end of each interval.
+    struct Interval {
+      std::int64_t end_ns;
+      long rss_kb;
+      double step_p99_us;
+    };
+    std::vector<Interval> intervals;
+    char last_status[256] = "no SimStatus";
+    if (report_every_s > 0) {
+      const auto every_ns = static_cast<std::int64_t>(report_every_s * 1e9);
+      for (std::int64_t t = from + every_ns; t <= to; t += every_ns) {
+        sleep_until(t);
+        double p99_step = -1;
+        for (const auto& rx : status.take())
+          if (rx.valid()) {
+            p99_step = rx.data.step_time_p99_us;
+            std::snprintf(last_status, sizeof last_status,
+                          "step p50 %.1f us, p99 %.1f us, max %.1f us, %llu deadline misses",
+                          rx.data.step_time_p50_us, rx.data.step_time_p99_us, rx.data.step_time_max_us,
+                          static_cast<unsigned long long>(rx.data.deadline_misses));
+          }
+        intervals.push_back({t, process_rss_kb(pid), p99_step});
+      }
+    }
     sleep_until(to);
     const double cpu1 = process_cpu_s(pid);
     // The server's own step times over the last status period (SimStatus, 1 Hz).
-    std::string step_text = "no SimStatus";
+    std::string step_text = last_status;
     if (const auto* st = status.take_newest()) {
       char buf[256];
       std::snprintf(buf, sizeof buf, "step p50 %.1f us, p99 %.1f us, max %.1f us, %llu deadline misses",
@@ -340,6 +394,28 @@ int main(int argc, char** argv) {
       sent += r.sent;
     }
     const double cpu_pct = 100.0 * (cpu1 - cpu0) / o.seconds;
+    if (!intervals.empty()) {
+      std::printf("soak,%s,interval_end_s,samples,p50_us,p99_us,max_us,lost,server_rss_kb,step_p99_us,nonfinite_total\n",
+                  mode.c_str());
+      std::int64_t begin = from;
+      for (const auto& iv : intervals) {
+        std::vector<double> lat;
+        std::uint64_t lost_iv = 0, nonfinite = 0;
+        for (const auto& r : results) {
+          for (std::size_t i = 0; i < r.latency_us.size(); ++i)
+            if (r.latency_at_ns[i] >= begin && r.latency_at_ns[i] < iv.end_ns) lat.push_back(r.latency_us[i]);
+          for (const auto& [t, n] : r.lost_at)
+            if (t >= begin && t < iv.end_ns) lost_iv += n;
+          nonfinite += r.nonfinite;
+        }
+        const auto q = neurosim::common::percentiles(lat);
+        std::printf("soak,%s,%.0f,%zu,%.1f,%.1f,%.1f,%llu,%ld,%.1f,%llu\n", mode.c_str(),
+                    1e-9 * static_cast<double>(iv.end_ns - from), lat.size(), q.p50, q.p99, q.max,
+                    static_cast<unsigned long long>(lost_iv), iv.rss_kb, iv.step_p99_us,
+                    static_cast<unsigned long long>(nonfinite));
+        begin = iv.end_ns;
+      }
+    }
     const std::size_t samples = all.size();
     const neurosim::common::Percentiles pc = neurosim::common::percentiles(all);
     const double mx = pc.max, p50 = pc.p50, p99 = pc.p99;
