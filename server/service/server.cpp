@@ -103,8 +103,15 @@ struct Server::Impl {
   Impl(const scene::Model& model, std::unique_ptr<interaction::Simulation> s, ServerOptions o,
        std::ostream& l)
       : settings(model), sim(std::move(s)), opt(std::move(o)), log_stream(l) {
-    for (const auto& m : model.meshes)
-      mesh_info.push_back(MeshInfo{m.id, m.material, m.priority, m.provenance});
+    for (const auto& m : model.meshes) {
+      MeshInfo mi{m.id, m.material, m.priority, m.provenance, {}, {}};
+      for (const auto& t : m.tissues) {
+        mi.region_labels.push_back(t.label);
+        mi.region_names.push_back(t.name);
+      }
+      mesh_info.push_back(std::move(mi));
+    }
+    rigid_surfaces = model.rigid;
     // Rigid obstacles (the skull): built only when the scene has them, else null and free.
     rigid = interaction::RigidObstacle::build(model.rigid);
     for (const auto& t : model.tools)
@@ -118,8 +125,11 @@ struct Server::Impl {
     fem::Material material;
     int priority;
     std::string provenance;
+    std::vector<int> region_labels;         // scene tissues' labels (tet_region indexes these)
+    std::vector<std::string> region_names;  // and their names
   };
   std::vector<MeshInfo> mesh_info;
+  std::vector<scene::RigidSurface> rigid_surfaces;  // published as rigid MeshTopology samples
   std::unique_ptr<interaction::Simulation> sim;
   std::unique_ptr<const interaction::RigidObstacle> rigid;  // null: the scene has none
   std::vector<interaction::ToolShape> tool_shapes;          // per scene tool
@@ -247,6 +257,8 @@ struct Server::Impl {
   void configure();
   void create_entities();
   void publish_topologies();
+  static void set_regions(neurosim_MeshTopology& t, const std::vector<int>& labels,
+                          std::size_t num_tets, const MeshInfo& info);
   void dds_loop();
   void handle_tool_sample(const wire::Received<neurosim_ToolState>& rx);
   void leave(const std::string& key, const char* why);
@@ -500,6 +512,7 @@ void Server::Impl::publish_topologies() {
       t->poisson_ratio = info->material.poisson_ratio;
       t->priority = info->priority;
       wire::set_string(t->provenance, info->provenance);
+      set_regions(*t, mesh.tet_labels(), mesh.num_tets(), *info);
     } else {
       wire::set_string(t->material_name, "");
       wire::set_string(t->provenance, "");
@@ -511,6 +524,55 @@ void Server::Impl::publish_topologies() {
         " vertices, " + std::to_string(mesh.num_tets()) + " tetrahedra, " +
         std::to_string(mesh.surface().size()) + " surface triangles");
   }
+  // Rigid obstacles (the skull): surface only, never deformed (no Deformation frames).
+  for (const scene::RigidSurface& r : rigid_surfaces) {
+    wire::Sample<neurosim_MeshTopology> t;
+    wire::set_string(t->mesh_id, r.id, "mesh_id");
+    t->revision = 1;
+    t->rigid = true;
+    wire::set_string(t->scene_name, settings.name);
+    std::vector<double> v;
+    v.reserve(3 * r.vertices_m.size());
+    for (const auto& x : r.vertices_m) v.insert(v.end(), {x.x(), x.y(), x.z()});
+    wire::assign(t->rest_vertices_m, v);
+    std::vector<std::int32_t> tris;
+    tris.reserve(3 * r.triangles.size());
+    for (const auto& tr : r.triangles) tris.insert(tris.end(), tr.begin(), tr.end());
+    wire::assign(t->surface_triangles, tris);
+    wire::set_string(t->material_name, "");
+    wire::set_string(t->provenance, r.provenance);
+    wire::set_string(t->volume_image_file, settings.image.file);
+    t->volume_image_unit_m = settings.image.file_unit_m;
+    topologies->write(*t);
+    log("published MeshTopology '" + r.id + "' (rigid): " + std::to_string(r.vertices_m.size()) +
+        " vertices, " + std::to_string(r.triangles.size()) + " surface triangles");
+  }
+}
+
+// tet_region / region_names of a labelled mesh: each tetrahedron's label as the index of its
+// scene tissue. Left empty when the scene names no tissues or the solved mesh's tetrahedra are
+// not the labelled ones (a mesh rebuilt by the simulation).
+void Server::Impl::set_regions(neurosim_MeshTopology& t, const std::vector<int>& labels,
+                               std::size_t num_tets, const MeshInfo& info) {
+  if (info.region_names.empty() || labels.size() != num_tets) return;
+  if (info.region_names.size() > 16)
+    throw std::invalid_argument("mesh '" + info.id + "': " +
+                                std::to_string(info.region_names.size()) +
+                                " tissues, MeshTopology carries at most 16 region names");
+  std::vector<std::uint8_t> region(num_tets);
+  for (std::size_t e = 0; e < num_tets; ++e) {
+    const auto it = std::find(info.region_labels.begin(), info.region_labels.end(), labels[e]);
+    if (it == info.region_labels.end())
+      throw std::invalid_argument("mesh '" + info.id + "': tetrahedron " + std::to_string(e) +
+                                  " has label " + std::to_string(labels[e]) +
+                                  ", which no tissue lists");
+    region[e] = static_cast<std::uint8_t>(it - info.region_labels.begin());
+  }
+  wire::assign(t.tet_region, region);
+  wire::reserve(t.region_names, info.region_names.size());
+  for (std::size_t i = 0; i < info.region_names.size(); ++i)
+    wire::set_string(t.region_names._buffer[i], info.region_names[i], "region name");
+  t.region_names._length = static_cast<std::uint32_t>(info.region_names.size());
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1136,6 +1198,12 @@ void Server::Impl::dispose_all() {
     for (int m = 0; m < sim->num_meshes(); ++m) {
       wire::Sample<neurosim_MeshTopology> k;
       wire::set_string(k->mesh_id, sim->mesh_id(m), "mesh_id");
+      topologies->dispose(*k);
+    }
+  if (topologies)
+    for (const scene::RigidSurface& r : rigid_surfaces) {
+      wire::Sample<neurosim_MeshTopology> k;
+      wire::set_string(k->mesh_id, r.id, "mesh_id");
       topologies->dispose(*k);
     }
   if (status_writer) status_writer->dispose(*status);

@@ -174,6 +174,8 @@ int run_viewer(const ViewerOptions& o, std::ostream& log, const std::atomic<bool
   popt.render.offscreen = o.headless;
   popt.render.overlay = o.overlay;
   popt.render.force_unit_n = o.force_unit_n;
+  popt.render.skull = o.skull;
+  popt.render.colour = o.colour;
   popt.volume_step = o.volume_step;
   Pipeline pipeline(popt, warn);
 

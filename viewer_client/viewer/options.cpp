@@ -8,6 +8,26 @@ namespace neurosim::viewer {
 
 const char* to_string(Mode m) { return m == Mode::Navigation ? "navigation" : "observe"; }
 
+const char* to_string(SkullMode m) {
+  switch (m) {
+    case SkullMode::Shown: return "shown";
+    case SkullMode::Transparent: return "transparent";
+    case SkullMode::Hidden: return "hidden";
+  }
+  return "?";
+}
+
+SkullMode next(SkullMode m) {
+  switch (m) {
+    case SkullMode::Shown: return SkullMode::Transparent;
+    case SkullMode::Transparent: return SkullMode::Hidden;
+    case SkullMode::Hidden: return SkullMode::Shown;
+  }
+  return SkullMode::Shown;
+}
+
+const char* to_string(ColourMode m) { return m == ColourMode::Region ? "region" : "plain"; }
+
 ViewerOptions parse_options(int argc, const char* const* argv, bool& help) {
   namespace cli = neurosim::cli;
   ViewerOptions o;
@@ -78,6 +98,17 @@ ViewerOptions parse_options(int argc, const char* const* argv, bool& help) {
       ->check(cli::positive());
   p->add_option("--summary", o.summary_file,
                 "write counters (frames, samples, malformed, server lost) as JSON");
+  std::string skull = "shown", colour = "plain";
+  p->add_option("--skull", skull,
+                "rigid meshes (the skull): shown (opaque bone), transparent or hidden; key 'k' "
+                "cycles them on screen")
+      ->check(CLI::IsMember({"shown", "transparent", "hidden"}))
+      ->capture_default_str();
+  p->add_option("--colour", colour,
+                "surfaces: plain (brain tan, vessels red) or region (each brain region its own "
+                "colour, from the topology's tissue labels)")
+      ->check(CLI::IsMember({"plain", "region"}))
+      ->capture_default_str();
   bool no_overlay = false;
   p->add_flag("--no-overlay", no_overlay, "no status text in the frames");
   p->footer("CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs).");
@@ -87,6 +118,10 @@ ViewerOptions parse_options(int argc, const char* const* argv, bool& help) {
   }
   o.mode = mode == "observe" ? Mode::Observe : Mode::Navigation;
   o.overlay = !no_overlay;
+  o.skull = skull == "transparent" ? SkullMode::Transparent
+            : skull == "hidden"    ? SkullMode::Hidden
+                                   : SkullMode::Shown;
+  o.colour = colour == "region" ? ColourMode::Region : ColourMode::Plain;
   return o;
 }
 

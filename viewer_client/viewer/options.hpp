@@ -12,6 +12,17 @@ enum class Mode {
 };
 const char* to_string(Mode m);
 
+// How rigid meshes (the skull) are drawn.
+enum class SkullMode { Shown, Transparent, Hidden };
+const char* to_string(SkullMode m);
+// The next mode of the interactive cycle: shown -> transparent -> hidden -> shown.
+SkullMode next(SkullMode m);
+
+// How the deformable surfaces are coloured: plain (brain tan, vessels red) or by region (the
+// tissue of each surface triangle, when the topology carries regions).
+enum class ColourMode { Plain, Region };
+const char* to_string(ColourMode m);
+
 struct ViewerOptions {
   Mode mode = Mode::Navigation;
   bool headless = false;      // render offscreen, write PNG frames into out_dir
@@ -28,6 +39,8 @@ struct ViewerOptions {
   double force_unit_n = 1.0;  // colour rule's f = |F| / force_unit_n (paper: F in N, so 1 N)
   std::string summary_file;   // JSON summary written at exit ("" none)
   bool overlay = true;        // status text in the frame
+  SkullMode skull = SkullMode::Shown;
+  ColourMode colour = ColourMode::Plain;
 };
 
 // Parses argv (common/cli: CLI11). Throws std::invalid_argument (cli::UsageError) with a message

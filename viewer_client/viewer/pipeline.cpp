@@ -60,6 +60,7 @@ void Pipeline::rebuild(const ViewerState& state) {
   }
   std::vector<MeshGeometry> meshes;
   for (const MeshState& m : state.meshes()) {
+    if (m.rigid) continue;  // no tetrahedra, never deformed: not part of the resampling
     MeshGeometry g;
     g.id = m.id;
     g.rest_m = m.rest_m;

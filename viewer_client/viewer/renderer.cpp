@@ -3,6 +3,7 @@
 #include <vtkActor.h>
 #include <vtkCallbackCommand.h>
 #include <vtkCamera.h>
+#include <vtkCellData.h>
 #include <vtkCellArray.h>
 #include <vtkColorTransferFunction.h>
 #include <vtkCoordinate.h>
@@ -54,12 +55,20 @@ namespace {
 constexpr double kBrainColour[3] = {0.92, 0.76, 0.68};
 constexpr double kArteryColour[3] = {0.85, 0.12, 0.10};
 constexpr double kBackground3d[3] = {0.08, 0.09, 0.12};
+// Rigid meshes (the skull): bone; translucent in SkullMode::Transparent.
+constexpr double kBoneColour[3] = {0.89, 0.85, 0.72};
+constexpr double kBoneTransparentOpacity = 0.3;
+// Region colours (by region index; cycled beyond the table): cerebrum, cerebellum, other, ...
+constexpr unsigned char kRegionColours[][3] = {
+    {235, 190, 170}, {90, 160, 230}, {150, 150, 150}, {120, 200, 120},
+    {230, 200, 80},  {190, 120, 220}, {240, 140, 60}, {80, 200, 200}};
 
 // Half-height of the 2D slice views, unit m.
 constexpr double kSliceViewHalfHeightM = 0.06;
 
 struct SurfaceActor {
   std::string mesh_id;
+  bool rigid = false;
   vtkSmartPointer<vtkPolyData> poly;
   vtkSmartPointer<vtkPolyDataNormals> normals;
   vtkSmartPointer<vtkActor> actor;
@@ -125,6 +134,19 @@ struct SceneRenderer::Impl {
   vtkSmartPointer<vtkVolume> volume;
   vtkNew<vtkTextActor> status;
   bool camera_placed = false;
+
+  // Rigid surfaces and their slice contours after opt.skull.
+  void apply_skull() {
+    for (auto& s : surfaces) {
+      if (!s.rigid) continue;
+      const bool visible = opt.skull != SkullMode::Hidden;
+      s.actor->SetVisibility(visible ? 1 : 0);
+      s.actor->GetProperty()->SetOpacity(
+          opt.skull == SkullMode::Transparent ? kBoneTransparentOpacity : 1.0);
+      for (auto& c : s.contours)
+        if (c) c->SetVisibility(visible ? 1 : 0);
+    }
+  }
 
   std::vector<vtkRenderer*> renderers() const {
     std::vector<vtkRenderer*> r{view3d.Get()};
@@ -272,6 +294,27 @@ void SceneRenderer::set_meshes(const ViewerState& state) {
     }
     s.poly->SetPoints(pts);
     s.poly->SetPolys(tris);
+    s.rigid = m.rigid;
+    // Region colours per surface triangle (the tissue of the tetrahedron it bounds).
+    const bool by_region =
+        !m.rigid && im.opt.colour == ColourMode::Region && !m.region_names.empty();
+    if (by_region) {
+      const std::vector<int> region = surface_regions(m);
+      vtkNew<vtkUnsignedCharArray> rgb;
+      rgb->SetNumberOfComponents(3);
+      rgb->SetName("region");
+      rgb->SetNumberOfTuples(static_cast<vtkIdType>(region.size()));
+      constexpr std::size_t kColours = sizeof kRegionColours / sizeof kRegionColours[0];
+      for (std::size_t i = 0; i < region.size(); ++i) {
+        unsigned char c[3];
+        for (int k = 0; k < 3; ++k)
+          c[k] = region[i] < 0
+                     ? static_cast<unsigned char>(255 * kBrainColour[k])
+                     : kRegionColours[static_cast<std::size_t>(region[i]) % kColours][k];
+        rgb->SetTypedTuple(static_cast<vtkIdType>(i), c);
+      }
+      s.poly->GetCellData()->SetScalars(rgb);
+    }
     s.normals = vtkSmartPointer<vtkPolyDataNormals>::New();
     s.normals->SetInputData(s.poly);
     s.normals->SplittingOff();
@@ -279,14 +322,23 @@ void SceneRenderer::set_meshes(const ViewerState& state) {
     s.normals->AutoOrientNormalsOff();
     auto mapper = vtkSmartPointer<vtkPolyDataMapper>::New();
     mapper->SetInputConnection(s.normals->GetOutputPort());
+    if (by_region) {
+      mapper->SetScalarModeToUseCellData();
+      mapper->SetColorModeToDirectScalars();
+      mapper->ScalarVisibilityOn();
+    } else {
+      mapper->ScalarVisibilityOff();
+    }
     s.actor = vtkSmartPointer<vtkActor>::New();
     s.actor->SetMapper(mapper);
-    // The embedded (higher priority) meshes are the vessels: opaque red; the host translucent.
-    const bool vessel = m.priority > 0;
-    const double* c = vessel ? kArteryColour : kBrainColour;
+    // The embedded (higher priority) meshes are the vessels: opaque red; the host translucent;
+    // rigid meshes bone (opacity from the skull mode).
+    const bool vessel = !m.rigid && m.priority > 0;
+    const double* c = m.rigid ? kBoneColour : vessel ? kArteryColour : kBrainColour;
     s.actor->GetProperty()->SetColor(c[0], c[1], c[2]);
     s.actor->GetProperty()->SetSpecular(0.2);
-    if (!vessel) s.actor->GetProperty()->SetOpacity(im.opt.mode == Mode::Navigation ? 0.45 : 0.25);
+    if (!vessel && !m.rigid)
+      s.actor->GetProperty()->SetOpacity(im.opt.mode == Mode::Navigation ? 0.45 : 0.25);
     im.view3d->AddActor(s.actor);
     if (im.opt.mode == Mode::Navigation) {
       for (std::size_t a = 0; a < 3; ++a) {
@@ -302,9 +354,10 @@ void SceneRenderer::set_meshes(const ViewerState& state) {
         cmapper->ScalarVisibilityOff();
         s.contours[a] = vtkSmartPointer<vtkActor>::New();
         s.contours[a]->SetMapper(cmapper);
-        s.contours[a]->GetProperty()->SetColor(vessel ? kArteryColour[0] : 0.3,
-                                               vessel ? kArteryColour[1] : 0.9,
-                                               vessel ? kArteryColour[2] : 0.4);
+        const double* cc = m.rigid ? kBoneColour : nullptr;
+        s.contours[a]->GetProperty()->SetColor(cc ? cc[0] : vessel ? kArteryColour[0] : 0.3,
+                                               cc ? cc[1] : vessel ? kArteryColour[1] : 0.9,
+                                               cc ? cc[2] : vessel ? kArteryColour[2] : 0.4);
         s.contours[a]->GetProperty()->SetLineWidth(2);
         s.contours[a]->GetProperty()->LightingOff();
         // 1 mm towards the 2D view's camera (on +axis): drawn over the slice, not in it.
@@ -316,6 +369,7 @@ void SceneRenderer::set_meshes(const ViewerState& state) {
     }
     im.surfaces.push_back(s);
   }
+  im.apply_skull();
   if (!im.camera_placed && !state.meshes().empty()) {
     const auto [lo, hi] = state.bounds_m();
     im.place_camera(lo, hi);
@@ -532,6 +586,13 @@ void SceneRenderer::set_volume_crop(const Eigen::Vector3d& c) {
   im.volume_mapper->SetCroppingRegionFlags(flags);
 }
 
+void SceneRenderer::set_skull(SkullMode mode) {
+  impl_->opt.skull = mode;
+  impl_->apply_skull();
+}
+
+SkullMode SceneRenderer::skull() const { return impl_->opt.skull; }
+
 void SceneRenderer::render() {
   impl_->view3d->ResetCameraClippingRange();
   impl_->window->Render();
@@ -611,6 +672,21 @@ void SceneRenderer::run_interactive(const std::function<bool()>& tick, double pe
     if (!(*c->tick)()) c->interactor->TerminateApp();
   });
   interactor->AddObserver(vtkCommand::TimerEvent, cb);
+  // 'k' cycles the skull: shown -> transparent -> hidden.
+  struct KeyCtx {
+    SceneRenderer* self;
+    vtkRenderWindowInteractor* interactor;
+  } key_ctx{this, interactor.Get()};
+  vtkNew<vtkCallbackCommand> key_cb;
+  key_cb->SetClientData(&key_ctx);
+  key_cb->SetCallback([](vtkObject*, unsigned long, void* data, void*) {
+    auto* c = static_cast<KeyCtx*>(data);
+    const char key = c->interactor->GetKeyCode();
+    if (key != 'k' && key != 'K') return;
+    c->self->set_skull(next(c->self->skull()));
+    c->self->render();
+  });
+  interactor->AddObserver(vtkCommand::KeyPressEvent, key_cb);
   interactor->CreateRepeatingTimer(static_cast<unsigned long>(std::max(1.0, period_s * 1e3)));
   interactor->Start();
 }

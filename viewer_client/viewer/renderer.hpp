@@ -4,6 +4,8 @@
 //                              coronal                                     | sagittal
 //               the 2D views look along their slice axis, centred on the slice point.
 //   observe:    one 3D viewport: volume rendering of the resampled MRI, surfaces, tools.
+// Rigid meshes (the skull) are bone-coloured surfaces (shown / transparent / hidden) and bone
+// contours on the slices; brain surfaces can be coloured by region (scene tissue).
 // Units: metres in the scene; pixels for frames. VTK stays inside renderer.cpp.
 #pragma once
 
@@ -28,6 +30,8 @@ struct RenderOptions {
   bool offscreen = true;
   bool overlay = true;
   double force_unit_n = 1.0;
+  SkullMode skull = SkullMode::Shown;     // rigid meshes: opaque bone, translucent or hidden
+  ColourMode colour = ColourMode::Plain;  // deformable surfaces: plain or by region
   // Tool drawn as a sphere (tip) and a tube (shaft); the probe of the bundled scenes.
   double tip_radius_m = 0.002;
   double shaft_radius_m = 0.0015;
@@ -55,6 +59,10 @@ class SceneRenderer {
   void set_volume(const ImageGrid* volume);
   void set_volume_crop(const Eigen::Vector3d& crop_centre_m);
 
+  // How rigid meshes (the skull) are drawn, in the 3D view and as slice contours.
+  void set_skull(SkullMode mode);
+  SkullMode skull() const;
+
   void render();
   // PNG of the last render. Throws std::runtime_error naming the file on failure.
   void write_png(const std::string& path);
@@ -65,7 +73,7 @@ class SceneRenderer {
   // 1 where a ball of radius_m around p projects, in any viewport (for image comparisons).
   std::vector<std::uint8_t> mask_around(const Eigen::Vector3d& p_m, double radius_m);
   // On screen: calls tick every period_s from the interactor's event loop until it returns false
-  // or the window is closed.
+  // or the window is closed. Key 'k' cycles the skull mode (shown, transparent, hidden).
   void run_interactive(const std::function<bool()>& tick, double period_s);
 
  private:

@@ -84,6 +84,25 @@ MeshState mesh_from_topology(const neurosim_MeshTopology& t) {
       m.surface[e][static_cast<std::size_t>(k)] = id;
     }
   m.priority = t.priority;
+  m.rigid = t.rigid;
+  if (m.rigid && (!m.tets.empty() || m.surface.empty()))
+    throw std::invalid_argument(what + ": a rigid mesh must have surface triangles and no "
+                                       "tetrahedra (has " + std::to_string(m.tets.size()) +
+                                " tetrahedra, " + std::to_string(m.surface.size()) +
+                                " triangles)");
+  const auto names = wire::view(t.region_names);
+  for (const auto& n : names) m.region_names.emplace_back(n);
+  const auto region = wire::view(t.tet_region);
+  if (region.size != 0 && region.size != m.tets.size())
+    throw std::invalid_argument(what + ": tet_region has " + std::to_string(region.size) +
+                                " entries for " + std::to_string(m.tets.size()) + " tetrahedra");
+  for (std::size_t e = 0; e < region.size; ++e) {
+    if (region[e] >= m.region_names.size())
+      throw std::invalid_argument(what + ": tetrahedron " + std::to_string(e) + " has region " +
+                                  std::to_string(region[e]) + ", only " +
+                                  std::to_string(m.region_names.size()) + " region names");
+    m.tet_region.push_back(region[e]);
+  }
   m.image_file = std::string(wire::get_string(t.volume_image_file));
   m.image_unit_m = t.volume_image_unit_m;
   if (!m.image_file.empty() && !(std::isfinite(m.image_unit_m) && m.image_unit_m > 0))
@@ -91,6 +110,31 @@ MeshState mesh_from_topology(const neurosim_MeshTopology& t) {
                                 " is not a positive number");
   m.u_m.assign(3 * nv, 0.0F);
   return m;
+}
+
+std::vector<int> surface_regions(const MeshState& m) {
+  std::vector<int> out(m.surface.size(), -1);
+  if (m.tet_region.size() != m.tets.size() || m.tets.empty()) return out;
+  // Faces of every tetrahedron, keyed by their sorted vertex ids.
+  std::map<std::array<int, 3>, int> face_region;
+  for (std::size_t e = 0; e < m.tets.size(); ++e) {
+    const auto& t = m.tets[e];
+    for (int skip = 0; skip < 4; ++skip) {
+      std::array<int, 3> f{};
+      int k = 0;
+      for (int i = 0; i < 4; ++i)
+        if (i != skip) f[static_cast<std::size_t>(k++)] = t[static_cast<std::size_t>(i)];
+      std::sort(f.begin(), f.end());
+      face_region.emplace(f, m.tet_region[e]);
+    }
+  }
+  for (std::size_t i = 0; i < m.surface.size(); ++i) {
+    std::array<int, 3> f = m.surface[i];
+    std::sort(f.begin(), f.end());
+    const auto it = face_region.find(f);
+    if (it != face_region.end()) out[i] = it->second;
+  }
+  return out;
 }
 
 ViewerState::ViewerState(Warn warn, int max_warnings_per_kind)
@@ -144,6 +188,8 @@ bool ViewerState::ingest_topology(const neurosim_MeshTopology& t) {
 void ViewerState::set_displacements(const std::string& mesh_id, std::vector<float> u_m) {
   MeshState* m = find(mesh_id);
   if (m == nullptr) throw std::invalid_argument("viewer: no mesh '" + mesh_id + "'");
+  if (m->rigid)
+    throw std::invalid_argument("viewer: mesh '" + mesh_id + "' is rigid: no displacements");
   if (u_m.size() != m->u_m.size())
     throw std::invalid_argument("viewer: mesh '" + mesh_id + "' has " +
                                 std::to_string(m->rest_m.size()) + " vertices, got " +
@@ -169,6 +215,9 @@ bool ViewerState::ingest_deformation(const neurosim_Deformation& d) {
     return false;
   }
   try {
+    if (m->rigid)
+      throw std::invalid_argument("Deformation '" + m->id + "' frame " + std::to_string(d.frame) +
+                                  ": the mesh is rigid (never deformed)");
     if (d.vertex_count != m->rest_m.size())
       throw std::invalid_argument("Deformation '" + m->id + "' frame " + std::to_string(d.frame) +
                                   ": vertex_count " + std::to_string(d.vertex_count) +

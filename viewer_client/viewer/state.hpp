@@ -29,6 +29,11 @@ struct MeshState {
   std::vector<std::array<int, 4>> tets;     // 0-based vertex ids
   std::vector<std::array<int, 3>> surface;  // outward triangles, 0-based vertex ids
   int priority = 0;
+  // A rigid obstacle (the skull): surface only, no tets, never deformed (u_m stays zero).
+  bool rigid = false;
+  // Region (scene tissue) index of each tet into region_names; both empty when unlabelled.
+  std::vector<std::uint8_t> tet_region;
+  std::vector<std::string> region_names;
   std::string image_file;     // NIfTI the mesh maps to ("" none)
   double image_unit_m = 1.0;  // image physical units to m
   std::vector<float> u_m;     // 3 per vertex, unit m (zeros until a frame)
@@ -142,6 +147,10 @@ class ViewerState {
   ViewerCounters counters_;
   std::vector<float> scratch_;
 };
+
+// Region index of each surface triangle of m: the region of the tetrahedron the triangle is a
+// face of; -1 when m has no regions or no tetrahedron has that face.
+std::vector<int> surface_regions(const MeshState& m);
 
 // The MeshState a MeshTopology sample describes. Throws std::invalid_argument naming the mesh and
 // the bad field, vertex or element.

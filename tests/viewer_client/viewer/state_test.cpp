@@ -248,3 +248,119 @@ TEST(ViewerOptions, GoodAndBadCommandLines) {
   EXPECT_NE(error_of({"v", "--mode", "navigation", "--duration"}).find("needs a value"),
             std::string::npos);
 }
+
+TEST(ViewerOptions, SkullAndColourModes) {
+  bool help = false;
+  const char* defaults[] = {"v", "--mode", "navigation"};
+  const nv::ViewerOptions d = nv::parse_options(3, defaults, help);
+  EXPECT_EQ(d.skull, nv::SkullMode::Shown);
+  EXPECT_EQ(d.colour, nv::ColourMode::Plain);
+  const char* set[] = {"v", "--mode", "navigation", "--skull", "transparent", "--colour", "region"};
+  const nv::ViewerOptions o = nv::parse_options(7, set, help);
+  EXPECT_EQ(o.skull, nv::SkullMode::Transparent);
+  EXPECT_EQ(o.colour, nv::ColourMode::Region);
+  const char* hidden[] = {"v", "--mode", "observe", "--skull", "hidden"};
+  EXPECT_EQ(nv::parse_options(5, hidden, help).skull, nv::SkullMode::Hidden);
+  // The interactive key cycles through all three and back.
+  EXPECT_EQ(nv::next(nv::SkullMode::Shown), nv::SkullMode::Transparent);
+  EXPECT_EQ(nv::next(nv::SkullMode::Transparent), nv::SkullMode::Hidden);
+  EXPECT_EQ(nv::next(nv::SkullMode::Hidden), nv::SkullMode::Shown);
+
+  auto error_of = [&](std::vector<const char*> argv) {
+    try {
+      nv::parse_options(static_cast<int>(argv.size()), argv.data(), help);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string bad_skull = error_of({"v", "--mode", "navigation", "--skull", "glass"});
+  EXPECT_NE(bad_skull.find("--skull"), std::string::npos) << bad_skull;
+  EXPECT_NE(bad_skull.find("glass"), std::string::npos) << bad_skull;
+  const std::string bad_colour = error_of({"v", "--mode", "navigation", "--colour", "strain"});
+  EXPECT_NE(bad_colour.find("--colour"), std::string::npos) << bad_colour;
+  EXPECT_NE(error_of({"v", "--mode", "navigation", "--skull"}).find("needs a value"),
+            std::string::npos);
+}
+
+TEST(ViewerState, RigidMeshStaysOutOfTheDeformationPath) {
+  std::vector<std::string> warnings;
+  nv::ViewerState s([&](const std::string& m) { warnings.push_back(m); });
+  wire::Sample<neurosim_MeshTopology> t;
+  fill_topology(*t, "skull");
+  wire::assign(t->tetrahedra, static_cast<const std::int32_t*>(nullptr), 0);
+  t->rigid = true;
+  ASSERT_TRUE(s.ingest_topology(*t));
+  ASSERT_NE(s.mesh("skull"), nullptr);
+  EXPECT_TRUE(s.mesh("skull")->rigid);
+  EXPECT_TRUE(s.mesh("skull")->tets.empty());
+  EXPECT_EQ(s.mesh("skull")->surface.size(), 4u);
+
+  // A Deformation frame for a rigid mesh is malformed: counted, ignored, the mesh stays at rest.
+  wire::DeformationEncoder enc("skull", 4, 1, {3, true});
+  wire::Sample<neurosim_Deformation> d;
+  double u[12] = {0};
+  u[0] = 0.01;
+  enc.encode(u, 12, 1, 0, *d);
+  EXPECT_FALSE(s.ingest_deformation(*d));
+  EXPECT_EQ(s.counters().malformed_deformation, 1u);
+  EXPECT_EQ(s.counters().deformations, 0u);
+  EXPECT_EQ(s.max_displacement_m(), 0.0);
+  EXPECT_FALSE(s.mesh("skull")->has_deformation);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("rigid"), std::string::npos) << warnings[0];
+  EXPECT_THROW(s.set_displacements("skull", std::vector<float>(12, 0.0F)), std::invalid_argument);
+
+  // A rigid topology with tetrahedra (or without triangles) is refused, naming the mesh.
+  wire::Sample<neurosim_MeshTopology> bad;
+  fill_topology(*bad, "bad_skull");
+  bad->rigid = true;
+  EXPECT_FALSE(s.ingest_topology(*bad));
+  EXPECT_EQ(s.counters().malformed_topology, 1u);
+  EXPECT_NE(warnings.back().find("bad_skull"), std::string::npos) << warnings.back();
+  EXPECT_EQ(s.mesh("bad_skull"), nullptr);
+}
+
+TEST(ViewerState, TetRegionsAreCheckedAndGiveSurfaceRegions) {
+  std::vector<std::string> warnings;
+  nv::ViewerState s([&](const std::string& m) { warnings.push_back(m); });
+  // Two tetrahedra sharing face (1, 2, 3): vertex 0 on one side, vertex 4 on the other.
+  wire::Sample<neurosim_MeshTopology> t;
+  wire::set_string(t->mesh_id, "brain");
+  const double v[] = {0, 0, 0, 0.01, 0, 0, 0, 0.01, 0, 0, 0, 0.01, 0.01, 0.01, 0.01};
+  wire::assign(t->rest_vertices_m, v, 15);
+  const std::int32_t tets[] = {0, 1, 2, 3, 4, 1, 3, 2};
+  wire::assign(t->tetrahedra, tets, 8);
+  const std::int32_t tris[] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 4, 2, 1, 4, 1, 3, 4, 3, 2};
+  wire::assign(t->surface_triangles, tris, 18);
+  const std::uint8_t region[] = {1, 0};
+  wire::assign(t->tet_region, region, 2);
+  wire::reserve(t->region_names, 2);
+  wire::set_string(t->region_names._buffer[0], "cerebrum");
+  wire::set_string(t->region_names._buffer[1], "cerebellum");
+  t->region_names._length = 2;
+  ASSERT_TRUE(s.ingest_topology(*t));
+  const nv::MeshState* m = s.mesh("brain");
+  ASSERT_NE(m, nullptr);
+  ASSERT_EQ(m->region_names.size(), 2u);
+  EXPECT_EQ(m->region_names[1], "cerebellum");
+  // Triangles 0-2 bound tetrahedron 0 (region 1), 3-5 tetrahedron 1 (region 0).
+  EXPECT_EQ(nv::surface_regions(*m), (std::vector<int>{1, 1, 1, 0, 0, 0}));
+
+  // A region index beyond the names, or a tet_region of the wrong length, is refused.
+  const std::uint8_t out_of_range[] = {0, 2};
+  wire::assign(t->tet_region, out_of_range, 2);
+  EXPECT_FALSE(s.ingest_topology(*t));
+  EXPECT_NE(warnings.back().find("tetrahedron 1 has region 2"), std::string::npos)
+      << warnings.back();
+  const std::uint8_t short_list[] = {0};
+  wire::assign(t->tet_region, short_list, 1);
+  EXPECT_FALSE(s.ingest_topology(*t));
+  EXPECT_NE(warnings.back().find("tet_region has 1 entries for 2 tetrahedra"), std::string::npos)
+      << warnings.back();
+  EXPECT_EQ(s.counters().malformed_topology, 2u);
+  // Without regions every triangle is -1.
+  nv::MeshState plain = *m;
+  plain.tet_region.clear();
+  EXPECT_EQ(nv::surface_regions(plain), (std::vector<int>(6, -1)));
+}
