@@ -33,8 +33,11 @@ struct LoopConfig {
   // The loop sleeps until this long before each deadline, then spins on the clock to it, so a
   // tick starts within a few µs of its deadline instead of the scheduler's wake-up latency
   // (tens of µs, more on a busy machine). 0: sleep to the deadline (battery-powered laptops:
-  // spinning costs power). Unit µs, 0 ≤ spin_us < period.
-  double spin_us = 50;
+  // spinning costs power). Unit µs, 0 ≤ spin_us < period. Default 0: on the project's 2-core VM
+  // a 50 µs spin did not reduce the ticks > 1 ms late (they are late timer deliveries and host
+  // preemption, bench/RESULTS.md "Real-time margins"); enable it (--spin-us 50) on bare metal
+  // where the scheduler's wake-up latency is the limit.
+  double spin_us = 0;
   void (*warn)(const char* message) = nullptr;  // told at once when SCHED_FIFO is refused
   std::size_t trace_capacity = 0;               // ticks kept in trace() (allocated up front)
 };
