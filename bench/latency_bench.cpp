@@ -20,6 +20,7 @@
 //   server_cpu_pct server process CPU time / wall time over the measurement, % of one core
 #include "common/cli.hpp"
 #include "common/clock.hpp"
+#include "common/process_stats.hpp"
 #include "common/stats.hpp"
 #include "cpu_load.hpp"
 #include "idl/wire/dds.hpp"
@@ -56,31 +57,6 @@ namespace {
 
 using neurosim::common::monotonic_ns;
 
-// utime + stime of a process, unit s.
-double process_cpu_s(pid_t pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-  std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const auto p = s.rfind(')');
-  if (p == std::string::npos) return 0;
-  std::istringstream is(s.substr(p + 2));
-  std::string f;
-  unsigned long long ut = 0, st = 0;
-  for (int i = 3; i <= 15; ++i) {
-    is >> f;
-    if (i == 14) ut = std::stoull(f);
-    if (i == 15) st = std::stoull(f);
-  }
-  return static_cast<double>(ut + st) / static_cast<double>(sysconf(_SC_CLK_TCK));
-}
-
-// Resident set size of a process, unit kB (-1 if unknown).
-long process_rss_kb(pid_t pid) {
-  std::ifstream f("/proc/" + std::to_string(pid) + "/status");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
-  return -1;
-}
 
 struct Options {
   int stations = 1;
@@ -345,7 +321,7 @@ int main(int argc, char** argv) {
     go = true;
     const auto sleep_until = [](std::int64_t t) { neurosim::common::sleep_until_ns(t); };
     sleep_until(from);
-    const double cpu0 = process_cpu_s(pid);
+    const double cpu0 = neurosim::common::cpu_seconds(pid);
     // Soak rows: the server's RSS and newest step p99 at the end of each interval.
     struct Interval {
       std::int64_t end_ns;
@@ -367,11 +343,11 @@ int main(int argc, char** argv) {
                           rx.data.step_time_p50_us, rx.data.step_time_p99_us, rx.data.step_time_max_us,
                           static_cast<unsigned long long>(rx.data.deadline_misses));
           }
-        intervals.push_back({t, process_rss_kb(pid), p99_step});
+        intervals.push_back({t, neurosim::common::resident_kib(pid), p99_step});
       }
     }
     sleep_until(to);
-    const double cpu1 = process_cpu_s(pid);
+    const double cpu1 = neurosim::common::cpu_seconds(pid);
     // The server's own step times over the last status period (SimStatus, 1 Hz).
     std::string step_text = last_status;
     if (const auto* st = status.take_newest()) {

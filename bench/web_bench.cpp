@@ -11,6 +11,7 @@
 //
 //   web_bench [--seconds S] [--csv]
 #include "common/cli.hpp"
+#include "common/process_stats.hpp"
 #include "common/clock.hpp"
 #include "common/stats.hpp"
 #include "idl/wire/dds.hpp"
@@ -260,22 +261,6 @@ class BridgeChild {
   int port_ = 0;
 };
 
-// utime + stime of a process, unit s.
-double process_cpu_s(pid_t pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-  std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const auto p = s.rfind(')');
-  if (p == std::string::npos) return 0;
-  std::istringstream is(s.substr(p + 2));
-  std::string f;
-  unsigned long long ut = 0, st = 0;
-  for (int i = 3; i <= 15; ++i) {
-    is >> f;
-    if (i == 14) ut = std::stoull(f);
-    if (i == 15) st = std::stoull(f);
-  }
-  return static_cast<double>(ut + st) / static_cast<double>(sysconf(_SC_CLK_TCK));
-}
 
 }  // namespace
 
@@ -344,11 +329,11 @@ int main(int argc, char** argv) {
         std::this_thread::sleep_for(std::chrono::seconds(1));  // topology, first keyframes
         for (auto& c : clients) c->reset();
         const std::uint64_t w0 = pub.written();
-        const double cpu0 = process_cpu_s(bridge.pid());
+        const double cpu0 = neurosim::common::cpu_seconds(bridge.pid());
         const auto t0 = Clock::now();
         std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
         const double wall = seconds_since(t0);
-        const double cpu = process_cpu_s(bridge.pid()) - cpu0;
+        const double cpu = neurosim::common::cpu_seconds(bridge.pid()) - cpu0;
         // Per mesh: frames are counted per mesh message, so divide by the meshes.
         const double published =
             static_cast<double>(pub.written() - w0) / wall / static_cast<double>(meshes.size());

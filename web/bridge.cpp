@@ -1,19 +1,15 @@
 #include "web/bridge.hpp"
 
 #include "common/json.hpp"
+#include "common/process_stats.hpp"
 
+#include <algorithm>
 #include <fstream>
 #include <string>
 
 namespace neurosim::web {
 
-long resident_kib() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
-  return 0;
-}
+long resident_kib() { return std::max(0L, common::resident_kib()); }
 
 Bridge::Bridge(const BridgeOptions& options, AccessToken token, Log log) {
   PageFiles page = PageFiles::load(options.page_dir);

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "common/clock.hpp"
+#include "common/process_stats.hpp"
 #include "haptic_client/dds_link.hpp"
 #include "haptic_client/loop.hpp"
 #include "idl/wire/dds.hpp"
@@ -171,12 +172,5 @@ class StatusProbe {
   wire::Reader<neurosim_SimStatus> reader_;
 };
 
-inline long rss_kb(pid_t pid) {
-  std::ifstream f("/proc/" + std::to_string(pid) + "/status");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
-  return -1;
-}
 
 }  // namespace neurosim::fault_testing

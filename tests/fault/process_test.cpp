@@ -187,13 +187,13 @@ TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(viewer_visit()) << server->log();  // warm-up
   sleep_s(2.5);  // two status periods without a viewer
   ASSERT_TRUE(status.wait_for([](const neurosim_SimStatus&) { return true; }, 3));
-  const long rss_before = rss_kb(server->pid());
+  const long rss_before = neurosim::common::resident_kib(server->pid());
   const double p99_before = status.p99_us;
   int visits = 0;
   for (int i = 0; i < 50; ++i) visits += viewer_visit() ? 1 : 0;
   sleep_s(2.5);
   ASSERT_TRUE(status.wait_for([](const neurosim_SimStatus&) { return true; }, 3));
-  const long rss_after = rss_kb(server->pid());
+  const long rss_after = neurosim::common::resident_kib(server->pid());
   const double p99_after = status.p99_us;
   a.join();
   std::printf("50 viewer visits (%d saw a frame): server RSS %ld -> %ld kB, step p99 %.0f -> %.0f us\n",

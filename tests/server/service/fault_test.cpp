@@ -6,6 +6,7 @@
 // must be counted in SimStatus, the legitimate station keeps its slot, its ContactModels keep
 // coming at an unchanged force, the server's memory stays bounded. Also: SIGTERM during the
 // load ends the server within 2 s with a message naming the phase.
+#include "common/process_stats.hpp"
 #include "server/scene/compile.hpp"
 #include "tests/server/service/fake_simulation.hpp"
 #include "tests/server/service/service_scenarios.hpp"
@@ -39,13 +40,6 @@ st::Setup fake_setup(const std::filesystem::path& scene) {
   return s;
 }
 
-long rss_kb(pid_t pid) {
-  std::ifstream f("/proc/" + std::to_string(pid) + "/status");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
-  return -1;
-}
 
 }  // namespace
 
@@ -66,7 +60,7 @@ TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUna
     return st::ModelRecord{};
   }();
   ASSERT_TRUE(first.in_contact) << "the legitimate station must press the box";
-  const long rss_before = rss_kb(ses.server.pid());
+  const long rss_before = neurosim::common::resident_kib(ses.server.pid());
   const std::size_t models_before = models.count("legit-1");
 
   // Safe position of the attacker's own station: 5 cm outside the +x face (no contact).
@@ -131,7 +125,7 @@ TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUna
   }
   EXPECT_GT(models.count("legit-1"), models_before + 3000);
   // Memory: the flood of distinct ids grows the server by far less than the 73 MB seen before.
-  const long rss_after = rss_kb(ses.server.pid());
+  const long rss_after = neurosim::common::resident_kib(ses.server.pid());
   EXPECT_LT(rss_after - rss_before, 16 * 1024) << "RSS " << rss_before << " kB -> " << rss_after << " kB";
   // The log is rate limited: a few lines per cause per second, not one per sample.
   const std::string log = ses.server.log();
