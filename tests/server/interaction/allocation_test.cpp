@@ -15,21 +15,14 @@
 #include <new>
 #include <vector>
 
+#include "thread_allocation_counter.hpp"
+
 namespace {
-thread_local long t_allocations = 0;
 // This thread's count (the stepping thread's when called from it).
 struct ThreadCount {
-  long load() const { return t_allocations; }
+  long load() const { return neurosim::testing::allocations_on_this_thread(); }
 } g_allocations;
 }  // namespace
-
-void* operator new(std::size_t size) {
-  ++t_allocations;
-  if (void* p = std::malloc(size ? size : 1)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace neurosim::interaction {
 namespace {

@@ -13,17 +13,7 @@
 #include <cstdlib>
 #include <new>
 
-namespace {
-thread_local long t_allocations = 0;  // operator new calls on this thread
-}  // namespace
-
-void* operator new(std::size_t size) {
-  ++t_allocations;
-  if (void* p = std::malloc(size ? size : 1)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "thread_allocation_counter.hpp"
 
 namespace neurosim::interaction {
 namespace {
@@ -146,7 +136,7 @@ TEST(interaction_tool_proxy, ConstrainDoesNotAllocate) {
   pose.axis = -down;
   pose.tip_m = surface - 0.007 * down;
   proxy.constrain(shape, pose, planes);  // first pose: the free check
-  const long before = t_allocations;
+  const long before = neurosim::testing::allocations_on_this_thread();
   int with_planes = 0;
   for (int k = 0; k < 40; ++k) {
     pose.tip_m = surface + (0.0005 * k - 0.007) * down;
@@ -154,14 +144,14 @@ TEST(interaction_tool_proxy, ConstrainDoesNotAllocate) {
     proxy.constrain(shape, pose, planes);
     with_planes += planes.count > 0;
   }
-  const long mid = t_allocations;
+  const long mid = neurosim::testing::allocations_on_this_thread();
   for (int k = 0; k < 40; ++k) {
     pose.axis = hole.axis;
     pose.tip_m = hole.center_m + 0.02 * hole.axis - 0.0005 * k * hole.axis;
     rim.constrain(shape, pose, planes);
     with_planes += planes.count > 0;
   }
-  const long after = t_allocations;
+  const long after = neurosim::testing::allocations_on_this_thread();
   EXPECT_GT(with_planes, 30);
   // The second proxy's first pose ran the free check (no allocation either).
   EXPECT_EQ(mid - before, 0);
