@@ -263,8 +263,8 @@ struct Server::Impl {
   void handle_tool_sample(const wire::Received<neurosim_ToolState>& rx);
   void leave(const std::string& key, const char* why);
   void limited_log(const char* cause, const std::string& line);
-  void refuse(const std::string& key, const wire::MatchedPublication* who, dds_instance_handle_t writer,
-              neurosim_RefusalReason reason, const std::string& why);
+  void refuse(const std::string& key, dds_instance_handle_t writer, neurosim_RefusalReason reason,
+              const std::string& why);
   std::optional<WriterInfo> writer_info(dds_instance_handle_t writer);
   void sweep(std::int64_t now_mono);
   void step_loop();
@@ -676,10 +676,8 @@ std::optional<WriterInfo> Server::Impl::writer_info(dds_instance_handle_t writer
   return info;
 }
 
-void Server::Impl::refuse(const std::string& key, const wire::MatchedPublication* who,
-                          dds_instance_handle_t writer, neurosim_RefusalReason reason,
-                          const std::string& why) {
-  (void)who;
+void Server::Impl::refuse(const std::string& key, dds_instance_handle_t writer,
+                          neurosim_RefusalReason reason, const std::string& why) {
   Guid guid{};
   if (auto w = claims.find(writer)) guid = w->guid;
   const std::int64_t wall = dds_time();
@@ -728,7 +726,7 @@ void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& 
     ++rejected_identity_dds;
     if (bound != slot_of_station.end())
       slots[static_cast<std::size_t>(bound->second)].rejected_identity.fetch_add(1, std::memory_order_relaxed);
-    if (refusal) refuse(key, nullptr, writer, neurosim_REFUSED_IDENTITY, why);
+    if (refusal) refuse(key, writer, neurosim_REFUSED_IDENTITY, why);
     else limited_log("identity", "rejected ToolState for '" + key + "': " + why);
   };
   const std::optional<WriterInfo> w = writer_info(writer);
@@ -748,7 +746,7 @@ void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& 
     for (const auto& [k, i] : slot_of_station)
       if (slots[static_cast<std::size_t>(i)].participant == w->participant) ++same_participant;
     if (same_participant >= opt.max_stations_per_participant)
-      return refuse(key, nullptr, writer, neurosim_REFUSED_PARTICIPANT_LIMIT,
+      return refuse(key, writer, neurosim_REFUSED_PARTICIPANT_LIMIT,
                     "its DDS participant already holds " + std::to_string(same_participant) +
                         " stations (max " + std::to_string(opt.max_stations_per_participant) +
                         " per participant)");
@@ -759,7 +757,7 @@ void Server::Impl::handle_tool_sample(const wire::Received<neurosim_ToolState>& 
         break;
       }
     if (free_slot < 0)
-      return refuse(key, nullptr, writer, neurosim_REFUSED_MAX_STATIONS,
+      return refuse(key, writer, neurosim_REFUSED_MAX_STATIONS,
                     "max_stations " + std::to_string(max_stations) + " reached (" +
                         std::to_string(slot_of_station.size()) + " active, some may be leaving)");
     auto& s = slots[static_cast<std::size_t>(free_slot)];
