@@ -69,6 +69,54 @@ class RetractScript : public Script {
   }
 };
 
+// Approach: the surgical approach through a craniotomy (the paper's Figure 16). Device frame:
+// origin on the brain surface at the opening's centre, +z the opening's axis out of the head
+// (neurosim-haptic --at-opening). From 32 mm beside the opening and 25 mm out, down onto the
+// skull, along the bone to the opening, over its rim, down onto the cerebellum (4 mm past first
+// touch), 1 mm aside (pushing it towards the rim), out again and back to the start outside the
+// head; each leg eased (zero speed at every waypoint); repeats every 12 s. Set for
+// brain_skull.scene: along the slide the tip (radius 2 mm) is commanded about 1 mm behind the
+// bone's outer table (3-8 mm above the brain surface there), so the proxy holds it on the bone
+// with about 1 N; it presses the cerebellum on a surface node of the brain mesh 5 mm from the
+// opening's centre (the node-based tissue contact of a 7 mm mesh: between nodes a 2 mm tip
+// slides through without force, so it pushes at a node).
+class ApproachScript : public Script {
+ public:
+  std::string name() const override { return "approach"; }
+  Eigen::Vector3d position(double t) const override {
+    struct Waypoint {
+      double t_s;
+      double x_mm, y_mm, z_mm;
+    };
+    static constexpr Waypoint kPath[] = {
+        {0.0, -32, 0, 25},      // outside the head, beside the opening
+        {0.5, -32, 0, 25},      // hold
+        {2.0, -32, 0, 3.5},     // down onto the bone
+        {3.3, -24, 0, 7.5},     // along the bone ...
+        {4.5, -17, 0, 8.5},     // ... to the rim
+        {5.5, -5, 0.5, 8.5},    // over the rim, above the cerebellum
+        {7.0, -5, 0.5, -2},     // down onto the cerebellum
+        {8.0, -6, 0.5, -2},     // aside, towards the rim
+        {8.7, -6, 0.5, -2},     // hold
+        {10.0, -6, 0.5, 25},    // out of the opening
+        {11.5, -32, 0, 25},     // back beside it, outside the head
+        {12.0, -32, 0, 25},     // hold; then again
+    };
+    constexpr std::size_t n = sizeof(kPath) / sizeof(kPath[0]);
+    t = std::fmod(std::max(t, 0.0), kPath[n - 1].t_s);
+    const auto at = [](const Waypoint& w) { return Eigen::Vector3d(w.x_mm, w.y_mm, w.z_mm); };
+    Eigen::Vector3d p_mm = at(kPath[n - 1]);
+    for (std::size_t i = 1; i < n; ++i) {
+      if (t < kPath[i].t_s) {
+        const double u = smooth((t - kPath[i - 1].t_s) / (kPath[i].t_s - kPath[i - 1].t_s));
+        p_mm = at(kPath[i - 1]) + u * (at(kPath[i]) - at(kPath[i - 1]));
+        break;
+      }
+    }
+    return 1e-3 * p_mm;
+  }
+};
+
 }  // namespace
 
 Eigen::Vector3d Script::velocity(double t_s) const {
@@ -77,7 +125,8 @@ Eigen::Vector3d Script::velocity(double t_s) const {
 }
 
 const std::vector<std::string>& script_names() {
-  static const std::vector<std::string> names{"press", "stroke", "circle", "retract"};
+  static const std::vector<std::string> names{"press", "stroke", "circle", "retract",
+                                              "approach"};
   return names;
 }
 
@@ -86,8 +135,9 @@ std::unique_ptr<Script> make_script(const std::string& name) {
   if (name == "stroke") return std::make_unique<StrokeScript>();
   if (name == "circle") return std::make_unique<CircleScript>();
   if (name == "retract") return std::make_unique<RetractScript>();
+  if (name == "approach") return std::make_unique<ApproachScript>();
   throw std::invalid_argument("unknown script '" + name +
-                              "' (known: press, stroke, circle, retract)");
+                              "' (known: press, stroke, circle, retract, approach)");
 }
 
 ScriptDevice::ScriptDevice(std::unique_ptr<Script> script) : script_(std::move(script)) {
@@ -197,7 +247,7 @@ std::unique_ptr<Device> make_device(const std::string& spec) {
   if (kind == "replay" && !arg.empty()) return std::make_unique<ReplayDevice>(arg);
   throw std::invalid_argument("bad device '" + spec +
                               "' (expected omni[:NAME], replay:FILE, script:NAME or hand:SCRIPT; "
-                              "scripts: press, stroke, circle, retract)");
+                              "scripts: press, stroke, circle, retract, approach)");
 }
 
 }  // namespace neurosim::haptic

@@ -5,7 +5,7 @@
 //          [--up X,Y,Z] [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]
 //          [--topic-prefix P] [--trace FILE.csv] [--spin-us US]
 //          [--rt-priority loop=80,publisher=70,receiver=60] [--rt-cpus loop=1]
-// SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract) | hand:SCRIPT
+// SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract, approach) | hand:SCRIPT
 // --help lists the options, --version prints the version; usage errors exit 2.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
@@ -41,8 +41,9 @@ void sched_line(const char* m) { std::fprintf(stderr, "neurosim-haptic: %s\n", m
 
 const char* kSpecHelp =
     "SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, circle,\n"
-    "      retract). Scripts press along device -z onto a surface at device z = 0; --origin puts\n"
-    "      that point in the scene (m) and --up is the surface's outward normal there.";
+    "      retract, approach). Scripts press along device -z onto a surface at device z = 0;\n"
+    "      --origin puts that point in the scene (m) and --up is the surface's outward normal\n"
+    "      there. approach goes through a craniotomy: use it with --at-opening.";
 
 }  // namespace
 
@@ -66,6 +67,13 @@ int main(int argc, char** argv) {
                                                "where device z = 0 is in the scene, unit m");
   auto* up_opt =
       neurosim::cli::add_triple(cli.app(), "--up", up, "the surface's outward normal there");
+  bool at_opening = false;
+  cli->add_flag("--at-opening", at_opening,
+                "origin: the centre of the scene's craniotomy (its first rigid mesh opening, on "
+                "the brain surface), up: its axis out of the head (needs --scene; for "
+                "script:approach)")
+      ->excludes(origin_opt)
+      ->excludes(up_opt);
   cli->add_option("--label", label, "recording label");
   cli->add_flag("--no-server", no_server, "run without DDS (no force from a server)");
   auto* no_rt_opt =
@@ -125,6 +133,21 @@ int main(int argc, char** argv) {
       cfg.force.force_scale = scene.haptics.force_scale;
       cfg.force.workspace_scale = scene.haptics.workspace_scale;
       cfg.force.max_force_n = scene.haptics.max_force_n;
+      if (at_opening) {
+        if (scene.openings.empty())
+          throw std::invalid_argument("--at-opening: scene " + scene_file +
+                                      " has no rigid mesh with an opening");
+        const auto& o = scene.openings.front();
+        cfg.workspace_origin_m = Eigen::Vector3d(o.center_m[0], o.center_m[1], o.center_m[2]);
+        cfg.workspace_up = Eigen::Vector3d(o.axis[0], o.axis[1], o.axis[2]);
+        std::fprintf(stderr,
+                     "neurosim-haptic: workspace at the opening of '%s': centre (%.4f, %.4f, "
+                     "%.4f) m, axis (%.3f, %.3f, %.3f), radius %.1f mm\n",
+                     o.mesh.c_str(), o.center_m[0], o.center_m[1], o.center_m[2], o.axis[0],
+                     o.axis[1], o.axis[2], o.radius_m * 1e3);
+      }
+    } else if (at_opening) {
+      throw std::invalid_argument("--at-opening needs --scene FILE (the scene with the opening)");
     }
     std::unique_ptr<nh::Device> device = nh::make_device(spec);
     cfg.force.max_force_n = std::min(cfg.force.max_force_n, device->max_force_n());

@@ -521,14 +521,17 @@ int run(const RunOptions& opt) {
                 << " triangles, an obstacle for tools): not in the solve\n";
   }
   if (coupled) {
-    // The coupled body carves the host: per-tissue materials do not follow the carving yet.
+    // The coupled body carves the host and runs one material per mesh: tissues with the mesh's
+    // E and nu (the same physics) are solved exactly; any other material is refused.
     for (const auto& c : model.couplings)
-      for (int mi : {c.host, c.embedded})
-        if (!model.meshes[static_cast<std::size_t>(mi)].materials.tet_material.empty())
-          throw std::runtime_error(scene_path + ": mesh \"" +
-                                   model.meshes[static_cast<std::size_t>(mi)].id +
-                                   "\": per-tissue materials are not implemented for coupled "
-                                   "solves (use --uncoupled)");
+      for (int mi : {c.host, c.embedded}) {
+        const auto& m = model.meshes[static_cast<std::size_t>(mi)];
+        if (const neurosim::scene::TissueDef* t = m.tissue_with_other_material())
+          throw std::runtime_error(scene_path + ": mesh \"" + m.id + "\", tissue \"" + t->name +
+                                   "\": its own material differs from the mesh's: per-tissue "
+                                   "materials are not implemented for coupled solves (use "
+                                   "--uncoupled)");
+      }
     auto static_model = model;
     static_model.effects.tool_contact = false;
     static_model.effects.deformation_output = false;

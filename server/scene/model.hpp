@@ -40,6 +40,17 @@ struct LoadedMesh {
   std::string provenance;
   std::string material_source;        // where E and nu come from
   double generator_cell_size_m{0.0};  // for generated meshes: the mesher's cell size, unit m
+
+  // The first tissue whose own material differs from the mesh's in E or nu (other physics), or
+  // nullptr when every tetrahedron has the mesh's E and nu: then a solver that runs one material
+  // per mesh (the interactive server, coupled static solves) runs this mesh exactly.
+  const TissueDef* tissue_with_other_material() const {
+    for (const auto& t : tissues)
+      if (t.own_material && (t.material.youngs_modulus_pa != material.youngs_modulus_pa ||
+                             t.material.poisson_ratio != material.poisson_ratio))
+        return &t;
+    return nullptr;
+  }
 };
 
 enum class CouplingKind { kTie, kSliding };

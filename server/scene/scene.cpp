@@ -396,6 +396,17 @@ Settings read_settings(const Scene& scene, const std::string& source) {
                        .string();
   }
   s.image.file_unit_m = scene.image().file_unit_m();
+  for (const auto& m : scene.meshes()) {
+    for (const auto& o : m.openings()) {
+      OpeningDef d;
+      d.mesh = m.id();
+      d.center_m = {o.center_m().x(), o.center_m().y(), o.center_m().z()};
+      const Eigen::Vector3d a = to_vec3(o.axis()).normalized();  // non-zero: validated
+      d.axis = {a.x(), a.y(), a.z()};
+      d.radius_m = o.radius_m();
+      s.openings.push_back(d);
+    }
+  }
   s.max_stations = scene.max_stations() > 0 ? scene.max_stations() : defaults.max_stations;
   return s;
 }

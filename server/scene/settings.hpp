@@ -5,6 +5,7 @@
 
 #include "server/fem/tier.hpp"
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -52,6 +53,15 @@ struct ImageDef {
   double file_unit_m{0.0};   // image physical coordinates x this = metres
 };
 
+// A craniotomy of a rigid mesh (scene meshes[].openings), for clients that place a workspace at
+// it (neurosim-haptic --at-opening); the server's copy with the surface is scene::RigidOpening.
+struct OpeningDef {
+  std::string mesh;                      // the rigid mesh's id
+  std::array<double, 3> center_m{};      // unit m
+  std::array<double, 3> axis{0, 0, 1};   // unit, out of the head
+  double radius_m{0.0};                  // unit m
+};
+
 struct Settings {
   std::string name;
   std::string description;
@@ -61,6 +71,7 @@ struct Settings {
   HapticsDef haptics;
   std::vector<ToolDef> tools;
   ImageDef image;
+  std::vector<OpeningDef> openings;  // every rigid mesh's, in scene order
   int max_stations{8};
 };
 

@@ -183,15 +183,13 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
     // material per mesh, so a tissue whose own material has the mesh's E and nu (the same
     // physics) is accepted and any other refused, never run with the mesh's values.
     for (const auto& m : model.meshes)
-      for (const auto& t : m.tissues)
-        if (t.own_material && (t.material.youngs_modulus_pa != m.material.youngs_modulus_pa ||
-                               t.material.poisson_ratio != m.material.poisson_ratio))
-          throw std::runtime_error(
-              opt.scene_path + ": mesh \"" + m.id + "\", tissue \"" + t.name + "\": material \"" +
-              t.material.name + "\" (E " + std::to_string(t.material.youngs_modulus_pa) +
-              " Pa, nu " + std::to_string(t.material.poisson_ratio) + ") differs from the mesh's \"" +
-              m.material.name + "\": per-tissue materials are not implemented in the interactive "
-              "server (neurosim-solve uses them on uncoupled meshes)");
+      if (const scene::TissueDef* t = m.tissue_with_other_material())
+        throw std::runtime_error(
+            opt.scene_path + ": mesh \"" + m.id + "\", tissue \"" + t->name + "\": material \"" +
+            t->material.name + "\" (E " + std::to_string(t->material.youngs_modulus_pa) +
+            " Pa, nu " + std::to_string(t->material.poisson_ratio) + ") differs from the mesh's \"" +
+            m.material.name + "\": per-tissue materials are not implemented in the interactive "
+            "server (neurosim-solve uses them on uncoupled meshes)");
     // --tier replaces the scene's tier before anything is built from it: the simulation, the
     // server's start-up line and SimStatus all see the one tier that runs.
     const scene::Tier scene_tier = model.effects.tier;

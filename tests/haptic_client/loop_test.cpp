@@ -235,6 +235,31 @@ TEST(haptic_loop, DeviceSpecs) {
   }
 }
 
+// script:approach (device frame = the opening's frame, mm below): outside beside the opening,
+// on the bone, over the rim, on the cerebellum, out, back; continuous (also where it repeats), at
+// rest at every waypoint and
+// never faster than a hand's 0.1 m/s (the tool's speed check allows 2 m/s).
+TEST(haptic_loop, ApproachScriptGoesThroughTheOpeningSmoothly) {
+  const auto s = nh::make_script("approach");
+  const auto mm = [&](double t) -> Vector3d { return 1e3 * s->position(t); };
+  EXPECT_TRUE(mm(0).isApprox(Vector3d(-32, 0, 25))) << mm(0).transpose();
+  EXPECT_TRUE(mm(2.0).isApprox(Vector3d(-32, 0, 3.5))) << "down onto the bone";
+  EXPECT_TRUE(mm(5.5).isApprox(Vector3d(-5, 0.5, 8.5))) << "over the rim";
+  EXPECT_LT(mm(7.0).z(), -1.9) << "below the brain surface in the opening";
+  EXPECT_LT(std::hypot(mm(7.0).x(), mm(7.0).y()), 15.0) << "within the 15 mm opening";
+  EXPECT_TRUE(mm(10.0).isApprox(Vector3d(-6, 0.5, 25))) << "out of the opening";
+  EXPECT_TRUE(mm(12.0).isApprox(mm(0))) << "back at the start: it repeats every 12 s";
+  double max_speed = 0, max_jump_mm = 0;
+  for (double t = 0; t < 25.0; t += 1e-3) {
+    max_speed = std::max(max_speed, s->velocity(t).norm());
+    max_jump_mm = std::max(max_jump_mm, (mm(t + 1e-3) - mm(t)).norm());
+  }
+  EXPECT_LT(max_speed, 0.1);
+  EXPECT_LT(max_jump_mm, 0.1);
+  for (double t : {0.5, 2.0, 3.3, 4.5, 5.5, 7.0, 8.0, 8.7, 10.0, 11.5, 12.0})
+    EXPECT_LT(s->velocity(t).norm(), 1e-6) << "at rest at the waypoint t = " << t;
+}
+
 TEST(haptic_loop, RecorderDropsInsteadOfBlockingTheLoop) {
   const fs::path dir = neurosim::testing::temp_dir("haptic_recorder");
   nh::ScriptDevice dev(nh::make_script("press"));
@@ -296,4 +321,35 @@ TEST(haptic_loop, CommandLineRunsScriptedStationAndWritesSummary) {
   std::string bad;
   EXPECT_EQ(run_haptic("--station cli", bad), 2) << "missing --device is a usage error";
   fs::remove_all(dir);
+}
+
+// --at-opening takes the workspace from the scene's craniotomy; refused, naming why, without a
+// scene, on a scene without an opening, or beside --origin.
+TEST(haptic_loop, CommandLineAtOpeningPlacesTheWorkspaceAtTheCraniotomy) {
+  const std::string scenes = (neurosim::testing::source_dir() / "scenes").string();
+  std::string out;
+  ASSERT_EQ(run_haptic("--station cli --device script:approach --duration 0.05 --no-server "
+                       "--no-rt --at-opening --scene " + scenes + "/brain_skull.scene",
+                       out),
+            0)
+      << out;
+  EXPECT_NE(out.find("workspace at the opening of 'skull': centre (0.1180, 0.0360, 0.0350) m"),
+            std::string::npos)
+      << out;
+  std::string none;
+  EXPECT_NE(run_haptic("--station cli --device script:approach --duration 0.05 --no-server "
+                       "--no-rt --at-opening --scene " + scenes + "/cube_cylinder.scene",
+                       none),
+            0);
+  EXPECT_NE(none.find("has no rigid mesh with an opening"), std::string::npos) << none;
+  std::string no_scene;
+  EXPECT_NE(run_haptic("--station cli --device script:approach --duration 0.05 --no-server "
+                       "--no-rt --at-opening", no_scene),
+            0);
+  EXPECT_NE(no_scene.find("--at-opening needs --scene"), std::string::npos) << no_scene;
+  std::string both;
+  EXPECT_EQ(run_haptic("--station cli --device script:approach --no-server --at-opening "
+                       "--origin 0,0,0 --scene " + scenes + "/brain_skull.scene", both),
+            2)
+      << both;
 }

@@ -387,7 +387,7 @@ ModelResult build_model(const ModelOptions& o) {
     const auto& so = o.skull_options;
     std::ostringstream prov;
     prov << "Colin27 head (" << so.head_path << ", T1 >= " << so.head_threshold
-         << ", filled) and brain mask (" << o.mri_path << "): bone shell from "
+         << ", cavities filled in 3-D and in each axial slice) and brain mask (" << o.mri_path << "): bone shell from "
          << so.csf_gap_mm << " mm (CSF gap) to " << so.csf_gap_mm + so.thickness_mm
          << " mm outside the brain mask (exact distance transform), clipped to the head, cut "
             "by the opening, largest piece; indicator Gaussian-smoothed (sigma "
@@ -536,7 +536,8 @@ std::string summary(const ModelResult& r) {
        << r.regions.volume_ml[kOther] << " ml\n";
     os << "  skull: " << k.vertices << " vertices, " << k.triangles
        << " triangles, closed, bone volume " << k.enclosed_volume_ml << " ml (shell voxels "
-       << k.build.shell_volume_ml << " ml; head " << k.build.head_volume_ml << " ml; "
+       << k.build.shell_volume_ml << " ml; head " << k.build.head_volume_ml << " ml, " << k.build.head_filled_in_slices
+       << " voxels filled in axial slices; "
        << k.build.removed_by_openings << " voxels cut by the opening, " << k.build.clipped_by_head
        << " outside the head, " << k.build.dropped_fragments << " in fragments) masks "
        << std::setprecision(2) << k.build.seconds_mask << " s, meshed in " << k.build.seconds_mesh

@@ -141,6 +141,46 @@ void keep_largest_component(unsigned char* voxels, const std::array<int, 3>& dim
   std::copy(largest.begin(), largest.end(), voxels);
 }
 
+long long fill_axial_slice_holes(unsigned char* voxels, const std::array<int, 3>& dims) {
+  const long long nx = dims[0], ny = dims[1], nz = dims[2], per_slice = nx * ny;
+  std::vector<unsigned char> outside(static_cast<std::size_t>(per_slice));
+  std::vector<long long> queue;
+  long long filled = 0;
+  for (long long z = 0; z < nz; ++z) {
+    unsigned char* v = voxels + z * per_slice;
+    std::fill(outside.begin(), outside.end(), 0);
+    queue.clear();
+    auto seed = [&](long long i) {
+      if (!v[i] && !outside[i]) {
+        outside[i] = 1;
+        queue.push_back(i);
+      }
+    };
+    for (long long x = 0; x < nx; ++x) {
+      seed(x);
+      seed((ny - 1) * nx + x);
+    }
+    for (long long y = 0; y < ny; ++y) {
+      seed(y * nx);
+      seed(y * nx + nx - 1);
+    }
+    for (std::size_t q = 0; q < queue.size(); ++q) {
+      const long long i = queue[q], x = i % nx, y = i / nx;
+      if (x > 0) seed(i - 1);
+      if (x + 1 < nx) seed(i + 1);
+      if (y > 0) seed(i - nx);
+      if (y + 1 < ny) seed(i + nx);
+    }
+    for (long long i = 0; i < per_slice; ++i) {
+      if (!v[i] && !outside[i]) {
+        v[i] = 1;
+        ++filled;
+      }
+    }
+  }
+  return filled;
+}
+
 double depth_in_mask_mm(const BrainMask& mask, const Vec3& p, double max_mm) {
   const auto& d = mask.dims;
   const unsigned char* v = static_cast<const unsigned char*>(mask.labels->GetScalarPointer());

@@ -38,6 +38,12 @@ Vec3 image_to_world(const BrainMask& mask, const Vec3& image_mm);
 // Keeps the largest face-connected component of the voxels != 0 (set to 1), clears the rest.
 void keep_largest_component(unsigned char* voxels, const std::array<int, 3>& dims);
 
+// Fills the holes of every axial slice (z = const): background voxels not connected, within
+// their slice, to the slice's border become 1; returns how many were filled. A head's dark
+// bone that the 3-D fill leaves open (it reaches the image's lower border through the neck,
+// which the field of view cuts) is enclosed by the scalp in each axial slice.
+long long fill_axial_slice_holes(unsigned char* voxels, const std::array<int, 3>& dims);
+
 // Distance (mm) from p (image mm) to the centre of the nearest voxel outside the mask,
 // searched up to max_mm (returns max_mm when none is that close).
 double depth_in_mask_mm(const BrainMask& mask, const Vec3& p_image_mm, double max_mm);

@@ -102,12 +102,17 @@ SkullResult build_skull(const BrainMask& brain, const SkullOptions& o) {
   SkullResult r;
   const auto t0 = common::Clock::now();
   // The head: T1 above the threshold, one piece, cavities (the dark bone, sinuses) filled.
-  const BrainMask head = load_brain_mask(o.head_path, o.head_threshold);
+  // The 3-D fill leaves the occipital bone open where it reaches the neck at the field of view's
+  // lower border; each axial slice closes it (the scalp rings it).
+  BrainMask head = load_brain_mask(o.head_path, o.head_threshold);
   if (head.dims != brain.dims || head.spacing_mm != brain.spacing_mm ||
       head.origin_mm != brain.origin_mm || !head.image_to_world.isApprox(brain.image_to_world)) {
     throw std::runtime_error(o.head_path + ": grid or sform differs from the brain image's");
   }
   const double voxel_ml = brain.spacing_mm[0] * brain.spacing_mm[1] * brain.spacing_mm[2] * 1e-3;
+  r.head_filled_in_slices = fill_axial_slice_holes(
+      static_cast<unsigned char*>(head.labels->GetScalarPointer()), head.dims);
+  head.voxels_inside += r.head_filled_in_slices;
   r.head_volume_ml = head.voxels_inside * voxel_ml;
 
   // Distances are from voxel centres; the mask's surface lies half a voxel outside them.

@@ -33,13 +33,17 @@ struct SkullOptions {
   double csf_gap_mm{3.0};
   double thickness_mm{6.5};
   double smoothing_sigma_mm{1.5};  // Gaussian on the shell's indicator before meshing, unit mm
-  GraySurfaceOptions surface{};    // iso 0.5 of the smoothed indicator
+  // Iso 0.5 of the smoothed indicator; facets within 1 mm of it keep the inner table clear of
+  // the brain surface (gap >= 1 mm of the 3 mm CSF gap).
+  GraySurfaceOptions surface{/*iso_value=*/0.5, /*facet_size_mm=*/8.0,
+                             /*facet_distance_mm=*/1.0};
   std::vector<CutCylinder> openings;
 };
 
 struct SkullResult {
   SurfaceOutput surface;             // image mm, outward
   double head_volume_ml{0.0};        // the head mask
+  long long head_filled_in_slices{0};  // head voxels added by the axial-slice hole fill
   double shell_volume_ml{0.0};       // the bone shell voxels meshed (after clipping and openings)
   long long clipped_by_head{0};      // shell voxels outside the head mask (dropped)
   long long removed_by_openings{0};  // shell voxels inside an opening (dropped)

@@ -176,6 +176,7 @@ int run_viewer(const ViewerOptions& o, std::ostream& log, const std::atomic<bool
   popt.render.force_unit_n = o.force_unit_n;
   popt.render.skull = o.skull;
   popt.render.colour = o.colour;
+  popt.render.view_from = Eigen::Vector3d(o.view_from[0], o.view_from[1], o.view_from[2]);
   popt.volume_step = o.volume_step;
   Pipeline pipeline(popt, warn);
 

@@ -2,6 +2,7 @@
 
 #include "common/cli.hpp"
 
+#include <cmath>
 #include <stdexcept>
 
 namespace neurosim::viewer {
@@ -109,6 +110,9 @@ ViewerOptions parse_options(int argc, const char* const* argv, bool& help) {
                 "colour, from the topology's tissue labels)")
       ->check(CLI::IsMember({"plain", "region"}))
       ->capture_default_str();
+  auto* view_from = cli::add_triple(p.app(), "--view-from", o.view_from,
+                  "3-D view: look at the scene from direction X,Y,Z (scene frame, e.g. a "
+                  "craniotomy's axis; default from the right, anterior and above)");
   bool no_overlay = false;
   p->add_flag("--no-overlay", no_overlay, "no status text in the frames");
   p->footer("CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs).");
@@ -122,6 +126,9 @@ ViewerOptions parse_options(int argc, const char* const* argv, bool& help) {
             : skull == "hidden"    ? SkullMode::Hidden
                                    : SkullMode::Shown;
   o.colour = colour == "region" ? ColourMode::Region : ColourMode::Plain;
+  if (view_from->count() > 0 &&
+      !(std::hypot(o.view_from[0], o.view_from[1], o.view_from[2]) > 1e-9))
+    throw cli::UsageError("--view-from: the direction must not be (nearly) zero");
   return o;
 }
 

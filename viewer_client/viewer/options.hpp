@@ -1,6 +1,7 @@
 // neurosim-viewer command line: what to show, where to write frames, which DDS domain.
 #pragma once
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -41,6 +42,9 @@ struct ViewerOptions {
   bool overlay = true;        // status text in the frame
   SkullMode skull = SkullMode::Shown;
   ColourMode colour = ColourMode::Plain;
+  // 3-D view: the camera looks at the scene's centre from this direction (scene frame; zero:
+  // the default, from the right, a little anterior and above).
+  std::array<double, 3> view_from{0, 0, 0};
 };
 
 // Parses argv (common/cli: CLI11). Throws std::invalid_argument (cli::UsageError) with a message

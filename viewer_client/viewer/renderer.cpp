@@ -189,14 +189,20 @@ struct SceneRenderer::Impl {
   void place_camera(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
     const Eigen::Vector3d c = 0.5 * (lo + hi);
     const double radius = 0.5 * (hi - lo).norm();
-    // From the right, a little anterior and above (the bundled scenes are pressed on the right).
-    const Eigen::Vector3d dir = Eigen::Vector3d(1.0, 0.35, 0.45).normalized();
+    // From the right, a little anterior and above (the bundled scenes are pressed on the right),
+    // unless the options say where from (the demo: along the craniotomy's axis).
+    const Eigen::Vector3d dir = opt.view_from.norm() > 1e-9
+                                    ? opt.view_from.normalized()
+                                    : Eigen::Vector3d(1.0, 0.35, 0.45).normalized();
     const double dist = radius / std::tan(0.5 * 30.0 * M_PI / 180.0) * 0.95;
     vtkCamera* cam = view3d->GetActiveCamera();
     cam->SetFocalPoint(c.x(), c.y(), c.z());
     const Eigen::Vector3d p = c + dist * dir;
     cam->SetPosition(p.x(), p.y(), p.z());
-    cam->SetViewUp(0, 0, 1);
+    if (std::abs(dir.z()) < 0.95)
+      cam->SetViewUp(0, 0, 1);  // superior up
+    else
+      cam->SetViewUp(0, 1, 0);  // looking along z: anterior up
     cam->SetViewAngle(30);
     view3d->ResetCameraClippingRange();
     camera_placed = true;

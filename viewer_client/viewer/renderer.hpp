@@ -32,6 +32,8 @@ struct RenderOptions {
   double force_unit_n = 1.0;
   SkullMode skull = SkullMode::Shown;     // rigid meshes: opaque bone, translucent or hidden
   ColourMode colour = ColourMode::Plain;  // deformable surfaces: plain or by region
+  // 3-D camera direction from the scene's centre (zero: from the right, anterior and above).
+  Eigen::Vector3d view_from = Eigen::Vector3d::Zero();
   // Tool drawn as a sphere (tip) and a tube (shaft); the probe of the bundled scenes.
   double tip_radius_m = 0.002;
   double shaft_radius_m = 0.0015;

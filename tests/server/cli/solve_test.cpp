@@ -291,6 +291,37 @@ TEST(SolveCli, LoadOnATiedEmbeddedMeshIsRefused) {
   fs::remove_all(dir);
 }
 
+// Coupled solves run one material per mesh: a tissue whose own material has the mesh's E and nu
+// (brain_skull's cerebellum) is solved; a different one is refused naming the tissue, and solved
+// by --uncoupled (per-tetrahedron materials), never run with the mesh's values.
+TEST(SolveCli, CoupledSolveTakesTissuesOfTheMeshMaterialAndRefusesOthers) {
+  const auto dir = testing::temp_dir("solve_tissues");
+  const fs::path scenes = testing::source_dir() / "scenes";
+  ASSERT_EQ(run_solve(scenes / "brain_skull.scene", dir / "same"), 0)
+      << testing::slurp(dir / "same.log");
+  std::string text = testing::slurp(scenes / "brain_skull.scene");
+  for (std::size_t at = 0; (at = text.find("\"brain_skull/", at)) != std::string::npos;)
+    text.replace(at + 1, 0, scenes.string() + "/");
+  const std::string cerebellum = "name: \"cerebellum_literature\"\n      youngs_modulus_pa: 3000";
+  const auto at = text.find(cerebellum);
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at + cerebellum.size() - 4, 4, "1500");
+  {
+    std::ofstream out(dir / "soft_cerebellum.scene");
+    out << text;
+  }
+  EXPECT_NE(run_solve(dir / "soft_cerebellum.scene", dir / "coupled"), 0);
+  const std::string log = testing::slurp(dir / "coupled.log");
+  EXPECT_NE(log.find("soft_cerebellum.scene: mesh \"brain\", tissue \"cerebellum\": its own "
+                     "material differs"),
+            std::string::npos)
+      << log;
+  EXPECT_EQ(run_solve(dir / "soft_cerebellum.scene", dir / "uncoupled", "--uncoupled --mesh brain"),
+            0)
+      << testing::slurp(dir / "uncoupled.log");
+  fs::remove_all(dir);
+}
+
 TEST(SolveCli, BundledCubeAgreesWithCalculix) {
   expect_agrees_with_calculix(testing::source_dir() / "scenes" / "cube_cylinder.scene", "cube",
                               1e-6);

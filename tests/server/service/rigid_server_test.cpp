@@ -120,7 +120,7 @@ TEST(service_rigid, DrivenIntoTheSkullHeldOutsideWhileTheDeviceGoesTenMillimetre
   auto ref = setup.make_reference();
   const auto obstacle = interaction::RigidObstacle::build(skull_scene().rigid);
   ASSERT_TRUE(ses.wait_ready());
-  EXPECT_NE(ses.server.log().find("built: rigid obstacles (13730 triangles)"), std::string::npos)
+  EXPECT_NE(ses.server.log().find("built: rigid obstacles (7538 triangles)"), std::string::npos)
       << ses.server.log();
   // Straight down onto the top of the skull: the line's entry into the bone.
   mesh::Vec3 lo = obstacle->vertices_m().front(), hi = lo;

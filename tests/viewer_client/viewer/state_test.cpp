@@ -281,6 +281,14 @@ TEST(ViewerOptions, SkullAndColourModes) {
   EXPECT_NE(bad_colour.find("--colour"), std::string::npos) << bad_colour;
   EXPECT_NE(error_of({"v", "--mode", "navigation", "--skull"}).find("needs a value"),
             std::string::npos);
+  // --view-from: a direction (the demo's craniotomy axis); zero is refused, not the default.
+  EXPECT_EQ(d.view_from, (std::array<double, 3>{0, 0, 0}));
+  const char* from[] = {"v", "--mode", "navigation", "--view-from", "0.25,-0.95,-0.2"};
+  EXPECT_EQ(nv::parse_options(5, from, help).view_from, (std::array<double, 3>{0.25, -0.95, -0.2}));
+  EXPECT_NE(error_of({"v", "--mode", "navigation", "--view-from", "0,0,0"}).find("--view-from"),
+            std::string::npos);
+  EXPECT_NE(error_of({"v", "--mode", "navigation", "--view-from", "1,2"}).find("--view-from"),
+            std::string::npos);
 }
 
 TEST(ViewerState, RigidMeshStaysOutOfTheDeformationPath) {
