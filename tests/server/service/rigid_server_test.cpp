@@ -4,7 +4,9 @@
 // device 10 mm deep while the server's physics never touches the brain behind the bone (the raw
 // pose would); through the opening the probe reaches the brain unblocked, with the forces of the
 // in-process Simulation stepped with the same poses. A scene without rigid meshes builds no
-// obstacle and sends no planes.
+// obstacle and sends no planes. The demo's approach station (neurosim-haptic script:approach)
+// slides on the bone and presses the cerebellum through the opening.
+#include "haptic_client/force_model.hpp"
 #include "server/interaction/rigid_obstacle.hpp"
 #include "server/interaction/simulation.hpp"
 #include "server/scene/compile.hpp"
@@ -258,4 +260,112 @@ TEST(service_rigid, SceneWithoutRigidMeshesBuildsNoObstacle) {
   }, 50);
   ASSERT_GT(station.records().size(), 50u);
   for (const auto& r : station.records()) EXPECT_TRUE(r.planes.empty());
+}
+
+// The demo's surgical approach end to end: the real server on brain_skull.scene and the real
+// neurosim-haptic running script:approach at the craniotomy (--at-opening), both child
+// processes on loopback with a topic prefix of their own. From the station's trace: while it
+// slides along the bone the wall holds it (rigid contact, a wall force, the proxy outside the
+// bone and a tip radius off it, no tissue force); through the opening it presses the
+// cerebellum (tissue contact, no wall); the force never steps by more than the loop's bound and
+// stays finite and clamped.
+TEST(service_rigid, ApproachStationSlidesOnTheBoneThenPressesTheCerebellumThroughTheOpening) {
+  namespace fs = std::filesystem;
+  const fs::path dir = nt::temp_dir("rigid_approach");
+  const std::string prefix = "approach" + std::to_string(::getpid()) + "_";
+  const fs::path scene = nt::source_dir() / "scenes/brain_skull.scene";
+  st::ChildProcess server(nt::bin_dir() / "neurosim-server",
+                          {"--scene", scene.string(), "--topic-prefix", prefix, "--duration", "120"},
+                          dir / "server.log");
+  st::ChildProcess station(nt::bin_dir() / "neurosim-haptic",
+                           {"--station", "approach", "--device", "script:approach", "--at-opening",
+                            "--scene", scene.string(), "--duration", "10.5", "--no-rt",
+                            "--wait-server", "120", "--topic-prefix", prefix, "--trace",
+                            (dir / "trace.csv").string()},
+                           dir / "haptic.log");
+  ASSERT_EQ(station.wait(240), 0) << station.log() << "\n" << server.log();
+  server.signal_and_wait(SIGTERM, 10);
+
+  struct Tick {
+    double t, x[3], f[3], proxy[3], wall[3];
+    bool tissue, rigid;
+  };
+  std::vector<Tick> ticks;
+  {
+    std::ifstream in(dir / "trace.csv");
+    std::string line;
+    std::getline(in, line);
+    ASSERT_EQ(line.rfind("t_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,model_age_ms,gain,in_contact,", 0), 0u)
+        << line;
+    while (std::getline(in, line)) {
+      std::vector<double> c;
+      std::stringstream ss(line);
+      std::string cell;
+      while (std::getline(ss, cell, ',')) c.push_back(std::stod(cell));
+      ASSERT_EQ(c.size(), 18u) << line;
+      Tick k{};
+      k.t = c[0];
+      for (int i = 0; i < 3; ++i) {
+        k.x[i] = c[1 + i];
+        k.f[i] = c[4 + i];
+        k.proxy[i] = c[12 + i];
+        k.wall[i] = c[15 + i];
+      }
+      k.tissue = c[9] > 0;
+      k.rigid = c[11] > 0;
+      ticks.push_back(k);
+    }
+  }
+  ASSERT_GT(ticks.size(), 10000u);
+  const auto obstacle = interaction::RigidObstacle::build(skull_scene().rigid);
+  const double r_tip = skull_scene().tools.front().tip_radius_m;
+  const double max_force = skull_scene().haptics.max_force_n;
+  auto norm = [](const double v[3]) { return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); };
+  int slide = 0, slide_rigid = 0, slide_tissue = 0, press = 0, press_tissue = 0, press_rigid = 0;
+  int checked = 0;
+  double slide_wall_n = 0, press_tissue_n = 0, max_step_n = 0, min_bone_gap_m = 1;
+  for (std::size_t i = 0; i < ticks.size(); ++i) {
+    const Tick& k = ticks[i];
+    ASSERT_TRUE(std::isfinite(norm(k.f)) && std::isfinite(norm(k.wall))) << "t " << k.t;
+    EXPECT_LE(norm(k.f), max_force + 1e-9) << "t " << k.t;
+    if (i > 0) {
+      const double d[3] = {k.f[0] - ticks[i - 1].f[0], k.f[1] - ticks[i - 1].f[1],
+                           k.f[2] - ticks[i - 1].f[2]};
+      max_step_n = std::max(max_step_n, norm(d));
+    }
+    if (k.t > 2.2 && k.t < 4.5) {  // on the bone, sliding to the rim
+      ++slide;
+      slide_rigid += k.rigid;
+      slide_tissue += k.tissue;
+      if (k.rigid) slide_wall_n = std::max(slide_wall_n, norm(k.wall));
+    }
+    if (k.t > 7.0 && k.t < 8.7) {  // on the cerebellum
+      ++press;
+      press_tissue += k.tissue;
+      press_rigid += k.rigid;
+      if (k.tissue) press_tissue_n = std::max(press_tissue_n, norm(k.f));
+    }
+    if (k.rigid && i % 25 == 0) {  // the proxy: outside the bone, the tip sphere clear of it
+      const mesh::Vec3 p(k.proxy[0], k.proxy[1], k.proxy[2]);
+      EXPECT_FALSE(obstacle->inside(p)) << "proxy inside the bone at t " << k.t;
+      min_bone_gap_m = std::min(min_bone_gap_m, obstacle->closest(p).distance_m);
+      ++checked;
+    }
+  }
+  std::printf("approach: slide %d ticks (%d on the bone, %d tissue), wall force up to %.3f N, "
+              "proxy >= %.2f mm from the bone (%d checked); press %d ticks (%d tissue, %d bone), "
+              "tissue force up to %.3f N; max force step %.4f N\n",
+              slide, slide_rigid, slide_tissue, slide_wall_n, min_bone_gap_m * 1e3, checked, press,
+              press_tissue, press_rigid, press_tissue_n, max_step_n);
+  EXPECT_GT(slide_rigid, 0.9 * slide) << "the bone holds the tool while it slides";
+  EXPECT_EQ(slide_tissue, 0) << "no tissue behind the bone is touched";
+  EXPECT_GT(slide_wall_n, 0.3);
+  EXPECT_GT(checked, 50);
+  EXPECT_GT(min_bone_gap_m, r_tip - 0.3e-3) << "the tip sphere stays off the bone";
+  EXPECT_GT(press_tissue, 0.9 * press) << "through the opening the cerebellum is pressed";
+  EXPECT_EQ(press_rigid, 0) << "inside the opening nothing of the bone is touched";
+  EXPECT_GT(press_tissue_n, 0.03);
+  EXPECT_LT(press_tissue_n, 1.0);
+  EXPECT_LE(max_step_n, haptic::ForceModelConfig{}.max_force_step_n + 1e-9);
+  fs::remove_all(dir);
 }
