@@ -205,3 +205,36 @@ TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
   EXPECT_LE(p99_after, 2 * p99_before + 300) << status.text;
   server->signal_and_wait(SIGTERM, 10);
 }
+
+// A second neurosim-haptic with a station id another writer holds: the server refuses it
+// (identity: its samples rejected and counted) and the client says so at once, not at exit, and ends with status 3; the station
+// holding the id goes on.
+TEST(fault_process, StationUnderAnIdHeldByAnotherIsToldAtOnceAndExitsThree) {
+  Session s("frefused");
+  auto server = s.start_server("server.log");
+  StatusProbe status(s.prefix);
+  Station a(s, "a", 0.05, 0.001, 60);
+  ASSERT_TRUE(a.wait_for_server(60)) << server->log();
+  ASSERT_TRUE(a.wait_force_at_least(0.1, 30)) << server->log();
+  const auto started = Clock::now();
+  ChildProcess twin(neurosim::testing::bin_dir() / "neurosim-haptic",
+                    {"--station", "a", "--device", "script:press", "--duration", "30", "--no-rt",
+                     "--origin", "0.1,0.02,0.05", "--up", "1,0,0", "--topic-prefix", s.prefix},
+                    s.dir / "twin.log");
+  const int rc = twin.wait(20);
+  const double took_s = seconds_since(started);
+  const std::string log = twin.log();
+  std::printf("twin of station 'a': exit %d after %.2f s\n", rc, took_s);
+  EXPECT_EQ(rc, 3) << log;
+  EXPECT_LT(took_s, 10.0) << "said at once, not at the end of its 30 s session";
+  EXPECT_NE(log.find("error: station 'a' refused by the server"), std::string::npos) << log;
+  EXPECT_NE(log.find("exiting"), std::string::npos) << log;
+  ASSERT_TRUE(status.wait_for(
+      [](const neurosim_SimStatus& st) { return st.samples_rejected_identity > 0; }, 5))
+      << status.text;
+  sleep_s(0.5);
+  const double f = a.force();
+  a.join();
+  EXPECT_GT(f, 0.1) << "the station holding the id keeps its force";
+  server->signal_and_wait(SIGTERM, 10);
+}
