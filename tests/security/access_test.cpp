@@ -3,7 +3,8 @@
 // runs as identity "server" on a private domain on loopback; this process joins as one identity.
 //   - a participant without a certificate (loopback.xml) cannot inject a ToolState the server acts
 //     on (control: against an unsecured server the same child is served);
-//   - a certified viewer may read the server's topics but cannot create a ToolState topic/writer;
+//   - a certified viewer may read the server's topics and the stations' ToolState but cannot
+//     create a ToolState writer in any partition;
 //   - a station cannot write under another station's id: a writer in another station's partition
 //     is refused by access control, and another id in its own partition is rejected by the server
 //     (cause "identity");
@@ -97,22 +98,28 @@ TEST(security_access, CertifiedViewerCannotPublishToolState) {
   wire::Topic<neurosim_SimStatus> status_topic(pp);
   wire::Reader<neurosim_SimStatus> status(pp, status_topic);
   ASSERT_TRUE(status.wait_for_writers(1, DDS_SECS(30))) << server.log();
-  // ... but its permissions name no ToolState: access control refuses the topic, so no writer.
+  // ... and may read every station's ToolState (it draws the tools: subscribe in the station
+  // partitions), but publish it in no partition.
   const wire::Qos q = wire::topic_qos(wire::Profile::ToolState);
   const dds_entity_t topic = dds_create_topic(pp.handle(), wire::TopicTraits<neurosim_ToolState>::descriptor(),
                                               wire::topic_name<neurosim_ToolState>().c_str(), q.get(), nullptr);
-  EXPECT_EQ(topic, DDS_RETCODE_NOT_ALLOWED_BY_SECURITY)
-      << "viewer created the ToolState topic: " << (topic < 0 ? dds_strretcode(topic) : "ok");
-  if (topic > 0) {
-    for (const std::string part : {"neurosim.station.viewer", ""}) {
-      dds_qos_t* pq = dds_create_qos();
-      const char* parts[] = {part.c_str()};
-      dds_qset_partition(pq, 1, parts);
-      const dds_entity_t pub = dds_create_publisher(pp.handle(), pq, nullptr);
-      dds_delete_qos(pq);
-      EXPECT_EQ(dds_create_writer(pub, topic, q.get(), nullptr), DDS_RETCODE_NOT_ALLOWED_BY_SECURITY)
-          << "partition '" << part << "'";
-    }
+  ASSERT_GT(topic, 0) << "viewer may subscribe to ToolState: " << dds_strretcode(topic);
+  {
+    dds_qos_t* sq = dds_create_qos();
+    const char* parts[] = {wire::kToolStateReaderPartition};
+    dds_qset_partition(sq, 1, parts);
+    const dds_entity_t sub = dds_create_subscriber(pp.handle(), sq, nullptr);
+    dds_delete_qos(sq);
+    EXPECT_GT(dds_create_reader(sub, topic, q.get(), nullptr), 0) << "ToolState reader refused";
+  }
+  for (const std::string part : {"neurosim.station.viewer", "neurosim.station.s1", ""}) {
+    dds_qos_t* pq = dds_create_qos();
+    const char* parts[] = {part.c_str()};
+    dds_qset_partition(pq, 1, parts);
+    const dds_entity_t pub = dds_create_publisher(pp.handle(), pq, nullptr);
+    dds_delete_qos(pq);
+    EXPECT_EQ(dds_create_writer(pub, topic, q.get(), nullptr), DDS_RETCODE_NOT_ALLOWED_BY_SECURITY)
+        << "partition '" << part << "'";
   }
 }
 
