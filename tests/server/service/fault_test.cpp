@@ -4,8 +4,9 @@
 // (bound writer and partition claim), a station beyond its participant's limit, an idle station
 // and a flood of distinct ids, while a legitimate scripted station presses the box. Every cause
 // must be counted in SimStatus, the legitimate station keeps its slot, its ContactModels keep
-// coming at an unchanged force, the server's memory stays bounded. Also: SIGTERM during the
-// load ends the server within 2 s with a message naming the phase.
+// coming at an unchanged force, the server's memory stays bounded. Station ids of 10 kB (a
+// participant declaring the type with unbounded ids) never reach the server. Also: SIGTERM
+// during the load ends the server within 2 s with a message naming the phase.
 #include "common/process_stats.hpp"
 #include "server/scene/compile.hpp"
 #include "tests/server/service/fake_simulation.hpp"
@@ -134,6 +135,49 @@ TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUna
   EXPECT_NE(log.find("suppressed"), std::string::npos);
   std::printf("fault: %zu legit models compared, RSS %ld -> %ld kB, %ld log lines\n%s\n", compared, rss_before,
               rss_after, static_cast<long>(lines), ses.status.last_text.c_str());
+  legit.join();
+  EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
+}
+
+// Station ids of 10 kB. The real type bounds them (Id is string<64>), so a participant that
+// wants to send one must declare the topic's type with unbounded ids
+// (service_test_long_id_attacker). The server's ToolState reader is discovered by it (same topic
+// and type name) but not matched (the types are not assignable), so none of its samples reaches
+// the server: nothing to count in SimStatus, no slot, no log line, and the legitimate station
+// is served throughout.
+TEST(service_fault, StationIdsOfTenKilobytesNeverReachTheServer) {
+  const st::Setup setup = fake_setup(scene_with_8_stations());
+  st::Session ses(setup, "fault_long_id", 40);
+  ASSERT_TRUE(ses.wait_ready());
+  st::ModelCollector models(ses.client);
+  const std::array<double, 3> press{setup.face_x_m + setup.tip_radius_m - 0.002, setup.centre_y_m,
+                                    setup.centre_z_m};
+  st::StationThread legit(ses.client, "legit-1", [&](double) { return press; }, 20);
+  ASSERT_TRUE(legit.writer().wait_for_readers(1, DDS_SECS(10)));
+  ASSERT_TRUE(models.wait_for([&] { return models.count("legit-1") > 200; }, 10)) << ses.server.log();
+  const std::size_t before = models.count("legit-1");
+  st::ChildProcess attacker(nt::bin_dir() / "service_test_long_id_attacker",
+                            {std::to_string(ses.domain), "10240", "3"},
+                            ses.log_file.parent_path() / "long_id_attacker.log");
+  ASSERT_EQ(attacker.wait(30), 0) << attacker.log();
+  const std::string out = attacker.log();
+  std::printf("%s", out.c_str());
+  EXPECT_NE(out.find("server ToolState reader discovered: yes; readers matched: 0"), std::string::npos)
+      << out;
+  EXPECT_NE(out.find("wrote 3000 of 3000 samples with a 10240-byte station id"), std::string::npos)
+      << out;
+  EXPECT_GT(models.count("legit-1"), before + 2000) << "the legitimate station kept being served";
+  ASSERT_TRUE(ses.status.wait_for([](const neurosim_SimStatus&) { return true; }, 5));
+  const bool clean = ses.status.wait_for(
+      [](const neurosim_SimStatus& s) {
+        return s.samples_rejected_nonfinite + s.samples_rejected_jump + s.samples_rejected_workspace +
+                       s.samples_rejected_time + s.samples_rejected_sequence +
+                       s.samples_rejected_identity + s.samples_rejected_rate ==
+                   0 &&
+               s.stations_refused == 0 && s.stations._length == 1;
+      },
+      5);
+  EXPECT_TRUE(clean) << "a sample of the attacker reached the server: " << ses.status.last_text;
   legit.join();
   EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
 }
