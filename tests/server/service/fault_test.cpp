@@ -41,19 +41,38 @@ st::Setup fake_setup(const std::filesystem::path& scene) {
   return s;
 }
 
+// The server and the legitimate station "legit-1" holding the box pressed for `seconds`
+// (`setup` must outlive it: the session keeps a reference).
+struct LegitSession {
+  LegitSession(const st::Setup& setup, const std::string& tag, double seconds)
+      : ses(setup, tag, 40),
+        models(ses.client),
+        press{setup.face_x_m + setup.tip_radius_m - 0.002, setup.centre_y_m, setup.centre_z_m},
+        legit(ses.client, "legit-1", [p = press](double) { return p; }, seconds) {}
+  // Serving, and the station's first 200 models in.
+  ::testing::AssertionResult wait_pressing() {
+    if (auto ready = ses.wait_ready(); !ready) return ready;
+    if (!legit.writer().wait_for_readers(1, DDS_SECS(10)) ||
+        !models.wait_for([&] { return models.count("legit-1") > 200; }, 10))
+      return ::testing::AssertionFailure() << "no models for legit-1:\n" << ses.server.log();
+    return ::testing::AssertionSuccess();
+  }
+  st::Session ses;
+  st::ModelCollector models;
+  std::array<double, 3> press;
+  st::StationThread legit;
+};
+
 
 }  // namespace
 
 TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUnaffected) {
   const st::Setup setup = fake_setup(scene_with_8_stations());
-  st::Session ses(setup, "fault", 40);
-  ASSERT_TRUE(ses.wait_ready());
-  st::ModelCollector models(ses.client);
-  const std::array<double, 3> press{setup.face_x_m + setup.tip_radius_m - 0.002, setup.centre_y_m,
-                                    setup.centre_z_m};
-  st::StationThread legit(ses.client, "legit-1", [&](double) { return press; }, 30);
-  ASSERT_TRUE(legit.writer().wait_for_readers(1, DDS_SECS(10)));
-  ASSERT_TRUE(models.wait_for([&] { return models.count("legit-1") > 200; }, 10)) << ses.server.log();
+  LegitSession session(setup, "fault", 30);
+  ASSERT_TRUE(session.wait_pressing());
+  auto& ses = session.ses;
+  auto& models = session.models;
+  auto& legit = session.legit;
   // The reference force: the first models at the held pose (all equal: a deterministic spring).
   const auto first = [&] {
     for (const auto& r : models.records())
@@ -146,15 +165,12 @@ TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUna
 // the server: nothing to count in SimStatus, no slot, no log line, and the legitimate station
 // is served throughout.
 TEST(service_fault, StationIdsOfTenKilobytesNeverReachTheServer) {
-  const st::Setup setup = fake_setup(scene_with_8_stations());
-  st::Session ses(setup, "fault_long_id", 40);
-  ASSERT_TRUE(ses.wait_ready());
-  st::ModelCollector models(ses.client);
-  const std::array<double, 3> press{setup.face_x_m + setup.tip_radius_m - 0.002, setup.centre_y_m,
-                                    setup.centre_z_m};
-  st::StationThread legit(ses.client, "legit-1", [&](double) { return press; }, 20);
-  ASSERT_TRUE(legit.writer().wait_for_readers(1, DDS_SECS(10)));
-  ASSERT_TRUE(models.wait_for([&] { return models.count("legit-1") > 200; }, 10)) << ses.server.log();
+  const st::Setup setup = fake_setup(scene_with_8_stations());  // outlives the session
+  LegitSession session(setup, "fault_long_id", 20);
+  ASSERT_TRUE(session.wait_pressing());
+  auto& ses = session.ses;
+  auto& models = session.models;
+  auto& legit = session.legit;
   const std::size_t before = models.count("legit-1");
   st::ChildProcess attacker(nt::bin_dir() / "service_test_long_id_attacker",
                             {std::to_string(ses.domain), "10240", "3"},
