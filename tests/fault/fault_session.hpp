@@ -11,6 +11,8 @@
 #include "server/service/service_test_util.hpp"
 #include "test_support.hpp"
 
+#include <gtest/gtest.h>
+
 #include <atomic>
 #include <fstream>
 #include <functional>
@@ -87,6 +89,16 @@ class Station {
       sleep_s(0.01);
     }
     return false;
+  }
+  // The server answers this station (within 60 s) and its force reaches f (N, within 30 s); the
+  // failure names the force and carries the server's log.
+  ::testing::AssertionResult pressing(double f, const ChildProcess& server) {
+    if (!wait_for_server(60))
+      return ::testing::AssertionFailure() << "no server within 60 s\n" << server.log();
+    if (!wait_force_at_least(f, 30))
+      return ::testing::AssertionFailure() << "force " << force() << " N, not " << f << " N\n"
+                                           << server.log();
+    return ::testing::AssertionSuccess();
   }
   // Largest |F(k) - F(k-1)| per nominal period over the trace, unit N.
   double max_force_step() const {

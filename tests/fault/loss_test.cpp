@@ -41,8 +41,7 @@ void hold_under_loss(int per_mille) {
     // The press script: 4 s cycles from 4 mm above the face to 4 mm into it and back, so the
     // force changes all the time and a lost model or pose would show as a step.
     Station a(s, "a", 0.05, nh::make_script("press"), 60);
-    ASSERT_TRUE(a.wait_for_server(60)) << server->log();
-    ASSERT_TRUE(a.wait_force_at_least(0.2, 30)) << a.force() << " N\n" << server->log();
+    ASSERT_TRUE(a.pressing(0.2, *server));
     sleep_s(8.0);  // two press cycles
     a.join();
     const auto link = a.counters();

@@ -14,10 +14,8 @@ TEST(fault_process, ServerKilledMidContactThenRestartedStationsResume) {
   Session s("fkill");
   auto server = s.start_server("server1.log");
   Station a(s, "a", 0.035, 0.003, 60), b(s, "b", 0.065, 0.003, 60);
-  ASSERT_TRUE(a.wait_for_server(60) && b.wait_for_server(60)) << server->log();
-  ASSERT_TRUE(a.wait_force_at_least(0.5, 30) && b.wait_force_at_least(0.5, 30))
-      << "no steady contact force: " << a.force() << " N, " << b.force() << " N\n"
-      << server->log();
+  ASSERT_TRUE(a.pressing(0.5, *server));
+  ASSERT_TRUE(b.pressing(0.5, *server));
   sleep_s(0.5);  // past the ramp-in
   const double fa = a.force(), fb = b.force();
   const std::size_t kill_a = a.ticks(), kill_b = b.ticks();
@@ -52,8 +50,7 @@ TEST(fault_process, ServerStoppedTwoSecondsThenContinuedStationKeepsItsSlot) {
   auto server = s.start_server("server.log");
   StatusProbe status(s.prefix);
   Station a(s, "a", 0.05, 0.004, 60);
-  ASSERT_TRUE(a.wait_for_server(60)) << server->log();
-  ASSERT_TRUE(a.wait_force_at_least(0.5, 30)) << a.force() << " N\n" << server->log();
+  ASSERT_TRUE(a.pressing(0.5, *server));
   sleep_s(0.5);
   const double f_before = a.force();
   const std::size_t stop_tick = a.ticks();
@@ -115,8 +112,7 @@ TEST(fault_process, StationKilledMidContactIsDroppedAndTheOtherFeelsOnlyThePhysi
   auto server = s.start_server("server.log");
   StatusProbe status(s.prefix);
   Station a(s, "a", 0.035, 0.0002, 60);  // 0.2 mm: well below the device's force clamp
-  ASSERT_TRUE(a.wait_for_server(60)) << server->log();
-  ASSERT_TRUE(a.wait_force_at_least(0.2, 30)) << server->log();
+  ASSERT_TRUE(a.pressing(0.2, *server));
   sleep_s(0.7);
   const double f_alone = a.force();
   ASSERT_LT(f_alone, 0.8 * a.config().force.max_force_n) << "clamped: the physics is not seen";
@@ -165,8 +161,7 @@ TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
   auto server = s.start_server("server.log");
   StatusProbe status(s.prefix);
   Station a(s, "a", 0.05, 0.003, 120);
-  ASSERT_TRUE(a.wait_for_server(60)) << server->log();
-  ASSERT_TRUE(a.wait_force_at_least(0.5, 30)) << server->log();
+  ASSERT_TRUE(a.pressing(0.5, *server));
 
   // One viewer: a participant of its own with the viewer's readers, until it has a frame.
   auto viewer_visit = [&] {
@@ -214,8 +209,7 @@ TEST(fault_process, StationUnderAnIdHeldByAnotherIsToldAtOnceAndExitsThree) {
   auto server = s.start_server("server.log");
   StatusProbe status(s.prefix);
   Station a(s, "a", 0.05, 0.001, 60);
-  ASSERT_TRUE(a.wait_for_server(60)) << server->log();
-  ASSERT_TRUE(a.wait_force_at_least(0.1, 30)) << server->log();
+  ASSERT_TRUE(a.pressing(0.1, *server));
   const auto started = Clock::now();
   ChildProcess twin(neurosim::testing::bin_dir() / "neurosim-haptic",
                     {"--station", "a", "--device", "script:press", "--duration", "30", "--no-rt",
