@@ -184,5 +184,16 @@ class StatusProbe {
   wire::Reader<neurosim_SimStatus> reader_;
 };
 
+// A server, its SimStatus probe and station "a" at height y (m) holding its tool depth_m into
+// the cube's face for `seconds`. Tests take it apart: auto& [s, server, status, a] = t;
+struct OneStation {
+  OneStation(const std::string& tag, double y, double depth_m, double seconds)
+      : s(tag), server(s.start_server("server.log")), status(s.prefix), a(s, "a", y, depth_m, seconds) {}
+  Session s;
+  std::unique_ptr<ChildProcess> server;
+  StatusProbe status;
+  Station a;
+};
+
 
 }  // namespace neurosim::fault_testing

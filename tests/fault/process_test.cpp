@@ -46,10 +46,8 @@ TEST(fault_process, ServerKilledMidContactThenRestartedStationsResume) {
 }
 
 TEST(fault_process, ServerStoppedTwoSecondsThenContinuedStationKeepsItsSlot) {
-  Session s("fstop");
-  auto server = s.start_server("server.log");
-  StatusProbe status(s.prefix);
-  Station a(s, "a", 0.05, 0.004, 60);
+  OneStation t("fstop", 0.05, 0.004, 60);
+  auto& [s, server, status, a] = t;
   ASSERT_TRUE(a.pressing(0.5, *server));
   sleep_s(0.5);
   const double f_before = a.force();
@@ -108,10 +106,8 @@ TEST(fault_process, StationKilledMidContactIsDroppedAndTheOtherFeelsOnlyThePhysi
   // is killed. a's force in phase 3 must return to its phase-1 value (the physics of the removed
   // tool), the server must drop the killed station's contact within a second, and a's force
   // never jumps.
-  Session s("fstation");
-  auto server = s.start_server("server.log");
-  StatusProbe status(s.prefix);
-  Station a(s, "a", 0.035, 0.0002, 60);  // 0.2 mm: well below the device's force clamp
+  OneStation t("fstation", 0.035, 0.0002, 60);  // 0.2 mm: well below the device's force clamp
+  auto& [s, server, status, a] = t;
   ASSERT_TRUE(a.pressing(0.2, *server));
   sleep_s(0.7);
   const double f_alone = a.force();
@@ -157,17 +153,15 @@ TEST(fault_process, StationKilledMidContactIsDroppedAndTheOtherFeelsOnlyThePhysi
 }
 
 TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
-  Session s("fviewer");
-  auto server = s.start_server("server.log");
-  StatusProbe status(s.prefix);
-  Station a(s, "a", 0.05, 0.003, 120);
+  OneStation t("fviewer", 0.05, 0.003, 120);
+  auto& [s, server, status, a] = t;
   ASSERT_TRUE(a.pressing(0.5, *server));
 
   // One viewer: a participant of its own with the viewer's readers, until it has a frame.
-  auto viewer_visit = [&] {
+  auto viewer_visit = [prefix = s.prefix] {
     wire::Participant pp;
-    wire::Topic<neurosim_MeshTopology> topo(pp, wire::topic_name<neurosim_MeshTopology>(s.prefix));
-    wire::Topic<neurosim_Deformation> def(pp, wire::topic_name<neurosim_Deformation>(s.prefix));
+    wire::Topic<neurosim_MeshTopology> topo(pp, wire::topic_name<neurosim_MeshTopology>(prefix));
+    wire::Topic<neurosim_Deformation> def(pp, wire::topic_name<neurosim_Deformation>(prefix));
     wire::Reader<neurosim_MeshTopology> topo_reader(pp, topo);
     wire::Reader<neurosim_Deformation> def_reader(pp, def);
     const auto t0 = Clock::now();
@@ -205,10 +199,8 @@ TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
 // (identity: its samples rejected and counted) and the client says so at once, not at exit, and ends with status 3; the station
 // holding the id goes on.
 TEST(fault_process, StationUnderAnIdHeldByAnotherIsToldAtOnceAndExitsThree) {
-  Session s("frefused");
-  auto server = s.start_server("server.log");
-  StatusProbe status(s.prefix);
-  Station a(s, "a", 0.05, 0.001, 60);
+  OneStation t("frefused", 0.05, 0.001, 60);
+  auto& [s, server, status, a] = t;
   ASSERT_TRUE(a.pressing(0.1, *server));
   const auto started = Clock::now();
   ChildProcess twin(neurosim::testing::bin_dir() / "neurosim-haptic",
