@@ -5,13 +5,15 @@
 // and a flood of distinct ids, while a legitimate scripted station presses the box. Every cause
 // must be counted in SimStatus, the legitimate station keeps its slot, its ContactModels keep
 // coming at an unchanged force, the server's memory stays bounded. Station ids of 10 kB (a
-// participant declaring the type with unbounded ids) never reach the server. Also: SIGTERM
-// during the real server's load ends it within 2 s with a message naming the phase.
+// participant declaring the type with unbounded ids) never reach the server. Reordered samples
+// are rejected as late and no answer goes back. Also: SIGTERM during the real server's load ends
+// it within 2 s with a message naming the phase.
 #include "common/process_stats.hpp"
 #include "server/scene/compile.hpp"
 #include "tests/server/service/fake_simulation.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <regex>
@@ -41,14 +43,20 @@ st::Setup fake_setup(const std::filesystem::path& scene) {
   return s;
 }
 
-// The server and the legitimate station "legit-1" holding the box pressed for `seconds`
-// (`setup` must outlive it: the session keeps a reference).
+// The server and the legitimate station "legit-1" pressing the box 2 mm deep for `seconds`
+// (`setup` must outlive it: the session keeps a reference). Optionally going deeper at
+// `deeper_m_per_s` and with every `hold_every`-th sample reordered (StationThread).
 struct LegitSession {
-  LegitSession(const st::Setup& setup, const std::string& tag, double seconds)
+  LegitSession(const st::Setup& setup, const std::string& tag, double seconds,
+               double deeper_m_per_s = 0, std::uint64_t hold_every = 0)
       : ses(setup, tag, 40),
         models(ses.client),
         press{setup.face_x_m + setup.tip_radius_m - 0.002, setup.centre_y_m, setup.centre_z_m},
-        legit(ses.client, "legit-1", [p = press](double) { return p; }, seconds) {}
+        legit(ses.client, "legit-1",
+              [p = press, deeper_m_per_s](double t) {
+                return std::array<double, 3>{p[0] - deeper_m_per_s * t, p[1], p[2]};
+              },
+              seconds, hold_every) {}
   // Serving, and the station's first 200 models in.
   ::testing::AssertionResult wait_pressing() {
     if (auto ready = ses.wait_ready(); !ready) return ready;
@@ -155,6 +163,56 @@ TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUna
   std::printf("fault: %zu legit models compared, RSS %ld -> %ld kB, %ld log lines\n%s\n", compared, rss_before,
               rss_after, static_cast<long>(lines), ses.status.last_text.c_str());
   legit.join();
+  EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
+}
+
+// Reordering on the wire (loopback neither reorders nor can be made to here: no netem in this
+// kernel, and Cyclone's fault injection only drops): the station writes every 4th sample after
+// its successor, as a reordering network would deliver it, while pressing deeper at 1 mm/s. A
+// late sample that comes after the server took its successor is rejected as `sequence` (never as
+// a jump); one that comes before replaces its successor in the reader's keep-last-1 history (the
+// server answers a 1 ms older pose, and the successor is lost). Either way the answers never go
+// back: their tool sequence never falls and neither does the force on a path that only goes deeper.
+TEST(service_fault, ReorderedToolStatesAreDroppedAndNoAnswerGoesBack) {
+  const st::Setup setup = fake_setup(scene_with_8_stations());
+  const std::uint64_t hold_every = 4;
+  LegitSession session(setup, "fault_reorder", 4, 0.001, hold_every);
+  ASSERT_TRUE(session.wait_pressing());
+  auto& ses = session.ses;
+  session.legit.wait_done();
+  const std::uint64_t sent = session.legit.sent_count();
+  const std::uint64_t late = (sent - 1) / hold_every;  // held and written after their successor
+  // The station is reclaimed 2 s after its last sample: by then every sample is counted (the
+  // server-wide counters keep them; the only station is this one).
+  neurosim_SimStatus final{};
+  const bool done = ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        final = s;
+        return s.stations_reclaimed >= 1;
+      },
+      6);
+  ASSERT_TRUE(done) << ses.status.last_text;
+  std::printf("reordered: %llu sent, %llu late; rejected: sequence %llu, jump %llu\n",
+              static_cast<unsigned long long>(sent), static_cast<unsigned long long>(late),
+              static_cast<unsigned long long>(final.samples_rejected_sequence),
+              static_cast<unsigned long long>(final.samples_rejected_jump));
+  EXPECT_GT(final.samples_rejected_sequence, 0u) << "no late sample was seen late";
+  EXPECT_LE(final.samples_rejected_sequence, late);
+  EXPECT_EQ(final.samples_rejected_jump, 0u);
+  EXPECT_EQ(final.samples_rejected_time, 0u);
+  std::uint64_t last_seq = 0;
+  double last_force = 0;
+  std::size_t answers = 0;
+  for (const auto& r : session.models.records()) {
+    if (r.station != "legit-1" || r.tool_sequence == 0) continue;
+    ASSERT_GE(r.tool_sequence, last_seq) << "an answer went back";  // a step with no new sample repeats
+    const double f = std::sqrt(r.f0[0] * r.f0[0] + r.f0[1] * r.f0[1] + r.f0[2] * r.f0[2]);
+    ASSERT_GE(f, last_force * (1 - 1e-12)) << "the force fell at sequence " << r.tool_sequence;
+    last_seq = r.tool_sequence;
+    last_force = f;
+    ++answers;
+  }
+  EXPECT_GT(answers, 2000u);
   EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
 }
 

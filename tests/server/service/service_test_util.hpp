@@ -305,9 +305,12 @@ inline const neurosim_StationStatus* find_station(const neurosim_SimStatus& s, c
 // gives the position. Remembers every position sent, by sequence number.
 class StationThread {
  public:
+  // hold_every = k > 0: every k-th sample is held back and written right after the next one, as a
+  // network that reorders packets would deliver them.
   StationThread(Client& c, std::string id, std::function<std::array<double, 3>(double)> pose,
-                double seconds)
-      : writer_(c.pp, c.tool_topic, id), id_(std::move(id)), pose_(std::move(pose)), seconds_(seconds) {
+                double seconds, std::uint64_t hold_every = 0)
+      : writer_(c.pp, c.tool_topic, id), id_(std::move(id)), pose_(std::move(pose)), seconds_(seconds),
+        hold_every_(hold_every) {
     thread_ = std::thread([this] { loop(); });
   }
   ~StationThread() { join(); }
@@ -331,7 +334,8 @@ class StationThread {
 
  private:
   void loop() {
-    wire::Sample<neurosim_ToolState> s;
+    wire::Sample<neurosim_ToolState> s, held;
+    bool holding = false;
     std::int64_t next = neurosim::common::monotonic_ns();
     const auto t0 = Clock::now();
     std::uint64_t seq = 0;
@@ -341,8 +345,16 @@ class StationThread {
         std::lock_guard<std::mutex> lk(m_);
         sent_.push_back(p);
       }
-      fill_tool(*s, id_.c_str(), ++seq, p.data(), dds_time());
-      writer_.write(*s);
+      ++seq;
+      if (hold_every_ > 0 && seq % hold_every_ == 0) {
+        fill_tool(*held, id_.c_str(), seq, p.data(), dds_time());
+        holding = true;
+      } else {
+        fill_tool(*s, id_.c_str(), seq, p.data(), dds_time());
+        writer_.write(*s);
+        if (holding) writer_.write(*held);
+        holding = false;
+      }
       next += 1000000;
       neurosim::common::sleep_until_ns(next);
     }
@@ -351,6 +363,7 @@ class StationThread {
   std::string id_;
   std::function<std::array<double, 3>(double)> pose_;
   double seconds_;
+  std::uint64_t hold_every_;
   std::atomic<bool> run_{true};
   std::mutex m_;
   std::vector<std::array<double, 3>> sent_;
