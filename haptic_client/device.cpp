@@ -130,14 +130,24 @@ const std::vector<std::string>& script_names() {
   return names;
 }
 
+namespace {
+
+// script_names() joined by ", ", for messages.
+std::string script_list() {
+  std::string list;
+  for (const auto& n : script_names()) list += (list.empty() ? "" : ", ") + n;
+  return list;
+}
+
+}  // namespace
+
 std::unique_ptr<Script> make_script(const std::string& name) {
   if (name == "press") return std::make_unique<PressScript>();
   if (name == "stroke") return std::make_unique<StrokeScript>();
   if (name == "circle") return std::make_unique<CircleScript>();
   if (name == "retract") return std::make_unique<RetractScript>();
   if (name == "approach") return std::make_unique<ApproachScript>();
-  throw std::invalid_argument("unknown script '" + name +
-                              "' (known: press, stroke, circle, retract, approach)");
+  throw std::invalid_argument("unknown script '" + name + "' (known: " + script_list() + ")");
 }
 
 ScriptDevice::ScriptDevice(std::unique_ptr<Script> script) : script_(std::move(script)) {
@@ -247,7 +257,7 @@ std::unique_ptr<Device> make_device(const std::string& spec) {
   if (kind == "replay" && !arg.empty()) return std::make_unique<ReplayDevice>(arg);
   throw std::invalid_argument("bad device '" + spec +
                               "' (expected omni[:NAME], replay:FILE, script:NAME or hand:SCRIPT; "
-                              "scripts: press, stroke, circle, retract, approach)");
+                              "scripts: " + script_list() + ")");
 }
 
 }  // namespace neurosim::haptic
