@@ -15,9 +15,9 @@
 namespace neurosim::model {
 namespace {
 
-// Face-connected components of voxels equal to `value`, grown by breadth-first search from
-// `seeds` (all such voxels when empty: then only the largest component is kept).
-// Returns 1 for the kept voxels, 0 elsewhere.
+// Face-connected components of voxels equal to `value`, grown by breadth-first search: with
+// from_border, every component touching the volume's border (an axis of size 1, a slice, has no
+// border along it); otherwise only the largest. Returns 1 for the kept voxels, 0 elsewhere.
 std::vector<unsigned char> components(const unsigned char* v, const std::array<int, 3>& d,
                                       unsigned char value, bool from_border) {
   const long long nx = d[0], ny = d[1], nz = d[2], n = nx * ny * nz;
@@ -48,7 +48,8 @@ std::vector<unsigned char> components(const unsigned char* v, const std::array<i
     if (v[i] != value || label[i] >= 0) continue;
     if (from_border) {
       const long long x = i % nx, y = (i / nx) % ny, z = i / (nx * ny);
-      const bool border = x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
+      const bool border = x == 0 || x == nx - 1 || y == 0 || y == ny - 1 ||
+                          (nz > 1 && (z == 0 || z == nz - 1));
       if (!border) continue;
       grow(i, 0);  // every border-connected component is kept
     } else {
@@ -142,35 +143,12 @@ void keep_largest_component(unsigned char* voxels, const std::array<int, 3>& dim
 }
 
 long long fill_axial_slice_holes(unsigned char* voxels, const std::array<int, 3>& dims) {
-  const long long nx = dims[0], ny = dims[1], nz = dims[2], per_slice = nx * ny;
-  std::vector<unsigned char> outside(static_cast<std::size_t>(per_slice));
-  std::vector<long long> queue;
+  const std::array<int, 3> slice{dims[0], dims[1], 1};
+  const long long per_slice = static_cast<long long>(dims[0]) * dims[1];
   long long filled = 0;
-  for (long long z = 0; z < nz; ++z) {
+  for (long long z = 0; z < dims[2]; ++z) {
     unsigned char* v = voxels + z * per_slice;
-    std::fill(outside.begin(), outside.end(), 0);
-    queue.clear();
-    auto seed = [&](long long i) {
-      if (!v[i] && !outside[i]) {
-        outside[i] = 1;
-        queue.push_back(i);
-      }
-    };
-    for (long long x = 0; x < nx; ++x) {
-      seed(x);
-      seed((ny - 1) * nx + x);
-    }
-    for (long long y = 0; y < ny; ++y) {
-      seed(y * nx);
-      seed(y * nx + nx - 1);
-    }
-    for (std::size_t q = 0; q < queue.size(); ++q) {
-      const long long i = queue[q], x = i % nx, y = i / nx;
-      if (x > 0) seed(i - 1);
-      if (x + 1 < nx) seed(i + 1);
-      if (y > 0) seed(i - nx);
-      if (y + 1 < ny) seed(i + nx);
-    }
+    const auto outside = components(v, slice, 0, true);
     for (long long i = 0; i < per_slice; ++i) {
       if (!v[i] && !outside[i]) {
         v[i] = 1;
