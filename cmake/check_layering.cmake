@@ -3,7 +3,7 @@
 #         -P cmake/check_layering.cmake
 # LINK_GRAPH is written at configure time by neurosim_write_link_graph
 # (cmake/NeurosimLinkGraph.cmake). Fails (exit code 1) and names every violation:
-#   1. a source or header under server/mesh, server/fem, server/fusion or server/interaction that
+#   1. a source or header under server/mesh, server/fem, server/fusion, server/model or server/interaction that
 #      includes a generated protobuf header (*.pb.h), a DDS header (dds/..., idl/wire/..., the
 #      idlc-generated neurosim.h) or the scene file reader server/scene/scene.hpp;
 #   2. neurosim_mesh, neurosim_fem, neurosim_fusion or neurosim_interaction linking, directly or
@@ -32,7 +32,7 @@ endif()
 set(_violations 0)
 
 # --- 1. Includes of the physics core -------------------------------------------------------------
-set(_core_dirs server/mesh server/fem server/fusion server/interaction)
+set(_core_dirs server/mesh server/fem server/fusion server/model server/interaction)
 set(_bad_include_regex "(\\.pb\\.h$|^dds/|/dds/|^idl/wire/|/idl/wire/|(^|/)neurosim\\.h$|(^|/)scene/scene\\.hpp$)")
 set(_checked_files 0)
 foreach(_dir IN LISTS _core_dirs)

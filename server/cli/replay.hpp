@@ -7,7 +7,7 @@
 
 #include "recording.pb.h"
 #include "server/interaction/simulation.hpp"
-#include "server/scene/model.hpp"
+#include "server/model/model.hpp"
 
 #include <cstddef>
 #include <functional>

@@ -8,7 +8,7 @@
 
 #include "server/interaction/tool_geometry.hpp"
 #include "server/mesh/tet_mesh.hpp"
-#include "server/scene/rigid.hpp"
+#include "server/model/rigid.hpp"
 
 #include <algorithm>
 #include <array>

@@ -6,7 +6,7 @@
 #pragma once
 
 #include "server/mesh/tet_mesh.hpp"
-#include "server/scene/model.hpp"
+#include "server/model/model.hpp"
 
 #include <Eigen/Core>
 

@@ -3,7 +3,7 @@
 // Every scene check that needs the meshes lives here; the rest is in scene.cpp.
 #pragma once
 
-#include "server/scene/model.hpp"
+#include "server/model/model.hpp"
 #include "server/scene/scene.hpp"
 
 #include <filesystem>

@@ -3,7 +3,7 @@
 #pragma once
 
 #include "scene.pb.h"
-#include "server/scene/settings.hpp"
+#include "server/model/settings.hpp"
 
 #include <Eigen/Core>
 

@@ -16,7 +16,7 @@
 
 #include "server/interaction/simulation.hpp"
 #include "common/thread_sched.hpp"
-#include "server/scene/model.hpp"
+#include "server/model/model.hpp"
 
 #include <atomic>
 #include <cstdint>

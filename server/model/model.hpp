@@ -3,13 +3,13 @@
 // (roles by priority, one host per embedded mesh, no nesting), tools, effects, rates, haptics,
 // loads and prescribed displacements resolved to node sets. No protobuf or DDS type: the physics
 // (server/interaction) and the static solver read this, never the scene file.
-// Made by server/scene/compile.hpp (every scene check lives there and in scene.cpp).
+// Made by server/scene/compile.hpp (the scene checks live there and in scene.cpp).
 #pragma once
 
 #include "server/fem/material.hpp"
 #include "server/mesh/tet_mesh.hpp"
-#include "server/scene/rigid.hpp"
-#include "server/scene/settings.hpp"
+#include "server/model/rigid.hpp"
+#include "server/model/settings.hpp"
 
 #include <array>
 #include <string>
