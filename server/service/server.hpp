@@ -1,22 +1,26 @@
 // neurosim-server core: a Simulation (Model built once) stepped at the
-// scene rate on its own thread with absolute deadlines, stations on DDS.
+// scene rate on its own thread with absolute deadlines, stations on DDS. Server composes:
 //
-//   DDS thread : waitset on ToolState → bind each station id to the writer that claims it
-//                (station_identity.hpp), join/leave/reclaim stations, filter samples
-//                (tool_filter.hpp), hand the newest good pose to the station's slot (triple
-//                buffer, never blocks).
-//                After each pose it signals the step thread (event step mode).
-//   step thread: when a pose arrives (at most 2× the scene rate) or one period after the last
-//                step: newest pose of each station → Simulation::step → ContactModel
-//                per station; Deformation per mesh at the viewer rate while a viewer is matched;
-//                SimStatus at the status rate.
+//   DDS thread  : StationAdmission (station_admission.hpp): bind each station id to the writer
+//                 that claims it, join/leave/reclaim stations, filter samples, hand the newest
+//                 good pose to the station's slot (triple buffer, never blocks); after each pose
+//                 it wakes the step thread (event step mode).
+//   step thread : StepLoop (step_loop.hpp): when a pose arrives (at most 2× the scene rate) or
+//                 one period after the last step: newest pose of each station →
+//                 Simulation::step → ContactModel per station; a step that throws for one
+//                 station's pose resets that station, the others are served. After each step
+//                 the DeformationPublisher's tick at the viewer rate and the StatusPublisher
+//                 (status_publisher.hpp) at the status rate.
+//   field thread: DeformationPublisher (deformation_publisher.hpp): full-field solves and
+//                 Deformation frames, only while a viewer is matched.
 //
 // Topics and QoS come from neurosim::wire (idl/wire/qos.cpp).
 #pragma once
 
-#include "server/interaction/simulation.hpp"
 #include "common/thread_sched.hpp"
+#include "server/interaction/simulation.hpp"
 #include "server/model/model.hpp"
+#include "server/service/step_loop.hpp"
 
 #include <atomic>
 #include <cstdint>
@@ -27,9 +31,6 @@
 #include <vector>
 
 namespace neurosim::service {
-
-enum class StepMode { kEvent, kClock };
-const char* step_mode_name(StepMode m);
 
 // step "ns-step" SCHED_FIFO 50, dds "ns-dds" SCHED_FIFO 45 (the ToolState receive path, below
 // the step thread), field "ns-field" normal (full-field solves must never delay a step).
@@ -87,6 +88,8 @@ struct ServerCounters {
   // deadline (clock mode: every step; event mode: no sample within one period).
   std::uint64_t steps_on_sample{0};
   std::uint64_t steps_on_deadline{0};
+  std::uint64_t step_failures{0};    // stations reset because their pose made the step throw
+  std::uint64_t writers_evicted{0};  // ToolState writers evicted from the writer table
 };
 
 class Server {

@@ -26,11 +26,65 @@ std::optional<WriterInfo> WriterClaims::find(dds_instance_handle_t writer) const
   return it->second;
 }
 
-bool WriterClaims::insert(dds_instance_handle_t writer, const WriterInfo& info) {
+WriterClaims::WriterClaims(WriterLimits limits) : limits_(limits) {
+  if (limits_.max_writers < 1 || limits_.max_per_participant < 1 || limits_.evict_idle_ns < 0)
+    throw std::invalid_argument("writer limits: max_writers and max_per_participant must be >= 1, "
+                                "evict_idle_ns >= 0");
+}
+
+Admitted WriterClaims::admit(dds_instance_handle_t writer, const WriterInfo& info,
+                             const std::function<bool(dds_instance_handle_t)>& pinned,
+                             dds_instance_handle_t* evicted) {
+  if (evicted != nullptr) *evicted = 0;
   std::lock_guard<std::mutex> lk(m_);
-  if (writers_.size() >= max_writers_ && writers_.count(writer) == 0) return false;
+  if (const auto it = writers_.find(writer); it != writers_.end()) {
+    it->second = info;
+    return Admitted::kCached;
+  }
+  // The writer idle longest among those `eligible` accepts (pinned writers never).
+  const auto idlest = [&](const auto& eligible) {
+    auto best = writers_.end();
+    for (auto it = writers_.begin(); it != writers_.end(); ++it) {
+      if (!eligible(it->second) || (pinned && pinned(it->first))) continue;
+      if (best == writers_.end() || it->second.last_seen_mono_ns < best->second.last_seen_mono_ns) best = it;
+    }
+    return best;
+  };
+  Admitted result = Admitted::kCached;
+  std::size_t own = 0;
+  for (const auto& [h, w] : writers_)
+    if (w.participant == info.participant) ++own;
+  if (own >= limits_.max_per_participant) {
+    // One participant never holds more: its own idlest writer makes room.
+    const auto victim = idlest([&](const WriterInfo& w) { return w.participant == info.participant; });
+    if (victim == writers_.end()) return Admitted::kFull;
+    if (evicted != nullptr) *evicted = victim->first;
+    writers_.erase(victim);
+    result = Admitted::kEvictedOwn;
+  } else if (writers_.size() >= limits_.max_writers) {
+    const std::int64_t now = info.last_seen_mono_ns;
+    const auto victim = idlest([&](const WriterInfo& w) { return now - w.last_seen_mono_ns >= limits_.evict_idle_ns; });
+    if (victim == writers_.end()) return Admitted::kFull;
+    if (evicted != nullptr) *evicted = victim->first;
+    writers_.erase(victim);
+    result = Admitted::kEvictedIdle;
+  }
   writers_[writer] = info;
-  return true;
+  return result;
+}
+
+void WriterClaims::touch(dds_instance_handle_t writer, std::int64_t now_mono_ns) {
+  std::lock_guard<std::mutex> lk(m_);
+  const auto it = writers_.find(writer);
+  if (it != writers_.end()) it->second.last_seen_mono_ns = now_mono_ns;
+}
+
+std::size_t WriterClaims::count_of(const Guid& participant) const {
+  std::lock_guard<std::mutex> lk(m_);
+  std::size_t n = 0;
+  for (const auto& [h, w] : writers_)
+    if (w.participant == participant) ++n;
+  return n;
 }
 
 void WriterClaims::erase(dds_instance_handle_t writer) {

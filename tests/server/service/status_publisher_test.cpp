@@ -1,0 +1,93 @@
+// StatusPublisher without a writer: the sample it fills from the parts' counts, and when it is
+// published (period, or early after a refusal).
+#include "server/service/status_publisher.hpp"
+
+#include "tests/server/service/service_parts_fixtures.hpp"
+
+#include <gtest/gtest.h>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace neurosim::service;
+using neurosim::service::testing::FakeDirectory;
+using neurosim::service::testing::PoisonSimulation;
+using neurosim::service::testing::RecordingSink;
+using neurosim::service::testing::SampleIn;
+
+constexpr std::int64_t kMs = 1000000;
+constexpr std::int64_t kSecond = 1000 * kMs;
+
+struct Status {
+  Status() {
+    stations.set_directory(&directory);
+    loop.emplace(StepLoopDef{}, sim, stations, nullptr, std::vector<neurosim::interaction::ToolShape>{},
+                 std::vector<double>{}, sink, nullptr);
+    settings.name = "fixture";
+    StatusPublisherDef def;
+    def.status_period_ns = kSecond;
+    def.step_times_per_period = 200;
+    status.emplace(def, settings, sim, stations, &*loop, nullptr, std::nullopt, nullptr, nullptr);
+    status->begin(0);
+  }
+  void send(dds_instance_handle_t writer, const std::string& station, const std::string& claim, int participant) {
+    directory.add(writer, claim, participant);
+    const SampleIn s(writer, station, 1, 0.0, 10 * kSecond);
+    stations.handle(s.rx(), ReceiveTime{10 * kSecond, 10 * kSecond});
+  }
+  neurosim::scene::Settings settings;
+  FakeDirectory directory;
+  StationAdmission stations{StationAdmissionDef{}, nullptr};
+  PoisonSimulation sim;
+  RecordingSink sink;
+  std::optional<StepLoop> loop;
+  std::optional<StatusPublisher> status;
+};
+
+TEST(service_status_publisher, TheSampleCarriesTheStepsStationsAndStepTimes) {
+  Status t;
+  t.send(7, "omni-1", "omni-1", 1);
+  t.loop->step_once();
+  t.loop->step_once();
+  for (int us = 1; us <= 100; ++us) t.status->after_step(0, us * 1000);  // 1..100 us, within the period
+  const neurosim_SimStatus& st = t.status->publish(2 * kSecond);
+  EXPECT_EQ(st.steps, 2u);
+  EXPECT_DOUBLE_EQ(st.step_rate_measured_hz, 1.0) << "2 steps in 2 s";
+  ASSERT_EQ(st.stations._length, 1u);
+  EXPECT_STREQ(st.stations._buffer[0].station_id, "omni-1");
+  EXPECT_EQ(st.stations._buffer[0].samples_accepted, 1u);
+  EXPECT_DOUBLE_EQ(st.step_time_max_us, 100.0);
+  EXPECT_NEAR(st.step_time_p50_us, 50.0, 1.0);
+  EXPECT_NEAR(st.step_time_p99_us, 99.0, 1.0);
+  EXPECT_EQ(st.max_strain, -1.0) << "no Deformation output: nothing measured";
+  EXPECT_EQ(st.expected_force_error, -1.0) << "no accuracy table";
+  EXPECT_EQ(st.refused._length, 0u);
+}
+
+// A refused station is told at once: the next step at least 0.2 s after the last status
+// publishes, with the refusal in it; without a refusal the status waits for its period.
+TEST(service_status_publisher, ARefusalIsPublishedWithinAFifthOfASecond) {
+  Status t;
+  t.status->after_step(0, 300 * kMs);
+  EXPECT_EQ(t.loop->counters().steps.load(), 0u);
+  t.send(8, "omni-2", "omni-1", 2);  // claims another station than its partition: refused
+  ASSERT_TRUE(t.stations.status_soon());
+  t.status->after_step(300 * kMs, 310 * kMs);
+  EXPECT_FALSE(t.stations.status_soon()) << "published at the first step after the refusal";
+  const neurosim_SimStatus& st = t.status->publish(320 * kMs);
+  ASSERT_EQ(st.refused._length, 1u);
+  EXPECT_STREQ(st.refused._buffer[0].station_id, "omni-2");
+  EXPECT_EQ(st.refused._buffer[0].reason, neurosim_REFUSED_IDENTITY);
+  EXPECT_EQ(st.samples_rejected_identity, 1u);
+  // Another refusal right after a status: it waits until 0.2 s have passed since that status.
+  t.send(9, "omni-3", "omni-9", 3);
+  t.status->after_step(320 * kMs, 330 * kMs);
+  EXPECT_TRUE(t.stations.status_soon()) << "0.01 s after the last status: not yet";
+  t.status->after_step(520 * kMs, 521 * kMs);
+  EXPECT_FALSE(t.stations.status_soon());
+}
+
+}  // namespace
