@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <atomic>
 #include <mutex>
 #include <numeric>
 #include <random>
@@ -78,9 +79,10 @@ std::vector<int> connected_parts(const mesh::TetMesh& mesh, int& num_parts) {
 
 }  // namespace
 
-struct StaticSolver::Impl {
-  SupernodalFactor llt;
-  std::mutex mutex;  // CHOLMOD common and workspace are shared by all solves
+// The scratch of solves: its own CHOLMOD common (status, allocation) and dense buffers that
+// cholmod_solve2 resizes once and then reuses.
+struct SolveWorkspace::Impl {
+  cholmod_common common{};
   cholmod_dense* x1{nullptr};
   cholmod_dense* y1{nullptr};
   cholmod_dense* e1{nullptr};
@@ -90,24 +92,41 @@ struct StaticSolver::Impl {
   Eigen::VectorXd rhs;   // reduced right-hand side, num_free_dofs
   Eigen::VectorXd full;  // 3N scratch (residual check)
 
+  Impl() { cholmod_start(&common); }
   ~Impl() {
-    cholmod_common& c = llt.common();
     for (cholmod_dense** d : {&x1, &y1, &e1, &xm, &ym, &em}) {
       if (*d) {
-        cholmod_free_dense(d, &c);
+        cholmod_free_dense(d, &common);
       }
     }
+    cholmod_finish(&common);
   }
+  Impl(const Impl&) = delete;
+  Impl& operator=(const Impl&) = delete;
 
-  // x := K_ff^-1 b for b (n x m), reusing workspace `x`, `y`, `e`.
-  void solve(const double* b_data, std::size_t n, std::size_t m, cholmod_dense** x,
-             cholmod_dense** y, cholmod_dense** e) {
+  // x := K_ff^-1 b for b (n x m), reusing the buffers `x`, `y`, `e`; the factor is only read.
+  void solve(const cholmod_factor* factor, const double* b_data, std::size_t n, std::size_t m,
+             cholmod_dense** x, cholmod_dense** y, cholmod_dense** e) {
     cholmod_dense b = dense_view(const_cast<double*>(b_data), n, m);
-    if (!cholmod_solve2(CHOLMOD_A, llt.factor(), &b, nullptr, x, nullptr, y, e, &llt.common())) {
+    if (!cholmod_solve2(CHOLMOD_A, const_cast<cholmod_factor*>(factor), &b, nullptr, x, nullptr, y, e,
+                        &common)) {
       throw std::runtime_error("StaticSolver: CHOLMOD solve failed (status " +
-                               std::to_string(llt.common().status) + ")");
+                               std::to_string(common.status) + ")");
     }
   }
+};
+
+SolveWorkspace::SolveWorkspace() : impl_(std::make_unique<Impl>()) {}
+SolveWorkspace::~SolveWorkspace() = default;
+SolveWorkspace::SolveWorkspace(SolveWorkspace&&) noexcept = default;
+SolveWorkspace& SolveWorkspace::operator=(SolveWorkspace&&) noexcept = default;
+
+struct StaticSolver::Impl {
+  SupernodalFactor llt;
+  // The solver's own workspace, for the overloads without one (set-up, offline use).
+  std::mutex mutex;
+  SolveWorkspace shared;
+  std::atomic<std::uint64_t> shared_uses{0};
 };
 
 StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materials,
@@ -230,8 +249,8 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   info_.num_dofs = ndof;
   info_.num_free_dofs = nf;
   info_.stiffness_nnz = k_.nonZeros();
-  impl_->rhs.resize(nf);
-  impl_->full.resize(ndof);
+  impl_->shared.impl_->rhs.resize(nf);
+  impl_->shared.impl_->full.resize(ndof);
   if (nf == 0) {
     return;  // everything fixed: u = 0, nothing to factor
   }
@@ -318,9 +337,9 @@ void StaticSolver::check_forces(const Eigen::VectorXd& forces_n, const char* wha
   }
 }
 
-void StaticSolver::check_residual(const Eigen::VectorXd& u_m, const Eigen::VectorXd& forces_n,
+void StaticSolver::check_residual(Eigen::VectorXd& r, const Eigen::VectorXd& u_m,
+                                  const Eigen::VectorXd& forces_n,
                                   const std::vector<char>* constrained) const {
-  Eigen::VectorXd& r = impl_->full;
   r.noalias() = k_ * u_m;
   // Scale: the applied forces or K u over all dofs (the reactions included), so that a problem
   // loaded only by prescribed displacements (f = 0 and K u ~ 0 on the free dofs) has one.
@@ -343,30 +362,44 @@ void StaticSolver::check_residual(const Eigen::VectorXd& u_m, const Eigen::Vecto
   }
 }
 
-void StaticSolver::solve(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m) const {
+void StaticSolver::solve_free(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m,
+                              SolveWorkspace::Impl& ws) const {
   check_forces(forces_n, "forces");
   u_m.setZero(num_dofs());
   const int nf = num_free_dofs();
   if (nf == 0) {
     return;
   }
-  {
-    std::lock_guard<std::mutex> lock(impl_->mutex);
-    for (int r = 0; r < nf; ++r) {
-      impl_->rhs[r] = forces_n[free_dofs_[r]];
-    }
-    impl_->solve(impl_->rhs.data(), nf, 1, &impl_->x1, &impl_->y1, &impl_->e1);
-    const double* x = static_cast<const double*>(impl_->x1->x);
-    for (int r = 0; r < nf; ++r) {
-      u_m[free_dofs_[r]] = x[r];
-    }
-    if (!u_m.allFinite()) {
-      throw std::runtime_error("StaticSolver: solve produced non-finite displacements");
-    }
-    if (options_.check_residual) {
-      check_residual(u_m, forces_n, nullptr);
-    }
+  ws.rhs.resize(nf);
+  for (int r = 0; r < nf; ++r) {
+    ws.rhs[r] = forces_n[free_dofs_[r]];
   }
+  ws.solve(impl_->llt.factor(), ws.rhs.data(), nf, 1, &ws.x1, &ws.y1, &ws.e1);
+  const double* x = static_cast<const double*>(ws.x1->x);
+  for (int r = 0; r < nf; ++r) {
+    u_m[free_dofs_[r]] = x[r];
+  }
+  if (!u_m.allFinite()) {
+    throw std::runtime_error("StaticSolver: solve produced non-finite displacements");
+  }
+  if (options_.check_residual) {
+    check_residual(ws.full, u_m, forces_n, nullptr);
+  }
+}
+
+void StaticSolver::solve(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m) const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  impl_->shared_uses.fetch_add(1, std::memory_order_relaxed);
+  solve_free(forces_n, u_m, *impl_->shared.impl_);
+}
+
+void StaticSolver::solve(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m,
+                         SolveWorkspace& ws) const {
+  solve_free(forces_n, u_m, *ws.impl_);
+}
+
+std::uint64_t StaticSolver::shared_workspace_uses() const {
+  return impl_->shared_uses.load(std::memory_order_relaxed);
 }
 
 Eigen::VectorXd StaticSolver::solve(const Eigen::VectorXd& forces_n) const {
@@ -390,8 +423,32 @@ void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) c
     return;
   }
   std::lock_guard<std::mutex> lock(impl_->mutex);
-  impl_->solve(b.data(), nf, b.cols(), &impl_->xm, &impl_->ym, &impl_->em);
-  std::copy_n(static_cast<const double*>(impl_->xm->x), x.size(), x.data());
+  impl_->shared_uses.fetch_add(1, std::memory_order_relaxed);
+  SolveWorkspace::Impl& ws = *impl_->shared.impl_;
+  ws.solve(impl_->llt.factor(), b.data(), nf, b.cols(), &ws.xm, &ws.ym, &ws.em);
+  std::copy_n(static_cast<const double*>(ws.xm->x), x.size(), x.data());
+  if (!x.allFinite()) {
+    throw std::runtime_error("StaticSolver::solve_reduced: non-finite solution");
+  }
+}
+
+void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x, SolveWorkspace& wsp) const {
+  const int nf = num_free_dofs();
+  if (b.rows() != nf) {
+    throw std::invalid_argument("StaticSolver::solve_reduced: right-hand side has " +
+                                std::to_string(b.rows()) + " rows, expected " + std::to_string(nf) +
+                                " free dofs");
+  }
+  if (!b.allFinite()) {
+    throw std::invalid_argument("StaticSolver::solve_reduced: non-finite right-hand side");
+  }
+  x.resize(nf, b.cols());
+  if (nf == 0 || b.cols() == 0) {
+    return;
+  }
+  SolveWorkspace::Impl& ws = *wsp.impl_;
+  ws.solve(impl_->llt.factor(), b.data(), nf, b.cols(), &ws.xm, &ws.ym, &ws.em);
+  std::copy_n(static_cast<const double*>(ws.xm->x), x.size(), x.data());
   if (!x.allFinite()) {
     throw std::runtime_error("StaticSolver::solve_reduced: non-finite solution");
   }
@@ -559,7 +616,7 @@ PrescribedSolution StaticSolver::solve_prescribed_per_dof(const std::vector<int>
   }
   if (options_.check_residual) {
     std::lock_guard<std::mutex> lock(impl_->mutex);
-    check_residual(u, forces_n, &constrained);
+    check_residual(impl_->shared.impl_->full, u, forces_n, &constrained);
   }
   out.displacement_m = std::move(u);
   return out;

@@ -1,5 +1,6 @@
 // Linear static solver: K u = f with fixed nodes eliminated, factored once with CHOLMOD
-// (supernodal LL^T). The factor is Model (built once); solves reuse CHOLMOD workspace.
+// (supernodal LL^T). The factor is Model (built once); the scratch of a solve is the caller's
+// SolveWorkspace (State, field worker), or the solver's own one under a mutex.
 #pragma once
 
 #include "server/fem/assembly.hpp"
@@ -10,6 +11,7 @@
 #include <Eigen/Core>
 
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -61,8 +63,28 @@ struct PrescribedSolution {
   Eigen::VectorXd reaction_n;
 };
 
-// Thread safety: const members may be called from several threads; solves share CHOLMOD's
-// workspace and are serialized by an internal mutex.
+// Scratch of solves: a CHOLMOD common and the dense buffers, owned by whoever solves (a
+// simulation State, a field worker, a tier worker), so that solves on different workspaces run
+// at once and take no lock: the factor they read is constant.
+class SolveWorkspace {
+ public:
+  SolveWorkspace();
+  ~SolveWorkspace();
+  SolveWorkspace(SolveWorkspace&&) noexcept;
+  SolveWorkspace& operator=(SolveWorkspace&&) noexcept;
+  SolveWorkspace(const SolveWorkspace&) = delete;
+  SolveWorkspace& operator=(const SolveWorkspace&) = delete;
+  struct Impl;
+
+ private:
+  friend class StaticSolver;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Thread safety: const members may be called from several threads. The overloads that take a
+// SolveWorkspace lock nothing (the caller owns the scratch); the others share the solver's own
+// workspace and are serialized by an internal mutex (set-up and offline use:
+// shared_workspace_uses() counts them).
 class StaticSolver {
  public:
   // Assembles K (one material, or one per tetrahedron), eliminates the fixed nodes (u = 0
@@ -83,6 +105,7 @@ class StaticSolver {
   // output argument does not allocate once `u_m` has size 3N (CHOLMOD workspace is reused).
   Eigen::VectorXd solve(const Eigen::VectorXd& forces_n) const;
   void solve(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m) const;
+  void solve(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m, SolveWorkspace& ws) const;
 
   // Displacements prescribed on `nodes` (displacements_m: 3|nodes|, node-major x,y,z), plus
   // optional forces (empty or 3N). Prescribed nodes that are fixed nodes are eliminated;
@@ -115,6 +138,9 @@ class StaticSolver {
   // Reduced (free-dof) system, for Compliance and coupling code.
   // X = K_ff^-1 B for a dense B (num_free_dofs x m): all columns in one CHOLMOD call.
   void solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const;
+  void solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x, SolveWorkspace& ws) const;
+  // Solves that used the solver's own (locked) workspace since construction.
+  std::uint64_t shared_workspace_uses() const;
   int num_nodes() const { return num_nodes_; }
   int num_dofs() const { return 3 * num_nodes_; }
   int num_free_dofs() const { return static_cast<int>(free_dofs_.size()); }
@@ -142,7 +168,8 @@ class StaticSolver {
   FactorInfo info_;
 
   void check_forces(const Eigen::VectorXd& forces_n, const char* what) const;
-  void check_residual(const Eigen::VectorXd& u_m, const Eigen::VectorXd& forces_n,
+  void solve_free(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m, SolveWorkspace::Impl& ws) const;
+  void check_residual(Eigen::VectorXd& scratch, const Eigen::VectorXd& u_m, const Eigen::VectorXd& forces_n,
                       const std::vector<char>* constrained) const;
 };
 

@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include <cstddef>
+#include <memory>
 #include <vector>
 
 namespace neurosim::interaction {
@@ -42,6 +43,8 @@ class ContactColumns {
 
  private:
   const CoupledBody* body_;
+  // The State's own solve scratch: a first touch inside the step locks nothing in the Model.
+  std::unique_ptr<fem::SolveWorkspace> ws_ = std::make_unique<fem::SolveWorkspace>();
   bool keep_full_;
   std::vector<int> column_of_;  // contact slot -> index in columns_ or -1
   std::vector<Columns> columns_;          // L[contact dofs, slot]

@@ -262,7 +262,8 @@ std::uint64_t CoupledBody::cache_key() const {
   return key.value();
 }
 
-void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::MatrixXd& x) const {
+void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::MatrixXd& x,
+                                        fem::SolveWorkspace* ws) const {
   if (!finalized_) throw std::logic_error("CoupledBody::solve_contact_columns before finalize");
   const auto& reduced = solver_->reduced_index();
   const int nf = solver_->num_free_dofs();
@@ -288,7 +289,8 @@ void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::Ma
       if (red >= 0) rhs.row(red) -= glb.row(r);
     }
   }
-  solver_->solve_reduced(rhs, x);
+  if (ws != nullptr) solver_->solve_reduced(rhs, x, *ws);
+  else solver_->solve_reduced(rhs, x);
 }
 
 void CoupledBody::set_iterative(const IterativeOptions& options) {
@@ -311,7 +313,7 @@ void CoupledBody::apply_coupling(const Eigen::MatrixXd& in, Eigen::MatrixXd& out
 
 void CoupledBody::host_displacement(const std::vector<int>& slots,
                                     const std::vector<mesh::Vec3>& forces_n,
-                                    Eigen::VectorXd& u_host_m) const {
+                                    Eigen::VectorXd& u_host_m, fem::SolveWorkspace* ws) const {
   if (slots.size() != forces_n.size())
     throw std::invalid_argument("CoupledBody::host_displacement: sizes differ");
   const int n3 = 3 * static_cast<int>(host_->num_vertices());
@@ -336,7 +338,8 @@ void CoupledBody::host_displacement(const std::vector<int>& slots,
     apply_coupling(v, gv);
     for (int r = 0; r < m3; ++r) f[3 * boundary_nodes_[r / 3] + r % 3] -= gv(r, 0);
   }
-  solver_->solve(f, u_host_m);
+  if (ws != nullptr) solver_->solve(f, u_host_m, *ws);
+  else solver_->solve(f, u_host_m);
 }
 
 Eigen::Matrix3d CoupledBody::host_block(int slot_i, int slot_j) const {

@@ -91,14 +91,18 @@ class CoupledBody {
 
   // Coupled compliance columns for unit forces at the given contact slots: X (free dofs x 3n,
   // the reduced index of host_solver()), one block solve (ContactColumns caches them).
-  void solve_contact_columns(const std::vector<int>& slots, Eigen::MatrixXd& x) const;
+  // With `ws` (the caller's: a State's ContactColumns) the solve locks nothing; without, it
+  // uses the host solver's own workspace under its mutex (set-up, offline).
+  void solve_contact_columns(const std::vector<int>& slots, Eigen::MatrixXd& x,
+                             fem::SolveWorkspace* ws = nullptr) const;
   // Unit right-hand sides per CHOLMOD block solve (BLAS-3 inside the supernodes).
   static constexpr int kBlockColumns = 63;
 
   // Host displacement (3N_A, unit m) for nodal forces on contact slots (force_n per slot, unit
   // N), ties included; a tied mesh's displacement follows from it (ties()[t].displacement).
+  // `ws` as for solve_contact_columns (the field thread's and the tier worker's own).
   void host_displacement(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
-                         Eigen::VectorXd& u_host_m) const;
+                         Eigen::VectorXd& u_host_m, fem::SolveWorkspace* ws = nullptr) const;
 
   const CoupledBodyTiming& timing() const { return timing_; }
   // Boundary blocks (for the iterative baseline): L_A[b,b], K_add, rows of L_A at contact x b.

@@ -133,10 +133,11 @@ class Model {
   }
   // Host field (ties included) for contact forces on slots, sliding row forces and other nodal
   // forces (may be empty); from cached full columns when `columns` has them (stepping thread).
+  // `ws`: the caller's solve scratch (the field thread's), so no lock in the Model is taken.
   void host_field(const BodyModel& b, const std::vector<int>& slots,
                   const std::vector<Vec3>& forces_n, const Eigen::VectorXd& sliding_lambda_n,
                   const Eigen::VectorXd& nodal_forces_n, const ContactColumns* columns,
-                  Eigen::VectorXd& u_host_m) const;
+                  Eigen::VectorXd& u_host_m, fem::SolveWorkspace* ws = nullptr) const;
   // Field of mesh `m` (entry e) from its body's host field.
   void mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
                   const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
@@ -921,7 +922,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
 void Model::host_field(const BodyModel& b, const std::vector<int>& slots,
                        const std::vector<Vec3>& forces_n, const Eigen::VectorXd& sliding_lambda_n,
                        const Eigen::VectorXd& nodal_forces_n, const ContactColumns* columns,
-                       Eigen::VectorXd& u_host_m) const {
+                       Eigen::VectorXd& u_host_m, fem::SolveWorkspace* ws) const {
   const bool sliding_force = sliding_lambda_n.size() > 0 && sliding_lambda_n.maxCoeff() > 0.0;
   const int n3 = 3 * static_cast<int>(b.body->host().num_vertices());
   if (nodal_forces_n.size() != 0 && nodal_forces_n.size() != n3) {
@@ -932,7 +933,7 @@ void Model::host_field(const BodyModel& b, const std::vector<int>& slots,
   }
   if (!sliding_force && nodal_forces_n.size() == 0) {
     if (columns == nullptr || !columns->full_field(slots, forces_n, u_host_m))
-      b.body->host_displacement(slots, forces_n, u_host_m);
+      b.body->host_displacement(slots, forces_n, u_host_m, ws);
     return;
   }
   // Contact forces at their nodes, the sliding forces J_A^T lambda on S', other nodal forces.
@@ -1045,9 +1046,11 @@ void SimulationImpl::displacements(FieldSnapshot& s, int m, Eigen::VectorXd& u_m
     return;
   }
   if (e.slide < 0 && !sb.host_done) {
-    // Never the step's column cache: this may run on another thread than step().
+    // Never the step's column cache: this may run on another thread than step(); the
+    // snapshot's own solve scratch, so the step's solves and this one share no lock.
+    if (!sb.workspace) sb.workspace = std::make_shared<fem::SolveWorkspace>();
     model_->host_field(model_->bodies_[e.body], sb.slots, sb.forces_n, sb.sliding_lambda_n,
-                       sb.nodal_forces_n, nullptr, sb.u_host_m);
+                       sb.nodal_forces_n, nullptr, sb.u_host_m, sb.workspace.get());
     sb.host_done = true;
   }
   model_->mesh_field(e, sb.sliding_lambda_n, sb.u_host_m, u_m);

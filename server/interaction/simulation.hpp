@@ -16,6 +16,10 @@
 #include <string>
 #include <vector>
 
+namespace neurosim::fem {
+class SolveWorkspace;  // server/fem/static_solver.hpp
+}  // namespace neurosim::fem
+
 namespace neurosim::interaction {
 
 class CoupledBody;  // server/interaction/coupled_body.hpp
@@ -92,6 +96,8 @@ struct FieldSnapshot {
     // The host field for these forces (3N_A, unit m), computed on the first request.
     Eigen::VectorXd u_host_m;
     bool host_done{false};
+    // The solve scratch of whoever computes the fields (made on the first request).
+    std::shared_ptr<fem::SolveWorkspace> workspace;
   };
   std::vector<Body> bodies;  // one per body (Simulation::body_index)
 };

@@ -154,7 +154,7 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   if (load.slots.empty()) {
     u_lin_.setZero(n_host);
   } else {
-    body_->host_displacement(load.slots, rotated_, u_lin_);
+    body_->host_displacement(load.slots, rotated_, u_lin_, ws_.get());
   }
   const auto& normals = body_->contact_normals();
   out.offset_m.resize(slot_node_.size());

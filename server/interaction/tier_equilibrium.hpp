@@ -95,6 +95,8 @@ class TierEquilibrium {
   std::vector<int> slot_node_;                       // per contact slot: host node
   Eigen::VectorXd u_, f_, u_host_, u_lin_, u_mesh_;  // warm start and scratch
   std::vector<mesh::Vec3> rotated_;
+  // The worker's own solve scratch: its linearizations lock nothing the step or the fields use.
+  std::unique_ptr<fem::SolveWorkspace> ws_ = std::make_unique<fem::SolveWorkspace>();
   std::vector<Eigen::Matrix3d> rotation_;  // per contact slot
   std::uint64_t count_{0};
   void rotations(const Eigen::VectorXd& u_host_m);

@@ -8,7 +8,9 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <cmath>
+#include <thread>
 #include <limits>
 
 namespace neurosim::fem {
@@ -380,6 +382,43 @@ TEST(FemStaticSolver, TwoPartsEachNeedSupportAndSolveIndependently) {
   std::printf("two parts: soft max |u| %.3e m, stiff max |u| %.3e m, ratio %.3e\n", soft_max,
               stiff_max, soft_max / stiff_max);
   EXPECT_GT(soft_max / stiff_max, 5e3);  // ~E ratio (Poisson ratios differ)
+}
+
+// Solves on workspaces of their own, from two threads at once, lock nothing and give the same
+// displacements as the solver's shared workspace (checked by count and by value, not by time).
+TEST(FemStaticSolver, OwnWorkspacesSolveConcurrentlyWithoutTheSharedLock) {
+  const auto m = box_mesh(BoxSpec{4, 4, 4, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, 5});
+  const auto bottom = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
+  SolverOptions opt;
+  opt.check_residual = true;
+  opt.residual_tolerance = 1e-10;
+  const StaticSolver solver(m, MaterialMap::uniform(kBrain), bottom, opt);
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
+  const auto top = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-9; });
+  for (int v : top) f.segment<3>(3 * v) = Eigen::Vector3d(0.1, 0.2, -0.5);  // N
+  const Eigen::VectorXd u_shared = solver.solve(f);
+  Eigen::MatrixXd b = Eigen::MatrixXd::Zero(solver.num_free_dofs(), 7), x_shared;
+  for (int j = 0; j < 7; ++j) b(5 * j, j) = 1.0;
+  solver.solve_reduced(b, x_shared);
+  const std::uint64_t uses = solver.shared_workspace_uses();
+  ASSERT_GE(uses, 2u);
+  double diff[2] = {0.0, 0.0};
+  auto work = [&](int t) {
+    SolveWorkspace ws;
+    Eigen::VectorXd u;
+    Eigen::MatrixXd x;
+    for (int k = 0; k < 50; ++k) {
+      solver.solve(f, u, ws);
+      solver.solve_reduced(b, x, ws);
+      diff[t] = std::max({diff[t], (u - u_shared).cwiseAbs().maxCoeff(), (x - x_shared).cwiseAbs().maxCoeff()});
+    }
+  };
+  std::thread a(work, 0), c(work, 1);
+  a.join();
+  c.join();
+  EXPECT_EQ(solver.shared_workspace_uses(), uses) << "a solve with its own workspace took the shared one";
+  EXPECT_EQ(diff[0], 0.0);
+  EXPECT_EQ(diff[1], 0.0);
 }
 
 }  // namespace

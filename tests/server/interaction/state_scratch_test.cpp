@@ -1,0 +1,92 @@
+// No scratch in the Model: the step's first touches of compliance columns (the State's
+// ContactColumns) and the field thread's solves (the FieldSnapshot's workspace) each solve on
+// their own fem::SolveWorkspace, so neither takes the lock of the host solver's shared workspace.
+// Checked by count, not by time: the shared workspace is used zero times while fields and first
+// touches run together, and every field equals the one solved alone.
+#include "server/fem/static_solver.hpp"
+#include "server/interaction/coupled_body.hpp"
+#include "server/interaction/simulation.hpp"
+#include "tests/server/interaction/interaction_fixtures.hpp"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <thread>
+#include <vector>
+
+namespace neurosim::interaction {
+namespace {
+
+using testing::make_scene;
+using testing::push_right;
+using testing::SceneSpec;
+
+TEST(interaction_state_scratch, FieldsAndFirstTouchesRunTogetherWithoutALockInTheModel) {
+  SimulationOptions options;
+  options.precompute_contact_columns = false;  // columns are computed on first touch, in the step
+  auto sim = Simulation::build(make_scene(SceneSpec{}), options);
+  const CoupledBody* body = sim->body_of(0);
+  ASSERT_NE(body, nullptr);
+  const fem::StaticSolver& host = body->host_solver();
+
+  std::vector<ToolContact> contacts;
+  StepStats stats;
+  sim->step({push_right(0.002)}, contacts, stats);
+  ASSERT_TRUE(contacts.at(0).in_contact);
+  FieldSnapshot reference_snapshot, field_snapshot;
+  sim->snapshot(reference_snapshot);
+  sim->snapshot(field_snapshot);
+  Eigen::VectorXd u_reference;
+  sim->displacements(reference_snapshot, 0, u_reference);
+  const std::uint64_t shared_before = host.shared_workspace_uses();
+
+  std::atomic<bool> stepping{true};
+  std::atomic<int> fields{0};
+  double max_field_difference = 0.0;
+  std::thread field_thread([&] {
+    Eigen::VectorXd u;
+    while (stepping.load() || fields.load() < 2) {
+      for (auto& b : field_snapshot.bodies) b.host_done = false;  // solve again
+      sim->displacements(field_snapshot, 0, u);
+      max_field_difference = std::max(max_field_difference, (u - u_reference).cwiseAbs().maxCoeff());
+      ++fields;
+    }
+  });
+  while (fields.load() < 1) std::this_thread::yield();
+  // Presses over the right face: every new contact node is a first touch inside the step.
+  int first_touches = 0;
+  for (int iy = 0; iy < 5; ++iy)
+    for (int iz = 0; iz < 5; ++iz) {
+      ToolPose p = push_right(0.003);
+      p.tip_m.y() = 0.02 + 0.015 * iy;
+      p.tip_m.z() = 0.02 + 0.015 * iz;
+      sim->step({p}, contacts, stats);
+      first_touches += stats.columns_computed;
+    }
+  stepping = false;
+  field_thread.join();
+
+  EXPECT_GT(first_touches, 0) << "the presses touched new contact nodes inside the step";
+  EXPECT_GE(fields.load(), 2);
+  EXPECT_EQ(host.shared_workspace_uses(), shared_before)
+      << "a step or a field solved on the host solver's shared (locked) workspace";
+  EXPECT_EQ(max_field_difference, 0.0) << "a field solved beside the steps differs from the one solved alone";
+}
+
+TEST(interaction_state_scratch, ColumnsFromTheStatesWorkspaceEqualTheSharedOnes) {
+  auto sim = Simulation::build(make_scene(SceneSpec{}), SimulationOptions{});
+  const CoupledBody* body = sim->body_of(0);
+  ASSERT_NE(body, nullptr);
+  const std::vector<int> slots{0, 1, 2};
+  Eigen::MatrixXd shared, own;
+  fem::SolveWorkspace ws;
+  body->solve_contact_columns(slots, shared);
+  const std::uint64_t uses = body->host_solver().shared_workspace_uses();
+  body->solve_contact_columns(slots, own, &ws);
+  EXPECT_EQ(body->host_solver().shared_workspace_uses(), uses);
+  ASSERT_EQ(own.rows(), shared.rows());
+  EXPECT_EQ((own - shared).cwiseAbs().maxCoeff(), 0.0);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
