@@ -2,6 +2,7 @@
 
 #include "common/clock.hpp"
 #include "common/thread_sched.hpp"
+#include "idl/wire/client.hpp"
 #include "idl/wire/dds.hpp"
 
 #include <pthread.h>
@@ -17,38 +18,39 @@ namespace neurosim::haptic {
 namespace {
 using common::realtime_ns;
 using common::monotonic_ns;
-constexpr dds_attach_t kModels = 1, kStatus = 2, kStatusLiveliness = 3;
+constexpr dds_attach_t kModels = 1;
+constexpr dds_attach_t kStatus = wire::ClientSession::kStatusData;
+constexpr dds_attach_t kStatusLiveliness = wire::ClientSession::kStatusLiveliness;
 }  // namespace
 
 struct DdsLink::Impl {
   DdsLinkOptions opt;
-  wire::Participant pp;
+  // The shared client set-up (participant, prefixed topics, the server's SimStatus and its
+  // liveliness on the waitset) plus this station's ToolState writer and ContactModel reader.
+  wire::ClientSession session;
   wire::Topic<neurosim_ToolState> tool_topic;
   wire::Writer<neurosim_ToolState> tools;
   wire::Topic<neurosim_ContactModel> model_topic;
   wire::Reader<neurosim_ContactModel> models;
-  wire::Topic<neurosim_SimStatus> status_topic;
-  wire::Reader<neurosim_SimStatus> status;
-  wire::Waitset ws;
+  wire::Reader<neurosim_SimStatus>& status;
+  wire::Waitset& ws;
   wire::Sample<neurosim_ToolState> sample;
   std::array<std::uint8_t, 16> own_writer{};  // to recognise this station in SimStatus.refused
   sem_t pending;  // posted by publish() (async-signal-safe, no lock in the loop thread)
 
   explicit Impl(const DdsLinkOptions& o)
       : opt(o),
-        tool_topic(pp, wire::topic_name<neurosim_ToolState>(o.topic_prefix)),
-        tools(pp, tool_topic, o.station_id),  // in partition neurosim.station.<station_id>
-        model_topic(pp, wire::topic_name<neurosim_ContactModel>(o.topic_prefix)),
-        models(pp, model_topic),
-        status_topic(pp, wire::topic_name<neurosim_SimStatus>(o.topic_prefix)),
-        status(pp, status_topic),
-        ws(pp) {
+        session(wire::ClientOptions{-1, o.topic_prefix}),
+        tool_topic(session.topic<neurosim_ToolState>()),
+        tools(session.participant(), tool_topic, o.station_id),  // in partition neurosim.station.<station_id>
+        model_topic(session.topic<neurosim_ContactModel>()),
+        models(session.participant(), model_topic),
+        status(session.status()),
+        ws(session.waitset()) {
     wire::set_string(sample->station_id, o.station_id, "station_id");
     wire::set_string(sample->tool_id, o.tool_id, "tool_id");
     own_writer = tools.guid();
     ws.attach_data(models, kModels);
-    ws.attach_data(status, kStatus);
-    ws.attach_liveliness(status, kStatusLiveliness);
     sem_init(&pending, 0, 0);
   }
   ~Impl() { sem_destroy(&pending); }
@@ -217,8 +219,7 @@ void DdsLink::run() {
       }
     }
     if (r.has(kStatusLiveliness) || r.timed_out()) {
-      const wire::Liveliness l = im.status.liveliness();
-      if (l.alive_count > 0) {
+      if (im.session.server_alive()) {
         if (!had_writer || !alive_.load()) seen_.fetch_add(1);
         had_writer = true;
         alive_.store(true, std::memory_order_release);

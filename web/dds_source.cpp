@@ -1,6 +1,7 @@
 #include "web/dds_source.hpp"
 
 #include "common/clock.hpp"
+#include "idl/wire/client.hpp"
 #include "idl/wire/dds.hpp"
 
 #include <atomic>
@@ -10,7 +11,7 @@
 namespace neurosim::web {
 
 namespace {
-constexpr dds_attach_t kData = 1, kLiveliness = 2;
+constexpr dds_attach_t kData = 1;
 
 // Deformation is keep-last 1 on the wire; the bridge's reader keeps a few frames per mesh so a
 // FULL frame is not overwritten by the next delta between two takes (history need not match).
@@ -20,27 +21,23 @@ wire::Qos deformation_reader_qos() {
   return q;
 }
 
-wire::ParticipantOptions participant_options(const DdsSourceOptions& o) {
-  wire::ParticipantOptions po;
-  if (o.domain >= 0) po.domain = static_cast<dds_domainid_t>(o.domain);
-  return po;
-}
 }  // namespace
 
 struct DdsSource::Impl {
   Hub& hub;
   Log log;
   const double stations_period_s;
-  wire::Participant pp;
+  // The shared client set-up (participant, prefixed topics, the server's SimStatus and its
+  // liveliness on the waitset) plus the observer's own readers.
+  wire::ClientSession session;
   wire::Topic<neurosim_MeshTopology> topo_topic;
   wire::Topic<neurosim_Deformation> deform_topic;
   wire::Topic<neurosim_ContactModel> model_topic;
-  wire::Topic<neurosim_SimStatus> status_topic;
   wire::Reader<neurosim_MeshTopology> topologies;
   wire::Reader<neurosim_Deformation> deformations;
   wire::Reader<neurosim_ContactModel> models;
-  wire::Reader<neurosim_SimStatus> status;
-  wire::Waitset ws;
+  wire::Reader<neurosim_SimStatus>& status;
+  wire::Waitset& ws;
   ObserverState state;  // DDS thread only
   mutable std::mutex counters_m;
   ObserverCounters counters_copy;
@@ -52,21 +49,18 @@ struct DdsSource::Impl {
       : hub(h),
         log(std::move(l)),
         stations_period_s(o.stations_hz > 0 ? 1.0 / o.stations_hz : 1.0 / 30),
-        pp(participant_options(o)),
-        topo_topic(pp, wire::topic_name<neurosim_MeshTopology>(o.topic_prefix)),
-        deform_topic(pp, wire::topic_name<neurosim_Deformation>(o.topic_prefix)),
-        model_topic(pp, wire::topic_name<neurosim_ContactModel>(o.topic_prefix)),
-        status_topic(pp, wire::topic_name<neurosim_SimStatus>(o.topic_prefix)),
-        topologies(pp, topo_topic),
-        deformations(pp, deform_topic, deformation_reader_qos(), wire::ReaderOptions{64}),
-        models(pp, model_topic),
-        status(pp, status_topic),
-        ws(pp),
+        session(wire::ClientOptions{o.domain, o.topic_prefix}),
+        topo_topic(session.topic<neurosim_MeshTopology>()),
+        deform_topic(session.topic<neurosim_Deformation>()),
+        model_topic(session.topic<neurosim_ContactModel>()),
+        topologies(session.participant(), topo_topic),
+        deformations(session.participant(), deform_topic, deformation_reader_qos(), wire::ReaderOptions{64}),
+        models(session.participant(), model_topic),
+        status(session.status()),
+        ws(session.waitset()),
         state([this](const std::string& m) { log("neurosim-web: " + m); }) {
     ws.attach_data(topologies, kData);
     ws.attach_data(deformations, kData);
-    ws.attach_data(status, kData);
-    ws.attach_liveliness(status, kLiveliness);
     // ContactModel arrives at 1 kHz per station: it is taken at stations_hz (keep-last 1 per
     // station: the newest waits in the reader), not attached to the waitset.
   }
@@ -88,8 +82,7 @@ void DdsSource::Impl::run() {
     bool status_dirty = false;
 
     // Server liveliness first: a restarted server's topology then lands in a live state.
-    const wire::Liveliness l = status.liveliness();
-    if (state.set_server_alive(l.alive_count > 0)) {
+    if (state.set_server_alive(session.server_alive())) {
       alive.store(state.server_alive());
       log(state.server_alive() ? "neurosim-web: server seen (SimStatus writer alive)"
                                : "neurosim-web: server gone (SimStatus writer lost); the "

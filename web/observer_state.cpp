@@ -1,6 +1,8 @@
 #include "web/observer_state.hpp"
 
+#include "common/force_colour.hpp"
 #include "common/json.hpp"
+#include "common/tool_pose.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -42,16 +44,6 @@ bool finite3(const double* v) {
   return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
 }
 
-// Shaft axis of a tool with orientation q = (w, x, y, z): the tool frame's +z in the scene frame
-// (the server's convention), unit length; +z when q is degenerate.
-std::array<double, 3> shaft_axis(const double* q) {
-  const double w = q[0], x = q[1], y = q[2], z = q[3];
-  std::array<double, 3> a{2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)};
-  const double n = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-  if (!(n > 1e-12) || !std::isfinite(n)) return {0, 0, 1};
-  return {a[0] / n, a[1] / n, a[2] / n};
-}
-
 common::Json array3(const std::array<double, 3>& v) {
   return common::Json::array({v[0], v[1], v[2]});
 }
@@ -59,8 +51,7 @@ common::Json array3(const std::array<double, 3>& v) {
 }  // namespace
 
 std::array<double, 3> force_colour(double force_n, double force_unit_n) {
-  const double f = std::isfinite(force_n) ? std::abs(force_n) / force_unit_n : 1.0;
-  return {std::min(0.2 + f, 1.0), std::max(0.2 - f, 0.0), std::max(0.2 - f, 0.0)};
+  return common::force_colour(force_n, force_unit_n);
 }
 
 ObserverState::ObserverState(Warn warn, int max_warnings_per_kind)
@@ -247,7 +238,7 @@ bool ObserverState::ingest_contact(const neurosim_ContactModel& c) {
     s.force_n[static_cast<std::size_t>(k)] = c.in_contact ? c.f0_n[k] : 0.0;
     s.tip_m[static_cast<std::size_t>(k)] = c.x0_position_m[k];
   }
-  s.axis = shaft_axis(c.x0_orientation);
+  s.axis = common::shaft_axis(c.x0_orientation);
   s.in_contact = c.in_contact;
   s.mesh = std::string(c.contact_mesh_id);
   s.server_time_ns = c.server_time_ns;

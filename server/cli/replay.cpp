@@ -1,5 +1,6 @@
 #include "server/cli/replay.hpp"
 
+#include "common/tool_pose.hpp"
 #include "idl/wire/recording_io.hpp"
 
 #include <algorithm>
@@ -41,8 +42,9 @@ interaction::ToolPose pose_of(const recording::Sample& s, int tool) {
   tp.tip_m = interaction::Vec3(s.position_m().x(), s.position_m().y(), s.position_m().z());
   const auto& o = s.orientation();
   const double qn = std::sqrt(o.w() * o.w() + o.x() * o.x() + o.y() * o.y() + o.z() * o.z());
-  const double w = o.w() / qn, x = o.x() / qn, y = o.y() / qn, z = o.z() / qn;
-  tp.axis = interaction::Vec3(2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y));
+  const double q[4] = {o.w() / qn, o.x() / qn, o.y() / qn, o.z() / qn};
+  const std::array<double, 3> a = common::rotated_z(q);
+  tp.axis = interaction::Vec3(a[0], a[1], a[2]);
   tp.tool = tool;
   return tp;
 }

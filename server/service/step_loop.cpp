@@ -1,6 +1,7 @@
 #include "server/service/step_loop.hpp"
 
 #include "common/clock.hpp"
+#include "common/tool_pose.hpp"
 
 #include <time.h>
 
@@ -262,9 +263,9 @@ void StepLoop::step_once() {
     const PoseSample& p = s.pose.newest();
     ToolPose& tp = all_poses_[n];
     tp.tip_m = interaction::Vec3(p.position_m[0], p.position_m[1], p.position_m[2]);
-    // Shaft axis: the tool frame's +z rotated into the scene frame by q = (w, x, y, z).
-    const double w = p.orientation[0], x = p.orientation[1], y = p.orientation[2], z = p.orientation[3];
-    tp.axis = interaction::Vec3(2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y));
+    // Shaft axis: the tool frame's +z rotated into the scene frame by q (unit: the filter's).
+    const std::array<double, 3> a = common::rotated_z(p.orientation);
+    tp.axis = interaction::Vec3(a[0], a[1], a[2]);
     tp.tool = p.tool;
     // The physics steps the tool held on the free side of the bone (server-side proxy).
     if (rigid_ != nullptr) proxies_[i].constrain(shapes_[static_cast<std::size_t>(tp.tool)], tp, rigid_planes_[i]);

@@ -1,5 +1,6 @@
 #include "viewer_client/viewer/dds_client.hpp"
 
+#include "idl/wire/client.hpp"
 #include "idl/wire/dds.hpp"
 
 #include <optional>
@@ -7,7 +8,7 @@
 namespace neurosim::viewer {
 
 namespace {
-constexpr dds_attach_t kData = 1, kLiveliness = 2;
+constexpr dds_attach_t kData = 1;
 
 // Deformation is keep-last 1 on the wire, but the viewer renders slower than the 30 Hz stream:
 // its reader keeps the last second of frames so the FULL frames that the deltas refer to are
@@ -19,43 +20,35 @@ wire::Qos deformation_reader_qos() {
 }
 }  // namespace
 
+// The shared client set-up (wire::ClientSession: participant, prefixed topics, the server's
+// SimStatus and its liveliness on the waitset) plus the viewer's own readers.
 struct DdsClient::Impl {
-  wire::Participant pp;
+  wire::ClientSession session;
   wire::Topic<neurosim_MeshTopology> topo_topic;
   wire::Topic<neurosim_Deformation> deform_topic;
   wire::Topic<neurosim_ToolState> tool_topic;
   wire::Topic<neurosim_ContactModel> model_topic;
-  wire::Topic<neurosim_SimStatus> status_topic;
   wire::Reader<neurosim_MeshTopology> topologies;
   wire::Reader<neurosim_Deformation> deformations;
   wire::Reader<neurosim_ToolState> tools;
   wire::Reader<neurosim_ContactModel> models;
-  wire::Reader<neurosim_SimStatus> status;
-  wire::Waitset ws;
-
-  static wire::ParticipantOptions participant_options(const DdsClientOptions& o) {
-    wire::ParticipantOptions po;
-    if (o.domain >= 0) po.domain = static_cast<dds_domainid_t>(o.domain);
-    return po;
-  }
+  wire::Reader<neurosim_SimStatus>& status;
+  wire::Waitset& ws;
 
   explicit Impl(const DdsClientOptions& o)
-      : pp(participant_options(o)),
-        topo_topic(pp, wire::topic_name<neurosim_MeshTopology>(o.topic_prefix)),
-        deform_topic(pp, wire::topic_name<neurosim_Deformation>(o.topic_prefix)),
-        tool_topic(pp, wire::topic_name<neurosim_ToolState>(o.topic_prefix)),
-        model_topic(pp, wire::topic_name<neurosim_ContactModel>(o.topic_prefix)),
-        status_topic(pp, wire::topic_name<neurosim_SimStatus>(o.topic_prefix)),
-        topologies(pp, topo_topic),
-        deformations(pp, deform_topic, deformation_reader_qos(), wire::ReaderOptions{128}),
-        tools(pp, tool_topic),
-        models(pp, model_topic),
-        status(pp, status_topic),
-        ws(pp) {
+      : session(wire::ClientOptions{o.domain, o.topic_prefix}),
+        topo_topic(session.topic<neurosim_MeshTopology>()),
+        deform_topic(session.topic<neurosim_Deformation>()),
+        tool_topic(session.topic<neurosim_ToolState>()),
+        model_topic(session.topic<neurosim_ContactModel>()),
+        topologies(session.participant(), topo_topic),
+        deformations(session.participant(), deform_topic, deformation_reader_qos(), wire::ReaderOptions{128}),
+        tools(session.participant(), tool_topic),
+        models(session.participant(), model_topic),
+        status(session.status()),
+        ws(session.waitset()) {
     ws.attach_data(topologies, kData);
     ws.attach_data(deformations, kData);
-    ws.attach_data(status, kData);
-    ws.attach_liveliness(status, kLiveliness);
   }
 };
 
@@ -70,8 +63,7 @@ bool DdsClient::poll(ViewerState& state) {
   Impl& im = *impl_;
   bool changed = false;
   // Server liveliness first: a restarted server's topology then lands in a "live" state.
-  const wire::Liveliness l = im.status.liveliness();
-  const bool alive = l.alive_count > 0;
+  const bool alive = im.session.server_alive();
   if (alive != state.server_alive()) {
     state.set_server_alive(alive);
     changed = true;

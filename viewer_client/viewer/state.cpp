@@ -1,5 +1,8 @@
 #include "viewer_client/viewer/state.hpp"
 
+#include "common/force_colour.hpp"
+#include "common/tool_pose.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -27,14 +30,13 @@ bool finite3(const double* v) {
 }  // namespace
 
 std::array<double, 3> force_colour(double force_n, double force_unit_n) {
-  const double f = std::isfinite(force_n) ? std::abs(force_n) / force_unit_n : 1.0;
-  return {std::min(0.2 + f, 1.0), std::max(0.2 - f, 0.0), std::max(0.2 - f, 0.0)};
+  return common::force_colour(force_n, force_unit_n);
 }
 
 Eigen::Vector3d shaft_axis(double w, double x, double y, double z) {
-  Eigen::Vector3d a(2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y));
-  const double n = a.norm();
-  return n > 1e-12 && std::isfinite(n) ? Eigen::Vector3d(a / n) : Eigen::Vector3d::UnitZ();
+  const double q[4] = {w, x, y, z};
+  const std::array<double, 3> a = common::shaft_axis(q);
+  return Eigen::Vector3d(a[0], a[1], a[2]);
 }
 
 MeshState mesh_from_topology(const neurosim_MeshTopology& t) {
