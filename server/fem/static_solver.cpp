@@ -2,6 +2,7 @@
 
 #include "common/clock.hpp"
 #include "server/fem/power_iteration.hpp"
+#include "server/fem/supports.hpp"
 
 #include <Eigen/Cholesky>
 #include <Eigen/CholmodSupport>
@@ -44,37 +45,6 @@ cholmod_dense dense_view(double* data, std::size_t rows, std::size_t cols) {
   d.xtype = CHOLMOD_REAL;
   d.dtype = CHOLMOD_DOUBLE;
   return d;
-}
-
-// Union-find over nodes joined by tetrahedra: connected parts of the mesh.
-std::vector<int> connected_parts(const mesh::TetMesh& mesh, int& num_parts) {
-  const int n = static_cast<int>(mesh.num_vertices());
-  std::vector<int> parent(n);
-  std::iota(parent.begin(), parent.end(), 0);
-  auto find = [&](int v) {
-    while (parent[v] != v) {
-      v = parent[v] = parent[parent[v]];
-    }
-    return v;
-  };
-  for (const auto& t : mesh.tets()) {
-    for (int a = 1; a < 4; ++a) {
-      const int r0 = find(t[0]), r1 = find(t[a]);
-      if (r0 != r1) {
-        parent[std::max(r0, r1)] = std::min(r0, r1);
-      }
-    }
-  }
-  std::vector<int> part(n, -1), root_part(n, -1);
-  num_parts = 0;
-  for (int v = 0; v < n; ++v) {
-    const int r = find(v);
-    if (root_part[r] < 0) {
-      root_part[r] = num_parts++;
-    }
-    part[v] = root_part[r];
-  }
-  return part;
 }
 
 }  // namespace
@@ -176,57 +146,14 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
 
   // Rigid-body modes: every connected part needs >= 3 non-collinear fixed nodes.
   if (options_.check_rigid_modes) {
-    int num_parts = 0;
-    const std::vector<int> part = connected_parts(mesh, num_parts);
-    std::vector<std::vector<int>> part_fixed(num_parts);
-    std::vector<int> part_size(num_parts, 0), part_first(num_parts, -1);
-    for (int v = 0; v < num_nodes_; ++v) {
-      if (!used[v]) {
-        continue;
-      }
-      ++part_size[part[v]];
-      if (part_first[part[v]] < 0) {
-        part_first[part[v]] = v;
-      }
-      if (is_fixed[v]) {
-        part_fixed[part[v]].push_back(v);
-      }
-    }
-    const auto& x = mesh.vertices();
-    for (int p = 0; p < num_parts; ++p) {
-      if (part_size[p] == 0) {
-        continue;
-      }
-      const auto& fx = part_fixed[p];
-      std::string problem;
-      if (fx.empty()) {
-        problem = "has no fixed node (6 rigid-body modes)";
-      } else {
-        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-        for (int v : fx) {
-          mean += x[v];
-        }
-        mean /= static_cast<double>(fx.size());
-        Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-        for (int v : fx) {
-          cov += (x[v] - mean) * (x[v] - mean).transpose();
-        }
-        const Eigen::Vector3d ev =
-            Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();
-        if (fx.size() == 1) {
-          problem = "has only 1 fixed node (3 rotations free)";
-        } else if (!(ev(1) > 1e-12 * ev(2))) {
-          problem = "has only collinear fixed nodes (" + std::to_string(fx.size()) +
-                    "): rotation about their line is free";
-        }
-      }
-      if (!problem.empty()) {
-        throw std::invalid_argument(
-            where + ": insufficient fixed nodes, the stiffness is singular: connected part " +
-            std::to_string(p) + " (" + std::to_string(part_size[p]) + " nodes, first node " +
-            std::to_string(part_first[p]) + ") " + problem +
-            "; fix at least 3 non-collinear nodes of every part");
-      }
+    const std::vector<UnsupportedPart> bad = unsupported_parts(mesh, fixed_nodes_);
+    if (!bad.empty()) {
+      const UnsupportedPart& p = bad.front();
+      throw std::invalid_argument(
+          where + ": insufficient fixed nodes, the stiffness is singular: connected part " +
+          std::to_string(p.part) + " (" + std::to_string(p.nodes.size()) + " nodes, first node " +
+          std::to_string(p.nodes.front()) + ") " + p.problem +
+          "; fix at least 3 non-collinear nodes of every part");
     }
   }
 

@@ -3,6 +3,7 @@
 #include "server/interaction/simulation.hpp"
 
 #include "common/clock.hpp"
+#include "server/fusion/carve.hpp"
 #include "server/fusion/coupling_map.hpp"
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/triangle_surface.hpp"
@@ -42,43 +43,6 @@ bool deeper(const Row& a, const Row& b) {
   if (a.depth_m != b.depth_m) return a.depth_m > b.depth_m;
   if (a.body != b.body) return a.body < b.body;
   return a.slot < b.slot;
-}
-
-// Tetrahedra of `host` enclosed by the triangles `cut` (S'): those not reachable from the
-// host's surface without crossing a face of S'. Empty result if S' does not close.
-std::vector<char> tets_inside(const mesh::TetMesh& host, const std::vector<mesh::Tri>& cut) {
-  std::vector<std::array<int, 3>> faces;
-  faces.reserve(cut.size());
-  for (const auto& t : cut) {
-    std::array<int, 3> f{t[0], t[1], t[2]};
-    std::sort(f.begin(), f.end());
-    faces.push_back(f);
-  }
-  std::sort(faces.begin(), faces.end());
-  std::vector<char> outside(host.num_tets(), 0);
-  std::vector<int> stack;
-  for (int t : host.surface_tet()) {
-    if (!outside[t]) {
-      outside[t] = 1;
-      stack.push_back(t);
-    }
-  }
-  while (!stack.empty()) {
-    const int t = stack.back();
-    stack.pop_back();
-    for (int k = 0; k < 4; ++k) {
-      const int nb = host.neighbours()[t][k];
-      if (nb < 0 || outside[nb]) continue;
-      std::array<int, 3> f{};
-      for (int a = 0; a < 3; ++a) f[a] = host.tets()[t][mesh::kTetFaces[k][a]];
-      std::sort(f.begin(), f.end());
-      if (std::binary_search(faces.begin(), faces.end(), f)) continue;
-      outside[nb] = 1;
-      stack.push_back(nb);
-    }
-  }
-  for (auto& o : outside) o = !o;
-  return outside;  // now: inside
 }
 
 }  // namespace
@@ -378,7 +342,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     }
     p.max_distance_m = map.embedded_to_boundary.max_m;
     if (options_.carve_host) {
-      const auto inside = tets_inside(host.mesh, boundary.triangles);
+      const auto inside = fusion::tets_inside(host.mesh, boundary.triangles);
       if (carve[h].empty()) carve[h].assign(host.mesh.num_tets(), 0);
       for (std::size_t t = 0; t < inside.size(); ++t)
         if (inside[t]) carve[h][t] = 1;

@@ -95,6 +95,10 @@ struct ModelResult {
   int artery_vertices_outside{0};   // artery vertices not strictly inside the brain surface
   int fixed_nodes{0};               // brain nodes fixed at the skull base
   int prescribed_nodes{0};          // brain nodes of the static load case (tool footprint)
+  int carved_tets{0};    // brain tetrahedra the server removes inside the artery at load
+  int island_parts{0};   // parts of the carved brain no fixed node held (pinned)
+  int pinned_nodes{0};   // their nodes, fixed by id in the scene (included in fixed_nodes)
+  double island_seconds{0.0};  // the load check (carving, parts), unit s
   Vec3 fixed_plane_point_m{Vec3::Zero()};
   Vec3 fixed_plane_normal{Vec3::UnitZ()};
   std::filesystem::path scene;
@@ -103,7 +107,9 @@ struct ModelResult {
 };
 
 // Builds everything and writes <out_dir>/<name>.scene and <out_dir>/<name>/{brain,artery}.mesh,
-// then reads the scene back with the server's loader. Throws std::invalid_argument on bad
+// then reads the scene back with the server's loader. Before the scene is written, the brain is
+// carved around the artery as the server does at load and every part the fixed nodes leave free
+// is pinned (islands.hpp): the scene written always loads. Throws std::invalid_argument on bad
 // options and std::runtime_error when the MRI cannot be read or the artery course leaves the
 // brain mask. An artery vertex outside the brain mesh is reported, not thrown.
 ModelResult build_model(const ModelOptions& options);

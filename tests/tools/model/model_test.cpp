@@ -2,6 +2,7 @@
 #include "tools/model/model.hpp"
 #include "server/mesh/io.hpp"
 #include "server/mesh/quality.hpp"
+#include "server/interaction/simulation.hpp"
 #include "server/scene/compile.hpp"
 #include "test_support.hpp"
 
@@ -158,6 +159,8 @@ TEST_F(model_builder, SceneParsesAndLoads) {
   const auto pushed = scene::select_nodes(brain.mesh, s.prescribed(0).region(), "prescribed");
   EXPECT_EQ(static_cast<int>(pushed.size()), result_->prescribed_nodes);
   EXPECT_LT(pushed.size(), 50u);
+  // The server's loader (carving, tie, factorization) takes it.
+  EXPECT_NO_THROW(neurosim::interaction::Simulation::build(scene::load_model(result_->scene)));
   // Brain-sized (m): Colin27 is about 0.14 x 0.17 x 0.12 m.
   EXPECT_GT((hi - lo).minCoeff(), 0.08);
   EXPECT_LT((hi - lo).maxCoeff(), 0.25);
