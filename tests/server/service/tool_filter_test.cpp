@@ -1,11 +1,6 @@
-// Unit tests of the service's building blocks: the ToolState filter (non-finite values,
-// workspace, future times, sequence, rate, jumps beyond the maximum speed at receive times), the
-// log limiter, the partition claim and the command line. The newest-pose triple buffer is
-// common::TripleBuffer (tests/common/triple_buffer_test.cpp).
+// The ToolState filter: non-finite values, workspace, future times, sequence, rate, jumps beyond
+// the maximum speed at receive times.
 #include "idl/wire/types.hpp"
-#include "server/service/server.hpp"
-#include "server/service/log_limiter.hpp"
-#include "server/service/station_identity.hpp"
 #include "server/service/tool_filter.hpp"
 
 #include <gtest/gtest.h>
@@ -171,46 +166,4 @@ TEST(service_tool_filter, RefusesBadLimits) {
   d.workspace.min_m[1] = 1;
   d.workspace.max_m[1] = 0;
   EXPECT_THROW(ToolFilter{d}, std::invalid_argument);
-}
-
-TEST(service_log_limiter, AtMostNLinesPerSecondPerCauseThenASummary) {
-  neurosim::service::LogLimiter lim(3);
-  std::string summary;
-  int allowed = 0;
-  for (int i = 0; i < 100; ++i) allowed += lim.allow("identity", i * kMs, &summary);
-  EXPECT_EQ(allowed, 3);
-  EXPECT_TRUE(lim.allow("workspace", 0, &summary)) << "causes are limited separately";
-  EXPECT_TRUE(lim.allow("identity", 1000 * kMs, &summary));
-  EXPECT_NE(summary.find("suppressed 97 'identity' lines"), std::string::npos) << summary;
-  EXPECT_EQ(lim.suppressed_total(), 97u);
-  EXPECT_THROW(neurosim::service::LogLimiter(0), std::invalid_argument);
-}
-
-TEST(service_station_identity, AWriterClaimsTheOneStationOfItsPartition) {
-  using neurosim::service::station_claim;
-  EXPECT_EQ(station_claim({"neurosim.station.omni-1"}).value_or("-"), "omni-1");
-  EXPECT_FALSE(station_claim({}).has_value()) << "default partition: no claim";
-  EXPECT_FALSE(station_claim({"neurosim.station.*"}).has_value()) << "a wildcard claims nothing";
-  EXPECT_FALSE(station_claim({"neurosim.station.a", "neurosim.station.b"}).has_value());
-  EXPECT_EQ(station_claim({"other", "neurosim.station.a"}).value_or("-"), "a");
-  EXPECT_FALSE(station_claim({"neurosim.station." + std::string(65, 'x')}).has_value());
-  EXPECT_EQ(neurosim::wire::station_partition("omni-1"), "neurosim.station.omni-1");
-  EXPECT_THROW(neurosim::wire::station_partition("a*"), std::invalid_argument);
-  EXPECT_THROW(neurosim::wire::station_partition(""), std::invalid_argument);
-  EXPECT_THROW(neurosim::wire::writer_qos(neurosim::wire::Profile::ToolState), std::logic_error);
-}
-
-TEST(service_command_line, BadArgumentsExitTwo) {
-  auto never = [](const neurosim::scene::Model&) -> std::unique_ptr<neurosim::interaction::Simulation> {
-    ADD_FAILURE() << "no simulation may be built";
-    return nullptr;
-  };
-  const char* a1[] = {"neurosim-server"};
-  EXPECT_EQ(neurosim::service::run_main(1, const_cast<char**>(a1), never), 2);
-  const char* a2[] = {"neurosim-server", "--scene", "x.scene", "--duration", "-1"};
-  EXPECT_EQ(neurosim::service::run_main(5, const_cast<char**>(a2), never), 2);
-  const char* a3[] = {"neurosim-server", "--scene", "x.scene", "--bogus"};
-  EXPECT_EQ(neurosim::service::run_main(4, const_cast<char**>(a3), never), 2);
-  const char* a4[] = {"neurosim-server", "--scene", "/nonexistent/x.scene"};
-  EXPECT_EQ(neurosim::service::run_main(3, const_cast<char**>(a4), never), 1);
 }
