@@ -32,6 +32,7 @@ class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen:
 void check_options(const std::string& where, const NewtonOptions& o) {
   if (o.increments < 0 || !(o.tolerance > 0.0) || o.max_iterations < 1 || o.max_cutbacks < 0 ||
       o.min_iterations < 0 || o.min_iterations > o.max_iterations || o.step_limit < 0 ||
+      !(o.path_tolerance >= 0.0) ||
       (o.reuse_factorization && !(o.refactor_contraction > 0.0 && o.refactor_contraction < 1.0)) ||
       (o.reuse_factorization && (o.anderson_depth < 0 || o.anderson_depth > 16))) {
     std::ostringstream msg;
@@ -676,9 +677,12 @@ EquilibriumResult EquilibriumSolver::solve(const Eigen::VectorXd& forces_n,
     NewtonIncrement inc;
     inc.load_factor = t_next;
     inc.cutbacks = cutbacks;
+    NewtonOptions increment_options = options;
+    if (t_next < 1.0 && options.path_tolerance > options.tolerance)
+      increment_options.tolerance = options.path_tolerance;
     try {
       s.f_ext = t_next * f_full;
-      s.newton(s.f_ext, u_try, options, inc);
+      s.newton(s.f_ext, u_try, increment_options, inc);
     } catch (const Failure& e) {
       if (++cutbacks > options.max_cutbacks) {
         std::ostringstream msg;

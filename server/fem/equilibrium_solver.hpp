@@ -65,6 +65,13 @@ struct NewtonOptions {
   // volume), unit N. Dimensionless.
   double tolerance{1e-10};
   int max_iterations{40};  // per increment
+  // solve only. > 0: the increments before the last (load factor < 1) end when max |r_free| <=
+  // path_tolerance * force scale (when it is above `tolerance`); the last increment is converged
+  // to `tolerance` either way. The increments only lead Newton along the load path to the
+  // answer at load factor 1, which for a hyperelastic body (no history) does not depend on how
+  // tightly the path was followed: a looser path saves the last one or two iterations of every
+  // increment but the last. 0: every increment to `tolerance`. Dimensionless.
+  double path_tolerance{0.0};
   // Iterations taken even when the start already meets the tolerance (a step that finds no
   // decrease there ends the solve, converged). A worker that re-solves for forces which moved by
   // less than the tolerance still follows them (1), instead of keeping an answer that is only

@@ -276,6 +276,41 @@ void check_reuse_sequence(const EquilibriumDefinition& def, MakeLoad make_load, 
   }
 }
 
+// A loose load path (path_tolerance) with chord steps (reuse_factorization), as neurosim-solve
+// runs it: the increments before the last stop early, fewer tangents are factorized, and the
+// answer at load factor 1 is full Newton's to the convergence tolerance.
+TEST(FemEquilibriumSolver, LoosePathWithChordStepsReachesFullNewtonsAnswer) {
+  const Beam b = beam();
+  const MaterialMap mats = MaterialMap::uniform({1.0e6, 0.4, "beam"});
+  const Eigen::VectorXd f = tip_load(b, 8.0);
+  for (Tier tier : {Tier::kCorotational, Tier::kNonlinear}) {
+    NewtonOptions full;
+    full.increments = 4;
+    EquilibriumSolver a({&b.mesh, mats, tier, b.fixed, {}, {}});
+    const EquilibriumResult ra = a.solve(f, full);
+    NewtonOptions loose = full;
+    loose.path_tolerance = 1e-4;
+    loose.reuse_factorization = true;
+    EquilibriumSolver c({&b.mesh, mats, tier, b.fixed, {}, {}});
+    const EquilibriumResult rc = c.solve(f, loose);
+    int fa = 0, fc = 0;
+    for (const auto& inc : ra.increments) fa += inc.factorizations;
+    for (const auto& inc : rc.increments) fc += inc.factorizations;
+    ASSERT_EQ(ra.increments.size(), rc.increments.size()) << tier_name(tier);
+    for (std::size_t i = 0; i + 1 < rc.increments.size(); ++i) {
+      EXPECT_GT(rc.increments[i].residual_n.back(), 1e-10 * rc.force_scale_n)
+          << tier_name(tier) << " increment " << i << " stopped at the path tolerance";
+      EXPECT_LE(rc.increments[i].residual_n.back(), 1e-4 * 1.5 * rc.force_scale_n);
+    }
+    EXPECT_LE(rc.increments.back().residual_n.back(), 1e-10 * rc.force_scale_n);
+    const double rel = testing::rel_max_diff(rc.displacement_m, ra.displacement_m);
+    std::printf("%s: loose path + chords %d factorizations, full Newton %d; rel diff %.2e\n",
+                tier_name(tier), fc, fa, rel);
+    EXPECT_LT(fc, fa) << tier_name(tier);
+    EXPECT_LT(rel, 1e-8) << tier_name(tier);
+  }
+}
+
 TEST(FemEquilibriumSolver, ReusedFactorizationReachesFullNewtonsAnswer) {
   const Beam b = beam();
   const MaterialMap mats = MaterialMap::uniform({1.0e6, 0.4, "beam"});
