@@ -24,8 +24,8 @@ Scene read_scene(const std::filesystem::path& path);
 // The same for text already in memory; `source` names it in messages.
 Scene parse_scene(const std::string& text, const std::string& source);
 // Semantic checks on a parsed scene (ids unique and referenced ones present, materials,
-// regions, tools, rates, components) and plausible ranges (SI units; README.md lists them:
-// E in [1, 1e12] Pa, rates.step_hz in [10, 1e5] Hz, rates.status_hz in [0.1, 100] Hz, a
+// regions, tools, rates, components) and plausible ranges (SI units; the table is ranges.hpp:
+// E in [1e-3, 1e12] Pa, rates.step_hz in [10, 1e5] Hz, rates.status_hz in [0.1, 100] Hz, a
 // prescribed displacement within 1 m, ...). Throws std::runtime_error naming the field and the
 // allowed range.
 void validate_scene(const Scene& scene, const std::string& source);
