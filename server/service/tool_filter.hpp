@@ -27,6 +27,24 @@ struct Workspace {
   bool contains(const double p[3]) const;
 };
 
+// Tool tips further than this outside the scene's meshes are rejected (unit m): the live
+// server's default (--workspace-margin) and neurosim-replay's.
+inline constexpr double kDefaultWorkspaceMarginM = 0.5;
+
+// The workspace of a scene: the box of its meshes' rest vertices (add each), enlarged by a
+// margin. What the live server and neurosim-replay filter tool tips with.
+class WorkspaceBounds {
+ public:
+  void add(const double p_m[3]);
+  // The box enlarged by margin_m (>= 0, unit m) on every side; no vertex added: the margin
+  // around the origin.
+  Workspace enlarged(double margin_m) const;
+
+ private:
+  Workspace box_{};
+  bool empty_{true};
+};
+
 struct ToolFilterDef {
   double max_speed_m_per_s{2.0};  // > 0, unit m/s
   // Added to the receive interval before the speed test (unit s), so jitter of one device
@@ -35,9 +53,12 @@ struct ToolFilterDef {
   Workspace workspace{};          // the tip must stay inside (scene bounding box + margin)
   double max_future_s{1.0};       // source_time_ns at most this far ahead of receive, unit s
   // Token bucket over receive times: on average at most max_rate_hz samples per second with
-  // bursts of rate_burst; the excess is rejected (Rate). <= 0 Hz: no rate limit.
+  // bursts of rate_burst; the excess is rejected (Rate). <= 0 Hz: no rate limit. The burst
+  // covers what a legitimate station sends after a stall of its machine: the haptic client
+  // writes up to 100 missed ticks back to back before it re-anchors its clock. The limit is
+  // there against floods (their average), and 200 samples once cost the server nothing.
   double max_rate_hz{2000.0};
-  double rate_burst{20.0};
+  double rate_burst{200.0};
 };
 
 // When a sample was taken: the server's monotonic and wall (Unix epoch, dds_time) clocks, ns.

@@ -158,6 +158,33 @@ TEST(service_tool_filter, RateAboveTheLimitIsRejectedA1kHzStationNever) {
   }
 }
 
+// The haptic client (haptic_client/loop.cpp) catches up missed ticks back to back after a
+// stall of its machine, up to 100 of them before it re-anchors its clock: a legitimate burst
+// the default limit must accept, while a flood is still held to the average rate.
+TEST(service_tool_filter, TheDefaultRateLimitAcceptsTheClientsCatchUpBurstNotAFlood) {
+  const ToolFilterDef d;
+  ToolFilter station(d), flood(d);
+  std::int64_t t = 0;
+  std::uint64_t seq = 0;
+  auto send = [&](ToolFilter& f, std::int64_t receive_ns) {
+    auto s = at_ms(0.0, receive_ns);
+    s.sequence_number = ++seq;
+    return f.check(s, at(receive_ns));
+  };
+  for (int k = 0; k < 1000; ++k, t += kMs) ASSERT_EQ(send(station, t), Verdict::Accepted) << k;
+  t += 100 * kMs;  // the station's machine stalled for 100 ms: no sample
+  for (int k = 0; k < 100; ++k)  // then its 100 missed ticks back to back, 10 us apart
+    ASSERT_EQ(send(station, t + k * 10000), Verdict::Accepted) << "catch-up sample " << k;
+  t += kMs;
+  for (int k = 0; k < 1000; ++k, t += kMs) ASSERT_EQ(send(station, t), Verdict::Accepted) << k;
+  // 20 kHz for 1 s: about max_rate_hz + rate_burst pass, the rest is rejected.
+  seq = 0;
+  int passed = 0;
+  for (std::int64_t k = 0; k < 20000; ++k) passed += send(flood, k * 50000) == Verdict::Accepted;
+  EXPECT_LE(passed, static_cast<int>(d.max_rate_hz + d.rate_burst) + 1);
+  EXPECT_GE(passed, static_cast<int>(d.max_rate_hz) - 1);
+}
+
 TEST(service_tool_filter, RefusesBadLimits) {
   EXPECT_THROW(ToolFilter(def(0.0)), std::invalid_argument);
   EXPECT_THROW(ToolFilter(def(std::numeric_limits<double>::quiet_NaN())), std::invalid_argument);
