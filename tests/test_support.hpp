@@ -1,10 +1,14 @@
 // Small helpers shared by the tests.
 #pragma once
 
+#include <fcntl.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -15,6 +19,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <thread>
 
 namespace neurosim::testing {
 
@@ -103,6 +108,35 @@ inline std::string message_with_memory_limit(std::size_t extra_bytes,
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
     message += " (child died, status " + std::to_string(status) + ")";
   return message;
+}
+
+// A named pipe no one writes to, at path, and the message of read(path) run on a thread. A reader
+// that blocks on the pipe (opening it for reading waits for a writer) is released after
+// timeout_s by a writer that opens and closes it, so a broken reader fails the test (its
+// message then starts with "blocked:") instead of hanging it.
+inline std::string message_of_reading_a_fifo(const std::string& path,
+                                             const std::function<void(const std::string&)>& read,
+                                             double timeout_s = 10.0) {
+  if (::mkfifo(path.c_str(), 0600) != 0) return "cannot make the FIFO " + path;
+  std::string message;
+  std::atomic<bool> done{false};
+  std::thread reader([&] {
+    message = message_of([&] { read(path); });
+    done.store(true);
+  });
+  const auto t0 = std::chrono::steady_clock::now();
+  while (!done.load() &&
+         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < timeout_s)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const bool blocked = !done.load();
+  while (!done.load()) {  // release it: a writer comes and goes (end of file for the reader)
+    const int fd = ::open(path.c_str(), O_WRONLY | O_NONBLOCK);
+    if (fd >= 0) ::close(fd);
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  reader.join();
+  std::filesystem::remove(path);
+  return blocked ? "blocked: " + message : message;
 }
 
 }  // namespace neurosim::testing

@@ -1,5 +1,7 @@
 #include "server/mesh/text_reader.hpp"
 
+#include "common/input_file.hpp"
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -11,29 +13,9 @@ namespace neurosim::mesh {
 
 TextReader::TextReader(std::string path, char comment, std::size_t max_bytes)
     : path_(std::move(path)), comment_(comment) {
-  std::ifstream in(path_, std::ios::binary);
-  if (!in) throw std::runtime_error(path_ + ": cannot open file");
-  // In chunks up to max_bytes + 1, never by the size the file claims: a FIFO or /dev/zero has
-  // none, and an endless stream must stop at the limit.
-  try {
-    // A regular file's size is known: one allocation, not the doubling of a growing string.
-    std::error_code ec;
-    const auto size = std::filesystem::file_size(path_, ec);
-    if (!ec) text_.reserve(static_cast<std::size_t>(std::min<std::uintmax_t>(size, max_bytes)) + 1);
-    char chunk[1 << 16];
-    while (in) {
-      const std::size_t want = std::min(sizeof chunk, max_bytes + 1 - text_.size());
-      in.read(chunk, static_cast<std::streamsize>(want));
-      text_.append(chunk, static_cast<std::size_t>(in.gcount()));
-      if (text_.size() > max_bytes)
-        throw std::runtime_error(path_ + ": larger than the limit of " + std::to_string(max_bytes) +
-                                 " bytes for a mesh file (a stream that does not end?)");
-    }
-  } catch (const std::bad_alloc&) {
-    throw std::runtime_error(path_ + ": out of memory after reading " +
-                             std::to_string(text_.size()) + " bytes");
-  }
-  if (in.bad()) throw std::runtime_error(path_ + ": read error");
+  // Regular files only, at most max_bytes (a named pipe would block the open, /dev/zero never
+  // ends): refused before reading, naming the file.
+  text_ = common::read_input_file(path_, max_bytes, "mesh file");
 }
 
 void TextReader::check_count(long long n, int tokens_each, const std::string& what) const {

@@ -1,5 +1,8 @@
 #include "server/scene/scene.hpp"
 
+#include "common/input_file.hpp"
+#include "server/scene/ranges.hpp"
+
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 
@@ -88,42 +91,12 @@ void check_positive(double value, const std::string& source, const std::string& 
   }
 }
 
-// Plausible ranges of scene values (SI units). Beyond them a value is a typo or hostile input
-// that would make the server sleep for years between steps, allocate gigabytes per status
-// period, or "solve" to displacements of astronomical size; refused naming the field and the
-// range. Generous for a surgical scene: the patient model uses E of kPa to MPa, tools of mm,
-// forces of N, rates of 1 Hz to 1 kHz.
-struct Range {
-  double lo, hi;
-  const char* unit;
-  bool zero_is_default;  // 0 (unset) means "the default", outside the range
-};
-constexpr Range kYoungsModulus{1e-3, 1e12, "Pa", false};  // below any gel to above steel (2e11)
-constexpr Range kFileUnit{1e-9, 1e3, "m", false};
-constexpr Range kCoordinate{-10.0, 10.0, "m", false};  // generated shapes, any component
-constexpr Range kLength{0.0, 10.0, "m", false};        // generated sizes
-constexpr Range kToolRadius{0.0, 0.1, "m", false};
-constexpr Range kToolLength{0.0, 1.0, "m", false};
-constexpr Range kToolSpeed{0.0, 100.0, "m/s", true};
-constexpr Range kForce{-1e6, 1e6, "N", false};          // any component of a load
-constexpr Range kDisplacement{-1.0, 1.0, "m", false};   // any component of a prescription
-constexpr Range kStepRate{10.0, 1e5, "Hz", true};       // the server refuses above 1 MHz anyway
-constexpr Range kViewerRate{0.1, 1e3, "Hz", true};
-// With the step rate, bounds the steps per status period (<= 1e6) the server keeps times for.
-constexpr Range kStatusRate{0.1, 100.0, "Hz", true};
-constexpr Range kScale{1e-3, 1e3, "", true};            // haptic force and workspace scales
-constexpr Range kMaxForce{0.0, 100.0, "N", true};
-// Far above what a 1 kHz model can step; about mesh::MeshingOptions::max_tetrahedra (2e6) at
-// the mesher's ~6 tetrahedra per vertex.
-constexpr int kMaxGeneratedVertices = 300'000;
-constexpr int kMaxStations = 64;                  // SimStatus.stations holds at most 64
-constexpr Range kOpeningRadius{0.0, 0.1, "m", false};       // a craniotomy of up to 20 cm
-constexpr Range kOpeningHalfLength{0.0, 0.2, "m", false};   // through a head and beyond
+using ranges::Range;
+using namespace ranges;
 
 void check_range(double value, const Range& r, const std::string& source,
                  const std::string& field) {
-  if (r.zero_is_default && value == 0.0) return;
-  if (std::isfinite(value) && value >= r.lo && value <= r.hi) return;
+  if (r.contains(value)) return;
   std::ostringstream msg;
   msg << value << " is outside [" << r.lo << ", " << r.hi << "]" << (*r.unit ? " " : "")
       << r.unit << (r.zero_is_default ? " (0 or unset: the default)" : "");
@@ -200,25 +173,13 @@ Scene parse_scene(const std::string& text, const std::string& source) {
 }
 
 Scene read_scene(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error(path.string() + ": cannot open scene file");
-  // Read in chunks up to the limit, never by the size the file claims: a FIFO or device that
-  // never ends stops here.
-  std::string text;
+  // Regular files only, at most kMaxSceneFileBytes: a named pipe or a device is refused before
+  // reading (opening a pipe alone would wait for a writer).
+  const std::string text = common::read_input_file(path.string(), kMaxSceneFileBytes, "scene file");
   try {
-    char chunk[1 << 16];
-    while (in) {
-      in.read(chunk, sizeof chunk);
-      text.append(chunk, static_cast<std::size_t>(in.gcount()));
-      if (text.size() > kMaxSceneFileBytes)
-        throw std::runtime_error(path.string() + ": larger than the limit of " +
-                                 std::to_string(kMaxSceneFileBytes) +
-                                 " bytes for a scene file (a stream that does not end?)");
-    }
-    if (in.bad()) throw std::runtime_error(path.string() + ": read error");
     return parse_scene(text, path.string());
   } catch (const std::bad_alloc&) {
-    throw std::runtime_error(path.string() + ": out of memory while reading the scene");
+    throw std::runtime_error(path.string() + ": out of memory while parsing the scene");
   }
 }
 
@@ -333,7 +294,7 @@ void validate_scene(const Scene& scene, const std::string& source) {
   check_range(scene.haptics().force_scale(), kScale, source, "haptics.force_scale");
   check_range(scene.haptics().workspace_scale(), kScale, source, "haptics.workspace_scale");
   check_range(scene.haptics().max_force_n(), kMaxForce, source, "haptics.max_force_n");
-  check_range(scene.image().file_unit_m(), Range{kFileUnit.lo, kFileUnit.hi, "m", true}, source,
+  check_range(scene.image().file_unit_m(), kImageFileUnit, source,
               "image.file_unit_m");
   if (scene.max_stations() < 0 || scene.max_stations() > kMaxStations) {
     fail(source, "max_stations",

@@ -174,12 +174,15 @@ TEST(Scene, ImplausibleValuesAreRefusedNamingFieldAndRange) {
                   "edge.scene"));
 }
 
-// A scene path that is a stream without end (a device, a FIFO) stops at the size limit.
-TEST(Scene, EndlessSceneFileStopsAtTheLimit) {
-  const std::string msg = message_of([] { read_scene("/dev/zero"); });
-  EXPECT_EQ(
-      msg.rfind("/dev/zero: larger than the limit of " + std::to_string(kMaxSceneFileBytes), 0), 0u)
-      << msg;
+// A scene path that is not a regular file (a device, a named pipe no one writes to) is refused
+// before reading, naming it: the pipe would block the open for ever.
+TEST(Scene, SpecialSceneFilesAreRefusedBeforeReading) {
+  EXPECT_EQ(message_of([] { read_scene("/dev/zero"); }),
+            "/dev/zero: scene file: is a character device, not a regular file");
+  const auto fifo = (neurosim::testing::temp_dir("scene_fifo") / "pipe.scene").string();
+  EXPECT_EQ(neurosim::testing::message_of_reading_a_fifo(
+                fifo, [](const std::string& p) { read_scene(p); }),
+            fifo + ": scene file: is a named pipe, not a regular file");
 }
 
 // A generated mesh whose expected size is absurd is refused before the mesher runs, naming the
