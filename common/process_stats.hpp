@@ -14,4 +14,11 @@ long resident_kib(pid_t pid = 0);
 // unknown.
 double cpu_seconds(pid_t pid = 0);
 
+// Memory this process can still get, unit byte, as the system states it: the smallest of the
+// machine's MemAvailable (/proc/meminfo), the address-space limit (RLIMIT_AS) less this
+// process's virtual size, and its cgroup's memory.max less memory.current. +inf when none is
+// known. `source` (if not null) gets which bound it is ("MemAvailable", "RLIMIT_AS", "cgroup
+// memory.max").
+double memory_available_bytes(const char** source = nullptr);
+
 }  // namespace neurosim::common

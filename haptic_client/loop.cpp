@@ -33,6 +33,7 @@ HapticLoop::HapticLoop(const LoopConfig& config, Device& device, Link* link, Rec
   r_ = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), cfg_.workspace_up / n)
            .toRotationMatrix();
   trace_.reserve(cfg_.trace_capacity);
+  sent_time_ns_.assign(kSentPoses, 0);
 }
 
 ForceTraceSummary HapticLoop::force_trace() const {
@@ -42,6 +43,7 @@ ForceTraceSummary HapticLoop::force_trace() const {
   f.mean_contact_force_n =
       contact_ticks_ > 0 ? contact_force_sum_ / static_cast<double>(contact_ticks_) : 0;
   f.models_seen = models_seen_;
+  f.foreign_models = foreign_models_;
   f.rigid_contact_ticks = rigid_ticks_;
   f.max_wall_force_n = max_wall_force_;
   f.max_wall_penetration_m = max_wall_penetration_;
@@ -49,6 +51,12 @@ ForceTraceSummary HapticLoop::force_trace() const {
 }
 
 std::uint64_t HapticLoop::recorder_dropped() const { return recorder_ ? recorder_->dropped() : 0; }
+
+bool HapticLoop::answers_own_pose(const ContactModelData& m) const {
+  const std::uint64_t q = m.tool_sequence;
+  return q >= 1 && q <= seq_ && seq_ - q < kSentPoses &&
+         sent_time_ns_[q % kSentPoses] == m.reference_time_ns;
+}
 
 void HapticLoop::tick(std::int64_t now_ns, double t_s, double period_s, double lateness_s) {
   const DeviceReading r = device_.read(t_s);
@@ -75,7 +83,13 @@ void HapticLoop::tick(std::int64_t now_ns, double t_s, double period_s, double l
     // The device position, also when a rigid plane holds the proxy back: the server projects it
     // onto its own obstacles again (sending the proxy would hide how deep the hand pushes).
     link_->publish(ts);
-    if (link_->take_model(model_buf_)) nm = &model_buf_;
+    sent_time_ns_[ts.sequence_number % kSentPoses] = ts.source_time_ns;
+    if (link_->take_model(model_buf_)) {
+      // Only a model answering a pose of this loop: under a station id another participant
+      // also writes, the server may answer that writer's poses (never rendered here).
+      if (answers_own_pose(model_buf_)) nm = &model_buf_;
+      else ++foreign_models_;
+    }
     alive = link_->server_alive();
   }
   ForceInput in;

@@ -67,6 +67,10 @@ struct ForceTraceSummary {
   double max_force_n = 0;           // largest |F| commanded, unit N
   double mean_contact_force_n = 0;  // mean |F| over contact ticks, unit N
   std::uint64_t models_seen = 0;    // distinct model sequences used
+  // Models ignored because they answer no pose this loop sent (their tool_sequence and source
+  // time echo are not one of its own: another writer under the same station id, a stale
+  // session), never rendered.
+  std::uint64_t foreign_models = 0;
   std::uint64_t rigid_contact_ticks = 0;  // ticks with the device behind a rigid plane
   double max_wall_force_n = 0;            // largest |wall force| (before the clamp), unit N
   double max_wall_penetration_m = 0;      // largest |proxy - device|, scene frame, unit m
@@ -110,6 +114,12 @@ class HapticLoop {
   Eigen::Matrix3d r_;  // device → scene rotation
   ContactModelData model_buf_{};
   std::uint64_t seq_ = 0;
+  // Source time sent with each of the last kSentPoses sequence numbers (index seq % size): a
+  // model is used only when it answers one of them exactly (answers_own_pose).
+  static constexpr std::size_t kSentPoses = 4096;  // 4 s at 1 kHz; models older are stale anyway
+  std::vector<std::int64_t> sent_time_ns_;
+  std::uint64_t foreign_models_ = 0;
+  bool answers_own_pose(const ContactModelData& m) const;
   Eigen::Vector3d last_force_ = Eigen::Vector3d::Zero();
   std::vector<TickTrace> trace_;
   std::atomic<std::uint64_t> ticks_done_{0};

@@ -260,12 +260,13 @@ int main(int argc, char** argv) {
     std::printf(
         "  force trace: %llu ticks in contact (%.1f %%), max |F| %.3f N, mean |F| in contact %.3f "
         "N, "
-        "%llu models used\n",
+        "%llu models used, %llu ignored (answering no pose of this station)\n",
         static_cast<unsigned long long>(ft.contact_ticks),
         s.samples > 0
             ? 100.0 * static_cast<double>(ft.contact_ticks) / static_cast<double>(s.samples)
             : 0.0,
-        ft.max_force_n, ft.mean_contact_force_n, static_cast<unsigned long long>(ft.models_seen));
+        ft.max_force_n, ft.mean_contact_force_n, static_cast<unsigned long long>(ft.models_seen),
+        static_cast<unsigned long long>(ft.foreign_models));
     std::printf(
         "  rigid wall: %llu ticks in rigid contact, max wall force %.3f N, max depth behind the "
         "proxy %.2f mm, planes dropped %llu, infeasible plane sets %llu\n",

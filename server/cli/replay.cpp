@@ -2,6 +2,7 @@
 
 #include "common/tool_pose.hpp"
 #include "idl/wire/recording_io.hpp"
+#include "idl/wire/types.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -35,6 +36,57 @@ Station load_station(const std::string& file, const scene::Model& model) {
   }
   st.samples = std::move(rec.samples);
   return st;
+}
+
+service::Workspace scene_workspace(const interaction::Simulation& sim, double margin_m) {
+  service::WorkspaceBounds bounds;
+  for (int m = 0; m < sim.num_meshes(); ++m)
+    for (const auto& x : sim.mesh(m).vertices()) bounds.add(x.data());
+  return bounds.enlarged(margin_m);
+}
+
+std::vector<RejectedSample> filter_station(Station& station, const scene::Model& model,
+                                           const service::Workspace& workspace, bool remove) {
+  service::ToolFilterDef def;
+  def.max_speed_m_per_s = model.tools.at(static_cast<std::size_t>(station.tool)).max_speed_m_per_s;
+  def.workspace = workspace;
+  service::ToolFilter filter(def);
+  const bool numbered = std::any_of(station.samples.begin(), station.samples.end(),
+                                    [](const recording::Sample& s) { return s.tool_sequence() != 0; });
+  std::vector<RejectedSample> rejected;
+  std::vector<recording::Sample> kept;
+  for (std::size_t i = 0; i < station.samples.size(); ++i) {
+    const recording::Sample& s = station.samples[i];
+    neurosim_ToolState ts{};
+    ts.position_m[0] = s.position_m().x();
+    ts.position_m[1] = s.position_m().y();
+    ts.position_m[2] = s.position_m().z();
+    ts.orientation[0] = s.orientation().w();
+    ts.orientation[1] = s.orientation().x();
+    ts.orientation[2] = s.orientation().y();
+    ts.orientation[3] = s.orientation().z();
+    ts.velocity_m_per_s[0] = s.velocity_m_per_s().x();
+    ts.velocity_m_per_s[1] = s.velocity_m_per_s().y();
+    ts.velocity_m_per_s[2] = s.velocity_m_per_s().z();
+    ts.sequence_number = numbered ? s.tool_sequence() : i + 1;
+    // Received when it was sampled: the recording's own clock is the only one there is. A time
+    // no int64 of ns holds is non-finite to the filter's time checks as well.
+    const double t_ns = 1e9 * s.time_s();
+    const bool time_ok = std::isfinite(t_ns) && std::abs(t_ns) < 9e18;
+    service::Verdict v = service::Verdict::NonFinite;
+    if (time_ok) {
+      const auto ns = static_cast<std::int64_t>(std::llround(t_ns));
+      ts.source_time_ns = ns;
+      v = filter.check(ts, service::ReceiveTime{ns, ns});
+    }
+    if (v == service::Verdict::Accepted) {
+      if (remove) kept.push_back(s);
+    } else {
+      rejected.push_back({i, s.time_s(), v});
+    }
+  }
+  if (remove) station.samples = std::move(kept);
+  return rejected;
 }
 
 interaction::ToolPose pose_of(const recording::Sample& s, int tool) {

@@ -8,6 +8,7 @@
 #include "recording.pb.h"
 #include "server/interaction/simulation.hpp"
 #include "server/model/model.hpp"
+#include "server/service/tool_filter.hpp"
 
 #include <cstddef>
 #include <functional>
@@ -28,6 +29,27 @@ struct Station {
 // missing or malformed, or its tool is not one of the scene's (the scene's tools listed), or
 // its station id has a comma, quote or line break (it is written to CSV files).
 Station load_station(const std::string& file, const scene::Model& model);
+
+// A sample the live server's filter would reject (server/service/tool_filter.hpp).
+struct RejectedSample {
+  std::size_t index{0};  // in the recording, from 0
+  double time_s{0.0};    // its time, unit s
+  service::Verdict why{service::Verdict::Accepted};
+};
+
+// The live server's filter for `sim`'s scene: the workspace is the bounding box of every mesh's
+// rest vertices enlarged by margin_m (the server's --workspace-margin), and each station's
+// tool has its max_speed_m_per_s; other limits are the server's defaults.
+service::Workspace scene_workspace(const interaction::Simulation& sim,
+                                   double margin_m = service::kDefaultWorkspaceMarginM);
+
+// Runs every sample of `station` through the live server's ToolFilter (a new one per station,
+// as for a new writer) with the sample's own time as its receive time and its source time;
+// samples recorded without tool sequence numbers (all 0) are numbered in their order. Returns
+// the samples it rejects, in order; with remove, they are also taken out of station.samples (the
+// station keeps its last accepted pose, as on the live server).
+std::vector<RejectedSample> filter_station(Station& station, const scene::Model& model,
+                                           const service::Workspace& workspace, bool remove);
 
 // The pose the live server builds from a ToolState (server/service/server.cpp): the quaternion
 // normalized, the shaft axis the tool frame's +z rotated into the scene frame.

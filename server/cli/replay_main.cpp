@@ -33,7 +33,10 @@ const char* kDescription =
     "The samples of all recordings are merged by time; at each distinct sample time the\n"
     "simulation steps once with every station's newest sample so far. A station whose recording\n"
     "has not started yet is left out of the step (as the live server leaves out a station that\n"
-    "has sent no pose); a station whose recording has ended keeps its last pose.";
+    "has sent no pose); a station whose recording has ended keeps its last pose.\n"
+    "Every sample first passes the live server's filter (its code): a sample the server would\n"
+    "reject (non-finite, tip outside the scene's bounding box + 0.5 m, a jump faster than the\n"
+    "tool's max_speed_m_per_s, ...) is an error unless --skip-rejected leaves it out.";
 const char* kFooter =
     "Writes DIR/forces.csv (time_s,station,tip_x_m,tip_y_m,tip_z_m,force_x_n,force_y_n,\n"
     "force_z_n,in_contact; one row per step and station taking part, numbers as %.17g) and\n"
@@ -45,6 +48,7 @@ struct Options {
   std::vector<std::string> recordings;
   int every{10};
   double max_rate_hz{0.0};  // 0: every sample time
+  bool skip_rejected{false};  // replay without the samples the live server would reject
 };
 
 std::string g17(double v) {
@@ -79,10 +83,41 @@ int run(const Options& opt) {
   sim_options.tier_worker_thread = false;
   std::unique_ptr<neurosim::interaction::Simulation> sim =
       neurosim::interaction::Simulation::build(model, sim_options);
+  // The live server's filter on every sample (its code, server/service/tool_filter.hpp): a
+  // sample it would reject is an error (the replay would compute what no session could), or,
+  // with --skip-rejected, left out as the server leaves it out.
+  const neurosim::service::Workspace workspace = neurosim::replay::scene_workspace(*sim);
+  std::size_t skipped = 0;
+  for (auto& st : stations) {
+    const auto rejected =
+        neurosim::replay::filter_station(st, model, workspace, opt.skip_rejected);
+    if (rejected.empty()) continue;
+    std::map<std::string, std::size_t> by_cause;
+    for (const auto& r : rejected) ++by_cause[neurosim::service::to_string(r.why)];
+    std::string causes;
+    for (const auto& [cause, n] : by_cause)
+      causes += (causes.empty() ? "" : ", ") + std::to_string(n) + " " + cause;
+    const auto& first = rejected.front();
+    const std::string what = st.file + ": " + std::to_string(rejected.size()) +
+                             " sample(s) the live server would reject (" + causes +
+                             "), the first: sample " + std::to_string(first.index) + " at " +
+                             g17(first.time_s) + " s (" + neurosim::service::to_string(first.why) +
+                             ")";
+    if (!opt.skip_rejected)
+      throw std::runtime_error(what + "; --skip-rejected replays without them, as the server would");
+    std::cerr << "neurosim-replay: note: " << what << ": skipped (--skip-rejected)\n";
+    skipped += rejected.size();
+  }
+  const std::size_t steps_left = neurosim::replay::step_times(stations, opt.max_rate_hz).size();
+  if (steps_left == 0) throw std::runtime_error("no sample left after the live server's filter");
+
   std::cout << "scene " << model.name << " (" << opt.scene_path << "), tier "
             << neurosim::fem::tier_name(model.effects.tier)
             << (opt.tier.empty() ? " (scene)" : " (--tier)") << "; " << stations.size()
-            << " station(s), " << num_steps << " steps\n";
+            << " station(s), " << steps_left << " steps"
+            << (skipped ? ", " + std::to_string(skipped) + " rejected sample(s) skipped"
+                        : std::string())
+            << "\n";
 
   const fs::path out(opt.out_dir);
   fs::create_directories(out);
@@ -153,7 +188,7 @@ int run(const Options& opt) {
     pvd.close();
     if (!pvd) throw std::runtime_error(pvd_path.string() + ": write failed");
   }
-  std::cout << num_steps << " steps, " << contact_rows << " contact rows, largest |force| "
+  std::cout << steps_left << " steps, " << contact_rows << " contact rows, largest |force| "
             << max_force << " N" << (unconverged ? ", " + std::to_string(unconverged) +
                                                        " steps whose contact LCP did not converge"
                                                  : std::string())
@@ -179,6 +214,10 @@ int main(int argc, char** argv) {
                   "step at most HZ times per second of recording (samples in between are "
                   "skipped; default 0: every sample time)")
       ->check(CLI::Range(0.0, 1e9));
+  cli->add_flag("--skip-rejected", opt.skip_rejected,
+                "replay without the samples the live server's filter would reject (NaN, tip "
+                "outside the scene's workspace, jumps faster than the tool, ...; counted on "
+                "stderr); without it such a sample is an error (exit 1)");
   cli.check([&] {
     if (!opt.tier.empty() && !neurosim::fem::parse_tier(opt.tier)) {
       throw neurosim::cli::UsageError("--tier " + opt.tier +

@@ -4,6 +4,7 @@
 // mesh (or --mesh ID) also at the top of --out, which is what verification scripts read.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
+#include "common/load_watch.hpp"
 #include "server/fem/assembly.hpp"
 #include "server/fem/equilibrium_solver.hpp"
 #include "server/fem/static_solver.hpp"
@@ -483,7 +484,18 @@ struct RunOptions {
   std::string scene_path, out_dir, only_mesh, tier;  // tier: empty = the scene's
   bool quiet{false}, uncoupled{false};
   int increments{0};
+  double load_timeout_s{900.0};  // loading the scene (meshes read or generated); 0: no limit
 };
+
+// f(); std::bad_alloc becomes an error naming what was being built.
+template <class F>
+auto building(const std::string& what, F&& f) -> decltype(f()) {
+  try {
+    return f();
+  } catch (const std::bad_alloc&) {
+    throw std::runtime_error("out of memory while " + what);
+  }
+}
 
 int run(const RunOptions& opt) {
   const std::string& scene_path = opt.scene_path;
@@ -491,7 +503,14 @@ int run(const RunOptions& opt) {
   const std::string& only_mesh = opt.only_mesh;
   const bool quiet = opt.quiet, uncoupled = opt.uncoupled;
   const auto t_start = neurosim::common::Clock::now();
-  const neurosim::scene::Model model = neurosim::scene::load_model(scene_path);
+  // The load on a worker thread, bounded by --load-timeout (a mesh path that blocks, a
+  // generated mesh far too large for this machine); SIGTERM ends the process as always.
+  neurosim::common::LoadWatchDef watch_def;
+  watch_def.program = "neurosim-solve";
+  watch_def.limit_s = opt.load_timeout_s;
+  neurosim::common::LoadWatch watch(watch_def);
+  const neurosim::scene::Model model = watch.run(
+      "loading the scene " + scene_path, [&] { return neurosim::scene::load_model(scene_path); });
   for (const auto& w : model.warnings) std::cerr << "neurosim-solve: warning: " << w << "\n";
   const double load_s = seconds_since(t_start);
   if (!only_mesh.empty() && model.find_mesh(only_mesh) < 0) {
@@ -551,7 +570,8 @@ int run(const RunOptions& opt) {
     static_model.effects.deformation_output = false;
     static_model.tools.clear();
     const auto t0 = std::chrono::steady_clock::now();
-    sim = neurosim::interaction::Simulation::build(static_model);
+    sim = building(scene_path + ": building the coupled model",
+                   [&] { return neurosim::interaction::Simulation::build(static_model); });
     const double build_s = seconds_since(t0);
     for (int m = 0; m < num_meshes; ++m) {
       const auto* body = sim->body_of(m);
@@ -577,11 +597,12 @@ int run(const RunOptions& opt) {
         std::cout << "  no load or prescribed displacement: at rest, not solved\n";
         continue;
       }
-      BodyResult br = tier == neurosim::fem::Tier::kLinear
-                          ? solve_body(*sim, *body, loads, what)
-                          : solve_body_tier(*sim, *body,
-                                            model.meshes[static_cast<std::size_t>(m)].material,
-                                            loads, tier, opt.increments);
+      BodyResult br = building(what + ": assembling and solving", [&] {
+        return tier == neurosim::fem::Tier::kLinear
+                   ? solve_body(*sim, *body, loads, what)
+                   : solve_body_tier(*sim, *body, model.meshes[static_cast<std::size_t>(m)].material,
+                                     loads, tier, opt.increments);
+      });
       print_summary(br.host, loads.f, loads.prescribed);
       solved[m] = {true, std::move(br.host), &sim->mesh(m), sim->fixed_nodes(m)};
       for (auto& [mb, rb] : br.embedded) {
@@ -611,9 +632,10 @@ int run(const RunOptions& opt) {
       std::cout << "  no load or prescribed displacement: at rest, not solved\n";
       continue;
     }
-    MeshResult r = tier == neurosim::fem::Tier::kLinear
-                       ? solve_alone(lm, loads)
-                       : solve_alone_tier(lm, loads, tier, opt.increments);
+    MeshResult r = building(what + ": assembling and solving", [&] {
+      return tier == neurosim::fem::Tier::kLinear ? solve_alone(lm, loads)
+                                                   : solve_alone_tier(lm, loads, tier, opt.increments);
+    });
     if (!r.u_m.allFinite() || !r.reaction_n.allFinite()) {
       throw std::runtime_error(what + ": solution is not finite");
     }
@@ -670,6 +692,11 @@ int main(int argc, char** argv) {
                   "initial load increments of the corotational / nonlinear solve (0: automatic)")
       ->check(CLI::Range(0, 100000));
   cli->add_flag("--uncoupled", opt.uncoupled, "every mesh on its own");
+  cli->add_option("--load-timeout", opt.load_timeout_s,
+                  "give up (exit 1, naming the scene) when loading the scene (reading or "
+                  "generating its meshes) takes longer than S seconds; 0: no limit")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
   cli->add_flag("--quiet", opt.quiet, "less output");
   cli->footer(kFooter);
   if (auto rc = cli.parse(argc, argv)) return *rc;

@@ -28,7 +28,6 @@ using C3t3 = CGAL::Mesh_complex_3_in_triangulation_3<Tr, Domain::Corner_index, D
 using Criteria = CGAL::Mesh_criteria_3<Tr>;
 namespace params = CGAL::parameters;
 
-constexpr double kTetsPerVertex = 6.0;  // Mesh_3 at radius-edge 2: 4 (small meshes) to 6
 constexpr double kTetsPerCell = 10.0;   // per s^3 grid cell over the bounding box
 
 void check_finite(const Vec3& v, const char* what) {

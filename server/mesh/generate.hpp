@@ -42,11 +42,25 @@ struct GeneratedMesh {
   bool optimization_time_limited{false};  // a sliver step stopped at optimization_time_limit_s
 };
 
+// Tetrahedra per vertex of Mesh_3 at radius-edge 2: 4 (small meshes) to 6; the estimates use 6.
+inline constexpr double kTetsPerVertex = 6.0;
+
 // Expected number of tetrahedra of a solid whose bounding box has these extents (m) meshed
 // with `options` (target_vertices, else cell_size_m): 6 per vertex, or 10 per cell of a grid of
 // the cell size over the box. Both are overestimates of what Mesh_3 makes (4 to 6 tetrahedra
 // per vertex). What max_tetrahedra is compared with before meshing.
 double expected_tetrahedra(const Vec3& extent_m, const MeshingOptions& options);
+
+// Peak memory of loading a scene mesh with this many vertices and building the interactive
+// simulation on it (neurosim-server: the mesh, its stiffness factor, compliance columns, the
+// inclusion decision), unit byte. Measured on the generated cube of scenes/cube_cylinder.scene
+// (neurosim-server peak RSS: 314 MB at 9,905 vertices, 629 MB at 20,061: 31.4 kB per vertex,
+// bench/RESULTS.md "Load memory"), with a margin of 1.5 for the factor's fill growing faster
+// than linearly on larger meshes. What a scene's mesh is checked against before it is generated
+// or built (scene::load_mesh), so a mesh too large for the machine is refused with this
+// estimate instead of ending in std::bad_alloc after minutes.
+inline constexpr double kLoadBytesPerVertex = 1.5 * 31.4e3;
+inline double expected_load_bytes(double vertices) { return kLoadBytesPerVertex * vertices; }
 
 // Both throw std::invalid_argument naming the option (target_vertices, cell_size_m) when the
 // expected size is above options.max_tetrahedra, before meshing.

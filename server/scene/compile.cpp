@@ -1,6 +1,7 @@
 // Scene -> Model: meshes built, node sets resolved, couplings checked (see compile.hpp).
 #include "server/scene/compile.hpp"
 
+#include "common/process_stats.hpp"
 #include "server/mesh/generate.hpp"
 #include "server/mesh/io.hpp"
 #include "server/mesh/text_reader.hpp"
@@ -68,6 +69,27 @@ std::vector<int> select_nodes(const mesh::TetMesh& mesh, const Region& region,
   return nodes;
 }
 
+namespace {
+
+// Refuses a mesh of `vertices` whose load and simulation build would need more memory than this
+// process can get (mesh::expected_load_bytes against common::memory_available_bytes), naming
+// `what` (the scene, the mesh, the field or file), the estimate and the bound.
+void check_load_memory(double vertices, const std::string& what, const std::string& fix) {
+  const char* bound = nullptr;
+  const double available = common::memory_available_bytes(&bound);
+  const double need = mesh::expected_load_bytes(vertices);
+  if (need <= available) return;
+  std::ostringstream msg;
+  msg.precision(3);
+  msg << what << ": loading a mesh of about " << vertices
+      << " vertices and building its simulation needs about " << need / 1e9 << " GB ("
+      << mesh::kLoadBytesPerVertex / 1e3 << " kB per vertex, measured), but this process can get "
+      << available / 1e9 << " GB (" << bound << "): " << fix;
+  throw std::runtime_error(msg.str());
+}
+
+}  // namespace
+
 LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
                      const std::string& source) {
   const std::string what = source + ": mesh \"" + entry.id() + "\"";
@@ -82,6 +104,8 @@ LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
     if (file.is_relative()) file = scene_dir / file;
     const double unit = entry.has_file_unit_m() ? entry.file_unit_m() : 1.0;
     mesh::MeshData data = mesh::read_mesh(file.string(), unit);
+    check_load_memory(static_cast<double>(data.vertices_m.size()), what + ": " + file.string(),
+                      "use a coarser mesh or a machine with more memory");
     if (entry.labels_size() > 0) {
       // Keep only the tetrahedra of the requested subdomains.
       std::set<int> keep(entry.labels().begin(), entry.labels().end());
@@ -125,6 +149,18 @@ LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
           << " (give a larger cell_size_m or fewer target_vertices)";
       throw std::runtime_error(msg.str());
     }
+    // Memory: refused before the mesher runs (a mesh within the limits above can still be far
+    // too large for this machine).
+    const double vertices = options.target_vertices > 0
+                                ? static_cast<double>(options.target_vertices)
+                                : expected / mesh::kTetsPerVertex;
+    check_load_memory(vertices,
+                      what + ": generate." +
+                          (options.target_vertices > 0
+                               ? "target_vertices: " + std::to_string(options.target_vertices)
+                               : std::string("cell_size_m")),
+                      options.target_vertices > 0 ? "give fewer target_vertices"
+                                                  : "give a larger cell_size_m");
     mesh::GeneratedMesh generated;
     try {
       generated =

@@ -1,6 +1,7 @@
 // The neurosim-server command line (server.hpp run_main).
 #include "common/cli.hpp"
 #include "common/clock.hpp"
+#include "common/load_watch.hpp"
 #include "server/fem/tier.hpp"
 #include "server/scene/compile.hpp"
 #include "server/service/server.hpp"
@@ -74,8 +75,14 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
           },
           "linear|corotational|nonlinear"));
   p->add_option("--duration", duration_s,
-                "stop after S seconds (default: run until SIGINT/SIGTERM)")
+                "stop after S seconds of serving (default: run until SIGINT/SIGTERM)")
       ->check(cli::positive());
+  double load_timeout_s = 900;
+  p->add_option("--load-timeout", load_timeout_s,
+                "give up (exit 1, naming the phase) when loading the scene and building the "
+                "simulation take longer than S seconds; 0: no limit")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
   p->add_option("--domain", opt.domain,
                 "DDS domain id (default: the CYCLONEDDS_URI configuration's)")
       ->check(cli::in_range(0, 230));
@@ -155,39 +162,21 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
 
-  // Load phases run on a worker thread while this thread watches the signal flag: a signal
-  // during a long load (mesh generation, compliance precompute, inclusion decision) ends the
-  // process within ~0.1 s instead of after the load. The worker is not joined then (exit).
-  std::atomic<const char*> phase{"loading the scene"};
-  auto interruptible = [&](auto&& work) {
-    using R = decltype(work());
-    std::optional<R> result;
-    std::exception_ptr error;
-    std::atomic<bool> done{false};
-    std::thread worker([&] {
-      try {
-        result.emplace(work());
-      } catch (...) {
-        error = std::current_exception();
-      }
-      done.store(true);
-    });
-    while (!done.load()) {
-      if (g_stop.load()) {
-        std::cerr << "neurosim-server: signal received while " << phase.load()
-                  << ": exiting without serving\n" << std::flush;
-        std::_Exit(0);
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    worker.join();
-    if (error) std::rethrow_exception(error);
-    return std::move(*result);
-  };
+  // Load phases run on a worker thread while this thread watches the signal flag and the load
+  // time: a signal during a long load (mesh generation, compliance precompute, inclusion
+  // decision) ends the process within ~0.1 s instead of after the load, and so does a load
+  // that passes --load-timeout (a blocked read, a mesh far too large for this machine).
+  common::LoadWatchDef watch_def;
+  watch_def.program = "neurosim-server";
+  watch_def.limit_s = load_timeout_s;
+  watch_def.stop = &g_stop;
+  watch_def.on_stop = "exiting without serving";
+  common::LoadWatch watch(watch_def);
 
   try {
     const auto t0 = common::Clock::now();
-    scene::Model model = interruptible([&] { return scene::load_model(opt.scene_path); });
+    scene::Model model =
+        watch.run("loading the scene " + opt.scene_path, [&] { return scene::load_model(opt.scene_path); });
     for (const auto& w : model.warnings) std::cerr << "neurosim-server: warning: " << w << "\n";
     // Scene features this server does not run yet: refused, never ignored.
     // Rigid meshes (the skull) are obstacles for the tools (Server: a tool proxy per station,
@@ -215,8 +204,9 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
     else
       std::cerr << " (from --tier " << tier_text << "; the scene's effects.tier is "
                 << scene::tier_name(scene_tier) << ")\n";
-    phase = "building the simulation (meshes, compliance, inclusion decision)";
-    auto sim = interruptible([&] { return factory(model); });
+    auto sim = watch.run("building the simulation of " + opt.scene_path +
+                             " (meshes, compliance, inclusion decision)",
+                         [&] { return factory(model); });
     const double build_s = common::seconds_since(t0);
     std::cerr << "neurosim-server: simulation built in " << build_s << " s\n";
     if (g_stop.load()) {

@@ -268,21 +268,10 @@ void Server::Impl::configure() {
     log("no accuracy table: SimStatus.expected_force_error stays -1 (unknown)");
   }
   // Workspace: the bounding box of every mesh's rest vertices, enlarged by the margin.
-  for (int i = 0; i < 3; ++i) {
-    workspace.min_m[i] = std::numeric_limits<double>::max();
-    workspace.max_m[i] = -std::numeric_limits<double>::max();
-  }
+  WorkspaceBounds bounds;
   for (int m = 0; m < sim->num_meshes(); ++m)
-    for (const auto& x : sim->mesh(m).vertices())
-      for (int i = 0; i < 3; ++i) {
-        workspace.min_m[i] = std::min(workspace.min_m[i], x[i]);
-        workspace.max_m[i] = std::max(workspace.max_m[i], x[i]);
-      }
-  for (int i = 0; i < 3; ++i) {
-    if (workspace.min_m[i] > workspace.max_m[i]) workspace.min_m[i] = workspace.max_m[i] = 0;  // no vertices
-    workspace.min_m[i] -= opt.workspace_margin_m;
-    workspace.max_m[i] += opt.workspace_margin_m;
-  }
+    for (const auto& x : sim->mesh(m).vertices()) bounds.add(x.data());
+  workspace = bounds.enlarged(opt.workspace_margin_m);
   {
     std::ostringstream w;
     w << "stations: workspace [" << workspace.min_m[0] << ", " << workspace.max_m[0] << "] x ["

@@ -19,6 +19,7 @@
 
 #include "common/thread_sched.hpp"
 #include "server/interaction/simulation.hpp"
+#include "server/service/tool_filter.hpp"
 #include "server/model/model.hpp"
 #include "server/service/step_loop.hpp"
 
@@ -52,9 +53,9 @@ struct ServerOptions {
   // Station identity and hostile input (docs/ARCHITECTURE.md "Station identity"):
   double station_idle_timeout_s{2.0};      // a station with no sample this long frees its slot, unit s
   int max_stations_per_participant{2};     // stations one DDS participant may hold at once (>= 1)
-  double workspace_margin_m{0.5};          // tool tips beyond the scene's bounding box + this are rejected, unit m
+  double workspace_margin_m{kDefaultWorkspaceMarginM};  // tool tips beyond the scene's bounding box + this are rejected, unit m
   double max_future_s{1.0};                // source times further ahead of the server's clock are rejected, unit s
-  double max_station_rate_hz{2000.0};      // samples per second a station may send on average (burst 20)
+  double max_station_rate_hz{2000.0};      // samples per second a station may send on average (burst 200)
   int log_lines_per_second{5};             // per cause; the rest is summarised ("suppressed K lines")
   // Real-time margins (docs/ARCHITECTURE.md "Threads"):
   //   kEvent: the step thread wakes when the DDS thread hands a pose to a slot (a semaphore), at

@@ -28,6 +28,23 @@ bool Workspace::contains(const double p[3]) const {
   return true;
 }
 
+void WorkspaceBounds::add(const double p_m[3]) {
+  for (int i = 0; i < 3; ++i) {
+    box_.min_m[i] = empty_ ? p_m[i] : std::min(box_.min_m[i], p_m[i]);
+    box_.max_m[i] = empty_ ? p_m[i] : std::max(box_.max_m[i], p_m[i]);
+  }
+  empty_ = false;
+}
+
+Workspace WorkspaceBounds::enlarged(double margin_m) const {
+  Workspace w;
+  for (int i = 0; i < 3; ++i) {
+    w.min_m[i] = (empty_ ? 0.0 : box_.min_m[i]) - margin_m;
+    w.max_m[i] = (empty_ ? 0.0 : box_.max_m[i]) + margin_m;
+  }
+  return w;
+}
+
 bool normalise_quaternion(const double q[4], double out[4]) {
   double scale = 0;
   for (int i = 0; i < 4; ++i) {

@@ -120,6 +120,50 @@ TEST(haptic_loop, UnsafeStiffnessWithoutPassivityLimitDoesOscillate) {
   EXPECT_GT(r.velocity_rms_last_second, 1e-3);
 }
 
+// A participant writing ToolStates under this station's id (it claimed the id first): the
+// server answers ITS poses, deep in the tissue, with the same sequence numbers this loop uses
+// (both count from 1) but its own source times. The loop (1 mm deep itself) must render none of
+// that force: no force at all until models answer its own poses, which it then uses.
+class SquatterLink : public nh::Link {
+ public:
+  nh::testing::HalfSpace tissue;
+  bool squatter{true};  // false: answer the loop's own poses
+  std::uint64_t answered{0};
+  void publish(const nh::ToolSample& s) override { last_ = s; }
+  bool take_model(nh::ContactModelData& out) override {
+    if (last_.sequence_number == 0) return false;
+    out = squatter ? tissue.model_at(Vector3d(0, 0, -0.004), last_.sequence_number,
+                                     last_.source_time_ns + 250000)
+                   : tissue.model_at(last_.position_m, last_.sequence_number, last_.source_time_ns);
+    ++answered;
+    return true;
+  }
+  bool server_alive() override { return true; }
+
+ private:
+  nh::ToolSample last_;
+};
+
+TEST(haptic_loop, ModelsAnsweringAnotherWritersPosesAreNeverRendered) {
+  nh::ScriptDevice dev(std::make_unique<nh::ConstantScript>(Vector3d(0, 0, -0.001)));
+  SquatterLink link;
+  link.tissue.surface_z_m = 0.0;
+  nh::LoopConfig cfg;
+  nh::HapticLoop loop(cfg, dev, &link, nullptr);
+  for (std::int64_t k = 0; k < 1000; ++k) {
+    loop.tick(k * 1000000, 1e-3 * static_cast<double>(k), 1e-3, 0);
+    ASSERT_EQ(dev.last_force().norm(), 0.0) << "tick " << k << ": a squatter's model was rendered";
+  }
+  EXPECT_EQ(loop.force_trace().foreign_models, link.answered);
+  EXPECT_EQ(loop.force_trace().models_seen, 0u);
+  // The same link answering the loop's own poses (1 mm deep): force comes.
+  link.squatter = false;
+  for (std::int64_t k = 1000; k < 2000; ++k)
+    loop.tick(k * 1000000, 1e-3 * static_cast<double>(k), 1e-3, 0);
+  EXPECT_GT(dev.last_force().z(), 0.5) << "the loop's own models must be rendered";
+  EXPECT_GT(loop.force_trace().models_seen, 0u);
+}
+
 TEST(haptic_loop, ReplayGivesIdenticalToolStateSequence) {
   const fs::path dir = neurosim::testing::temp_dir("haptic_replay");
   const fs::path first = dir / "stroke.rec", second = dir / "replayed.rec";

@@ -1,7 +1,8 @@
 // neurosim-replay end to end: a recorded press into the cube/cylinder scene's +x face replayed
 // twice gives byte-identical forces, equal to an in-process Simulation stepped with the same
 // poses; the nonlinear tier differs from the linear one; the ParaView series lists its files;
-// bad input gives a clear message and a non-zero exit.
+// bad input gives a clear message and a non-zero exit; a sample the live server's filter would
+// reject is an error, or left out with --skip-rejected.
 #include "idl/wire/recording_io.hpp"
 #include "server/fem/tier.hpp"
 #include "server/interaction/simulation.hpp"
@@ -34,8 +35,11 @@ const double kQw = std::cos(kPi / 4), kQy = std::sin(kPi / 4);
 
 // A press into the +x face at (0.1, y, 0.05) m, 4 mm deep, and back: the tip (radius 3 mm)
 // starts and ends 2 mm off the face. 1 kHz samples from t0.
+// bad_sample >= 0: that sample's tip is at x = 1e300 m (what the live server rejects as
+// outside its workspace).
 void write_press(const fs::path& file, int samples, const std::string& station = "station-a",
-                 const std::string& tool = "probe", double t0 = 0.0, double y = 0.05) {
+                 const std::string& tool = "probe", double t0 = 0.0, double y = 0.05,
+                 int bad_sample = -1) {
   recording::Header h;
   h.set_scene_name("cube_cylinder");
   h.set_station_id(station);
@@ -46,7 +50,7 @@ void write_press(const fs::path& file, int samples, const std::string& station =
     recording::Sample s;
     s.set_time_s(t0 + 1e-3 * i);
     const double depth = 0.006 * std::sin(kPi * i / (samples - 1));
-    s.mutable_position_m()->set_x(0.105 - depth);
+    s.mutable_position_m()->set_x(i == bad_sample ? 1e300 : 0.105 - depth);
     s.mutable_position_m()->set_y(y);
     s.mutable_position_m()->set_z(0.05);
     s.mutable_orientation()->set_w(kQw);
@@ -329,6 +333,36 @@ TEST_F(ReplayCli, UnknownToolIsRefusedNamingTheFile) {
   EXPECT_NE(r.exit_code, 0) << r.log;
   EXPECT_NE(r.log.find(rec.string()), std::string::npos) << r.log;
   EXPECT_NE(r.log.find("scalpel"), std::string::npos) << r.log;
+}
+
+// A tip at 1e300 m (a recording the live server would never have used): refused naming the file,
+// the sample and the filter's cause, exit 1, no forces written; with --skip-rejected the replay
+// leaves that sample out, as the server does (the station keeps its previous pose).
+TEST_F(ReplayCli, SamplesTheLiveServerRejectsAreAnErrorUnlessSkipped) {
+  const fs::path rec = *dir_ / "far_tip.rec";
+  write_press(rec, 50, "station-far", "probe", 0.0, 0.05, 20);
+  const std::string common =
+      "--scene " + scene_path().string() + " --recording " + rec.string() + " --tier linear";
+  Outcome r = run_replay(common + " --out " + (*dir_ / "far_refused").string(),
+                         *dir_ / "far_refused.log");
+  EXPECT_EQ(r.exit_code, 1) << r.log;
+  EXPECT_NE(r.log.find(rec.string() + ": 1 sample(s) the live server would reject (1 workspace), "
+                       "the first: sample 20 at 0.02 s (workspace)"),
+            std::string::npos)
+      << r.log;
+  EXPECT_NE(r.log.find("--skip-rejected"), std::string::npos) << r.log;
+  EXPECT_FALSE(fs::exists(*dir_ / "far_refused" / "forces.csv"));
+
+  r = run_replay(common + " --skip-rejected --out " + (*dir_ / "far_skipped").string(),
+                 *dir_ / "far_skipped.log");
+  ASSERT_EQ(r.exit_code, 0) << r.log;
+  EXPECT_NE(r.log.find("skipped (--skip-rejected)"), std::string::npos) << r.log;
+  const auto rows = read_forces(*dir_ / "far_skipped" / "forces.csv");
+  EXPECT_EQ(rows.size(), 49u);
+  for (const auto& row : rows) {
+    EXPECT_LT(std::abs(row.tip.x()), 1.0) << "t = " << row.t;
+    EXPECT_NE(row.t, 0.02) << "the rejected sample's time is no step";
+  }
 }
 
 }  // namespace

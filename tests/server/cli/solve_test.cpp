@@ -11,6 +11,10 @@
 #include <gtest/gtest.h>
 #include <Eigen/SparseCholesky>
 
+#include <sys/stat.h>
+#include <sys/wait.h>
+
+#include <chrono>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -509,6 +513,92 @@ TEST(SolveCli, BadSceneGivesClearErrorAndNonZeroExit) {
   const std::string text = testing::slurp(dir / "out.log");
   EXPECT_NE(text.find("bad.scene"), std::string::npos) << text;
   EXPECT_NE(text.find("meshes[0].material"), std::string::npos) << text;
+  fs::remove_all(dir);
+}
+
+// neurosim-solve under `timeout 120` (a load that blocks or runs for minutes fails the test
+// instead of hanging it) and `prefix` (e.g. prlimit): exit status, seconds taken, the log.
+struct Bounded {
+  int status{-1};
+  double seconds{0};
+  std::string log;
+};
+Bounded run_solve_bounded(const fs::path& scene, const fs::path& out, const std::string& extra,
+                          const std::string& prefix = "") {
+  const std::string cmd = "timeout 120 " + prefix + " " +
+                          (testing::bin_dir() / "neurosim-solve").string() + " --scene " +
+                          scene.string() + " --out " + out.string() + " " + extra + " > " +
+                          out.string() + ".log 2>&1";
+  const auto t0 = std::chrono::steady_clock::now();
+  const int rc = std::system(cmd.c_str());
+  Bounded b;
+  b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  b.status = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  b.log = testing::slurp(out.string() + ".log");
+  return b;
+}
+
+// cube_cylinder.scene with its cube generated at `vertices`.
+fs::path cube_scene_with(int vertices, const fs::path& dir) {
+  std::string text = testing::slurp(testing::source_dir() / "scenes/cube_cylinder.scene");
+  const std::string small = "target_vertices: 1812";
+  EXPECT_NE(text.find(small), std::string::npos) << "cube_cylinder.scene changed its cube";
+  text.replace(text.find(small), small.size(), "target_vertices: " + std::to_string(vertices));
+  const fs::path scene = dir / ("cube_" + std::to_string(vertices) + ".scene");
+  std::ofstream(scene) << text;
+  return scene;
+}
+
+// A mesh file that is a named pipe no one writes to: refused at once naming it (it blocked the
+// load for ever: opening a pipe for reading waits for a writer).
+TEST(SolveCli, MeshFileThatIsANamedPipeIsRefusedAtOnce) {
+  const auto dir = testing::temp_dir("solve_fifo");
+  ASSERT_EQ(::mkfifo((dir / "pipe.mesh").c_str(), 0600), 0);
+  std::ofstream(dir / "fifo.scene")
+      << "meshes { id: \"t\" file: \"pipe.mesh\"\n"
+         "  material { youngs_modulus_pa: 1e6 poisson_ratio: 0.3 }\n"
+         "  fixed { nodes { ids: 0 } } }\n"
+         "loads { mesh: \"t\" region { nodes { ids: 1 } } force_n { z: -0.5 } }\n";
+  const Bounded b = run_solve_bounded(dir / "fifo.scene", dir / "out", "");
+  EXPECT_EQ(b.status, 1) << b.log;
+  EXPECT_NE(b.log.find((dir / "pipe.mesh").string() + ": mesh file: is a named pipe, not a regular file"),
+            std::string::npos)
+      << b.log;
+  fs::remove_all(dir);
+}
+
+// A generated mesh inside the scene's limits (target_vertices 140,000 <= 300,000) but far too
+// large for the memory this process may use (an address-space limit of 2 GiB here; the same
+// mesh grew to 5.7 GB and ended in a bare std::bad_alloc): refused before the mesher runs, with
+// the estimate, the scene, the mesh and the field.
+TEST(SolveCli, GeneratedMeshTooLargeForTheMemoryIsRefusedBeforeMeshing) {
+  const auto dir = testing::temp_dir("solve_memory");
+  const fs::path scene = cube_scene_with(140000, dir);
+  const Bounded b = run_solve_bounded(scene, dir / "out", "", "prlimit --as=2147483648 --");
+  EXPECT_EQ(b.status, 1) << b.log;
+  EXPECT_LT(b.seconds, 60.0) << "refused before meshing, not after: " << b.log;
+  EXPECT_NE(b.log.find(scene.string() + ": mesh \"cube\": generate.target_vertices: 140000: "
+                       "loading a mesh of about 1.4e+05 vertices and building its simulation "
+                       "needs about 6.59 GB"),
+            std::string::npos)
+      << b.log;
+  EXPECT_NE(b.log.find("(RLIMIT_AS): give fewer target_vertices"), std::string::npos) << b.log;
+  EXPECT_EQ(b.log.find("bad_alloc"), std::string::npos) << b.log;
+  fs::remove_all(dir);
+}
+
+// A load that takes longer than --load-timeout (a 30,000-vertex cube: tens of seconds of
+// meshing) ends after the limit with status 1, naming the limit and the scene.
+TEST(SolveCli, LoadLongerThanTheLoadTimeoutEndsNamingIt) {
+  const auto dir = testing::temp_dir("solve_load_timeout");
+  const fs::path scene = cube_scene_with(30000, dir);
+  const Bounded b = run_solve_bounded(scene, dir / "out", "--load-timeout 1");
+  EXPECT_EQ(b.status, 1) << b.log;
+  EXPECT_NE(b.log.find("neurosim-solve: error: the load took longer than 1 s (--load-timeout) "
+                       "while loading the scene " + scene.string() + ": exiting"),
+            std::string::npos)
+      << b.log;
+  EXPECT_LT(b.seconds, 60.0) << b.log;
   fs::remove_all(dir);
 }
 
