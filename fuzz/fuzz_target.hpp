@@ -41,7 +41,11 @@ inline const std::string& scratch_dir() {
                                        : std::filesystem::is_directory("/dev/shm")
                                            ? std::filesystem::path("/dev/shm")
                                            : std::filesystem::temp_directory_path();
-    auto* d = new std::string((base / ("neurosim_fuzz_" + std::to_string(::getpid()))).string());
+    // The pid zero-padded: paths of one length in every run, so the readers' messages (which
+    // name the file) take the same code paths and a fixed run meets the same inputs.
+    char name[32];
+    std::snprintf(name, sizeof name, "neurosim_fuzz_%010d", static_cast<int>(::getpid()));
+    auto* d = new std::string((base / name).string());
     std::filesystem::create_directories(*d);
     std::atexit([] {
       std::error_code ec;
