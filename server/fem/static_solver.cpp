@@ -1,6 +1,7 @@
 #include "server/fem/static_solver.hpp"
 
 #include "common/clock.hpp"
+#include "common/process_stats.hpp"
 #include "server/fem/power_iteration.hpp"
 #include "server/fem/supports.hpp"
 
@@ -13,6 +14,7 @@
 #include <chrono>
 #include <cmath>
 #include <atomic>
+#include <iomanip>
 #include <mutex>
 #include <numeric>
 #include <random>
@@ -215,6 +217,29 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   if (llt.info() != Eigen::Success || !llt.factor()) {
     throw std::runtime_error(where + ": CHOLMOD analysis failed (status " +
                              std::to_string(c.status) + ")");
+  }
+  {
+    // The numeric factor's size, exact from the symbolic analysis (supernodal: the values of
+    // every supernode; simplicial: nnz(L)), with the same count as FactorInfo::factor_bytes.
+    const cholmod_factor* ls = llt.factor();
+    const double entries = ls->is_super ? static_cast<double>(ls->xsize) : c.lnz;
+    const double needed = entries * sizeof(double) +
+                          static_cast<double>(ls->ssize) * sizeof(int) +
+                          3.0 * static_cast<double>(ls->nsuper + 1) * sizeof(int) +
+                          2.0 * static_cast<double>(ls->n) * sizeof(int);
+    const char* source = "SolverOptions::max_factor_bytes";
+    const double limit = options_.max_factor_bytes > 0.0
+                             ? options_.max_factor_bytes
+                             : common::memory_available_bytes(&source);
+    if (needed > limit) {
+      std::ostringstream msg;
+      msg << where << ": the factor of K_ff needs " << std::fixed << std::setprecision(1)
+          << needed / 1048576.0 << " MiB (CHOLMOD's symbolic analysis: " << nf
+          << " free dofs, nnz(L) " << static_cast<long long>(c.lnz) << "), more than the "
+          << limit / 1048576.0 << " MiB available (" << source << ")"
+          << ": refused before factoring; use a coarser mesh or a machine with more memory";
+      throw FactorTooLarge(msg.str(), needed, limit);
+    }
   }
   t0 = Clock::now();
   llt.factorize(kff);

@@ -13,6 +13,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace neurosim::fem {
@@ -26,8 +28,22 @@ struct SolverOptions {
   bool check_rigid_modes{true};
   // A factor whose CHOLMOD rcond (min diag(L) / max diag(L))^2 is below this is singular.
   double min_rcond{1e-15};
+  // Memory for the numeric factor, unit byte: the factor's size is known exactly from the
+  // symbolic analysis, before the numeric factorization allocates it; a larger one is refused
+  // there (FactorTooLarge, with the estimate) instead of the process being killed by the kernel
+  // half-way. 0: common::memory_available_bytes() when the solver is built (MemAvailable, RLIMIT_AS or the
+  // cgroup's limit, the smallest).
+  double max_factor_bytes{0.0};
   // Let CHOLMOD print its own warnings to stdout (errors become exceptions either way).
   bool cholmod_verbose{false};
+};
+
+// The factor of K_ff would not fit in SolverOptions::max_factor_bytes (or the memory available).
+struct FactorTooLarge : std::runtime_error {
+  FactorTooLarge(const std::string& what, double needed, double available)
+      : std::runtime_error(what), needed_bytes(needed), available_bytes(available) {}
+  double needed_bytes;     // the factor (values + structure), from the symbolic analysis, byte
+  double available_bytes;  // the limit it was compared with, byte
 };
 
 // What the factorization cost and holds (reported by benchmarks and Compliance).

@@ -154,6 +154,29 @@ TEST(FemStaticSolver, InsufficientFixedNodesAreReported) {
   EXPECT_NO_THROW(StaticSolver(m, mat, {0, 3, 12}));
 }
 
+// The factor's size is known from the symbolic analysis: a limit below it refuses the mesh
+// before the numeric factorization, with the estimate, which is what the factor then holds.
+TEST(FemStaticSolver, FactorLargerThanTheMemoryLimitIsRefusedWithTheEstimate) {
+  const mesh::TetMesh m = box_mesh({6, 6, 6, {0, 0, 0}, {0.06, 0.06, 0.06}, 0.0, 1});
+  const auto fixed = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
+  const MaterialMap mats = MaterialMap::uniform({3000.0, 0.45, "brain"});
+  const StaticSolver ok(m, mats, fixed);  // the default limit: the machine's available memory
+  const double bytes = static_cast<double>(ok.factor_info().factor_bytes);
+  ASSERT_GT(bytes, 0.0);
+  SolverOptions tight;
+  tight.max_factor_bytes = 0.5 * bytes;
+  try {
+    StaticSolver refused(m, mats, fixed, tight);
+    FAIL() << "a factor of " << bytes << " bytes was not refused at a limit of half of it";
+  } catch (const FactorTooLarge& e) {
+    EXPECT_DOUBLE_EQ(e.needed_bytes, bytes);
+    EXPECT_DOUBLE_EQ(e.available_bytes, 0.5 * bytes);
+    EXPECT_NE(std::string(e.what()).find("MiB"), std::string::npos) << e.what();
+  }
+  tight.max_factor_bytes = bytes;  // exactly enough
+  EXPECT_NO_THROW(StaticSolver(m, mats, fixed, tight));
+}
+
 TEST(FemStaticSolver, NonFiniteInputIsRefused) {
   const auto m = box_mesh(BoxSpec{2, 2, 2});
   const auto fixed = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
