@@ -1,0 +1,169 @@
+// scale_bench: the brain/artery scene at several brain cell sizes. Per size (the scene built by
+// `neurosim-model --cell-size C --out-dir DIR/cC` when DIR/cC/brain_artery.scene is missing):
+// - setup_cold_s: Simulation::build with an empty compliance cache folder (factorization,
+//   carving, tie, boundary operator); setup_cached_s: the same build again, the boundary
+//   operator read from the disk cache (the factorization is not cached yet: it is redone);
+// - rss_mb: the process's peak resident memory after both (getrusage ru_maxrss: sizes should be
+//   given from coarse to fine, so that each row's peak is its own);
+// - step_p50/p99/max_us: the contact step (one probe, LINEAR tier, the step's own thread) along a
+//   10 s slide at 20 mm/s over fresh brain surface, 1000 steps per second of the slide: the tip
+//   2 mm deep under the right lateral surface, sweeping anteroposteriorly, moving 6 mm up at each
+//   end so the way back is fresh surface as well. The rows measured are today's node rows
+//   (the contact nodes under the tip and shaft), not triangle rows;
+// - columns_not_ready: steps in which a node touched for the first time had its compliance
+//   columns solved inside the step (StepStats::columns_computed > 0; no column worker exists yet,
+//   so every first touch is solved on the step thread);
+// - field_hz: 1 / mean time of the host's full displacement field (Simulation::displacements)
+//   at the end of the slide;
+// - nonlinear_update_hz: not measured here (nan): multirate_bench measures the NONLINEAR tier's
+//   update rate on the bundled scene.
+#include "common/cli.hpp"
+#include "common/clock.hpp"
+#include "common/stats.hpp"
+#include "server/interaction/simulation.hpp"
+#include "server/scene/compile.hpp"
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <limits>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+namespace ni = neurosim::interaction;
+using Clock = neurosim::common::Clock;
+using Vec3 = Eigen::Vector3d;
+
+namespace {
+
+fs::path scene_at(double cell_mm, const fs::path& dir) {
+  char name[32];
+  std::snprintf(name, sizeof name, "c%g", cell_mm);
+  const fs::path d = dir / name;
+  const fs::path scene = d / "brain_artery.scene";
+  if (!fs::exists(scene)) {
+    fs::create_directories(d);
+    const std::string cmd = std::string(NEUROSIM_BIN_DIR) + "/neurosim-model --out-dir '" +
+                            d.string() + "' --cell-size " + std::to_string(cell_mm) + " > '" +
+                            (d / "model.log").string() + "' 2>&1";
+    std::cerr << "scale_bench: building " << scene << "\n";
+    if (std::system(cmd.c_str()) != 0)
+      throw std::runtime_error("neurosim-model failed (log: " + (d / "model.log").string() + ")");
+  }
+  return scene;
+}
+
+double peak_rss_mb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return static_cast<double>(u.ru_maxrss) / 1024.0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<double> cells;
+  std::string dir = "/tmp/neurosim_scale_bench";
+  double seconds = 10.0, speed = 0.020, depth = 0.002;
+  bool csv = false;
+  neurosim::cli::Parser p("scale_bench", "The brain/artery scene at several cell sizes.");
+  p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
+  p->add_option("--models", dir, "folder of the built scenes")->capture_default_str();
+  p->add_option("--seconds", seconds, "slide duration, unit s")->capture_default_str();
+  p->add_option("--speed", speed, "slide speed, unit m/s")->capture_default_str();
+  p->add_flag("--csv", csv, "CSV only (the default adds comments on stderr)");
+  if (auto rc = p.parse(argc, argv)) return *rc;
+  if (cells.empty()) cells = {7.0};
+  std::cout << "cell_mm,host_vertices,host_tets,setup_cold_s,setup_cached_s,rss_mb,step_p50_us,"
+               "step_p99_us,step_max_us,columns_not_ready,field_hz,nonlinear_update_hz\n";
+  try {
+    for (double cell : cells) {
+      const fs::path scene = scene_at(cell, dir);
+      const neurosim::scene::Model model = neurosim::scene::load_model(scene);
+      ni::SimulationOptions options;
+      const fs::path cache = fs::path(dir) / ("cache_" + std::to_string(::getpid()));
+      fs::remove_all(cache);
+      options.compliance_cache_dir = cache.string();
+      auto t0 = Clock::now();
+      auto cold = ni::Simulation::build(model, options);
+      const double cold_s = neurosim::common::seconds_since(t0);
+      cold.reset();
+      t0 = Clock::now();
+      auto sim = ni::Simulation::build(model, options);
+      const double cached_s = neurosim::common::seconds_since(t0);
+      fs::remove_all(cache);
+      const int host = 0;
+      const auto& mesh = sim->mesh(host);
+      // Lateral surface profile: per 1 mm of y, the largest x of the surface nodes within
+      // +-3 mm of the slide's height z.
+      Vec3 lo, hi;
+      mesh.bounds(lo, hi);
+      const double z0 = lo.z() + 0.55 * (hi.z() - lo.z());
+      const double y_min = lo.y() + 0.25 * (hi.y() - lo.y()), y_max = lo.y() + 0.75 * (hi.y() - lo.y());
+      auto lateral_x = [&](double y, double z) {
+        double best = -std::numeric_limits<double>::infinity();
+        for (int v : mesh.surface_vertices()) {
+          const Vec3& x = mesh.vertices()[v];
+          if (std::abs(x.y() - y) <= 0.003 && std::abs(x.z() - z) <= 0.003) best = std::max(best, x.x());
+        }
+        return best;
+      };
+      std::map<long, double> profile;  // key: (pass, y in mm)
+      const int steps = static_cast<int>(std::lround(seconds * 1000.0));
+      const double length = y_max - y_min;
+      std::vector<ni::ToolPose> one(1);
+      std::vector<ni::ToolContact> contacts;
+      ni::StepStats stats;
+      std::vector<double> times;
+      times.reserve(steps);
+      int not_ready = 0;
+      for (int k = 0; k < steps; ++k) {
+        const double s = speed * k * 1e-3;  // path length so far, m
+        const int pass = static_cast<int>(s / length);
+        const double f = s / length - pass;
+        const double y = (pass % 2 == 0) ? y_min + f * length : y_max - f * length;
+        const double z = z0 + 0.006 * pass;
+        const long key = pass * 100000L + std::lround(y * 1e3);
+        auto it = profile.find(key);
+        if (it == profile.end()) it = profile.emplace(key, lateral_x(std::round(y * 1e3) * 1e-3, z)).first;
+        if (!std::isfinite(it->second)) continue;
+        one[0].tip_m = Vec3(it->second + 0.002 - depth, y, z);  // tip radius 2 mm, centre inside
+        one[0].axis = Vec3::UnitX();
+        const auto ts = Clock::now();
+        sim->step(one, contacts, stats);
+        times.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
+        if (stats.columns_computed > 0) ++not_ready;
+      }
+      Eigen::VectorXd u;
+      double field_s = 0.0;
+      for (int k = 0; k < 5; ++k) {
+        const auto tf = Clock::now();
+        sim->displacements(host, u);
+        field_s += neurosim::common::seconds_since(tf);
+      }
+      const auto pc = neurosim::common::percentiles(times);
+      std::printf("%g,%zu,%zu,%.2f,%.2f,%.0f,%.1f,%.1f,%.1f,%d,%.1f,nan\n", cell, mesh.num_vertices(),
+                  mesh.num_tets(), cold_s, cached_s, peak_rss_mb(), pc.p50, pc.p99, pc.max,
+                  not_ready, 5.0 / field_s);
+      std::fflush(stdout);
+      if (!csv)
+        std::cerr << "scale_bench: cell " << cell << " mm: " << times.size() << " steps, "
+                  << not_ready << " with a first touch solved in the step\n";
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "scale_bench: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}
