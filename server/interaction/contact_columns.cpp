@@ -36,7 +36,7 @@ void ContactColumns::ensure(const std::vector<int>& slots) {
     const std::size_t n = std::min(chunk, missing.size() - first);
     const std::vector<int> part(missing.begin() + static_cast<std::ptrdiff_t>(first),
                                 missing.begin() + static_cast<std::ptrdiff_t>(first + n));
-    body_->solve_contact_columns(part, x, ws_.get());
+    body_->solve_contact_columns(part, x, ws_.get(), &iterations_);
     for (std::size_t j = 0; j < n; ++j) {
       const int c = 3 * static_cast<int>(j);
       Columns col(s3, 3);

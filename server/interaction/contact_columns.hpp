@@ -25,6 +25,8 @@ class ContactColumns {
 
   bool has(int slot) const { return column_of_[slot] >= 0; }
   std::size_t size() const { return columns_.size(); }
+  // Iterations the ITERATIVE baseline's coupling needed for the columns computed so far.
+  const IterativeReport& iterative_report() const { return iterations_; }
   // Computes the columns of the given slots that are missing (block solves; allocates).
   // Throws std::invalid_argument for a slot out of range.
   void ensure(const std::vector<int>& slots);
@@ -45,6 +47,7 @@ class ContactColumns {
   const CoupledBody* body_;
   // The State's own solve scratch: a first touch inside the step locks nothing in the Model.
   std::unique_ptr<fem::SolveWorkspace> ws_ = std::make_unique<fem::SolveWorkspace>();
+  IterativeReport iterations_;  // the ITERATIVE baseline's iterations for these columns
   bool keep_full_;
   std::vector<int> column_of_;  // contact slot -> index in columns_ or -1
   std::vector<Columns> columns_;          // L[contact dofs, slot]

@@ -263,7 +263,7 @@ std::uint64_t CoupledBody::cache_key() const {
 }
 
 void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::MatrixXd& x,
-                                        fem::SolveWorkspace* ws) const {
+                                        fem::SolveWorkspace* ws, IterativeReport* iterations) const {
   if (!finalized_) throw std::logic_error("CoupledBody::solve_contact_columns before finalize");
   const auto& reduced = solver_->reduced_index();
   const int nf = solver_->num_free_dofs();
@@ -283,7 +283,7 @@ void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::Ma
     // f_b = -G L_A[b, i] (Woodbury on the tie stiffness: L = L_A - L_A[:,b] G L_A[b,:]).
     lb.resize(m3, 3 * n);
     for (int j = 0; j < n; ++j) lb.middleCols(3 * j, 3) = op_.l_sb.middleRows(3 * slots[j], 3).transpose();
-    apply_coupling(lb, glb);
+    apply_coupling(lb, glb, iterations);
     for (int r = 0; r < m3; ++r) {
       const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
       if (red >= 0) rhs.row(red) -= glb.row(r);
@@ -303,9 +303,10 @@ void CoupledBody::set_iterative(const IterativeOptions& options) {
   iterative_options_ = options;
 }
 
-void CoupledBody::apply_coupling(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const {
+void CoupledBody::apply_coupling(const Eigen::MatrixXd& in, Eigen::MatrixXd& out,
+                                 IterativeReport* iterations) const {
   if (iterative_) {
-    iterative_->apply(in, out);
+    iterative_->apply(in, out, iterations);
     return;
   }
   out.noalias() = op_.g * in;

@@ -72,9 +72,6 @@ class CoupledBody {
   // differ from the exact ones by about the tolerance; for comparison only.
   void set_iterative(const IterativeOptions& options);
   // Counters of the iterations so far (all zero for the exact operator).
-  IterativeReport iterative_report() const {
-    return iterative_ ? iterative_->report() : IterativeReport{};
-  }
 
   int host_index() const { return host_index_; }
   const mesh::TetMesh& host() const { return *host_; }
@@ -93,8 +90,10 @@ class CoupledBody {
   // the reduced index of host_solver()), one block solve (ContactColumns caches them).
   // With `ws` (the caller's: a State's ContactColumns) the solve locks nothing; without, it
   // uses the host solver's own workspace under its mutex (set-up, offline).
+  // `iterations` (ITERATIVE baseline only) gets the iterations the coupling needed.
   void solve_contact_columns(const std::vector<int>& slots, Eigen::MatrixXd& x,
-                             fem::SolveWorkspace* ws = nullptr) const;
+                             fem::SolveWorkspace* ws = nullptr,
+                             IterativeReport* iterations = nullptr) const;
   // Unit right-hand sides per CHOLMOD block solve (BLAS-3 inside the supernodes).
   static constexpr int kBlockColumns = 63;
 
@@ -137,7 +136,8 @@ class CoupledBody {
   IterativeOptions iterative_options_;
   std::unique_ptr<IterativeTie> iterative_;  // the baseline, built at finalize (null: exact G)
   // out = G in (exact) or its iterative approximation.
-  void apply_coupling(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const;
+  void apply_coupling(const Eigen::MatrixXd& in, Eigen::MatrixXd& out,
+                      IterativeReport* iterations = nullptr) const;
   void select_contact_nodes();
   void compute_boundary_operator();
   std::uint64_t cache_key() const;

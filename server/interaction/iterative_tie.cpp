@@ -68,7 +68,7 @@ IterativeResult IterativeTie::solve(const std::vector<int>& slots,
   return r;
 }
 
-void IterativeTie::apply(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const {
+void IterativeTie::apply(const Eigen::MatrixXd& in, Eigen::MatrixXd& out, IterativeReport* counts) const {
   Eigen::MatrixXd u = in;
   for (Eigen::Index c = 0; c < in.cols(); ++c) {
     const double scale = std::max(in.col(c).norm(), 1e-300);
@@ -84,11 +84,11 @@ void IterativeTie::apply(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const 
         break;
       }
     }
-    int seen = max_iterations_.load();
-    while (it > seen && !max_iterations_.compare_exchange_weak(seen, it)) {
+    if (counts != nullptr) {
+      counts->max_iterations = std::max(counts->max_iterations, it);
+      ++counts->solves;
+      if (!converged) ++counts->unconverged;
     }
-    solves_.fetch_add(1);
-    if (!converged) unconverged_.fetch_add(1);
   }
   out.noalias() = body_.boundary_stiffness() * u;
 }

@@ -22,7 +22,8 @@ struct IterativeOptions {
   double relaxation{0.0};   // w; 0: 2 / (2 + rho) with rho = spectral radius of L_bb K_add
 };
 
-// Counters of apply() (the iterations a body's coupled solves needed).
+// Counters of apply() (the iterations a body's coupled solves needed), kept by the caller (the
+// State's ContactColumns), never in the Model.
 struct IterativeReport {
   int solves{0};          // right-hand sides iterated
   int max_iterations{0};  // most iterations one needed
@@ -49,19 +50,15 @@ class IterativeTie {
                         const std::vector<Eigen::Vector3d>& forces_n) const;
   double relaxation() const { return omega_; }
   // out = G in by the iteration, per column: u_b <- (1 - w) u_b + w (in - P u_b) until an update
-  // is below tolerance x |in| (or max_iterations), then G in = K_add u_b. Thread-safe (const;
-  // the counters are atomic).
-  void apply(const Eigen::MatrixXd& in, Eigen::MatrixXd& out) const;
-  IterativeReport report() const {
-    return {solves_.load(), max_iterations_.load(), unconverged_.load()};
-  }
+  // is below tolerance x |in| (or max_iterations), then G in = K_add u_b. Writes nothing of its
+  // own (const, thread-safe); the iterations are added to `counts` if given.
+  void apply(const Eigen::MatrixXd& in, Eigen::MatrixXd& out, IterativeReport* counts = nullptr) const;
 
  private:
   const CoupledBody& body_;
   IterativeOptions options_;
   Eigen::MatrixXd p_;  // L_bb K_add
   double omega_{1.0};
-  mutable std::atomic<int> solves_{0}, max_iterations_{0}, unconverged_{0};
   Eigen::VectorXd load(const std::vector<int>& slots,
                        const std::vector<Eigen::Vector3d>& forces_n) const;
 };

@@ -228,6 +228,11 @@ class SimulationImpl final : public Simulation {
   void snapshot(FieldSnapshot& s) const override;
   void displacements(FieldSnapshot& s, int mesh, Eigen::VectorXd& u_m) const override;
   int body_index(int m) const override { return model_->entry(m).body; }
+  IterativeReport iterative_report(int m) const override {
+    const int b = model_->entry(m).body;
+    if (b < 0 || !state_->bodies_[static_cast<std::size_t>(b)].columns) return {};
+    return state_->bodies_[static_cast<std::size_t>(b)].columns->iterative_report();
+  }
   scene::Tier tier() const override { return model_->tier_; }
   double tier_update_rate_hz() const override {
     return state_->tier_ ? state_->tier_->rate_hz() : 0.0;

@@ -5,6 +5,7 @@
 // the tests): extend it freely, keep the meaning of what is here.
 #pragma once
 
+#include "server/interaction/iterative_tie.hpp"
 #include "server/mesh/tet_mesh.hpp"
 #include "server/model/model.hpp"
 
@@ -242,6 +243,9 @@ class Simulation {
   }
   // The body `mesh` belongs to (index into FieldSnapshot::bodies), -1 if inert.
   virtual int body_index(int mesh) const { (void)mesh; return -1; }
+  // The ITERATIVE baseline: the iterations the coupling of `mesh`'s body needed for the contact
+  // columns computed so far (counted in the State, never in the Model). Default: none.
+  virtual IterativeReport iterative_report(int mesh) const { (void)mesh; return {}; }
 
   // Meshes that take part: a mesh with no fixed node that is not tied to a host (e.g. the
   // embedded mesh with coupling off) is inert: never touched, displacement zero.

@@ -270,11 +270,11 @@ TEST(interaction_simulation, IterativeBaselineMatchesExact) {
   const double f = exact.contacts[0].force_n.norm();
   EXPECT_LE((exact.contacts[0].force_n - iter.contacts[0].force_n).norm(), 1e-9 * f);
   // The iteration did run (and converged) instead of the factored operator.
-  const auto report = iter.sim->body_of(0)->iterative_report();
+  const auto report = iter.sim->iterative_report(0);
   EXPECT_GT(report.solves, 0);
   EXPECT_GT(report.max_iterations, 1);
   EXPECT_EQ(report.unconverged, 0);
-  EXPECT_EQ(exact.sim->body_of(0)->iterative_report().solves, 0);
+  EXPECT_EQ(exact.sim->iterative_report(0).solves, 0);
   Eigen::VectorXd ue, ui;
   exact.sim->displacements(1, ue);
   iter.sim->displacements(1, ui);
