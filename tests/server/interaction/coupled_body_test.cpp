@@ -1,0 +1,152 @@
+// CoupledBody against the monolithic tied system solved directly (tied_box_fixtures.hpp): the
+// coupled compliance columns at contact slots, the host displacement for a load on several
+// slots and the tied mesh's displacement equal the direct solve; the answer differs from the
+// host alone (the tie matters); contact nodes are the free surface nodes off S'; a body read
+// from the boundary-operator cache gives the same columns.
+#include "server/interaction/coupled_body.hpp"
+
+#include "test_support.hpp"
+#include "tied_box_fixtures.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+
+namespace neurosim::interaction {
+namespace {
+
+using tied_box::make_tied_box;
+using tied_box::MonolithicSolver;
+
+std::unique_ptr<CoupledBody> make_body(const tied_box::TiedBox& c, const std::string& cache = {}) {
+  auto body = std::make_unique<CoupledBody>(0, c.host, c.host_material, c.host_fixed);
+  body->add_tie(c.def);
+  if (!cache.empty()) body->set_cache_dir(cache);
+  body->finalize();
+  return body;
+}
+
+// Every 7th contact slot (spread over the sides of A).
+std::vector<int> some_slots(const CoupledBody& body) {
+  std::vector<int> slots;
+  for (int s = 0; s < static_cast<int>(body.contact_nodes().size()); s += 7) slots.push_back(s);
+  return slots;
+}
+
+TEST(interaction_coupled_body, ContactColumnsEqualTheMonolithicTiedSolve) {
+  const auto owner = make_tied_box();
+  const auto& c = *owner;
+  const auto body = make_body(c);
+  const MonolithicSolver mono(c);
+  const std::vector<int> slots = some_slots(*body);
+  ASSERT_GE(slots.size(), 4u);
+  Eigen::MatrixXd x;
+  body->solve_contact_columns(slots, x);
+  const auto& free = body->host_solver().free_dofs();
+  ASSERT_EQ(x.rows(), static_cast<int>(free.size()));
+  ASSERT_EQ(x.cols(), 3 * static_cast<int>(slots.size()));
+  const int n3 = 3 * static_cast<int>(c.host.num_vertices());
+  Eigen::MatrixXd unit = Eigen::MatrixXd::Zero(n3, x.cols());
+  for (std::size_t k = 0; k < slots.size(); ++k)
+    for (int a = 0; a < 3; ++a)
+      unit(3 * body->contact_nodes()[slots[k]] + a, 3 * static_cast<int>(k) + a) = 1.0;
+  Eigen::MatrixXd u_full;
+  body->coupled_displacement(unit, u_full);
+  double tie_effect = 0.0, scale = 0.0;
+  for (int col = 0; col < x.cols(); ++col) {
+    const auto ref = mono.solve(unit.col(col));
+    Eigen::VectorXd ref_free(x.rows());
+    for (int r = 0; r < x.rows(); ++r) ref_free[r] = ref.u_host_m[free[r]];
+    ASSERT_GT(ref_free.norm(), 0.0);
+    EXPECT_LE((x.col(col) - ref_free).norm(), 1e-8 * ref_free.norm()) << "column " << col;
+    EXPECT_LE((u_full.col(col) - ref.u_host_m).norm(), 1e-8 * ref.u_host_m.norm())
+        << "column " << col;
+    const Eigen::VectorXd host_only = body->host_solver().solve(Eigen::VectorXd(unit.col(col)));
+    tie_effect = std::max(tie_effect, (host_only - ref.u_host_m).norm());
+    scale = std::max(scale, ref.u_host_m.norm());
+  }
+  // Not a test that the host alone would pass: B changes A's compliance noticeably.
+  EXPECT_GT(tie_effect, 1e-2 * scale);
+}
+
+TEST(interaction_coupled_body, HostAndTiedDisplacementEqualTheMonolithicTiedSolve) {
+  const auto owner = make_tied_box();
+  const auto& c = *owner;
+  const auto body = make_body(c);
+  const MonolithicSolver mono(c);
+  const std::vector<int> slots = some_slots(*body);
+  std::vector<mesh::Vec3> forces;
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * static_cast<int>(c.host.num_vertices()));
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    // Pressing inwards, plus a fixed tangential part (unit N).
+    const mesh::Vec3 fk = -0.01 * body->contact_normals()[slots[k]] +
+                          0.003 * mesh::Vec3(1.0, -0.5, 0.25) * static_cast<double>(k % 3);
+    forces.push_back(fk);
+    f.segment<3>(3 * body->contact_nodes()[slots[k]]) += fk;
+  }
+  Eigen::VectorXd u_host;
+  body->host_displacement(slots, forces, u_host);
+  const auto ref = mono.solve(f);
+  EXPECT_LE((u_host - ref.u_host_m).norm(), 1e-8 * ref.u_host_m.norm());
+  ASSERT_EQ(body->ties().size(), 1u);
+  Eigen::VectorXd u_emb;
+  body->ties()[0].displacement(u_host, u_emb);
+  ASSERT_GT(ref.u_embedded_m.norm(), 0.0);
+  EXPECT_LE((u_emb - ref.u_embedded_m).norm(), 1e-8 * ref.u_embedded_m.norm());
+  EXPECT_THROW(body->host_displacement(slots, {}, u_host), std::invalid_argument);
+}
+
+TEST(interaction_coupled_body, ContactNodesAreTheFreeSurfaceNodesOffTheTie) {
+  const auto owner = make_tied_box();
+  const auto& c = *owner;
+  const auto body = make_body(c);
+  const auto& boundary = body->boundary_nodes();
+  ASSERT_TRUE(std::is_sorted(boundary.begin(), boundary.end()));
+  std::vector<int> expected_boundary;
+  for (const auto& tri : c.def.tri_nodes)
+    expected_boundary.insert(expected_boundary.end(), tri.begin(), tri.end());
+  std::sort(expected_boundary.begin(), expected_boundary.end());
+  expected_boundary.erase(std::unique(expected_boundary.begin(), expected_boundary.end()),
+                          expected_boundary.end());
+  EXPECT_EQ(boundary, expected_boundary);
+  std::vector<int> expected;
+  for (int v : c.host.surface_vertices()) {
+    if (std::binary_search(c.host_fixed.begin(), c.host_fixed.end(), v)) continue;
+    if (std::binary_search(boundary.begin(), boundary.end(), v)) continue;
+    expected.push_back(v);
+  }
+  ASSERT_FALSE(expected.empty());
+  EXPECT_EQ(body->contact_nodes(), expected);
+  ASSERT_EQ(body->contact_normals().size(), expected.size());
+  for (std::size_t s = 0; s < expected.size(); ++s) {
+    EXPECT_EQ(body->contact_slot(expected[s]), static_cast<int>(s));
+    EXPECT_NEAR(body->contact_normals()[s].norm(), 1.0, 1e-12);
+    // The box's outward normal points away from its centre.
+    const mesh::Vec3 out = c.host.vertices()[expected[s]] - mesh::Vec3(0.02, 0.02, 0.02);
+    EXPECT_GT(body->contact_normals()[s].dot(out), 0.0) << "node " << expected[s];
+  }
+  for (int v : boundary) EXPECT_EQ(body->contact_slot(v), -1);
+  EXPECT_THROW(body->add_tie(c.def), std::logic_error);
+}
+
+TEST(interaction_coupled_body, CachedBoundaryOperatorGivesTheSameColumns) {
+  const auto owner = make_tied_box();
+  const auto& c = *owner;
+  const std::string dir = testing::temp_dir("coupled_body_cache").string();
+  const auto first = make_body(c, dir);
+  EXPECT_FALSE(first->cache_hit());
+  const auto second = make_body(c, dir);
+  EXPECT_TRUE(second->cache_hit());
+  const std::vector<int> slots = some_slots(*first);
+  Eigen::MatrixXd x1, x2;
+  first->solve_contact_columns(slots, x1);
+  second->solve_contact_columns(slots, x2);
+  ASSERT_EQ(x1.rows(), x2.rows());
+  ASSERT_EQ(x1.cols(), x2.cols());
+  EXPECT_LE((x1 - x2).norm(), 1e-14 * x1.norm());
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
