@@ -1,0 +1,142 @@
+// TierWorker (synchronous mode, deterministic): the relaxed forces of a linear fixed-point map
+// lambda = a + beta f with beta = -1.5 (plain iteration diverges: error factor -1.5) reach the
+// closed-form fixed point a / (1 - beta) in two updates (Aitken is exact for an affine map of
+// one rate) and stay there; constant forces, once reached, are not updated again; the
+// equilibrium handed out is the one a fresh TierEquilibrium finds for those forces; stale and
+// malformed loads are skipped or refused naming the body and the slot.
+#include "server/interaction/tier_worker.hpp"
+
+#include "test_support.hpp"
+#include "tied_box_fixtures.hpp"
+
+#include <gtest/gtest.h>
+
+namespace neurosim::interaction {
+namespace {
+
+using tied_box::make_tied_box;
+using tied_box::TiedBox;
+
+struct Case {
+  std::unique_ptr<const TiedBox> box = make_tied_box();
+  std::unique_ptr<CoupledBody> body;
+  Case() {
+    body = std::make_unique<CoupledBody>(0, box->host, box->host_material, box->host_fixed);
+    body->add_tie(box->def);
+    body->finalize();
+  }
+  std::unique_ptr<TierEquilibrium> equilibrium() const {
+    TierEquilibriumDefinition d;
+    d.body = body.get();
+    d.host_material = box->host_material;
+    d.host_fixed_nodes = box->host_fixed;
+    d.tier = fem::Tier::kNonlinear;
+    return std::make_unique<TierEquilibrium>(d);
+  }
+  TierWorker worker() const {
+    std::vector<std::unique_ptr<TierEquilibrium>> bodies;
+    bodies.push_back(equilibrium());
+    return TierWorker(std::move(bodies), /*threaded=*/false, 8);
+  }
+};
+
+// Forces of the applied part a: 0.1 mN inwards on three contact slots.
+TierLoad applied(const CoupledBody& body) {
+  TierLoad a;
+  for (int s : {0, 5, 11}) {
+    a.slots.push_back(s);
+    a.forces_n.push_back(-1e-4 * body.contact_normals()[s]);
+  }
+  return a;
+}
+
+// lambda = a + beta f on the slots of a (f: the forces of the current linearization).
+TierLoad step(const TierLoad& a, double beta, const TierLinearization& lin) {
+  TierLoad l = a;
+  for (std::size_t k = 0; k < a.slots.size(); ++k)
+    for (std::size_t j = 0; j < lin.load.slots.size(); ++j)
+      if (lin.load.slots[j] == a.slots[k]) l.forces_n[k] += beta * lin.load.forces_n[j];
+  l.linearization = lin.count;
+  return l;
+}
+
+double distance(const TierLoad& a, const std::vector<mesh::Vec3>& expected) {
+  double d = 0.0;
+  if (a.forces_n.size() != expected.size()) return 1e300;
+  for (std::size_t k = 0; k < expected.size(); ++k)
+    d = std::max(d, (a.forces_n[k] - expected[k]).norm());
+  return d;
+}
+
+TEST(interaction_tier_worker, AitkenReachesTheFixedPointOfADivergingMap) {
+  const Case c;
+  TierWorker w = c.worker();
+  const TierLoad a = applied(*c.body);
+  constexpr double kBeta = -1.5;
+  std::vector<mesh::Vec3> fixed_point;
+  for (const auto& f : a.forces_n) fixed_point.push_back(f / (1.0 - kBeta));
+  // At rest: no forces, count 0.
+  EXPECT_TRUE(w.linearization(0).load.slots.empty());
+  EXPECT_EQ(w.linearization(0).count, 0u);
+  // First update: omega = 1, f = a.
+  ASSERT_TRUE(w.post({step(a, kBeta, w.linearization(0))}));
+  EXPECT_LE(distance(w.linearization(0).load, a.forces_n), 1e-18);
+  // Second: Aitken's omega = 1 / (1 - beta) lands on the fixed point.
+  ASSERT_TRUE(w.post({step(a, kBeta, w.linearization(0))}));
+  EXPECT_LE(distance(w.linearization(0).load, fixed_point), 1e-15);
+  ASSERT_TRUE(w.linearization(0).converged);
+  // Further steps stay there (the residual is round-off).
+  for (int i = 0; i < 3; ++i) {
+    w.post({step(a, kBeta, w.linearization(0))});
+    EXPECT_LE(distance(w.linearization(0).load, fixed_point), 1e-15);
+  }
+  EXPECT_EQ(w.failures(), 0u);
+
+  // The equilibrium handed out is a fresh solve's for the fixed-point forces.
+  auto fresh = c.equilibrium();
+  TierLinearization ref;
+  TierLoad f = a;
+  f.forces_n = fixed_point;
+  fresh->update(f, ref);
+  const Eigen::VectorXd& u = w.linearization(0).u_m;
+  ASSERT_EQ(u.size(), ref.u_m.size());
+  ASSERT_GT(ref.u_m.norm(), 0.0);
+  EXPECT_LE((u - ref.u_m).norm(), 1e-9 * ref.u_m.norm());
+}
+
+TEST(interaction_tier_worker, StaleAndMalformedLoadsAreSkippedOrRefused) {
+  const Case c;
+  TierWorker w = c.worker();
+  const TierLoad a = applied(*c.body);
+  ASSERT_TRUE(w.post({step(a, 0.0, w.linearization(0))}));
+  // Constant forces (beta = 0): f = a exactly, a fixed point, not updated again.
+  EXPECT_LE(distance(w.linearization(0).load, a.forces_n), 0.0);
+  ASSERT_TRUE(w.linearization(0).converged);
+  const std::uint64_t settled = w.linearization(0).count;
+  EXPECT_FALSE(w.post({step(a, 0.0, w.linearization(0))}));
+  EXPECT_EQ(w.linearization(0).count, settled);
+  // Found with the rest linearization (count 0), now stale: skipped, nothing changes.
+  TierLoad stale = a;
+  stale.linearization = 0;
+  const std::uint64_t count = w.linearization(0).count;
+  EXPECT_FALSE(w.post({stale}));
+  EXPECT_EQ(w.linearization(0).count, count);
+  // Malformed loads (synchronous: thrown).
+  TierLoad bad = step(a, 0.0, w.linearization(0));
+  bad.slots[1] = c.body->contact_nodes().size() + 3;
+  const std::string m = testing::message_of([&] { w.post({bad}); });
+  EXPECT_NE(m.find("body 0"), std::string::npos) << m;
+  EXPECT_NE(m.find("contact slot " + std::to_string(bad.slots[1])), std::string::npos) << m;
+  TierLoad uneven = step(a, 0.0, w.linearization(0));
+  uneven.forces_n.pop_back();
+  EXPECT_NE(testing::message_of([&] { w.post({uneven}); }).find("3 slots, 2 forces"),
+            std::string::npos);
+  EXPECT_THROW(w.post({}), std::invalid_argument);
+  std::vector<std::unique_ptr<TierEquilibrium>> none(1);
+  EXPECT_NE(
+      testing::message_of([&] { TierWorker t(std::move(none), false, 8); }).find("body 0 null"),
+      std::string::npos);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
