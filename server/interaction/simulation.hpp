@@ -105,7 +105,12 @@ struct FieldSnapshot {
 
 // Options the scene does not give (limits, tolerances), with defaults.
 struct SimulationOptions {
+  // Contact rows per tool at most (the deepest; a row is a node, an edge or a face point).
   int max_contact_nodes_per_tool{32};
+  // Compliance in series with each contact row, relative to the row's own (W_ii (1 + eps)):
+  // keeps W positive definite when a face row and the node rows of its vertices are nearly
+  // dependent (contact_step.cpp); the force changes by about eps relative.
+  double contact_row_compliance{1e-8};
   int lcp_max_iterations{200};
   double lcp_tolerance{1e-10};  // relative
   // Disk cache of each body's boundary operator (keyed by meshes, materials, fixed nodes and the

@@ -63,6 +63,7 @@ TierEquilibrium::~TierEquilibrium() = default;
 void TierEquilibrium::rest(TierLinearization& out) const {
   out.offset_m.assign(slot_node_.size(), mesh::Vec3::Zero());
   out.warped_normal = body_->contact_normals();
+  out.rotation.assign(slot_node_.size(), Eigen::Matrix3d::Identity());
   out.u_m.setZero(solver_->num_dofs());
   out.load.slots.clear();
   out.load.forces_n.clear();
@@ -159,6 +160,7 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   const auto& normals = body_->contact_normals();
   out.offset_m.resize(slot_node_.size());
   out.warped_normal.resize(slot_node_.size());
+  out.rotation = rotation_;
   for (std::size_t s = 0; s < slot_node_.size(); ++s) {
     const int v = slot_node_[s];
     out.offset_m[s] = u_host_.segment<3>(3 * v) - rotation_[s] * u_lin_.segment<3>(3 * v);

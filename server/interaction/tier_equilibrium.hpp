@@ -10,12 +10,14 @@
 //
 // For the forces f* the model gives u* exactly, so the step and the updates form a fixed-point
 // iteration whose fixed point is the tier's own contact equilibrium (the warping sets how fast it
-// converges, not where). Per contact slot s the step reads the warped normal m_s = R_s^T n_s (so
-// W_rs = m_r . C_rs m_s) and the offset u0_s (depth_r + n_r . u0_r). R_s: the polar rotation of
+// converges, not where). Per contact slot s the step reads the rotation R_s (a row with normal n
+// acting on slots a, b by weights w: W_rs = sum w_a w_b (R_a^T n_r) . C_ab (R_b^T n_s)) and the
+// offset u0_s (depth_r + n_r . sum w_a u0_a). R_s: the polar rotation of
 // the mean deformation gradient of the host tetrahedra around the slot's node.
 //
-// Contact is flat and in the reference configuration in every tier (rest positions, rest
-// normals, forces along them as dead loads), so the tiers differ only in the elasticity.
+// The rows are found on the deformed surface (rest + u*), their depth and forces are taken in
+// the reference configuration (forces along the rows' normals as dead loads), so the tiers differ
+// only in the elasticity.
 #pragma once
 
 #include "server/fem/equilibrium_solver.hpp"
@@ -42,6 +44,7 @@ struct TierLoad {
 struct TierLinearization {
   std::vector<mesh::Vec3> offset_m;       // per contact slot: u0 at its node, unit m
   std::vector<mesh::Vec3> warped_normal;  // per contact slot: R^T n (unit)
+  std::vector<Eigen::Matrix3d> rotation;  // per contact slot: R (a row's normal n -> R^T n)
   // The equilibrium: host (3 N_A) then each tied mesh (TierEquilibrium::body_offset), unit m.
   Eigen::VectorXd u_m;
   TierLoad load;             // the forces u_m is the equilibrium of

@@ -281,12 +281,21 @@ TEST(interaction_simulation, IterativeBaselineMatchesExact) {
   EXPECT_LE((ue - ui).cwiseAbs().maxCoeff(), 1e-9 * ue.cwiseAbs().maxCoeff());
 }
 
+// The rows are found on the surface deformed by the last answer: the pose is held until that
+// geometry settles (a fixed point, reached to round-off in a few steps), then moved by h. K is the
+// flat-contact linearization -N (W_AA^-1) N^T: each row a plane with a fixed normal. The node and
+// edge rows' normals are radial from the tip centre, so they also turn with the tip (by h / rho,
+// rho ~ the tip radius): across the push that adds up to sum(lambda) h / rho, and along it the
+// turn of the planes through the rows' displacement u (u_t / rho relative: 2 % here, a 15 mm tip
+// 3 mm into 12 mm elements). K leaves both out (the turn would make K indefinite for the haptic
+// client).
 TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
-  auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
+  const SceneSpec spec;
+  auto sim = Simulation::build(testing::make_scene(spec));
   std::vector<ToolContact> c0, c1;
   StepStats st;
   const ToolPose p = push_right(0.003);
-  sim->step({p}, c0, st);
+  for (int k = 0; k < 30; ++k) sim->step({p}, c0, st);
   ASSERT_TRUE(c0[0].in_contact);
   ToolPose q = p;
   const double h = 1e-7;
@@ -295,7 +304,9 @@ TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
   ASSERT_EQ(c0[0].nodes, c1[0].nodes);
   const Vec3 fd = (c1[0].force_n - c0[0].force_n) / h;
   const Vec3 model = c0[0].stiffness_n_per_m * Vec3(-1.0, 0.0, 0.0);
-  EXPECT_LE((fd - model).norm(), 1e-5 * model.norm());
+  EXPECT_LE(std::abs(fd.x() - model.x()), 0.05 * model.norm());
+  EXPECT_LE((fd - model).norm(), 0.05 * model.norm() + 1.5 * c0[0].force_n.norm() /
+                                                           (0.9 * spec.tip_radius_m));
   // Pushing deeper raises the force: dF/dx is negative along the push.
   EXPECT_LT(c0[0].stiffness_n_per_m(0, 0), 0.0);
   const Eigen::SelfAdjointEigenSolver<Mat3> eig(
@@ -410,6 +421,10 @@ TEST(interaction_stability, ContactOnSliver) {
                     m.vertices()[m.surface()[f][2]]) /
                    3.0;
     if (c.z() < 0.01) continue;  // the fixed bottom
+    // The free surface only (not the carved faces around the cylinder, S').
+    bool free = true;
+    for (int v : m.surface()[f]) free = free && sim->body_of(0)->contact_slot(v) >= 0;
+    if (!free) continue;
     if (q < worst_q) {
       worst_q = q;
       worst = static_cast<int>(f);
@@ -435,13 +450,15 @@ TEST(interaction_stability, TwoToolsOnTheSameNode) {
   auto sim = Simulation::build(testing::make_scene(SceneSpec{}));
   std::vector<ToolContact> one, two;
   StepStats st;
-  sim->step({push_right(0.003)}, one, st);
-  sim->step({push_right(0.003), push_right(0.003)}, two, st);
+  // Each held until the deformed surface the rows are found on settles (a fixed point).
+  for (int k = 0; k < 30; ++k) sim->step({push_right(0.003)}, one, st);
+  for (int k = 0; k < 30; ++k) sim->step({push_right(0.003), push_right(0.003)}, two, st);
   EXPECT_TRUE(st.converged);
   ASSERT_EQ(two.size(), 2u);
-  // The node is pushed once; the tools share what one tool would feel.
+  // The nodes are pushed once (one row per feature; the deeper tool carries it): the tools share
+  // what one tool would feel.
   EXPECT_LE((two[0].force_n + two[1].force_n - one[0].force_n).norm(),
-            1e-9 * one[0].force_n.norm());
+            1e-7 * one[0].force_n.norm());
   // A deeper second tool takes the node over and feels more than the first alone.
   sim->step({push_right(0.003), push_right(0.004)}, two, st);
   EXPECT_TRUE(st.converged);
@@ -466,7 +483,8 @@ TEST(interaction_stability, ToolInsideTheEmbeddedMesh) {
 }  // namespace
 // The Model/State split: one constant Model serves independent States; a State's answer depends
 // only on the Model and the poses it is stepped with (not on another State's steps), and equals
-// the Simulation's.
+// the Simulation's. The rows follow the surface deformed by the last answer, so a held pose
+// settles to one answer whatever came before (a fixed point: b's other presses are forgotten).
 TEST(interaction_simulation, OneModelServesIndependentStates) {
   const SceneSpec spec;
   const auto model = build_model(testing::make_scene(spec));
@@ -474,11 +492,12 @@ TEST(interaction_simulation, OneModelServesIndependentStates) {
   auto b = make_state(*model);
   std::vector<ToolContact> ca, cb, cs;
   StepStats st;
-  step(*model, *a, {push_right(0.004)}, ca, st);
+  const int hold = 30;
+  for (int k = 0; k < hold; ++k) step(*model, *a, {push_right(0.004)}, ca, st);
   ASSERT_TRUE(ca[0].in_contact);
   step(*model, *b, {push_right(0.002)}, cb, st);
   step(*model, *b, {push_right(0.006)}, cb, st);
-  step(*model, *b, {push_right(0.004)}, cb, st);
+  for (int k = 0; k < hold; ++k) step(*model, *b, {push_right(0.004)}, cb, st);
   const double f = ca[0].force_n.norm();
   EXPECT_LE((cb[0].force_n - ca[0].force_n).norm(), 1e-9 * f);
   EXPECT_LE((cb[0].stiffness_n_per_m - ca[0].stiffness_n_per_m).norm(),
@@ -488,7 +507,7 @@ TEST(interaction_simulation, OneModelServesIndependentStates) {
   step(*model, *a, {push_right(0.004)}, ca, st);
   EXPECT_LE((ca[0].force_n - before).norm(), 1e-12 * f);
   auto sim = Simulation::build(testing::make_scene(spec));
-  sim->step({push_right(0.004)}, cs, st);
+  for (int k = 0; k < hold; ++k) sim->step({push_right(0.004)}, cs, st);
   EXPECT_LE((cs[0].force_n - before).norm(), 1e-12 * f);
 }
 

@@ -1,0 +1,692 @@
+// The contact step in named phases (MuJoCo's mj_step habit): pose checks, candidate triangles,
+// rows, compliance columns, Delassus operator, LCP, forces, answer per tool, tier post.
+//
+// Rows: a tool part (the tip sphere, the shaft capsule) against the contactable triangles of each
+// body, on the surface deformed by the last good answer (rest + latest displacement at the
+// triangle's nodes). Each triangle near the part gives its closest point; the rows are
+//   - a node row for every triangle vertex inside the part (+ margin): normal radial from the
+//     part's centre, the node against a rigid sphere (CalculiX's node-to-surface contact with the
+//     tool as master), so a tip wider than the triangles feels a patch;
+//   - a face row where a triangle's closest point is inside it (normal: the triangle's);
+//   - an edge row where every contactable triangle of the edge reports that edge (the distance
+//     has a local minimum there; otherwise a neighbouring face row already holds it);
+// merged by feature (a vertex seen by its 3-7 triangles, an edge by its two: one row each).
+// A face row and the node rows of its vertices are nearly dependent when the normals agree, so
+// the Delassus operator gets a small compliance in series per row (W_ii (1 + eps),
+// SimulationOptions::contact_row_compliance): W stays positive definite and the LCP solution
+// unique, the force changes by ~eps relative.
+#include "server/interaction/simulation_state.hpp"
+
+#include "common/clock.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace neurosim::interaction {
+
+namespace {
+
+using common::Clock;
+using common::seconds_since;
+
+constexpr std::uint64_t kShaftBit = std::uint64_t{1} << 62;
+// Feature keys sort vertices, then edges, then faces; the shaft's after the tip's.
+std::uint64_t feature_key(bool shaft, TriangleFeature f, std::uint64_t a, std::uint64_t b) {
+  return (shaft ? kShaftBit : 0) | (static_cast<std::uint64_t>(f) << 60) | (a << 30) | b;
+}
+TriangleFeature key_feature(std::uint64_t key) {
+  return static_cast<TriangleFeature>((key >> 60) & 3u);
+}
+
+bool deeper(const Row& a, const Row& b) {
+  if (a.depth_m != b.depth_m) return a.depth_m > b.depth_m;
+  if (a.body != b.body) return a.body < b.body;
+  return a.key < b.key;
+}
+
+}  // namespace
+
+State::State(const Model& m) {
+  bodies_.resize(m.bodies_.size());
+  for (std::size_t i = 0; i < m.bodies_.size(); ++i) {
+    const BodyModel& b = m.bodies_[i];
+    BodyState& bs = bodies_[i];
+    bs.columns = std::make_unique<ContactColumns>(*b.body, m.options_.cache_full_field_columns);
+    bs.triangle_stamp.assign(b.surface.triangles().size(), -1);
+    bs.position_stamp.assign(b.rest_m.size(), -1);
+    bs.position_m.assign(b.rest_m.size(), Vec3::Zero());
+    bs.force_index.assign(b.rest_m.size(), -1);
+    bs.sliding_lambda.setZero(b.body->sliding().size());
+    if (m.options_.precompute_contact_columns) {
+      const auto t0 = Clock::now();
+      std::vector<int> all(b.rest_m.size());
+      for (std::size_t s = 0; s < all.size(); ++s) all[s] = static_cast<int>(s);
+      bs.columns->ensure(all);
+      columns_s_ += seconds_since(t0);
+    }
+  }
+  missing_.resize(m.bodies_.size());
+  sliding_active_.assign(m.num_sliding_, 0);
+  tier_loads_.resize(m.bodies_.size());
+  if (m.tier_ != scene::Tier::kLinear && !m.bodies_.empty()) {
+    const auto t0 = Clock::now();
+    std::vector<std::unique_ptr<TierEquilibrium>> eq;
+    for (const BodyModel& b : m.bodies_) {
+      TierEquilibriumDefinition d;
+      d.body = b.body.get();
+      d.host_material = b.host_material;
+      d.host_fixed_nodes = b.host_fixed_nodes;
+      d.tier = m.tier_;
+      d.newton.tolerance = m.options_.tier_newton_tolerance;
+      d.newton.step_limit = m.options_.tier_update_steps;
+      try {
+        eq.push_back(std::make_unique<TierEquilibrium>(d));
+      } catch (const std::exception& ex) {
+        throw std::runtime_error(m.source_ + ": mesh " +
+                                 m.meshes_[b.body->host_index()].loaded->id + ": " + ex.what());
+      }
+    }
+    // A row loads up to three nodes.
+    tier_ = std::make_unique<TierWorker>(
+        std::move(eq), m.options_.tier_worker_thread,
+        3 * std::max<int>(1, static_cast<int>(m.tools_.size())) *
+            m.options_.max_contact_nodes_per_tool);
+    tier_s_ = seconds_since(t0);
+  }
+  // Sliding rows: the step workspace and the inverse of their block at load, not in step 1.
+  if (m.num_sliding_ > 0) {
+    const auto t0 = Clock::now();
+    reserve_workspace(m, std::max<int>(1, static_cast<int>(m.tools_.size())));
+    sliding_s_ += seconds_since(t0);
+  }
+}
+
+void State::reserve_workspace(const Model& m, int tools) {
+  const int max_contact = std::max(1, tools * m.options_.max_contact_nodes_per_tool);
+  const int max_rows = m.num_sliding_ + max_contact;
+  if (max_rows <= lcp_.capacity()) return;
+  lcp_.reserve(max_rows);
+  w_.setZero(max_rows, max_rows);
+  delta_.setZero(max_rows);
+  lambda_.setZero(max_rows);
+  warm_.assign(max_rows, 0);
+  rows_.reserve(max_contact);
+  // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
+  for (const auto& b : m.bodies_) {
+    const int o = b.sliding_offset, ns = b.body->sliding().size();
+    if (ns == 0) continue;
+    w_.block(o, o, ns, ns) = b.body->sliding().compliance();
+    for (std::size_t i = 0; i < b.slides.size(); ++i) {
+      const auto& sl = *b.slides[i];
+      const int f = o + b.slide_first_row[i];
+      w_.block(f, f, sl.size(), sl.size()) += sl.compliance();
+      for (int k = 0; k < sl.size(); ++k) delta_[f + k] = -sl.pairs()[k].initial_gap_m;
+    }
+  }
+  // Candidates: every triangle at most once per tool and body (a triangle gives at most a face
+  // or edge hit and three node hits per tool part).
+  std::size_t triangles = 0;
+  for (const auto& b : m.bodies_) triangles = std::max(triangles, b.surface.triangles().size());
+  candidates_.reserve(2 * triangles);
+  hits_.reserve(std::min<std::size_t>(8 * triangles, 8 * 4096));
+  tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
+  for (auto& b : bodies_) {
+    b.force_slots.reserve(3 * max_rows);
+    b.forces_n.reserve(3 * max_rows);
+  }
+  for (auto& list : missing_) list.reserve(3 * max_rows);
+  for (auto& l : tier_loads_) {
+    l.slots.reserve(3 * max_rows);
+    l.forces_n.reserve(3 * max_rows);
+  }
+  last_good_.resize(tools);
+  for (auto& c : last_good_) c.nodes.reserve(3 * m.options_.max_contact_nodes_per_tool);
+  // The inverse of the constant sliding block, once (its size does not depend on the tools).
+  if (m.num_sliding_ > 0 && !lcp_constant_block_) {
+    lcp_constant_block_ = true;
+    if (m.options_.sliding_inactive_set) lcp_.set_constant_block(w_, m.num_sliding_);
+  }
+}
+
+// Phase "pose": inputs first, nothing changes on a bad pose.
+void State::check_poses(const Model& m, const std::vector<ToolPose>& poses) const {
+  for (std::size_t t = 0; t < poses.size(); ++t) {
+    const auto& p = poses[t];
+    if (!p.tip_m.allFinite() || !p.axis.allFinite()) {
+      throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) +
+                                  " pose is not finite");
+    }
+    if (p.axis.norm() < 1e-12)
+      throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " axis is zero");
+    if (p.tool < 0 || p.tool >= static_cast<int>(m.tools_.size())) {
+      if (!m.tools_.empty() || p.tool != 0) {
+        throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) +
+                                    " refers to scene tool " + std::to_string(p.tool) + " of " +
+                                    std::to_string(m.tools_.size()));
+      }
+    }
+  }
+}
+
+void State::begin_step(const Model& m, int tools, StepStats& stats) {
+  reserve_workspace(m, tools);
+  ++step_counter_;
+  stats.tier_updated = false;
+  stats.tier_update_us = 0.0;
+  stats.inverted_elements = 0;
+  if (tier_) {
+    tier_->begin_step();
+    for (std::size_t bi = 0; bi < bodies_.size(); ++bi)
+      stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
+  }
+  rows_.clear();
+}
+
+// Position of a contact slot's node on the surface deformed by the last good answer: LINEAR,
+// rest + sum_k L(slot, k) f_k over the loaded slots (cached columns); the other tiers, rest + the
+// latest equilibrium. Computed once per step and slot.
+const mesh::Vec3& State::position(const Model& m, int body, int slot) {
+  BodyState& bs = bodies_[body];
+  if (bs.position_stamp[slot] == step_counter_) return bs.position_m[slot];
+  bs.position_stamp[slot] = step_counter_;
+  const BodyModel& b = m.bodies_[body];
+  Vec3 x = b.rest_m[slot];
+  if (tier_) {
+    const int v = b.body->contact_nodes()[slot];
+    x += tier_->linearization(body).u_m.segment<3>(3 * static_cast<Eigen::Index>(v));
+  } else {
+    for (std::size_t k = 0; k < bs.force_slots.size(); ++k)
+      x.noalias() += bs.columns->block(slot, bs.force_slots[k]) * bs.forces_n[k];
+  }
+  bs.position_m[slot] = x;
+  return bs.position_m[slot];
+}
+
+// Phase "candidate triangles": of one body near one tool (rest grid, widened by the largest
+// displacement of the last good answer), each listed once.
+void State::candidate_triangles(const Model& m, int body, const ToolPose& pose, const Vec3& axis) {
+  const BodyModel& b = m.bodies_[body];
+  BodyState& bs = bodies_[body];
+  const ToolShape& shape = m.tools_[pose.tool];
+  const double slack = m.options_.candidate_margin * shape.tip_radius_m + bs.max_displacement_m;
+  const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
+  candidates_.clear();
+  const long long stamp = ++stamp_counter_;
+  const std::size_t from = candidates_.size();
+  b.surface.query(p0 - Vec3::Constant(shape.tip_radius_m + slack),
+                  p0 + Vec3::Constant(shape.tip_radius_m + slack), candidates_);
+  if (shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0) {
+    const double reach = shape.shaft_radius_m + slack;
+    b.surface.query(p0.cwiseMin(p1) - Vec3::Constant(reach),
+                    p0.cwiseMax(p1) + Vec3::Constant(reach), candidates_);
+  }
+  // Keep each triangle once, and only those whose rest bounding sphere can reach a tool part.
+  const double radius = b.surface.max_radius_m();
+  std::size_t kept = from;
+  for (std::size_t k = from; k < candidates_.size(); ++k) {
+    const int t = candidates_[k];
+    if (bs.triangle_stamp[t] == stamp) continue;
+    bs.triangle_stamp[t] = stamp;
+    const Vec3& c = b.surface.centroid(t);
+    const bool tip = (c - p0).norm() <= shape.tip_radius_m + slack + radius;
+    const bool shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0 &&
+                       (c - closest_on_segment(c, p0, p1)).norm() <=
+                           shape.shaft_radius_m + slack + radius;
+    if (tip || shaft) candidates_[kept++] = t;
+  }
+  candidates_.resize(kept);
+}
+
+// Phase "rows", geometry: the closest features of the deformed candidate triangles to the tip
+// centre and to the shaft axis, within the part's radius + margin.
+void State::triangle_features(const Model& m, int body, const ToolPose& pose, const Vec3& axis) {
+  const BodyModel& b = m.bodies_[body];
+  const ToolShape& shape = m.tools_[pose.tool];
+  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
+  const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
+  const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
+  const auto& tris = b.surface.triangles();
+  const auto& rest = b.body->host().vertices();
+  // The deformed surface, and the rest surface too once the body carries a force: the LCP's
+  // depths are taken from rest, so a feature that penetrates at rest is a row even when the last
+  // answer moved it out of reach (a tool leaving faster than the margin would otherwise lose the
+  // tissue for a step, then find it again: chatter).
+  const int geometries = bodies_[body].max_displacement_m > 0.0 ? 2 : 1;
+  hits_.clear();
+  for (int t : candidates_) {
+    const SurfaceTriangle& tri = tris[t];
+    for (int g = 0; g < geometries; ++g) {
+      std::array<Vec3, 3> x;
+      for (int k = 0; k < 3; ++k)
+        x[k] = g == 0 && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
+      Vec3 n = (x[1] - x[0]).cross(x[2] - x[0]);
+      if (!(n.norm() > 0.0)) continue;
+      n.normalize();
+      for (int part = 0; part < (has_shaft ? 2 : 1); ++part)
+        part_features(t, tri, x, n, part == 1, g == 1, shape, p0, p1, margin);
+    }
+  }
+}
+
+// The hits of one tool part on one triangle (positions x, unit normal n): its vertices inside
+// the part (+ margin) and the triangle's closest point when it is an edge or face point.
+void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
+                          const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
+                          const Vec3& p0, const Vec3& p1, double margin) {
+  const double reach = (shaft ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
+  // The part's centre for this triangle: the tip centre, or the shaft axis point closest to the
+  // triangle (alternating projections between the two convex sets).
+  Vec3 c = p0;
+  TrianglePoint at = closest_on_triangle(c, x);
+  if (shaft) {
+    c = closest_on_segment((x[0] + x[1] + x[2]) / 3.0, p0, p1);
+    for (int it = 0; it < 4; ++it) {
+      at = closest_on_triangle(c, x);
+      c = closest_on_segment(at.point_m, p0, p1);
+    }
+    at = closest_on_triangle(c, x);
+  }
+  FeatureHit h;
+  h.triangle = t;
+  h.shaft = shaft;
+  h.at_rest = at_rest;
+  h.face_normal = n;
+  // Node hits: the triangle's vertices inside the part (each node's own closest centre).
+  for (int k = 0; k < 3; ++k) {
+    if (tri.slot[k] < 0) continue;
+    const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
+    if ((ck - x[k]).norm() > reach) continue;
+    h.key = feature_key(shaft, TriangleFeature::kVertex, 0, tri.node[k]);
+    h.at.point_m = x[k];
+    h.at.weights = {0.0, 0.0, 0.0};
+    h.at.weights[k] = 1.0;
+    h.at.feature = TriangleFeature::kVertex;
+    h.at.a = k;
+    h.centre_m = ck;
+    hits_.push_back(h);
+  }
+  if (at.feature == TriangleFeature::kVertex || (c - at.point_m).norm() > reach) return;
+  if (at.feature == TriangleFeature::kEdge) {
+    const std::uint64_t a = tri.node[at.a], e = tri.node[(at.a + 1) % 3];
+    h.key = feature_key(shaft, TriangleFeature::kEdge, std::min(a, e), std::max(a, e));
+  } else {
+    h.key = feature_key(shaft, TriangleFeature::kFace, 0, static_cast<std::uint64_t>(t));
+  }
+  h.at = at;
+  h.centre_m = c;
+  hits_.push_back(h);
+}
+
+// Phase "rows", merge: one row per feature (an edge only where all its triangles report it),
+// normals, depths on the deformed and the rest surface.
+void State::merge_features(const Model& m, int body, int tool, const ToolShape& shape) {
+  const BodyModel& b = m.bodies_[body];
+  const auto& tris = b.surface.triangles();
+  const auto& rest = b.body->host().vertices();
+  const TierLinearization* lin = tier_ ? &tier_->linearization(body) : nullptr;
+  // One row per feature, from the deformed surface's hits when there are any (else the rest
+  // surface's): sorted by feature, then geometry, then triangle.
+  std::sort(hits_.begin(), hits_.end(), [](const FeatureHit& a, const FeatureHit& c) {
+    if (a.key != c.key) return a.key < c.key;
+    if (a.at_rest != c.at_rest) return c.at_rest;
+    return a.triangle < c.triangle;
+  });
+  for (std::size_t i = 0; i < hits_.size();) {
+    std::size_t j = i;
+    Vec3 normal_sum = Vec3::Zero();
+    int reports = 0;
+    for (; j < hits_.size() && hits_[j].key == hits_[i].key; ++j) {
+      if (hits_[j].at_rest != hits_[i].at_rest) continue;
+      normal_sum += hits_[j].face_normal;
+      ++reports;
+    }
+    const FeatureHit& h = hits_[i];
+    i = j;
+    const SurfaceTriangle& tri = tris[h.triangle];
+    const TriangleFeature f = key_feature(h.key);
+    if (f == TriangleFeature::kEdge && reports != tri.edge_triangles[h.at.a]) continue;
+    const Vec3 d = h.centre_m - h.at.point_m;
+    const double dn = d.norm();
+    Vec3 n;
+    if (f == TriangleFeature::kFace) {
+      n = h.face_normal;
+    } else {
+      // A node or an edge: radial from the part's centre when the centre is in front of the
+      // surface there; else along the mean normal of the triangles that report it.
+      const Vec3 mean = normal_sum.normalized();
+      if (dn > 1e-9 && d.dot(mean) > 0.0) {
+        n = d / dn;
+      } else if (f == TriangleFeature::kVertex) {
+        continue;  // the tissue wrapped over the part: its face and edge rows hold it
+      } else {
+        n = mean;
+      }
+    }
+    // A part whose centre lies deeper than max_penetration behind the surface does not push it.
+    if (n.dot(d) < -b.max_penetration_m) continue;
+    const double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+    Row r;
+    r.body = body;
+    r.tool = tool;
+    r.shaft = h.shaft;
+    r.key = h.key;
+    r.normal = n;
+    r.point_m = h.at.point_m;
+    double mobile = 0.0;
+    Vec3 rest_point = Vec3::Zero(), offset = Vec3::Zero();
+    for (int k = 0; k < 3; ++k) {
+      r.slot[k] = tri.slot[k];
+      r.w[k] = h.at.weights[k];
+      rest_point += r.w[k] * rest[tri.node[k]];
+      if (r.slot[k] < 0 || r.w[k] == 0.0) {
+        r.slot[k] = -1;  // a fixed node (or no weight): carries nothing
+        r.m[k] = n;
+        continue;
+      }
+      mobile += r.w[k];
+      if (lin) {
+        const Mat3& rot = lin->rotation[r.slot[k]];
+        r.m[k] = rot.transpose() * n;
+        offset += r.w[k] * lin->offset_m[r.slot[k]];
+      } else {
+        r.m[k] = n;
+      }
+    }
+    if (mobile < 1e-6) continue;  // all on fixed nodes: nothing can move
+    r.depth_m = radius - n.dot(d);
+    // LINEAR: the LCP's W lambda is the whole displacement, so its depth is the rest one; the
+    // other tiers add the offset u0 of the latest equilibrium (tier_equilibrium.hpp).
+    r.rest_depth_m = radius - n.dot(h.centre_m - rest_point) + n.dot(offset);
+    tool_rows_.push_back(r);
+  }
+}
+
+// Phase "rows" of one tool: per body the candidates, their features, merged; then the deepest
+// rows of the tool (at most max_contact_nodes_per_tool), appended to the step's rows.
+void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis) {
+  const ToolShape& shape = m.tools_[pose.tool];
+  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
+  tool_rows_.clear();
+  for (int bi = 0; bi < static_cast<int>(m.bodies_.size()); ++bi) {
+    if (m.bodies_[bi].surface.triangles().empty()) continue;
+    candidate_triangles(m, bi, pose, axis);
+    triangle_features(m, bi, pose, axis);
+    merge_features(m, bi, tool, shape);
+  }
+  // Rows within the margin enter the LCP inactive (caught if the deformation pushes them in).
+  tool_rows_.erase(std::remove_if(tool_rows_.begin(), tool_rows_.end(),
+                                  [&](const Row& r) { return !(r.depth_m > -margin); }),
+                   tool_rows_.end());
+  const std::size_t keep =
+      std::min<std::size_t>(tool_rows_.size(), m.options_.max_contact_nodes_per_tool);
+  std::partial_sort(tool_rows_.begin(), tool_rows_.begin() + keep, tool_rows_.end(), deeper);
+  // Two tools on one feature: one row (the same constraint twice would leave only the row
+  // compliance between the tools: a stiffness of 1/eps); the deeper tool carries it.
+  for (std::size_t k = 0; k < keep; ++k) {
+    const Row& r = tool_rows_[k];
+    auto same = std::find_if(rows_.begin(), rows_.end(), [&](const Row& o) {
+      return o.body == r.body && o.key == r.key && o.tool != r.tool;
+    });
+    if (same == rows_.end()) {
+      rows_.push_back(r);
+    } else if (r.depth_m > same->depth_m) {
+      *same = r;
+    }
+  }
+}
+
+// Phase "compliance columns": the coupled columns of every node a row acts on (cached after the
+// first touch; block solves, milliseconds, inside the step).
+void State::compliance_columns(StepStats& stats) {
+  for (auto& list : missing_) list.clear();
+  for (const Row& r : rows_)
+    for (int k = 0; k < 3; ++k)
+      if (r.slot[k] >= 0 && !bodies_[r.body].columns->has(r.slot[k]))
+        missing_[r.body].push_back(r.slot[k]);
+  stats.columns_computed = 0;
+  for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+    if (missing_[bi].empty()) continue;
+    const std::size_t before = bodies_[bi].columns->size();
+    bodies_[bi].columns->ensure(missing_[bi]);
+    stats.columns_computed += static_cast<int>(bodies_[bi].columns->size() - before);
+  }
+}
+
+// Phase "Delassus": W_rs = sum_a sum_b w_ra w_sb m_ra . L(a, b) m_sb (coupled compliance, unit
+// m/N; m = R^T n per node, n in LINEAR) with the row compliance in series on the diagonal;
+// against the sliding rows of the same body W_kr = -sum_a w_ra J_A,k L[:, a] m_ra; delta the
+// rows' depths.
+void State::delassus(const Model& m, int ns) {
+  const int nc = static_cast<int>(rows_.size());
+  const double eps = m.options_.contact_row_compliance;
+  for (int r = 0; r < nc; ++r) {
+    const Row& a = rows_[r];
+    const int i = ns + r;
+    const auto& cols = *bodies_[a.body].columns;
+    delta_[i] = a.rest_depth_m;
+    for (int s = r; s < nc; ++s) {
+      const Row& c = rows_[s];
+      double v = 0.0;
+      if (c.body == a.body) {
+        for (int q = 0; q < 3; ++q) {
+          if (c.slot[q] < 0) continue;
+          Vec3 y = Vec3::Zero();  // sum_p w_p L(slot_p, slot_q)^T m_p
+          for (int p = 0; p < 3; ++p)
+            if (a.slot[p] >= 0) y.noalias() += a.w[p] * (cols.block(a.slot[p], c.slot[q]).transpose() * a.m[p]);
+          v += c.w[q] * y.dot(c.m[q]);
+        }
+      }
+      if (s == r) v *= 1.0 + eps;
+      w_(i, ns + s) = v;
+      w_(ns + s, i) = v;
+    }
+    if (ns == 0) continue;
+    w_.col(i).head(ns).setZero();
+    const int rows_a = m.bodies_[a.body].body->sliding().size();
+    if (rows_a > 0) {
+      const int o = m.bodies_[a.body].sliding_offset;
+      for (int p = 0; p < 3; ++p)
+        if (a.slot[p] >= 0)
+          w_.col(i).segment(o, rows_a).noalias() -= a.w[p] * (cols.sliding_block(a.slot[p]) * a.m[p]);
+    }
+    w_.row(i).head(ns) = w_.col(i).head(ns).transpose();
+  }
+}
+
+// Phase "forces": the last good contact forces per body and node (a row's force -lambda n on
+// its nodes by w, summed per node), the sliding forces, and how far the surface moved.
+void State::store_forces(const Model& m, int ns) {
+  const int nc = static_cast<int>(rows_.size());
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
+    const auto& b = m.bodies_[bi];
+    auto& bs = bodies_[bi];
+    for (int s : bs.force_slots) bs.force_index[s] = -1;
+    bs.force_slots.clear();
+    bs.forces_n.clear();
+    const int rows_b = b.body->sliding().size();
+    if (rows_b > 0) bs.sliding_lambda = lambda_.segment(b.sliding_offset, rows_b);
+  }
+  for (int r = 0; r < nc; ++r) {
+    const double l = lambda_[ns + r];
+    if (l <= 0.0) continue;
+    const Row& row = rows_[r];
+    auto& bs = bodies_[row.body];
+    for (int k = 0; k < 3; ++k) {
+      const int s = row.slot[k];
+      if (s < 0 || row.w[k] == 0.0) continue;
+      if (bs.force_index[s] < 0) {
+        bs.force_index[s] = static_cast<int>(bs.force_slots.size());
+        bs.force_slots.push_back(s);
+        bs.forces_n.push_back(Vec3::Zero());
+      }
+      bs.forces_n[bs.force_index[s]] -= (l * row.w[k]) * row.normal;  // inward on the tissue
+    }
+  }
+  // Largest displacement at the loaded nodes: how far the next step's candidates may have moved.
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
+    auto& bs = bodies_[bi];
+    double most = 0.0;
+    for (int s : bs.force_slots) {
+      Vec3 u = Vec3::Zero();
+      if (tier_) {
+        const int v = m.bodies_[bi].body->contact_nodes()[s];
+        u = tier_->linearization(static_cast<int>(bi)).u_m.segment<3>(3 * static_cast<Eigen::Index>(v));
+      } else {
+        for (std::size_t k = 0; k < bs.force_slots.size(); ++k)
+          u.noalias() += bs.columns->block(s, bs.force_slots[k]) * bs.forces_n[k];
+      }
+      most = std::max(most, u.norm());
+    }
+    bs.max_displacement_m = most;
+  }
+}
+
+// Phase "answer" of one tool: force, stiffness K = -N (W_AA^-1)_cc N^T over its active rows
+// (flat-contact linearization: a row's depth changes by -n . dx), normal, main mesh and nodes,
+// validity radius (the contact patch: the active rows' points around their force-weighted
+// centre, at least a quarter of the tip radius).
+void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iterations,
+                   ToolContact& c) {
+  const int nc = static_cast<int>(rows_.size());
+  c.force_n.setZero();
+  c.stiffness_n_per_m.setZero();
+  c.normal.setZero();
+  c.reference_tip_m = pose.tip_m;
+  c.converged = true;
+  c.iterations = iterations;
+  c.nodes.clear();
+  c.mesh = -1;
+  // Main body: the one carrying most of this tool's force.
+  int main_body = -1;
+  double best = 0.0;
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
+    double sum = 0.0;
+    for (int r = 0; r < nc; ++r)
+      if (rows_[r].tool == t && rows_[r].body == static_cast<int>(bi)) sum += lambda_[ns + r];
+    if (sum > best) {
+      best = sum;
+      main_body = static_cast<int>(bi);
+    }
+  }
+  Vec3 centre = Vec3::Zero();
+  for (int r = 0; r < nc; ++r) {
+    const Row& row = rows_[r];
+    const double l = lambda_[ns + r];
+    if (row.tool != t || !(l > 0.0)) continue;
+    c.force_n += l * row.normal;
+    if (row.body != main_body) continue;
+    centre += (l / best) * row.point_m;
+    const auto& nodes = m.bodies_[row.body].body->contact_nodes();
+    for (int k = 0; k < 3; ++k) {
+      if (row.slot[k] < 0 || row.w[k] == 0.0) continue;
+      const int v = nodes[row.slot[k]];
+      if (std::find(c.nodes.begin(), c.nodes.end(), v) == c.nodes.end()) c.nodes.push_back(v);
+    }
+  }
+  c.stiffness_n_per_m = lcp_.contact_stiffness(ns, [&](int row) -> const Vec3* {
+    const Row& r = rows_[row - ns];
+    return r.tool == t ? &r.normal : nullptr;
+  });
+  c.in_contact = main_body >= 0;
+  c.validity_radius_m = 0.0;
+  if (c.in_contact) {
+    c.mesh = m.bodies_[main_body].body->host_index();
+    double patch = 0.0;
+    for (int r = 0; r < nc; ++r)
+      if (rows_[r].tool == t && rows_[r].body == main_body && lambda_[ns + r] > 0.0)
+        patch = std::max(patch, (rows_[r].point_m - centre).norm());
+    c.validity_radius_m = std::max(patch, 0.25 * m.tools_[pose.tool].tip_radius_m);
+    const double f = c.force_n.norm();
+    if (f > 0.0) c.normal = c.force_n / f;
+  }
+  if (!c.force_n.allFinite() || !c.stiffness_n_per_m.allFinite()) {
+    throw std::runtime_error("Simulation::step: non-finite contact result for tool " +
+                             std::to_string(t));
+  }
+}
+
+// Phase "tier post": the tier's equilibrium follows these forces (worker thread; or now,
+// deterministic).
+void State::tier_post(StepStats& stats) {
+  if (!tier_) return;
+  for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+    tier_loads_[bi].slots = bodies_[bi].force_slots;
+    tier_loads_[bi].forces_n = bodies_[bi].forces_n;
+    tier_loads_[bi].linearization = tier_->linearization(static_cast<int>(bi)).count;
+  }
+  const auto u0 = Clock::now();
+  stats.tier_updated = tier_->post(tier_loads_);
+  if (stats.tier_updated) {
+    stats.tier_update_us = std::chrono::duration<double, std::micro>(Clock::now() - u0).count();
+    stats.inverted_elements = 0;  // of the equilibrium just made
+    for (std::size_t bi = 0; bi < bodies_.size(); ++bi)
+      stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
+  }
+}
+
+void State::step(const Model& m, const std::vector<ToolPose>& poses,
+                 std::vector<ToolContact>& contacts, StepStats& stats) {
+  const auto t0 = Clock::now();
+  const int nt = static_cast<int>(poses.size());
+  check_poses(m, poses);
+  begin_step(m, nt, stats);
+  if (static_cast<int>(contacts.size()) != nt) contacts.resize(nt);
+  // Each answer lists up to three nodes per row: room for all of them once, not per step.
+  for (auto& c : contacts)
+    if (c.nodes.capacity() < static_cast<std::size_t>(3 * m.options_.max_contact_nodes_per_tool))
+      c.nodes.reserve(3 * m.options_.max_contact_nodes_per_tool);
+  if (!m.tools_.empty()) {
+    for (int t = 0; t < nt; ++t) rows_of_tool(m, t, poses[t], poses[t].axis.normalized());
+  }
+  const int nc = static_cast<int>(rows_.size());
+  const int ns = m.num_sliding_;  // sliding rows first (constant block of W), then contact rows
+  const int n = ns + nc;
+  compliance_columns(stats);
+  delassus(m, ns);
+
+  // Phase "LCP". Warm start: the sliding rows active in the last good step, the contact rows
+  // that penetrate. The sliding block of W never changes: its active (or inactive) set and
+  // factor carry over between steps; with sliding_inactive_set its inverse was computed at load.
+  for (int k = 0; k < ns; ++k) warm_[k] = sliding_active_[k];
+  for (int r = 0; r < nc; ++r) warm_[ns + r] = delta_[ns + r] > 0.0 ? 1 : 0;
+  LcpOptions lcp_options;
+  lcp_options.tolerance = m.options_.lcp_tolerance;
+  lcp_options.max_iterations =
+      m.options_.lcp_max_iterations + m.options_.lcp_iterations_per_sliding_row * ns;
+  lcp_options.path = !m.options_.sliding_inactive_set        ? LcpPath::reference
+                     : m.options_.sliding_inactive_set_always ? LcpPath::inactive_set
+                                                              : LcpPath::automatic;
+  const LcpResult lcp = lcp_.solve(LcpProblem{&w_, &delta_, n, ns, &warm_}, lcp_options, lambda_);
+  stats.contact_rows = nc;
+  stats.sliding_rows = ns;
+  stats.converged = lcp.converged;
+  if (!lcp.converged) {
+    // Keep the last good answer (contact and sliding forces), say that this step did not
+    // converge.
+    for (int t = 0; t < nt; ++t) {
+      contacts[t] = last_good_[t];
+      contacts[t].converged = false;
+      contacts[t].iterations = lcp.iterations;
+    }
+    stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+    return;
+  }
+  stats.sliding_active = 0;
+  for (int k = 0; k < ns; ++k) {
+    sliding_active_[k] = lambda_[k] > 0.0 ? 1 : 0;
+    stats.sliding_active += sliding_active_[k];
+  }
+  store_forces(m, ns);
+  for (int t = 0; t < nt; ++t) {
+    answer(m, t, poses[t], ns, lcp.iterations, contacts[t]);
+    last_good_[t] = contacts[t];
+  }
+  tier_post(stats);
+  stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+}
+
+}  // namespace neurosim::interaction

@@ -1,0 +1,197 @@
+// Inside the Simulation (not part of its contract): the constant physics Model, the per-step
+// State and the contact rows a step builds. simulation.cpp builds the Model and serves the
+// fields; contact_step.cpp is the step, in named phases.
+#pragma once
+
+#include "server/interaction/contact_columns.hpp"
+#include "server/interaction/contact_lcp.hpp"
+#include "server/interaction/contact_surface.hpp"
+#include "server/interaction/coupled_body.hpp"
+#include "server/interaction/simulation.hpp"
+#include "server/interaction/sliding_coupling.hpp"
+#include "server/interaction/tier_worker.hpp"
+#include "server/interaction/tool_geometry.hpp"
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace neurosim::interaction {
+
+// A scene mesh in the physics: the loaded (possibly carved) mesh and its place in a body.
+struct MeshEntry {
+  std::unique_ptr<scene::LoadedMesh> loaded;  // stable address: bodies point into it
+  int body{-1};                               // body it belongs to (host or tied), -1: inert
+  int tie{-1};                                // tie index in that body when embedded (TIE)
+  int slide{-1};                              // slide index in that body (SLIDING)
+};
+
+// A body (host + tied and sliding meshes), constant after build.
+struct BodyModel {
+  std::unique_ptr<CoupledBody> body;
+  ContactSurface surface;          // contactable triangles of the host, grid over them
+  std::vector<mesh::Vec3> rest_m;  // per contact slot
+  double max_penetration_m{0.0};
+  // SLIDING couplings hosted by the body: B's part, and where its rows start among the body's
+  // sliding rows (CoupledBody::sliding_rows); the body's rows start at sliding_offset in the LCP.
+  std::vector<std::unique_ptr<SlidingCoupling>> slides;
+  std::vector<int> slide_first_row;
+  int sliding_offset{0};
+  // The host's material and supports (for the COROTATIONAL and NONLINEAR tiers' equilibrium).
+  fem::Material host_material;
+  std::vector<int> host_fixed_nodes;
+};
+
+// One unilateral contact row: a point of a contactable triangle (a face point, an edge point or
+// a node) against one tool part. Gap g = n . (c - sum w x) - r >= 0 with c the part's centre
+// (the tip centre, or the shaft axis point closest to the feature) and x the nodes' positions;
+// the row's force lambda pushes the tool along +n and the nodes along -n with weights w.
+struct Row {
+  int body{-1};
+  int tool{-1};
+  bool shaft{false};           // pushed by the shaft (else by the tip)
+  std::uint64_t key{0};        // feature (contact_step.cpp: feature_key)
+  std::array<int, 3> slot{};   // contact slots (-1: a fixed node, or no node)
+  std::array<double, 3> w{};   // barycentric weights (sum 1; on fixed nodes they carry nothing)
+  std::array<Vec3, 3> m{};     // per node the normal as its compliance sees it (R^T n; LINEAR n)
+  Vec3 normal{Vec3::Zero()};   // unit, out of the tissue towards the tool
+  Vec3 point_m{Vec3::Zero()};  // the contact point on the deformed surface, unit m
+  double depth_m{0.0};         // -gap on the deformed surface (current answer), unit m
+  double rest_depth_m{0.0};    // -gap with the nodes at rest, unit m
+};
+
+// A candidate feature of one tool part on one triangle, before merging (contact_step.cpp).
+struct FeatureHit {
+  std::uint64_t key{0};
+  int triangle{-1};
+  bool shaft{false};
+  bool at_rest{false};          // found on the rest surface (else on the deformed one)
+  TrianglePoint at;             // closest point of the deformed triangle, its weights
+  Vec3 centre_m{Vec3::Zero()};  // the tool part's centre for this feature
+  Vec3 face_normal{Vec3::Zero()};  // the deformed triangle's outward unit normal
+};
+
+// What a step changes on a body.
+struct BodyState {
+  std::unique_ptr<ContactColumns> columns;  // filled on first touch (or when the state is made)
+  std::vector<long long> triangle_stamp;    // per triangle: last tool query that listed it
+  std::vector<long long> position_stamp;    // per contact slot: step of position_m
+  std::vector<mesh::Vec3> position_m;       // per contact slot: deformed position, unit m
+  std::vector<int> force_index;             // per contact slot: index in force_slots or -1
+  double max_displacement_m{0.0};  // largest displacement at the loaded slots, last good step
+  // Last good step's contact forces on the body, per slot (unit N), and sliding row forces.
+  std::vector<int> force_slots;
+  std::vector<mesh::Vec3> forces_n;
+  Eigen::VectorXd sliding_lambda;
+};
+
+// The constant physics model: meshes, bodies (factorizations, coupling operators, contact
+// geometry), tool shapes. Built once from the scene's Model; never written by a step.
+class Model {
+ public:
+  Model(const scene::Model& model, const SimulationOptions& options);
+
+  const MeshEntry& entry(int m) const {
+    if (m < 0 || m >= static_cast<int>(meshes_.size())) {
+      throw std::invalid_argument("Simulation: mesh index " + std::to_string(m) + " out of range");
+    }
+    return meshes_[m];
+  }
+  // Host field (ties included) for contact forces on slots, sliding row forces and other nodal
+  // forces (may be empty); from cached full columns when `columns` has them (stepping thread).
+  // `ws`: the caller's solve scratch (the field thread's), so no lock in the Model is taken.
+  void host_field(const BodyModel& b, const std::vector<int>& slots,
+                  const std::vector<Vec3>& forces_n, const Eigen::VectorXd& sliding_lambda_n,
+                  const Eigen::VectorXd& nodal_forces_n, const ContactColumns* columns,
+                  Eigen::VectorXd& u_host_m, fem::SolveWorkspace* ws = nullptr) const;
+  // Field of mesh `m` (entry e) from its body's host field.
+  void mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
+                  const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
+  // COROTATIONAL and NONLINEAR: field of mesh entry e from its body's stacked equilibrium
+  // (host, then the tied meshes in the order of CoupledBody::ties()).
+  void tier_mesh_field(const MeshEntry& e, const Eigen::VectorXd& stacked_u_m,
+                       Eigen::VectorXd& u_m) const;
+
+  SimulationOptions options_;
+  std::string source_;
+  std::vector<MeshEntry> meshes_;
+  std::vector<BodyModel> bodies_;
+  std::vector<ToolShape> tools_;
+  SetupStats setup_;
+  int num_sliding_{0};  // sliding rows, first in the LCP
+  scene::Tier tier_{scene::Tier::kLinear};
+};
+
+// Everything a step changes (MuJoCo's mjData): per body the contact-compliance cache, the
+// deformed surface positions and the last good forces; the rows, the Delassus operator and the
+// LCP with its warm start; the last good answer per tool. Sized at construction and per tool
+// count, no allocation once warmed up.
+class State {
+ public:
+  // The compliance columns of every contactable node when options.precompute_contact_columns,
+  // and, with sliding rows, the step workspace and the inverse of their constant block.
+  explicit State(const Model& m);
+  // The step (contact_step.cpp): pose, candidates, rows, columns, Delassus, LCP, forces, answer
+  // per tool, tier post.
+  void step(const Model& m, const std::vector<ToolPose>& poses,
+            std::vector<ToolContact>& contacts, StepStats& stats);
+  // Host field for the last good step (stepping thread: may use the cached full columns).
+  void host_field(const Model& m, int body, Eigen::VectorXd& u_host_m) const {
+    if (tier_) {
+      u_host_m = tier_->linearization(body).u_m.head(
+          3 * static_cast<Eigen::Index>(m.bodies_[body].body->host().num_vertices()));
+      return;
+    }
+    const BodyState& bs = bodies_[body];
+    m.host_field(m.bodies_[body], bs.force_slots, bs.forces_n, bs.sliding_lambda,
+                 Eigen::VectorXd(), bs.columns.get(), u_host_m);
+  }
+
+  std::vector<BodyState> bodies_;
+  double columns_s_{0.0};  // compliance columns computed at construction, unit s
+  double sliding_s_{0.0};  // step workspace and constant sliding block at construction, unit s
+  // COROTATIONAL and NONLINEAR: every body's equilibrium, following the contact forces
+  // (tier_worker.hpp); null for LINEAR.
+  std::unique_ptr<TierWorker> tier_;
+  double tier_s_{0.0};  // tier solvers (pattern, symbolic analysis) at construction, unit s
+
+ private:
+  // Phases of step() (contact_step.cpp).
+  void check_poses(const Model& m, const std::vector<ToolPose>& poses) const;
+  void begin_step(const Model& m, int tools, StepStats& stats);
+  void reserve_workspace(const Model& m, int tools);
+  void candidate_triangles(const Model& m, int body, const ToolPose& pose, const Vec3& axis);
+  void triangle_features(const Model& m, int body, const ToolPose& pose, const Vec3& axis);
+  void rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis);
+  void part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
+                     const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
+                     const Vec3& p0, const Vec3& p1, double margin);
+  void merge_features(const Model& m, int body, int tool, const ToolShape& shape);
+  void compliance_columns(StepStats& stats);
+  void delassus(const Model& m, int ns);
+  void store_forces(const Model& m, int ns);
+  void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations,
+              ToolContact& c);
+  void tier_post(StepStats& stats);
+  const mesh::Vec3& position(const Model& m, int body, int slot);
+
+  long long stamp_counter_{0};
+  long long step_counter_{0};
+  std::vector<int> candidates_;    // triangles of one body near one tool
+  std::vector<FeatureHit> hits_;   // features of one body and tool, before merging
+  std::vector<Row> tool_rows_;     // rows of one tool, before the per-tool limit
+  std::vector<Row> rows_;          // the step's contact rows
+  std::vector<std::vector<int>> missing_;
+  Eigen::MatrixXd w_;
+  Eigen::VectorXd delta_, lambda_;
+  std::vector<char> sliding_active_;  // per sliding row: carried a force in the last good step
+  std::vector<char> warm_;            // LCP warm start
+  ContactLcp lcp_;
+  bool lcp_constant_block_{false};  // set_constant_block done
+  std::vector<ToolContact> last_good_;
+  std::vector<TierLoad> tier_loads_;  // per body, the step's contact forces for the worker
+};
+
+}  // namespace neurosim::interaction

@@ -1,0 +1,392 @@
+// The contact step against surface triangles (contact_step.cpp): a sphere pressed into a flat
+// block at a vertex, an edge midpoint and a face centre feels the tissue from first touch at
+// each, within a factor 2 of each other, in every tier; a tip wider than its distance to the
+// nodes, centred in a face cell, is stopped; a tip centred on vertices where 3 to 7 triangles
+// meet and on an edge gives one row, and a tip just off them (a face row next to a node row:
+// nearly dependent rows) converges to the same force.
+#include "server/interaction/simulation.hpp"
+#include "server/interaction/contact_surface.hpp"
+
+#include "server/fem/fem_test_meshes.hpp"
+#include "server/mesh/io.hpp"
+#include "server/scene/compile.hpp"
+#include "server/scene/scene.hpp"
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace neurosim::interaction {
+namespace {
+
+// A block of brain [0, L]^3 (E = 3 kPa, nu = 0.45) fixed at z = 0, cells^3 Kuhn hexahedra, or
+// the scene generator's unstructured cube; one tool with the given tip radius.
+struct Block {
+  double edge_m{0.06};
+  int cells{5};  // 12 mm cells
+  double tip_radius_m{0.002};
+  bool generated{false};  // the scene generator's mesh (irregular vertex valences)
+  scene::Tier tier{scene::Tier::kLinear};
+};
+
+scene::Model block_scene(const Block& b) {
+  const auto dir = neurosim::testing::temp_dir("contact_step");
+  std::ostringstream s;
+  s.precision(17);
+  s << "name: \"contact_step\"\n";
+  if (b.generated) {
+    s << "meshes { id: \"brain\" generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: "
+      << b.edge_m << " y: " << b.edge_m << " z: " << b.edge_m << " } } cell_size_m: "
+      << b.edge_m / b.cells << " seed: 1 }\n";
+  } else {
+    fem::testing::BoxSpec spec;
+    spec.nx = spec.ny = spec.nz = b.cells;
+    spec.hi = Eigen::Vector3d::Constant(b.edge_m);
+    const auto file = dir / "brain.mesh";
+    mesh::write_medit(file.string(), mesh::to_mesh_data(fem::testing::box_mesh(spec)), 1.0);
+    s << "meshes { id: \"brain\" file: \"" << file.string() << "\"\n";
+  }
+  s << "  material { name: \"brain\" youngs_modulus_pa: 3000 poisson_ratio: 0.45 }\n"
+    << "  fixed { half_space { point_m { z: 1e-9 } normal { z: 1 } } }\n"
+    << "  priority: 0 }\n"
+    << "tools { id: \"probe\" tip_radius_m: " << b.tip_radius_m
+    << " shaft_radius_m: 0.0005 shaft_length_m: 0.05 max_speed_m_per_s: 2 }\n"
+    << "effects { tier: LINEAR coupling: false tool_contact: true deformation_output: true }\n";
+  const std::string source = (dir / "contact_step.scene").string();
+  scene::Model model = scene::compile(scene::parse_scene(s.str(), source), source);
+  model.effects.tier = b.tier;
+  std::filesystem::remove_all(dir);
+  return model;
+}
+
+SimulationOptions synchronous() {
+  SimulationOptions o;
+  o.tier_worker_thread = false;  // deterministic tiers
+  return o;
+}
+
+// The tip on the face x = L above (y, z), pushed depth_m past the rest surface along -x.
+ToolPose press(const Block& b, double depth_m, double y_m, double z_m) {
+  ToolPose p;
+  p.tip_m = Vec3(b.edge_m + b.tip_radius_m - depth_m, y_m, z_m);
+  p.axis = Vec3::UnitX();
+  return p;
+}
+
+// Force along +x at each depth of a slow press (held `hold` steps per depth: the multirate tiers
+// converge to their equilibrium).
+std::vector<double> press_curve(Simulation& sim, const Block& b, double y, double z,
+                                const std::vector<double>& depths, int hold) {
+  std::vector<double> out;
+  std::vector<ToolContact> c;
+  StepStats st;
+  double previous = 0.0;
+  for (double d : depths) {
+    for (int k = 1; k <= hold; ++k) {
+      const double dk = previous + (d - previous) * k / hold;
+      sim.step({press(b, dk, y, z)}, c, st);
+      EXPECT_TRUE(st.converged);
+    }
+    previous = d;
+    out.push_back(c[0].force_n.x());
+  }
+  return out;
+}
+
+std::string tier_label(scene::Tier t) { return scene::tier_name(t); }
+
+class ContactStepTier : public ::testing::TestWithParam<scene::Tier> {};
+
+// Kuhn faces on x = L: quads of 12 mm split along the (y, z) diagonal. A vertex at (24, 24) mm,
+// the midpoint of an axis edge (30, 24), of a diagonal edge (30, 30) (the cell's centre), a
+// triangle's centroid (32, 28). Linear shape functions make a face point stiffer than a node
+// (its row loads three nodes; the compliance under a point load is largest at a node).
+TEST_P(ContactStepTier, FlatBlockVertexEdgeFaceWithinFactor2) {
+  Block b;
+  b.tier = GetParam();
+  const auto model = build_model(block_scene(b), synchronous());
+  const std::vector<double> depths{0.05e-3, 0.5e-3, 1e-3, 2e-3, 3e-3, 4e-3};
+  const int hold = b.tier == scene::Tier::kLinear ? 1 : 15;
+  const std::vector<std::pair<std::string, Vec3>> at{
+      {"vertex", Vec3(0, 0.024, 0.024)},
+      {"axis edge", Vec3(0, 0.030, 0.024)},
+      {"diagonal edge", Vec3(0, 0.030, 0.030)},
+      {"face", Vec3(0, 0.032, 0.028)}};
+  std::vector<std::vector<double>> curves;
+  for (const auto& [name, p] : at) {
+    auto sim = Simulation::from_model(model);
+    curves.push_back(press_curve(*sim, b, p.y(), p.z(), depths, hold));
+  }
+  for (std::size_t k = 0; k < depths.size(); ++k) {
+    double lo = 1e300, hi = 0.0;
+    std::printf("%s depth %.2f mm:", tier_label(b.tier).c_str(), depths[k] * 1e3);
+    for (std::size_t i = 0; i < at.size(); ++i) {
+      const double f = curves[i][k];
+      std::printf("  %s %.3f mN", at[i].first.c_str(), f * 1e3);
+      EXPECT_GT(f, 0.0) << at[i].first << " at " << depths[k];
+      lo = std::min(lo, f);
+      hi = std::max(hi, f);
+    }
+    std::printf("  ratio %.3f\n", hi / lo);
+    EXPECT_LE(hi, 2.0 * lo) << "depth " << depths[k];
+  }
+}
+
+// An 8 mm tip centred in a 12 mm face cell is 8.5 mm from the cell's four nodes: node contact
+// let it through with 0 N. Pressed 6 mm deep it is held by a force that grows with the depth,
+// and the surface under it moves with it.
+TEST_P(ContactStepTier, WideTipInAFaceCellIsStopped) {
+  Block b;
+  b.tier = GetParam();
+  b.tip_radius_m = 0.008;
+  auto sim = Simulation::build(block_scene(b), synchronous());
+  std::vector<ToolContact> c;
+  StepStats st;
+  double previous = 0.0;
+  const int steps = 120;
+  for (int k = 1; k <= steps; ++k) {
+    const double d = 6e-3 * k / steps;
+    sim->step({press(b, d, 0.030, 0.030)}, c, st);
+    ASSERT_TRUE(st.converged);
+    ASSERT_TRUE(c[0].in_contact) << "depth " << d;
+    EXPECT_GT(c[0].force_n.x(), 0.0);
+    if (b.tier == scene::Tier::kLinear) {
+      EXPECT_GT(c[0].force_n.x(), previous) << "depth " << d;
+    }
+    previous = c[0].force_n.x();
+  }
+  // The surface point under the tip (the cell's centre) moved about as far as the tip.
+  Eigen::VectorXd u;
+  sim->displacements(0, u);
+  const auto& x = sim->mesh(0).vertices();
+  double centre_u = 0.0;
+  for (std::size_t v = 0; v < x.size(); ++v) {
+    const Vec3 p = x[v];
+    if (std::abs(p.x() - b.edge_m) < 1e-9 && std::abs(p.y() - 0.030) < 6.1e-3 &&
+        std::abs(p.z() - 0.030) < 6.1e-3)
+      centre_u += -u[3 * v] / 4.0;  // the four corners of the cell
+  }
+  std::printf("%s: 6 mm press at a cell centre: %.3f mN, cell corners moved %.3f mm\n",
+              tier_label(b.tier).c_str(), previous * 1e3, centre_u * 1e3);
+  EXPECT_GT(previous, 0.0);
+  // The sphere reaches 6 mm below the rest surface at the cell's centre, on the diagonal of its
+  // two triangles: the diagonal's end nodes move about that far, the four corners on average by
+  // more than 1 mm (node contact: none moved, the sphere's section at the rest surface, 7.75 mm,
+  // does not reach the corners 8.5 mm away).
+  EXPECT_GT(centre_u, 1e-3);
+}
+
+INSTANTIATE_TEST_SUITE_P(contact_step, ContactStepTier,
+                         ::testing::Values(scene::Tier::kLinear, scene::Tier::kCorotational,
+                                           scene::Tier::kNonlinear),
+                         [](const ::testing::TestParamInfo<scene::Tier>& p) {
+                           return tier_label(p.param);
+                         });
+
+// Vertices of the pressed face (x = L) of the generated cube by the number of its triangles
+// (4 to 8 occur on this mesh), and the tip centred on each, on an edge midpoint, and 0.05 mm off
+// each: one row where centred (the feature's triangles merged), about the same force just off it
+// (a face row beside the node row, nearly dependent: the row compliance keeps W definite; the
+// force has a kink at a node, where the row goes from one node to three: 2 % in 0.05 mm seen).
+TEST(interaction_contact_step, TipOnVerticesOfEveryValenceAndOnAnEdge) {
+  Block b;
+  b.generated = true;
+  b.cells = 5;
+  const auto model = build_model(block_scene(b), {});
+  auto probe = Simulation::from_model(model);
+  const auto& mesh = probe->mesh(0);
+  std::map<int, int> valence;  // vertex -> triangles on the face x = L
+  std::vector<std::array<int, 3>> face;
+  for (const auto& t : mesh.surface()) {
+    bool on = true;
+    for (int v : t) on = on && std::abs(mesh.vertices()[v].x() - b.edge_m) < 1e-9;
+    if (!on) continue;
+    face.push_back({t[0], t[1], t[2]});
+    for (int v : t) ++valence[v];
+  }
+  auto interior = [&](const Vec3& p) {
+    return p.y() > 0.01 && p.y() < b.edge_m - 0.01 && p.z() > 0.01 && p.z() < b.edge_m - 0.01;
+  };
+  std::map<int, int> vertex_of_valence;
+  for (const auto& [v, n] : valence)
+    if (interior(mesh.vertices()[v]) && !vertex_of_valence.count(n)) vertex_of_valence[n] = v;
+  for (int n = 4; n <= 7; ++n) EXPECT_TRUE(vertex_of_valence.count(n)) << "valence " << n;
+  const double depth = 1e-3;
+  auto run = [&](const Vec3& on_face, StepStats& st) {
+    auto sim = Simulation::from_model(model);
+    std::vector<ToolContact> c;
+    sim->step({press(b, depth, on_face.y(), on_face.z())}, c, st);
+    EXPECT_TRUE(st.converged);
+    return c[0];
+  };
+  for (const auto& [n, v] : vertex_of_valence) {
+    const Vec3 p = mesh.vertices()[v];
+    StepStats st;
+    const ToolContact centred = run(p, st);
+    EXPECT_EQ(st.contact_rows, 1) << "valence " << n;
+    EXPECT_GT(centred.force_n.x(), 0.0) << "valence " << n;
+    for (const Vec3& off : {Vec3(0, 5e-5, 0), Vec3(0, 0, -5e-5), Vec3(0, -3.5e-5, 3.5e-5)}) {
+      StepStats so;
+      const ToolContact moved = run(p + off, so);
+      EXPECT_NEAR(moved.force_n.x(), centred.force_n.x(), 0.05 * centred.force_n.x())
+          << "valence " << n << " rows " << so.contact_rows;
+    }
+    std::printf("valence %d: %.3f mN at %.1f mm\n", n, centred.force_n.x() * 1e3, depth * 1e3);
+  }
+  // An interior edge of the face: centred on its midpoint, one row on its two triangles.
+  for (const auto& t : face) {
+    const Vec3 a = mesh.vertices()[t[0]], c = mesh.vertices()[t[1]];
+    const Vec3 mid = 0.5 * (a + c);
+    if (!interior(mid) || (a - c).norm() < 0.008) continue;
+    StepStats st;
+    const ToolContact on_edge = run(mid, st);
+    EXPECT_EQ(st.contact_rows, 1);
+    EXPECT_GT(on_edge.force_n.x(), 0.0);
+    StepStats so;
+    const ToolContact off = run(mid + 5e-5 * (c - a).cross(Vec3::UnitX()).normalized(), so);
+    EXPECT_NEAR(off.force_n.x(), on_edge.force_n.x(), 0.05 * on_edge.force_n.x());
+    break;
+  }
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
+
+namespace neurosim::interaction {
+namespace {
+
+// A path over a mesh's rest surface seen from above: the tip centre kept `depth_m` below the
+// highest surface point under (x, y) along that triangle's normal; the depth the test divides by
+// is measured to the closest point of the surface triangles (brute force).
+struct SurfacePoint {
+  Vec3 point_m;
+  Vec3 normal;  // the triangle's outward normal
+};
+
+SurfacePoint closest_on_surface(const mesh::TetMesh& mesh, const Vec3& x) {
+  SurfacePoint best{Vec3::Zero(), Vec3::UnitZ()};
+  double best_d = std::numeric_limits<double>::infinity();
+  const auto& v = mesh.vertices();
+  for (const auto& t : mesh.surface()) {
+    const std::array<Vec3, 3> p{v[t[0]], v[t[1]], v[t[2]]};
+    const TrianglePoint at = closest_on_triangle(x, p);
+    const double d = (x - at.point_m).squaredNorm();
+    if (d < best_d) {
+      best_d = d;
+      best.point_m = at.point_m;
+      best.normal = (p[1] - p[0]).cross(p[2] - p[0]).normalized();
+    }
+  }
+  return best;
+}
+
+// The highest point of the surface above (x, y) (a vertical ray from above), or none.
+bool top_of_surface(const mesh::TetMesh& mesh, double x, double y, SurfacePoint& out) {
+  const auto& v = mesh.vertices();
+  double best = -std::numeric_limits<double>::infinity();
+  for (const auto& t : mesh.surface()) {
+    const Vec3 &a = v[t[0]], &b = v[t[1]], &c = v[t[2]];
+    const Vec3 n = (b - a).cross(c - a);
+    if (n.z() <= 0.0) continue;  // faces looking up only
+    // Barycentric coordinates of (x, y) in the triangle's projection on z = 0.
+    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
+    const double l1 = ((x - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y - a.y())) / det;
+    const double l2 = ((b.x() - a.x()) * (y - a.y()) - (x - a.x()) * (b.y() - a.y())) / det;
+    if (l1 < 0.0 || l2 < 0.0 || l1 + l2 > 1.0) continue;
+    const Vec3 p = a + l1 * (b - a) + l2 * (c - a);
+    if (p.z() > best) {
+      best = p.z();
+      out.point_m = p;
+      out.normal = n.normalized();
+    }
+  }
+  return std::isfinite(best);
+}
+
+struct Slide {
+  std::vector<double> force_per_depth;  // |F| / measured depth per step, unit N/m
+  double min_force_n{std::numeric_limits<double>::infinity()};
+  double spread{0.0};  // max / min of force_per_depth
+};
+
+Slide slide(const scene::Model& model, const Vec3& start, const Vec3& heading, double depth_m,
+            double length_m, double step_m) {
+  auto sim = Simulation::build(model);
+  const mesh::TetMesh& mesh = sim->mesh(0);
+  const double r = model.tools.at(0).tip_radius_m;
+  std::vector<ToolContact> c;
+  StepStats st;
+  Slide out;
+  const int steps = static_cast<int>(std::lround(length_m / step_m));
+  for (int k = 0; k <= steps; ++k) {
+    const Vec3 at = start + (k * step_m) * heading;
+    SurfacePoint p;
+    if (!top_of_surface(mesh, at.x(), at.y(), p)) {
+      ADD_FAILURE() << "the path leaves the surface at step " << k;
+      break;
+    }
+    ToolPose pose;
+    pose.tip_m = p.point_m + (r - depth_m) * p.normal;
+    pose.axis = p.normal;
+    sim->step({pose}, c, st);
+    EXPECT_TRUE(st.converged);
+    // The depth as the tip sees it: below the closest point of the surface triangles.
+    const SurfacePoint q = closest_on_surface(mesh, pose.tip_m);
+    const double depth = r - q.normal.dot(pose.tip_m - q.point_m);
+    const double f = c[0].force_n.norm();
+    out.min_force_n = std::min(out.min_force_n, f);
+    out.force_per_depth.push_back(f / depth);
+    if (std::getenv("SLIDE_TRACE"))
+      std::printf("trace %d tip %.4f %.4f %.4f depth %.4f mm F %.4f mN rows %d nodes %zu\n", k,
+                  pose.tip_m.x() * 1e3, pose.tip_m.y() * 1e3, pose.tip_m.z() * 1e3, depth * 1e3,
+                  f * 1e3, st.contact_rows, c[0].nodes.size());
+  }
+  const auto [lo, hi] =
+      std::minmax_element(out.force_per_depth.begin(), out.force_per_depth.end());
+  out.spread = *hi / *lo;
+  return out;
+}
+
+// The 2 mm probe slid 40 mm over the bundled brain (triangles about 7 mm, four tip radii) 1 mm and
+// 2 mm below its rest surface, and the cube's 3 mm probe over its top face: the force is never
+// zero (node contact: zero in 94 % of such a slide). |F| / depth varies along the path by at most
+// 2x on the cube (measured 1.7x) and 3.5x on the brain (measured 2.9x at 1 mm, 3.0x at 2 mm; the
+// target of 2x is not reached): a face point is stiffer than a node (its row loads three nodes:
+// 1.5x on the flat block), and on the brain the tip also crosses creases of the surface, where it
+// touches two faces at once while its depth is measured to the closest one, and gyri of varying
+// thickness.
+TEST(interaction_contact_step, SlideOverTheSurfaceNeverLosesTheTissue) {
+  struct Case {
+    const char* scene;
+    double depth_m;
+  };
+  for (const Case& k : {Case{"brain_artery", 1e-3}, Case{"brain_artery", 2e-3},
+                        Case{"cube_cylinder", 1e-3}, Case{"cube_cylinder", 2e-3}}) {
+    const scene::Model model = scene::load_model(neurosim::testing::source_dir() / "scenes" /
+                                                 (std::string(k.scene) + ".scene"));
+    // Brain: 40 mm front to back over the left hemisphere's top (x = 60 mm in image
+    // coordinates, clear of the midline fissure). Cube: across the middle of its top face.
+    const bool brain = std::string(k.scene) == "brain_artery";
+    const Vec3 start = brain ? Vec3(0.060, 0.080, 0.0) : Vec3(0.030, 0.050, 0.0);
+    const Vec3 heading = brain ? Vec3::UnitY() : Vec3::UnitX();
+    const Slide s = slide(model, start, heading, k.depth_m, 0.04, 1e-4);
+    std::printf("%s, %.0f mm deep: min |F| %.3f mN, |F|/depth %.1f .. %.1f N/m, spread %.2f\n",
+                k.scene, k.depth_m * 1e3, s.min_force_n * 1e3,
+                *std::min_element(s.force_per_depth.begin(), s.force_per_depth.end()),
+                *std::max_element(s.force_per_depth.begin(), s.force_per_depth.end()), s.spread);
+    EXPECT_GT(s.min_force_n, 0.0) << k.scene;
+    EXPECT_LE(s.spread, brain ? 3.5 : 2.0) << k.scene << " " << k.depth_m;
+  }
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
