@@ -3,9 +3,16 @@
 // with the coupling kind SLIDING (frictionless unilateral pairs solved with the tool contact).
 //   interaction_bench [--csv] [--steps N] [--sliding-steps N] [--quick] [--residual-csv FILE]
 //                     [--only SCENARIO] [--no-sliding-ref]
+//   interaction_bench --brain-contact [--steps N]
 // --csv prints only the table; set-up times and notes go to stderr. SLIDING rows: `sliding` (the
 // default LCP path, inverse of the sliding block at load) and `sliding_ref` (the reference path,
 // factor of the active rows), unless --no-sliding-ref.
+// --brain-contact: scenes/brain_artery.scene as it is (TIE, LINEAR, the 2 mm probe): a press
+// breathing 0.6-1.4 mm deep on a 4 mm circle (after 200 warm-up steps), and a 10 s slide at
+// 20 mm/s, 1 mm deep, over fresh surface (five 36 mm lines 5 mm apart joined by 4 mm moves, the
+// first touches of compliance columns included): per-step p50 / p99 / max (us), rows per step,
+// steps with no force. Only the Simulation contract: the same source builds against an older
+// library for side-by-side runs.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "common/stats.hpp"
@@ -57,6 +64,121 @@ effects { tier: LINEAR coupling: true tool_contact: true deformation_output: tru
 )";
 }
 
+
+// The highest point of the host's surface above (x, y) and its triangle's normal (a vertical
+// ray from above); false if the ray misses.
+bool top_of_surface(const neurosim::mesh::TetMesh& mesh, double x, double y, Eigen::Vector3d& p,
+                    Eigen::Vector3d& n) {
+  const auto& v = mesh.vertices();
+  double best = -1e300;
+  for (const auto& t : mesh.surface()) {
+    const Eigen::Vector3d &a = v[t[0]], &b = v[t[1]], &c = v[t[2]];
+    const Eigen::Vector3d nn = (b - a).cross(c - a);
+    if (nn.z() <= 0.0) continue;
+    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
+    const double l1 = ((x - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y - a.y())) / det;
+    const double l2 = ((b.x() - a.x()) * (y - a.y()) - (x - a.x()) * (b.y() - a.y())) / det;
+    if (l1 < 0.0 || l2 < 0.0 || l1 + l2 > 1.0) continue;
+    const Eigen::Vector3d q = a + l1 * (b - a) + l2 * (c - a);
+    if (q.z() > best) {
+      best = q.z();
+      p = q;
+      n = nn.normalized();
+    }
+  }
+  return best > -1e300;
+}
+
+struct RunTimes {
+  std::vector<double> us;
+  double rows{0.0};
+  int zero_force{0};
+  int columns{0};
+};
+
+// Steps the poses, timing each step.
+RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses) {
+  RunTimes r;
+  std::vector<ni::ToolContact> contacts;
+  ni::StepStats stats;
+  std::vector<ni::ToolPose> one(1);
+  for (const auto& p : poses) {
+    one[0] = p;
+    const auto ts = Clock::now();
+    sim.step(one, contacts, stats);
+    r.us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
+    r.rows += stats.contact_rows;
+    r.columns += stats.columns_computed;
+    if (!(contacts[0].force_n.norm() > 0.0)) ++r.zero_force;
+  }
+  r.rows /= static_cast<double>(std::max<std::size_t>(1, poses.size()));
+  return r;
+}
+
+int brain_contact(int steps) {
+  const std::string path = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/brain_artery.scene";
+  const neurosim::scene::Model model = neurosim::scene::load_model(path);
+  const double r = model.tools.at(0).tip_radius_m;
+  auto sim = ni::Simulation::build(model);
+  const auto& mesh = sim->mesh(0);
+  auto pose_at = [&](double x, double y, double depth, ni::ToolPose& pose) {
+    Eigen::Vector3d p, n;
+    if (!top_of_surface(mesh, x, y, p, n)) return false;
+    pose.tip_m = p + (r - depth) * n;
+    pose.axis = n;
+    return true;
+  };
+  // Press: breathing 0.6-1.4 mm on a 4 mm circle around (60, 100) mm.
+  std::vector<ni::ToolPose> warm, press;
+  for (int k = 0; k < 200 + steps; ++k) {
+    const double a = 2.0 * M_PI * k / 200.0, b = 2.0 * M_PI * k / 50.0;
+    ni::ToolPose pose;
+    if (!pose_at(0.060 + 0.004 * std::cos(a), 0.100 + 0.004 * std::sin(a),
+                 0.001 * (1.0 + 0.4 * std::sin(b)), pose)) {
+      std::cerr << "brain-contact: the press path leaves the surface\n";
+      return 1;
+    }
+    (k < 200 ? warm : press).push_back(pose);
+  }
+  run_poses(*sim, warm);
+  const RunTimes tp = run_poses(*sim, press);
+  // Slide: 10 s at 20 mm/s (1 mm per 50 steps), 1 mm deep, over surface the press never touched.
+  std::vector<ni::ToolPose> slide;
+  const double step_m = 0.020 / 1000.0;
+  double x = 0.045, y = 0.060, dir = 1.0;
+  for (int line = 0; line < 5; ++line) {
+    for (double s = 0.0; s < 0.036 - 1e-12; s += step_m) {
+      ni::ToolPose pose;
+      if (!pose_at(x, y, 0.001, pose)) {
+        std::cerr << "brain-contact: the slide leaves the surface at " << x << ", " << y << "\n";
+        return 1;
+      }
+      slide.push_back(pose);
+      y += dir * step_m;
+    }
+    for (double s = 0.0; s < 0.004 - 1e-12; s += step_m) {
+      ni::ToolPose pose;
+      if (!pose_at(x, y, 0.001, pose)) return 1;
+      slide.push_back(pose);
+      x -= step_m;  // towards the lateral side, away from the midline
+    }
+    dir = -dir;
+  }
+  auto fresh = ni::Simulation::build(model);
+  const RunTimes ts = run_poses(*fresh, slide);
+  std::cout << "case,steps,p50_us,p99_us,max_us,rows_per_step,zero_force_steps,columns_computed\n";
+  char line[256];
+  std::snprintf(line, sizeof line, "brain_press,%zu,%.1f,%.1f,%.1f,%.2f,%d,%d\n", press.size(),
+                percentile(tp.us, 0.5), percentile(tp.us, 0.99),
+                *std::max_element(tp.us.begin(), tp.us.end()), tp.rows, tp.zero_force, tp.columns);
+  std::cout << line;
+  std::snprintf(line, sizeof line, "brain_slide,%zu,%.1f,%.1f,%.1f,%.2f,%d,%d\n", slide.size(),
+                percentile(ts.us, 0.5), percentile(ts.us, 0.99),
+                *std::max_element(ts.us.begin(), ts.us.end()), ts.rows, ts.zero_force, ts.columns);
+  std::cout << line;
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -67,6 +189,7 @@ int main(int argc, char** argv) {
   bool sliding_ref = true;
   std::string residual_csv;
   bool no_sliding_ref = false;
+  bool brain = false;
   neurosim::cli::Parser cli("interaction_bench",
                             "Per-step contact solve: exact vs iterative coupling, sliding.");
   cli->add_flag("--csv", csv, "print CSV");
@@ -76,7 +199,9 @@ int main(int argc, char** argv) {
   cli->add_option("--residual-csv", residual_csv, "write the iterative residuals as CSV");
   cli->add_option("--only", only, "one scenario by name");
   cli->add_flag("--no-sliding-ref", no_sliding_ref, "no sliding reference solve");
+  cli->add_flag("--brain-contact", brain, "brain_artery press and 10 s slide (contact rows)");
   if (auto rc = cli.parse(argc, argv)) return *rc;
+  if (brain) return brain_contact(steps);
   sliding_ref = !no_sliding_ref;
   if (sliding_steps < 0) sliding_steps = steps;
   std::vector<Scenario> scenarios;

@@ -43,8 +43,8 @@ constexpr int kSteps = 2000;
 // A block of brain [0, L]^3 (E, nu of brain_artery.scene's literature material) fixed at z = 0,
 // structured (cells^3 hexahedra, 6 tetrahedra each), and optionally an artery tied inside it
 // (artery_mesh: a rod along y 16 mm below the pressed face x = L). The tool (a 10 mm tip by
-// default) pressed at (y, z) = (30, 30) mm touches the four nodes around it (8.5 mm away):
-// contact is node based, a tip that reaches no node's normal line is not felt.
+// default) pressed at (y, z) = (30, 30) mm lands on the midpoint of a cell's diagonal edge, 8.5
+// mm from the cell's corners (contact against the surface triangles: an edge row first).
 struct Block {
   double edge_m{0.06};
   int cells{5};  // 12 mm elements
@@ -428,6 +428,35 @@ INSTANTIATE_TEST_SUITE_P(stability, StabilityPoisson,
                            return std::string(scene::tier_name(std::get<0>(i.param))) + "_nu" +
                                   std::to_string(static_cast<int>(std::lround(nu * 1000)));
                          });
+
+// The press cycles at a vertex (24, 24) mm, the midpoint of an axis edge (30, 24) and a
+// triangle's centroid (32, 28) of the pressed face's 12 mm cells (the cases above press the
+// cell's centre, the midpoint of its diagonal edge): contact against the surface triangles holds
+// wherever the tip lands.
+TEST_P(Stability, PressCyclesAtVertexEdgeFace) {
+  Block b;
+  const BuiltScene scene = build_scene(b, "vertex_edge_face");
+  const std::vector<std::pair<const char*, std::pair<double, double>>> at{
+      {"press at a vertex", {0.024, 0.024}},
+      {"press at an edge midpoint", {0.030, 0.024}},
+      {"press at a face centroid", {0.032, 0.028}}};
+  for (const auto& [name, yz] : at) {
+    Scenario run;
+    run.name = name;
+    run.model = &scene.model;
+    run.tier = tier();
+    run.path = press_cycles(b, 0.010, yz.first, yz.second);
+    Worst w;
+    drive(run, w);
+    if (HasFatalFailure()) return;
+    EXPECT_EQ(w.unconverged, 0) << name;
+    EXPECT_EQ(w.tier_failures, 0) << name << ": " << w.last_error;
+    EXPECT_GT(w.force_n, 0.0) << name;
+    if (tier() == scene::Tier::kLinear) {
+      EXPECT_LE(w.clapeyron_rel, 1e-6) << name;
+    }
+  }
+}
 
 // A stiff artery tied inside soft brain: E_artery / E_brain = 1e2, 1e4, 1e6; the tool presses the
 // brain over the artery. The tie stays exact (coupling by Schur complement, Newton with the tie
