@@ -42,6 +42,16 @@ TriangleFeature key_feature(std::uint64_t key) {
   return static_cast<TriangleFeature>((key >> 60) & 3u);
 }
 
+// A hit counts when the part's centre c is within reach of the point p (in front of the surface
+// or just behind it), or behind the surface there (d . n < 0; n the face's, or the node's rest
+// normal) by at most max_penetration with p under c (lateral offset within reach): a tool that
+// entered the tissue deeper than its radius still pushes the surface it went through.
+bool within(const Vec3& d, const Vec3& n, double reach, double max_penetration_m) {
+  if (d.norm() <= reach) return true;
+  const double h = d.dot(n);
+  return h < 0.0 && -h <= max_penetration_m && (d - h * n).norm() <= reach;
+}
+
 bool deeper(const Row& a, const Row& b) {
   if (a.depth_m != b.depth_m) return a.depth_m > b.depth_m;
   if (a.body != b.body) return a.body < b.body;
@@ -139,6 +149,15 @@ void State::reserve_workspace(const Model& m, int tools) {
     b.forces_n.reserve(3 * max_rows);
   }
   for (auto& list : missing_) list.reserve(3 * max_rows);
+  backup_.resize(bodies_.size());
+  for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+    backup_[bi].slots.reserve(3 * max_rows);
+    backup_[bi].forces_n.reserve(3 * max_rows);
+    backup_[bi].sliding_lambda.resize(bodies_[bi].sliding_lambda.size());
+  }
+  sliding_active_backup_.reserve(sliding_active_.size());
+  row_keys_.reserve(max_rows);
+  previous_row_keys_.reserve(max_rows);
   for (auto& l : tier_loads_) {
     l.slots.reserve(3 * max_rows);
     l.forces_n.reserve(3 * max_rows);
@@ -174,7 +193,6 @@ void State::check_poses(const Model& m, const std::vector<ToolPose>& poses) cons
 
 void State::begin_step(const Model& m, int tools, StepStats& stats) {
   reserve_workspace(m, tools);
-  ++step_counter_;
   stats.tier_updated = false;
   stats.tier_update_us = 0.0;
   stats.inverted_elements = 0;
@@ -186,22 +204,17 @@ void State::begin_step(const Model& m, int tools, StepStats& stats) {
   rows_.clear();
 }
 
-// Position of a contact slot's node on the surface deformed by the last good answer: LINEAR,
-// rest + sum_k L(slot, k) f_k over the loaded slots (cached columns); the other tiers, rest + the
-// latest equilibrium. Computed once per step and slot.
+// Position of a contact slot's node on the surface deformed by this step's answer so far
+// (LINEAR): rest + sum_k L(slot, k) f_k over the loaded slots (cached columns). Computed once per
+// geometry and slot.
 const mesh::Vec3& State::position(const Model& m, int body, int slot) {
   BodyState& bs = bodies_[body];
-  if (bs.position_stamp[slot] == step_counter_) return bs.position_m[slot];
-  bs.position_stamp[slot] = step_counter_;
+  if (bs.position_stamp[slot] == geometry_counter_) return bs.position_m[slot];
+  bs.position_stamp[slot] = geometry_counter_;
   const BodyModel& b = m.bodies_[body];
   Vec3 x = b.rest_m[slot];
-  if (tier_) {
-    const int v = b.body->contact_nodes()[slot];
-    x += tier_->linearization(body).u_m.segment<3>(3 * static_cast<Eigen::Index>(v));
-  } else {
-    for (std::size_t k = 0; k < bs.force_slots.size(); ++k)
-      x.noalias() += bs.columns->block(slot, bs.force_slots[k]) * bs.forces_n[k];
-  }
+  for (std::size_t k = 0; k < bs.force_slots.size(); ++k)
+    x.noalias() += bs.columns->block(slot, bs.force_slots[k]) * bs.forces_n[k];
   bs.position_m[slot] = x;
   return bs.position_m[slot];
 }
@@ -212,7 +225,10 @@ void State::candidate_triangles(const Model& m, int body, const ToolPose& pose, 
   const BodyModel& b = m.bodies_[body];
   BodyState& bs = bodies_[body];
   const ToolShape& shape = m.tools_[pose.tool];
-  const double slack = m.options_.candidate_margin * shape.tip_radius_m + bs.max_displacement_m;
+  // The surface may have moved by the last answer's displacement (this geometry's, or the last
+  // step's: a LINEAR step starts again from rest, its tool is about that deep below it).
+  const double moved = std::max(bs.max_displacement_m, backup_[body].max_displacement_m);
+  const double slack = m.options_.candidate_margin * shape.tip_radius_m + moved;
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   candidates_.clear();
   const long long stamp = ++stamp_counter_;
@@ -255,11 +271,15 @@ void State::triangle_features(const Model& m, int body, const ToolPose& pose, co
   // depths are taken from rest, so a feature that penetrates at rest is a row even when the last
   // answer moved it out of reach (a tool leaving faster than the margin would otherwise lose the
   // tissue for a step, then find it again: chatter).
-  const int geometries = bodies_[body].max_displacement_m > 0.0 ? 2 : 1;
+  // The multirate tiers find their rows on the rest surface only: their equilibrium lags the
+  // step (worker thread), and a row set that followed it would keep the held force from settling
+  // (the step and the updates are a fixed-point iteration on fixed rows).
+  const int g_first = tier_ ? 1 : 0;
+  const int g_last = tier_ || bodies_[body].max_displacement_m > 0.0 ? 1 : 0;
   hits_.clear();
   for (int t : candidates_) {
     const SurfaceTriangle& tri = tris[t];
-    for (int g = 0; g < geometries; ++g) {
+    for (int g = g_first; g <= g_last; ++g) {
       std::array<Vec3, 3> x;
       for (int k = 0; k < 3; ++k)
         x[k] = g == 0 && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
@@ -267,7 +287,8 @@ void State::triangle_features(const Model& m, int body, const ToolPose& pose, co
       if (!(n.norm() > 0.0)) continue;
       n.normalize();
       for (int part = 0; part < (has_shaft ? 2 : 1); ++part)
-        part_features(t, tri, x, n, part == 1, g == 1, shape, p0, p1, margin);
+        part_features(t, tri, x, n, part == 1, g == 1, shape, p0, p1, margin,
+                      b.max_penetration_m, b.body->contact_normals());
     }
   }
 }
@@ -276,7 +297,8 @@ void State::triangle_features(const Model& m, int body, const ToolPose& pose, co
 // the part (+ margin) and the triangle's closest point when it is an edge or face point.
 void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                           const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
-                          const Vec3& p0, const Vec3& p1, double margin) {
+                          const Vec3& p0, const Vec3& p1, double margin,
+                          double max_penetration_m, const std::vector<Vec3>& node_normals) {
   const double reach = (shaft ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
   // The part's centre for this triangle: the tip centre, or the shaft axis point closest to the
   // triangle (alternating projections between the two convex sets).
@@ -299,7 +321,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   for (int k = 0; k < 3; ++k) {
     if (tri.slot[k] < 0) continue;
     const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
-    if ((ck - x[k]).norm() > reach) continue;
+    if (!within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m)) continue;
     h.key = feature_key(shaft, TriangleFeature::kVertex, 0, tri.node[k]);
     h.at.point_m = x[k];
     h.at.weights = {0.0, 0.0, 0.0};
@@ -309,7 +331,12 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
     h.centre_m = ck;
     hits_.push_back(h);
   }
-  if (at.feature == TriangleFeature::kVertex || (c - at.point_m).norm() > reach) return;
+  // An edge by its distance only (behind a ridge the far flank's edge is not the surface the
+  // tool went through); a face also from behind.
+  if (at.feature == TriangleFeature::kVertex) return;
+  if (at.feature == TriangleFeature::kEdge ? (c - at.point_m).norm() > reach
+                                           : !within(c - at.point_m, n, reach, max_penetration_m))
+    return;
   if (at.feature == TriangleFeature::kEdge) {
     const std::uint64_t a = tri.node[at.a], e = tri.node[(at.a + 1) % 3];
     h.key = feature_key(shaft, TriangleFeature::kEdge, std::min(a, e), std::max(a, e));
@@ -328,6 +355,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   const auto& tris = b.surface.triangles();
   const auto& rest = b.body->host().vertices();
   const TierLinearization* lin = tier_ ? &tier_->linearization(body) : nullptr;
+  const std::size_t first = tool_rows_.size();
   // One row per feature, from the deformed surface's hits when there are any (else the rest
   // surface's): sorted by feature, then geometry, then triangle.
   std::sort(hits_.begin(), hits_.end(), [](const FeatureHit& a, const FeatureHit& c) {
@@ -356,15 +384,13 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       n = h.face_normal;
     } else {
       // A node or an edge: radial from the part's centre when the centre is in front of the
-      // surface there; else along the mean normal of the triangles that report it.
+      // surface there (within 60 degrees of its normal); else (the centre beside the point, on
+      // the surface or behind it) along the mean normal of the triangles that report it.
       const Vec3 mean = normal_sum.normalized();
-      if (dn > 1e-9 && d.dot(mean) > 0.0) {
-        n = d / dn;
-      } else if (f == TriangleFeature::kVertex) {
-        continue;  // the tissue wrapped over the part: its face and edge rows hold it
-      } else {
-        n = mean;
-      }
+      n = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
+                  d.dot(mean) > 0.5 * dn
+              ? Vec3(d / dn)
+              : mean;
     }
     // A part whose centre lies deeper than max_penetration behind the surface does not push it.
     if (n.dot(d) < -b.max_penetration_m) continue;
@@ -397,12 +423,27 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       }
     }
     if (mobile < 1e-6) continue;  // all on fixed nodes: nothing can move
-    r.depth_m = radius - n.dot(d);
+    r.height_m = n.dot(d);
+    r.depth_m = radius - r.height_m;
     // LINEAR: the LCP's W lambda is the whole displacement, so its depth is the rest one; the
     // other tiers add the offset u0 of the latest equilibrium (tier_equilibrium.hpp).
     r.rest_depth_m = radius - n.dot(h.centre_m - rest_point) + n.dot(offset);
     tool_rows_.push_back(r);
   }
+  // The tool pushes the surface it entered: a row behind the surface (height < 0) whose normal
+  // turns more than 60 degrees from the row the centre is least deep under belongs to another
+  // side of the body (a ridge's far flank, the far face of a thin part) and is dropped.
+  if (tool_rows_.size() <= first) return;
+  std::size_t entry = first;
+  for (std::size_t k = first + 1; k < tool_rows_.size(); ++k)
+    if (tool_rows_[k].height_m > tool_rows_[entry].height_m) entry = k;
+  const Vec3 n_entry = tool_rows_[entry].normal;
+  tool_rows_.erase(std::remove_if(tool_rows_.begin() + static_cast<std::ptrdiff_t>(first),
+                                  tool_rows_.end(),
+                                  [&](const Row& r) {
+                                    return r.height_m < 0.0 && r.normal.dot(n_entry) < 0.5;
+                                  }),
+                   tool_rows_.end());
 }
 
 // Phase "rows" of one tool: per body the candidates, their features, merged; then the deepest
@@ -628,6 +669,83 @@ void State::tier_post(StepStats& stats) {
   }
 }
 
+// Phases "rows" to "LCP" on the current geometry: the rows of every tool, their compliance
+// columns, W and delta, the LCP (warm start: the sliding rows active in the last good step, the
+// contact rows that penetrate; the sliding block of W never changes, so its active or inactive
+// set and factor carry over, and with sliding_inactive_set its inverse was computed at load).
+LcpResult State::solve_geometry(const Model& m, const std::vector<ToolPose>& poses,
+                                StepStats& stats) {
+  ++geometry_counter_;
+  rows_.clear();
+  if (!m.tools_.empty()) {
+    for (int t = 0; t < static_cast<int>(poses.size()); ++t)
+      rows_of_tool(m, t, poses[t], poses[t].axis.normalized());
+  }
+  const int nc = static_cast<int>(rows_.size());
+  const int ns = m.num_sliding_;  // sliding rows first (constant block of W), then contact rows
+  compliance_columns(stats);
+  delassus(m, ns);
+  for (int k = 0; k < ns; ++k) warm_[k] = sliding_active_[k];
+  for (int r = 0; r < nc; ++r) warm_[ns + r] = delta_[ns + r] > 0.0 ? 1 : 0;
+  LcpOptions lcp_options;
+  lcp_options.tolerance = m.options_.lcp_tolerance;
+  lcp_options.max_iterations =
+      m.options_.lcp_max_iterations + m.options_.lcp_iterations_per_sliding_row * ns;
+  lcp_options.path = !m.options_.sliding_inactive_set        ? LcpPath::reference
+                     : m.options_.sliding_inactive_set_always ? LcpPath::inactive_set
+                                                              : LcpPath::automatic;
+  return lcp_.solve(LcpProblem{&w_, &delta_, ns + nc, ns, &warm_}, lcp_options, lambda_);
+}
+
+// The last good forces of every body, kept while the step iterates (no allocation: reserved).
+void State::save_forces() {
+  for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+    const BodyState& bs = bodies_[bi];
+    ForceBackup& k = backup_[bi];
+    k.slots = bs.force_slots;
+    k.forces_n = bs.forces_n;
+    k.sliding_lambda = bs.sliding_lambda;
+    k.max_displacement_m = bs.max_displacement_m;
+  }
+  sliding_active_backup_ = sliding_active_;
+}
+
+void State::restore_forces(bool to_rest) {
+  for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+    BodyState& bs = bodies_[bi];
+    for (int s : bs.force_slots) bs.force_index[s] = -1;
+    bs.force_slots.clear();
+    bs.forces_n.clear();
+    bs.max_displacement_m = 0.0;
+    if (to_rest) continue;
+    const ForceBackup& k = backup_[bi];
+    bs.force_slots = k.slots;
+    bs.forces_n = k.forces_n;
+    bs.sliding_lambda = k.sliding_lambda;
+    bs.max_displacement_m = k.max_displacement_m;
+    for (std::size_t i = 0; i < bs.force_slots.size(); ++i)
+      bs.force_index[bs.force_slots[i]] = static_cast<int>(i);
+  }
+  if (!to_rest) sliding_active_ = sliding_active_backup_;
+}
+
+// The rows of this geometry as sorted (tool, feature) keys; true if they equal the last ones.
+bool State::same_rows_as_before() {
+  row_keys_.clear();
+  for (const Row& r : rows_)
+    row_keys_.push_back((static_cast<std::uint64_t>(r.tool) << 48) ^ r.key ^
+                        (static_cast<std::uint64_t>(r.body) << 56));
+  std::sort(row_keys_.begin(), row_keys_.end());
+  const bool same = row_keys_ == previous_row_keys_;
+  previous_row_keys_.swap(row_keys_);
+  return same;
+}
+
+// LINEAR: the rows follow the surface deformed by this step's own answer, found by iterating
+// from rest (rows on the rest surface, LCP, rows on the surface it deformed, LCP, ...) until the
+// rows are the same features twice or contact_geometry_iterations is reached: the answer is a
+// function of the poses alone (a replay equals the live run; a held pose, a sequence of poses,
+// gives the same force). The multirate tiers take the surface of their latest equilibrium once.
 void State::step(const Model& m, const std::vector<ToolPose>& poses,
                  std::vector<ToolContact>& contacts, StepStats& stats) {
   const auto t0 = Clock::now();
@@ -639,34 +757,34 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
   for (auto& c : contacts)
     if (c.nodes.capacity() < static_cast<std::size_t>(3 * m.options_.max_contact_nodes_per_tool))
       c.nodes.reserve(3 * m.options_.max_contact_nodes_per_tool);
-  if (!m.tools_.empty()) {
-    for (int t = 0; t < nt; ++t) rows_of_tool(m, t, poses[t], poses[t].axis.normalized());
+  const int ns = m.num_sliding_;
+  const bool iterate = !tier_;
+  save_forces();
+  if (iterate) restore_forces(true);  // from rest
+  previous_row_keys_.clear();
+  stats.columns_computed = 0;
+  stats.geometry_iterations = 0;
+  LcpResult lcp;
+  int columns = 0;
+  for (int it = 0;; ++it) {
+    lcp = solve_geometry(m, poses, stats);
+    columns += stats.columns_computed;
+    ++stats.geometry_iterations;
+    if (!lcp.converged) break;
+    for (int k = 0; k < ns; ++k) sliding_active_[k] = lambda_[k] > 0.0 ? 1 : 0;
+    store_forces(m, ns);
+    if (!iterate || rows_.empty() || same_rows_as_before() ||
+        it + 1 >= m.options_.contact_geometry_iterations)
+      break;
   }
-  const int nc = static_cast<int>(rows_.size());
-  const int ns = m.num_sliding_;  // sliding rows first (constant block of W), then contact rows
-  const int n = ns + nc;
-  compliance_columns(stats);
-  delassus(m, ns);
-
-  // Phase "LCP". Warm start: the sliding rows active in the last good step, the contact rows
-  // that penetrate. The sliding block of W never changes: its active (or inactive) set and
-  // factor carry over between steps; with sliding_inactive_set its inverse was computed at load.
-  for (int k = 0; k < ns; ++k) warm_[k] = sliding_active_[k];
-  for (int r = 0; r < nc; ++r) warm_[ns + r] = delta_[ns + r] > 0.0 ? 1 : 0;
-  LcpOptions lcp_options;
-  lcp_options.tolerance = m.options_.lcp_tolerance;
-  lcp_options.max_iterations =
-      m.options_.lcp_max_iterations + m.options_.lcp_iterations_per_sliding_row * ns;
-  lcp_options.path = !m.options_.sliding_inactive_set        ? LcpPath::reference
-                     : m.options_.sliding_inactive_set_always ? LcpPath::inactive_set
-                                                              : LcpPath::automatic;
-  const LcpResult lcp = lcp_.solve(LcpProblem{&w_, &delta_, n, ns, &warm_}, lcp_options, lambda_);
-  stats.contact_rows = nc;
+  stats.columns_computed = columns;
+  stats.contact_rows = static_cast<int>(rows_.size());
   stats.sliding_rows = ns;
   stats.converged = lcp.converged;
   if (!lcp.converged) {
     // Keep the last good answer (contact and sliding forces), say that this step did not
     // converge.
+    restore_forces(false);
     for (int t = 0; t < nt; ++t) {
       contacts[t] = last_good_[t];
       contacts[t].converged = false;
@@ -676,11 +794,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     return;
   }
   stats.sliding_active = 0;
-  for (int k = 0; k < ns; ++k) {
-    sliding_active_[k] = lambda_[k] > 0.0 ? 1 : 0;
-    stats.sliding_active += sliding_active_[k];
-  }
-  store_forces(m, ns);
+  for (int k = 0; k < ns; ++k) stats.sliding_active += sliding_active_[k];
   for (int t = 0; t < nt; ++t) {
     answer(m, t, poses[t], ns, lcp.iterations, contacts[t]);
     last_good_[t] = contacts[t];

@@ -122,7 +122,8 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
   if (options_.max_contact_nodes_per_tool < 1 || options_.lcp_max_iterations < 1 ||
       !(options_.lcp_tolerance > 0.0) || !(options_.max_penetration_m >= 0.0) ||
       !std::isfinite(options_.max_penetration_m) || !(options_.candidate_margin >= 0.0) ||
-      !(options_.contact_row_compliance >= 0.0) || !(options_.contact_row_compliance < 1.0)) {
+      !(options_.contact_row_compliance >= 0.0) || !(options_.contact_row_compliance < 1.0) ||
+      options_.contact_geometry_iterations < 1) {
     throw std::invalid_argument(source_ + ": invalid SimulationOptions");
   }
   tier_ = model.effects.tier;

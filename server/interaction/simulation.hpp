@@ -56,6 +56,8 @@ struct StepStats {
   // Contact nodes touched for the first time in this step: their coupled compliance columns were
   // computed (block solves, milliseconds) inside the step.
   int columns_computed{0};
+  // LINEAR: LCPs of this step (rows found again on the surface each answer deformed, from rest).
+  int geometry_iterations{0};
   int sliding_rows{0};    // unilateral rows of SLIDING couplings in this step's LCP
   int sliding_active{0};  // of which carry a force
   // COROTATIONAL and NONLINEAR with SimulationOptions::tier_worker_thread = false: the tier's
@@ -111,6 +113,9 @@ struct SimulationOptions {
   // keeps W positive definite when a face row and the node rows of its vertices are nearly
   // dependent (contact_step.cpp); the force changes by about eps relative.
   double contact_row_compliance{1e-8};
+  // LINEAR: the rows follow the surface deformed by the step's own answer, iterated from rest
+  // until the same features come out twice, at most this many LCPs per step (>= 1).
+  int contact_geometry_iterations{6};
   int lcp_max_iterations{200};
   double lcp_tolerance{1e-10};  // relative
   // Disk cache of each body's boundary operator (keyed by meshes, materials, fixed nodes and the

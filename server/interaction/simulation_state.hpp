@@ -58,6 +58,7 @@ struct Row {
   std::array<Vec3, 3> m{};     // per node the normal as its compliance sees it (R^T n; LINEAR n)
   Vec3 normal{Vec3::Zero()};   // unit, out of the tissue towards the tool
   Vec3 point_m{Vec3::Zero()};  // the contact point on the deformed surface, unit m
+  double height_m{0.0};        // the centre's height above the point along n (deformed), unit m
   double depth_m{0.0};         // -gap on the deformed surface (current answer), unit m
   double rest_depth_m{0.0};    // -gap with the nodes at rest, unit m
 };
@@ -167,7 +168,8 @@ class State {
   void rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis);
   void part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                      const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
-                     const Vec3& p0, const Vec3& p1, double margin);
+                     const Vec3& p0, const Vec3& p1, double margin, double max_penetration_m,
+                     const std::vector<Vec3>& node_normals);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape);
   void compliance_columns(StepStats& stats);
   void delassus(const Model& m, int ns);
@@ -175,10 +177,14 @@ class State {
   void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations,
               ToolContact& c);
   void tier_post(StepStats& stats);
+  LcpResult solve_geometry(const Model& m, const std::vector<ToolPose>& poses, StepStats& stats);
+  void save_forces();
+  void restore_forces(bool to_rest);
+  bool same_rows_as_before();
   const mesh::Vec3& position(const Model& m, int body, int slot);
 
   long long stamp_counter_{0};
-  long long step_counter_{0};
+  long long geometry_counter_{0};  // rows found on a new geometry (positions cached per value)
   std::vector<int> candidates_;    // triangles of one body near one tool
   std::vector<FeatureHit> hits_;   // features of one body and tool, before merging
   std::vector<Row> tool_rows_;     // rows of one tool, before the per-tool limit
@@ -192,6 +198,16 @@ class State {
   bool lcp_constant_block_{false};  // set_constant_block done
   std::vector<ToolContact> last_good_;
   std::vector<TierLoad> tier_loads_;  // per body, the step's contact forces for the worker
+  // The last good forces while a LINEAR step iterates its geometry (restored if it fails).
+  struct ForceBackup {
+    std::vector<int> slots;
+    std::vector<mesh::Vec3> forces_n;
+    Eigen::VectorXd sliding_lambda;
+    double max_displacement_m{0.0};
+  };
+  std::vector<ForceBackup> backup_;
+  std::vector<char> sliding_active_backup_;
+  std::vector<std::uint64_t> row_keys_, previous_row_keys_;  // rows of the last two geometries
 };
 
 }  // namespace neurosim::interaction

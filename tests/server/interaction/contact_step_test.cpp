@@ -18,7 +18,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <map>
 #include <sstream>
@@ -201,7 +200,10 @@ TEST(interaction_contact_step, TipOnVerticesOfEveryValenceAndOnAnEdge) {
   Block b;
   b.generated = true;
   b.cells = 5;
-  const auto model = build_model(block_scene(b), {});
+  // The rows of the rest surface (one geometry): what the merge by feature makes of them.
+  SimulationOptions one_geometry;
+  one_geometry.contact_geometry_iterations = 1;
+  const auto model = build_model(block_scene(b), one_geometry);
   auto probe = Simulation::from_model(model);
   const auto& mesh = probe->mesh(0);
   std::map<int, int> valence;  // vertex -> triangles on the face x = L
@@ -345,10 +347,6 @@ Slide slide(const scene::Model& model, const Vec3& start, const Vec3& heading, d
     const double f = c[0].force_n.norm();
     out.min_force_n = std::min(out.min_force_n, f);
     out.force_per_depth.push_back(f / depth);
-    if (std::getenv("SLIDE_TRACE"))
-      std::printf("trace %d tip %.4f %.4f %.4f depth %.4f mm F %.4f mN rows %d nodes %zu\n", k,
-                  pose.tip_m.x() * 1e3, pose.tip_m.y() * 1e3, pose.tip_m.z() * 1e3, depth * 1e3,
-                  f * 1e3, st.contact_rows, c[0].nodes.size());
   }
   const auto [lo, hi] =
       std::minmax_element(out.force_per_depth.begin(), out.force_per_depth.end());
@@ -359,7 +357,7 @@ Slide slide(const scene::Model& model, const Vec3& start, const Vec3& heading, d
 // The 2 mm probe slid 40 mm over the bundled brain (triangles about 7 mm, four tip radii) 1 mm and
 // 2 mm below its rest surface, and the cube's 3 mm probe over its top face: the force is never
 // zero (node contact: zero in 94 % of such a slide). |F| / depth varies along the path by at most
-// 2x on the cube (measured 1.7x) and 3.5x on the brain (measured 2.9x at 1 mm, 3.0x at 2 mm; the
+// 2x on the cube (measured 1.7x) and 3x on the brain (measured 2.6x at 1 mm, 2.4x at 2 mm; the
 // target of 2x is not reached): a face point is stiffer than a node (its row loads three nodes:
 // 1.5x on the flat block), and on the brain the tip also crosses creases of the surface, where it
 // touches two faces at once while its depth is measured to the closest one, and gyri of varying
@@ -384,7 +382,7 @@ TEST(interaction_contact_step, SlideOverTheSurfaceNeverLosesTheTissue) {
                 *std::min_element(s.force_per_depth.begin(), s.force_per_depth.end()),
                 *std::max_element(s.force_per_depth.begin(), s.force_per_depth.end()), s.spread);
     EXPECT_GT(s.min_force_n, 0.0) << k.scene;
-    EXPECT_LE(s.spread, brain ? 3.5 : 2.0) << k.scene << " " << k.depth_m;
+    EXPECT_LE(s.spread, brain ? 3.0 : 2.0) << k.scene << " " << k.depth_m;
   }
 }
 

@@ -286,8 +286,9 @@ TEST(interaction_simulation, IterativeBaselineMatchesExact) {
 // flat-contact linearization -N (W_AA^-1) N^T: each row a plane with a fixed normal. The node and
 // edge rows' normals are radial from the tip centre, so they also turn with the tip (by h / rho,
 // rho ~ the tip radius): across the push that adds up to sum(lambda) h / rho, and along it the
-// turn of the planes through the rows' displacement u (u_t / rho relative: 2 % here, a 15 mm tip
-// 3 mm into 12 mm elements). K leaves both out (the turn would make K indefinite for the haptic
+// turn of the planes through the rows' displacement u (u_t / rho relative), and the rows' points
+// and weights move as the surface is found again from rest in each step: 10 % here, a 15 mm tip
+// 3 mm into 12 mm elements. K leaves these out (the turn would make K indefinite for the haptic
 // client).
 TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
   const SceneSpec spec;
@@ -304,8 +305,8 @@ TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
   ASSERT_EQ(c0[0].nodes, c1[0].nodes);
   const Vec3 fd = (c1[0].force_n - c0[0].force_n) / h;
   const Vec3 model = c0[0].stiffness_n_per_m * Vec3(-1.0, 0.0, 0.0);
-  EXPECT_LE(std::abs(fd.x() - model.x()), 0.05 * model.norm());
-  EXPECT_LE((fd - model).norm(), 0.05 * model.norm() + 1.5 * c0[0].force_n.norm() /
+  EXPECT_LE(std::abs(fd.x() - model.x()), 0.15 * model.norm());
+  EXPECT_LE((fd - model).norm(), 0.15 * model.norm() + 1.5 * c0[0].force_n.norm() /
                                                            (0.9 * spec.tip_radius_m));
   // Pushing deeper raises the force: dF/dx is negative along the push.
   EXPECT_LT(c0[0].stiffness_n_per_m(0, 0), 0.0);
@@ -353,8 +354,11 @@ TEST(interaction_simulation, DeterministicSteps) {
   sim->step({push_right(0.003)}, a, st);
   sim->step({push_right(0.001)}, b, st);
   sim->step({push_right(0.003)}, b, st);
-  EXPECT_EQ(a[0].force_n, b[0].force_n);
-  EXPECT_EQ(a[0].stiffness_n_per_m, b[0].stiffness_n_per_m);
+  // LINEAR: the rows are found again from rest in every step, so the answer is the pose's alone
+  // (the LCP's warm start from the last step changes its path, not its solution).
+  EXPECT_LE((a[0].force_n - b[0].force_n).norm(), 1e-12 * a[0].force_n.norm());
+  EXPECT_LE((a[0].stiffness_n_per_m - b[0].stiffness_n_per_m).norm(),
+            1e-12 * a[0].stiffness_n_per_m.norm());
   EXPECT_EQ(a[0].nodes, b[0].nodes);
 }
 
