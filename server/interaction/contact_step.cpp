@@ -157,6 +157,9 @@ void State::reserve_workspace(const Model& m, int tools) {
   }
   sliding_active_backup_.reserve(sliding_active_.size());
   row_keys_.reserve(max_rows);
+  own_rows_.reserve(max_contact);
+  own_factor_.setZero(max_contact, max_contact);
+  own_y_.setZero(max_contact, 3);
   previous_row_keys_.reserve(max_rows);
   for (auto& l : tier_loads_) {
     l.slots.reserve(3 * max_rows);
@@ -465,12 +468,21 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
   const std::size_t keep =
       std::min<std::size_t>(tool_rows_.size(), m.options_.max_contact_nodes_per_tool);
   std::partial_sort(tool_rows_.begin(), tool_rows_.begin() + keep, tool_rows_.end(), deeper);
-  // Two tools on one feature: one row (the same constraint twice would leave only the row
-  // compliance between the tools: a stiffness of 1/eps); the deeper tool carries it.
+  // Two tools on one feature, or on nearly the same constraint (the same main node, normals within
+  // 30 degrees): one row (the same constraint twice would leave only the row compliance between
+  // the tools, a stiffness of 1/eps); the deeper tool carries it.
+  auto main_slot = [](const Row& r) {
+    int best = 0;
+    for (int k = 1; k < 3; ++k)
+      if (r.w[k] > r.w[best]) best = k;
+    return r.slot[best];
+  };
   for (std::size_t k = 0; k < keep; ++k) {
     const Row& r = tool_rows_[k];
     auto same = std::find_if(rows_.begin(), rows_.end(), [&](const Row& o) {
-      return o.body == r.body && o.key == r.key && o.tool != r.tool;
+      return o.body == r.body && o.tool != r.tool &&
+             (o.key == r.key ||
+              (main_slot(o) == main_slot(r) && main_slot(r) >= 0 && o.normal.dot(r.normal) > 0.866));
     });
     if (same == rows_.end()) {
       rows_.push_back(r);
@@ -586,12 +598,48 @@ void State::store_forces(const Model& m, int ns) {
   }
 }
 
+// Several tools: the stiffness of one from its own active rows, -N (W_tt)^-1 N^T, the others'
+// rows and the sliding rows left free. Two tools on nearly the same constraint would otherwise
+// feel each other through the row compliance only (a stiffness of 1/eps): each station's model
+// is that of its own contact. In-place Cholesky on a buffer sized at reserve (no allocation).
+Mat3 State::own_stiffness(int ns, int t) {
+  own_rows_.clear();
+  for (int r = 0; r < static_cast<int>(rows_.size()); ++r)
+    if (rows_[r].tool == t && lambda_[ns + r] > 0.0) own_rows_.push_back(r);
+  const int n = static_cast<int>(own_rows_.size());
+  Mat3 k = Mat3::Zero();
+  if (n == 0) return k;
+  auto& a = own_factor_;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j <= i; ++j) a(i, j) = w_(ns + own_rows_[i], ns + own_rows_[j]);
+  for (int j = 0; j < n; ++j) {  // lower Cholesky factor
+    double d = a(j, j);
+    for (int q = 0; q < j; ++q) d -= a(j, q) * a(j, q);
+    if (!(d > 0.0)) return k;  // not definite: no stiffness rather than a wrong one
+    a(j, j) = std::sqrt(d);
+    for (int i = j + 1; i < n; ++i) {
+      double v = a(i, j);
+      for (int q = 0; q < j; ++q) v -= a(i, q) * a(j, q);
+      a(i, j) = v / a(j, j);
+    }
+  }
+  // K = -sum_ij n_i (W^-1)_ij n_j^T = -Y^T Y with L Y = N (rows of N: the normals).
+  auto& y = own_y_;
+  for (int i = 0; i < n; ++i) {
+    Vec3 v = rows_[own_rows_[i]].normal;
+    for (int q = 0; q < i; ++q) v -= a(i, q) * y.row(q).transpose();
+    y.row(i) = (v / a(i, i)).transpose();
+  }
+  for (int i = 0; i < n; ++i) k.noalias() -= y.row(i).transpose() * y.row(i);
+  return k;
+}
+
 // Phase "answer" of one tool: force, stiffness K = -N (W_AA^-1)_cc N^T over its active rows
 // (flat-contact linearization: a row's depth changes by -n . dx), normal, main mesh and nodes,
 // validity radius (the contact patch: the active rows' points around their force-weighted
 // centre, at least a quarter of the tip radius).
 void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iterations,
-                   ToolContact& c) {
+                   int tools, ToolContact& c) {
   const int nc = static_cast<int>(rows_.size());
   c.force_n.setZero();
   c.stiffness_n_per_m.setZero();
@@ -628,10 +676,14 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
       if (std::find(c.nodes.begin(), c.nodes.end(), v) == c.nodes.end()) c.nodes.push_back(v);
     }
   }
-  c.stiffness_n_per_m = lcp_.contact_stiffness(ns, [&](int row) -> const Vec3* {
-    const Row& r = rows_[row - ns];
-    return r.tool == t ? &r.normal : nullptr;
-  });
+  if (tools == 1) {
+    c.stiffness_n_per_m = lcp_.contact_stiffness(ns, [&](int row) -> const Vec3* {
+      const Row& r = rows_[row - ns];
+      return r.tool == t ? &r.normal : nullptr;
+    });
+  } else {
+    c.stiffness_n_per_m = own_stiffness(ns, t);
+  }
   c.in_contact = main_body >= 0;
   c.validity_radius_m = 0.0;
   if (c.in_contact) {
@@ -796,7 +848,7 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
   stats.sliding_active = 0;
   for (int k = 0; k < ns; ++k) stats.sliding_active += sliding_active_[k];
   for (int t = 0; t < nt; ++t) {
-    answer(m, t, poses[t], ns, lcp.iterations, contacts[t]);
+    answer(m, t, poses[t], ns, lcp.iterations, nt, contacts[t]);
     last_good_[t] = contacts[t];
   }
   tier_post(stats);

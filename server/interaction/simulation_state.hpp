@@ -174,8 +174,9 @@ class State {
   void compliance_columns(StepStats& stats);
   void delassus(const Model& m, int ns);
   void store_forces(const Model& m, int ns);
-  void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations,
+  void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations, int tools,
               ToolContact& c);
+  Mat3 own_stiffness(int ns, int tool);
   void tier_post(StepStats& stats);
   LcpResult solve_geometry(const Model& m, const std::vector<ToolPose>& poses, StepStats& stats);
   void save_forces();
@@ -208,6 +209,9 @@ class State {
   std::vector<ForceBackup> backup_;
   std::vector<char> sliding_active_backup_;
   std::vector<std::uint64_t> row_keys_, previous_row_keys_;  // rows of the last two geometries
+  std::vector<int> own_rows_;  // own_stiffness: one tool's active rows, its factor and N
+  Eigen::MatrixXd own_factor_;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> own_y_;
 };
 
 }  // namespace neurosim::interaction
