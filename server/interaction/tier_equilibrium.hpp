@@ -15,9 +15,9 @@
 // offset u0_s (depth_r + n_r . sum w_a u0_a). R_s: the polar rotation of
 // the mean deformation gradient of the host tetrahedra around the slot's node.
 //
-// The rows are found on the deformed surface (rest + u*), their depth and forces are taken in
-// the reference configuration (forces along the rows' normals as dead loads), so the tiers differ
-// only in the elasticity.
+// The contact rows are those of the rest surface, their depth and forces taken in the reference
+// configuration (forces along the rows' normals as dead loads), so the tiers differ only in the
+// elasticity.
 #pragma once
 
 #include "server/fem/equilibrium_solver.hpp"
