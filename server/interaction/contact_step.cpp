@@ -228,9 +228,9 @@ void State::candidate_triangles(const Model& m, int body, const ToolPose& pose, 
   const BodyModel& b = m.bodies_[body];
   BodyState& bs = bodies_[body];
   const ToolShape& shape = m.tools_[pose.tool];
-  // The surface may have moved by the last answer's displacement (this geometry's, or the last
-  // step's: a LINEAR step starts again from rest, its tool is about that deep below it).
-  const double moved = std::max(bs.max_displacement_m, backup_[body].max_displacement_m);
+  // The surface may have moved by this geometry's displacement, and a tool may push a surface it
+  // is up to behind_reach below (the same box whatever came before: the rows are the pose's).
+  const double moved = std::max(bs.max_displacement_m, b.behind_reach_m);
   const double slack = m.options_.candidate_margin * shape.tip_radius_m + moved;
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   candidates_.clear();
@@ -291,7 +291,7 @@ void State::triangle_features(const Model& m, int body, const ToolPose& pose, co
       n.normalize();
       for (int part = 0; part < (has_shaft ? 2 : 1); ++part)
         part_features(t, tri, x, n, part == 1, g == 1, shape, p0, p1, margin,
-                      b.max_penetration_m, b.body->contact_normals());
+                      b.behind_reach_m, b.body->contact_normals());
     }
   }
 }
@@ -395,8 +395,8 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
               ? Vec3(d / dn)
               : mean;
     }
-    // A part whose centre lies deeper than max_penetration behind the surface does not push it.
-    if (n.dot(d) < -b.max_penetration_m) continue;
+    // A part whose centre lies deeper than behind_reach behind the surface does not push it.
+    if (n.dot(d) < -b.behind_reach_m) continue;
     const double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
     Row r;
     r.body = body;

@@ -353,6 +353,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     host.bounds(lo, hi);
     b.max_penetration_m =
         options_.max_penetration_m > 0.0 ? options_.max_penetration_m : 0.45 * (hi - lo).minCoeff();
+    b.behind_reach_m = std::min(b.max_penetration_m, 3.0 * b.surface.mean_edge_m());
   }
 
   if (model.effects.tool_contact) {

@@ -34,6 +34,9 @@ struct BodyModel {
   ContactSurface surface;          // contactable triangles of the host, grid over them
   std::vector<mesh::Vec3> rest_m;  // per contact slot
   double max_penetration_m{0.0};
+  // How far behind the surface a tool part still pushes it: max_penetration_m, at most three
+  // mean edges of the contactable surface (the candidate box, the same for every history), unit m.
+  double behind_reach_m{0.0};
   // SLIDING couplings hosted by the body: B's part, and where its rows start among the body's
   // sliding rows (CoupledBody::sliding_rows); the body's rows start at sliding_offset in the LCP.
   std::vector<std::unique_ptr<SlidingCoupling>> slides;
