@@ -158,9 +158,12 @@ int brain_contact(int steps) {
     }
     for (double s = 0.0; s < 0.004 - 1e-12; s += step_m) {
       ni::ToolPose pose;
-      if (!pose_at(x, y, 0.001, pose)) return 1;
+      if (!pose_at(x, y, 0.001, pose)) {
+        std::cerr << "brain-contact: the slide leaves the surface at " << x << ", " << y << "\n";
+        return 1;
+      }
       slide.push_back(pose);
-      x -= step_m;  // towards the lateral side, away from the midline
+      x += step_m;  // towards the midline (still 25 mm off it at the end)
     }
     dir = -dir;
   }
