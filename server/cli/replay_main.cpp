@@ -45,6 +45,7 @@ const char* kFooter =
 
 struct Options {
   std::string scene_path, out_dir, tier;  // tier: empty = the scene's
+  std::string element;                    // empty: the scene's material.element
   std::vector<std::string> recordings;
   int every{10};
   double max_rate_hz{0.0};  // 0: every sample time
@@ -61,6 +62,7 @@ int run(const Options& opt) {
   neurosim::scene::Model model = neurosim::scene::load_model(opt.scene_path);
   for (const auto& w : model.warnings) std::cerr << "neurosim-replay: warning: " << w << "\n";
   if (!opt.tier.empty()) model.effects.tier = *neurosim::fem::parse_tier(opt.tier);
+  if (!opt.element.empty()) model.set_element(*neurosim::fem::parse_element(opt.element));
   if (model.tools.empty()) throw std::runtime_error(opt.scene_path + ": the scene has no tools");
   if (!model.effects.tool_contact) {
     std::cerr << "neurosim-replay: note: " << opt.scene_path
@@ -207,6 +209,8 @@ int main(int argc, char** argv) {
       ->required()
       ->take_all();
   cli->add_option("--tier", opt.tier, "linear | corotational | nonlinear (default: the scene's)");
+  cli->add_option("--element", opt.element,
+                  "anp-tet | linear-tet: every mesh's element (default: the scene's material.element)");
   cli->add_option("--out", opt.out_dir, "output folder DIR")->required();
   cli->add_option("--every", opt.every, "write a displacement frame every N steps (default 10)")
       ->check(CLI::Range(1, 1000000000));
@@ -222,6 +226,10 @@ int main(int argc, char** argv) {
     if (!opt.tier.empty() && !neurosim::fem::parse_tier(opt.tier)) {
       throw neurosim::cli::UsageError("--tier " + opt.tier +
                                       ": unknown tier, expected linear, corotational or nonlinear");
+    }
+    if (!opt.element.empty() && !neurosim::fem::parse_element(opt.element)) {
+      throw neurosim::cli::UsageError("--element " + opt.element + ": unknown element, expected " +
+                                      neurosim::fem::element_names());
     }
   });
   cli->footer(kFooter);

@@ -482,6 +482,7 @@ void check_plausible(const MeshResult& r, double scene_size_m, const std::string
 
 struct RunOptions {
   std::string scene_path, out_dir, only_mesh, tier;  // tier: empty = the scene's
+  std::string element;  // empty: the scene's material.element
   bool quiet{false}, uncoupled{false};
   int increments{0};
   double load_timeout_s{900.0};  // loading the scene (meshes read or generated); 0: no limit
@@ -509,8 +510,9 @@ int run(const RunOptions& opt) {
   watch_def.program = "neurosim-solve";
   watch_def.limit_s = opt.load_timeout_s;
   neurosim::common::LoadWatch watch(watch_def);
-  const neurosim::scene::Model model = watch.run(
+  neurosim::scene::Model model = watch.run(
       "loading the scene " + scene_path, [&] { return neurosim::scene::load_model(scene_path); });
+  if (!opt.element.empty()) model.set_element(*neurosim::fem::parse_element(opt.element));
   for (const auto& w : model.warnings) std::cerr << "neurosim-solve: warning: " << w << "\n";
   const double load_s = seconds_since(t_start);
   if (!only_mesh.empty() && model.find_mesh(only_mesh) < 0) {
@@ -688,6 +690,9 @@ int main(int argc, char** argv) {
   cli->add_option("--mesh", opt.only_mesh, "the mesh copied to the top of DIR");
   cli->add_option("--tier", opt.tier, "linear | corotational | nonlinear (default: the scene's)")
       ->check(CLI::IsMember({"linear", "corotational", "nonlinear"}, CLI::ignore_case));
+  cli->add_option("--element", opt.element,
+                  "anp-tet | linear-tet: every mesh's element (default: the scene's material.element)")
+      ->check(CLI::IsMember({"anp-tet", "linear-tet"}));
   cli->add_option("--increments", opt.increments,
                   "initial load increments of the corotational / nonlinear solve (0: automatic)")
       ->check(CLI::Range(0, 100000));

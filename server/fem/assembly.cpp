@@ -1,5 +1,6 @@
 #include "server/fem/assembly.hpp"
 
+#include "server/fem/nodal_pressure.hpp"
 #include "server/fem/tet_element.hpp"
 
 #include <algorithm>
@@ -9,39 +10,14 @@
 
 namespace neurosim::fem {
 
-StiffnessAssembler::StiffnessAssembler(const mesh::TetMesh& mesh)
-    : num_nodes_(mesh.num_vertices()), num_tets_(mesh.num_tets()) {
+StiffnessAssembler::StiffnessAssembler(const mesh::TetMesh& mesh, Element element)
+    : element_(element), num_nodes_(mesh.num_vertices()), num_tets_(mesh.num_tets()) {
   const auto& tets = mesh.tets();
   const int n = static_cast<int>(num_nodes_);
-  // Node-node adjacency (including the node itself), CSR, sorted per node.
-  std::vector<int> count(n + 1, 0);
-  for (const auto& t : tets) {
-    for (int a = 0; a < 4; ++a) {
-      count[t[a] + 1] += 4;
-    }
-  }
-  for (int v = 0; v < n; ++v) {
-    count[v + 1] += count[v];
-  }
-  std::vector<int> adj(count[n]);
-  std::vector<int> fill(count.begin(), count.end() - 1);
-  for (const auto& t : tets) {
-    for (int a = 0; a < 4; ++a) {
-      for (int b = 0; b < 4; ++b) {
-        adj[fill[t[a]]++] = t[b];
-      }
-    }
-  }
-  std::vector<int> nbr_offset(n + 1, 0);
-  std::vector<int> nbr;
-  nbr.reserve(adj.size() / 3);
-  for (int v = 0; v < n; ++v) {
-    auto first = adj.begin() + count[v], last = adj.begin() + count[v + 1];
-    std::sort(first, last);
-    last = std::unique(first, last);
-    nbr.insert(nbr.end(), first, last);
-    nbr_offset[v + 1] = static_cast<int>(nbr.size());
-  }
+  // Node-node adjacency (including the node itself), CSR, sorted per node; anp-tet's nodal
+  // volumetric terms couple the neighbours of a node's neighbours.
+  std::vector<int> nbr_offset, nbr;
+  NodalPressure::adjacency(mesh, element == Element::kAnpTet ? 2 : 1, nbr_offset, nbr);
   // Column 3b+j holds rows 3a+i for every neighbour a of b (sorted), i = 0..2.
   const long long nnz = 9LL * static_cast<long long>(nbr.size());
   if (nnz > std::numeric_limits<int>::max()) {
@@ -91,11 +67,21 @@ void StiffnessAssembler::assemble(const mesh::TetMesh& mesh, const MaterialMap& 
         " nodes, " + std::to_string(mesh.num_tets()) + " tets) is not the mesh of this pattern");
   }
   materials.validate(num_tets_);
+  if (materials.element() != element_) {
+    throw std::invalid_argument(std::string("StiffnessAssembler: the materials ask for element '") +
+                                element_name(materials.element()) + "', the pattern is for '" +
+                                element_name(element_) + "'");
+  }
+  const bool anp = element_ == Element::kAnpTet;
   std::vector<double> lambda(materials.materials.size()), mu(materials.materials.size());
   for (std::size_t m = 0; m < materials.materials.size(); ++m) {
     lambda[m] = materials.materials[m].lame_lambda_pa();
     mu[m] = materials.materials[m].shear_modulus_pa();
+    // anp-tet: the element keeps the deviatoric part (lambda - K = -2 mu / 3), the nodes the
+    // volumetric one (nodal_pressure.hpp).
+    if (anp) lambda[m] = -2.0 / 3.0 * mu[m];
   }
+  std::vector<Eigen::Matrix<double, 4, 3>> gradients(anp ? num_tets_ : 0);
   if (k.rows() != pattern_.rows() || k.nonZeros() != pattern_.nonZeros() || !k.isCompressed()) {
     k = pattern_;
   }
@@ -113,6 +99,7 @@ void StiffnessAssembler::assemble(const mesh::TetMesh& mesh, const MaterialMap& 
         grad[a][i] = g.gradients(a, i);
       }
     }
+    if (anp) gradients[e] = g.gradients;
     const double vl = g.volume_m3 * lambda[m], vm = g.volume_m3 * mu[m];
     const int* start = block_start_.data() + e * 48;
     // Blocks (a, b), b >= a, scattered to (a, b) and transposed to (b, a): K_e is never formed.
@@ -137,11 +124,13 @@ void StiffnessAssembler::assemble(const mesh::TetMesh& mesh, const MaterialMap& 
       }
     }
   }
+  // LINEAR volumetric strain tr(grad u): d theta_e / d u_b = grad N_b.
+  if (anp) NodalPressure(mesh, materials).add_nodal_stiffness(gradients, k);
 }
 
 SparseMatrix assemble_stiffness(const mesh::TetMesh& mesh, const MaterialMap& materials) {
   SparseMatrix k;
-  StiffnessAssembler(mesh).assemble(mesh, materials, k);
+  StiffnessAssembler(mesh, materials.element()).assemble(mesh, materials, k);
   return k;
 }
 

@@ -18,11 +18,13 @@ using SparseMatrix = Eigen::SparseMatrix<double>;  // column-major, int indices
 // is element kernels plus scatter-adds, with no sorting and no allocation after the first fill.
 class StiffnessAssembler {
  public:
-  explicit StiffnessAssembler(const mesh::TetMesh& mesh);
+  // The pattern of `element`: node neighbours (linear-tet) or neighbours of neighbours (anp-tet).
+  explicit StiffnessAssembler(const mesh::TetMesh& mesh, Element element = Element::kLinearTet);
 
   // K with both triangles stored (symmetric). `k` gets the pattern on the first call and is
   // refilled in place afterwards. Throws std::invalid_argument for an invalid material map or
-  // an inverted / degenerate / non-finite tetrahedron (naming it), or a mesh of another size.
+  // an inverted / degenerate / non-finite tetrahedron (naming it), a mesh of another size, or
+  // materials naming another element than the pattern's.
   void assemble(const mesh::TetMesh& mesh, const MaterialMap& materials, SparseMatrix& k) const;
 
   // Adds an element matrix (dof 3 a + i, a local node of tetrahedron `tet`) into the value
@@ -45,8 +47,10 @@ class StiffnessAssembler {
   const SparseMatrix& pattern() const { return pattern_; }
   std::size_t num_nodes() const { return num_nodes_; }
   std::size_t num_tets() const { return num_tets_; }
+  Element element() const { return element_; }
 
  private:
+  Element element_{Element::kLinearTet};
   std::size_t num_nodes_{0};
   std::size_t num_tets_{0};
   SparseMatrix pattern_;
@@ -55,7 +59,7 @@ class StiffnessAssembler {
   std::vector<int> block_start_;
 };
 
-// Convenience: one-shot assembly (builds a StiffnessAssembler).
+// Convenience: one-shot assembly (builds a StiffnessAssembler for the materials' element).
 SparseMatrix assemble_stiffness(const mesh::TetMesh& mesh, const MaterialMap& materials);
 
 }  // namespace neurosim::fem

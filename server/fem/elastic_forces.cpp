@@ -32,12 +32,15 @@ void note(ElasticForcesReport* report, const Eigen::Matrix3d& h, const LawEvalua
 
 ElasticForces::ElasticForces(const mesh::TetMesh& mesh, const MaterialMap& materials, Tier tier)
     : tier_(tier),
+      element_(materials.element()),
       num_nodes_(static_cast<int>(mesh.num_vertices())),
       tets_(mesh.tets()),
-      assembler_(mesh) {
+      assembler_(mesh, materials.element()) {
   materials.validate(mesh.num_tets());
+  if (element_ == Element::kAnpTet) nodal_ = std::make_unique<NodalPressure>(mesh, materials);
   for (const Material& m : materials.materials) {
-    laws_.push_back(LawConstants::of(m));
+    const LawConstants c = LawConstants::of(m);
+    laws_.push_back(element_ == Element::kAnpTet ? c.deviatoric() : c);
   }
   const auto& x = mesh.vertices();
   gradients_.resize(tets_.size());
@@ -72,26 +75,45 @@ Eigen::Matrix3d ElasticForces::displacement_gradient(std::size_t tet,
   return f;
 }
 
+void ElasticForces::nodal_state(const Eigen::VectorXd& u_m, NodalState& s) const {
+  s.element.resize(tets_.size());
+  s.theta.resize(tets_.size());
+  for (std::size_t e = 0; e < tets_.size(); ++e) {
+    s.element[e] = volumetric_strain(tier_, displacement_gradient(e, u_m));
+    s.theta[e] = s.element[e].theta;
+  }
+  nodal_->nodal_strain(s.theta, s.nodal_theta);
+  nodal_->element_pressure(s.nodal_theta, s.pressure_pa);
+}
+
 double ElasticForces::energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report) const {
   check_size(u_m, "energy");
+  NodalState nodal;
+  if (nodal_) nodal_state(u_m, nodal);
   double e_total = 0.0;
   for (std::size_t e = 0; e < tets_.size(); ++e) {
     const Eigen::Matrix3d f = displacement_gradient(e, u_m);
     LawEvaluation eval;
+    // anp-tet: the element's law is the deviatoric part, the nodes hold the volumetric one.
     e_total += volume_m3_[e] * energy_density(tier_, laws_[law_index_[e]], f, &eval);
     note(report, f, eval);
   }
+  if (nodal_) e_total += nodal_->energy(nodal.nodal_theta);
   return e_total;
 }
 
 void ElasticForces::internal_force(const Eigen::VectorXd& u_m, Eigen::VectorXd& f_n,
                                    ElasticForcesReport* report) const {
   check_size(u_m, "internal_force");
+  NodalState nodal;
+  if (nodal_) nodal_state(u_m, nodal);
   f_n.setZero(num_dofs());
   for (std::size_t e = 0; e < tets_.size(); ++e) {
     const Eigen::Matrix3d f = displacement_gradient(e, u_m);
     LawEvaluation eval;
-    const Eigen::Matrix3d p = first_piola(tier_, laws_[law_index_[e]], f, &eval);
+    Eigen::Matrix3d p = first_piola(tier_, laws_[law_index_[e]], f, &eval);
+    // anp-tet: the deviatoric stress plus the element's average nodal pressure.
+    if (nodal_) p += nodal.pressure_pa[e] * nodal.element[e].gradient;
     note(report, f, eval);
     const auto& t = tets_[e];
     for (int a = 0; a < 4; ++a) {
@@ -109,13 +131,33 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
   }
   double* values = k.valuePtr();
   std::fill_n(values, k.nonZeros(), 0.0);
-  StressTangent c;
+  NodalState nodal;
+  std::vector<Eigen::Matrix<double, 4, 3>> w;  // anp-tet: d theta_e / d u_b = G_e grad N_b
+  if (nodal_) {
+    nodal_state(u_m, nodal);
+    w.resize(tets_.size());
+  }
+  StressTangent c, d2theta;
   Eigen::Matrix<double, 9, 12> b;
   Eigen::Matrix<double, 12, 12> k_e;
   for (std::size_t e = 0; e < tets_.size(); ++e) {
     const Eigen::Matrix3d f = displacement_gradient(e, u_m);
     LawEvaluation eval;
-    stress_tangent(tier_, laws_[law_index_[e]], f, project_psd, c, &eval);
+    const LawConstants& law = laws_[law_index_[e]];
+    if (!nodal_) {
+      stress_tangent(tier_, law, f, project_psd, c, &eval);
+    } else {
+      // Deviatoric tangent plus the nodal pressure's pbar d2theta, projected as a whole; the
+      // nodal K q q^T terms follow below.
+      stress_tangent(tier_, law, f, false, c, &eval);
+      const VolumetricStrain& v = nodal.element[e];
+      if (tier_ != Tier::kLinear) {
+        volumetric_hessian(tier_, f, d2theta);
+        c += nodal.pressure_pa[e] * d2theta;
+      }
+      if (project_psd || eval.clamped) project_to_psd(c);
+      w[e] = gradients_[e] * v.gradient.transpose();
+    }
     note(report, f, eval);
     // vec(dF) = B du: dF(i, l) = sum_b du_b,i g_b,l at vec index i + 3 l.
     b.setZero();
@@ -129,6 +171,7 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
     k_e.noalias() = volume_m3_[e] * (b.transpose() * c * b);
     assembler_.add_element(e, k_e, values);
   }
+  if (nodal_) nodal_->add_nodal_stiffness(w, k);
 }
 
 }  // namespace neurosim::fem

@@ -3,16 +3,22 @@
 // after construction (the rest geometry and materials); every evaluation takes u and writes
 // into caller-owned buffers. Linear tetrahedra: F = I + sum_a u_a grad(N_a)^T is constant per
 // element, nodal force f_a = V P grad(N_a), element tangent V B^T (dP/dF) B. The laws take
-// H = F - I, formed directly from u (full precision for small strains).
+// H = F - I, formed directly from u (full precision for small strains). With the anp-tet
+// element (materials' element) the volumetric part of every tier's energy is held per node
+// (nodal_pressure.hpp): the element keeps the law's deviatoric part (LawConstants::deviatoric),
+// its stress gains the average nodal pressure pbar_e G_e and the tangent the nodal terms
+// (pattern: neighbours of neighbours).
 #pragma once
 
 #include "server/fem/assembly.hpp"
 #include "server/fem/elastic_law.hpp"
 #include "server/fem/material.hpp"
+#include "server/fem/nodal_pressure.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
 #include <Eigen/Core>
 
+#include <memory>
 #include <vector>
 
 namespace neurosim::fem {
@@ -31,6 +37,7 @@ class ElasticForces {
   ElasticForces(const mesh::TetMesh& mesh, const MaterialMap& materials, Tier tier);
 
   Tier tier() const { return tier_; }
+  Element element() const { return element_; }
   int num_nodes() const { return num_nodes_; }
   int num_dofs() const { return 3 * num_nodes_; }
   std::size_t num_tets() const { return tets_.size(); }
@@ -54,14 +61,23 @@ class ElasticForces {
 
  private:
   Tier tier_;
+  Element element_{Element::kLinearTet};
   int num_nodes_{0};
   std::vector<mesh::Tet> tets_;
   std::vector<Eigen::Matrix<double, 4, 3>> gradients_;  // per tet, row a: grad N_a (1/m)
   std::vector<double> volume_m3_;
   double total_volume_m3_{0.0};
   std::vector<int> law_index_;  // per tet: index into laws_
-  std::vector<LawConstants> laws_;
+  std::vector<LawConstants> laws_;  // anp-tet: their deviatoric parts
   StiffnessAssembler assembler_;
+  std::unique_ptr<const NodalPressure> nodal_;  // anp-tet only
+
+  // anp-tet: every element's volumetric strain and gradient, and its average nodal pressure.
+  struct NodalState {
+    std::vector<VolumetricStrain> element;
+    std::vector<double> theta, nodal_theta, pressure_pa;
+  };
+  void nodal_state(const Eigen::VectorXd& u_m, NodalState& s) const;
 
   void check_size(const Eigen::VectorXd& u_m, const char* what) const;
 };

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -20,7 +21,16 @@ LawConstants LawConstants::of(const Material& material) {
   c.mu_pa = material.shear_modulus_pa();
   c.c10_pa = e / (4.0 * (1.0 + nu));
   c.d1_per_pa = 6.0 * (1.0 - 2.0 * nu) / e;
+  c.bulk_pa = c.lambda_pa + 2.0 / 3.0 * c.mu_pa;
   return c;
+}
+
+LawConstants LawConstants::deviatoric() const {
+  LawConstants d = *this;
+  d.lambda_pa = -2.0 / 3.0 * mu_pa;
+  d.d1_per_pa = std::numeric_limits<double>::infinity();  // 1 / D1 = 0: no volumetric energy
+  d.bulk_pa = 0.0;
+  return d;
 }
 
 namespace {
@@ -244,19 +254,94 @@ void tangent_columns(DStress&& dstress, StressTangent& dp_df) {
   dp_df = 0.5 * (dp_df + dp_df.transpose()).eval();  // symmetric up to round-off: made exact
 }
 
-void project_to_psd(StressTangent& dp_df) {
-  const Eigen::SelfAdjointEigenSolver<StressTangent> eig(dp_df);
-  const Eigen::Matrix<double, 9, 1> lambda = eig.eigenvalues().cwiseMax(0.0);
-  dp_df = eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
-}
-
 void check_finite(const Mat3& f) {
   if (!f.allFinite()) {
     throw std::invalid_argument("elastic law: non-finite deformation gradient");
   }
 }
 
+// Cofactor matrix cof F = det(F) F^-T, a polynomial of F (defined for singular and inverted F).
+Mat3 cofactor(const Mat3& f) {
+  Mat3 c;
+  c.col(0) = f.col(1).cross(f.col(2));
+  c.col(1) = f.col(2).cross(f.col(0));
+  c.col(2) = f.col(0).cross(f.col(1));
+  return c;
+}
+
 }  // namespace
+
+void project_to_psd(StressTangent& dp_df) {
+  const Eigen::SelfAdjointEigenSolver<StressTangent> eig(dp_df);
+  const Eigen::Matrix<double, 9, 1> lambda = eig.eigenvalues().cwiseMax(0.0);
+  dp_df = eig.eigenvectors() * lambda.asDiagonal() * eig.eigenvectors().transpose();
+}
+
+VolumetricStrain volumetric_strain(Tier tier, const Mat3& h) {
+  check_finite(h);
+  VolumetricStrain v;
+  switch (tier) {
+    case Tier::kLinear:
+      v.theta = h.trace();
+      v.gradient.setIdentity();
+      return v;
+    case Tier::kCorotational: {
+      const Mat3 f = Mat3::Identity() + h;
+      if (f.determinant() >= kStretchCheckJ) {
+        const CorotAccurate a = corot_accurate(h);
+        v.theta = a.s_minus_i.trace();
+        v.gradient = a.r;
+      } else {
+        const RotationVariantSvd s = rotation_variant_svd(f);
+        v.theta = s.sigma.sum() - 3.0;
+        v.gradient = s.u * s.v.transpose();
+      }
+      return v;
+    }
+    case Tier::kNonlinear:
+      v.theta = j_minus_one(h);
+      v.gradient = cofactor(Mat3::Identity() + h);
+      return v;
+  }
+  throw std::invalid_argument("volumetric_strain: unknown tier");
+}
+
+void volumetric_hessian(Tier tier, const Mat3& h, StressTangent& d2theta) {
+  check_finite(h);
+  switch (tier) {
+    case Tier::kLinear:
+      d2theta.setZero();
+      return;
+    case Tier::kCorotational: {
+      // d tr(S) / dF = R, so the Hessian is dR (the rotation rate of the polar decomposition).
+      const RotationVariantSvd s = rotation_variant_svd(Mat3::Identity() + h);
+      const CorotPoint p(s);
+      tangent_columns(
+          [&](const Mat3& df) {
+            const Mat3 m = p.s.u.transpose() * df * p.s.v;
+            Mat3 w = Mat3::Zero();
+            for (int i = 0; i < 3; ++i) {
+              for (int j = i + 1; j < 3; ++j) {
+                w(i, j) = (m(i, j) - m(j, i)) * p.inv_sum(i, j);
+                w(j, i) = -w(i, j);
+              }
+            }
+            return (p.s.u * w * p.s.v.transpose()).eval();
+          },
+          d2theta);
+      return;
+    }
+    case Tier::kNonlinear: {
+      // cof is quadratic in F: cof(F + dF) = cof F + L(F, dF) + cof dF, L bilinear.
+      const Mat3 f = Mat3::Identity() + h;
+      const Mat3 cf = cofactor(f);
+      tangent_columns([&](const Mat3& df) { return (cofactor(f + df) - cf - cofactor(df)).eval(); },
+                      d2theta);
+      return;
+    }
+  }
+  throw std::invalid_argument("volumetric_hessian: unknown tier");
+}
 
 double energy_density(Tier tier, const LawConstants& c, const Mat3& h, LawEvaluation* eval) {
   check_finite(h);

@@ -41,9 +41,14 @@ struct LawConstants {
   double mu_pa{0.0};      // shear modulus, unit Pa
   double c10_pa{0.0};     // neo-Hookean C10 = mu / 2, unit Pa
   double d1_per_pa{0.0};  // neo-Hookean D1 = 2 / K, unit 1/Pa
+  double bulk_pa{0.0};    // K = lambda + 2 mu / 3 = 2 / D1, unit Pa
 
   // Validates the material (Material::validate) and derives the constants.
   static LawConstants of(const Material& material);
+  // The deviatoric part of the same law, W - K/2 theta^2 (volumetric_strain below): lambda
+  // replaced by lambda - K = -2 mu / 3 (LINEAR, COROTATIONAL: mu |dev eps|^2) and 1 / D1 by 0
+  // (NONLINEAR: C10 (J^-2/3 I1 - 3), clamped as the full law). Bounded below in every tier.
+  LawConstants deviatoric() const;
 };
 
 using StressTangent = Eigen::Matrix<double, 9, 9>;  // dP/dF, vec column-major: i + 3 j
@@ -63,5 +68,20 @@ Eigen::Matrix3d first_piola(Tier tier, const LawConstants& c, const Eigen::Matri
 // direction for Newton far from equilibrium); clamped neo-Hookean elements are always projected.
 void stress_tangent(Tier tier, const LawConstants& c, const Eigen::Matrix3d& h, bool project_psd,
                     StressTangent& dp_df, LawEvaluation* eval = nullptr);
+
+// The volumetric strain theta(F) of a tier, whose energy K/2 theta^2 is the law's volumetric
+// part (the rest, W - K/2 theta^2, is deviatoric): LINEAR tr H, COROTATIONAL tr(S - I) (signed
+// stretches), NONLINEAR J - 1. The anp-tet element holds this part per node
+// (nodal_pressure.hpp). gradient = d theta / dF (LINEAR I, COROTATIONAL R, NONLINEAR cof F).
+struct VolumetricStrain {
+  double theta{0.0};                                    // dimensionless
+  Eigen::Matrix3d gradient{Eigen::Matrix3d::Identity()};  // dimensionless
+};
+VolumetricStrain volumetric_strain(Tier tier, const Eigen::Matrix3d& h);
+// d^2 theta / dF^2 at F = I + H (9x9, vec column-major, dimensionless), symmetric.
+void volumetric_hessian(Tier tier, const Eigen::Matrix3d& h, StressTangent& d2theta);
+
+// Clips the negative eigenvalues of a symmetric dP/dF to zero.
+void project_to_psd(StressTangent& dp_df);
 
 }  // namespace neurosim::fem

@@ -65,6 +65,12 @@ void MaterialMap::validate(std::size_t num_tets) const {
   }
   for (const Material& m : materials) {
     m.validate();
+    if (m.element != materials.front().element) {
+      throw std::invalid_argument("MaterialMap: " + label(m) + " asks for element '" +
+                                  element_name(m.element) + "' but " + label(materials.front()) +
+                                  " for '" + element_name(materials.front().element) +
+                                  "': one mesh has one element");
+    }
   }
   if (tet_material.empty()) {
     return;

@@ -1,6 +1,8 @@
 // Isotropic linear elastic material (Young's modulus, Poisson's ratio) and its Lamé parameters.
 #pragma once
 
+#include "server/fem/element.hpp"
+
 #include <Eigen/Core>
 
 #include <string>
@@ -12,6 +14,9 @@ struct Material {
   double youngs_modulus_pa{0.0};  // E, unit Pa
   double poisson_ratio{0.0};      // nu, dimensionless, in (-1, 0.5)
   std::string name;               // for messages ("brain", "artery")
+  // The element formulation (element.hpp). The library's default is the constant-strain
+  // tetrahedron; scenes default to kDefaultSceneElement.
+  Element element{Element::kLinearTet};
 
   // Throws std::invalid_argument naming the material if E <= 0, nu outside (-1, 0.5)
   // or either is non-finite.
@@ -33,8 +38,11 @@ struct MaterialMap {
   static MaterialMap uniform(Material material);
   static MaterialMap per_tet(std::vector<Material> materials, std::vector<int> tet_material);
 
-  // Validates every material and, for per-tet maps, the size and the indices (names the tet).
+  // Validates every material and, for per-tet maps, the size and the indices (names the tet);
+  // every material must name the same element (the nodal terms of anp-tet span materials).
   void validate(std::size_t num_tets) const;
+  // The mesh's element (materials[0]'s; validate() checks that all agree).
+  Element element() const { return materials.empty() ? Element::kLinearTet : materials.front().element; }
   const Material& of_tet(std::size_t tet) const {
     return tet_material.empty() ? materials.front() : materials[tet_material[tet]];
   }

@@ -161,7 +161,7 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
 
   // Assembly (pattern + values).
   auto t0 = Clock::now();
-  StiffnessAssembler(mesh).assemble(mesh, materials, k_);
+  StiffnessAssembler(mesh, materials.element()).assemble(mesh, materials, k_);
   info_.assembly_s = seconds_since(t0);
 
   // Dof numbering of the reduced system (keeps the original order, so rows stay sorted).

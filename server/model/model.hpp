@@ -100,6 +100,16 @@ struct Model : Settings {
       if (meshes[i].id == id) return static_cast<int>(i);
     return -1;
   }
+
+  // Every mesh (its material, tissue materials and material map) on `element`: the programs'
+  // --element option, applied before anything is built from the Model.
+  void set_element(fem::Element element) {
+    for (auto& m : meshes) {
+      m.material.element = element;
+      for (auto& mat : m.materials.materials) mat.element = element;
+      for (auto& t : m.tissues) t.material.element = element;
+    }
+  }
 };
 
 }  // namespace neurosim::scene

@@ -20,6 +20,14 @@ fem::Material to_material(const Material& material, const std::string& what) {
   m.youngs_modulus_pa = material.youngs_modulus_pa();
   m.poisson_ratio = material.poisson_ratio();
   m.name = material.name().empty() ? what : material.name();
+  if (material.element().empty()) {
+    m.element = fem::kDefaultSceneElement;
+  } else if (const auto e = fem::parse_element(material.element())) {
+    m.element = *e;
+  } else {
+    throw std::runtime_error(what + ".element: unknown element \"" + material.element() +
+                             "\" (known: " + fem::element_names() + ")");
+  }
   try {
     m.validate();
   } catch (const std::invalid_argument& e) {
@@ -208,6 +216,7 @@ void resolve_tissues(const Mesh& entry, const std::string& what, LoadedMesh& out
       d.material = to_material(t.material(), what + " tissues[" + std::to_string(k) + "] (" +
                                                  t.name() + ") material");
       d.material_source = t.material().source();
+      if (t.material().element().empty()) d.material.element = out.material.element;
       materials.push_back(d.material);
       any_own = true;
     }

@@ -2,6 +2,7 @@
 
 #include "common/input_file.hpp"
 #include "server/scene/ranges.hpp"
+#include "server/fem/element.hpp"
 
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
@@ -9,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -119,6 +121,9 @@ void check_material(const Material& mat, const std::string& source, const std::s
     msg << mat.poisson_ratio() << " is outside (-1, 0.5)";
     fail(source, f + ".poisson_ratio", msg.str());
   }
+  if (!mat.element().empty() && !fem::parse_element(mat.element()))
+    fail(source, f + ".element",
+         "unknown element \"" + mat.element() + "\" (known: " + fem::element_names() + ")");
 }
 
 // A rigid mesh: a closed triangle surface from a file, with openings; nothing of a body.
@@ -154,7 +159,15 @@ void check_tissues(const Mesh& m, const std::string& source, const std::string& 
       fail(source, g + ".label", "label " + std::to_string(t.label()) + " listed twice");
     if (t.name().empty()) fail(source, g + ".name", "missing");
     if (!names.insert(t.name()).second) fail(source, g + ".name", "duplicate name \"" + t.name() + "\"");
-    if (t.has_material()) check_material(t.material(), source, g + ".material");
+    if (t.has_material()) {
+      check_material(t.material(), source, g + ".material");
+      const auto mesh_element = m.material().element().empty()
+                                    ? std::optional<fem::Element>(fem::kDefaultSceneElement)
+                                    : fem::parse_element(m.material().element());
+      if (!t.material().element().empty() && fem::parse_element(t.material().element()) != mesh_element)
+        fail(source, g + ".material.element",
+             "\"" + t.material().element() + "\" differs from the mesh's element (one element per mesh)");
+    }
   }
 }
 

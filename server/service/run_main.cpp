@@ -2,6 +2,7 @@
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "common/load_watch.hpp"
+#include "server/fem/element.hpp"
 #include "server/fem/tier.hpp"
 #include "server/scene/compile.hpp"
 #include "server/service/server.hpp"
@@ -57,6 +58,7 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
   ServerOptions opt;
   double duration_s = 0;
   std::string tier_text;  // --tier as given; empty: the scene's effects.tier
+  std::string element_text;  // --element as given; empty: the scene's material.element
   cli::Parser p("neurosim-server",
                 "The simulation service: steps the scene and serves haptic stations and viewers "
                 "over DDS.");
@@ -74,6 +76,14 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
                    "' (expected linear, corotational or nonlinear)";
           },
           "linear|corotational|nonlinear"));
+  p->add_option("--element", element_text,
+                "element: anp-tet | linear-tet (default: the scene's material.element)")
+      ->check(CLI::Validator(
+          [](std::string& value) -> std::string {
+            if (fem::parse_element(value)) return {};
+            return "unknown element '" + value + "' (expected " + fem::element_names() + ")";
+          },
+          "anp-tet|linear-tet"));
   p->add_option("--duration", duration_s,
                 "stop after S seconds of serving (default: run until SIGINT/SIGTERM)")
       ->check(cli::positive());
@@ -194,6 +204,7 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
     // --tier replaces the scene's tier before anything is built from it: the simulation, the
     // server's start-up line and SimStatus all see the one tier that runs.
     const scene::Tier scene_tier = model.effects.tier;
+    if (!element_text.empty()) model.set_element(*fem::parse_element(element_text));
     if (!tier_text.empty()) {
       model.effects.tier = *fem::parse_tier(tier_text);  // validated by the option's check
       opt.tier_source = "--tier";
