@@ -338,8 +338,7 @@ std::vector<CalculixRow> calculix_rows(const SceneCase& sc, const std::vector<Pr
           std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       double ccx_force = 0.0;
       for (int v : footprint) ccx_force += ccx.reaction_n.segment<3>(3 * v).dot(sc.up);
-      for (auto tier : {neurosim::fem::Tier::kLinear, neurosim::fem::Tier::kCorotational,
-                        neurosim::fem::Tier::kNonlinear}) {
+      for (auto tier : {neurosim::fem::Tier::kLinear, neurosim::fem::Tier::kNonlinear}) {
         neurosim::fem::EquilibriumSolver solver(
             {&mesh, mats, tier, host.fixed_nodes, loads.prescribed_sets, {}});
         const auto sol = solver.solve(Eigen::VectorXd());
@@ -363,7 +362,7 @@ bool have_program(const char* name) {
 
 int main(int argc, char** argv) {
   bool csv = false;
-  std::string out_dir, table_path;
+  std::string out_dir, table_path, element;
   std::vector<std::string> scenes{"cube_cylinder", "brain_artery"};
   neurosim::cli::Parser cli("accuracy_bench",
                             "What accuracy costs in time: tiers x resolutions x coupling over "
@@ -373,6 +372,9 @@ int main(int argc, char** argv) {
       ->required();
   cli->add_option("--scene", scenes, "scenes to run (cube_cylinder, brain_artery)")
       ->capture_default_str();
+  cli->add_option("--element", element,
+                  "anp-tet | linear-tet: every mesh's element (default: the scenes' material.element)")
+      ->check(CLI::IsMember({"anp-tet", "linear-tet"}));
   cli->add_option("--table", table_path,
                   "measured force-error table for the server (default DIR/force_error.csv)");
   if (auto rc = cli.parse(argc, argv)) return *rc;
@@ -415,6 +417,7 @@ int main(int argc, char** argv) {
         r.host_vertices = static_cast<int>(r.model.meshes.at(0).mesh.num_vertices());
         r.label = std::to_string(r.host_vertices);
         r.model.tools.at(0).tip_radius_m = sc.tip_radius_m;
+        if (!element.empty()) r.model.set_element(*neurosim::fem::parse_element(element));
       }
       cases.push_back(std::move(sc));
     }
@@ -449,7 +452,8 @@ int main(int argc, char** argv) {
           Tier tier;
           int iterations;  // 0: EXACT
         };
-        std::vector<Config> configs{{Tier::kNonlinear, 0}, {Tier::kCorotational, 0}, {Tier::kLinear, 0}};
+        // COROTATIONAL is withdrawn (fem/served_tiers.hpp).
+        std::vector<Config> configs{{Tier::kNonlinear, 0}, {Tier::kLinear, 0}};
         if (!res.model.couplings.empty())
           for (int it : {1, 3, 10, 30}) configs.push_back({Tier::kLinear, it});
         for (const auto& cfg : configs) {

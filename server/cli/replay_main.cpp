@@ -4,6 +4,8 @@
 // the displacement fields as a ParaView time series (series.pvd + one .vtu per frame and mesh).
 #include "common/cli.hpp"
 #include "server/cli/replay.hpp"
+#include "server/fem/element.hpp"
+#include "server/fem/served_tiers.hpp"
 #include "server/fem/tier.hpp"
 #include "server/interaction/simulation.hpp"
 #include "server/mesh/vtu.hpp"
@@ -208,7 +210,7 @@ int main(int argc, char** argv) {
   cli->add_option("--recording", opt.recordings, "recording file (one per station; repeat)")
       ->required()
       ->take_all();
-  cli->add_option("--tier", opt.tier, "linear | corotational | nonlinear (default: the scene's)");
+  cli->add_option("--tier", opt.tier, "linear | nonlinear (default: the scene's)");
   cli->add_option("--element", opt.element,
                   "anp-tet | linear-tet: every mesh's element (default: the scene's material.element)");
   cli->add_option("--out", opt.out_dir, "output folder DIR")->required();
@@ -225,7 +227,11 @@ int main(int argc, char** argv) {
   cli.check([&] {
     if (!opt.tier.empty() && !neurosim::fem::parse_tier(opt.tier)) {
       throw neurosim::cli::UsageError("--tier " + opt.tier +
-                                      ": unknown tier, expected linear, corotational or nonlinear");
+                                      ": unknown tier, expected linear or nonlinear");
+    }
+    if (!opt.tier.empty() && !neurosim::fem::tier_served(*neurosim::fem::parse_tier(opt.tier))) {
+      throw neurosim::cli::UsageError("--tier " + opt.tier + ": " +
+                                      neurosim::fem::kCorotationalWithdrawn);
     }
     if (!opt.element.empty() && !neurosim::fem::parse_element(opt.element)) {
       throw neurosim::cli::UsageError("--element " + opt.element + ": unknown element, expected " +

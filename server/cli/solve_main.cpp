@@ -6,6 +6,7 @@
 #include "common/clock.hpp"
 #include "common/load_watch.hpp"
 #include "server/fem/assembly.hpp"
+#include "server/fem/served_tiers.hpp"
 #include "server/fem/equilibrium_solver.hpp"
 #include "server/fem/static_solver.hpp"
 #include "server/interaction/coupled_body.hpp"
@@ -526,6 +527,8 @@ int run(const RunOptions& opt) {
                                   ": expected linear, corotational or nonlinear");
     }
     tier = *parsed;
+    if (!neurosim::fem::tier_served(tier))
+      throw std::invalid_argument("--tier " + opt.tier + ": " + neurosim::fem::kCorotationalWithdrawn);
   }
   std::cout << "scene " << model.name << " (" << scene_path << "), tier "
             << neurosim::fem::tier_name(tier) << (opt.tier.empty() ? " (scene)" : " (--tier)")
@@ -688,7 +691,7 @@ int main(int argc, char** argv) {
   cli->add_option("--scene", opt.scene_path, "scene file")->required();
   cli->add_option("--out", opt.out_dir, "output folder DIR")->required();
   cli->add_option("--mesh", opt.only_mesh, "the mesh copied to the top of DIR");
-  cli->add_option("--tier", opt.tier, "linear | corotational | nonlinear (default: the scene's)")
+  cli->add_option("--tier", opt.tier, "linear | nonlinear (default: the scene's)")
       ->check(CLI::IsMember({"linear", "corotational", "nonlinear"}, CLI::ignore_case));
   cli->add_option("--element", opt.element,
                   "anp-tet | linear-tet: every mesh's element (default: the scene's material.element)")

@@ -29,8 +29,11 @@ inline const char* element_name(Element element) {
 // The names parse_element accepts, for error messages.
 inline const char* element_names() { return "anp-tet, linear-tet"; }
 
-// The element of a scene that names none.
-inline constexpr Element kDefaultSceneElement = Element::kAnpTet;
+// The element of a scene that names none. Still linear-tet: with anp-tet the multirate worker's
+// held NONLINEAR force on the brain settles 4 % away from the synchronous updates' answer
+// (service_tier.BrainNonlinear, interaction_tier WorkerThreadReachesTheSynchronousAnswer), an
+// open defect; scenes ask for anp-tet by name.
+inline constexpr Element kDefaultSceneElement = Element::kLinearTet;
 
 // Exact (case-sensitive) "linear-tet" / "anp-tet"; nullopt for anything else.
 inline std::optional<Element> parse_element(std::string_view name) {

@@ -75,13 +75,9 @@ NodalPressure::NodalPressure(const mesh::TetMesh& mesh, const MaterialMap& mater
       nodal_bulk_pa_[t[a]] += 0.25 * g.volume_m3 * element_bulk_pa_[e];
     }
   }
-  for (std::size_t v = 0; v < n; ++v) {
-    if (!(nodal_volume_m3_[v] > 0.0)) {
-      throw std::invalid_argument("anp-tet: node " + std::to_string(v) + " of mesh '" +
-                                  mesh.source() + "' belongs to no tetrahedron");
-    }
-    nodal_bulk_pa_[v] /= nodal_volume_m3_[v];
-  }
+  // A node in no tetrahedron (carved meshes keep them) has no volume and no volumetric term.
+  for (std::size_t v = 0; v < n; ++v)
+    if (nodal_volume_m3_[v] > 0.0) nodal_bulk_pa_[v] /= nodal_volume_m3_[v];
   // Node -> tetrahedra.
   node_tet_offset_.assign(n + 1, 0);
   for (const auto& t : tets_)
@@ -111,7 +107,8 @@ void NodalPressure::nodal_strain(const std::vector<double>& element_theta,
     const double share = 0.25 * element_volume_m3_[e] * element_theta[e];
     for (int a = 0; a < 4; ++a) nodal_theta[tets_[e][a]] += share;
   }
-  for (std::size_t v = 0; v < nodal_theta.size(); ++v) nodal_theta[v] /= nodal_volume_m3_[v];
+  for (std::size_t v = 0; v < nodal_theta.size(); ++v)
+    if (nodal_volume_m3_[v] > 0.0) nodal_theta[v] /= nodal_volume_m3_[v];
 }
 
 void NodalPressure::element_pressure(const std::vector<double>& nodal_theta,
@@ -138,6 +135,7 @@ void NodalPressure::add_nodal_stiffness(const std::vector<Eigen::Matrix<double, 
   double* values = k.valuePtr();
   std::vector<double> q;
   for (std::size_t a = 0; a < nodal_volume_m3_.size(); ++a) {
+    if (!(nodal_volume_m3_[a] > 0.0)) continue;  // in no tetrahedron
     const int p0 = patch_offset_[a], m = patch_offset_[a + 1] - p0;
     q.assign(3 * static_cast<std::size_t>(m), 0.0);
     // q_a = d thetabar_a / du over the 1-ring of a.

@@ -29,8 +29,8 @@ namespace neurosim::fem {
 
 class NodalPressure {
  public:
-  // Throws std::invalid_argument for an invalid material map or a degenerate element (named),
-  // or a node that no tetrahedron uses (it would have no volume).
+  // Throws std::invalid_argument for an invalid material map or a degenerate element (named).
+  // A node that no tetrahedron uses has no volume and no volumetric term.
   NodalPressure(const mesh::TetMesh& mesh, const MaterialMap& materials);
 
   std::size_t num_nodes() const { return nodal_volume_m3_.size(); }

@@ -37,6 +37,11 @@ void CacheKey::add_mesh(const mesh::TetMesh& m, const fem::Material& mat) {
   add(m.tets());
   add_bytes(&mat.youngs_modulus_pa, sizeof(double));
   add_bytes(&mat.poisson_ratio, sizeof(double));
+  // The element changes the operator; linear-tet adds nothing (keys of earlier caches hold).
+  if (mat.element != fem::Element::kLinearTet) {
+    const int element = static_cast<int>(mat.element);
+    add_bytes(&element, sizeof element);
+  }
 }
 
 bool load_boundary_operator(const std::string& file, std::uint64_t key, int m3_expected,

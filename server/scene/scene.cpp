@@ -3,6 +3,7 @@
 #include "common/input_file.hpp"
 #include "server/scene/ranges.hpp"
 #include "server/fem/element.hpp"
+#include "server/fem/served_tiers.hpp"
 
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
@@ -331,7 +332,7 @@ Settings read_settings(const Scene& scene, const std::string& source) {
   const auto& fx = scene.effects();
   switch (fx.tier()) {
     case Effects::LINEAR: s.effects.tier = Tier::kLinear; break;
-    case Effects::COROTATIONAL: s.effects.tier = Tier::kCorotational; break;
+    case Effects::COROTATIONAL: fail(source, "effects.tier", fem::kCorotationalWithdrawn); break;
     case Effects::NONLINEAR: s.effects.tier = Tier::kNonlinear; break;
     default: fail(source, "effects.tier", "unknown tier " + std::to_string(fx.tier()));
   }

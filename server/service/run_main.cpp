@@ -3,6 +3,7 @@
 #include "common/clock.hpp"
 #include "common/load_watch.hpp"
 #include "server/fem/element.hpp"
+#include "server/fem/served_tiers.hpp"
 #include "server/fem/tier.hpp"
 #include "server/scene/compile.hpp"
 #include "server/service/server.hpp"
@@ -67,15 +68,16 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
   // Checked with fem::parse_tier (the spelling neurosim-solve --tier takes, any case), so an
   // unknown tier is a usage error (exit 2) before the scene is even read.
   p->add_option("--tier", tier_text,
-                "elasticity tier: linear | corotational | nonlinear (default: the scene's "
+                "elasticity tier: linear | nonlinear (default: the scene's "
                 "effects.tier)")
       ->check(CLI::Validator(
           [](std::string& value) -> std::string {
-            if (fem::parse_tier(value)) return {};
-            return "unknown elasticity tier '" + value +
-                   "' (expected linear, corotational or nonlinear)";
+            const auto tier = fem::parse_tier(value);
+            if (tier && fem::tier_served(*tier)) return {};
+            if (tier) return std::string(fem::kCorotationalWithdrawn);
+            return "unknown elasticity tier '" + value + "' (expected linear or nonlinear)";
           },
-          "linear|corotational|nonlinear"));
+          "linear|nonlinear"));
   p->add_option("--element", element_text,
                 "element: anp-tet | linear-tet (default: the scene's material.element)")
       ->check(CLI::Validator(

@@ -60,7 +60,6 @@ TEST(FemNodalPressure, ElementNamesParseAndUnknownNamesAreRefused) {
   EXPECT_FALSE(parse_element("C3D10").has_value());
   EXPECT_FALSE(parse_element("ANP-TET").has_value());
   EXPECT_STREQ(element_name(Element::kAnpTet), "anp-tet");
-  EXPECT_EQ(kDefaultSceneElement, Element::kAnpTet);
 }
 
 TEST(FemNodalPressure, OneMeshHasOneElement) {

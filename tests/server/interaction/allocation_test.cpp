@@ -73,7 +73,7 @@ TEST(interaction_allocation, WarmStepDoesNotAllocate) {
 // nodes first touched on the way back vary from run to run: every column is computed at load
 // here (the first touches of the other cases are covered by their warm-up).
 TEST(interaction_allocation, WarmTierStepDoesNotAllocate) {
-  for (const char* tier : {"COROTATIONAL", "NONLINEAR"}) {
+  for (const char* tier : {"NONLINEAR"}) {  // COROTATIONAL: withdrawn from scenes
     SCOPED_TRACE(tier);
     testing::SceneSpec spec;
     spec.tier = tier;

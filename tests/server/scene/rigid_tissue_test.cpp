@@ -46,7 +46,7 @@ meshes {
   id: "brain"
   file: "two.mesh"
   file_unit_m: 0.001
-  material { youngs_modulus_pa: 3000 poisson_ratio: 0.45 source: "mesh" }
+  material { youngs_modulus_pa: 3000 poisson_ratio: 0.45 source: "mesh" element: "linear-tet" }
   )" + extra +
          "\n}\n";
 }
@@ -161,6 +161,13 @@ meshes { id: "skull" file: "closed.mesh" rigid: true
   check(brain_entry("tissues { label: 2 name: \"b\" material { youngs_modulus_pa: 3000 "
                     "poisson_ratio: 0.5 } }"),
         "meshes[0].tissues[0].material.poisson_ratio");
+  // The element: a known name, one per mesh.
+  check(brain_entry("tissues { label: 2 name: \"b\" material { youngs_modulus_pa: 3000 "
+                    "poisson_ratio: 0.45 element: \"anp-tet\" } }"),
+        "meshes[0].tissues[0].material.element: \"anp-tet\" differs from the mesh's element");
+  check(brain_entry("tissues { label: 2 name: \"b\" material { youngs_modulus_pa: 3000 "
+                    "poisson_ratio: 0.45 element: \"C3D10\" } }"),
+        "meshes[0].tissues[0].material.element: unknown element \"C3D10\" (known: anp-tet, linear-tet)");
 }
 
 TEST_F(RigidTissue, TissueMaterialsPerTetrahedron) {

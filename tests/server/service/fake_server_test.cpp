@@ -169,7 +169,19 @@ TEST(service_fake, UnknownTierIsAUsageError) {
   const std::string log = p.log();
   EXPECT_NE(log.find("--tier"), std::string::npos) << log;
   EXPECT_NE(log.find("hyperelastic"), std::string::npos) << log;
-  EXPECT_NE(log.find("linear, corotational or nonlinear"), std::string::npos) << log;
+  EXPECT_NE(log.find("linear or nonlinear"), std::string::npos) << log;
+  EXPECT_EQ(log.find("simulation built"), std::string::npos) << "refused before building\n" << log;
+}
+
+TEST(service_fake, WithdrawnCorotationalTierIsAUsageError) {
+  const auto dir = nt::temp_dir("service_corot_tier");
+  st::ChildProcess p(nt::bin_dir() / "service_test_fake_server",
+                     {"--scene", fake_setup().scene.string(), "--tier", "corotational", "--duration", "5"},
+                     dir / "log.txt");
+  EXPECT_EQ(p.wait(20), 2);
+  const std::string log = p.log();
+  EXPECT_NE(log.find("withdrawn"), std::string::npos) << log;
+  EXPECT_NE(log.find("NONLINEAR"), std::string::npos) << log;
   EXPECT_EQ(log.find("simulation built"), std::string::npos) << "refused before building\n" << log;
 }
 

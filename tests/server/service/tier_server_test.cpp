@@ -172,8 +172,6 @@ void press_and_hold(const Press& press, const char* tier) {
 }  // namespace
 
 TEST(service_tier, CubeLinear) { press_and_hold(kCube, "linear"); }
-TEST(service_tier, CubeCorotational) { press_and_hold(kCube, "corotational"); }
 TEST(service_tier, CubeNonlinear) { press_and_hold(kCube, "nonlinear"); }
 TEST(service_tier, BrainLinear) { press_and_hold(kBrain, "linear"); }
-TEST(service_tier, BrainCorotational) { press_and_hold(kBrain, "corotational"); }
 TEST(service_tier, BrainNonlinear) { press_and_hold(kBrain, "nonlinear"); }
