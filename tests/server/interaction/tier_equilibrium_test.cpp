@@ -93,9 +93,9 @@ TEST_P(Tiers, HeldPressConvergesToTheTierContactEquilibrium) {
   ASSERT_TRUE(c.force_n.allFinite());
 
   // The field is the tier's equilibrium for the converged forces.
-  fem::Material host{1.0e6, 0.4, "host"};
-  host.element = fem::kDefaultSceneElement;  // the scene names no element
-  const Eigen::VectorXd ref = reference_equilibrium(sim, tier, host);
+  fem::Material host_material{1.0e6, 0.4, "host"};
+  host_material.element = fem::kDefaultSceneElement;  // the scene names no element
+  const Eigen::VectorXd ref = reference_equilibrium(sim, tier, host_material);
   Eigen::VectorXd u_host, u_cyl;
   sim.displacements(0, u_host);
   sim.displacements(1, u_cyl);
