@@ -86,7 +86,7 @@ struct ViewerCounters {
 };
 
 // Colour of a tool carrying force |F| (paper's rule, f = |F| / force_unit_n with F in N):
-// (R, G, B) = (min(0.2 + f, 1), max(0.2 - f, 0), max(0.2 - f, 0)).
+// (R, G, B) = (min(0.2 + f, 1), max(0.2 - f, 0), max(0.2 - f, 0)): common::force_colour.
 std::array<double, 3> force_colour(double force_n, double force_unit_n = 1.0);
 
 // Shaft axis of a tool with orientation q (w, x, y, z): the tool frame's +z in the scene frame

@@ -1,6 +1,8 @@
 // Bundles the observer page for the build (web/CMakeLists.txt runs it):
 //   node bundle.mjs --src web/page --out <build>/share/neurosim-web --node-modules <npm dir>/node_modules
-// src/main.js and everything it imports (three.js from node_modules) become one minified ES
+//                   --generated <build dir of the generated modules>
+// src/main.js and everything it imports (three.js from node_modules; './generated/NAME.js' from
+// the --generated folder, files the build writes from C++ headers) become one minified ES
 // module, app.js; index.html and style.css are copied next to it. The licence comments of the
 // bundled packages are kept at the end of app.js.
 import { createRequire } from 'node:module';
@@ -19,6 +21,7 @@ function arg(name) {
 const src = arg('--src');
 const out = arg('--out');
 const nodeModules = arg('--node-modules');
+const generated = arg('--generated');
 const require = createRequire(join(nodeModules, 'noop.js'));
 const esbuild = require('esbuild');
 
@@ -32,6 +35,14 @@ await esbuild.build({
   target: ['es2020'],
   nodePaths: [nodeModules],
   legalComments: 'eof',
+  plugins: [{
+    name: 'generated',
+    setup(build) {
+      build.onResolve({ filter: /^\.\/generated\/[a-z_]+\.js$/ }, (a) => ({
+        path: join(generated, a.path.slice('./generated/'.length)),
+      }));
+    },
+  }],
   logLevel: 'warning',
 });
 for (const f of ['index.html', 'style.css']) copyFileSync(join(src, f), join(out, f));

@@ -10,6 +10,7 @@
 // window.neurosimWeb is for tests and curious users: state(), project([x, y, z]), canvasRect(),
 // setToolVisible(bool), setPaused(bool) (as the Pause button), displacementStats(mesh index).
 import { Connection } from './connection.js';
+import { describeRule } from './colour.js';
 import { ForcePlot } from './force_plot.js';
 import { KIND_DEFORMATION_FRAME, KIND_MESH_GEOMETRY, kindOf, parseFrame, parseGeometry } from './protocol.js';
 import { SceneView } from './scene_view.js';
@@ -19,6 +20,7 @@ const params = new URLSearchParams(window.location.search);
 const forceUnitParam = Number(params.get('force_unit'));
 const forceUnitN = Number.isFinite(forceUnitParam) && forceUnitParam > 0 ? forceUnitParam : 1;
 document.getElementById('force-unit').textContent = String(forceUnitN);
+document.getElementById('colour-rule').textContent = describeRule();
 const scaleParam = Number(params.get('displacement_scale_mm'));
 const displacementScaleMm = Number.isFinite(scaleParam) && scaleParam > 0 ? scaleParam : 5;
 document.getElementById('displacement-scale').textContent = String(displacementScaleMm);
