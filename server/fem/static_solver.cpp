@@ -361,27 +361,9 @@ Eigen::VectorXd StaticSolver::solve(const Eigen::VectorXd& forces_n) const {
 }
 
 void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const {
-  const int nf = num_free_dofs();
-  if (b.rows() != nf) {
-    throw std::invalid_argument("StaticSolver::solve_reduced: right-hand side has " +
-                                std::to_string(b.rows()) + " rows, expected " + std::to_string(nf) +
-                                " free dofs");
-  }
-  if (!b.allFinite()) {
-    throw std::invalid_argument("StaticSolver::solve_reduced: non-finite right-hand side");
-  }
-  x.resize(nf, b.cols());
-  if (nf == 0 || b.cols() == 0) {
-    return;
-  }
   std::lock_guard<std::mutex> lock(impl_->mutex);
   impl_->shared_uses.fetch_add(1, std::memory_order_relaxed);
-  SolveWorkspace::Impl& ws = *impl_->shared.impl_;
-  ws.solve(impl_->llt.factor(), b.data(), nf, b.cols(), &ws.xm, &ws.ym, &ws.em);
-  std::copy_n(static_cast<const double*>(ws.xm->x), x.size(), x.data());
-  if (!x.allFinite()) {
-    throw std::runtime_error("StaticSolver::solve_reduced: non-finite solution");
-  }
+  solve_reduced(b, x, impl_->shared);
 }
 
 void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x, SolveWorkspace& wsp) const {
