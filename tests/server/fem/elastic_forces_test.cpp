@@ -4,6 +4,7 @@
 // nonlinear tiers while the linear tier sees the full stiffness force.
 #include "server/fem/elastic_forces.hpp"
 
+#include "elastic_forces_checks.hpp"
 #include "fem_test_meshes.hpp"
 #include "server/fem/assembly.hpp"
 
@@ -11,10 +12,11 @@
 #include <Eigen/Geometry>
 
 #include <cstdio>
-#include <random>
 
 namespace neurosim::fem {
 namespace {
+
+using testing::random_displacement;
 
 const Tier kTiers[] = {Tier::kLinear, Tier::kCorotational, Tier::kNonlinear};
 
@@ -22,31 +24,12 @@ mesh::TetMesh cube() {
   return testing::box_mesh({3, 3, 3, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, 7});
 }
 
-Eigen::VectorXd random_displacement(const mesh::TetMesh& m, double amplitude_m, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd d(3 * m.num_vertices());
-  for (Eigen::Index i = 0; i < d.size(); ++i) d[i] = amplitude_m * u(rng);
-  return d;
-}
-
 TEST(FemElasticForces, ForceIsTheGradientOfTheEnergy) {
   const mesh::TetMesh m = cube();
   const MaterialMap mats = MaterialMap::uniform({3000.0, 0.45, "brain"});
   const Eigen::VectorXd u = random_displacement(m, 4e-3, 3);
-  for (Tier tier : kTiers) {
-    const ElasticForces forces(m, mats, tier);
-    Eigen::VectorXd f;
-    forces.internal_force(u, f);
-    const double h = 1e-8;
-    for (int dof : {0, 17, 40, 101, 3 * static_cast<int>(m.num_vertices()) - 1}) {
-      Eigen::VectorXd up = u, um = u;
-      up[dof] += h;
-      um[dof] -= h;
-      const double fd = (forces.energy(up) - forces.energy(um)) / (2.0 * h);
-      EXPECT_NEAR(fd, f[dof], 1e-6 * f.cwiseAbs().maxCoeff()) << tier_name(tier) << " dof " << dof;
-    }
-  }
+  for (Tier tier : kTiers)
+    testing::expect_force_is_energy_gradient(ElasticForces(m, mats, tier), u, tier_name(tier));
 }
 
 TEST(FemElasticForces, TangentIsTheDerivativeOfTheForce) {
@@ -57,18 +40,7 @@ TEST(FemElasticForces, TangentIsTheDerivativeOfTheForce) {
     const ElasticForces forces(m, mats, tier);
     SparseMatrix k;
     forces.tangent(u, false, k);
-    const Eigen::MatrixXd kd(k);
-    const double h = 1e-8;
-    for (int dof : {1, 30, 77, 150}) {
-      Eigen::VectorXd up = u, um = u, fp, fm;
-      up[dof] += h;
-      um[dof] -= h;
-      forces.internal_force(up, fp);
-      forces.internal_force(um, fm);
-      const Eigen::VectorXd fd = (fp - fm) / (2.0 * h);
-      EXPECT_LT((fd - kd.col(dof)).cwiseAbs().maxCoeff(), 1e-6 * kd.col(dof).cwiseAbs().maxCoeff())
-          << tier_name(tier) << " dof " << dof;
-    }
+    testing::expect_tangent_is_force_derivative(forces, u, Eigen::MatrixXd(k), tier_name(tier));
   }
 }
 

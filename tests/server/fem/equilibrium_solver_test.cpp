@@ -6,6 +6,7 @@
 // factorizations than iterations, on one mesh and on a tied pair.
 #include "server/fem/equilibrium_solver.hpp"
 
+#include "elastic_forces_checks.hpp"
 #include "fem_test_meshes.hpp"
 #include "server/fem/static_solver.hpp"
 #include "test_support.hpp"
@@ -22,39 +23,13 @@ using testing::nodes_where;
 
 const Tier kTiers[] = {Tier::kLinear, Tier::kCorotational, Tier::kNonlinear};
 
-struct Beam {
-  mesh::TetMesh mesh;
-  std::vector<int> fixed;
-  std::vector<int> tip;
-};
-
-Beam beam() {
-  Beam b{box_mesh({10, 2, 2, {0, 0, 0}, {0.1, 0.02, 0.02}, 0.0, 1}), {}, {}};
-  b.fixed = nodes_where(b.mesh, [](const Eigen::Vector3d& p) { return p.x() < 1e-9; });
-  b.tip = nodes_where(b.mesh, [](const Eigen::Vector3d& p) { return p.x() > 0.1 - 1e-9; });
-  return b;
-}
-
-Eigen::VectorXd tip_load(const Beam& b, double total_n) {
-  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * b.mesh.num_vertices());
-  for (int v : b.tip) f[3 * v + 2] = -total_n / static_cast<double>(b.tip.size());
-  return f;
-}
+using testing::Beam;
+using testing::beam;
 
 TEST(FemEquilibriumSolver, SmallLoadsAgreeWithTheLinearSolver) {
-  const Beam b = beam();
-  const MaterialMap mats = MaterialMap::uniform({1.0e6, 0.4, "beam"});
-  const Eigen::VectorXd f = tip_load(b, 1e-6);  // tip deflection ~1e-8 of the length
-  const StaticSolver linear(b.mesh, mats, b.fixed);
-  const Eigen::VectorXd u_lin = linear.solve(f);
-  for (Tier tier : kTiers) {
-    EquilibriumSolver solver({&b.mesh, mats, tier, b.fixed, {}, {}});
-    const EquilibriumResult r = solver.solve(f);
-    const double rel = testing::rel_max_diff(r.displacement_m, u_lin);
-    std::printf("small load, %s tier: max |u - u_linear| / max |u_linear| = %.2e\n",
-                tier_name(tier), rel);
-    EXPECT_LT(rel, 1e-6) << tier_name(tier);
-  }
+  testing::expect_small_loads_agree_with_the_linear_solve(
+      MaterialMap::uniform({1.0e6, 0.4, "beam"}),
+      {Tier::kLinear, Tier::kCorotational, Tier::kNonlinear}, "linear-tet");
 }
 
 TEST(FemEquilibriumSolver, LinearTierConvergesInOneIterationPerIncrement) {
@@ -63,7 +38,7 @@ TEST(FemEquilibriumSolver, LinearTierConvergesInOneIterationPerIncrement) {
   EquilibriumSolver solver({&b.mesh, mats, Tier::kLinear, b.fixed, {}, {}});
   NewtonOptions o;
   o.increments = 1;
-  const EquilibriumResult r = solver.solve(tip_load(b, 5.0), o);
+  const EquilibriumResult r = solver.solve(b.tip_load(5.0), o);
   ASSERT_EQ(r.increments.size(), 1u);
   EXPECT_EQ(r.increments[0].residual_n.size(), 2u);  // initial residual, one step
 }
@@ -73,7 +48,7 @@ TEST(FemEquilibriumSolver, LargeDeflectionConvergesQuadratically) {
   const MaterialMap mats = MaterialMap::uniform({1.0e6, 0.4, "beam"});
   for (Tier tier : {Tier::kCorotational, Tier::kNonlinear}) {
     EquilibriumSolver solver({&b.mesh, mats, tier, b.fixed, {}, {}});
-    const EquilibriumResult r = solver.solve(tip_load(b, 8.0));
+    const EquilibriumResult r = solver.solve(b.tip_load(8.0));
     double tip_w = 0.0;
     for (int v : b.tip) tip_w = std::min(tip_w, r.displacement_m[3 * v + 2]);
     std::printf("%s: tip deflection %.4f m (%.0f %% of the length), %zu increments\n",
@@ -282,7 +257,7 @@ void check_reuse_sequence(const EquilibriumDefinition& def, MakeLoad make_load, 
 TEST(FemEquilibriumSolver, LoosePathWithChordStepsReachesFullNewtonsAnswer) {
   const Beam b = beam();
   const MaterialMap mats = MaterialMap::uniform({1.0e6, 0.4, "beam"});
-  const Eigen::VectorXd f = tip_load(b, 8.0);
+  const Eigen::VectorXd f = b.tip_load(8.0);
   for (Tier tier : {Tier::kCorotational, Tier::kNonlinear}) {
     NewtonOptions full;
     full.increments = 4;
@@ -317,7 +292,7 @@ TEST(FemEquilibriumSolver, ReusedFactorizationReachesFullNewtonsAnswer) {
   // 4 N at the tip: a large deflection (~40 % of the length in the nonlinear tiers), growing
   // 3 % per update and turning sideways.
   auto load = [&](int k) {
-    Eigen::VectorXd f = tip_load(b, 4.0 * (1.0 + 0.03 * k));
+    Eigen::VectorXd f = b.tip_load(4.0 * (1.0 + 0.03 * k));
     for (int v : b.tip) f[3 * v + 1] = 0.02 * k * f[3 * v + 2];
     return f;
   };

@@ -1,6 +1,7 @@
 // Test-only structured tetrahedral meshes: a box of nx*ny*nz hexahedra, each split into the 6
 // Kuhn tetrahedra around its main diagonal (conforming across hexahedra), optionally with the
-// interior nodes jittered to make an irregular mesh.
+// interior nodes jittered to make an irregular mesh; a clamped cantilever beam on it; random
+// displacements from a seed.
 #pragma once
 
 #include "server/mesh/tet_mesh.hpp"
@@ -87,6 +88,38 @@ inline std::vector<int> nodes_where(const mesh::TetMesh& m,
     }
   }
   return out;
+}
+
+// A cantilever: 10 x 2 x 2 hexahedra over 0.1 x 0.02 x 0.02 m, clamped at x = 0 (`fixed`), the
+// nodes of the free end x = 0.1 m in `tip`.
+struct Beam {
+  mesh::TetMesh mesh;
+  std::vector<int> fixed;
+  std::vector<int> tip;
+  // total_n (N) spread evenly over the tip nodes, along -z.
+  Eigen::VectorXd tip_load(double total_n) const {
+    Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(mesh.num_vertices()));
+    for (int v : tip) f[3 * v + 2] = -total_n / static_cast<double>(tip.size());
+    return f;
+  }
+};
+
+inline Beam beam() {
+  Beam b{box_mesh({10, 2, 2, {0, 0, 0}, {0.1, 0.02, 0.02}, 0.0, 1}), {}, {}};
+  b.fixed = nodes_where(b.mesh, [](const Eigen::Vector3d& p) { return p.x() < 1e-9; });
+  b.tip = nodes_where(b.mesh, [](const Eigen::Vector3d& p) { return p.x() > 0.1 - 1e-9; });
+  return b;
+}
+
+// Every dof of m displaced by a uniform random value in [-amplitude_m, amplitude_m] (unit m),
+// from a fixed seed.
+inline Eigen::VectorXd random_displacement(const mesh::TetMesh& m, double amplitude_m,
+                                           unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd d(3 * static_cast<Eigen::Index>(m.num_vertices()));
+  for (Eigen::Index i = 0; i < d.size(); ++i) d[i] = amplitude_m * u(rng);
+  return d;
 }
 
 // max |a - b| / max |b|

@@ -8,6 +8,7 @@
 // refused naming them.
 #include "server/fem/nodal_pressure.hpp"
 
+#include "elastic_forces_checks.hpp"
 #include "fem_test_meshes.hpp"
 #include "server/fem/elastic_forces.hpp"
 #include "server/fem/equilibrium_solver.hpp"
@@ -19,7 +20,6 @@
 #include <Eigen/Geometry>
 
 #include <cstdio>
-#include <random>
 #include <string>
 
 namespace neurosim::fem {
@@ -27,6 +27,7 @@ namespace {
 
 using testing::box_mesh;
 using testing::nodes_where;
+using testing::random_displacement;
 
 const Tier kTiers[] = {Tier::kLinear, Tier::kCorotational, Tier::kNonlinear};
 
@@ -38,14 +39,6 @@ Material anp(double e_pa, double nu, const char* name = "brain") {
 
 mesh::TetMesh jittered_cube(int n = 3) {
   return box_mesh({n, n, n, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, 7});
-}
-
-Eigen::VectorXd random_displacement(const mesh::TetMesh& m, double amplitude_m, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd d(3 * m.num_vertices());
-  for (Eigen::Index i = 0; i < d.size(); ++i) d[i] = amplitude_m * u(rng);
-  return d;
 }
 
 Eigen::VectorXd affine(const mesh::TetMesh& m, const Eigen::Matrix3d& h) {
@@ -135,19 +128,8 @@ TEST(FemNodalPressure, ForceIsTheGradientOfTheEnergy) {
   const mesh::TetMesh m = jittered_cube();
   const MaterialMap mats = MaterialMap::uniform(anp(3000.0, 0.49));
   const Eigen::VectorXd u = random_displacement(m, 4e-3, 3);
-  for (Tier tier : kTiers) {
-    const ElasticForces forces(m, mats, tier);
-    Eigen::VectorXd f;
-    forces.internal_force(u, f);
-    const double h = 1e-8;
-    for (int dof : {0, 17, 40, 101, 3 * static_cast<int>(m.num_vertices()) - 1}) {
-      Eigen::VectorXd up = u, um = u;
-      up[dof] += h;
-      um[dof] -= h;
-      const double fd = (forces.energy(up) - forces.energy(um)) / (2.0 * h);
-      EXPECT_NEAR(fd, f[dof], 1e-6 * f.cwiseAbs().maxCoeff()) << tier_name(tier) << " dof " << dof;
-    }
-  }
+  for (Tier tier : kTiers)
+    testing::expect_force_is_energy_gradient(ElasticForces(m, mats, tier), u, tier_name(tier));
 }
 
 TEST(FemNodalPressure, TangentIsTheDerivativeOfTheForce) {
@@ -160,17 +142,7 @@ TEST(FemNodalPressure, TangentIsTheDerivativeOfTheForce) {
     forces.tangent(u, false, k);
     const Eigen::MatrixXd kd(k);
     EXPECT_LT((kd - kd.transpose()).cwiseAbs().maxCoeff(), 1e-12 * kd.cwiseAbs().maxCoeff());
-    const double h = 1e-8;
-    for (int dof : {1, 30, 77, 150}) {
-      Eigen::VectorXd up = u, um = u, fp, fm;
-      up[dof] += h;
-      um[dof] -= h;
-      forces.internal_force(up, fp);
-      forces.internal_force(um, fm);
-      const Eigen::VectorXd fd = (fp - fm) / (2.0 * h);
-      EXPECT_LT((fd - kd.col(dof)).cwiseAbs().maxCoeff(), 1e-6 * kd.col(dof).cwiseAbs().maxCoeff())
-          << tier_name(tier) << " dof " << dof;
-    }
+    testing::expect_tangent_is_force_derivative(forces, u, kd, tier_name(tier));
   }
 }
 
@@ -229,30 +201,10 @@ TEST(FemNodalPressure, RigidRotationLeavesNoResidualForce) {
   }
 }
 
-struct Beam {
-  mesh::TetMesh mesh = box_mesh({10, 2, 2, {0, 0, 0}, {0.1, 0.02, 0.02}, 0.0, 1});
-  std::vector<int> fixed = nodes_where(mesh, [](const Eigen::Vector3d& p) { return p.x() < 1e-9; });
-  std::vector<int> tip = nodes_where(mesh, [](const Eigen::Vector3d& p) { return p.x() > 0.1 - 1e-9; });
-  Eigen::VectorXd load(double total_n) const {
-    Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * mesh.num_vertices());
-    for (int v : tip) f[3 * v + 2] = -total_n / static_cast<double>(tip.size());
-    return f;
-  }
-};
-
 TEST(FemNodalPressure, SmallLoadsAgreeWithTheLinearSolve) {
-  const Beam b;
-  const MaterialMap mats = MaterialMap::uniform(anp(1.0e6, 0.499));
-  const Eigen::VectorXd f = b.load(1e-6);
-  const Eigen::VectorXd u_lin = StaticSolver(b.mesh, mats, b.fixed).solve(f);
-  for (Tier tier : kTiers) {
-    EquilibriumSolver solver({&b.mesh, mats, tier, b.fixed, {}, {}});
-    const EquilibriumResult r = solver.solve(f);
-    const double rel = testing::rel_max_diff(r.displacement_m, u_lin);
-    std::printf("anp-tet, small load, %s: max |u - u_linear| / max |u_linear| = %.2e\n",
-                tier_name(tier), rel);
-    EXPECT_LT(rel, 1e-6) << tier_name(tier);
-  }
+  testing::expect_small_loads_agree_with_the_linear_solve(
+      MaterialMap::uniform(anp(1.0e6, 0.499)),
+      {Tier::kLinear, Tier::kCorotational, Tier::kNonlinear}, "anp-tet");
 }
 
 // As the linear-tet test in equilibrium_solver_test: the centre node of a small cube dragged

@@ -22,6 +22,30 @@ using testing::nodes_where;
 
 const Material kBrain{1.0e6, 0.4, "brain"};
 
+// A jittered 0.1 m brain cube of 4 x 4 x 4 hexahedra (seed `seed`) clamped at its bottom,
+// solved with the residual check at 1e-10, and the same force (N) on every top node.
+struct ClampedCube {
+  explicit ClampedCube(unsigned seed)
+      : mesh(box_mesh(BoxSpec{4, 4, 4, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, seed})),
+        bottom(nodes_where(mesh, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; })),
+        top(nodes_where(mesh, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-9; })),
+        solver(mesh, MaterialMap::uniform(kBrain), bottom, options()) {}
+  Eigen::VectorXd top_load(const Eigen::Vector3d& per_node_n) const {
+    Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
+    for (int v : top) f.segment<3>(3 * v) = per_node_n;
+    return f;
+  }
+  static SolverOptions options() {
+    SolverOptions opt;
+    opt.check_residual = true;
+    opt.residual_tolerance = 1e-10;
+    return opt;
+  }
+  mesh::TetMesh mesh;
+  std::vector<int> bottom, top;
+  StaticSolver solver;
+};
+
 // Linear field u = A x + c (m).
 Eigen::VectorXd linear_field(const mesh::TetMesh& m) {
   Eigen::Matrix3d a;
@@ -74,17 +98,9 @@ TEST(FemStaticSolver, PatchTestIrregularMesh) {
 }
 
 TEST(FemStaticSolver, ReactionsBalanceLoadsAndResidualIsSmall) {
-  const auto m = box_mesh(BoxSpec{4, 4, 4, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, 3});
-  const auto bottom = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
-  SolverOptions opt;
-  opt.check_residual = true;
-  opt.residual_tolerance = 1e-10;
-  const StaticSolver solver(m, MaterialMap::uniform(kBrain), bottom, opt);
-  Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
-  const auto top = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-9; });
-  for (int v : top) {
-    f.segment<3>(3 * v) = Eigen::Vector3d(0.2, -0.1, -1.0);  // N
-  }
+  const ClampedCube cube(3);
+  const auto& [m, bottom, top, solver] = cube;
+  const Eigen::VectorXd f = cube.top_load(Eigen::Vector3d(0.2, -0.1, -1.0));
   const auto sol = solver.solve_prescribed({}, Eigen::VectorXd(), f);
   const Eigen::VectorXd u = solver.solve(f);
   EXPECT_LE((u - sol.displacement_m).cwiseAbs().maxCoeff(), 1e-14 * u.cwiseAbs().maxCoeff());
@@ -410,15 +426,9 @@ TEST(FemStaticSolver, TwoPartsEachNeedSupportAndSolveIndependently) {
 // Solves on workspaces of their own, from two threads at once, lock nothing and give the same
 // displacements as the solver's shared workspace (checked by count and by value, not by time).
 TEST(FemStaticSolver, OwnWorkspacesSolveConcurrentlyWithoutTheSharedLock) {
-  const auto m = box_mesh(BoxSpec{4, 4, 4, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, 5});
-  const auto bottom = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
-  SolverOptions opt;
-  opt.check_residual = true;
-  opt.residual_tolerance = 1e-10;
-  const StaticSolver solver(m, MaterialMap::uniform(kBrain), bottom, opt);
-  Eigen::VectorXd f = Eigen::VectorXd::Zero(solver.num_dofs());
-  const auto top = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.1 - 1e-9; });
-  for (int v : top) f.segment<3>(3 * v) = Eigen::Vector3d(0.1, 0.2, -0.5);  // N
+  const ClampedCube cube(5);
+  const StaticSolver& solver = cube.solver;
+  const Eigen::VectorXd f = cube.top_load(Eigen::Vector3d(0.1, 0.2, -0.5));
   const Eigen::VectorXd u_shared = solver.solve(f);
   Eigen::MatrixXd b = Eigen::MatrixXd::Zero(solver.num_free_dofs(), 7), x_shared;
   for (int j = 0; j < 7; ++j) b(5 * j, j) = 1.0;

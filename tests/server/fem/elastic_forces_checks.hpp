@@ -1,0 +1,69 @@
+// Checks shared by the element tests (elastic_forces_test, nodal_pressure_test): an element's
+// forces against central differences of its energy, its tangent against central differences of
+// its forces, and its equilibrium under a tiny load against the linear StaticSolver.
+#pragma once
+
+#include "fem_test_meshes.hpp"
+#include "server/fem/elastic_forces.hpp"
+#include "server/fem/equilibrium_solver.hpp"
+#include "server/fem/static_solver.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <initializer_list>
+#include <string>
+
+namespace neurosim::fem::testing {
+
+// f[dof] = dE/du[dof] (central differences, h = 1e-8 m) at a few dofs, the last one included.
+inline void expect_force_is_energy_gradient(const ElasticForces& forces, const Eigen::VectorXd& u,
+                                            const std::string& what) {
+  Eigen::VectorXd f;
+  forces.internal_force(u, f);
+  const double h = 1e-8;
+  for (int dof : {0, 17, 40, 101, static_cast<int>(u.size()) - 1}) {
+    Eigen::VectorXd up = u, um = u;
+    up[dof] += h;
+    um[dof] -= h;
+    const double fd = (forces.energy(up) - forces.energy(um)) / (2.0 * h);
+    EXPECT_NEAR(fd, f[dof], 1e-6 * f.cwiseAbs().maxCoeff()) << what << " dof " << dof;
+  }
+}
+
+// K(:, dof) = df/du[dof] (central differences, h = 1e-8 m) for a few dofs; kd = the tangent at u.
+inline void expect_tangent_is_force_derivative(const ElasticForces& forces,
+                                               const Eigen::VectorXd& u, const Eigen::MatrixXd& kd,
+                                               const std::string& what) {
+  const double h = 1e-8;
+  for (int dof : {1, 30, 77, 150}) {
+    Eigen::VectorXd up = u, um = u, fp, fm;
+    up[dof] += h;
+    um[dof] -= h;
+    forces.internal_force(up, fp);
+    forces.internal_force(um, fm);
+    const Eigen::VectorXd fd = (fp - fm) / (2.0 * h);
+    EXPECT_LT((fd - kd.col(dof)).cwiseAbs().maxCoeff(), 1e-6 * kd.col(dof).cwiseAbs().maxCoeff())
+        << what << " dof " << dof;
+  }
+}
+
+// The beam under a 1e-6 N tip load (deflection ~1e-8 of its length) in each tier: Newton's
+// equilibrium equals the linear solve to 1e-6 (the linearization is consistent).
+inline void expect_small_loads_agree_with_the_linear_solve(const MaterialMap& mats,
+                                                           std::initializer_list<Tier> tiers,
+                                                           const std::string& what) {
+  const Beam b = beam();
+  const Eigen::VectorXd f = b.tip_load(1e-6);
+  const Eigen::VectorXd u_lin = StaticSolver(b.mesh, mats, b.fixed).solve(f);
+  for (Tier tier : tiers) {
+    EquilibriumSolver solver({&b.mesh, mats, tier, b.fixed, {}, {}});
+    const EquilibriumResult r = solver.solve(f);
+    const double rel = rel_max_diff(r.displacement_m, u_lin);
+    std::printf("%s, small load, %s: max |u - u_linear| / max |u_linear| = %.2e\n", what.c_str(),
+                tier_name(tier), rel);
+    EXPECT_LT(rel, 1e-6) << what << " " << tier_name(tier);
+  }
+}
+
+}  // namespace neurosim::fem::testing
