@@ -63,8 +63,8 @@ TEST(fault_process, ServerStoppedTwoSecondsThenContinuedStationKeepsItsSlot) {
   sleep_s(0.3);
   a.join();
 
-  // After the first fresh model (one answering a sample sent after the stop), the force is
-  // back to 90 % within 0.5 s.
+  // After the first fresh model (one answering a sample sent after the stop), the force comes
+  // back to 90 % through the ramp-in.
   const auto& tr = a.trace();
   std::uint64_t seq_at_stop = 0;
   for (std::size_t i = 0; i < stop_tick && i < tr.size(); ++i)
@@ -86,7 +86,10 @@ TEST(fault_process, ServerStoppedTwoSecondsThenContinuedStationKeepsItsSlot) {
   std::printf("force back to 90 %% %.3f s after the first fresh model; %llu models in the 300 ms "
               "after SIGCONT; max step %.3f N\n",
               back_s, static_cast<unsigned long long>(models_300ms), a.max_force_step());
-  EXPECT_LE(back_s, 0.5);
+  // Back through the ramp-in, not in one jump (how long it takes is printed only: a loaded
+  // machine delays the models and the ticks that carry it, without any fault).
+  EXPECT_GT(back_s, 0.0);
+  EXPECT_LT(tr[fresh].force_n.norm(), 0.9 * f_before);
   EXPECT_LE(a.max_force_step(), a.config().force.max_force_step_n + 1e-12);
   // No burst: the stalled schedule restarts instead of replaying 2000 missed steps.
   EXPECT_LE(models_300ms, 450u);
@@ -161,8 +164,9 @@ TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
   auto& [s, server, status, a] = t;
   ASSERT_TRUE(a.pressing(0.5, *server));
 
-  // One viewer: a participant of its own with the viewer's readers, until it has a frame.
-  auto viewer_visit = [prefix = s.prefix] {
+  // One viewer: a participant of its own with the viewer's readers, until it has a frame, then
+  // `stay` (called until it returns true or 5 s have passed).
+  auto viewer_visit = [prefix = s.prefix](const std::function<bool()>& stay = [] { return true; }) {
     wire::Participant pp;
     wire::Topic<neurosim_MeshTopology> topo(pp, wire::topic_name<neurosim_MeshTopology>(prefix));
     wire::Topic<neurosim_Deformation> def(pp, wire::topic_name<neurosim_Deformation>(prefix));
@@ -175,9 +179,18 @@ TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
       for (const auto& rx : def_reader.take()) frame |= rx.valid();
       sleep_s(0.01);
     }
+    while (!stay() && seconds_since(t0) < 5) sleep_s(0.01);
     return topology && frame;
   };
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(viewer_visit()) << server->log();  // warm-up
+  // While a viewer is there the server solves displacement fields for it and measures their
+  // strain (SimStatus max_strain >= 0); with none, it solves none (max_strain -1). The visit
+  // stays until a status says so.
+  bool measured = false;
+  ASSERT_TRUE(viewer_visit([&] {
+    return measured = status.wait_for([](const neurosim_SimStatus& st) { return st.max_strain >= 0; }, 0.2);
+  }));
+  EXPECT_TRUE(measured) << "no field strain measured while a viewer was there: " << status.text;
   sleep_s(2.5);  // two status periods without a viewer
   ASSERT_TRUE(status.wait_for([](const neurosim_SimStatus&) { return true; }, 3));
   const long rss_before = neurosim::common::resident_kib(server->pid());
@@ -185,17 +198,20 @@ TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
   int visits = 0;
   for (int i = 0; i < 50; ++i) visits += viewer_visit() ? 1 : 0;
   sleep_s(2.5);
-  ASSERT_TRUE(status.wait_for([](const neurosim_SimStatus&) { return true; }, 3));
+  // The viewers gone, the server stops the field work they caused (not measured by the step's
+  // time: load alone changes that; the step p99 is printed only).
+  const bool fields_stopped =
+      status.wait_for([](const neurosim_SimStatus& st) { return st.max_strain < 0; }, 5);
   const long rss_after = neurosim::common::resident_kib(server->pid());
   const double p99_after = status.p99_us;
   a.join();
   std::printf("50 viewer visits (%d saw a frame): server RSS %ld -> %ld kB, step p99 %.0f -> %.0f us\n",
               visits, rss_before, rss_after, p99_before, p99_after);
   EXPECT_EQ(visits, 50);
+  EXPECT_TRUE(fields_stopped) << "fields still solved after the viewers left: " << status.text;
   ASSERT_GT(rss_before, 0);
   // Growth allowed: allocator noise, not a leak per visit (50 visits x 100 kB would be 5 MB).
   EXPECT_LE(rss_after - rss_before, 2048) << "server memory grew with viewers that left";
-  EXPECT_LE(p99_after, 2 * p99_before + 300) << status.text;
   server->signal_and_wait(SIGTERM, 10);
 }
 
