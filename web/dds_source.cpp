@@ -5,7 +5,9 @@
 #include "idl/wire/dds.hpp"
 
 #include <atomic>
+#include <cstdlib>
 #include <mutex>
+#include <string>
 #include <thread>
 
 namespace neurosim::web {
@@ -21,12 +23,47 @@ wire::Qos deformation_reader_qos() {
   return q;
 }
 
+// The observer's receive buffers: Cyclone fills each receive thread's buffer (Sizing/
+// ReceiveBufferSize, 1 MiB by default) front to back and only then takes a fresh one, so a
+// thread that receives little (the discovery port: a few kB a second) touches a new page of its
+// buffer every few seconds for a quarter of an hour. That was the observer's slow RSS growth
+// (bench/RESULTS.md "client_soak"); with 256 KiB the growth ends where it is flat.
+constexpr const char* kReceiveBuffers =
+    "<Sizing><ReceiveBufferSize>256KiB</ReceiveBufferSize></Sizing>";
+
+// The observer's DDS domain: the CYCLONEDDS_URI configuration plus kReceiveBuffers, created
+// before the session's participant (which then joins it). Not created when CYCLONEDDS_URI is
+// unset (the session refuses to start and says why) or when this process has the domain
+// already (tests that run a server in the same process): then that domain's configuration holds.
+class ObserverDomain {
+ public:
+  explicit ObserverDomain(int domain) {
+    const char* uri = std::getenv("CYCLONEDDS_URI");
+    if (uri == nullptr || *uri == '\0') return;
+    const std::string config = std::string(uri) + "," + kReceiveBuffers;
+    // DDS_DOMAIN_DEFAULT is not allowed here: the configurations' <Domain id="any"> serve id 0,
+    // the default.
+    const dds_entity_t d = dds_create_domain(domain < 0 ? 0 : domain, config.c_str());
+    if (d > 0) handle_ = d;
+  }
+  ~ObserverDomain() {
+    if (handle_ > 0) dds_delete(handle_);
+  }
+  ObserverDomain(const ObserverDomain&) = delete;
+  ObserverDomain& operator=(const ObserverDomain&) = delete;
+  bool created() const { return handle_ > 0; }
+
+ private:
+  dds_entity_t handle_ = 0;
+};
+
 }  // namespace
 
 struct DdsSource::Impl {
   Hub& hub;
   Log log;
   const double stations_period_s;
+  ObserverDomain domain;  // before the session: its participant joins this domain
   // The shared client set-up (participant, prefixed topics, the server's SimStatus and its
   // liveliness on the waitset) plus the observer's own readers.
   wire::ClientSession session;
@@ -49,6 +86,7 @@ struct DdsSource::Impl {
       : hub(h),
         log(std::move(l)),
         stations_period_s(o.stations_hz > 0 ? 1.0 / o.stations_hz : 1.0 / 30),
+        domain(o.domain),
         session(wire::ClientOptions{o.domain, o.topic_prefix}),
         topo_topic(session.topic<neurosim_MeshTopology>()),
         deform_topic(session.topic<neurosim_Deformation>()),

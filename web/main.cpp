@@ -4,10 +4,12 @@
 #include "web/bridge.hpp"
 #include "web/options.hpp"
 
+#include <malloc.h>
 #include <signal.h>
 
 #include <atomic>
 #include <chrono>
+#include <cstdlib>
 #include <iostream>
 #include <mutex>
 #include <thread>
@@ -21,6 +23,14 @@ int main(int argc, char** argv) {
   namespace web = neurosim::web;
   web::WebOptions options;
   if (const auto rc = web::parse_command_line(argc, argv, options)) return *rc;
+  // Memory that levels off (bench/RESULTS.md "client_soak"), set before any thread starts: one
+  // malloc arena for the observer's threads (Cyclone's, CivetWeb's and the senders' buffers are
+  // allocated on one thread and freed on another), and a fixed mmap threshold of 64 KiB, so
+  // Cyclone's receive buffers (dds_source.cpp: 256 KiB) are mapped and given back when released
+  // rather than left resident in the heap once glibc's dynamic threshold has risen above them.
+  // MALLOC_ARENA_MAX and MALLOC_MMAP_THRESHOLD_ in the environment take precedence.
+  if (std::getenv("MALLOC_ARENA_MAX") == nullptr) mallopt(M_ARENA_MAX, 1);
+  if (std::getenv("MALLOC_MMAP_THRESHOLD_") == nullptr) mallopt(M_MMAP_THRESHOLD, 64 * 1024);
   struct sigaction sa {};
   sa.sa_handler = on_signal;
   sigemptyset(&sa.sa_mask);
