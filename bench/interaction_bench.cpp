@@ -10,8 +10,10 @@
 // --brain-contact: scenes/brain_artery.scene as it is (TIE, LINEAR, the 2 mm probe): a press
 // breathing 0.6-1.4 mm deep on a 4 mm circle (after 200 warm-up steps), and a 10 s slide at
 // 20 mm/s, 1 mm deep, over fresh surface (five 36 mm lines 5 mm apart joined by 4 mm moves, the
-// first touches of compliance columns included): per-step p50 / p99 / max (us), rows per step,
-// steps with no force. Only the Simulation contract: the same source builds against an older
+// first touches of compliance columns included): per-step p50 / p99 / max (us) of the wall time
+// and of the thread's CPU time (the step's own work: on a loaded machine the wall time of a
+// preempted step includes another process's time slice), rows and LCPs per step, steps with no
+// force, columns computed. Only the Simulation contract: the same source builds against an older
 // library for side-by-side runs.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
@@ -26,6 +28,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -89,8 +92,18 @@ bool top_of_surface(const neurosim::mesh::TetMesh& mesh, double x, double y, Eig
   return best > -1e300;
 }
 
+// CPU time of the calling thread, unit us: a step's own work, without the time the scheduler
+// gave other processes (on a loaded machine a preempted step's wall time includes a time slice).
+double thread_cpu_us() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return 1e6 * static_cast<double>(t.tv_sec) + 1e-3 * static_cast<double>(t.tv_nsec);
+}
+
 struct RunTimes {
   std::vector<double> us;
+  std::vector<double> cpu_us;  // thread CPU time per step
+  double lcps{0.0};            // LCPs per step (StepStats::geometry_iterations)
   double rows{0.0};
   int zero_force{0};
   int columns{0};
@@ -105,13 +118,18 @@ RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses) 
   for (const auto& p : poses) {
     one[0] = p;
     const auto ts = Clock::now();
+    const double c0 = thread_cpu_us();
     sim.step(one, contacts, stats);
+    const double c1 = thread_cpu_us();
     r.us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
+    r.cpu_us.push_back(c1 - c0);
+    r.lcps += stats.geometry_iterations;
     r.rows += stats.contact_rows;
     r.columns += stats.columns_computed;
     if (!(contacts[0].force_n.norm() > 0.0)) ++r.zero_force;
   }
   r.rows /= static_cast<double>(std::max<std::size_t>(1, poses.size()));
+  r.lcps /= static_cast<double>(std::max<std::size_t>(1, poses.size()));
   return r;
 }
 
@@ -169,16 +187,19 @@ int brain_contact(int steps) {
   }
   auto fresh = ni::Simulation::build(model);
   const RunTimes ts = run_poses(*fresh, slide);
-  std::cout << "case,steps,p50_us,p99_us,max_us,rows_per_step,zero_force_steps,columns_computed\n";
-  char line[256];
-  std::snprintf(line, sizeof line, "brain_press,%zu,%.1f,%.1f,%.1f,%.2f,%d,%d\n", press.size(),
-                percentile(tp.us, 0.5), percentile(tp.us, 0.99),
-                *std::max_element(tp.us.begin(), tp.us.end()), tp.rows, tp.zero_force, tp.columns);
-  std::cout << line;
-  std::snprintf(line, sizeof line, "brain_slide,%zu,%.1f,%.1f,%.1f,%.2f,%d,%d\n", slide.size(),
-                percentile(ts.us, 0.5), percentile(ts.us, 0.99),
-                *std::max_element(ts.us.begin(), ts.us.end()), ts.rows, ts.zero_force, ts.columns);
-  std::cout << line;
+  std::cout << "case,steps,p50_us,p99_us,max_us,cpu_p50_us,cpu_p99_us,cpu_max_us,rows_per_step,"
+               "lcps_per_step,zero_force_steps,columns_computed\n";
+  auto print = [](const char* name, const RunTimes& t) {
+    char line[320];
+    std::snprintf(line, sizeof line, "%s,%zu,%.1f,%.1f,%.1f,%.1f,%.1f,%.1f,%.2f,%.2f,%d,%d\n", name,
+                  t.us.size(), percentile(t.us, 0.5), percentile(t.us, 0.99),
+                  *std::max_element(t.us.begin(), t.us.end()), percentile(t.cpu_us, 0.5),
+                  percentile(t.cpu_us, 0.99), *std::max_element(t.cpu_us.begin(), t.cpu_us.end()),
+                  t.rows, t.lcps, t.zero_force, t.columns);
+    std::cout << line;
+  };
+  print("brain_press", tp);
+  print("brain_slide", ts);
   return 0;
 }
 

@@ -52,6 +52,37 @@ bool within(const Vec3& d, const Vec3& n, double reach, double max_penetration_m
   return h < 0.0 && -h <= max_penetration_m && (d - h * n).norm() <= reach;
 }
 
+// Whether a point c of the part's axis (the segment p0-p1; p0 = p1 for the tip) can have a face
+// or edge hit on the triangle x (unit normal n): its height h = n . (c - x0) in [-behind, reach]
+// and its projection on the plane within reach of the triangle (of the bounding circle about the
+// centroid). A face hit needs both (within: in front |d| <= reach, behind -h <= behind and the
+// lateral offset <= reach), an edge hit |c - p| <= reach. Exact as a rejection: no hit is lost.
+bool may_touch_face(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0, const Vec3& p1,
+                    double reach, double behind) {
+  reach *= 1.0 + 1e-9;  // rounding: never reject a hit the exact test would take
+  behind *= 1.0 + 1e-9;
+  const Vec3 centre = (x[0] + x[1] + x[2]) / 3.0;
+  double rho2 = 0.0;
+  for (int k = 0; k < 3; ++k) rho2 = std::max(rho2, (x[k] - centre).squaredNorm());
+  const double h0 = n.dot(p0 - x[0]), h1 = n.dot(p1 - x[0]);
+  double ta = 0.0, tb = 1.0;
+  if (h1 == h0) {
+    if (h0 > reach || h0 < -behind) return false;
+  } else {
+    double lo = (-behind - h0) / (h1 - h0), hi = (reach - h0) / (h1 - h0);
+    if (lo > hi) std::swap(lo, hi);
+    ta = std::max(0.0, lo);
+    tb = std::min(1.0, hi);
+    if (ta > tb) return false;
+  }
+  Vec3 a = p0 + ta * (p1 - p0), b = p0 + tb * (p1 - p0);
+  a -= n.dot(a - centre) * n;
+  b -= n.dot(b - centre) * n;
+  const double lateral2 = (closest_on_segment(centre, a, b) - centre).squaredNorm();
+  const double lateral_reach = std::sqrt(rho2) + reach;
+  return lateral2 <= lateral_reach * lateral_reach;
+}
+
 bool deeper(const Row& a, const Row& b) {
   if (a.depth_m != b.depth_m) return a.depth_m > b.depth_m;
   if (a.body != b.body) return a.body < b.body;
@@ -70,6 +101,8 @@ State::State(const Model& m) {
     bs.position_stamp.assign(b.rest_m.size(), -1);
     bs.position_m.assign(b.rest_m.size(), Vec3::Zero());
     bs.force_index.assign(b.rest_m.size(), -1);
+    bs.node_test_stamp.assign(4 * b.rest_m.size(), -1);
+    bs.node_test_in.assign(4 * b.rest_m.size(), 0);
     bs.sliding_lambda.setZero(b.body->sliding().size());
     if (m.options_.precompute_contact_columns) {
       const auto t0 = Clock::now();
@@ -141,8 +174,12 @@ void State::reserve_workspace(const Model& m, int tools) {
   // or edge hit and three node hits per tool part).
   std::size_t triangles = 0;
   for (const auto& b : m.bodies_) triangles = std::max(triangles, b.surface.triangles().size());
-  candidates_.reserve(2 * triangles);
   hits_.reserve(std::min<std::size_t>(8 * triangles, 8 * 4096));
+  step_candidates_.resize(static_cast<std::size_t>(tools) * bodies_.size());
+  for (auto& sc : step_candidates_) {
+    sc.triangles.reserve(2 * triangles);
+    sc.rest_hits.reserve(hits_.capacity());
+  }
   tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
   for (auto& b : bodies_) {
     b.force_slots.reserve(3 * max_rows);
@@ -196,6 +233,7 @@ void State::check_poses(const Model& m, const std::vector<ToolPose>& poses) cons
 
 void State::begin_step(const Model& m, int tools, StepStats& stats) {
   reserve_workspace(m, tools);
+  ++step_counter_;
   stats.tier_updated = false;
   stats.tier_update_us = 0.0;
   stats.inverted_elements = 0;
@@ -223,8 +261,10 @@ const mesh::Vec3& State::position(const Model& m, int body, int slot) {
 }
 
 // Phase "candidate triangles": of one body near one tool (rest grid, widened by the largest
-// displacement of the last good answer), each listed once.
-void State::candidate_triangles(const Model& m, int body, const ToolPose& pose, const Vec3& axis) {
+// displacement of the last good answer), each listed once. Found once per step and tool: the
+// later geometries of the step reuse the list unless their displacement needs a wider one.
+void State::candidate_triangles(const Model& m, int body, int tool, const ToolPose& pose,
+                                const Vec3& axis) {
   const BodyModel& b = m.bodies_[body];
   BodyState& bs = bodies_[body];
   const ToolShape& shape = m.tools_[pose.tool];
@@ -232,37 +272,47 @@ void State::candidate_triangles(const Model& m, int body, const ToolPose& pose, 
   // is up to behind_reach below (the same box whatever came before: the rows are the pose's).
   const double moved = std::max(bs.max_displacement_m, b.behind_reach_m);
   const double slack = m.options_.candidate_margin * shape.tip_radius_m + moved;
+  StepCandidates& sc = step_candidates_[tool * bodies_.size() + body];
+  candidates_ = &sc;
+  if (sc.step != step_counter_) {
+    sc.step = step_counter_;
+    sc.rest_hits_valid = false;
+  } else if (sc.slack_m >= slack) {
+    return;  // a list found with at least this slack holds every triangle this geometry reaches
+  }
+  sc.slack_m = slack;
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
-  candidates_.clear();
+  std::vector<int>& list = sc.triangles;
+  list.clear();
   const long long stamp = ++stamp_counter_;
-  const std::size_t from = candidates_.size();
   b.surface.query(p0 - Vec3::Constant(shape.tip_radius_m + slack),
-                  p0 + Vec3::Constant(shape.tip_radius_m + slack), candidates_);
+                  p0 + Vec3::Constant(shape.tip_radius_m + slack), list);
   if (shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0) {
     const double reach = shape.shaft_radius_m + slack;
     b.surface.query(p0.cwiseMin(p1) - Vec3::Constant(reach),
-                    p0.cwiseMax(p1) + Vec3::Constant(reach), candidates_);
+                    p0.cwiseMax(p1) + Vec3::Constant(reach), list);
   }
   // Keep each triangle once, and only those whose rest bounding sphere can reach a tool part.
-  const double radius = b.surface.max_radius_m();
-  std::size_t kept = from;
-  for (std::size_t k = from; k < candidates_.size(); ++k) {
-    const int t = candidates_[k];
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < list.size(); ++k) {
+    const int t = list[k];
     if (bs.triangle_stamp[t] == stamp) continue;
     bs.triangle_stamp[t] = stamp;
     const Vec3& c = b.surface.centroid(t);
+    const double radius = b.surface.radius_m(t);
     const bool tip = (c - p0).norm() <= shape.tip_radius_m + slack + radius;
     const bool shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0 &&
                        (c - closest_on_segment(c, p0, p1)).norm() <=
                            shape.shaft_radius_m + slack + radius;
-    if (tip || shaft) candidates_[kept++] = t;
+    if (tip || shaft) list[kept++] = t;
   }
-  candidates_.resize(kept);
+  list.resize(kept);
 }
 
 // Phase "rows", geometry: the closest features of the deformed candidate triangles to the tip
 // centre and to the shaft axis, within the part's radius + margin.
-void State::triangle_features(const Model& m, int body, const ToolPose& pose, const Vec3& axis) {
+void State::triangle_features(const Model& m, int body, int tool, const ToolPose& pose,
+                              const Vec3& axis) {
   const BodyModel& b = m.bodies_[body];
   const ToolShape& shape = m.tools_[pose.tool];
   const double margin = m.options_.candidate_margin * shape.tip_radius_m;
@@ -277,10 +327,20 @@ void State::triangle_features(const Model& m, int body, const ToolPose& pose, co
   // The multirate tiers find their rows on the rest surface only: their equilibrium lags the
   // step (worker thread), and a row set that followed it would keep the held force from settling
   // (the step and the updates are a fixed-point iteration on fixed rows).
+  // LINEAR: the step's first geometry is the rest surface (no force yet); its hits are kept and
+  // stand for the rest surface's in the later geometries.
+  StepCandidates& sc = step_candidates_[tool * bodies_.size() + body];
   const int g_first = tier_ ? 1 : 0;
-  const int g_last = tier_ || bodies_[body].max_displacement_m > 0.0 ? 1 : 0;
+  int g_last = tier_ || bodies_[body].max_displacement_m > 0.0 ? 1 : 0;
   hits_.clear();
-  for (int t : candidates_) {
+  const bool first_is_rest = !tier_ && !sc.rest_hits_valid && g_last == 0;
+  if (!tier_ && sc.rest_hits_valid && g_last == 1) {
+    hits_.assign(sc.rest_hits.begin(), sc.rest_hits.end());
+    g_last = 0;
+  }
+  BodyState& bs = bodies_[body];
+  const long long memo = ++node_memo_counter_;  // each node tested once per geometry and part
+  for (int t : sc.triangles) {
     const SurfaceTriangle& tri = tris[t];
     for (int g = g_first; g <= g_last; ++g) {
       std::array<Vec3, 3> x;
@@ -291,8 +351,13 @@ void State::triangle_features(const Model& m, int body, const ToolPose& pose, co
       n.normalize();
       for (int part = 0; part < (has_shaft ? 2 : 1); ++part)
         part_features(t, tri, x, n, part == 1, g == 1, shape, p0, p1, margin,
-                      b.behind_reach_m, b.body->contact_normals());
+                      b.behind_reach_m, b.body->contact_normals(), bs, memo);
     }
+  }
+  if (first_is_rest) {
+    sc.rest_hits.assign(hits_.begin(), hits_.end());
+    for (FeatureHit& h : sc.rest_hits) h.at_rest = true;
+    sc.rest_hits_valid = true;
   }
 }
 
@@ -301,20 +366,9 @@ void State::triangle_features(const Model& m, int body, const ToolPose& pose, co
 void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                           const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
                           const Vec3& p0, const Vec3& p1, double margin,
-                          double max_penetration_m, const std::vector<Vec3>& node_normals) {
+                          double max_penetration_m, const std::vector<Vec3>& node_normals,
+                          BodyState& bs, long long memo) {
   const double reach = (shaft ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
-  // The part's centre for this triangle: the tip centre, or the shaft axis point closest to the
-  // triangle (alternating projections between the two convex sets).
-  Vec3 c = p0;
-  TrianglePoint at = closest_on_triangle(c, x);
-  if (shaft) {
-    c = closest_on_segment((x[0] + x[1] + x[2]) / 3.0, p0, p1);
-    for (int it = 0; it < 4; ++it) {
-      at = closest_on_triangle(c, x);
-      c = closest_on_segment(at.point_m, p0, p1);
-    }
-    at = closest_on_triangle(c, x);
-  }
   FeatureHit h;
   h.triangle = t;
   h.shaft = shaft;
@@ -323,8 +377,14 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   // Node hits: the triangle's vertices inside the part (each node's own closest centre).
   for (int k = 0; k < 3; ++k) {
     if (tri.slot[k] < 0) continue;
+    const std::size_t i = 4 * static_cast<std::size_t>(tri.slot[k]) + (at_rest ? 2 : 0) + shaft;
+    if (bs.node_test_stamp[i] == memo && !bs.node_test_in[i]) continue;
     const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
-    if (!within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m)) continue;
+    if (bs.node_test_stamp[i] != memo) {
+      bs.node_test_stamp[i] = memo;
+      bs.node_test_in[i] = within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m);
+      if (!bs.node_test_in[i]) continue;
+    }
     h.key = feature_key(shaft, TriangleFeature::kVertex, 0, tri.node[k]);
     h.at.point_m = x[k];
     h.at.weights = {0.0, 0.0, 0.0};
@@ -334,6 +394,22 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
     h.centre_m = ck;
     hits_.push_back(h);
   }
+  // Most candidates are far from the part (the box reaches behind_reach behind the surface):
+  // their face or edge point is skipped by a plane test before the closest-point search.
+  if (!may_touch_face(x, n, p0, shaft ? p1 : p0, reach, std::max(reach, max_penetration_m)))
+    return;
+  // The part's centre for this triangle: the tip centre, or the shaft axis point closest to the
+  // triangle (alternating projections between the two convex sets).
+  Vec3 c = p0;
+  TrianglePoint at;
+  if (shaft) {
+    c = closest_on_segment((x[0] + x[1] + x[2]) / 3.0, p0, p1);
+    for (int it = 0; it < 4; ++it) {
+      at = closest_on_triangle(c, x);
+      c = closest_on_segment(at.point_m, p0, p1);
+    }
+  }
+  at = closest_on_triangle(c, x);
   // An edge by its distance only (behind a ridge the far flank's edge is not the surface the
   // tool went through); a face also from behind.
   if (at.feature == TriangleFeature::kVertex) return;
@@ -457,8 +533,8 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
   tool_rows_.clear();
   for (int bi = 0; bi < static_cast<int>(m.bodies_.size()); ++bi) {
     if (m.bodies_[bi].surface.triangles().empty()) continue;
-    candidate_triangles(m, bi, pose, axis);
-    triangle_features(m, bi, pose, axis);
+    candidate_triangles(m, bi, tool, pose, axis);
+    triangle_features(m, bi, tool, pose, axis);
     merge_features(m, bi, tool, shape);
   }
   // Rows within the margin enter the LCP inactive (caught if the deformation pushes them in).

@@ -95,14 +95,18 @@ ContactSurface::ContactSurface(const ContactSurfaceDefinition& def) {
   // Grid over the rest centroids; queries are widened by the largest triangle radius.
   double edge_sum = 0.0;
   centroid_.reserve(triangles_.size());
+  radius_m_.reserve(triangles_.size());
   for (const auto& t : triangles_) {
     const auto& v = host.vertices();
     const mesh::Vec3 c = (v[t.node[0]] + v[t.node[1]] + v[t.node[2]]) / 3.0;
     centroid_.push_back(c);
+    double radius = 0.0;
     for (int k = 0; k < 3; ++k) {
-      max_radius_m_ = std::max(max_radius_m_, (v[t.node[k]] - c).norm());
+      radius = std::max(radius, (v[t.node[k]] - c).norm());
       edge_sum += (v[t.node[k]] - v[t.node[(k + 1) % 3]]).norm();
     }
+    radius_m_.push_back(radius);
+    max_radius_m_ = std::max(max_radius_m_, radius);
   }
   if (triangles_.empty()) return;
   mean_edge_m_ = edge_sum / (3.0 * static_cast<double>(triangles_.size()));

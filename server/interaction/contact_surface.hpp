@@ -51,12 +51,15 @@ class ContactSurface {
   void query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const;
   // Rest centroid and the largest centroid-vertex distance over all triangles, unit m.
   const mesh::Vec3& centroid(int t) const { return centroid_[t]; }
+  // Largest centroid-vertex distance of triangle t (rest), unit m.
+  double radius_m(int t) const { return radius_m_[t]; }
   double max_radius_m() const { return max_radius_m_; }
   double mean_edge_m() const { return mean_edge_m_; }
 
  private:
   std::vector<SurfaceTriangle> triangles_;
   std::vector<mesh::Vec3> centroid_;
+  std::vector<double> radius_m_;
   PointGrid grid_;
   double max_radius_m_{0.0};
   double mean_edge_m_{0.0};

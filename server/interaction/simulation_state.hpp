@@ -84,6 +84,10 @@ struct BodyState {
   std::vector<long long> position_stamp;    // per contact slot: step of position_m
   std::vector<mesh::Vec3> position_m;       // per contact slot: deformed position, unit m
   std::vector<int> force_index;             // per contact slot: index in force_slots or -1
+  // Per contact slot and (rest surface, shaft): the node test of the last triangle search that
+  // made it (its stamp) and whether the node was inside the part (each node tested once).
+  std::vector<long long> node_test_stamp;
+  std::vector<char> node_test_in;
   double max_displacement_m{0.0};  // largest displacement at the loaded slots, last good step
   // Last good step's contact forces on the body, per slot (unit N), and sliding row forces.
   std::vector<int> force_slots;
@@ -166,13 +170,15 @@ class State {
   void check_poses(const Model& m, const std::vector<ToolPose>& poses) const;
   void begin_step(const Model& m, int tools, StepStats& stats);
   void reserve_workspace(const Model& m, int tools);
-  void candidate_triangles(const Model& m, int body, const ToolPose& pose, const Vec3& axis);
-  void triangle_features(const Model& m, int body, const ToolPose& pose, const Vec3& axis);
+  void candidate_triangles(const Model& m, int body, int tool, const ToolPose& pose,
+                           const Vec3& axis);
+  void triangle_features(const Model& m, int body, int tool, const ToolPose& pose,
+                         const Vec3& axis);
   void rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis);
   void part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                      const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
                      const Vec3& p0, const Vec3& p1, double margin, double max_penetration_m,
-                     const std::vector<Vec3>& node_normals);
+                     const std::vector<Vec3>& node_normals, BodyState& bs, long long memo);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape);
   void compliance_columns(StepStats& stats);
   void delassus(const Model& m, int ns);
@@ -189,8 +195,21 @@ class State {
 
   long long stamp_counter_{0};
   long long geometry_counter_{0};  // rows found on a new geometry (positions cached per value)
-  std::vector<int> candidates_;    // triangles of one body near one tool
   std::vector<FeatureHit> hits_;   // features of one body and tool, before merging
+  // Per tool and body (index tool * bodies + body), kept through the geometries of one step: the
+  // candidate triangles (and the slack they were found with) and, LINEAR, the hits of the first
+  // geometry, which is the rest surface (the later geometries' rest hits, not searched again).
+  struct StepCandidates {
+    long long step{-1};
+    double slack_m{0.0};
+    std::vector<int> triangles;
+    bool rest_hits_valid{false};
+    std::vector<FeatureHit> rest_hits;
+  };
+  std::vector<StepCandidates> step_candidates_;
+  long long step_counter_{0};
+  long long node_memo_counter_{0};
+  const StepCandidates* candidates_{nullptr};  // of the body and tool being searched
   std::vector<Row> tool_rows_;     // rows of one tool, before the per-tool limit
   std::vector<Row> rows_;          // the step's contact rows
   std::vector<std::vector<int>> missing_;
