@@ -6,8 +6,9 @@
 // must be counted in SimStatus, the legitimate station keeps its slot, its ContactModels keep
 // coming at an unchanged force, the server's memory stays bounded. Station ids of 10 kB (a
 // participant declaring the type with unbounded ids) never reach the server. Reordered samples
-// are rejected as late and no answer goes back. Also: SIGTERM during the real server's load ends
-// it at once with a message naming the phase.
+// are rejected as late and no answer goes back. One participant's 300 writers leave room for
+// the next station. Also: SIGTERM during the real server's load ends it at once with a message
+// naming the phase.
 #include "common/process_stats.hpp"
 #include "server/scene/compile.hpp"
 #include "tests/server/service/fake_simulation.hpp"
@@ -275,6 +276,74 @@ TEST(service_fault, StationIdsOfTenKilobytesNeverReachTheServer) {
               static_cast<unsigned long long>(last.samples_rejected_rate),
               static_cast<unsigned long long>(last.samples_rejected_jump),
               static_cast<unsigned long long>(last.samples_rejected_sequence));
+  legit.join();
+  EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
+}
+
+// One DDS participant with 300 ToolState writers, each in its own station's partition and each
+// sending one sample, then going idle (what filled the server's 256-writer table, so a station
+// that came next was ignored without a refusal): the server caches at most its per-participant
+// limit of that participant's writers (the rest evict each other), gives it its limit of
+// stations and refuses the others naming that limit, and a legitimate station of another
+// participant joining afterwards is served and never refused. Real DDS on a private domain.
+TEST(service_fault, ThreeHundredWritersOfOneParticipantLeaveRoomForTheNextStation) {
+  const st::Setup setup = fake_setup(scene_with_8_stations());  // outlives the session
+  st::Session ses(setup, "fault_writers", 60);
+  ASSERT_TRUE(ses.wait_ready());
+  // The squatter: a participant of its own, 1 cm outside the box's face (no contact).
+  st::Client squatter(ses.domain);
+  const double p[3] = {setup.face_x_m + setup.tip_radius_m + 0.01, setup.centre_y_m,
+                       setup.centre_z_m};
+  std::vector<std::unique_ptr<wire::Writer<neurosim_ToolState>>> writers;
+  wire::Sample<neurosim_ToolState> sample;
+  for (int w = 0; w < 300; ++w) {
+    const std::string id = "squat-" + std::to_string(w);
+    writers.push_back(
+        std::make_unique<wire::Writer<neurosim_ToolState>>(squatter.pp, squatter.tool_topic, id));
+  }
+  for (int w = 0; w < 300; ++w) {
+    ASSERT_TRUE(writers[static_cast<std::size_t>(w)]->wait_for_readers(1, DDS_SECS(20)))
+        << "writer " << w << " never matched the server's reader";
+    st::fill_tool(*sample, ("squat-" + std::to_string(w)).c_str(), 1, p, dds_time());
+    writers[static_cast<std::size_t>(w)]->write(*sample);
+  }
+  // The server took the squatter's samples: its limit of stations, the rest refused.
+  auto squat_stations = [](const neurosim_SimStatus& s) {
+    std::size_t n = 0;
+    for (const auto& x : wire::view(s.stations)) n += std::string(x.station_id).rfind("squat-", 0) == 0;
+    return n;
+  };
+  std::size_t held = 0;
+  ASSERT_TRUE(ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        held = squat_stations(s);
+        return held > 0 && s.stations_refused > 0;
+      },
+      20))
+      << ses.status.last_text;
+  // The legitimate station, right after, from another participant.
+  st::ModelCollector models(ses.client);
+  const std::array<double, 3> press{setup.face_x_m + setup.tip_radius_m - 0.002, setup.centre_y_m,
+                                    setup.centre_z_m};
+  st::StationThread legit(ses.client, "legit-1", [press](double) { return press; }, 15);
+  const bool served = models.wait_for([&] { return models.count("legit-1") > 200; }, 20);
+  neurosim_SimStatus last{};
+  bool refused_legit = false;
+  const bool listed = ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        for (const auto& r : wire::view(s.refused)) refused_legit |= std::string(r.station_id) == "legit-1";
+        last = s;
+        return st::find_station(s, "legit-1") != nullptr;
+      },
+      10);
+  std::printf("300 writers of one participant: it holds %zu stations, %llu joins refused; legit-1 "
+              "served: %zu models\n",
+              squat_stations(last), static_cast<unsigned long long>(last.stations_refused),
+              models.count("legit-1"));
+  EXPECT_TRUE(served) << "legit-1 got no models after the squatter's writers:\n" << ses.server.log();
+  EXPECT_TRUE(listed) << ses.status.last_text;
+  EXPECT_FALSE(refused_legit) << ses.status.last_text;
+  EXPECT_LE(squat_stations(last), 2u) << "the squatter holds more than its participant's limit";
   legit.join();
   EXPECT_EQ(ses.server.signal_and_wait(SIGTERM, 15), 0) << ses.server.log();
 }
