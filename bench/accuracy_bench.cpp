@@ -373,8 +373,8 @@ int main(int argc, char** argv) {
   cli->add_option("--scene", scenes, "scenes to run (cube_cylinder, brain_artery)")
       ->capture_default_str();
   cli->add_option("--element", element,
-                  "anp-tet | linear-tet: every mesh's element (default: the scenes' material.element)")
-      ->check(CLI::IsMember({"anp-tet", "linear-tet"}));
+                  "smoothed-tet | anp-tet | linear-tet: every mesh's element (default: the scenes' material.element)")
+      ->check(CLI::IsMember({"smoothed-tet", "anp-tet", "linear-tet"}));
   cli->add_option("--table", table_path,
                   "measured force-error table for the server (default DIR/force_error.csv)");
   if (auto rc = cli.parse(argc, argv)) return *rc;

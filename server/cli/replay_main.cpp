@@ -212,7 +212,7 @@ int main(int argc, char** argv) {
       ->take_all();
   cli->add_option("--tier", opt.tier, "linear | nonlinear (default: the scene's)");
   cli->add_option("--element", opt.element,
-                  "anp-tet | linear-tet: every mesh's element (default: the scene's material.element)");
+                  "smoothed-tet | anp-tet | linear-tet: every mesh's element (default: the scene's material.element)");
   cli->add_option("--out", opt.out_dir, "output folder DIR")->required();
   cli->add_option("--every", opt.every, "write a displacement frame every N steps (default 10)")
       ->check(CLI::Range(1, 1000000000));

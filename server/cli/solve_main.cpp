@@ -694,8 +694,8 @@ int main(int argc, char** argv) {
   cli->add_option("--tier", opt.tier, "linear | nonlinear (default: the scene's)")
       ->check(CLI::IsMember({"linear", "corotational", "nonlinear"}, CLI::ignore_case));
   cli->add_option("--element", opt.element,
-                  "anp-tet | linear-tet: every mesh's element (default: the scene's material.element)")
-      ->check(CLI::IsMember({"anp-tet", "linear-tet"}));
+                  "smoothed-tet | anp-tet | linear-tet: every mesh's element (default: the scene's material.element)")
+      ->check(CLI::IsMember({"smoothed-tet", "anp-tet", "linear-tet"}));
   cli->add_option("--increments", opt.increments,
                   "initial load increments of the corotational / nonlinear solve (0: automatic)")
       ->check(CLI::Range(0, 100000));

@@ -1,5 +1,6 @@
 #include "server/fem/assembly.hpp"
 
+#include "server/fem/elastic_forces.hpp"
 #include "server/fem/nodal_pressure.hpp"
 #include "server/fem/tet_element.hpp"
 
@@ -17,7 +18,8 @@ StiffnessAssembler::StiffnessAssembler(const mesh::TetMesh& mesh, Element elemen
   // Node-node adjacency (including the node itself), CSR, sorted per node; anp-tet's nodal
   // volumetric terms couple the neighbours of a node's neighbours.
   std::vector<int> nbr_offset, nbr;
-  NodalPressure::adjacency(mesh, element == Element::kAnpTet ? 2 : 1, nbr_offset, nbr);
+  // smoothed-tet's node cells couple the same pairs.
+  NodalPressure::adjacency(mesh, element == Element::kLinearTet ? 1 : 2, nbr_offset, nbr);
   // Column 3b+j holds rows 3a+i for every neighbour a of b (sorted), i = 0..2.
   const long long nnz = 9LL * static_cast<long long>(nbr.size());
   if (nnz > std::numeric_limits<int>::max()) {
@@ -72,6 +74,12 @@ void StiffnessAssembler::assemble(const mesh::TetMesh& mesh, const MaterialMap& 
                                 element_name(materials.element()) + "', the pattern is for '" +
                                 element_name(element_) + "'");
   }
+  if (element_ == Element::kSmoothedTet) {
+    // The smoothing cells' stiffness is the LINEAR tier's tangent (at any u: it is constant).
+    ElasticForces(mesh, materials, Tier::kLinear)
+        .tangent(Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(num_nodes_)), false, k);
+    return;
+  }
   const bool anp = element_ == Element::kAnpTet;
   std::vector<double> lambda(materials.materials.size()), mu(materials.materials.size());
   for (std::size_t m = 0; m < materials.materials.size(); ++m) {
@@ -125,7 +133,8 @@ void StiffnessAssembler::assemble(const mesh::TetMesh& mesh, const MaterialMap& 
     }
   }
   // LINEAR volumetric strain tr(grad u): d theta_e / d u_b = grad N_b.
-  if (anp) NodalPressure(mesh, materials).add_nodal_stiffness(gradients, k);
+  std::vector<double> q;
+  if (anp) NodalPressure(mesh, materials).add_nodal_stiffness(gradients, k, q);
 }
 
 SparseMatrix assemble_stiffness(const mesh::TetMesh& mesh, const MaterialMap& materials) {

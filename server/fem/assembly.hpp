@@ -18,7 +18,8 @@ using SparseMatrix = Eigen::SparseMatrix<double>;  // column-major, int indices
 // is element kernels plus scatter-adds, with no sorting and no allocation after the first fill.
 class StiffnessAssembler {
  public:
-  // The pattern of `element`: node neighbours (linear-tet) or neighbours of neighbours (anp-tet).
+  // The pattern of `element`: node neighbours (linear-tet) or neighbours of neighbours (anp-tet,
+  // smoothed-tet).
   explicit StiffnessAssembler(const mesh::TetMesh& mesh, Element element = Element::kLinearTet);
 
   // K with both triangles stored (symmetric). `k` gets the pattern on the first call and is

@@ -37,10 +37,13 @@ ElasticForces::ElasticForces(const mesh::TetMesh& mesh, const MaterialMap& mater
       tets_(mesh.tets()),
       assembler_(mesh, materials.element()) {
   materials.validate(mesh.num_tets());
-  if (element_ == Element::kAnpTet) nodal_ = std::make_unique<NodalPressure>(mesh, materials);
+  if (element_ != Element::kLinearTet) nodal_ = std::make_unique<NodalPressure>(mesh, materials);
+  if (element_ == Element::kSmoothedTet) {
+    smoothed_ = std::make_unique<SmoothedStrain>(mesh, materials, assembler_.pattern());
+  }
   for (const Material& m : materials.materials) {
     const LawConstants c = LawConstants::of(m);
-    laws_.push_back(element_ == Element::kAnpTet ? c.deviatoric() : c);
+    laws_.push_back(element_ == Element::kLinearTet ? c : c.deviatoric());
   }
   const auto& x = mesh.vertices();
   gradients_.resize(tets_.size());
@@ -75,7 +78,7 @@ Eigen::Matrix3d ElasticForces::displacement_gradient(std::size_t tet,
   return f;
 }
 
-void ElasticForces::nodal_state(const Eigen::VectorXd& u_m, NodalState& s) const {
+void ElasticForces::nodal_state(const Eigen::VectorXd& u_m, Workspace& s) const {
   s.element.resize(tets_.size());
   s.theta.resize(tets_.size());
   for (std::size_t e = 0; e < tets_.size(); ++e) {
@@ -86,34 +89,67 @@ void ElasticForces::nodal_state(const Eigen::VectorXd& u_m, NodalState& s) const
   nodal_->element_pressure(s.nodal_theta, s.pressure_pa);
 }
 
-double ElasticForces::energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report) const {
+double ElasticForces::energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report,
+                             Workspace* workspace) const {
   check_size(u_m, "energy");
-  NodalState nodal;
-  if (nodal_) nodal_state(u_m, nodal);
+  Workspace local;
+  Workspace& ws = workspace ? *workspace : local;
+  if (nodal_) nodal_state(u_m, ws);
   double e_total = 0.0;
-  for (std::size_t e = 0; e < tets_.size(); ++e) {
-    const Eigen::Matrix3d f = displacement_gradient(e, u_m);
-    LawEvaluation eval;
-    // anp-tet: the element's law is the deviatoric part, the nodes hold the volumetric one.
-    e_total += volume_m3_[e] * energy_density(tier_, laws_[law_index_[e]], f, &eval);
-    note(report, f, eval);
+  LawEvaluation eval;
+  if (smoothed_) {
+    // smoothed-tet: the deviatoric energy over the smoothing cells, the elements only report.
+    for (int c = 0; c < smoothed_->num_cells(); ++c) {
+      eval = LawEvaluation{};
+      e_total += smoothed_->volume_m3(c) *
+                 energy_density(tier_, laws_[smoothed_->material(c)],
+                                smoothed_->displacement_gradient(c, u_m), &eval);
+      if (report && eval.clamped) ++report->clamped_elements;
+    }
+    if (report) {
+      for (std::size_t e = 0; e < tets_.size(); ++e) note(report, displacement_gradient(e, u_m), {});
+    }
+  } else {
+    for (std::size_t e = 0; e < tets_.size(); ++e) {
+      const Eigen::Matrix3d f = displacement_gradient(e, u_m);
+      eval = LawEvaluation{};
+      // anp-tet: the element's law is the deviatoric part, the nodes hold the volumetric one.
+      e_total += volume_m3_[e] * energy_density(tier_, laws_[law_index_[e]], f, &eval);
+      note(report, f, eval);
+    }
   }
-  if (nodal_) e_total += nodal_->energy(nodal.nodal_theta);
+  if (nodal_) e_total += nodal_->energy(ws.nodal_theta);
   return e_total;
 }
 
 void ElasticForces::internal_force(const Eigen::VectorXd& u_m, Eigen::VectorXd& f_n,
-                                   ElasticForcesReport* report) const {
+                                   ElasticForcesReport* report, Workspace* workspace) const {
   check_size(u_m, "internal_force");
-  NodalState nodal;
-  if (nodal_) nodal_state(u_m, nodal);
+  Workspace local;
+  Workspace& ws = workspace ? *workspace : local;
+  if (nodal_) nodal_state(u_m, ws);
   f_n.setZero(num_dofs());
+  if (smoothed_) {
+    for (int c = 0; c < smoothed_->num_cells(); ++c) {
+      LawEvaluation eval;
+      const Eigen::Matrix3d p = first_piola(tier_, laws_[smoothed_->material(c)],
+                                            smoothed_->displacement_gradient(c, u_m), &eval);
+      if (report && eval.clamped) ++report->clamped_elements;
+      smoothed_->add_force(c, p, f_n);
+    }
+  }
   for (std::size_t e = 0; e < tets_.size(); ++e) {
     const Eigen::Matrix3d f = displacement_gradient(e, u_m);
     LawEvaluation eval;
-    Eigen::Matrix3d p = first_piola(tier_, laws_[law_index_[e]], f, &eval);
-    // anp-tet: the deviatoric stress plus the element's average nodal pressure.
-    if (nodal_) p += nodal.pressure_pa[e] * nodal.element[e].gradient;
+    Eigen::Matrix3d p;
+    if (smoothed_) {
+      // smoothed-tet: the element carries only its average nodal pressure.
+      p = ws.pressure_pa[e] * ws.element[e].gradient;
+    } else {
+      p = first_piola(tier_, laws_[law_index_[e]], f, &eval);
+      // anp-tet: the deviatoric stress plus the element's average nodal pressure.
+      if (nodal_) p += ws.pressure_pa[e] * ws.element[e].gradient;
+    }
     note(report, f, eval);
     const auto& t = tets_[e];
     for (int a = 0; a < 4; ++a) {
@@ -123,7 +159,7 @@ void ElasticForces::internal_force(const Eigen::VectorXd& u_m, Eigen::VectorXd& 
 }
 
 void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, SparseMatrix& k,
-                            ElasticForcesReport* report) const {
+                            ElasticForcesReport* report, Workspace* workspace) const {
   check_size(u_m, "tangent");
   const SparseMatrix& pattern = assembler_.pattern();
   if (k.rows() != pattern.rows() || k.nonZeros() != pattern.nonZeros() || !k.isCompressed()) {
@@ -131,13 +167,23 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
   }
   double* values = k.valuePtr();
   std::fill_n(values, k.nonZeros(), 0.0);
-  NodalState nodal;
-  std::vector<Eigen::Matrix<double, 4, 3>> w;  // anp-tet: d theta_e / d u_b = G_e grad N_b
+  Workspace local;
+  Workspace& ws = workspace ? *workspace : local;
   if (nodal_) {
-    nodal_state(u_m, nodal);
-    w.resize(tets_.size());
+    nodal_state(u_m, ws);
+    ws.w.resize(tets_.size());  // d theta_e / d u_b = G_e grad N_b
   }
   StressTangent c, d2theta;
+  if (smoothed_) {
+    ws.cell.resize(static_cast<std::size_t>(smoothed_->max_cell_nodes()));
+    for (int cell = 0; cell < smoothed_->num_cells(); ++cell) {
+      LawEvaluation eval;
+      stress_tangent(tier_, laws_[smoothed_->material(cell)],
+                     smoothed_->displacement_gradient(cell, u_m), project_psd, c, &eval);
+      if (report && eval.clamped) ++report->clamped_elements;
+      smoothed_->add_tangent(cell, c, ws.cell, k);
+    }
+  }
   Eigen::Matrix<double, 9, 12> b;
   Eigen::Matrix<double, 12, 12> k_e;
   for (std::size_t e = 0; e < tets_.size(); ++e) {
@@ -147,18 +193,28 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
     if (!nodal_) {
       stress_tangent(tier_, law, f, project_psd, c, &eval);
     } else {
-      // Deviatoric tangent plus the nodal pressure's pbar d2theta, projected as a whole; the
-      // nodal K q q^T terms follow below.
-      stress_tangent(tier_, law, f, false, c, &eval);
-      const VolumetricStrain& v = nodal.element[e];
-      if (tier_ != Tier::kLinear) {
+      const VolumetricStrain& v = ws.element[e];
+      ws.w[e] = gradients_[e] * v.gradient.transpose();
+      if (smoothed_) {
+        // smoothed-tet: the element's pbar d2theta only (none in LINEAR); the nodal K q q^T
+        // terms follow below.
+        note(report, f, eval);
+        if (tier_ == Tier::kLinear) continue;
         volumetric_hessian(tier_, f, d2theta);
-        c += nodal.pressure_pa[e] * d2theta;
+        c = ws.pressure_pa[e] * d2theta;
+        if (project_psd) project_to_psd(c);
+      } else {
+        // anp-tet: deviatoric tangent plus the nodal pressure's pbar d2theta, projected as a
+        // whole; the nodal K q q^T terms follow below.
+        stress_tangent(tier_, law, f, false, c, &eval);
+        if (tier_ != Tier::kLinear) {
+          volumetric_hessian(tier_, f, d2theta);
+          c += ws.pressure_pa[e] * d2theta;
+        }
+        if (project_psd || eval.clamped) project_to_psd(c);
       }
-      if (project_psd || eval.clamped) project_to_psd(c);
-      w[e] = gradients_[e] * v.gradient.transpose();
     }
-    note(report, f, eval);
+    if (!smoothed_) note(report, f, eval);
     // vec(dF) = B du: dF(i, l) = sum_b du_b,i g_b,l at vec index i + 3 l.
     b.setZero();
     for (int a = 0; a < 4; ++a) {
@@ -171,7 +227,7 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
     k_e.noalias() = volume_m3_[e] * (b.transpose() * c * b);
     assembler_.add_element(e, k_e, values);
   }
-  if (nodal_) nodal_->add_nodal_stiffness(w, k);
+  if (nodal_) nodal_->add_nodal_stiffness(ws.w, k, ws.q);
 }
 
 }  // namespace neurosim::fem

@@ -7,13 +7,16 @@
 // element (materials' element) the volumetric part of every tier's energy is held per node
 // (nodal_pressure.hpp): the element keeps the law's deviatoric part (LawConstants::deviatoric),
 // its stress gains the average nodal pressure pbar_e G_e and the tangent the nodal terms
-// (pattern: neighbours of neighbours).
+// (pattern: neighbours of neighbours). With smoothed-tet the volumetric part is the same and
+// the deviatoric part is held by the edge and node smoothing cells (smoothed_strain.hpp), the
+// elements keeping only the pressure.
 #pragma once
 
 #include "server/fem/assembly.hpp"
 #include "server/fem/elastic_law.hpp"
 #include "server/fem/material.hpp"
 #include "server/fem/nodal_pressure.hpp"
+#include "server/fem/smoothed_strain.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
 #include <Eigen/Core>
@@ -33,6 +36,17 @@ struct ElasticForcesReport {
 
 class ElasticForces {
  public:
+  // The scratch of the anp-tet and smoothed-tet evaluations, sized on first use and reused
+  // (a caller that evaluates every step keeps one: no allocation after the first evaluation).
+  // Without one, each evaluation allocates its own.
+  struct Workspace {
+    std::vector<VolumetricStrain> element;
+    std::vector<double> theta, nodal_theta, pressure_pa;
+    std::vector<Eigen::Matrix<double, 4, 3>> w;         // d theta_e / d u_b (1/m)
+    std::vector<double> q;                              // nodal stiffness scratch
+    std::vector<Eigen::Matrix<double, 9, 3>> cell;      // smoothed-tet tangent scratch
+  };
+
   // Throws std::invalid_argument for an invalid material map or a degenerate element (named).
   ElasticForces(const mesh::TetMesh& mesh, const MaterialMap& materials, Tier tier);
 
@@ -47,15 +61,16 @@ class ElasticForces {
   Eigen::Matrix3d displacement_gradient(std::size_t tet, const Eigen::VectorXd& u_m) const;
 
   // Total strain energy sum_e V_e W(F_e), unit J.
-  double energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report = nullptr) const;
+  double energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report = nullptr,
+                Workspace* workspace = nullptr) const;
   // Internal nodal forces dE/du (3N, unit N): the forces the body needs applied to hold u.
   void internal_force(const Eigen::VectorXd& u_m, Eigen::VectorXd& f_n,
-                      ElasticForcesReport* report = nullptr) const;
+                      ElasticForcesReport* report = nullptr, Workspace* workspace = nullptr) const;
   // Tangent stiffness d^2E/du^2 (3N x 3N, unit N/m) in the assembler's pattern (k gets the
   // pattern on first use, values refilled in place). project_psd: every element tangent made
   // positive semidefinite (Newton far from equilibrium).
   void tangent(const Eigen::VectorXd& u_m, bool project_psd, SparseMatrix& k,
-               ElasticForcesReport* report = nullptr) const;
+               ElasticForcesReport* report = nullptr, Workspace* workspace = nullptr) const;
 
   const StiffnessAssembler& assembler() const { return assembler_; }
 
@@ -70,14 +85,12 @@ class ElasticForces {
   std::vector<int> law_index_;  // per tet: index into laws_
   std::vector<LawConstants> laws_;  // anp-tet: their deviatoric parts
   StiffnessAssembler assembler_;
-  std::unique_ptr<const NodalPressure> nodal_;  // anp-tet only
+  std::unique_ptr<const NodalPressure> nodal_;      // anp-tet, smoothed-tet
+  std::unique_ptr<const SmoothedStrain> smoothed_;  // smoothed-tet only
 
-  // anp-tet: every element's volumetric strain and gradient, and its average nodal pressure.
-  struct NodalState {
-    std::vector<VolumetricStrain> element;
-    std::vector<double> theta, nodal_theta, pressure_pa;
-  };
-  void nodal_state(const Eigen::VectorXd& u_m, NodalState& s) const;
+  // anp-tet, smoothed-tet: every element's volumetric strain and gradient, and its average
+  // nodal pressure, into the workspace.
+  void nodal_state(const Eigen::VectorXd& u_m, Workspace& s) const;
 
   void check_size(const Eigen::VectorXd& u_m, const char* what) const;
 };

@@ -129,11 +129,10 @@ double NodalPressure::energy(const std::vector<double>& nodal_theta) const {
 }
 
 void NodalPressure::add_nodal_stiffness(const std::vector<Eigen::Matrix<double, 4, 3>>& w,
-                                        SparseMatrix& k) const {
+                                        SparseMatrix& k, std::vector<double>& q) const {
   const int* outer = k.outerIndexPtr();
   const int* inner = k.innerIndexPtr();
   double* values = k.valuePtr();
-  std::vector<double> q;
   for (std::size_t a = 0; a < nodal_volume_m3_.size(); ++a) {
     if (!(nodal_volume_m3_[a] > 0.0)) continue;  // in no tetrahedron
     const int p0 = patch_offset_[a], m = patch_offset_[a + 1] - p0;

@@ -47,10 +47,10 @@ class NodalPressure {
   // sum_a V_a K_a/2 thetabar_a^2, unit J.
   double energy(const std::vector<double>& nodal_theta) const;
   // Adds sum_a V_a K_a q_a q_a^T (unit N/m) into the value array of `k` (the pattern of
-  // StiffnessAssembler(mesh, Element::kAnpTet)), with w[e] row b = d theta_e / d u_b of local
-  // node b (unit 1/m).
-  void add_nodal_stiffness(const std::vector<Eigen::Matrix<double, 4, 3>>& w,
-                           SparseMatrix& k) const;
+  // StiffnessAssembler(mesh, Element::kAnpTet or kSmoothedTet)), with w[e] row b = d theta_e / d u_b of local
+  // node b (unit 1/m). q: caller-owned scratch (grows to 3 x the largest 1-ring once).
+  void add_nodal_stiffness(const std::vector<Eigen::Matrix<double, 4, 3>>& w, SparseMatrix& k,
+                           std::vector<double>& q) const;
 
   // Node adjacency (each node with itself), CSR sorted per node: of the tetrahedra (distance 1)
   // or its square (distance 2, the anp-tet stiffness pattern).

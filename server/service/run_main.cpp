@@ -79,13 +79,13 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
           },
           "linear|nonlinear"));
   p->add_option("--element", element_text,
-                "element: anp-tet | linear-tet (default: the scene's material.element)")
+                "element: smoothed-tet | anp-tet | linear-tet (default: the scene's material.element)")
       ->check(CLI::Validator(
           [](std::string& value) -> std::string {
             if (fem::parse_element(value)) return {};
             return "unknown element '" + value + "' (expected " + fem::element_names() + ")";
           },
-          "anp-tet|linear-tet"));
+          "smoothed-tet|anp-tet|linear-tet"));
   p->add_option("--duration", duration_s,
                 "stop after S seconds of serving (default: run until SIGINT/SIGTERM)")
       ->check(cli::positive());

@@ -74,7 +74,8 @@ inline void expect_small_loads_agree_with_the_linear_solve(const MaterialMap& ma
 // returns to rest (|u| < 1e-9 m) for the material of each Poisson ratio.
 inline void expect_inverted_elements_recover_when_released(
     const std::function<MaterialMap(double nu)>& material, std::initializer_list<double> nus,
-    std::initializer_list<Tier> tiers, const std::string& what_element) {
+    std::initializer_list<Tier> tiers, const std::string& what_element,
+    const std::function<double(double nu)>& press_depth_m = [](double) { return 0.015; }) {
   const mesh::TetMesh m = box_mesh({2, 2, 2, {0, 0, 0}, {0.02, 0.02, 0.02}, 0.0, 1});
   const std::vector<int> fixed =
       nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
@@ -91,7 +92,7 @@ inline void expect_inverted_elements_recover_when_released(
     for (Tier tier : tiers) {
       const std::string what =
           what_element + ", " + tier_name(tier) + " nu " + std::to_string(nu);
-      PrescribedDofs press{pushed, Eigen::Vector3d(0, 0, -0.015), kAllComponents};
+      PrescribedDofs press{pushed, Eigen::Vector3d(0, 0, -press_depth_m(nu)), kAllComponents};
       EquilibriumSolver solver({&m, mats, tier, fixed, {press}, {}});
       const EquilibriumResult pressed = solver.solve({});
       ASSERT_TRUE(pressed.displacement_m.allFinite()) << what;

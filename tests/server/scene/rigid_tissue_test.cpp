@@ -167,7 +167,7 @@ meshes { id: "skull" file: "closed.mesh" rigid: true
         "meshes[0].tissues[0].material.element: \"anp-tet\" differs from the mesh's element");
   check(brain_entry("tissues { label: 2 name: \"b\" material { youngs_modulus_pa: 3000 "
                     "poisson_ratio: 0.45 element: \"C3D10\" } }"),
-        "meshes[0].tissues[0].material.element: unknown element \"C3D10\" (known: anp-tet, linear-tet)");
+        "meshes[0].tissues[0].material.element: unknown element \"C3D10\" (known: anp-tet, linear-tet, smoothed-tet)");
 }
 
 TEST_F(RigidTissue, TissueMaterialsPerTetrahedron) {
