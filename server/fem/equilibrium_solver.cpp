@@ -51,6 +51,8 @@ void check_options(const std::string& where, const NewtonOptions& o) {
 struct EquilibriumSolver::Impl {
   std::string where;
   std::vector<ElasticForces> bodies;  // host first, then the tied meshes
+  // Per body: the evaluation scratch (anp-tet, smoothed-tet), so no evaluation allocates.
+  mutable std::vector<ElasticForces::Workspace> workspaces;
   std::vector<int> offset;            // per body: first stacked dof
   int ndof{0};                        // stacked dofs
   // Tie elimination u = T q: q holds every stacked dof except the tied ones (which follow
@@ -115,7 +117,8 @@ struct EquilibriumSolver::Impl {
     double e = 0.0;
     for (std::size_t b = 0; b < bodies.size(); ++b) {
       ElasticForcesReport r;
-      e += bodies[b].energy(u.segment(offset[b], bodies[b].num_dofs()), report ? &r : nullptr);
+      e += bodies[b].energy(u.segment(offset[b], bodies[b].num_dofs()), report ? &r : nullptr,
+                            &workspaces[b]);
       if (report) {
         report->clamped_elements += r.clamped_elements;
         report->inverted_elements += r.inverted_elements;
@@ -135,13 +138,13 @@ struct EquilibriumSolver::Impl {
   double residual(const Eigen::VectorXd& u, const Eigen::VectorXd& fext,
                   bool forces_known = false) {
     if (!forces_known && bodies.size() == 1) {
-      bodies[0].internal_force(u, f_int);  // no copy of u into body_u
+      bodies[0].internal_force(u, f_int, nullptr, &workspaces[0]);  // no copy of u into body_u
     } else if (!forces_known) {
       f_int.resize(ndof);
       for (std::size_t b = 0; b < bodies.size(); ++b) {
         const int nb = bodies[b].num_dofs();
         body_u = u.segment(offset[b], nb);
-        bodies[b].internal_force(body_u, body_f);
+        bodies[b].internal_force(body_u, body_f, nullptr, &workspaces[b]);
         f_int.segment(offset[b], nb) = body_f;
       }
     }
@@ -174,7 +177,7 @@ struct EquilibriumSolver::Impl {
   const SparseMatrix& tangent(const Eigen::VectorXd& u, bool project) {
     for (std::size_t b = 0; b < bodies.size(); ++b) {
       body_u = u.segment(offset[b], bodies[b].num_dofs());
-      bodies[b].tangent(body_u, project, k_body[b]);
+      bodies[b].tangent(body_u, project, k_body[b], nullptr, &workspaces[b]);
     }
     if (!tied()) {
       return k_body[0];
@@ -501,6 +504,7 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
     s.ndof += b.num_dofs();
   }
   s.k_body.resize(s.bodies.size());
+  s.workspaces.resize(s.bodies.size());
   const int n = s.bodies[0].num_nodes();
 
   // Constrained stacked dofs: host fixed + prescribed, each tied mesh's fixed nodes.

@@ -1,8 +1,10 @@
 // Per-step paths allocate nothing once warmed up (Model vs State): StaticSolver::solve(f, u)
-// with a sized u, Compliance::find_column and block_from_cache into a sized matrix.
+// with a sized u, Compliance::find_column and block_from_cache into a sized matrix; the
+// locking-free elements' energy, forces and tangent with a warmed ElasticForces::Workspace.
 // Counts every malloc/calloc/realloc in the process while the steps run.
 #include "fem_test_meshes.hpp"
 #include "server/fem/compliance.hpp"
+#include "server/fem/elastic_forces.hpp"
 
 #include <gtest/gtest.h>
 
@@ -74,6 +76,39 @@ TEST(FemNoAlloc, SolveAndCacheLookupsDoNotAllocate) {
   compliance.column(3 * 200);
   g_counting = false;
   EXPECT_GT(g_allocations.load(), 0);
+}
+
+TEST(FemNoAlloc, LockingFreeElementEvaluationsDoNotAllocate) {
+  const auto m = testing::box_mesh(testing::BoxSpec{3, 3, 3, {0, 0, 0}, {0.1, 0.1, 0.1}, 0.2, 3});
+  for (Element element : {Element::kAnpTet, Element::kSmoothedTet}) {
+    Material mat{3000.0, 0.49, "brain"};
+    mat.element = element;
+    const ElasticForces forces(m, MaterialMap::uniform(mat), Tier::kNonlinear);
+    Eigen::VectorXd u = Eigen::VectorXd::Constant(forces.num_dofs(), 1e-3), f(forces.num_dofs());
+    SparseMatrix k;
+    ElasticForces::Workspace ws;
+    ElasticForcesReport report;
+    forces.tangent(u, false, k, &report, &ws);  // warm-up: the workspace and k's pattern
+    forces.internal_force(u, f, &report, &ws);
+    g_allocations = 0;
+    g_counting = true;
+    double sum = 0.0;
+    for (int step = 0; step < 5; ++step) {
+      u[7] = 1e-3 * step;
+      sum += forces.energy(u, &report, &ws);
+      forces.internal_force(u, f, &report, &ws);
+      forces.tangent(u, step % 2 == 1, k, &report, &ws);
+      sum += f[7] + k.valuePtr()[0];
+    }
+    g_counting = false;
+    EXPECT_EQ(g_allocations.load(), 0) << element_name(element);
+    EXPECT_TRUE(std::isfinite(sum));
+    // The counter sees this path: without a workspace each evaluation allocates its own.
+    g_counting = true;
+    forces.internal_force(u, f, &report);
+    g_counting = false;
+    EXPECT_GT(g_allocations.load(), 0) << element_name(element);
+  }
 }
 
 }  // namespace
