@@ -1,6 +1,6 @@
 // tier_bench: what each elasticity tier costs for the static equilibrium of a scene's host mesh.
-//   tier_bench [--csv] [--scene S]... [--force N]
-// Per scene and tier: set-up (assembly pattern + CHOLMOD symbolic analysis), one evaluation of
+//   tier_bench [--csv] [--scene S]... [--force N] [--element E]...
+// Per scene, element (linear-tet, anp-tet, smoothed-tet) and served tier (LINEAR, NONLINEAR): set-up (assembly pattern + CHOLMOD symbolic analysis), one evaluation of
 // the internal forces and of the tangent, the first equilibrium under a tool-like load (a force
 // on the topmost surface node, in load increments) and one equilibrium update warm-started from
 // it after the load grew 5 % (what a worker refreshing the equilibrium does), with its Newton
@@ -29,22 +29,26 @@ int main(int argc, char** argv) {
   std::vector<std::string> scenes{std::string(NEUROSIM_SOURCE_DIR) + "/scenes/cube_cylinder.scene",
                                   std::string(NEUROSIM_SOURCE_DIR) + "/scenes/brain_artery.scene"};
   double force_n = 0.3;
+  std::vector<std::string> elements{"linear-tet", "anp-tet", "smoothed-tet"};
   cli::Parser cli("tier_bench", "Static-equilibrium cost of each elasticity tier (host meshes).");
   cli->add_flag("--csv", csv, "CSV output");
   cli->add_option("--scene", scenes, "scene file(s)");
   cli->add_option("--force", force_n, "tool-like force on the topmost surface node, N")
       ->check(CLI::PositiveNumber);
+  cli->add_option("--element", elements, "elements to run")
+      ->check(CLI::IsMember({"linear-tet", "anp-tet", "smoothed-tet"}))
+      ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;
   try {
     if (csv) {
-      std::printf("scene,mesh,tier,nodes,tets,setup_ms,force_ms,tangent_ms,first_solve_ms,"
+      std::printf("scene,mesh,element,tier,nodes,tets,setup_ms,force_ms,tangent_ms,first_solve_ms,"
                   "first_iterations,update_ms,update_iterations,update_hz,max_u_mm,"
                   "reuse_update_ms,reuse_max_ms,reuse_iterations,reuse_factorizations,"
                   "reuse_update_hz,reuse_rel_diff\n");
     } else {
-      std::printf("%-14s %-6s %-13s %6s %6s %9s %9s %10s %11s %5s %10s %5s %9s %8s | %9s %9s %5s "
+      std::printf("%-14s %-6s %-12s %-9s %6s %6s %9s %9s %10s %11s %5s %10s %5s %9s %8s | %9s %9s %5s "
                   "%5s %9s %9s\n",
-                  "scene", "mesh", "tier", "nodes", "tets", "setup ms", "force ms", "tangent ms",
+                  "scene", "mesh", "element", "tier", "nodes", "tets", "setup ms", "force ms", "tangent ms",
                   "first ms", "its", "update ms", "its", "update Hz", "max u mm", "reuse ms",
                   "worst ms", "its", "facts", "reuse Hz", "rel diff");
     }
@@ -58,9 +62,12 @@ int main(int argc, char** argv) {
       }
       Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * m.num_vertices());
       f[3 * top + 2] = -force_n;
-      for (fem::Tier tier : {fem::Tier::kLinear, fem::Tier::kCorotational, fem::Tier::kNonlinear}) {
+      for (const std::string& element_text : elements)
+      for (fem::Tier tier : {fem::Tier::kLinear, fem::Tier::kNonlinear}) {
         std::unique_ptr<fem::EquilibriumSolver> solver;
-        const fem::MaterialMap mats = fem::MaterialMap::uniform(lm.material);
+        fem::Material material = lm.material;
+        material.element = *fem::parse_element(element_text);
+        const fem::MaterialMap mats = fem::MaterialMap::uniform(material);
         const double setup_ms = best_ms(3, [&] {
           solver = std::make_unique<fem::EquilibriumSolver>(
               fem::EquilibriumDefinition{&m, mats, tier, lm.fixed_nodes, {}, {}});
@@ -109,11 +116,11 @@ int main(int argc, char** argv) {
         const double reuse_ms = reuse_total_ms / kReuseCalls;
         const double max_u_mm = 1e3 * first.displacement_m.cwiseAbs().maxCoeff();
         const char* fmt =
-            csv ? "%s,%s,%s,%zu,%zu,%.2f,%.3f,%.3f,%.2f,%d,%.2f,%d,%.1f,%.3f,%.2f,%.2f,%.2f,%.2f,"
+            csv ? "%s,%s,%s,%s,%zu,%zu,%.2f,%.3f,%.3f,%.2f,%d,%.2f,%d,%.1f,%.3f,%.2f,%.2f,%.2f,%.2f,"
                   "%.1f,%.1e\n"
-                : "%-14s %-6s %-13s %6zu %6zu %9.2f %9.3f %10.3f %11.2f %5d %10.2f %5d %9.1f "
+                : "%-14s %-6s %-12s %-9s %6zu %6zu %9.2f %9.3f %10.3f %11.2f %5d %10.2f %5d %9.1f "
                   "%8.3f | %9.2f %9.2f %5.2f %5.2f %9.1f %9.1e\n";
-        std::printf(fmt, model.name.c_str(), lm.id.c_str(), fem::tier_name(tier), m.num_vertices(),
+        std::printf(fmt, model.name.c_str(), lm.id.c_str(), element_text.c_str(), fem::tier_name(tier), m.num_vertices(),
                     m.num_tets(), setup_ms, force_ms, tangent_ms, first_ms, first_its, update_ms,
                     update_its, 1000.0 / update_ms, max_u_mm, reuse_ms, reuse_max_ms,
                     static_cast<double>(reuse_its) / kReuseCalls,

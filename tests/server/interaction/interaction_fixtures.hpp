@@ -27,7 +27,12 @@ struct SceneSpec {
   // ("TIE" or "SLIDING"); empty: none.
   std::string rod_kind{};
   std::string tier{"LINEAR"};  // effects.tier
+  std::string element{};       // every material's element (empty: the scene default)
 };
+
+inline std::string element_field(const SceneSpec& s) {
+  return s.element.empty() ? std::string() : " element: \"" + s.element + "\"";
+}
 
 // Cube [0, 0.1]^3 m fixed at z = 0; cylinder r = 15 mm along y through (0.05, *, 0.05), 60 mm long.
 inline std::string scene_text(const SceneSpec& s) {
@@ -38,13 +43,13 @@ inline std::string scene_text(const SceneSpec& s) {
        "0.1 } } "
     << "cell_size_m: " << s.host_cell_m << " seed: 1 }\n"
     << "  material { name: \"host\" youngs_modulus_pa: " << s.host_e_pa
-    << " poisson_ratio: " << s.nu << " }\n"
+    << " poisson_ratio: " << s.nu << element_field(s) << " }\n"
     << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 1 z: 1e-6 } } } priority: 0 }\n"
     << "meshes { id: \"cylinder\" generate { cylinder { base_center_m { x: 0.05 y: 0.02 z: 0.05 } "
     << "axis_m { x: 0 y: 0.06 z: 0 } radius_m: 0.015 } cell_size_m: " << s.embedded_cell_m
     << " seed: 1 }\n"
     << "  material { name: \"embedded\" youngs_modulus_pa: " << s.embedded_e_pa
-    << " poisson_ratio: " << s.nu << " }\n";
+    << " poisson_ratio: " << s.nu << element_field(s) << " }\n";
   if (s.embedded_fixed)
     o << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 0.0201 z: 1 } } }\n";
   o << "  priority: 1 }\n"
