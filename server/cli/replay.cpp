@@ -152,7 +152,7 @@ void run(interaction::Simulation& sim, const std::vector<Station>& stations,
       poses.push_back(pose_of(samples[next[i] - 1], stations[i].tool));
       station_of_pose.push_back(static_cast<int>(i));
     }
-    sim.step(poses, contacts, stats);
+    sim.step_at(t, poses, contacts, stats);  // time enters a viscoelastic body's step
     view.index = k;
     view.time_s = t;
     on_step(view);

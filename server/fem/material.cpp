@@ -23,6 +23,7 @@ void Material::validate() const {
                                 ": Poisson's ratio must be finite and in (-1, 0.5), got " +
                                 std::to_string(poisson_ratio));
   }
+  viscoelastic.validate(label(*this) + ": viscoelastic");
 }
 
 double Material::lame_lambda_pa() const {

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "server/fem/element.hpp"
+#include "server/fem/viscoelastic.hpp"
 
 #include <Eigen/Core>
 
@@ -17,6 +18,8 @@ struct Material {
   // The element formulation (element.hpp). The library's default is the constant-strain
   // tetrahedron; scenes default to kDefaultSceneElement.
   Element element{Element::kLinearTet};
+  // The relaxation kernel (viscoelastic.hpp); no terms: elastic. E and nu are instantaneous.
+  Viscoelastic viscoelastic;
 
   // Throws std::invalid_argument naming the material if E <= 0, nu outside (-1, 0.5)
   // or either is non-finite.

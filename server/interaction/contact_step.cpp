@@ -104,6 +104,8 @@ State::State(const Model& m) {
     bs.node_test_stamp.assign(4 * b.rest_m.size(), -1);
     bs.node_test_in.assign(4 * b.rest_m.size(), 0);
     bs.sliding_lambda.setZero(b.body->sliding().size());
+    if (!b.creep.terms.empty())
+      bs.history = std::make_unique<ViscoelasticHistory>(b.creep, static_cast<int>(b.rest_m.size()));
     if (m.options_.precompute_contact_columns) {
       const auto t0 = Clock::now();
       std::vector<int> all(b.rest_m.size());
@@ -188,8 +190,12 @@ void State::reserve_workspace(const Model& m, int tools) {
   for (auto& list : missing_) list.reserve(3 * max_rows);
   backup_.resize(bodies_.size());
   for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
-    backup_[bi].slots.reserve(3 * max_rows);
-    backup_[bi].forces_n.reserve(3 * max_rows);
+    // A viscoelastic body's forces also hold its history slots: room for every slot.
+    const std::size_t most = bodies_[bi].history ? m.bodies_[bi].rest_m.size() : 0;
+    bodies_[bi].force_slots.reserve(most);
+    bodies_[bi].forces_n.reserve(most);
+    backup_[bi].slots.reserve(std::max<std::size_t>(3 * max_rows, most));
+    backup_[bi].forces_n.reserve(std::max<std::size_t>(3 * max_rows, most));
     backup_[bi].sliding_lambda.resize(bodies_[bi].sliding_lambda.size());
   }
   sliding_active_backup_.reserve(sliding_active_.size());
@@ -596,7 +602,14 @@ void State::delassus(const Model& m, int ns) {
     const Row& a = rows_[r];
     const int i = ns + r;
     const auto& cols = *bodies_[a.body].columns;
+    const ViscoelasticHistory* hist = bodies_[a.body].history.get();
     delta_[i] = a.rest_depth_m;
+    // Viscoelastic: the history's displacement moves the surface (depth + its share along m),
+    // and the step's compliance is alpha W (viscoelastic_history.hpp).
+    const double alpha = hist ? hist->alpha() : 1.0;
+    if (hist && !hist->slots().empty())
+      for (int p = 0; p < 3; ++p)
+        if (a.slot[p] >= 0) delta_[i] += a.w[p] * a.m[p].dot(hist->displacement(cols, a.slot[p]));
     for (int s = r; s < nc; ++s) {
       const Row& c = rows_[s];
       double v = 0.0;
@@ -609,6 +622,7 @@ void State::delassus(const Model& m, int ns) {
           v += c.w[q] * y.dot(c.m[q]);
         }
       }
+      v *= alpha;
       if (s == r) v *= 1.0 + eps;
       w_(i, ns + s) = v;
       w_(ns + s, i) = v;
@@ -638,12 +652,14 @@ void State::store_forces(const Model& m, int ns) {
     bs.forces_n.clear();
     const int rows_b = b.body->sliding().size();
     if (rows_b > 0) bs.sliding_lambda = lambda_.segment(b.sliding_offset, rows_b);
+    if (bs.history) add_history_forces(bs);
   }
   for (int r = 0; r < nc; ++r) {
     const double l = lambda_[ns + r];
     if (l <= 0.0) continue;
     const Row& row = rows_[r];
     auto& bs = bodies_[row.body];
+    const double alpha = bs.history ? bs.history->alpha() : 1.0;  // creep-equivalent force
     for (int k = 0; k < 3; ++k) {
       const int s = row.slot[k];
       if (s < 0 || row.w[k] == 0.0) continue;
@@ -652,7 +668,7 @@ void State::store_forces(const Model& m, int ns) {
         bs.force_slots.push_back(s);
         bs.forces_n.push_back(Vec3::Zero());
       }
-      bs.forces_n[bs.force_index[s]] -= (l * row.w[k]) * row.normal;  // inward on the tissue
+      bs.forces_n[bs.force_index[s]] -= (alpha * l * row.w[k]) * row.normal;  // inward on the tissue
     }
   }
   // Largest displacement at the loaded nodes: how far the next step's candidates may have moved.
@@ -845,6 +861,8 @@ void State::restore_forces(bool to_rest) {
     bs.force_slots.clear();
     bs.forces_n.clear();
     bs.max_displacement_m = 0.0;
+    // From rest, as an elastic body: a viscoelastic body's history enters the first LCP (its
+    // depths and forces) but not the first rows, so a held history gives the elastic rows.
     if (to_rest) continue;
     const ForceBackup& k = backup_[bi];
     bs.force_slots = k.slots;
@@ -874,12 +892,13 @@ bool State::same_rows_as_before() {
 // rows are the same features twice or contact_geometry_iterations is reached: the answer is a
 // function of the poses alone (a replay equals the live run; a held pose, a sequence of poses,
 // gives the same force). The multirate tiers take the surface of their latest equilibrium once.
-void State::step(const Model& m, const std::vector<ToolPose>& poses,
+void State::step(const Model& m, const std::vector<ToolPose>& poses, double time_s,
                  std::vector<ToolContact>& contacts, StepStats& stats) {
   const auto t0 = Clock::now();
   const int nt = static_cast<int>(poses.size());
   check_poses(m, poses);
   begin_step(m, nt, stats);
+  begin_history(m, time_s);
   if (static_cast<int>(contacts.size()) != nt) contacts.resize(nt);
   // Each answer lists up to three nodes per row: room for all of them once, not per step.
   for (auto& c : contacts)
@@ -927,8 +946,41 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses,
     answer(m, t, poses[t], ns, lcp.iterations, nt, contacts[t]);
     last_good_[t] = contacts[t];
   }
+  commit_history();
   tier_post(stats);
   stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+}
+
+// Phase "history" (viscoelastic bodies only): the step's time since the last converged one,
+// alpha and the history forces of each relaxing body (viscoelastic_history.hpp).
+void State::begin_history(const Model& m, double time_s) {
+  step_time_s_ = time_s;
+  if (!m.viscoelastic_) return;
+  if (!std::isfinite(time_s))
+    throw std::invalid_argument("Simulation::step: the step's time is not finite");
+  step_time_s_ = timed_ ? std::max(time_s, time_s_) : time_s;
+  const double dt = timed_ ? step_time_s_ - time_s_ : 0.0;
+  for (auto& bs : bodies_)
+    if (bs.history) bs.history->begin(dt);
+}
+
+// The step converged: its forces enter the history, its time is the last one.
+void State::commit_history() {
+  time_s_ = step_time_s_;
+  timed_ = true;
+  for (auto& bs : bodies_)
+    if (bs.history) bs.history->commit(bs.force_slots, bs.forces_n);
+}
+
+// The history forces of a body as its first loaded slots (store_forces adds the rows' onto them).
+void State::add_history_forces(BodyState& bs) {
+  const auto& slots = bs.history->slots();
+  const auto& h = bs.history->forces_n();
+  for (std::size_t i = 0; i < slots.size(); ++i) {
+    bs.force_index[slots[i]] = static_cast<int>(bs.force_slots.size());
+    bs.force_slots.push_back(slots[i]);
+    bs.forces_n.push_back(h[i]);
+  }
 }
 
 }  // namespace neurosim::interaction

@@ -41,7 +41,11 @@ void StateDeleter::operator()(State* state) const { delete state; }
 StatePtr make_state(const Model& model) { return StatePtr(new State(model)); }
 void step(const Model& model, State& state, const std::vector<ToolPose>& poses,
           std::vector<ToolContact>& contacts, StepStats& stats) {
-  state.step(model, poses, contacts, stats);
+  state.step(model, poses, state.time_s() + model.step_period_s_, contacts, stats);
+}
+void step_at(const Model& model, State& state, double time_s, const std::vector<ToolPose>& poses,
+             std::vector<ToolContact>& contacts, StepStats& stats) {
+  state.step(model, poses, time_s, contacts, stats);
 }
 
 namespace {
@@ -71,6 +75,10 @@ class SimulationImpl final : public Simulation {
   void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts,
             StepStats& stats) override {
     interaction::step(*model_, *state_, poses, contacts, stats);
+  }
+  void step_at(double time_s, const std::vector<ToolPose>& poses,
+               std::vector<ToolContact>& contacts, StepStats& stats) override {
+    interaction::step_at(*model_, *state_, time_s, poses, contacts, stats);
   }
   void displacements(int mesh, Eigen::VectorXd& u_m) const override;
   double tie_residual_m() const override;
@@ -141,6 +149,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     meshes_.push_back(std::move(e));
   }
   setup_.load_meshes_s = seconds_since(t0);
+  step_period_s_ = 1.0 / model.rates.step_hz;
 
   // Roles from the couplings (only when the scene asks for coupling; checked by the scene
   // compiler: priorities, one host per embedded mesh, no nesting).
@@ -269,6 +278,16 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     setup_.factor_s += b.body->timing().factor_s;
     b.host_material = lm.material;
     b.host_fixed_nodes = lm.fixed_nodes;
+    // The body relaxes with its host's kernel (a tied mesh with another one: compile() warns).
+    if (!lm.material.viscoelastic.empty()) {
+      const std::string what = source_ + ": mesh " + lm.id + ": material.viscoelastic";
+      if (tier_ != scene::Tier::kLinear)
+        throw std::runtime_error(what + ": the " + std::string(scene::tier_name(tier_)) +
+                                 " tier is elastic in this build (viscoelastic terms run in the "
+                                 "LINEAR tier; remove them or use --tier linear)");
+      b.creep = fem::creep_spectrum(lm.material.viscoelastic);
+      viscoelastic_ = true;
+    }
     b.body->set_cache_dir(options_.compliance_cache_dir);
     if (iterative_host[m])
       b.body->set_iterative(IterativeOptions{options_.iterative_max_iterations,
@@ -287,6 +306,10 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       // Frictionless unilateral pairs: B's surface node, its closest point on S', B's normal.
       const std::string what =
           source_ + ": SLIDING coupling " + meshes_[h].loaded->id + " / " + emb.id;
+      if (!body.creep.terms.empty() || !emb.material.viscoelastic.empty())
+        throw std::runtime_error(what + ": viscoelastic terms with a SLIDING coupling are not "
+                                 "implemented (the sliding forces have no history); use TIE or "
+                                 "remove material.viscoelastic");
       const auto normals = surface_vertex_normals(emb.mesh);
       std::vector<SlidingPair> pairs;
       std::vector<HostSlidingRow> rows;

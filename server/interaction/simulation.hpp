@@ -212,6 +212,11 @@ StatePtr make_state(const Model& model);
 // tool out (contacts.size() == poses.size()). Writes only `state`; no allocation once warmed up.
 void step(const Model& model, State& state, const std::vector<ToolPose>& poses,
           std::vector<ToolContact>& contacts, StepStats& stats);
+// The same at the poses' sample time (unit s): time enters the step of a viscoelastic body (the
+// time since the last converged step); step() above takes one step period (1 / rates.step_hz)
+// after the last step.
+void step_at(const Model& model, State& state, double time_s, const std::vector<ToolPose>& poses,
+             std::vector<ToolContact>& contacts, StepStats& stats);
 
 class Simulation {
  public:
@@ -233,6 +238,14 @@ class Simulation {
   // per tool out (contacts.size() == poses.size()). No allocation once warmed up.
   virtual void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts,
                     StepStats& stats) = 0;
+  // The same at the poses' sample time, unit s (a viscoelastic body's history advances by the
+  // time since the last converged step; step() takes one step period after it). Replay and the
+  // live server both pass sample times. Default (test doubles): step().
+  virtual void step_at(double time_s, const std::vector<ToolPose>& poses,
+                       std::vector<ToolContact>& contacts, StepStats& stats) {
+    (void)time_s;
+    step(poses, contacts, stats);
+  }
 
   // Displacement of every vertex of `mesh` for the last step's contact and coupling forces
   // (3N, unit m); one sparse solve per mesh, only when someone asks. A host with

@@ -11,6 +11,7 @@
 #include "server/interaction/sliding_coupling.hpp"
 #include "server/interaction/tier_worker.hpp"
 #include "server/interaction/tool_geometry.hpp"
+#include "server/interaction/viscoelastic_history.hpp"
 
 #include <array>
 #include <cstdint>
@@ -45,6 +46,8 @@ struct BodyModel {
   // The host's material and supports (for the COROTATIONAL and NONLINEAR tiers' equilibrium).
   fem::Material host_material;
   std::vector<int> host_fixed_nodes;
+  // The body's creep function (the host material's kernel; no terms: elastic, no history).
+  fem::CreepSpectrum creep;
 };
 
 // One unilateral contact row: a point of a contactable triangle (a face point, an edge point or
@@ -93,6 +96,9 @@ struct BodyState {
   std::vector<int> force_slots;
   std::vector<mesh::Vec3> forces_n;
   Eigen::VectorXd sliding_lambda;
+  // Viscoelastic body: the hereditary integral's internal variables; forces_n above are then the
+  // creep-equivalent forces (the elastic forces giving the displacement, viscoelastic_history.hpp).
+  std::unique_ptr<ViscoelasticHistory> history;
 };
 
 // The constant physics model: meshes, bodies (factorizations, coupling operators, contact
@@ -129,6 +135,8 @@ class Model {
   std::vector<ToolShape> tools_;
   SetupStats setup_;
   int num_sliding_{0};  // sliding rows, first in the LCP
+  double step_period_s_{1e-3};  // 1 / rates.step_hz: the time of a step given none, unit s
+  bool viscoelastic_{false};    // some body has a relaxation kernel
   scene::Tier tier_{scene::Tier::kLinear};
 };
 
@@ -143,8 +151,12 @@ class State {
   explicit State(const Model& m);
   // The step (contact_step.cpp): pose, candidates, rows, columns, Delassus, LCP, forces, answer
   // per tool, tier post.
-  void step(const Model& m, const std::vector<ToolPose>& poses,
+  // time_s: the step's time (the poses' sample time, unit s); only a viscoelastic body uses it
+  // (the time since the last converged step; an earlier time counts as none passed).
+  void step(const Model& m, const std::vector<ToolPose>& poses, double time_s,
             std::vector<ToolContact>& contacts, StepStats& stats);
+  // The time of the last step (for steps given no time: one step period later), unit s.
+  double time_s() const { return time_s_; }
   // Host field for the last good step (stepping thread: may use the cached full columns).
   void host_field(const Model& m, int body, Eigen::VectorXd& u_host_m) const {
     if (tier_) {
@@ -193,6 +205,13 @@ class State {
   bool same_rows_as_before();
   const mesh::Vec3& position(const Model& m, int body, int slot);
 
+  void begin_history(const Model& m, double time_s);
+  static void add_history_forces(BodyState& bs);
+  void commit_history();
+
+  double time_s_{0.0};        // time of the last converged step, unit s
+  bool timed_{false};         // a step converged (else the first step is a jump: dt = 0)
+  double step_time_s_{0.0};   // this step's time
   long long stamp_counter_{0};
   long long geometry_counter_{0};  // rows found on a new geometry (positions cached per value)
   std::vector<FeatureHit> hits_;   // features of one body and tool, before merging

@@ -28,12 +28,20 @@ fem::Material to_material(const Material& material, const std::string& what) {
     throw std::runtime_error(what + ".element: unknown element \"" + material.element() +
                              "\" (known: " + fem::element_names() + ")");
   }
+  m.viscoelastic = to_viscoelastic(material.viscoelastic());
   try {
     m.validate();
   } catch (const std::invalid_argument& e) {
     throw std::runtime_error(what + ": " + e.what());
   }
   return m;
+}
+
+fem::Viscoelastic to_viscoelastic(const Viscoelastic& v) {
+  fem::Viscoelastic out;
+  out.source = v.source();
+  for (const auto& t : v.terms()) out.terms.push_back(fem::PronyTerm{t.g(), t.tau_s()});
+  return out;
 }
 
 std::vector<int> select_nodes(const mesh::TetMesh& mesh, const Region& region,
@@ -217,6 +225,14 @@ void resolve_tissues(const Mesh& entry, const std::string& what, LoadedMesh& out
                                                  t.name() + ") material");
       d.material_source = t.material().source();
       if (t.material().element().empty()) d.material.element = out.material.element;
+      // One relaxation kernel per mesh: a tissue's material without one takes the mesh's.
+      if (!t.material().has_viscoelastic()) {
+        d.material.viscoelastic = out.material.viscoelastic;
+      } else if (!d.material.viscoelastic.same_kernel(out.material.viscoelastic)) {
+        throw std::runtime_error(what + " tissues[" + std::to_string(k) + "] (" + t.name() +
+                                 ") material.viscoelastic: differs from the mesh's (one relaxation "
+                                 "kernel per mesh; leave it out to take the mesh's)");
+      }
       materials.push_back(d.material);
       any_own = true;
     }
@@ -376,6 +392,16 @@ Model compile(const Scene& scene, const std::string& source) {
     host_of[def.embedded] = def.host;
     is_host[def.host] = 1;
     model.couplings.push_back(def);
+    // A tied body relaxes with its host's kernel (server/interaction/viscoelastic_history.hpp).
+    const auto& hv = model.meshes[def.host].material.viscoelastic;
+    const auto& ev = model.meshes[def.embedded].material.viscoelastic;
+    if (def.kind == CouplingKind::kTie && model.effects.coupling && !hv.same_kernel(ev)) {
+      model.warnings.push_back(
+          source + ": couplings[" + std::to_string(c) + "]: mesh " + model.meshes[def.embedded].id +
+          " is tied to " + model.meshes[def.host].id +
+          " whose relaxation kernel differs; the tied body relaxes with the host's kernel "
+          "(exact only for a shared kernel; docs/accuracy.md bounds the approximation)");
+    }
   }
   for (std::size_t m = 0; m < model.meshes.size(); ++m) {
     if (is_host[m] && host_of[m] >= 0) {

@@ -40,5 +40,7 @@ std::vector<int> select_nodes(const mesh::TetMesh& mesh, const Region& region,
 
 // Scene material to the FEM material (validated; errors name `what`).
 fem::Material to_material(const Material& material, const std::string& what);
+// The scene's Prony series as fem::Viscoelastic (not validated here: to_material does it).
+fem::Viscoelastic to_viscoelastic(const Viscoelastic& v);
 
 }  // namespace neurosim::scene

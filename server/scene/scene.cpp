@@ -4,6 +4,7 @@
 #include "server/scene/ranges.hpp"
 #include "server/fem/element.hpp"
 #include "server/fem/served_tiers.hpp"
+#include "server/fem/viscoelastic.hpp"
 
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
@@ -125,6 +126,16 @@ void check_material(const Material& mat, const std::string& source, const std::s
   if (!mat.element().empty() && !fem::parse_element(mat.element()))
     fail(source, f + ".element",
          "unknown element \"" + mat.element() + "\" (known: " + fem::element_names() + ")");
+  if (mat.has_viscoelastic()) {
+    // fem::Viscoelastic::validate names the field and the term ("<f>.viscoelastic.terms[1].g").
+    try {
+      fem::Viscoelastic v;
+      for (const auto& t : mat.viscoelastic().terms()) v.terms.push_back(fem::PronyTerm{t.g(), t.tau_s()});
+      v.validate(f + ".viscoelastic");
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(source + ": " + e.what());
+    }
+  }
 }
 
 // A rigid mesh: a closed triangle surface from a file, with openings; nothing of a body.

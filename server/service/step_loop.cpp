@@ -137,7 +137,7 @@ void StepLoop::retire(std::size_t i) {
 bool StepLoop::try_step(std::size_t n, const std::string** error) {
   interaction::StepStats stats;
   try {
-    sim_.step(poses_by_count_[n], contacts_by_count_[n], stats);
+    sim_.step_at(step_time_s_, poses_by_count_[n], contacts_by_count_[n], stats);
     return true;
   } catch (const std::exception& e) {
     step_error_ = e.what();
@@ -245,6 +245,7 @@ void StepLoop::step_once() {
   const std::uint64_t step = counters_.steps.load(std::memory_order_relaxed) + 1;
   const std::int64_t now_mono = monotonic_ns();
   std::size_t n = 0;
+  std::int64_t newest_ns = 0;
   for (std::size_t i = 0; i < slots_.size(); ++i) {
     auto& s = slots_[i];
     auto& ss = slot_step_[i];
@@ -261,6 +262,11 @@ void StepLoop::step_once() {
     if (s.pose.consume()) ss.has_pose = true;
     if (!ss.has_pose || ss.hold_until_ns > now_mono) continue;
     const PoseSample& p = s.pose.newest();
+    if (!time_origin_set_) {
+      time_origin_set_ = true;
+      time_origin_ns_ = p.source_time_ns;
+    }
+    newest_ns = n == 0 ? p.source_time_ns : std::max(newest_ns, p.source_time_ns);
     ToolPose& tp = all_poses_[n];
     tp.tip_m = interaction::Vec3(p.position_m[0], p.position_m[1], p.position_m[2]);
     // Shaft axis: the tool frame's +z rotated into the scene frame by q (unit: the filter's).
@@ -272,6 +278,7 @@ void StepLoop::step_once() {
     all_slots_[n++] = static_cast<int>(i);
   }
   if (n > 0) {
+    step_time_s_ = 1e-9 * static_cast<double>(newest_ns - time_origin_ns_);
     auto& poses = poses_by_count_[n];
     for (std::size_t k = 0; k < n; ++k) {
       poses[k] = all_poses_[k];

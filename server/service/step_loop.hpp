@@ -120,6 +120,11 @@ class StepLoop {
   std::vector<interaction::ObstaclePlanes> rigid_planes_;
   double proxy_reach_m_{0};
   std::string step_error_;
+  // The step's time: the newest source time of its poses, from the first one seen (unit ns), so
+  // a replay of the stations' recordings steps a viscoelastic body through the same times.
+  std::int64_t time_origin_ns_{0};
+  bool time_origin_set_{false};
+  double step_time_s_{0.0};
 };
 
 }  // namespace neurosim::service

@@ -1,0 +1,108 @@
+#include "server/interaction/viscoelastic_history.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace neurosim::interaction {
+
+ViscoelasticHistory::ViscoelasticHistory(const fem::CreepSpectrum& creep, int num_slots)
+    : terms_(creep.terms), num_terms_(static_cast<int>(creep.terms.size())) {
+  e_.assign(num_terms_, 1.0);
+  beta_.assign(num_terms_, 1.0);
+  f_prev_.assign(num_slots, Vec3::Zero());
+  q_.assign(static_cast<std::size_t>(num_slots) * num_terms_, Vec3::Zero());
+  index_.assign(num_slots, -1);
+  seen_.assign(num_slots, 0);
+  slots_.reserve(num_slots);
+  h_.reserve(num_slots);
+  next_slots_.reserve(num_slots);
+}
+
+void ViscoelasticHistory::begin(double dt_s) {
+  if (!(dt_s >= 0.0) || !std::isfinite(dt_s))
+    throw std::invalid_argument("ViscoelasticHistory: time step must be finite and >= 0");
+  alpha_ = 1.0;
+  for (int k = 0; k < num_terms_; ++k) {
+    // beta = (1 - e^-x) / x with x = dt / rho, accurate for x -> 0 (expm1) and 1 at x = 0.
+    const double x = dt_s / terms_[k].rho_s;
+    e_[k] = std::exp(-x);
+    beta_[k] = x > 0.0 ? -std::expm1(-x) / x : 1.0;
+    alpha_ += terms_[k].a * (1.0 - beta_[k]);
+  }
+  for (std::size_t i = 0; i < slots_.size(); ++i) {
+    const int s = slots_[i];
+    Vec3 h = Vec3::Zero();
+    for (int k = 0; k < num_terms_; ++k)
+      h -= terms_[k].a * (e_[k] * q_[static_cast<std::size_t>(s) * num_terms_ + k] -
+                          beta_[k] * f_prev_[s]);
+    h_[i] = h;
+  }
+}
+
+ViscoelasticHistory::Vec3 ViscoelasticHistory::displacement(const ContactColumns& columns,
+                                                            int slot) const {
+  Vec3 u = Vec3::Zero();
+  for (std::size_t i = 0; i < slots_.size(); ++i)
+    u.noalias() += columns.block(slot, slots_[i]) * h_[i];
+  return u;
+}
+
+void ViscoelasticHistory::commit(const std::vector<int>& slots,
+                                 const std::vector<Vec3>& equivalent_n) {
+  // f_n = (f~_n - h_n) / alpha on the loaded slots; zero on history slots not listed.
+  next_slots_.clear();
+  for (std::size_t i = 0; i < slots.size(); ++i) {
+    const int s = slots[i];
+    if (seen_[s]) continue;
+    seen_[s] = 1;
+    next_slots_.push_back(s);
+  }
+  for (int s : slots_) {
+    if (seen_[s]) continue;
+    seen_[s] = 1;
+    next_slots_.push_back(s);
+  }
+  // The new forces, kept in h_'s place per slot until the internal variables are updated.
+  for (std::size_t i = 0; i < slots.size(); ++i) {
+    const int s = slots[i];
+    const Vec3 f = (equivalent_n[i] - force_of(s)) / alpha_;
+    force_scale_n_ = std::max(force_scale_n_, f.norm());
+    seen_[s] = 2;  // loaded this step
+    for (int k = 0; k < num_terms_; ++k) {
+      Vec3& q = q_[static_cast<std::size_t>(s) * num_terms_ + k];
+      q = e_[k] * q + beta_[k] * (f - f_prev_[s]);
+    }
+    f_prev_[s] = f;
+  }
+  // History slots without a force this step: f_n = 0.
+  for (int s : next_slots_) {
+    if (seen_[s] == 2) continue;
+    for (int k = 0; k < num_terms_; ++k) {
+      Vec3& q = q_[static_cast<std::size_t>(s) * num_terms_ + k];
+      q = e_[k] * q - beta_[k] * f_prev_[s];
+    }
+    f_prev_[s] = Vec3::Zero();
+  }
+  // The slots that keep a history, in a deterministic order (first loaded, then older).
+  for (int s : slots_) index_[s] = -1;
+  slots_.clear();
+  h_.clear();
+  const double floor = 1e-12 * force_scale_n_;
+  for (int s : next_slots_) {
+    seen_[s] = 0;
+    double left = f_prev_[s].norm();
+    for (int k = 0; k < num_terms_; ++k)
+      left += terms_[k].a * q_[static_cast<std::size_t>(s) * num_terms_ + k].norm();
+    if (left <= floor) {
+      for (int k = 0; k < num_terms_; ++k) q_[static_cast<std::size_t>(s) * num_terms_ + k].setZero();
+      f_prev_[s].setZero();
+      continue;
+    }
+    index_[s] = static_cast<int>(slots_.size());
+    slots_.push_back(s);
+    h_.push_back(Vec3::Zero());  // begin() fills it
+  }
+}
+
+}  // namespace neurosim::interaction

@@ -1,0 +1,78 @@
+// The hereditary integral of a viscoelastic body in contact-slot space, so the contact step stays
+// a small LCP on the same compliance columns (docs/accuracy.md, "Viscoelastic tissue").
+//
+// Model: one relaxation kernel g for the whole body (fem/viscoelastic.hpp; the host's when meshes
+// are tied). With sigma = int g(t - s) d(D eps)(s) and the supports held, the body's equilibrium
+// is K (g * du) = f for the history of external forces f, hence u(t) = C (J * df)(t): the
+// displacement is the ELASTIC response (the precomputed coupled compliance C) to the creep-
+// equivalent force
+//   f~(t) = int J(t - s) df(s) = f(t) + sum_k a_k (f(t) - q_k(t)),  q_k(t) = int e^{-(t-s)/rho_k} df(s)
+// (J(t) = 1 + sum_k a_k (1 - e^{-t/rho_k}), fem::CreepSpectrum). The contact forces live on the
+// contact slots, so f~ and the internal variables q_k do too: per slot and creep term, one Vec3,
+// nonzero only at slots that carried a force within the last few rho_k.
+//
+// Step from t_{n-1} to t_n = t_{n-1} + dt with f linear in between (the usual exponential
+// integrator of Taylor-Pister-Goudreau / Simo, exact for that input):
+//   q_k,n = E_k q_k,n-1 + beta_k (f_n - f_n-1),  E_k = e^{-dt/rho_k},  beta_k = (1 - E_k) rho_k / dt
+// so f~_n = alpha f_n + h_n with
+//   alpha = 1 + sum_k a_k (1 - beta_k)            (the instantaneous scaling of C over the step)
+//   h_n   = -sum_k a_k (E_k q_k,n-1 - beta_k f_n-1)   (history, known before the step).
+// The step's LCP is then W' = alpha W on the same rows and columns and a depth shifted by the
+// history displacement C h_n along each row: exact for the model and a force linear between the
+// step times; the only error is that interpolation (relative (dt / rho_min)^2 / 12 at most on a
+// step's increment of the hereditary integral). dt = 0 is a jump (alpha = 1, J(0) = 1).
+#pragma once
+
+#include "server/fem/viscoelastic.hpp"
+#include "server/interaction/contact_columns.hpp"
+
+#include <Eigen/Core>
+
+#include <vector>
+
+namespace neurosim::interaction {
+
+class ViscoelasticHistory {
+ public:
+  using Vec3 = Eigen::Vector3d;
+
+  // Creep function of the body and its number of contact slots; sizes everything (no
+  // allocation afterwards).
+  ViscoelasticHistory(const fem::CreepSpectrum& creep, int num_slots);
+
+  // The step to t_n = t_n-1 + dt_s (dt_s >= 0): alpha and the history forces h_n.
+  void begin(double dt_s);
+  double alpha() const { return alpha_; }
+  // Slots with a history force, and h_n per slot (unit N; the force the elastic body would need
+  // for the displacement the history leaves).
+  const std::vector<int>& slots() const { return slots_; }
+  const std::vector<Vec3>& forces_n() const { return h_; }
+  // The history force of `slot` (zero when it has none).
+  Vec3 force_of(int slot) const { return index_[slot] >= 0 ? h_[index_[slot]] : Vec3::Zero(); }
+  // Displacement of `slot` from the history forces, C h_n (unit m); columns of slots() cached.
+  Vec3 displacement(const ContactColumns& columns, int slot) const;
+
+  // The step converged with the creep-equivalent forces `equivalent_n` (= alpha f_n + h_n) on
+  // `slots`: recover f_n and advance the internal variables. Slots whose history has decayed
+  // below 1e-12 of the largest force seen leave it.
+  void commit(const std::vector<int>& slots, const std::vector<Vec3>& equivalent_n);
+  // The contact force of the last committed step at `slot` (unit N).
+  Vec3 force_at(int slot) const { return f_prev_[slot]; }
+
+ private:
+  std::vector<fem::CreepTerm> terms_;
+  int num_terms_;
+  // Per step.
+  double alpha_{1.0};
+  std::vector<double> e_, beta_;
+  // Per slot: previous force, the internal variables q_k (slot-major), index into slots_ or -1.
+  std::vector<Vec3> f_prev_, q_;
+  std::vector<int> index_;
+  std::vector<int> slots_;  // slots with history (force or internal variable nonzero)
+  std::vector<Vec3> h_;     // per slots_ entry
+  std::vector<int> next_slots_;
+  std::vector<char> seen_;
+  double force_scale_n_{0.0};
+};
+
+}  // namespace neurosim::interaction
