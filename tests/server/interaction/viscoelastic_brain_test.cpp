@@ -22,7 +22,7 @@ const Vec3 kOrigin(0.1605, 0.1125, 0.0787);
 const Vec3 kUp = Vec3(0.963, 0.176, 0.202).normalized();
 constexpr double kDt = 1e-3;
 
-struct Run {
+struct BrainRun {
   std::unique_ptr<Simulation> sim;
   std::vector<ToolPose> poses{1};
   std::vector<ToolContact> contacts;
@@ -42,8 +42,8 @@ struct Run {
   }
 };
 
-Run make_run(const scene::Model& model) {
-  Run r;
+BrainRun make_run(const scene::Model& model) {
+  BrainRun r;
   r.sim = Simulation::build(model);
   r.tip_radius_m = model.tools.at(0).tip_radius_m;
   return r;
@@ -55,7 +55,7 @@ TEST(interaction_viscoelastic_brain, PressHoldSlideReleaseStaysStableAndRelaxes)
   const auto& v = model.meshes.at(0).material.viscoelastic;
   ASSERT_EQ(v.terms.size(), 2u);
   ASSERT_FALSE(model.warnings.empty());  // the elastic artery tied to the relaxing brain
-  Run r = make_run(model);
+  BrainRun r = make_run(model);
   const double depth = 0.004;
   // Press 4 mm in 0.2 s, hold 3 s.
   double f_peak = 0.0;
@@ -69,7 +69,7 @@ TEST(interaction_viscoelastic_brain, PressHoldSlideReleaseStaysStableAndRelaxes)
   }
   // The instantaneous answer at the same depth (a fresh body, one jump) bounds it from above, the
   // instantaneous answer times g(hold + ramp) from below.
-  Run fresh = make_run(model);
+  BrainRun fresh = make_run(model);
   const double f_inst = fresh.step(depth);
   EXPECT_LT(f, f_inst);
   EXPECT_GT(f, f_inst * v.relaxation(r.t - t_hold + 0.2) * (1 - 1e-3));
@@ -83,7 +83,7 @@ TEST(interaction_viscoelastic_brain, PressHoldSlideReleaseStaysStableAndRelaxes)
   for (int k = 0; k < 1000; ++k) EXPECT_LE(r.step(-0.002), 1e-12);
 
   // A slower press (2 s) to the same depth needs less force than the 0.2 s one.
-  Run slow = make_run(model);
+  BrainRun slow = make_run(model);
   double f_slow = 0.0;
   for (int k = 0; k <= 2000; ++k) f_slow = slow.step(depth * k / 2000);
   EXPECT_LT(f_slow, f_peak);
