@@ -2,7 +2,8 @@
 // elastic block meshed finely under it (a structured grid graded away from the contact, Kuhn
 // tetrahedra), LINEAR tier, against Hertz's force-depth law
 //   F = 4/3 E / (1 - nu^2) sqrt(R) d^(3/2)   (contact radius a = sqrt(R d)),
-// at depths whose contact radius spans at least five elements.
+// at depths whose contact radius spans at least five elements; and against CalculiX's own
+// surface-to-surface contact (a rigid spherical cap) pressed into the same mesh.
 #include "server/interaction/simulation.hpp"
 
 #include "server/mesh/io.hpp"
@@ -164,7 +165,7 @@ struct CcxContactCase {
   double cap_half_m{0.0045};     // the cap covers |x|, |y| <= this (contact radius <= 3.2 mm)
   double cap_step_m{0.00025};    // cap node spacing: chord sag h^2 / (8 R) < 1 um
   double penalty_pa_per_m{3e8};  // about 500 E / h: overclosure < 1 % of the depth
-  std::vector<double> depths_m{0.00025, 0.0005, 0.00075, 0.001};  // equal increments
+  std::vector<double> depths_m{0.001 / 3.0, 0.002 / 3.0, 0.001};  // equal increments
 };
 
 // Writes the deck, runs ccx (one thread, bounded by `timeout`), returns the cap's total z
@@ -265,14 +266,18 @@ std::vector<std::pair<double, double>> ccx_sphere_press(const std::filesystem::p
   return forces;
 }
 
-// The same press in neurosim (LINEAR tier) and in CalculiX on the same graded block, coarser
-// than the Hertz test's so that ccx's contact iterations run in seconds.
+// The same press in neurosim (LINEAR tier) and in CalculiX on the same graded block (0.6 mm
+// under the contact, 4851 vertices), coarser than the Hertz test's so that ccx's contact
+// iterations stay short (about 10 Newton iterations per increment, 20 s of CPU in all). Measured
+// neurosim / ccx 1.010, 1.002, 1.004 at 1/3, 2/3 and 1 mm. What is left: ccx's penalty lets the
+// cap overclose by p / K (under 3 um at 1 mm, about 0.4 % of the force), ccx integrates the
+// contact pressure over the slave faces where neurosim places one row per touched feature.
 TEST(interaction_contact_reference, SpherePressedIntoABlockAgreesWithCalculixContact) {
   HertzCase h;
   h.fine_m = 0.0006;
   h.fine_half_m = 0.0036;
   h.growth = 2.0;
-  h.half_m = 0.03;
+  h.half_m = 0.02;
   const CcxContactCase c;
   const auto xs = graded_axis(h.fine_m, h.fine_half_m, h.growth, h.half_m, true);
   const auto zs = graded_axis(h.fine_m, h.fine_half_m, h.growth, h.half_m, false);
@@ -304,11 +309,9 @@ TEST(interaction_contact_reference, SpherePressedIntoABlockAgreesWithCalculixCon
     std::printf("d %.2f mm: neurosim F %.5f N (rows %d), ccx F %.5f N, ratio %.4f\n", d * 1e3,
                 tc[0].force_n.z(), st.contact_rows, ccx[k].second,
                 tc[0].force_n.z() / ccx[k].second);
-    if (k > 0) {
-      EXPECT_NEAR(tc[0].force_n.z() / ccx[k].second, 1.0, 0.05) << "depth " << d;
-    }
+    EXPECT_NEAR(tc[0].force_n.z() / ccx[k].second, 1.0, 0.05) << "depth " << d;
   }
-  std::filesystem::remove_all(dir);
+  if (!::testing::Test::HasFailure()) std::filesystem::remove_all(dir);  // kept to diagnose
 }
 }  // namespace
 }  // namespace neurosim::interaction
