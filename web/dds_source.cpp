@@ -5,6 +5,7 @@
 #include "idl/wire/dds.hpp"
 
 #include <atomic>
+#include <functional>
 #include <cstdlib>
 #include <mutex>
 #include <string>
@@ -34,17 +35,24 @@ constexpr const char* kReceiveBuffers =
 // The observer's DDS domain: the CYCLONEDDS_URI configuration plus kReceiveBuffers, created
 // before the session's participant (which then joins it). Not created when CYCLONEDDS_URI is
 // unset (the session refuses to start and says why) or when this process has the domain
-// already (tests that run a server in the same process): then that domain's configuration holds.
+// already (tests that run a server in the same process): then that domain's configuration holds,
+// with its own receive buffers, and the observer says so once.
 class ObserverDomain {
  public:
-  explicit ObserverDomain(int domain) {
+  ObserverDomain(int domain, const std::function<void(const std::string&)>& log) {
     const char* uri = std::getenv("CYCLONEDDS_URI");
     if (uri == nullptr || *uri == '\0') return;
     const std::string config = std::string(uri) + "," + kReceiveBuffers;
     // DDS_DOMAIN_DEFAULT is not allowed here: the configurations' <Domain id="any"> serve id 0,
     // the default.
     const dds_entity_t d = dds_create_domain(domain < 0 ? 0 : domain, config.c_str());
-    if (d > 0) handle_ = d;
+    if (d > 0) {
+      handle_ = d;
+    } else if (d == DDS_RETCODE_PRECONDITION_NOT_MET) {
+      log("neurosim-web: DDS domain " + std::to_string(domain < 0 ? 0 : domain) +
+          " already exists in this process: the observer uses its configuration (not the " +
+          "observer's 256 KiB receive buffers)");
+    }
   }
   ~ObserverDomain() {
     if (handle_ > 0) dds_delete(handle_);
@@ -86,7 +94,7 @@ struct DdsSource::Impl {
       : hub(h),
         log(std::move(l)),
         stations_period_s(o.stations_hz > 0 ? 1.0 / o.stations_hz : 1.0 / 30),
-        domain(o.domain),
+        domain(o.domain, log),
         session(wire::ClientOptions{o.domain, o.topic_prefix}),
         topo_topic(session.topic<neurosim_MeshTopology>()),
         deform_topic(session.topic<neurosim_Deformation>()),

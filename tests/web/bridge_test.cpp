@@ -149,14 +149,33 @@ TEST(WebBridge, AClientThatNeverReadsDoesNotStallTheOthers) {
   ASSERT_TRUE(reader.connected()) << reader.error();
   reader.keep_messages(false);
   ASSERT_TRUE(reader.wait_until([&] { return reader.frames() >= 5; }, 20)) << bridge.child().log();
+  // The share of the server's frames the reader gets over a fixed count of frames written (45,
+  // 1.5 s at 30 Hz; at most 20 s on a slow machine): first alone, then beside the stalled client,
+  // on the same machine under the same load. Only the stalled client differs between the two,
+  // so a loaded machine lowers both; a broadcast that waits on the stalled socket (up to the
+  // 1 s write timeout per frame) leaves the reader a few frames of the 45.
+  const auto share_of_frames = [&] {
+    const std::size_t r0 = reader.frames();
+    const std::uint64_t w0 = server.frames_written();
+    const auto t0 = wt::Clock::now();
+    while (server.frames_written() < w0 + 45 && wt::seconds_since(t0) < 20)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const double sent = static_cast<double>(server.frames_written() - w0);
+    return std::pair<double, double>{static_cast<double>(reader.frames() - r0), sent};
+  };
+  const auto [got_alone, sent_alone] = share_of_frames();
   wt::StalledClient stalled(bridge.port());
   std::this_thread::sleep_for(std::chrono::milliseconds(700));  // its buffers fill
-  const std::size_t r0 = reader.frames();
-  const std::uint64_t w0 = server.frames_written();
-  std::this_thread::sleep_for(std::chrono::seconds(2));
-  const double got = static_cast<double>(reader.frames() - r0);
-  const double sent = static_cast<double>(server.frames_written() - w0);
-  EXPECT_GE(got, 0.8 * sent) << "reader got " << got << " of " << sent << " frames";
+  const auto [got, sent] = share_of_frames();
+  ASSERT_GE(sent_alone, 45);
+  ASSERT_GE(sent, 45);
+  const double share_alone = got_alone / sent_alone, share = got / sent;
+  std::cout << "reader got " << got_alone << " of " << sent_alone << " frames alone, " << got
+            << " of " << sent << " beside the stalled client\n";
+  EXPECT_GE(share_alone, 0.3) << "reader got " << got_alone << " of " << sent_alone << " alone";
+  EXPECT_GE(share, 0.7 * share_alone)
+      << "reader got " << got << " of " << sent << " frames beside the stalled client, "
+      << got_alone << " of " << sent_alone << " alone";
   // The stalled client (it joined second: the larger id) has frames dropped while its socket is
   // full; its sends then fail and its pings go unanswered, so it is dropped, while the reader
   // (which answers pings, as a browser does) stays and keeps getting frames.
@@ -164,21 +183,20 @@ TEST(WebBridge, AClientThatNeverReadsDoesNotStallTheOthers) {
   const auto t0 = wt::Clock::now();
   for (;;) {
     s = wt::bridge_stats(bridge.port());
-    if (s["clients"] != 2 || wt::seconds_since(t0) > 15) break;
+    if (s["clients"] != 2 || wt::seconds_since(t0) > 30) break;
     const Json& a = s["per_client"][0];
     const Json& b = s["per_client"][1];
     last_stalled = a["id"].get<int>() > b["id"].get<int>() ? a : b;
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
-  std::cout << "reader got " << got << " of " << sent
-            << " frames; the stalled client last seen: " << last_stalled.dump() << "\n";
+  std::cout << "the stalled client last seen: " << last_stalled.dump() << "\n";
   EXPECT_EQ(s["clients"], 1) << s.dump(2);
   ASSERT_FALSE(last_stalled.is_null());
   EXPECT_GT(last_stalled["frames_dropped"].get<std::uint64_t>(), 10U) << last_stalled.dump();
   // What reached its socket is bounded by the socket buffers, not by the run time.
   EXPECT_LT(last_stalled["bytes_sent"].get<std::uint64_t>(), 8U << 20) << last_stalled.dump();
   const std::size_t r1 = reader.frames();
-  EXPECT_TRUE(reader.wait_until([&] { return reader.frames() >= r1 + 10; }, 5));
+  EXPECT_TRUE(reader.wait_until([&] { return reader.frames() >= r1 + 10; }, 20));
   EXPECT_NE(bridge.child().log().find("dropped, send failed"), std::string::npos)
       << bridge.child().log();
 }
