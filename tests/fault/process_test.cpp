@@ -165,7 +165,7 @@ TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
   ASSERT_TRUE(a.pressing(0.5, *server));
 
   // One viewer: a participant of its own with the viewer's readers, until it has a frame, then
-  // `stay` (called until it returns true or 5 s have passed).
+  // `stay` (called until it returns true or 15 s have passed: room for a loaded machine).
   auto viewer_visit = [prefix = s.prefix](const std::function<bool()>& stay = [] { return true; }) {
     wire::Participant pp;
     wire::Topic<neurosim_MeshTopology> topo(pp, wire::topic_name<neurosim_MeshTopology>(prefix));
@@ -174,12 +174,12 @@ TEST(fault_process, ViewerJoiningAndLeaving50TimesLeavesNoTrace) {
     wire::Reader<neurosim_Deformation> def_reader(pp, def);
     const auto t0 = Clock::now();
     bool topology = false, frame = false;
-    while (!(topology && frame) && seconds_since(t0) < 5) {
+    while (!(topology && frame) && seconds_since(t0) < 15) {
       for (const auto& rx : topo_reader.take()) topology |= rx.valid();
       for (const auto& rx : def_reader.take()) frame |= rx.valid();
       sleep_s(0.01);
     }
-    while (!stay() && seconds_since(t0) < 5) sleep_s(0.01);
+    while (!stay() && seconds_since(t0) < 15) sleep_s(0.01);
     return topology && frame;
   };
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(viewer_visit()) << server->log();  // warm-up
@@ -227,12 +227,14 @@ TEST(fault_process, StationUnderAnIdHeldByAnotherIsToldAtOnceAndExitsThree) {
                     {"--station", "a", "--device", "script:press", "--duration", "30", "--no-rt",
                      "--origin", "0.1,0.02,0.05", "--up", "1,0,0", "--topic-prefix", s.prefix},
                     s.dir / "twin.log");
-  const int rc = twin.wait(20);
+  const int rc = twin.wait(28);
   const double took_s = seconds_since(started);
   const std::string log = twin.log();
   std::printf("twin of station 'a': exit %d after %.2f s\n", rc, took_s);
   EXPECT_EQ(rc, 3) << log;
-  EXPECT_LT(took_s, 10.0) << "said at once, not at the end of its 30 s session";
+  // Bound with room for a loaded machine (start-up and discovery slow down), still well before
+  // the end of the 30 s session.
+  EXPECT_LT(took_s, 20.0) << "said at once, not at the end of its 30 s session";
   EXPECT_NE(log.find("error: station 'a' refused by the server"), std::string::npos) << log;
   EXPECT_NE(log.find("exiting"), std::string::npos) << log;
   ASSERT_TRUE(status.wait_for(
