@@ -19,7 +19,7 @@ struct Material {
   // tetrahedron; scenes default to kDefaultSceneElement.
   Element element{Element::kLinearTet};
   // The relaxation kernel (viscoelastic.hpp); no terms: elastic. E and nu are instantaneous.
-  Viscoelastic viscoelastic;
+  Viscoelastic viscoelastic{};
 
   // Throws std::invalid_argument naming the material if E <= 0, nu outside (-1, 0.5)
   // or either is non-finite.
