@@ -114,7 +114,9 @@ class Child {
 // and the next one is tried. A display that reported but refuses an X connection (seen once under
 // two CPU hogs: VTK's "bad X server connection", then the aborted test's Xvfb kept ctest's output
 // pipe open until the timeout) is stopped and the next number tried; Xvfb's output goes to
-// /dev/null so it never holds the test's output open.
+// /dev/null so it never holds the test's output open. -noreset: by default an X server resets
+// when its last client disconnects, and a client connecting during the reset is refused; a test
+// that opens and closes several render windows (or this helper's own check) then loses the race.
 class Xvfb {
  public:
   Xvfb() {
@@ -158,7 +160,7 @@ class Xvfb {
                                   "-displayfd",    fd,
                                   "-screen",       "0",
                                   "1280x1024x24",  "-nolisten",
-                                  "tcp"};
+                                  "tcp",           "-noreset"};
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
