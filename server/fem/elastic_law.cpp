@@ -105,7 +105,8 @@ struct CorotPoint {
     }
   }
 };
-Mat3 corot_dstress(const LawConstants& c, const CorotPoint& p, const Mat3& df) {
+// dR: the rate of the polar decomposition's rotation R = U Vᵀ along dF.
+Mat3 rotation_rate(const CorotPoint& p, const Mat3& df) {
   const Mat3 m = p.s.u.transpose() * df * p.s.v;
   Mat3 w = Mat3::Zero();
   for (int i = 0; i < 3; ++i) {
@@ -114,7 +115,10 @@ Mat3 corot_dstress(const LawConstants& c, const CorotPoint& p, const Mat3& df) {
       w(j, i) = -w(i, j);
     }
   }
-  const Mat3 dr = p.s.u * w * p.s.v.transpose();
+  return p.s.u * w * p.s.v.transpose();
+}
+Mat3 corot_dstress(const LawConstants& c, const CorotPoint& p, const Mat3& df) {
+  const Mat3 dr = rotation_rate(p, df);
   return 2.0 * c.mu_pa * (df - dr) + c.lambda_pa * (p.r.cwiseProduct(df).sum() * p.r +
                                                     (p.s.sigma.sum() - 3.0) * dr);
 }
@@ -317,17 +321,7 @@ void volumetric_hessian(Tier tier, const Mat3& h, StressTangent& d2theta) {
       const RotationVariantSvd s = rotation_variant_svd(Mat3::Identity() + h);
       const CorotPoint p(s);
       tangent_columns(
-          [&](const Mat3& df) {
-            const Mat3 m = p.s.u.transpose() * df * p.s.v;
-            Mat3 w = Mat3::Zero();
-            for (int i = 0; i < 3; ++i) {
-              for (int j = i + 1; j < 3; ++j) {
-                w(i, j) = (m(i, j) - m(j, i)) * p.inv_sum(i, j);
-                w(j, i) = -w(i, j);
-              }
-            }
-            return (p.s.u * w * p.s.v.transpose()).eval();
-          },
+          [&](const Mat3& df) { return rotation_rate(p, df); },
           d2theta);
       return;
     }
