@@ -40,13 +40,15 @@ struct Session {
       : dir(neurosim::testing::temp_dir("fault_" + tag)),
         prefix(tag + std::to_string(::getpid()) + "_") {}
   ~Session() { fs::remove_all(dir); }
-  std::unique_ptr<ChildProcess> start_server(const std::string& log_name) {
-    return std::make_unique<ChildProcess>(
-        neurosim::testing::bin_dir() / "neurosim-server",
-        std::vector<std::string>{"--scene",
-                                 (neurosim::testing::source_dir() / "scenes/cube_cylinder.scene").string(),
-                                 "--topic-prefix", prefix, "--duration", "120"},
-        dir / log_name);
+  // extra: further server options (e.g. {"--station-idle-timeout", "60"}).
+  std::unique_ptr<ChildProcess> start_server(const std::string& log_name,
+                                             const std::vector<std::string>& extra = {}) {
+    std::vector<std::string> args{"--scene",
+                                  (neurosim::testing::source_dir() / "scenes/cube_cylinder.scene").string(),
+                                  "--topic-prefix", prefix, "--duration", "120"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return std::make_unique<ChildProcess>(neurosim::testing::bin_dir() / "neurosim-server", args,
+                                          dir / log_name);
   }
   fs::path dir;
   std::string prefix;
