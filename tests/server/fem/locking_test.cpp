@@ -12,6 +12,7 @@
 // tests check those two facts and that the reference is sound; the linear-tet and anp-tet ratios
 // are printed and recorded (bench/RESULTS.md, "Stability suite"). smoothed-tet is not a subspace
 // of C3D10 (its smoothed strains soften it), so its ratio may pass 1: it is held to a band.
+#include "c3d10_reference.hpp"
 #include "fem_test_meshes.hpp"
 #include "server/fem/calculix.hpp"
 #include "server/fem/static_solver.hpp"
@@ -36,36 +37,9 @@ namespace {
 
 using testing::box_mesh;
 using testing::BoxSpec;
+using testing::QuadraticMesh;
 
 constexpr double kBrainE = 3000.0;  // Pa, scenes/brain_artery.scene's brain
-
-// The mesh with a node at the middle of every edge: C3D10 connectivity in CalculiX's order
-// (corners 1-4, then the mid-nodes of edges 1-2, 2-3, 3-1, 1-4, 2-4, 3-4), 0-based.
-struct QuadraticMesh {
-  std::vector<mesh::Vec3> nodes;  // the corners first (same ids), then the mid-edge nodes
-  std::vector<std::array<int, 10>> elements;
-  std::map<std::pair<int, int>, int> mid;  // sorted edge -> its mid node
-};
-
-QuadraticMesh quadratic(const mesh::TetMesh& m) {
-  QuadraticMesh q;
-  q.nodes = m.vertices();
-  auto mid_node = [&](int a, int b) {
-    const auto key = std::minmax(a, b);
-    const auto it = q.mid.find(key);
-    if (it != q.mid.end()) return it->second;
-    const int id = static_cast<int>(q.nodes.size());
-    q.nodes.push_back(0.5 * (m.vertices()[a] + m.vertices()[b]));
-    q.mid.emplace(key, id);
-    return id;
-  };
-  for (const mesh::Tet& t : m.tets()) {
-    q.elements.push_back({t[0], t[1], t[2], t[3], mid_node(t[0], t[1]), mid_node(t[1], t[2]),
-                          mid_node(t[2], t[0]), mid_node(t[0], t[3]), mid_node(t[1], t[3]),
-                          mid_node(t[2], t[3])});
-  }
-  return q;
-}
 
 // A uniform traction of total force `total_n` on the surface triangles `tris` of m, as
 // consistent nodal loads: linear triangles 1/3 of the triangle's share per corner; quadratic
@@ -93,48 +67,6 @@ void traction_loads(const mesh::TetMesh& m, const std::vector<mesh::Tri>& tris,
   }
 }
 
-// Writes the C3D10 deck, runs ccx (one thread, bounded), returns all nodal displacements.
-Eigen::VectorXd solve_c3d10(const std::string& tag, const QuadraticMesh& q, const Material& mat,
-                            const std::vector<int>& fixed, const Eigen::VectorXd& loads) {
-  const auto dir = neurosim::testing::temp_dir("locking_" + tag);
-  {
-    std::ofstream out(dir / "job.inp");
-    out.precision(13);  // ccx reads at most 20 characters per number
-    out << "** neurosim locking test: " << tag << "\n*NODE, NSET=NALL\n";
-    for (std::size_t v = 0; v < q.nodes.size(); ++v)
-      out << v + 1 << ", " << q.nodes[v].x() << ", " << q.nodes[v].y() << ", " << q.nodes[v].z()
-          << "\n";
-    out << "*ELEMENT, TYPE=C3D10, ELSET=EALL\n";
-    for (std::size_t e = 0; e < q.elements.size(); ++e) {
-      out << e + 1;
-      for (int n : q.elements[e]) out << ", " << n + 1;
-      out << "\n";
-    }
-    out << "*MATERIAL, NAME=M\n*ELASTIC\n"
-        << mat.youngs_modulus_pa << ", " << mat.poisson_ratio
-        << "\n*SOLID SECTION, ELSET=EALL, MATERIAL=M\n*NSET, NSET=NFIX\n";
-    for (std::size_t i = 0; i < fixed.size(); ++i)
-      out << fixed[i] + 1 << (i + 1 == fixed.size() || i % 10 == 9 ? "\n" : ", ");
-    out << "*STEP\n*STATIC\n*BOUNDARY\nNFIX, 1, 3\n*CLOAD\n";
-    for (Eigen::Index d = 0; d < loads.size(); ++d)
-      if (loads[d] != 0.0) out << d / 3 + 1 << ", " << d % 3 + 1 << ", " << loads[d] << "\n";
-    out << "*NODE PRINT, NSET=NALL\nU\n*END STEP\n";
-  }
-  const std::string cmd = "cd '" + dir.string() +
-                          "' && OMP_NUM_THREADS=1 CCX_NPROC_EQUATION_SOLVER=1 timeout -k 5 120 "
-                          "ccx -i job > job.log 2>&1";
-  const int status = std::system(cmd.c_str());
-  const int code = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : -1;
-  const std::string log = neurosim::testing::slurp(dir / "job.log");
-  if (code != 0 || log.find("*ERROR") != std::string::npos) {
-    ADD_FAILURE() << "ccx failed (exit " << code << ", Debian package calculix-ccx):\n" << log;
-    return {};
-  }
-  const CalculixResult r = read_calculix_dat(dir / "job.dat", q.nodes.size());
-  std::filesystem::remove_all(dir);
-  return r.displacement_m;
-}
-
 struct Locking {
   double ours_m{0.0};       // delta with linear tetrahedra (StaticSolver, linear-tet)
   double anp_m{0.0};        // delta with the average nodal pressure tetrahedra (anp-tet)
@@ -149,7 +81,7 @@ struct Locking {
 Locking measure(const std::string& tag, const mesh::TetMesh& m, const Material& mat,
                 const std::vector<int>& fixed, const std::vector<mesh::Tri>& loaded,
                 const mesh::Vec3& total_n) {
-  const QuadraticMesh q = quadratic(m);
+  const testing::QuadraticMesh q = testing::quadratic(m);
   Eigen::VectorXd f_lin, f_quad;
   traction_loads(m, loaded, total_n, q, f_lin, f_quad);
   const StaticSolver solver(m, MaterialMap::uniform(mat), fixed);
@@ -167,7 +99,7 @@ Locking measure(const std::string& tag, const mesh::TetMesh& m, const Material& 
   for (int v : fixed) is_fixed[v] = 1;
   for (const auto& [edge, node] : q.mid)
     if (is_fixed[edge.first] && is_fixed[edge.second]) fixed_quad.push_back(node);
-  const Eigen::VectorXd uq = solve_c3d10(tag, q, mat, fixed_quad, f_quad);
+  const Eigen::VectorXd uq = testing::solve_c3d10("locking_" + tag, q, mat, fixed_quad, f_quad).displacement_m;
   Locking l;
   l.ours_m = f_lin.dot(u) / total_n.norm();
   l.anp_m = f_lin.dot(u_anp) / total_n.norm();
