@@ -388,21 +388,20 @@ void StaticSolver::solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x, S
   }
 }
 
-PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
-                                                  const Eigen::VectorXd& displacements_m,
-                                                  const Eigen::VectorXd& forces_n) const {
+std::vector<int> StaticSolver::node_dofs(const std::vector<int>& nodes,
+                                        const Eigen::VectorXd& displacements_m, int num_nodes) {
   if (displacements_m.size() != 3 * static_cast<Eigen::Index>(nodes.size())) {
     throw std::invalid_argument(
         "StaticSolver::solve_prescribed: " + std::to_string(displacements_m.size()) +
         " displacement values for " + std::to_string(nodes.size()) + " nodes (need 3 each)");
   }
-  std::vector<char> seen(num_nodes_, 0);
+  std::vector<char> seen(num_nodes, 0);
   std::vector<int> dofs(3 * nodes.size());
   for (std::size_t k = 0; k < nodes.size(); ++k) {
     const int v = nodes[k];
-    if (v < 0 || v >= num_nodes_) {
+    if (v < 0 || v >= num_nodes) {
       throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) +
-                                  " out of range [0, " + std::to_string(num_nodes_) + ")");
+                                  " out of range [0, " + std::to_string(num_nodes) + ")");
     }
     if (seen[v]) {
       throw std::invalid_argument("StaticSolver::solve_prescribed: node " + std::to_string(v) +
@@ -413,7 +412,22 @@ PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
       dofs[3 * k + a] = 3 * v + a;
     }
   }
-  return solve_prescribed_per_dof(dofs, displacements_m, forces_n);
+  return dofs;
+}
+
+PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
+                                                  const Eigen::VectorXd& displacements_m,
+                                                  const Eigen::VectorXd& forces_n) const {
+  return prescribed_per_dof(node_dofs(nodes, displacements_m, num_nodes_), displacements_m,
+                            forces_n, nullptr);
+}
+
+PrescribedSolution StaticSolver::solve_prescribed(const std::vector<int>& nodes,
+                                                  const Eigen::VectorXd& displacements_m,
+                                                  const Eigen::VectorXd& forces_n,
+                                                  SolveWorkspace& ws) const {
+  return prescribed_per_dof(node_dofs(nodes, displacements_m, num_nodes_), displacements_m,
+                            forces_n, &ws);
 }
 
 PrescribedSolution StaticSolver::solve_prescribed_dofs(
@@ -430,6 +444,24 @@ PrescribedSolution StaticSolver::solve_prescribed_dofs(
 PrescribedSolution StaticSolver::solve_prescribed_per_dof(const std::vector<int>& dofs,
                                                           const Eigen::VectorXd& values_m,
                                                           const Eigen::VectorXd& forces_n) const {
+  return prescribed_per_dof(dofs, values_m, forces_n, nullptr);
+}
+
+PrescribedSolution StaticSolver::solve_prescribed_per_dof(const std::vector<int>& dofs,
+                                                          const Eigen::VectorXd& values_m,
+                                                          const Eigen::VectorXd& forces_n,
+                                                          SolveWorkspace& ws) const {
+  return prescribed_per_dof(dofs, values_m, forces_n, &ws);
+}
+
+PrescribedSolution StaticSolver::prescribed_per_dof(const std::vector<int>& dofs,
+                                                    const Eigen::VectorXd& values_m,
+                                                    const Eigen::VectorXd& forces_n,
+                                                    SolveWorkspace* ws) const {
+  const auto reduced_solve = [&](const Eigen::MatrixXd& rhs, Eigen::MatrixXd& x) {
+    if (ws != nullptr) solve_reduced(rhs, x, *ws);
+    else solve_reduced(rhs, x);
+  };
   const int ndof = num_dofs();
   if (values_m.size() != static_cast<Eigen::Index>(dofs.size())) {
     throw std::invalid_argument(
@@ -484,7 +516,7 @@ PrescribedSolution StaticSolver::solve_prescribed_per_dof(const std::vector<int>
   for (int r = 0; r < nf; ++r) {
     b(r, 0) = (forces_n.size() ? forces_n[free_dofs_[r]] : 0.0) - kuc[free_dofs_[r]];
   }
-  solve_reduced(b, u0);
+  reduced_solve(b, u0);
 
   if (!free_prescribed.empty()) {
     // Prescribed free dofs: multipliers lam (their reaction forces) with
@@ -505,7 +537,7 @@ PrescribedSolution StaticSolver::solve_prescribed_per_dof(const std::vector<int>
       for (int c = 0; c < cols; ++c) {
         e(rows[c0 + c], c) = 1.0;
       }
-      solve_reduced(e, g);
+      reduced_solve(e, g);
       for (int c = 0; c < cols; ++c) {
         for (int r = 0; r < m; ++r) {
           s(r, c0 + c) = g(rows[r], c);
@@ -525,7 +557,7 @@ PrescribedSolution StaticSolver::solve_prescribed_per_dof(const std::vector<int>
     for (int c = 0; c < m; ++c) {
       e(rows[c], 0) += lam[c];
     }
-    solve_reduced(e, g);
+    reduced_solve(e, g);
     u0.col(0) += g.col(0);
   }
   for (int r = 0; r < nf; ++r) {
@@ -549,8 +581,12 @@ PrescribedSolution StaticSolver::solve_prescribed_per_dof(const std::vector<int>
     throw std::runtime_error("StaticSolver::solve_prescribed: non-finite result");
   }
   if (options_.check_residual) {
-    std::lock_guard<std::mutex> lock(impl_->mutex);
-    check_residual(impl_->shared.impl_->full, u, forces_n, &constrained);
+    if (ws != nullptr) {
+      check_residual(ws->impl_->full, u, forces_n, &constrained);
+    } else {
+      std::lock_guard<std::mutex> lock(impl_->mutex);
+      check_residual(impl_->shared.impl_->full, u, forces_n, &constrained);
+    }
   }
   out.displacement_m = std::move(u);
   return out;

@@ -132,6 +132,10 @@ class StaticSolver {
   PrescribedSolution solve_prescribed(const std::vector<int>& nodes,
                                       const Eigen::VectorXd& displacements_m,
                                       const Eigen::VectorXd& forces_n = Eigen::VectorXd()) const;
+  // The same on the caller's workspace (no lock; forces_n empty or 3N).
+  PrescribedSolution solve_prescribed(const std::vector<int>& nodes,
+                                      const Eigen::VectorXd& displacements_m,
+                                      const Eigen::VectorXd& forces_n, SolveWorkspace& ws) const;
 
   // Prescribed displacements by component (PrescribedDofs: a node set, a displacement and the
   // components it holds; the other components are free unknowns), plus optional forces (empty
@@ -150,6 +154,10 @@ class StaticSolver {
   PrescribedSolution solve_prescribed_per_dof(
       const std::vector<int>& dofs, const Eigen::VectorXd& values_m,
       const Eigen::VectorXd& forces_n = Eigen::VectorXd()) const;
+  PrescribedSolution solve_prescribed_per_dof(const std::vector<int>& dofs,
+                                              const Eigen::VectorXd& values_m,
+                                              const Eigen::VectorXd& forces_n,
+                                              SolveWorkspace& ws) const;
 
   // Reduced (free-dof) system, for Compliance and coupling code.
   // X = K_ff^-1 B for a dense B (num_free_dofs x m): all columns in one CHOLMOD call.
@@ -185,6 +193,11 @@ class StaticSolver {
 
   void check_forces(const Eigen::VectorXd& forces_n, const char* what) const;
   void solve_free(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m, SolveWorkspace::Impl& ws) const;
+  // ws null: the solver's own workspace (each solve takes the lock).
+  PrescribedSolution prescribed_per_dof(const std::vector<int>& dofs, const Eigen::VectorXd& values_m,
+                                        const Eigen::VectorXd& forces_n, SolveWorkspace* ws) const;
+  static std::vector<int> node_dofs(const std::vector<int>& nodes, const Eigen::VectorXd& displacements_m,
+                                    int num_nodes);
   void check_residual(Eigen::VectorXd& scratch, const Eigen::VectorXd& u_m, const Eigen::VectorXd& forces_n,
                       const std::vector<char>* constrained) const;
 };

@@ -129,8 +129,13 @@ void CoupledBody::finalize() {
   }
 }
 
-void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const {
-  solver_->solve_reduced(b, x);
+void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x,
+                                        fem::SolveWorkspace* ws) const {
+  const auto solve = [&](const Eigen::MatrixXd& rhs, Eigen::MatrixXd& out) {
+    if (ws != nullptr) solver_->solve_reduced(rhs, out, *ws);
+    else solver_->solve_reduced(rhs, out);
+  };
+  solve(b, x);
   const int m3 = static_cast<int>(op_.l_bb.rows());
   if (m3 == 0) return;
   // Woodbury on the tie stiffness: L b = L_A (b - P_b^T G (L_A b)[b]).
@@ -146,11 +151,11 @@ void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixX
     const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
     if (red >= 0) rhs.row(red) -= gv.row(r);
   }
-  solver_->solve_reduced(rhs, x);
+  solve(rhs, x);
 }
 
 void CoupledBody::coupled_displacement(const Eigen::MatrixXd& forces_n,
-                                       Eigen::MatrixXd& u_host_m) const {
+                                       Eigen::MatrixXd& u_host_m, fem::SolveWorkspace* ws) const {
   const int n3 = 3 * static_cast<int>(host_->num_vertices());
   if (forces_n.rows() != n3 || !forces_n.allFinite())
     throw std::invalid_argument("CoupledBody::coupled_displacement: bad force vector");
@@ -158,15 +163,15 @@ void CoupledBody::coupled_displacement(const Eigen::MatrixXd& forces_n,
   const auto& free = solver_->free_dofs();
   Eigen::MatrixXd rhs(nf, forces_n.cols()), x;
   for (int r = 0; r < nf; ++r) rhs.row(r) = forces_n.row(free[r]);
-  coupled_solve_reduced(rhs, x);
+  coupled_solve_reduced(rhs, x, ws);
   u_host_m.setZero(n3, forces_n.cols());
   for (int r = 0; r < nf; ++r) u_host_m.row(free[r]) = x.row(r);
 }
 
 void CoupledBody::coupled_displacement(const Eigen::VectorXd& forces_n,
-                                       Eigen::VectorXd& u_host_m) const {
+                                       Eigen::VectorXd& u_host_m, fem::SolveWorkspace* ws) const {
   Eigen::MatrixXd u;
-  coupled_displacement(Eigen::MatrixXd(forces_n), u);
+  coupled_displacement(Eigen::MatrixXd(forces_n), u, ws);
   u_host_m = u.col(0);
 }
 

@@ -56,8 +56,11 @@ class CoupledBody {
   // Coupled host displacement (ties included) for arbitrary nodal forces (3N_A, unit N), unit m.
   // Two sparse solves when the body has ties, one otherwise; the matrix form solves all its
   // columns (3N_A x k load cases) as one block.
-  void coupled_displacement(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_host_m) const;
-  void coupled_displacement(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_host_m) const;
+  // ws: the caller's solve scratch; null uses the host solver's own, locked one (set-up, offline).
+  void coupled_displacement(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_host_m,
+                            fem::SolveWorkspace* ws = nullptr) const;
+  void coupled_displacement(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_host_m,
+                            fem::SolveWorkspace* ws = nullptr) const;
 
   // Directory of the disk cache of the boundary operator (L_bb, L_cb, K_add, G), keyed by a
   // hash of both meshes, materials, fixed nodes and the coupling map; empty: no cache.
@@ -126,7 +129,8 @@ class CoupledBody {
   std::vector<char> sliding_node_;            // A node -> on a sliding row
   SlidingOperator sliding_;
   // X = coupled L B for free-dof right-hand sides (ties by Woodbury: two solves).
-  void coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x) const;
+  void coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x,
+                             fem::SolveWorkspace* ws = nullptr) const;
   CoupledBodyTiming timing_;
   bool finalized_{false};
   fem::Material material_;

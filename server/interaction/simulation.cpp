@@ -97,6 +97,15 @@ class SimulationImpl final : public Simulation {
   }
   void sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const override;
   double sliding_penetration_m() const override;
+  std::uint64_t shared_workspace_uses() const override {
+    std::uint64_t uses = 0;
+    for (const BodyModel& b : model_->bodies_) {
+      uses += b.body->host_solver().shared_workspace_uses();
+      for (const auto& tie : b.body->ties()) uses += tie.shared_workspace_uses();
+      for (const auto& sl : b.slides) uses += sl->shared_workspace_uses();
+    }
+    return uses;
+  }
   void snapshot(FieldSnapshot& s) const override;
   void displacements(FieldSnapshot& s, int mesh, Eigen::VectorXd& u_m) const override;
   int body_index(int m) const override { return model_->entry(m).body; }
@@ -415,11 +424,12 @@ void Model::host_field(const BodyModel& b, const std::vector<int>& slots,
     for (int a = 0; a < 3; ++a)
       f.segment<3>(3 * rows[k].nodes[a]) += (l * rows[k].weights[a]) * rows[k].normal;
   }
-  b.body->coupled_displacement(f, u_host_m);
+  b.body->coupled_displacement(f, u_host_m, ws);
 }
 
 void Model::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
-                       const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const {
+                       const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m,
+                       fem::SolveWorkspace* ws) const {
   const BodyModel& b = bodies_[e.body];
   if (e.slide >= 0) {
     const auto& sl = *b.slides[e.slide];
@@ -427,14 +437,14 @@ void Model::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda
         sliding_lambda_n.size() > 0
             ? Eigen::VectorXd(sliding_lambda_n.segment(b.slide_first_row[e.slide], sl.size()))
             : Eigen::VectorXd(Eigen::VectorXd::Zero(sl.size()));
-    sl.displacement(lambda, u_m);
+    sl.displacement(lambda, u_m, ws);
     return;
   }
   if (e.tie < 0) {
     u_m = u_host_m;
     return;
   }
-  b.body->ties().at(static_cast<std::size_t>(e.tie)).displacement(u_host_m, u_m);
+  b.body->ties().at(static_cast<std::size_t>(e.tie)).displacement(u_host_m, u_m, ws);
 }
 
 void Model::tier_mesh_field(const MeshEntry& e, const Eigen::VectorXd& stacked_u_m,
@@ -467,7 +477,7 @@ void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
   }
   const BodyState& bs = state_->bodies_[e.body];
   if (e.slide >= 0) {  // B's field depends on the sliding forces only
-    model_->mesh_field(e, bs.sliding_lambda, Eigen::VectorXd(), u_m);
+    model_->mesh_field(e, bs.sliding_lambda, Eigen::VectorXd(), u_m, state_->field_workspace.get());
     return;
   }
   if (e.tie < 0) {
@@ -476,7 +486,7 @@ void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
   }
   Eigen::VectorXd u_host;
   state_->host_field(*model_, e.body, u_host);
-  model_->mesh_field(e, bs.sliding_lambda, u_host, u_m);
+  model_->mesh_field(e, bs.sliding_lambda, u_host, u_m, state_->field_workspace.get());
 }
 
 void SimulationImpl::snapshot(FieldSnapshot& s) const {
@@ -521,7 +531,8 @@ void SimulationImpl::displacements(FieldSnapshot& s, int m, Eigen::VectorXd& u_m
                        sb.nodal_forces_n, nullptr, sb.u_host_m, sb.workspace.get());
     sb.host_done = true;
   }
-  model_->mesh_field(e, sb.sliding_lambda_n, sb.u_host_m, u_m);
+  if (!sb.workspace) sb.workspace = std::make_shared<fem::SolveWorkspace>();
+  model_->mesh_field(e, sb.sliding_lambda_n, sb.u_host_m, u_m, sb.workspace.get());
 }
 
 void SimulationImpl::sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const {
@@ -549,7 +560,8 @@ double SimulationImpl::sliding_penetration_m() const {
     state_->host_field(*model_, static_cast<int>(bi), u_host);
     for (std::size_t i = 0; i < b.slides.size(); ++i) {
       const auto& sl = *b.slides[i];
-      sl.displacement(lambda.segment(b.slide_first_row[i], sl.size()), u_emb);
+      sl.displacement(lambda.segment(b.slide_first_row[i], sl.size()), u_emb,
+                      state_->field_workspace.get());
       for (int k = 0; k < sl.size(); ++k) worst = std::max(worst, -sl.gap(k, u_host, u_emb));
     }
   }
@@ -568,7 +580,7 @@ double SimulationImpl::tie_residual_m() const {
         model_->tier_mesh_field(model_->entry(tie.mesh()),
                                 state_->tier_->linearization(static_cast<int>(bi)).u_m, u_emb);
       } else {
-        tie.displacement(u_host, u_emb);
+        tie.displacement(u_host, u_emb, state_->field_workspace.get());
       }
       worst = std::max(worst, tie.residual(u_host, u_emb));
     }

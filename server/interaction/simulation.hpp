@@ -295,6 +295,10 @@ class Simulation {
   // Largest interpenetration max(0, -g) over every sliding pair for the last step, unit m
   // (full-field solves: for tests and benchmarks).
   virtual double sliding_penetration_m() const { return 0.0; }
+  // Solves on a solver's own (locked) workspace in the Model since construction, over every
+  // body's host solver, tied interior and sliding compliance: set-up only. Steps and fields
+  // (the State's and a FieldSnapshot's scratch) never add to it.
+  virtual std::uint64_t shared_workspace_uses() const { return 0; }
 
   // The elasticity tier that runs (the scene's effects.tier; never another one).
   virtual scene::Tier tier() const { return scene::Tier::kLinear; }

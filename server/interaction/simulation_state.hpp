@@ -120,9 +120,11 @@ class Model {
                   const std::vector<Vec3>& forces_n, const Eigen::VectorXd& sliding_lambda_n,
                   const Eigen::VectorXd& nodal_forces_n, const ContactColumns* columns,
                   Eigen::VectorXd& u_host_m, fem::SolveWorkspace* ws = nullptr) const;
-  // Field of mesh `m` (entry e) from its body's host field.
+  // Field of mesh `m` (entry e) from its body's host field; ws as in host_field (the tied
+  // mesh's interior and the sliding mesh's compliance solve on it).
   void mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
-                  const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
+                  const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m,
+                  fem::SolveWorkspace* ws = nullptr) const;
   // COROTATIONAL and NONLINEAR: field of mesh entry e from its body's stacked equilibrium
   // (host, then the tied meshes in the order of CoupledBody::ties()).
   void tier_mesh_field(const MeshEntry& e, const Eigen::VectorXd& stacked_u_m,
@@ -166,8 +168,12 @@ class State {
     }
     const BodyState& bs = bodies_[body];
     m.host_field(m.bodies_[body], bs.force_slots, bs.forces_n, bs.sliding_lambda,
-                 Eigen::VectorXd(), bs.columns.get(), u_host_m);
+                 Eigen::VectorXd(), bs.columns.get(), u_host_m, field_workspace.get());
   }
+  // Solve scratch of the fields asked on the stepping thread (Simulation::displacements and the
+  // diagnostics): a pointer, so the const field queries solve on it and never on a solver's own
+  // locked workspace in the Model.
+  std::unique_ptr<fem::SolveWorkspace> field_workspace = std::make_unique<fem::SolveWorkspace>();
 
   std::vector<BodyState> bodies_;
   double columns_s_{0.0};  // compliance columns computed at construction, unit s

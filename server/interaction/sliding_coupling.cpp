@@ -121,7 +121,8 @@ EmbeddedCompliance::EmbeddedCompliance(const mesh::TetMesh& mesh, const fem::Mat
 
 EmbeddedCompliance::~EmbeddedCompliance() = default;
 
-void EmbeddedCompliance::apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_m) const {
+void EmbeddedCompliance::apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_m,
+                               fem::SolveWorkspace* ws) const {
   if (forces_n.rows() != dofs_ || !forces_n.allFinite())
     throw std::invalid_argument(what_ + ": EmbeddedCompliance::apply: bad forces");
   if (solver_) {
@@ -129,7 +130,8 @@ void EmbeddedCompliance::apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd&
     const int nf = solver_->num_free_dofs();
     Eigen::MatrixXd rhs(nf, forces_n.cols()), x;
     for (int r = 0; r < nf; ++r) rhs.row(r) = forces_n.row(free[r]);
-    solver_->solve_reduced(rhs, x);
+    if (ws != nullptr) solver_->solve_reduced(rhs, x, *ws);
+    else solver_->solve_reduced(rhs, x);
     u_m.setZero(dofs_, forces_n.cols());
     for (int r = 0; r < nf; ++r) u_m.row(free[r]) = x.row(r);
     return;
@@ -190,13 +192,14 @@ SlidingCoupling::SlidingCoupling(SlidingDefinition def)
   if (!w_b_.allFinite()) throw std::runtime_error(what + ": sliding compliance is not finite");
 }
 
-void SlidingCoupling::displacement(const Eigen::VectorXd& lambda_n, Eigen::VectorXd& u_m) const {
+void SlidingCoupling::displacement(const Eigen::VectorXd& lambda_n, Eigen::VectorXd& u_m,
+                                   fem::SolveWorkspace* ws) const {
   if (lambda_n.size() != size() || !lambda_n.allFinite())
     throw std::invalid_argument("SlidingCoupling::displacement: bad row forces");
   Eigen::MatrixXd f = Eigen::MatrixXd::Zero(3 * geometry_->num_vertices(), 1), u;
   for (int k = 0; k < size(); ++k)
     f.block<3, 1>(3 * pairs_[k].embedded_node, 0) -= lambda_n[k] * pairs_[k].normal;
-  compliance_->apply(f, u);
+  compliance_->apply(f, u, ws);
   u_m = u.col(0);
 }
 

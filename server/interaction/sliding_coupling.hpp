@@ -25,12 +25,14 @@
 #pragma once
 
 #include "server/fem/material.hpp"
+#include "server/fem/static_solver.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -61,8 +63,12 @@ class EmbeddedCompliance {
   EmbeddedCompliance& operator=(const EmbeddedCompliance&) = delete;
 
   // U = L_B F for nodal forces F (3N x m, unit N), U unit m.
-  void apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_m) const;
+  // ws: the caller's solve scratch; null uses B's own, locked workspace (set-up, offline).
+  void apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_m,
+             fem::SolveWorkspace* ws = nullptr) const;
   bool floating() const { return !solver_; }
+  // Solves on B's own (locked) workspace since construction.
+  std::uint64_t shared_workspace_uses() const { return solver_ ? solver_->shared_workspace_uses() : 0; }
 
  private:
   struct Floating;
@@ -95,8 +101,11 @@ class SlidingCoupling {
   // W_B = J_B L_B J_B^T (pairs x pairs), unit m/N.
   const Eigen::MatrixXd& compliance() const { return w_b_; }
   const EmbeddedCompliance& operator_b() const { return *compliance_; }
-  // B's displacement (3N_B, unit m) for the row forces lambda (pairs, unit N).
-  void displacement(const Eigen::VectorXd& lambda_n, Eigen::VectorXd& u_m) const;
+  // B's displacement (3N_B, unit m) for the row forces lambda (pairs, unit N); ws as in
+  // EmbeddedCompliance::apply.
+  void displacement(const Eigen::VectorXd& lambda_n, Eigen::VectorXd& u_m,
+                    fem::SolveWorkspace* ws = nullptr) const;
+  std::uint64_t shared_workspace_uses() const { return compliance_->shared_workspace_uses(); }
   // g_k for the given full fields of A and B (unit m).
   double gap(int k, const Eigen::VectorXd& u_host_m, const Eigen::VectorXd& u_embedded_m) const;
 

@@ -135,11 +135,14 @@ void TieCondensation::tied_displacement(const Eigen::VectorXd& u_host_m,
   }
 }
 
-void TieCondensation::displacement(const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const {
+void TieCondensation::displacement(const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m,
+                                   fem::SolveWorkspace* ws) const {
   Eigen::VectorXd u_s;
   tied_displacement(u_host_m, u_s);
   if (interior_) {
-    u_m = interior_->solve_prescribed(tied_nodes_, u_s).displacement_m;
+    u_m = ws != nullptr
+              ? interior_->solve_prescribed(tied_nodes_, u_s, Eigen::VectorXd(), *ws).displacement_m
+              : interior_->solve_prescribed(tied_nodes_, u_s).displacement_m;
   } else {
     u_m.setZero(3 * static_cast<int>(geometry_->num_vertices()));
     for (std::size_t k = 0; k < tied_nodes_.size(); ++k)

@@ -23,6 +23,7 @@
 #include <Eigen/SparseCore>
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -68,8 +69,14 @@ class TieCondensation {
   // u_s = J u_A: the tied nodes' displacement (3t, node-major) for A's (3N_A), unit m.
   void tied_displacement(const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_tied_m) const;
   // B's displacement (3N_B) for A's (3N_A), unit m: tied nodes u_s = J u_A, interior from K_ii,
-  // fixed nodes zero. The tie holds to round-off by construction.
-  void displacement(const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m) const;
+  // fixed nodes zero. The tie holds to round-off by construction. ws: the caller's solve scratch
+  // (a State, a field worker); null uses K_ii's own, locked workspace (set-up, offline).
+  void displacement(const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m,
+                    fem::SolveWorkspace* ws = nullptr) const;
+  // Solves of K_ii on its own (locked) workspace since construction.
+  std::uint64_t shared_workspace_uses() const {
+    return interior_ ? interior_->shared_workspace_uses() : 0;
+  }
   // max_k |sum_a w_a u_A(node_a) - u_B,k| over the tied nodes, unit m.
   double residual(const Eigen::VectorXd& u_host_m, const Eigen::VectorXd& u_embedded_m) const;
 
