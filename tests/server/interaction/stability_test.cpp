@@ -50,6 +50,7 @@ struct Block {
   int cells{5};  // 12 mm elements
   double e_pa{3000.0};
   double nu{0.45};
+  std::string element;  // material.element; empty: the scene default (linear-tet)
   double tip_radius_m{0.010};
   double artery_ratio{0.0};  // E_artery / E_brain; 0: no artery (artery_mesh)
   // Changes to the host mesh before it is written (slivers).
@@ -98,8 +99,9 @@ BuiltScene build_scene(const Block& b, const std::string& tag) {
   s << "name: \"stability_" << tag << "\"\n"
     << "meshes { id: \"brain\" file: \"" << file.string() << "\"\n";
   if (b.declare_unit && b.file_unit_m != 1.0) s << "  file_unit_m: " << b.file_unit_m << "\n";
-  s << "  material { name: \"brain\" youngs_modulus_pa: " << b.e_pa << " poisson_ratio: " << b.nu
-    << " }\n"
+  s << "  material { name: \"brain\" youngs_modulus_pa: " << b.e_pa << " poisson_ratio: " << b.nu;
+  if (!b.element.empty()) s << " element: \"" << b.element << "\"";
+  s << " }\n"
     << "  fixed { half_space { point_m { z: 1e-9 } normal { z: 1 } } }\n"
     << "  priority: 0 }\n";
   if (b.artery_ratio > 0.0) {
@@ -396,18 +398,20 @@ std::string tier_name_of(const ::testing::TestParamInfo<scene::Tier>& info) {
 }
 
 // Nearly incompressible brain: nu = 0.45 (the scene's), 0.49 and 0.499 (linear tetrahedra lock;
-// tests/server/fem/locking_test.cpp measures how much against CalculiX's quadratic tetrahedra).
-using PoissonCase = std::tuple<scene::Tier, double>;
+// tests/server/fem/locking_test.cpp measures how much against CalculiX's quadratic tetrahedra),
+// with linear-tet and with the locking-free smoothed-tet.
+using PoissonCase = std::tuple<scene::Tier, double, const char*>;
 class StabilityPoisson : public ::testing::TestWithParam<PoissonCase> {};
 
 TEST_P(StabilityPoisson, PressCycles) {
-  const auto [tier, nu] = GetParam();
+  const auto [tier, nu, element] = GetParam();
   Block b;
   b.nu = nu;
+  b.element = element;
   const BuiltScene scene = build_scene(b, "poisson");
   Scenario run;
   char name[64];
-  std::snprintf(name, sizeof name, "poisson nu = %.3f", nu);
+  std::snprintf(name, sizeof name, "poisson nu = %.3f %s", nu, element);
   run.name = name;
   run.model = &scene.model;
   run.tier = tier;
@@ -425,11 +429,14 @@ TEST_P(StabilityPoisson, PressCycles) {
 
 INSTANTIATE_TEST_SUITE_P(stability, StabilityPoisson,
                          ::testing::Combine(::testing::ValuesIn(kTiers),
-                                            ::testing::Values(0.45, 0.49, 0.499)),
+                                            ::testing::Values(0.45, 0.49, 0.499),
+                                            ::testing::Values("linear-tet", "smoothed-tet")),
                          [](const ::testing::TestParamInfo<PoissonCase>& i) {
                            const double nu = std::get<1>(i.param);
+                           const std::string element = std::get<2>(i.param);
                            return std::string(scene::tier_name(std::get<0>(i.param))) + "_nu" +
-                                  std::to_string(static_cast<int>(std::lround(nu * 1000)));
+                                  std::to_string(static_cast<int>(std::lround(nu * 1000))) +
+                                  (element == "linear-tet" ? "" : "_SmoothedTet");
                          });
 
 // The press cycles at a vertex (24, 24) mm, the midpoint of an axis edge (30, 24) and a
