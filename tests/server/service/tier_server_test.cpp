@@ -11,7 +11,6 @@
 #include "server/scene/compile.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
-#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <cstdio>
@@ -81,65 +80,13 @@ void press_and_hold(const Press& press, const char* tier) {
 
   st::ModelCollector models(ses.client);
   const double approach_s = 1.0;
-  const double hold_s = 150.0;  // at most: the test stops as soon as the force is still
+  const double hold_s = 150.0;  // at most: the test stops once the force has settled
   st::StationThread station(
       ses.client, "tier-1",
       [&](double t) { return tip(-0.002 + (press.depth_m + 0.002) * std::min(1.0, t / approach_s)); },
       approach_s + hold_s);
   ASSERT_TRUE(station.writer().wait_for_readers(1, DDS_SECS(10)));
-  // Still: the force moved by less than 1e-11 of itself over the last second of models (LINEAR)
-  // or over three of the tier's update periods, at least a second, once it updates at all
-  // (COROTATIONAL, NONLINEAR: between two slow updates the force is still for as long as an
-  // update takes, which on the brain with a locking-free element is seconds; reading it then
-  // compared a half-converged equilibrium with the in-process one).
-  const bool tiered = want != neurosim_TIER_LINEAR;
-  double update_hz = 0.0;  // the newest SimStatus's tier update rate, unit Hz
-  double last_change_t = 0.0;
-  ni::Vec3 last_f = ni::Vec3::Zero();
-  std::size_t seen = 0;
-  const auto t0 = st::Clock::now();
-  bool still = false;
-  while (!still && st::seconds_since(t0) < approach_s + hold_s - 5.0) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    const auto recs = models.records();
-    for (; seen < recs.size(); ++seen) {
-      const auto& m = recs[seen];
-      if (m.station != "tier-1") continue;
-      const ni::Vec3 f(m.f0[0], m.f0[1], m.f0[2]);
-      ASSERT_TRUE(f.allFinite()) << "ContactModel force not finite, seq " << m.tool_sequence;
-      for (double k : m.K) ASSERT_TRUE(std::isfinite(k)) << "stiffness not finite";
-      if ((f - last_f).norm() > 1e-11 * f.norm() || !m.in_contact) last_change_t = st::seconds_since(t0);
-      last_f = f;
-    }
-    if (tiered) {
-      ses.status.wait_for(
-          [&](const neurosim_SimStatus& s) {
-            update_hz = s.tier_update_rate_hz;
-            return true;
-          },
-          0.05);
-    }
-    const double window_s = !tiered ? 1.0 : update_hz > 0.0 ? std::max(1.0, 3.0 / update_hz) : 1e300;
-    still = st::seconds_since(t0) > approach_s + 1.0 && last_f.norm() > 0.0 &&
-            st::seconds_since(t0) - last_change_t > window_s;
-  }
-  ASSERT_TRUE(still) << "the held force never settled; last " << last_f.transpose() << "\n"
-                     << ses.server.log();
-  double rate = 0.0;
-  ASSERT_TRUE(ses.status.wait_for(
-      [&](const neurosim_SimStatus& s) {
-        rate = s.tier_update_rate_hz;
-        return s.tier == want;
-      },
-      5));
-  if (want == neurosim_TIER_LINEAR) {
-    EXPECT_EQ(rate, 0.0);
-  } else {
-    EXPECT_GT(rate, 0.0);
-    EXPECT_TRUE(std::isfinite(rate));
-  }
-
-  // The in-process tier settled at the held pose.
+  // The in-process tier settled at the held pose (synchronous updates: deterministic).
   std::vector<ni::ToolContact> c;
   ni::StepStats stats;
   ni::Vec3 prev = ni::Vec3::Constant(1e300);
@@ -151,10 +98,51 @@ void press_and_hold(const Press& press, const char* tier) {
   }
   ASSERT_TRUE(c[0].in_contact);
   const double fn = c[0].force_n.norm();
-  std::printf("%s %s: held force %.9g N (server) vs %.9g N (in process, %d steps), update rate %.2f Hz\n",
-              press.scene, tier, last_f.norm(), fn, steps, rate);
-  EXPECT_LE((last_f - c[0].force_n).norm(), 1e-9 * fn)
-      << last_f.transpose() << " vs " << c[0].force_n.transpose();
+
+  // The server's held force reaches the in-process one (to 1e-9 of it) and stays there for a
+  // second of models. Not "still for a second" alone: the tier worker's updates come in bursts,
+  // and an update that jumps the load path can take seconds (on the brain with a locking-free
+  // element, 3 s between force changes were seen), so a still force may be half converged.
+  double reached_t = -1.0;
+  ni::Vec3 last_f = ni::Vec3::Zero();
+  std::size_t seen = 0;
+  const auto t0 = st::Clock::now();
+  bool settled = false;
+  while (!settled && st::seconds_since(t0) < approach_s + hold_s - 5.0) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const auto recs = models.records();
+    for (; seen < recs.size(); ++seen) {
+      const auto& m = recs[seen];
+      if (m.station != "tier-1") continue;
+      const ni::Vec3 f(m.f0[0], m.f0[1], m.f0[2]);
+      ASSERT_TRUE(f.allFinite()) << "ContactModel force not finite, seq " << m.tool_sequence;
+      for (double k : m.K) ASSERT_TRUE(std::isfinite(k)) << "stiffness not finite";
+      const bool at_ref = m.in_contact && (f - c[0].force_n).norm() <= 1e-9 * fn;
+      if (!at_ref) reached_t = -1.0;
+      if (at_ref && reached_t < 0.0) reached_t = st::seconds_since(t0);
+      last_f = f;
+    }
+    settled = reached_t >= 0.0 && st::seconds_since(t0) - reached_t > 1.0;
+  }
+  std::printf("%s %s: held force %.9g N (server) vs %.9g N (in process, %d steps)%s\n",
+              press.scene, tier, last_f.norm(), fn, steps,
+              settled ? "" : ": never reached and held for a second");
+  ASSERT_TRUE(settled) << last_f.transpose() << " vs " << c[0].force_n.transpose() << "\n"
+                       << ses.server.log();
+  double rate = 0.0;
+  ASSERT_TRUE(ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        rate = s.tier_update_rate_hz;
+        return s.tier == want;
+      },
+      5));
+  std::printf("%s %s: update rate %.2f Hz\n", press.scene, tier, rate);
+  if (want == neurosim_TIER_LINEAR) {
+    EXPECT_EQ(rate, 0.0);
+  } else {
+    EXPECT_GT(rate, 0.0);
+    EXPECT_TRUE(std::isfinite(rate));
+  }
 
   // The largest strain of the settled fields, in process, and what SimStatus says.
   double strain = 0.0;
