@@ -46,7 +46,12 @@ int main(int argc, char** argv) {
     const auto t_build = Clock::now();
     const auto obstacle = ni::RigidObstacle::build(model.rigid);
     const double build_ms = 1e-3 * us_since(t_build);
-    auto sim = ni::Simulation::build(model);
+    // The server's step holds the tool by a proxy inside the Simulation; here the proxy and the
+    // contact step are timed apart: the same proxy outside, a Simulation of the scene without its
+    // rigid mesh (the same step otherwise).
+    neurosim::scene::Model tissue_only = model;
+    tissue_only.rigid.clear();
+    auto sim = ni::Simulation::build(tissue_only);
     const auto& tool = model.tools.front();
     const ni::ToolShape shape{tool.tip_radius_m, tool.shaft_radius_m, tool.shaft_length_m};
 

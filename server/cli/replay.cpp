@@ -150,6 +150,8 @@ void run(interaction::Simulation& sim, const std::vector<Station>& stations,
       while (next[i] < samples.size() && samples[next[i]].time_s() <= t) ++next[i];
       if (next[i] == 0) continue;  // not started yet: not in this step
       poses.push_back(pose_of(samples[next[i] - 1], stations[i].tool));
+      // The recording is the station (its rigid proxy in the step, as the live server's slot).
+      poses.back().station = static_cast<int>(i);
       station_of_pose.push_back(static_cast<int>(i));
     }
     sim.step_at(t, poses, contacts, stats);  // time enters a viscoelastic body's step

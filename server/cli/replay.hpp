@@ -71,7 +71,9 @@ struct StepView {
   const interaction::StepStats* stats{nullptr};
 };
 
-// Steps `sim` once per step_times(stations) and calls on_step after each. Station ids must be
+// Steps `sim` once per step_times(stations) and calls on_step after each; each pose's station is
+// its recording's index (with rigid obstacles the step holds each station's tool outside the bone
+// by its own proxy, as the live server does per slot). Station ids must be
 // unique (throws std::invalid_argument naming both files); throws what Simulation::step throws.
 // Deterministic when `sim` was built with tier_worker_thread = false.
 void run(interaction::Simulation& sim, const std::vector<Station>& stations,

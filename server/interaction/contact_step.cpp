@@ -217,7 +217,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   }
 }
 
-// Phase "pose": inputs first, nothing changes on a bad pose.
+// Phase "pose", first the inputs: nothing changes on a bad pose.
 void State::check_poses(const Model& m, const std::vector<ToolPose>& poses) const {
   for (std::size_t t = 0; t < poses.size(); ++t) {
     const auto& p = poses[t];
@@ -232,6 +232,21 @@ void State::check_poses(const Model& m, const std::vector<ToolPose>& poses) cons
         throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) +
                                     " refers to scene tool " + std::to_string(p.tool) + " of " +
                                     std::to_string(m.tools_.size()));
+      }
+    }
+    // One pose per station and step (each station's proxy moves once).
+    if (p.station < -1 || p.station >= kMaxStations) {
+      throw std::invalid_argument("Simulation::step: tool " + std::to_string(t) + " station " +
+                                  std::to_string(p.station) + " is outside [-1, " +
+                                  std::to_string(kMaxStations) + ")");
+    }
+    const int key = p.station >= 0 ? p.station : static_cast<int>(t);
+    for (std::size_t u = 0; u < t; ++u) {
+      const int other = poses[u].station >= 0 ? poses[u].station : static_cast<int>(u);
+      if (other == key) {
+        throw std::invalid_argument("Simulation::step: tools " + std::to_string(u) + " and " +
+                                    std::to_string(t) + " are both station " +
+                                    std::to_string(key));
       }
     }
   }
@@ -895,8 +910,49 @@ bool State::same_rows_as_before() {
 void State::step(const Model& m, const std::vector<ToolPose>& poses, double time_s,
                  std::vector<ToolContact>& contacts, StepStats& stats) {
   const auto t0 = Clock::now();
-  const int nt = static_cast<int>(poses.size());
   check_poses(m, poses);
+  try {
+    hold_poses(m, poses);
+    solve_held_poses(m, time_s, contacts, stats, t0);
+  } catch (...) {
+    // A step that fails changes no station's proxy (the service steps the others without it).
+    restore_proxies();
+    throw;
+  }
+}
+
+// Phase "pose": with rigid obstacles, each station's tip held on the free side of the bone by its
+// proxy (the god-object: the device's tip projected onto the planes around where the tip was last
+// free), so the tissue behind the bone is never pushed through it; the rest of the step uses
+// these poses. In the State, not in the service, so a replay holds the tool as the live server.
+void State::hold_poses(const Model& m, const std::vector<ToolPose>& poses) {
+  held_.assign(poses.begin(), poses.end());
+  planes_.resize(poses.size());
+  for (auto& p : planes_) p.count = 0;
+  proxy_before_.clear();
+  if (!m.rigid_) return;
+  for (std::size_t t = 0; t < poses.size(); ++t) {
+    const int key = poses[t].station >= 0 ? poses[t].station : static_cast<int>(t);
+    // A station's first pose makes its proxy (allocation once per station).
+    if (key >= static_cast<int>(proxies_.size())) proxies_.resize(static_cast<std::size_t>(key) + 1);
+    auto& proxy = proxies_[static_cast<std::size_t>(key)];
+    if (!proxy) proxy = std::make_unique<ToolProxy>(*m.rigid_, m.proxy_options_);
+    proxy_before_.emplace_back(key, proxy->memory());
+    proxy->constrain(m.tools_[static_cast<std::size_t>(held_[t].tool)], held_[t], planes_[t]);
+  }
+}
+
+void State::restore_proxies() {
+  for (auto it = proxy_before_.rbegin(); it != proxy_before_.rend(); ++it)
+    proxies_[static_cast<std::size_t>(it->first)]->restore(it->second);
+  proxy_before_.clear();
+}
+
+// The held poses through candidates, rows, columns, Delassus, LCP, answer and tier post.
+void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolContact>& contacts,
+                             StepStats& stats, std::chrono::steady_clock::time_point t0) {
+  const std::vector<ToolPose>& poses = held_;
+  const int nt = static_cast<int>(poses.size());
   begin_step(m, nt, stats);
   begin_history(m, time_s);
   if (static_cast<int>(contacts.size()) != nt) contacts.resize(nt);
@@ -936,6 +992,8 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses, double time
       contacts[t] = last_good_[t];
       contacts[t].converged = false;
       contacts[t].iterations = lcp.iterations;
+      contacts[t].rigid_planes = planes_[t];
+      contacts[t].held_tip_m = poses[t].tip_m;
     }
     stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
     return;
@@ -944,6 +1002,8 @@ void State::step(const Model& m, const std::vector<ToolPose>& poses, double time
   for (int k = 0; k < ns; ++k) stats.sliding_active += sliding_active_[k];
   for (int t = 0; t < nt; ++t) {
     answer(m, t, poses[t], ns, lcp.iterations, nt, contacts[t]);
+    contacts[t].rigid_planes = planes_[t];
+    contacts[t].held_tip_m = poses[t].tip_m;
     last_good_[t] = contacts[t];
   }
   commit_history();

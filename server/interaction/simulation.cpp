@@ -71,6 +71,11 @@ class SimulationImpl final : public Simulation {
     return model_->entry(m).loaded->fixed_nodes;
   }
   int num_tools() const override { return static_cast<int>(model_->tools_.size()); }
+  const RigidObstacle* rigid_obstacle() const override { return model_->rigid_.get(); }
+  double proxy_reach_m() const override {
+    return model_->rigid_ ? model_->proxy_options_.reach_m : 0.0;
+  }
+  void reset_station(int station) override { state_->reset_station(station); }
 
   void step(const std::vector<ToolPose>& poses, std::vector<ToolContact>& contacts,
             StepStats& stats) override {
@@ -391,6 +396,14 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
   if (model.effects.tool_contact) {
     for (const auto& tool : model.tools)
       tools_.push_back(ToolShape{tool.tip_radius_m, tool.shaft_radius_m, tool.shaft_length_m});
+  }
+  if (!tools_.empty() && !model.rigid.empty()) {
+    rigid_ = RigidObstacle::build(model.rigid);
+    // The proxy's planes must cover the fastest tool's travel in one step (with room: 1.5 x).
+    for (const auto& tool : model.tools)
+      proxy_options_.reach_m =
+          std::max(proxy_options_.reach_m, 1.5 * tool.max_speed_m_per_s / model.rates.step_hz);
+    proxy_options_.max_reach_m = std::max(proxy_options_.max_reach_m, proxy_options_.reach_m);
   }
   setup_.sliding_rows = num_sliding_;
   setup_.total_s = seconds_since(t_start);

@@ -6,6 +6,7 @@
 #pragma once
 
 #include "server/interaction/iterative_tie.hpp"
+#include "server/interaction/rigid_obstacle.hpp"
 #include "server/mesh/tet_mesh.hpp"
 #include "server/model/model.hpp"
 
@@ -33,7 +34,14 @@ struct ToolPose {
   Vec3 tip_m{Vec3::Zero()};  // centre of the spherical tip
   Vec3 axis{Vec3::UnitZ()};  // unit vector from the tip towards the handle (shaft direction)
   int tool{0};               // index into the scene's tools (tip and shaft radii)
+  // The station the pose comes from, the same in every step (the live server's slot, the replay's
+  // recording): with rigid obstacles its proxy remembers where the tip was last free. -1: the
+  // pose's index in the step's poses. At most kMaxStations - 1.
+  int station{-1};
 };
+
+// Stations a Simulation tells apart (ToolPose::station), each with its own rigid proxy.
+inline constexpr int kMaxStations = 4096;
 
 // What a step returns for one tool.
 struct ToolContact {
@@ -47,6 +55,11 @@ struct ToolContact {
   std::vector<int> nodes;                // contact nodes on that mesh
   bool converged{true};                  // the contact LCP met its tolerance
   int iterations{0};
+  // With rigid obstacles (the skull): the station's proxy held the tip the physics stepped on the
+  // free side of the bone (reference_tip_m is that tip); these are its constraint planes around
+  // it, each with the penetration of the device's (raw) tip behind it. count 0 without obstacles.
+  ObstaclePlanes rigid_planes;
+  Vec3 held_tip_m{Vec3::Zero()};  // the tip the physics stepped (the device's, or held), unit m
 };
 
 struct StepStats {
@@ -281,6 +294,14 @@ class Simulation {
   // a tetrahedron inside the embedded mesh. mesh(m) is the carved mesh (same vertex ids).
   virtual const std::vector<int>& fixed_nodes(int mesh) const = 0;
   virtual int num_tools() const = 0;
+  // The scene's rigid obstacles the step holds each station's tool outside of (a proxy per
+  // station in the State), or nullptr (none, or effects.tool_contact off); and how far the
+  // proxies look around the tool each step, unit m. Defaults (test doubles): none.
+  virtual const RigidObstacle* rigid_obstacle() const { return nullptr; }
+  virtual double proxy_reach_m() const { return 0.0; }
+  // Forget a station's proxy (the station left, or its pose was refused): its next pose starts
+  // afresh (free if outside the bone). Default: nothing to forget.
+  virtual void reset_station(int station) { (void)station; }
   // The body (host + tied meshes) `mesh` belongs to, or nullptr if inert; and the last good
   // step's contact forces on it (contact slots, unit N). For benchmarks and the baseline.
   virtual const CoupledBody* body_of(int mesh) const = 0;

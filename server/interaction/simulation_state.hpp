@@ -11,9 +11,11 @@
 #include "server/interaction/sliding_coupling.hpp"
 #include "server/interaction/tier_worker.hpp"
 #include "server/interaction/tool_geometry.hpp"
+#include "server/interaction/tool_proxy.hpp"
 #include "server/interaction/viscoelastic_history.hpp"
 
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -135,6 +137,10 @@ class Model {
   std::vector<MeshEntry> meshes_;
   std::vector<BodyModel> bodies_;
   std::vector<ToolShape> tools_;
+  // The scene's rigid obstacles (the skull), with tool contact only; null: none. The step holds
+  // each station's tool outside them (State: a ToolProxy per station, with these options).
+  std::unique_ptr<const RigidObstacle> rigid_;
+  ToolProxyOptions proxy_options_;
   SetupStats setup_;
   int num_sliding_{0};  // sliding rows, first in the LCP
   double step_period_s_{1e-3};  // 1 / rates.step_hz: the time of a step given none, unit s
@@ -157,6 +163,11 @@ class State {
   // (the time since the last converged step; an earlier time counts as none passed).
   void step(const Model& m, const std::vector<ToolPose>& poses, double time_s,
             std::vector<ToolContact>& contacts, StepStats& stats);
+  // Forget a station's proxy (Simulation::reset_station).
+  void reset_station(int station) {
+    if (station >= 0 && station < static_cast<int>(proxies_.size()) && proxies_[station])
+      proxies_[station]->reset();
+  }
   // The time of the last step (for steps given no time: one step period later), unit s.
   double time_s() const { return time_s_; }
   // Host field for the last good step (stepping thread: may use the cached full columns).
@@ -186,6 +197,10 @@ class State {
  private:
   // Phases of step() (contact_step.cpp).
   void check_poses(const Model& m, const std::vector<ToolPose>& poses) const;
+  void hold_poses(const Model& m, const std::vector<ToolPose>& poses);
+  void restore_proxies();
+  void solve_held_poses(const Model& m, double time_s, std::vector<ToolContact>& contacts,
+                        StepStats& stats, std::chrono::steady_clock::time_point t0);
   void begin_step(const Model& m, int tools, StepStats& stats);
   void reserve_workspace(const Model& m, int tools);
   void candidate_triangles(const Model& m, int body, int tool, const ToolPose& pose,
@@ -245,6 +260,13 @@ class State {
   ContactLcp lcp_;
   bool lcp_constant_block_{false};  // set_constant_block done
   std::vector<ToolContact> last_good_;
+  // Phase "pose": a proxy per station (index ToolPose::station; made on the station's first
+  // pose), the poses the physics steps (held on the free side of the rigid obstacles), each
+  // tool's planes, and each proxy's memory before this step (put back if the step throws).
+  std::vector<std::unique_ptr<ToolProxy>> proxies_;
+  std::vector<ToolPose> held_;
+  std::vector<ObstaclePlanes> planes_;
+  std::vector<std::pair<int, ToolProxy::Memory>> proxy_before_;
   std::vector<TierLoad> tier_loads_;  // per body, the step's contact forces for the worker
   // The last good forces while a LINEAR step iterates its geometry (restored if it fails).
   struct ForceBackup {

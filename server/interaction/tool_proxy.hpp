@@ -2,7 +2,8 @@
 // physics uses is the newest tip projected onto the free side of the obstacle's constraint
 // planes, which are taken around the last accepted free tip, so a fast tool that jumps through
 // the bone shell between two steps is held where it came from, and the tissue behind the bone is
-// never pushed through it. One per station; allocation-free after construction.
+// never pushed through it. One per station, in the interaction State (the step's "pose" phase),
+// so the live server and a replay hold the tool alike; allocation-free after construction.
 #pragma once
 
 #include "server/interaction/rigid_obstacle.hpp"
@@ -32,11 +33,23 @@ class ToolProxy {
   // of every plane; axis and tool unchanged). planes: the constraint planes, penetration of the
   // newest pose behind each.
   void constrain(const ToolShape& shape, ToolPose& pose, ObstaclePlanes& planes);
-  // Forget the free tip (the station left): the next pose starts afresh.
-  void reset() {
-    has_free_ = false;
-    has_last_raw_ = false;
+  // What the proxy remembers between steps (constrain reads and writes it): a step that fails
+  // after constrain puts it back, so the failure leaves the station's proxy as it was.
+  struct Memory {
+    bool has_free{false};
+    mesh::Vec3 free_tip_m{mesh::Vec3::Zero()};
+    bool has_last_raw{false};
+    mesh::Vec3 last_raw_m{mesh::Vec3::Zero()};  // the device's tip at the last call
+  };
+  Memory memory() const { return {has_free_, free_tip_m_, has_last_raw_, last_raw_m_}; }
+  void restore(const Memory& k) {
+    has_free_ = k.has_free;
+    free_tip_m_ = k.free_tip_m;
+    has_last_raw_ = k.has_last_raw;
+    last_raw_m_ = k.last_raw_m;
   }
+  // Forget the free tip (the station left): the next pose starts afresh.
+  void reset() { restore(Memory{}); }
   bool has_free() const { return has_free_; }
   const mesh::Vec3& free_tip_m() const { return free_tip_m_; }
 

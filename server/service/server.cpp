@@ -7,7 +7,6 @@
 #include "common/clock.hpp"
 #include "idl/wire/dds.hpp"
 #include "server/interaction/rigid_obstacle.hpp"
-#include "server/interaction/tool_proxy.hpp"
 #include "server/service/accuracy_table.hpp"
 #include "server/service/deformation_publisher.hpp"
 #include "server/service/station_admission.hpp"
@@ -93,10 +92,6 @@ struct Server::Impl {
       mesh_info.push_back(std::move(mi));
     }
     rigid_surfaces = model.rigid;
-    // Rigid obstacles (the skull): built only when the scene has them, else null and free.
-    rigid = interaction::RigidObstacle::build(model.rigid);
-    for (const auto& t : model.tools)
-      tool_shapes.push_back({t.tip_radius_m, t.shaft_radius_m, t.shaft_length_m});
   }
 
   // ---- Model (built once) --------------------------------------------------------------------
@@ -112,8 +107,6 @@ struct Server::Impl {
   std::vector<MeshInfo> mesh_info;
   std::vector<scene::RigidSurface> rigid_surfaces;  // published as rigid MeshTopology samples
   std::unique_ptr<interaction::Simulation> sim;
-  std::unique_ptr<const interaction::RigidObstacle> rigid;  // null: the scene has none
-  std::vector<interaction::ToolShape> tool_shapes;          // per scene tool
   ServerOptions opt;
   std::ostream& log_stream;
   std::mutex log_mutex;
@@ -342,13 +335,13 @@ void Server::Impl::create_entities() {
   ld.period_ns = period_ns;
   ld.mode = opt.step_mode;
   ld.max_step_rate_factor = opt.max_step_rate_factor;
-  loop.emplace(ld, *sim, *stations, tool_contact ? rigid.get() : nullptr, tool_shapes, tool_max_speed,
+  loop.emplace(ld, *sim, *stations,
                sink ? static_cast<ContactModelSink&>(*sink) : static_cast<ContactModelSink&>(null_sink),
                [this](const std::string& line) { log(line); });
   if (tool_contact) {
-    if (loop->num_proxies() > 0)
+    if (const interaction::RigidObstacle* rigid = sim->rigid_obstacle())
       log("built: rigid obstacles (" + std::to_string(rigid->num_triangles()) +
-          " triangles), a tool proxy per station slot (reach " + std::to_string(1e3 * loop->proxy_reach_m()) + " mm)");
+          " triangles), a tool proxy per station in the step (reach " + std::to_string(1e3 * sim->proxy_reach_m()) + " mm)");
     log("built: ToolState reader (partition " + std::string(wire::kToolStateReaderPartition) +
         ", station identity filter, at most " + std::to_string(stations->writers().limits().max_writers) +
         " writers, " + std::to_string(stations->writers().limits().max_per_participant) +

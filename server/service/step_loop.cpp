@@ -28,15 +28,11 @@ void StepLoopDef::validate() const {
 }
 
 StepLoop::StepLoop(StepLoopDef def, interaction::Simulation& sim, StationAdmission& stations,
-                   const interaction::RigidObstacle* rigid, std::vector<interaction::ToolShape> shapes,
-                   const std::vector<double>& tool_max_speed, ContactModelSink& out,
-                   std::function<void(const std::string&)> log)
+                   ContactModelSink& out, std::function<void(const std::string&)> log)
     : def_((def.validate(), def)),
       sim_(sim),
       stations_(stations),
       slots_(stations.slots()),
-      rigid_(rigid),
-      shapes_(std::move(shapes)),
       out_(out),
       log_(std::move(log)) {
   if (sem_init(&wake_, 0, 0) != 0) throw std::runtime_error("sem_init failed");
@@ -52,19 +48,11 @@ StepLoop::StepLoop(StepLoopDef def, interaction::Simulation& sim, StationAdmissi
   slot_of_pose_.resize(m);
   all_poses_.resize(m);
   all_slots_.resize(m);
-  if (rigid_ != nullptr) {
-    // The proxy's planes must cover the fastest tool's travel in one step.
-    interaction::ToolProxyOptions po;
-    const double step_hz = 1e9 / static_cast<double>(def_.period_ns);
-    for (double v : tool_max_speed) po.reach_m = std::max(po.reach_m, 1.5 * v / step_hz);
-    po.max_reach_m = std::max(po.max_reach_m, po.reach_m);
-    proxy_reach_m_ = po.reach_m;
-    for (std::size_t i = 0; i < m; ++i) {
-      proxies_.emplace_back(*rigid_, po);
-      wire::reserve(models_out_[i]->rigid_planes, interaction::kMaxObstaclePlanes);
-    }
-    rigid_planes_.resize(m);
-  }
+  if (m > static_cast<std::size_t>(interaction::kMaxStations))
+    throw std::invalid_argument(std::to_string(m) + " station slots: the simulation tells at most " +
+                                std::to_string(interaction::kMaxStations) + " apart");
+  if (sim_.rigid_obstacle() != nullptr)
+    for (std::size_t i = 0; i < m; ++i) wire::reserve(models_out_[i]->rigid_planes, interaction::kMaxObstaclePlanes);
   step_error_.reserve(256);
 }
 
@@ -130,7 +118,7 @@ void StepLoop::retire(std::size_t i) {
   s.pose.consume();  // drop whatever the last session left
   slot_step_[i] = SlotStep{};
   s.in_contact.store(false, std::memory_order_relaxed);
-  if (rigid_ != nullptr) proxies_[i].reset();
+  sim_.reset_station(static_cast<int>(i));
   s.state.store(kSlotFree, std::memory_order_release);
 }
 
@@ -159,7 +147,7 @@ void StepLoop::contain_failure(std::size_t& n, const std::string& error) {
     auto& ss = slot_step_[i];
     ss.has_pose = false;
     ss.hold_until_ns = now_mono + def_.step_failure_holdoff_ns;
-    if (rigid_ != nullptr) proxies_[i].reset();
+    sim_.reset_station(static_cast<int>(i));
     const PoseSample& p = slots_[i].pose.newest();
     if (log_)
       log_("station '" + std::string(slots_[i].station_id) + "': the step failed for its pose (sequence " +
@@ -223,8 +211,8 @@ void StepLoop::write_model(std::size_t i, const ToolContact* c, std::uint64_t st
   cm.contact_mesh_id[neurosim_ID_MAX] = '\0';
   cm.tool_sample_rejected = c == nullptr || s.last_rejected.load(std::memory_order_relaxed);
   cm.rigid_planes._length = 0;
-  if (rigid_ != nullptr && c != nullptr) {
-    const interaction::ObstaclePlanes& rp = rigid_planes_[i];
+  if (sim_.rigid_obstacle() != nullptr && c != nullptr) {
+    const interaction::ObstaclePlanes& rp = c->rigid_planes;
     cm.rigid_planes._length = static_cast<std::uint32_t>(rp.count);
     for (int j = 0; j < rp.count; ++j) {
       const auto& src = rp.planes[static_cast<std::size_t>(j)];
@@ -273,8 +261,9 @@ void StepLoop::step_once() {
     const std::array<double, 3> a = common::rotated_z(p.orientation);
     tp.axis = interaction::Vec3(a[0], a[1], a[2]);
     tp.tool = p.tool;
-    // The physics steps the tool held on the free side of the bone (server-side proxy).
-    if (rigid_ != nullptr) proxies_[i].constrain(shapes_[static_cast<std::size_t>(tp.tool)], tp, rigid_planes_[i]);
+    // The slot is the station: with rigid obstacles the step holds the tool outside the bone by
+    // the slot's proxy.
+    tp.station = static_cast<int>(i);
     all_slots_[n++] = static_cast<int>(i);
   }
   if (n > 0) {

@@ -1,8 +1,9 @@
 // The step thread (docs/ARCHITECTURE.md "Threads"): when a pose arrives (event step mode, at most
 // max_step_rate_factor × the scene rate) or one period after the last step, the newest pose of
 // every station becomes a ToolPose (the tool frame's +z rotated by the quaternion is the shaft
-// axis; with rigid obstacles the pose first goes through the station's ToolProxy), all tools are
-// stepped together (interaction::Simulation::step) and each station gets its ContactModel.
+// axis; its station is the slot, so with rigid obstacles the step holds it outside the bone by the
+// slot's proxy in the Simulation), all tools are stepped together (interaction::Simulation::step)
+// and each station gets its ContactModel (with the proxy's planes).
 //
 // A step that throws for the stations' input is contained: the stations whose pose alone makes
 // the step throw are reset (their pose dropped, a zero-force ContactModel flagged rejected, no
@@ -11,9 +12,7 @@
 #pragma once
 
 #include "idl/wire/dds.hpp"
-#include "server/interaction/rigid_obstacle.hpp"
 #include "server/interaction/simulation.hpp"
-#include "server/interaction/tool_proxy.hpp"
 #include "server/service/station_admission.hpp"
 
 #include <semaphore.h>
@@ -54,12 +53,8 @@ struct StepLoopCounters {
 
 class StepLoop {
  public:
-  // `rigid` may be null (no rigid obstacle: no proxy); `shapes` per scene tool; `tool_max_speed`
-  // per scene tool (m/s: the proxy's reach covers the fastest tool's travel in one step).
   StepLoop(StepLoopDef def, interaction::Simulation& sim, StationAdmission& stations,
-           const interaction::RigidObstacle* rigid, std::vector<interaction::ToolShape> shapes,
-           const std::vector<double>& tool_max_speed, ContactModelSink& out,
-           std::function<void(const std::string&)> log);
+           ContactModelSink& out, std::function<void(const std::string&)> log);
   ~StepLoop();
   StepLoop(const StepLoop&) = delete;
   StepLoop& operator=(const StepLoop&) = delete;
@@ -81,8 +76,6 @@ class StepLoop {
 
   const StepLoopCounters& counters() const { return counters_; }
   std::size_t num_slots() const { return slots_.size(); }
-  int num_proxies() const { return static_cast<int>(proxies_.size()); }
-  double proxy_reach_m() const { return proxy_reach_m_; }
 
  private:
   struct SlotStep {  // step thread only
@@ -101,8 +94,6 @@ class StepLoop {
   interaction::Simulation& sim_;
   StationAdmission& stations_;
   std::vector<StationSlot>& slots_;
-  const interaction::RigidObstacle* rigid_;
-  std::vector<interaction::ToolShape> shapes_;
   ContactModelSink& out_;
   std::function<void(const std::string&)> log_;
   StepLoopCounters counters_;
@@ -116,9 +107,6 @@ class StepLoop {
   std::vector<int> slot_of_pose_;
   std::vector<interaction::ToolPose> all_poses_;  // every station's pose of this step
   std::vector<int> all_slots_;
-  std::vector<interaction::ToolProxy> proxies_;  // with rigid obstacles: one per slot
-  std::vector<interaction::ObstaclePlanes> rigid_planes_;
-  double proxy_reach_m_{0};
   std::string step_error_;
   // The step's time: the newest source time of its poses, from the first one seen (unit ns), so
   // a replay of the stations' recordings steps a viscoelastic body through the same times.

@@ -331,7 +331,7 @@ Slide slide(const scene::Model& model, const Vec3& start, const Vec3& heading, d
   const int steps = static_cast<int>(std::lround(length_m / step_m));
   for (int k = 0; k <= steps; ++k) {
     const Vec3 at = start + (k * step_m) * heading;
-    SurfacePoint p;
+    SurfacePoint p{Vec3::Zero(), Vec3::UnitZ()};
     if (!top_of_surface(mesh, at.x(), at.y(), p)) {
       ADD_FAILURE() << "the path leaves the surface at step " << k;
       break;

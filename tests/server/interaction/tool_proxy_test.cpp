@@ -213,5 +213,76 @@ TEST(interaction_tool_proxy, ThroughTheOpeningUnblockedToTheCerebellum) {
   EXPECT_TRUE(touches_cerebellum);
 }
 
+// The step's "pose" phase is this proxy, one per station (ToolPose::station): two stations
+// stepped together on brain_skull, one driven into the top of the skull past where its raw pose
+// reaches the brain, one through the craniotomy onto the cerebellum, give exactly what the
+// service gave when it held each with its own ToolProxy and stepped the scene without the skull:
+// the same held tips, planes and forces; the top station never touches the brain.
+TEST(interaction_tool_proxy, TheStepHoldsEachStationByItsOwnProxy) {
+  const RigidObstacle& o = skull();
+  const ToolShape shape = probe_shape();
+  const scene::Model& model = testing::brain_skull_model();
+  scene::Model no_skull = model;
+  no_skull.rigid.clear();
+  const auto with_skull = build_model(model), tissue = build_model(no_skull);
+  auto stepped = Simulation::from_model(with_skull);
+  StatePtr reference = make_state(*tissue), raw = make_state(*tissue);
+  const mesh::Vec3 down(0, 0, -1);
+  const mesh::Vec3 top = testing::first_bone(o, skull_centre() + mesh::Vec3(0, 0, 0.15), down, 0.2);
+  const scene::RigidOpening& hole = model.rigid.front().openings.front();
+  ToolProxy top_proxy(o), hole_proxy(o);
+  std::vector<ToolPose> poses(2), held(2), raw_top(1);
+  std::vector<ToolContact> c, ref, cr;
+  StepStats stats;
+  ObstaclePlanes top_planes, hole_planes;
+  int raw_touches = 0, held_steps = 0, hole_contacts = 0;
+  for (int k = 0; k < 140; ++k) {
+    // Top: from 5 mm above the tip's contact, 0.2 mm per step (23 mm); opening: 0.5 mm per step
+    // from 40 mm outside along its axis, then held.
+    poses[0].tip_m = top - (shape.tip_radius_m + 0.005) * down + (0.0002 * k) * down;
+    poses[0].axis = -down;
+    poses[0].station = 7;
+    poses[1].tip_m = hole.center_m + (0.04 - 0.0005 * std::min(k, 100)) * hole.axis;
+    poses[1].axis = hole.axis;
+    poses[1].station = 3;
+    held = poses;
+    top_proxy.constrain(shape, held[0], top_planes);
+    hole_proxy.constrain(shape, held[1], hole_planes);
+    stepped->step(poses, c, stats);
+    step(*tissue, *reference, held, ref, stats);
+    raw_top[0] = poses[0];
+    step(*tissue, *raw, raw_top, cr, stats);
+    raw_touches += cr[0].in_contact ? 1 : 0;
+    ASSERT_EQ(c[0].held_tip_m, held[0].tip_m) << "step " << k;
+    ASSERT_EQ(c[1].held_tip_m, held[1].tip_m) << "step " << k;
+    ASSERT_EQ(c[0].rigid_planes.count, top_planes.count) << "step " << k;
+    ASSERT_EQ(c[1].rigid_planes.count, hole_planes.count) << "step " << k;
+    EXPECT_EQ(c[0].rigid_planes.max_penetration_m(), top_planes.max_penetration_m());
+    for (int t = 0; t < 2; ++t) {
+      ASSERT_EQ(c[static_cast<std::size_t>(t)].in_contact, ref[static_cast<std::size_t>(t)].in_contact)
+          << "step " << k << " tool " << t;
+      EXPECT_EQ(c[static_cast<std::size_t>(t)].force_n, ref[static_cast<std::size_t>(t)].force_n)
+          << "step " << k << " tool " << t;
+    }
+    EXPECT_FALSE(c[0].in_contact) << "step " << k << ": the brain touched through the skull";
+    held_steps += top_planes.max_penetration_m() > 1e-3 ? 1 : 0;
+    hole_contacts += c[1].in_contact ? 1 : 0;
+  }
+  EXPECT_GT(raw_touches, 10) << "the raw top path should reach the brain through the bone";
+  EXPECT_GT(held_steps, 10);
+  EXPECT_GT(hole_contacts, 10);
+  // A station that left is forgotten: its next pose starts afresh, as a new proxy's would.
+  stepped->reset_station(7);
+  top_proxy.reset();
+  poses[0].tip_m = top - (shape.tip_radius_m + 0.002) * down;
+  held = poses;
+  top_proxy.constrain(shape, held[0], top_planes);
+  stepped->step(poses, c, stats);
+  EXPECT_EQ(c[0].held_tip_m, held[0].tip_m);
+  // Two poses of one station in a step are refused, and the proxies are left as they were.
+  std::vector<ToolPose> twice{poses[0], poses[0]};
+  EXPECT_THROW(stepped->step(twice, c, stats), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace neurosim::interaction

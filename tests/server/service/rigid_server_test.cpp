@@ -119,7 +119,10 @@ double max_penetration(const Record& r) {
 TEST(service_rigid, DrivenIntoTheSkullHeldOutsideWhileTheDeviceGoesTenMillimetresDeep) {
   const st::Setup setup = skull_setup();
   st::Session ses(setup, "rigid_skull", 30);
-  auto ref = setup.make_reference();
+  // The raw pose's physics: the scene without its skull (the Simulation holds a tool outside it).
+  scene::Model no_skull = skull_scene();
+  no_skull.rigid.clear();
+  auto ref = interaction::Simulation::build(no_skull);
   const auto obstacle = interaction::RigidObstacle::build(skull_scene().rigid);
   ASSERT_TRUE(ses.wait_ready());
   EXPECT_NE(ses.server.log().find("built: rigid obstacles (7538 triangles)"), std::string::npos)

@@ -12,6 +12,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -174,6 +175,8 @@ struct ModelRecord {
   double f0[3]{}, K[9]{}, normal[3]{}, x0[3]{};
   std::uint64_t server_step{0};
   std::string mesh;
+  int rigid_planes{0};                 // the proxy's constraint planes (rigid obstacles)
+  double rigid_penetration_m{0.0};     // deepest raw penetration behind them, unit m
 };
 
 // Takes ContactModels on its own thread (the reader keeps only the newest per station, so it
@@ -236,6 +239,9 @@ class ModelCollector {
         for (int i = 0; i < 9; ++i) r.K[i] = d.stiffness_n_per_m[i];
         r.server_step = d.server_step;
         r.mesh = d.contact_mesh_id;
+        r.rigid_planes = static_cast<int>(d.rigid_planes._length);
+        for (std::uint32_t j = 0; j < d.rigid_planes._length; ++j)
+          r.rigid_penetration_m = std::max(r.rigid_penetration_m, d.rigid_planes._buffer[j].penetration_m);
         recs_.push_back(r);
       }
     }

@@ -24,8 +24,7 @@ constexpr std::int64_t kSecond = 1000 * kMs;
 struct Status {
   Status() {
     stations.set_directory(&directory);
-    loop.emplace(StepLoopDef{}, sim, stations, nullptr, std::vector<neurosim::interaction::ToolShape>{},
-                 std::vector<double>{}, sink, nullptr);
+    loop.emplace(StepLoopDef{}, sim, stations, sink, nullptr);
     settings.name = "fixture";
     StatusPublisherDef def;
     def.status_period_ns = kSecond;

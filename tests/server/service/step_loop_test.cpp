@@ -27,8 +27,7 @@ struct Loop {
     stations.set_directory(&directory);
     StepLoopDef def;
     def.step_failure_holdoff_ns = 1000 * kSecond;  // a reset station stays out for the whole test
-    loop.emplace(def, sim, stations, nullptr, std::vector<neurosim::interaction::ToolShape>{}, std::vector<double>{},
-                 sink, [this](const std::string& l) { log.push_back(l); });
+    loop.emplace(def, sim, stations, sink, [this](const std::string& l) { log.push_back(l); });
   }
   // A pose of `station` (its own writer and participant), handed to its slot.
   void pose(const std::string& station, std::uint64_t seq, double x_m) {
