@@ -1,0 +1,226 @@
+// contact_convergence_bench: mesh convergence of the contact force. The brain/artery scene at
+// several brain cell sizes (the scene built by `neurosim-model --cell-size C --out-dir DIR/cC`
+// when DIR/cC/brain_artery.scene is missing), the same press on each: the 2 mm probe (the
+// scene's tool), axis vertical, its centre on the vertical line through (x, y) (default 45 / 100 mm
+// in image coordinates: the top of the left hemisphere, where the 5, 4 and 3 mm surfaces are the
+// same plane, so only the mesh under it changes; at 60 / 100 mm it tilts from 21 to 36 degrees
+// as the cells shrink, and the geometry's change hides the discretization's) at a
+// depth d below that mesh's own rest surface on the line (d = 0.5, 1, 1.5, 2, 2.5, 3 mm), LINEAR
+// tier (the scene's element, or --element for every mesh), each depth stepped straight from rest (the LINEAR answer is the pose's alone).
+// Per cell size and depth: |F| (mN) and the contact rows. Then, per depth, the differences of
+// successive sizes and the order p of F(h) = F* + C h^p that two successive differences imply
+// ((F(h1) - F(h2)) / (F(h2) - F(h3)) = (h1^p - h2^p) / (h2^p - h3^p), solved for p).
+// With --slide, per cell size also the slide of ctest
+// interaction_contact_step.SlideOverTheSurfaceNeverLosesTheTissue: the probe slid 40 mm (y 80 to
+// 120 mm at x 60 mm, 0.1 mm steps) 1 mm and 2 mm below the rest surface (the highest surface point
+// under the tip, along its triangle's normal), |F| / depth with the depth measured to the closest
+// point of the surface triangles: its range and spread (max / min) along the path.
+#include "common/cli.hpp"
+#include "common/clock.hpp"
+#include "server/fem/element.hpp"
+#include "server/interaction/contact_surface.hpp"
+#include "server/interaction/simulation.hpp"
+#include "server/scene/compile.hpp"
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+namespace ni = neurosim::interaction;
+using Vec3 = Eigen::Vector3d;
+
+namespace {
+
+fs::path scene_at(double cell_mm, const fs::path& dir) {
+  char name[32];
+  std::snprintf(name, sizeof name, "c%g", cell_mm);
+  const fs::path d = dir / name;
+  const fs::path scene = d / "brain_artery.scene";
+  if (!fs::exists(scene)) {
+    fs::create_directories(d);
+    const std::string cmd = std::string(NEUROSIM_BIN_DIR) + "/neurosim-model --out-dir '" +
+                            d.string() + "' --cell-size " + std::to_string(cell_mm) + " > '" +
+                            (d / "model.log").string() + "' 2>&1";
+    std::cerr << "contact_convergence_bench: building " << scene << "\n";
+    if (std::system(cmd.c_str()) != 0)
+      throw std::runtime_error("neurosim-model failed (log: " + (d / "model.log").string() + ")");
+  }
+  return scene;
+}
+
+// The highest surface point of `mesh` on the vertical line through (x, y), and its triangle's
+// outward normal; false if the line misses the surface.
+bool top_of_surface(const neurosim::mesh::TetMesh& mesh, double x, double y, Vec3& point, Vec3& normal) {
+  const auto& v = mesh.vertices();
+  double best = -std::numeric_limits<double>::infinity();
+  for (const auto& t : mesh.surface()) {
+    const Vec3 &a = v[t[0]], &b = v[t[1]], &c = v[t[2]];
+    const Vec3 n = (b - a).cross(c - a);
+    if (n.z() <= 0.0) continue;
+    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
+    const double l1 = ((x - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y - a.y())) / det;
+    const double l2 = ((b.x() - a.x()) * (y - a.y()) - (x - a.x()) * (b.y() - a.y())) / det;
+    if (l1 < 0.0 || l2 < 0.0 || l1 + l2 > 1.0) continue;
+    const Vec3 p = a + l1 * (b - a) + l2 * (c - a);
+    if (p.z() > best) {
+      best = p.z();
+      point = p;
+      normal = n.normalized();
+    }
+  }
+  return std::isfinite(best);
+}
+
+// The closest point of the mesh's surface triangles to x (brute force) and its triangle's normal.
+void closest_on_surface(const neurosim::mesh::TetMesh& mesh, const Vec3& x, Vec3& point, Vec3& normal) {
+  double best = std::numeric_limits<double>::infinity();
+  const auto& v = mesh.vertices();
+  for (const auto& t : mesh.surface()) {
+    const std::array<Vec3, 3> p{v[t[0]], v[t[1]], v[t[2]]};
+    const ni::TrianglePoint at = ni::closest_on_triangle(x, p);
+    const double d = (x - at.point_m).squaredNorm();
+    if (d < best) {
+      best = d;
+      point = at.point_m;
+      normal = (p[1] - p[0]).cross(p[2] - p[0]).normalized();
+    }
+  }
+}
+
+// Order p with (h1^p - h2^p) / (h2^p - h3^p) = ratio (bisection on p in (0.05, 6)); nan if the
+// differences change sign (no monotone convergence) or the ratio is out of reach.
+double observed_order(double h1, double h2, double h3, double d12, double d23) {
+  if (!(d12 * d23 > 0.0)) return std::nan("");
+  const double ratio = d12 / d23;
+  auto g = [&](double p) {
+    return (std::pow(h1, p) - std::pow(h2, p)) / (std::pow(h2, p) - std::pow(h3, p)) - ratio;
+  };
+  double lo = 0.05, hi = 6.0;
+  if (g(lo) * g(hi) > 0.0) return std::nan("");
+  for (int i = 0; i < 100; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (g(lo) * g(mid) <= 0.0 ? hi : lo) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<double> cells;
+  std::string dir = "/tmp/neurosim_scale_bench";
+  double x_mm = 45.0, y_mm = 100.0;
+  bool slide = false;
+  std::string element;
+  neurosim::cli::Parser p("contact_convergence_bench",
+                          "The same press on the brain at several cell sizes: force convergence.");
+  p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
+  p->add_option("--models", dir, "folder of the built scenes (as scale_bench)")->capture_default_str();
+  p->add_option("--x", x_mm, "press line x, unit mm")->capture_default_str();
+  p->add_option("--y", y_mm, "press line y, unit mm")->capture_default_str();
+  p->add_option("--element", element, "every mesh's element (default: the scene's)");
+  p->add_flag("--slide", slide, "also the 40 mm slide at 1 and 2 mm (|F| / depth spread)");
+  if (auto rc = p.parse(argc, argv)) return *rc;
+  if (cells.empty()) cells = {7.0, 5.0, 4.0, 3.0};
+  const std::vector<double> depths_mm{0.5, 1.0, 1.5, 2.0, 2.5, 3.0};
+  std::vector<std::vector<double>> force_mn(cells.size(), std::vector<double>(depths_mm.size(), 0.0));
+  std::vector<std::string> slide_rows;
+  std::printf("cell_mm,host_vertices,host_tets,surface_z_mm,normal_z,depth_mm,force_mn,rows,build_s\n");
+  try {
+    for (std::size_t ci = 0; ci < cells.size(); ++ci) {
+      const fs::path scene = scene_at(cells[ci], dir);
+      neurosim::scene::Model model = neurosim::scene::load_model(scene);
+      model.effects.tier = neurosim::scene::Tier::kLinear;
+      if (!element.empty()) {
+        const auto e = neurosim::fem::parse_element(element);
+        if (!e) throw std::runtime_error("--element " + element + ": expected " + neurosim::fem::element_names());
+        model.set_element(*e);
+      }
+      const auto t0 = neurosim::common::Clock::now();
+      auto sim = ni::Simulation::build(model);
+      const double build_s = neurosim::common::seconds_since(t0);
+      const auto& mesh = sim->mesh(0);
+      Vec3 top = Vec3::Zero(), n = Vec3::UnitZ();
+      if (!top_of_surface(mesh, 1e-3 * x_mm, 1e-3 * y_mm, top, n))
+        throw std::runtime_error(scene.string() + ": the press line misses the brain's surface");
+      const double r = model.tools.at(0).tip_radius_m;
+      std::vector<ni::ToolPose> poses(1);
+      std::vector<ni::ToolContact> contacts;
+      ni::StepStats stats;
+      for (std::size_t di = 0; di < depths_mm.size(); ++di) {
+        poses[0].tip_m = top + Vec3(0, 0, r - 1e-3 * depths_mm[di]);
+        poses[0].axis = Vec3::UnitZ();
+        sim->step(poses, contacts, stats);
+        if (!stats.converged) throw std::runtime_error(scene.string() + ": the contact LCP did not converge");
+        force_mn[ci][di] = 1e3 * contacts[0].force_n.norm();
+        std::printf("%g,%zu,%zu,%.3f,%.4f,%g,%.4f,%d,%.1f\n", cells[ci], mesh.num_vertices(), mesh.num_tets(),
+                    1e3 * top.z(), n.z(), depths_mm[di], force_mn[ci][di], stats.contact_rows, build_s);
+        std::fflush(stdout);
+      }
+      for (double depth_mm : slide ? std::vector<double>{1.0, 2.0} : std::vector<double>{}) {
+        double fpd_min = std::numeric_limits<double>::infinity(), fpd_max = 0.0, f_min = fpd_min;
+        int steps = 0;
+        double y_at_min = 0.0, depth_at_min = 0.0;  // where |F| / depth is least, unit mm / m
+        for (int k = 0; k <= 400; ++k) {
+          Vec3 at = Vec3::Zero(), up = Vec3::UnitZ();
+          if (!top_of_surface(mesh, 0.060, 0.080 + 1e-4 * k, at, up))
+            throw std::runtime_error(scene.string() + ": the slide leaves the surface at step " + std::to_string(k));
+          poses[0].tip_m = at + (r - 1e-3 * depth_mm) * up;
+          poses[0].axis = up;
+          sim->step(poses, contacts, stats);
+          Vec3 q = Vec3::Zero(), nq = Vec3::UnitZ();
+          closest_on_surface(mesh, poses[0].tip_m, q, nq);
+          const double depth = r - nq.dot(poses[0].tip_m - q);
+          const double f = contacts[0].force_n.norm();
+          f_min = std::min(f_min, f);
+          if (f / depth < fpd_min) {
+            y_at_min = 80.0 + 0.1 * k;
+            depth_at_min = depth;
+          }
+          fpd_min = std::min(fpd_min, f / depth);
+          fpd_max = std::max(fpd_max, f / depth);
+          ++steps;
+        }
+        char row[256];
+        std::snprintf(row, sizeof row, "%g,%g,%d,%.3f,%.1f,%.1f,%.2f,%.1f,%.3f", cells[ci], depth_mm, steps,
+                      1e3 * f_min, fpd_min, fpd_max, fpd_max / fpd_min, y_at_min, 1e3 * depth_at_min);
+        slide_rows.emplace_back(row);
+      }
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "contact_convergence_bench: %s\n", e.what());
+    return 1;
+  }
+  // Successive differences and the order they imply.
+  std::printf("\ndepth_mm");
+  for (std::size_t ci = 0; ci + 1 < cells.size(); ++ci) std::printf(",F%g-F%g_mn", cells[ci], cells[ci + 1]);
+  for (std::size_t ci = 0; ci + 2 < cells.size(); ++ci)
+    std::printf(",order_%g_%g_%g", cells[ci], cells[ci + 1], cells[ci + 2]);
+  std::printf("\n");
+  for (std::size_t di = 0; di < depths_mm.size(); ++di) {
+    std::printf("%g", depths_mm[di]);
+    for (std::size_t ci = 0; ci + 1 < cells.size(); ++ci)
+      std::printf(",%.4f", force_mn[ci][di] - force_mn[ci + 1][di]);
+    for (std::size_t ci = 0; ci + 2 < cells.size(); ++ci)
+      std::printf(",%.2f", observed_order(cells[ci], cells[ci + 1], cells[ci + 2],
+                                           force_mn[ci][di] - force_mn[ci + 1][di],
+                                           force_mn[ci + 1][di] - force_mn[ci + 2][di]));
+    std::printf("\n");
+  }
+  if (slide) {
+    std::printf("\ncell_mm,slide_depth_mm,steps,min_force_mn,force_per_depth_min_n_per_m,"
+                "force_per_depth_max_n_per_m,spread,y_at_min_mm,depth_at_min_mm\n");
+    for (const auto& row : slide_rows) std::printf("%s\n", row.c_str());
+  }
+  return 0;
+}
