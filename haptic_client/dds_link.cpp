@@ -122,6 +122,15 @@ std::size_t copy_contact_model(const neurosim_ContactModel& c, std::int64_t arri
   m.in_contact = c.in_contact;
   m.validity_radius_m = c.validity_radius_m;
   m.server_step = c.server_step;
+  // Relaxing parts into the fixed array (the IDL bounds the sequence to kMaxRelaxingForces; the
+  // force model rejects a model with a non-finite part or tau_s <= 0).
+  m.num_relaxing = 0;
+  for (const neurosim_RelaxingForce& r : wire::view(c.relaxing_forces)) {
+    if (m.num_relaxing == kMaxRelaxingForces) break;
+    RelaxingForce& dst = m.relaxing[m.num_relaxing++];
+    dst.force_n = Eigen::Vector3d(r.force_n[0], r.force_n[1], r.force_n[2]);
+    dst.tau_s = r.tau_s;
+  }
   // Rigid planes into the fixed array (the IDL bounds the sequence to kMaxRigidPlanes).
   std::size_t dropped = 0;
   m.rigid_planes.clear();

@@ -37,6 +37,11 @@ Eigen::Vector3d across_active(const RigidPlaneSet& s, const ProxyResult& r,
 }
 
 bool finite(const ContactModelData& m) {
+  if (m.num_relaxing > kMaxRelaxingForces) return false;
+  for (std::size_t i = 0; i < m.num_relaxing; ++i)
+    if (!m.relaxing[i].force_n.allFinite() || !std::isfinite(m.relaxing[i].tau_s) ||
+        !(m.relaxing[i].tau_s > 0))
+      return false;
   return m.x0_m.allFinite() && m.f0_n.allFinite() && m.k_n_per_m.allFinite() &&
          m.normal.allFinite() && std::isfinite(m.validity_radius_m);
 }
@@ -106,19 +111,31 @@ void ForceModel::reset() {
   last_force_.setZero();
 }
 
-Eigen::Vector3d ForceModel::extrapolate(const ContactModelData& m, const Eigen::Vector3d& x) {
+Eigen::Vector3d ForceModel::extrapolate(const ContactModelData& m, const Eigen::Vector3d& x,
+                                        double age_s) {
   if (!m.in_contact) return Eigen::Vector3d::Zero();
   Eigen::Vector3d d = x - m.x0_m;
   const double r = m.validity_radius_m;
   const double dn = d.norm();
   if (r > 0 && dn > r) d *= r / dn;  // extrapolate only within the validity radius
   Eigen::Vector3d f = m.f0_n + m.k_n_per_m * d;
+  // Viscoelastic tissue: f0 relaxes since the model's time (each part by at most all of it).
+  const double s = std::max(0.0, age_s);
+  for (std::size_t i = 0; i < m.num_relaxing; ++i)
+    f += std::expm1(-s / m.relaxing[i].tau_s) * m.relaxing[i].force_n;
   // Unilateral: tissue pushes, never pulls the tool in.
   if (m.normal.squaredNorm() > 0 && f.dot(m.normal) < 0) return Eigen::Vector3d::Zero();
   return f;
 }
 
-bool ForceModel::accept(const ContactModelData& m, const Eigen::Vector3d& x) {
+namespace {
+// Age of a model at loop time now_ns (>= 0), unit s.
+double age_of(const ContactModelData& m, std::int64_t now_ns) {
+  return std::max(0.0, 1e-9 * static_cast<double>(now_ns - m.reference_time_ns));
+}
+}  // namespace
+
+bool ForceModel::accept(const ContactModelData& m, const Eigen::Vector3d& x, std::int64_t now_ns) {
   if (!finite(m) || m.validity_radius_m < 0) {
     ++counters_.nan_models;
     return false;
@@ -140,14 +157,17 @@ bool ForceModel::accept(const ContactModelData& m, const Eigen::Vector3d& x) {
     const double s = k_limit_scene_ / k;
     next.k_n_per_m *= s;
     next.f0_n *= s;
+    for (std::size_t i = 0; i < next.num_relaxing; ++i) next.relaxing[i].force_n *= s;
     ++counters_.stiffness_limited;
   }
   if (has_current_ && cfg_.blend_s > 0 && x.allFinite()) {
     // Keep rendering what we rendered: the jump becomes an offset that fades out. The wall's
     // spring too (planes moved, appeared or vanished), each plane set on its own proxy.
     Proxy old_proxy = proxy_, new_proxy = proxy_;
-    blend_offset_ += extrapolate(current_, x) + wall_spring(current_.rigid_planes, x, old_proxy) -
-                     extrapolate(next, x) - wall_spring(next.rigid_planes, x, new_proxy);
+    blend_offset_ += extrapolate(current_, x, age_of(current_, now_ns)) +
+                     wall_spring(current_.rigid_planes, x, old_proxy) -
+                     extrapolate(next, x, age_of(next, now_ns)) -
+                     wall_spring(next.rigid_planes, x, new_proxy);
     blend_rate_ = std::max(blend_rate_, blend_offset_.norm() / cfg_.blend_s);
   }
   current_ = next;
@@ -171,7 +191,7 @@ ForceOutput ForceModel::step(const ForceInput& in) {
     blend_offset_ *= left / off;
     if (left == 0) blend_rate_ = 0;
   }
-  if (in.new_model != nullptr) accept(*in.new_model, in.position_m);
+  if (in.new_model != nullptr) accept(*in.new_model, in.position_m, in.now_ns);
 
   // Server gone (liveliness): the model is treated as stale at once, so the force fades to zero
   // within fade_s with bounded steps; then the model is dropped and a returning server ramps in.
@@ -187,8 +207,7 @@ ForceOutput ForceModel::step(const ForceInput& in) {
   }
 
   double age = 0;
-  if (has_current_)
-    age = std::max(0.0, 1e-9 * static_cast<double>(in.now_ns - current_.reference_time_ns));
+  if (has_current_) age = age_of(current_, in.now_ns);
   const bool stale = !has_current_ || age > cfg_.model_timeout_s || server_gone_;
   if (stale && has_current_ && !stale_) ++counters_.timeouts;
   stale_ = stale;
@@ -226,7 +245,7 @@ ForceOutput ForceModel::step(const ForceInput& in) {
   Eigen::Vector3d fd = Eigen::Vector3d::Zero();
   if (has_current_ && gain_ > 0) {
     // Extrapolate the newest model; blend offset from the model change.
-    const Eigen::Vector3d f = extrapolate(current_, in.position_m) + blend_offset_;
+    const Eigen::Vector3d f = extrapolate(current_, in.position_m, age) + blend_offset_;
     fd = cfg_.force_scale * f;
     const Eigen::Vector3d& n = current_.normal;
     if (current_.in_contact && n.squaredNorm() > 0 && fd.squaredNorm() > 0) {

@@ -1,5 +1,6 @@
 // The haptic client's local force model (docs/ARCHITECTURE.md "haptic_client"):
-// extrapolation of the newest server ContactModel, F = f0 + K (x - x0), blended on a new model,
+// extrapolation of the newest server ContactModel, F = f0 + K (x - x0) with f0 relaxing in time
+// for viscoelastic tissue (the model's relaxing parts), blended on a new model,
 // with passivity-limited stiffness and damping, device clamp, per-tick step bound, ramp-in,
 // model watchdog, server-gone and NaN handling; rigid obstacles (the model's constraint planes)
 // rendered as a wall on a proxy (proxy.hpp) and added to the tissue force.
@@ -12,9 +13,19 @@
 
 #include <Eigen/Core>
 
+#include <array>
+#include <cstddef>
 #include <cstdint>
 
 namespace neurosim::haptic {
+
+// The part of a model's f0 relaxing with one time constant while the tool is held
+// (ContactModel.relaxing_forces: viscoelastic tissue).
+struct RelaxingForce {
+  Eigen::Vector3d force_n = Eigen::Vector3d::Zero();  // unit N
+  double tau_s = 0;                                   // relaxation time, > 0, unit s
+};
+inline constexpr std::size_t kMaxRelaxingForces = 8;  // the IDL's bound
 
 // One ContactModel as the loop sees it (copied out of the DDS sample; SI units).
 struct ContactModelData {
@@ -23,7 +34,7 @@ struct ContactModelData {
                                        // source time), same clock as ForceInput::now_ns, unit ns
   Eigen::Vector3d x0_m = Eigen::Vector3d::Zero();       // reference tool tip, scene frame, unit m
   Eigen::Vector3d f0_n = Eigen::Vector3d::Zero();       // force on the tool at x0, unit N
-  Eigen::Matrix3d k_n_per_m = Eigen::Matrix3d::Zero();  // K = dF/dx at x0, unit N/m
+  Eigen::Matrix3d k_n_per_m = Eigen::Matrix3d::Zero();  // K = dF/dx at x0 (instantaneous), N/m
   Eigen::Vector3d normal = Eigen::Vector3d::Zero();     // out of the tissue, unit vector
   bool in_contact = false;
   double validity_radius_m = 0;  // extrapolate within this distance of x0 (0: no limit), unit m
@@ -31,6 +42,10 @@ struct ContactModelData {
   // Rigid obstacles near the tool (ContactModel.rigid_planes), rigid: valid until replaced by
   // the next model's planes (no validity radius), empty when none is near.
   RigidPlaneSet rigid_planes;
+  // Viscoelastic tissue: held at x0, the force at reference_time_ns + s is
+  // f0 + sum_i (exp(-s / tau_i) - 1) relaxing[i].force_n (none: f0 holds).
+  std::array<RelaxingForce, kMaxRelaxingForces> relaxing{};
+  std::size_t num_relaxing = 0;
 };
 
 struct ForceModelConfig {
@@ -114,13 +129,15 @@ class ForceModel {
   // Stiffness of the rigid wall in the scene frame (N/m), <= scene_stiffness_limit().
   double wall_stiffness_scene() const { return k_wall_scene_; }
 
-  // Simulated force of one model at x (scene frame, before scaling, gain, damping, clamp):
-  // f0 + K (x - x0) with x - x0 limited to the validity radius, zero out of contact or when the
-  // result would pull the tool into the tissue (unilateral).
-  static Eigen::Vector3d extrapolate(const ContactModelData& m, const Eigen::Vector3d& x);
+  // Simulated force of one model at x, age_s after its reference time (scene frame, before
+  // scaling, gain, damping, clamp): f0 relaxed by its relaxing parts over age_s, plus K (x - x0)
+  // with x - x0 limited to the validity radius; zero out of contact or when the result would
+  // pull the tool into the tissue (unilateral).
+  static Eigen::Vector3d extrapolate(const ContactModelData& m, const Eigen::Vector3d& x,
+                                     double age_s = 0);
 
  private:
-  bool accept(const ContactModelData& m, const Eigen::Vector3d& x);
+  bool accept(const ContactModelData& m, const Eigen::Vector3d& x, std::int64_t now_ns);
   // Wall spring of a plane set at x, simulated (scene) force k_wall (proxy - x), unit N.
   Eigen::Vector3d wall_spring(const RigidPlaneSet& planes, const Eigen::Vector3d& x,
                               Proxy& proxy) const;

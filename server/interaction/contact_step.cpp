@@ -104,8 +104,12 @@ State::State(const Model& m) {
     bs.node_test_stamp.assign(4 * b.rest_m.size(), -1);
     bs.node_test_in.assign(4 * b.rest_m.size(), 0);
     bs.sliding_lambda.setZero(b.body->sliding().size());
-    if (!b.creep.terms.empty())
-      bs.history = std::make_unique<ViscoelasticHistory>(b.creep, static_cast<int>(b.rest_m.size()));
+    if (!b.creep.terms.empty()) {
+      bs.history = std::make_unique<ViscoelasticHistory>(b.host_material.viscoelastic, b.creep,
+                                                         static_cast<int>(b.rest_m.size()));
+      bs.tool_force_n.assign(b.rest_m.size(), Vec3::Zero());
+      bs.relax_stamp.assign(b.rest_m.size(), -1);
+    }
     if (m.options_.precompute_contact_columns) {
       const auto t0 = Clock::now();
       std::vector<int> all(b.rest_m.size());
@@ -188,6 +192,7 @@ void State::reserve_workspace(const Model& m, int tools) {
     b.forces_n.reserve(3 * max_rows);
   }
   for (auto& list : missing_) list.reserve(3 * max_rows);
+  relax_slots_.reserve(3 * max_rows);
   backup_.resize(bodies_.size());
   for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
     // A viscoelastic body's forces also hold its history slots: room for every slot.
@@ -741,6 +746,23 @@ Mat3 State::own_stiffness(int ns, int t) {
   return k;
 }
 
+// The body carrying most of tool t's force (-1: none) and that force's sum of row forces.
+int State::main_body_of(const Model& m, int t, int ns, double& sum_n) const {
+  const int nc = static_cast<int>(rows_.size());
+  int main = -1;
+  sum_n = 0.0;
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
+    double sum = 0.0;
+    for (int r = 0; r < nc; ++r)
+      if (rows_[r].tool == t && rows_[r].body == static_cast<int>(bi)) sum += lambda_[ns + r];
+    if (sum > sum_n) {
+      sum_n = sum;
+      main = static_cast<int>(bi);
+    }
+  }
+  return main;
+}
+
 // Phase "answer" of one tool: force, stiffness K = -N (W_AA^-1)_cc N^T over its active rows
 // (flat-contact linearization: a row's depth changes by -n . dx), normal, main mesh and nodes,
 // validity radius (the contact patch: the active rows' points around their force-weighted
@@ -756,18 +778,8 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
   c.iterations = iterations;
   c.nodes.clear();
   c.mesh = -1;
-  // Main body: the one carrying most of this tool's force.
-  int main_body = -1;
   double best = 0.0;
-  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
-    double sum = 0.0;
-    for (int r = 0; r < nc; ++r)
-      if (rows_[r].tool == t && rows_[r].body == static_cast<int>(bi)) sum += lambda_[ns + r];
-    if (sum > best) {
-      best = sum;
-      main_body = static_cast<int>(bi);
-    }
-  }
+  const int main_body = main_body_of(m, t, ns, best);
   Vec3 centre = Vec3::Zero();
   for (int r = 0; r < nc; ++r) {
     const Row& row = rows_[r];
@@ -807,6 +819,56 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
     throw std::runtime_error("Simulation::step: non-finite contact result for tool " +
                              std::to_string(t));
   }
+}
+
+// Phase "relaxation" (after the history took the step): a viscoelastic main body's share of the
+// tool's force per kernel term, and the instantaneous stiffness. Per slot the force relaxes as
+// force_at + sum_i (e^{-s/tau_i} - 1) relaxing(slot, i) with its displacement held
+// (viscoelastic_history.hpp); the tool takes each loaded slot's parts in the proportion of the
+// slot's force it exerts (all of them when it alone loads the slot). Rows on other bodies: held.
+// The LCP's compliance was alpha W (the step's relaxation over dt): K = alpha K_step is the
+// stiffness at dt = 0, when every active row of the tool has that alpha (else the step's).
+void State::relaxation(const Model& m, int t, int ns, ToolContact& c) {
+  c.num_relaxing = 0;
+  if (!m.viscoelastic_ || !c.in_contact) return;
+  double sum_n = 0.0;
+  const int b = main_body_of(m, t, ns, sum_n);
+  if (b < 0 || !bodies_[b].history) return;
+  BodyState& bs = bodies_[b];
+  const ViscoelasticHistory& hist = *bs.history;
+  const long long stamp = ++relax_counter_;
+  relax_slots_.clear();
+  bool one_alpha = true;
+  for (std::size_t r = 0; r < rows_.size(); ++r) {
+    const Row& row = rows_[r];
+    const double l = lambda_[ns + static_cast<int>(r)];
+    if (row.tool != t || !(l > 0.0)) continue;
+    const ViscoelasticHistory* h = bodies_[row.body].history.get();
+    if ((h ? h->alpha() : 1.0) != hist.alpha()) one_alpha = false;
+    if (row.body != b) continue;
+    for (int k = 0; k < 3; ++k) {
+      const int s = row.slot[k];
+      if (s < 0 || row.w[k] == 0.0) continue;
+      if (bs.relax_stamp[s] != stamp) {
+        bs.relax_stamp[s] = stamp;
+        bs.tool_force_n[s].setZero();
+        relax_slots_.push_back(s);
+      }
+      bs.tool_force_n[s] -= (l * row.w[k]) * row.normal;  // on the tissue
+    }
+  }
+  const auto& kernel = hist.kernel();
+  const int nk = std::min(static_cast<int>(kernel.size()), kMaxRelaxingForces);
+  for (int i = 0; i < nk; ++i) c.relaxing[i] = RelaxingForce{Vec3::Zero(), kernel[i].tau_s};
+  for (int s : relax_slots_) {
+    const Vec3 f = hist.force_at(s);
+    const double ff = f.squaredNorm();
+    if (!(ff > 0.0)) continue;
+    const double share = bs.tool_force_n[s].dot(f) / ff;
+    for (int i = 0; i < nk; ++i) c.relaxing[i].force_n -= share * hist.relaxing(s, i);  // on the tool
+  }
+  c.num_relaxing = nk;
+  if (one_alpha) c.stiffness_n_per_m *= hist.alpha();
 }
 
 // Phase "tier post": the tier's equilibrium follows these forces (worker thread; or now,
@@ -1004,9 +1066,12 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
     answer(m, t, poses[t], ns, lcp.iterations, nt, contacts[t]);
     contacts[t].rigid_planes = planes_[t];
     contacts[t].held_tip_m = poses[t].tip_m;
-    last_good_[t] = contacts[t];
   }
   commit_history();
+  for (int t = 0; t < nt; ++t) {
+    relaxation(m, t, ns, contacts[t]);
+    last_good_[t] = contacts[t];
+  }
   tier_post(stats);
   stats.solve_us = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
 }

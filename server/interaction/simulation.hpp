@@ -43,11 +43,22 @@ struct ToolPose {
 // Stations a Simulation tells apart (ToolPose::station), each with its own rigid proxy.
 inline constexpr int kMaxStations = 4096;
 
+// The part of a tool's force that relaxes with one time constant while the tool is held
+// (viscoelastic tissue): held at the step's pose from its time on, the force is
+// force_n + sum_i (exp(-s / tau_i) - 1) relaxing[i].force_n after s seconds.
+struct RelaxingForce {
+  Vec3 force_n{Vec3::Zero()};  // unit N
+  double tau_s{0.0};           // relaxation time, unit s
+};
+inline constexpr int kMaxRelaxingForces = 8;  // fem::Viscoelastic::kMaxTerms
+
 // What a step returns for one tool.
 struct ToolContact {
   bool in_contact{false};
   Vec3 force_n{Vec3::Zero()};            // reaction force on the tool, unit N
-  Mat3 stiffness_n_per_m{Mat3::Zero()};  // d(force)/d(tip position) at this pose, unit N/m
+  // d(force)/d(tip position) at this pose, unit N/m; viscoelastic tissue: the instantaneous one
+  // (an increment of the tip changes the force by K dx at once, and relaxes afterwards).
+  Mat3 stiffness_n_per_m{Mat3::Zero()};
   Vec3 normal{Vec3::Zero()};             // contact normal (unit, pointing out of the tissue)
   Vec3 reference_tip_m{Vec3::Zero()};    // the pose the force and stiffness refer to (x0)
   double validity_radius_m{0.0};         // the linear model holds within this distance of x0
@@ -60,6 +71,11 @@ struct ToolContact {
   // it, each with the penetration of the device's (raw) tip behind it. count 0 without obstacles.
   ObstaclePlanes rigid_planes;
   Vec3 held_tip_m{Vec3::Zero()};  // the tip the physics stepped (the device's, or held), unit m
+  // Viscoelastic main body: the parts of force_n relaxing with its kernel's terms (exact for the
+  // pose held with the contact slots' displacement held, viscoelastic_history.hpp); none for an
+  // elastic body (the force holds).
+  std::array<RelaxingForce, kMaxRelaxingForces> relaxing{};
+  int num_relaxing{0};
 };
 
 struct StepStats {

@@ -101,6 +101,10 @@ struct BodyState {
   // Viscoelastic body: the hereditary integral's internal variables; forces_n above are then the
   // creep-equivalent forces (the elastic forces giving the displacement, viscoelastic_history.hpp).
   std::unique_ptr<ViscoelasticHistory> history;
+  // Phase "relaxation": one tool's force per slot (tissue side, unit N) and the stamp that says
+  // which entries belong to the current tool (sized with the history).
+  std::vector<mesh::Vec3> tool_force_n;
+  std::vector<long long> relax_stamp;
 };
 
 // The constant physics model: meshes, bodies (factorizations, coupling operators, contact
@@ -219,6 +223,8 @@ class State {
   void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations, int tools,
               ToolContact& c);
   Mat3 own_stiffness(int ns, int tool);
+  int main_body_of(const Model& m, int tool, int ns, double& sum_n) const;
+  void relaxation(const Model& m, int tool, int ns, ToolContact& c);
   void tier_post(StepStats& stats);
   LcpResult solve_geometry(const Model& m, const std::vector<ToolPose>& poses, StepStats& stats);
   void save_forces();
@@ -278,6 +284,8 @@ class State {
   std::vector<ForceBackup> backup_;
   std::vector<char> sliding_active_backup_;
   std::vector<std::uint64_t> row_keys_, previous_row_keys_;  // rows of the last two geometries
+  long long relax_counter_{0};
+  std::vector<int> relax_slots_;  // relaxation: the slots of one tool's rows on its main body
   std::vector<int> own_rows_;  // own_stiffness: one tool's active rows, its factor and N
   Eigen::MatrixXd own_factor_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> own_y_;

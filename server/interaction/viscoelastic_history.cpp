@@ -6,12 +6,31 @@
 
 namespace neurosim::interaction {
 
-ViscoelasticHistory::ViscoelasticHistory(const fem::CreepSpectrum& creep, int num_slots)
-    : terms_(creep.terms), num_terms_(static_cast<int>(creep.terms.size())) {
+namespace {
+
+// E = e^{-x} and beta = (1 - e^{-x}) / x for x = dt / time, accurate for x -> 0 (expm1), 1 at 0.
+void decay(double dt_s, double time_s, double& e, double& beta) {
+  const double x = dt_s / time_s;
+  e = std::exp(-x);
+  beta = x > 0.0 ? -std::expm1(-x) / x : 1.0;
+}
+
+}  // namespace
+
+ViscoelasticHistory::ViscoelasticHistory(const fem::Viscoelastic& kernel,
+                                         const fem::CreepSpectrum& creep, int num_slots)
+    : terms_(creep.terms),
+      num_terms_(static_cast<int>(creep.terms.size())),
+      kernel_(kernel.terms),
+      num_kernel_(static_cast<int>(kernel.terms.size())) {
   e_.assign(num_terms_, 1.0);
   beta_.assign(num_terms_, 1.0);
+  er_.assign(num_kernel_, 1.0);
+  br_.assign(num_kernel_, 1.0);
   f_prev_.assign(num_slots, Vec3::Zero());
   q_.assign(static_cast<std::size_t>(num_slots) * num_terms_, Vec3::Zero());
+  eq_prev_.assign(num_slots, Vec3::Zero());
+  z_.assign(static_cast<std::size_t>(num_slots) * num_kernel_, Vec3::Zero());
   index_.assign(num_slots, -1);
   seen_.assign(num_slots, 0);
   slots_.reserve(num_slots);
@@ -24,12 +43,10 @@ void ViscoelasticHistory::begin(double dt_s) {
     throw std::invalid_argument("ViscoelasticHistory: time step must be finite and >= 0");
   alpha_ = 1.0;
   for (int k = 0; k < num_terms_; ++k) {
-    // beta = (1 - e^-x) / x with x = dt / rho, accurate for x -> 0 (expm1) and 1 at x = 0.
-    const double x = dt_s / terms_[k].rho_s;
-    e_[k] = std::exp(-x);
-    beta_[k] = x > 0.0 ? -std::expm1(-x) / x : 1.0;
+    decay(dt_s, terms_[k].rho_s, e_[k], beta_[k]);
     alpha_ += terms_[k].a * (1.0 - beta_[k]);
   }
+  for (int i = 0; i < num_kernel_; ++i) decay(dt_s, kernel_[i].tau_s, er_[i], br_[i]);
   for (std::size_t i = 0; i < slots_.size(); ++i) {
     const int s = slots_[i];
     Vec3 h = Vec3::Zero();
@@ -74,6 +91,7 @@ void ViscoelasticHistory::commit(const std::vector<int>& slots,
       q = e_[k] * q + beta_[k] * (f - f_prev_[s]);
     }
     f_prev_[s] = f;
+    relax(s, equivalent_n[i]);
   }
   // History slots without a force this step: f_n = 0.
   for (int s : next_slots_) {
@@ -83,6 +101,7 @@ void ViscoelasticHistory::commit(const std::vector<int>& slots,
       q = e_[k] * q - beta_[k] * f_prev_[s];
     }
     f_prev_[s] = Vec3::Zero();
+    relax(s, force_of(s));  // f~ = alpha 0 + h
   }
   // The slots that keep a history, in a deterministic order (first loaded, then older).
   for (int s : slots_) index_[s] = -1;
@@ -94,15 +113,28 @@ void ViscoelasticHistory::commit(const std::vector<int>& slots,
     double left = f_prev_[s].norm();
     for (int k = 0; k < num_terms_; ++k)
       left += terms_[k].a * q_[static_cast<std::size_t>(s) * num_terms_ + k].norm();
+    for (int i = 0; i < num_kernel_; ++i)
+      left += z_[static_cast<std::size_t>(s) * num_kernel_ + i].norm();
     if (left <= floor) {
       for (int k = 0; k < num_terms_; ++k) q_[static_cast<std::size_t>(s) * num_terms_ + k].setZero();
+      for (int i = 0; i < num_kernel_; ++i) z_[static_cast<std::size_t>(s) * num_kernel_ + i].setZero();
       f_prev_[s].setZero();
+      eq_prev_[s].setZero();
       continue;
     }
     index_[s] = static_cast<int>(slots_.size());
     slots_.push_back(s);
     h_.push_back(Vec3::Zero());  // begin() fills it
   }
+}
+
+void ViscoelasticHistory::relax(int slot, const Vec3& equivalent_n) {
+  const Vec3 d = equivalent_n - eq_prev_[slot];
+  for (int i = 0; i < num_kernel_; ++i) {
+    Vec3& z = z_[static_cast<std::size_t>(slot) * num_kernel_ + i];
+    z = er_[i] * z + br_[i] * d;
+  }
+  eq_prev_[slot] = equivalent_n;
 }
 
 }  // namespace neurosim::interaction

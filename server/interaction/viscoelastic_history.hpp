@@ -21,6 +21,15 @@
 // history displacement C h_n along each row: exact for the model and a force linear between the
 // step times; the only error is that interpolation (relative (dt / rho_min)^2 / 12 at most on a
 // step's increment of the hereditary integral). dt = 0 is a jump (alpha = 1, J(0) = 1).
+//
+// What a held tool feels next (the haptic client's extrapolation between models): per slot the
+// actual force is the relaxation integral of the creep-equivalent one, f = int g(t - s) df~(s)
+// (g and J are inverse kernels), so with the Prony terms
+//   f_n = g_inf f~_n + sum_i g_i z_i,n,  z_i(t) = int e^{-(t-s)/tau_i} df~(s),
+// integrated with f~ linear between the step times (z_i,n = E_i z_i,n-1 + beta_i (f~_n - f~_n-1)
+// with E_i, beta_i of tau_i). Held from t_n with f~ held (the slot's displacement held),
+// f(t_n + s) = f_n + sum_i (e^{-s/tau_i} - 1) g_i z_i,n: relaxing(slot, i) = g_i z_i,n is the
+// part of the slot's force that relaxes with tau_i.
 #pragma once
 
 #include "server/fem/viscoelastic.hpp"
@@ -36,9 +45,10 @@ class ViscoelasticHistory {
  public:
   using Vec3 = Eigen::Vector3d;
 
-  // Creep function of the body and its number of contact slots; sizes everything (no
-  // allocation afterwards).
-  ViscoelasticHistory(const fem::CreepSpectrum& creep, int num_slots);
+  // The body's relaxation kernel (validated), its creep function and its number of contact
+  // slots; sizes everything (no allocation afterwards).
+  ViscoelasticHistory(const fem::Viscoelastic& kernel, const fem::CreepSpectrum& creep,
+                      int num_slots);
 
   // The step to t_n = t_n-1 + dt_s (dt_s >= 0): alpha and the history forces h_n.
   void begin(double dt_s);
@@ -58,15 +68,29 @@ class ViscoelasticHistory {
   void commit(const std::vector<int>& slots, const std::vector<Vec3>& equivalent_n);
   // The contact force of the last committed step at `slot` (unit N).
   Vec3 force_at(int slot) const { return f_prev_[slot]; }
+  // The part of that force relaxing with the kernel's term `term` (g_i z_i, unit N): held from
+  // the last committed step, the slot's force is force_at + sum_i (e^{-s/tau_i} - 1) relaxing.
+  Vec3 relaxing(int slot, int term) const {
+    return kernel_[term].g * z_[static_cast<std::size_t>(slot) * num_kernel_ + term];
+  }
+  const std::vector<fem::PronyTerm>& kernel() const { return kernel_; }
 
  private:
+  // The relaxation variables of `slot` for its creep-equivalent force of this step.
+  void relax(int slot, const Vec3& equivalent_n);
+
   std::vector<fem::CreepTerm> terms_;
   int num_terms_;
+  std::vector<fem::PronyTerm> kernel_;
+  int num_kernel_;
   // Per step.
   double alpha_{1.0};
-  std::vector<double> e_, beta_;
-  // Per slot: previous force, the internal variables q_k (slot-major), index into slots_ or -1.
+  std::vector<double> e_, beta_;   // creep terms
+  std::vector<double> er_, br_;    // relaxation (Prony) terms
+  // Per slot: previous force, the internal variables q_k (slot-major), index into slots_ or -1;
+  // previous creep-equivalent force and the relaxation variables z_i (slot-major).
   std::vector<Vec3> f_prev_, q_;
+  std::vector<Vec3> eq_prev_, z_;
   std::vector<int> index_;
   std::vector<int> slots_;  // slots with history (force or internal variable nonzero)
   std::vector<Vec3> h_;     // per slots_ entry

@@ -45,6 +45,9 @@ StepLoop::StepLoop(StepLoopDef def, interaction::Simulation& sim, StationAdmissi
     poses_by_count_[n].resize(n);
     contacts_by_count_[n].resize(n);
   }
+  // Room for a viscoelastic tissue's relaxing parts (no allocation in the step).
+  for (std::size_t i = 0; i < m; ++i)
+    wire::reserve(models_out_[i]->relaxing_forces, interaction::kMaxRelaxingForces);
   slot_of_pose_.resize(m);
   all_poses_.resize(m);
   all_slots_.resize(m);
@@ -210,6 +213,16 @@ void StepLoop::write_model(std::size_t i, const ToolContact* c, std::uint64_t st
   std::strncpy(cm.contact_mesh_id, mid, neurosim_ID_MAX);
   cm.contact_mesh_id[neurosim_ID_MAX] = '\0';
   cm.tool_sample_rejected = c == nullptr || s.last_rejected.load(std::memory_order_relaxed);
+  cm.relaxing_forces._length = 0;
+  if (touching) {
+    cm.relaxing_forces._length = static_cast<std::uint32_t>(c->num_relaxing);
+    for (int j = 0; j < c->num_relaxing; ++j) {
+      const interaction::RelaxingForce& src = c->relaxing[static_cast<std::size_t>(j)];
+      neurosim_RelaxingForce& dst = cm.relaxing_forces._buffer[j];
+      for (int d = 0; d < 3; ++d) dst.force_n[d] = src.force_n[d];
+      dst.tau_s = src.tau_s;
+    }
+  }
   cm.rigid_planes._length = 0;
   if (sim_.rigid_obstacle() != nullptr && c != nullptr) {
     const interaction::ObstaclePlanes& rp = c->rigid_planes;

@@ -337,3 +337,54 @@ TEST(haptic_force_model, SceneFactorsScaleForceAndTheStiffnessLimit) {
   EXPECT_EQ(fm.counters().stiffness_limited, 0u);
   EXPECT_NEAR(out.force_n.z(), 0.1 * 5000 * 0.003, 1e-12);
 }
+
+// Viscoelastic tissue: held at x0, the rendered force is f0 relaxed by the model's parts over
+// its age (ContactModel.relaxing_forces), K dx on top; a part with tau <= 0 or NaN rejects the
+// model; the passivity limit scales the parts with f0 and K.
+TEST(haptic_force_model, RelaxingPartsRelaxTheHeldForce) {
+  nh::ForceModelConfig c = open_config();
+  c.damping_n_s_per_m = 0;
+  c.enforce_passivity = false;  // K as sent (the limit below)
+  nh::ForceModel fm(c);
+  nh::ContactModelData m;
+  m.tool_sequence = 1;
+  m.reference_time_ns = 0;
+  m.in_contact = true;
+  m.normal = Vector3d::UnitZ();
+  m.f0_n = Vector3d(0, 0, 1.0);
+  m.k_n_per_m = -300 * Matrix3d::Identity();
+  m.validity_radius_m = 0.01;
+  m.relaxing[0] = {Vector3d(0, 0, 0.4), 0.01};
+  m.relaxing[1] = {Vector3d(0, 0, 0.2), 0.5};
+  m.num_relaxing = 2;
+  const Vector3d x = m.x0_m + Vector3d(0, 0, -0.001);  // 1 mm in: K dx = +0.3 N
+  for (int k = 0; k <= 40; ++k) {
+    const double s = 1e-3 * k;
+    const auto out = fm.step(input(k * kTick, x, k == 0 ? &m : nullptr));
+    const double expected = 1.0 + 0.3 + 0.4 * (std::exp(-s / 0.01) - 1) + 0.2 * (std::exp(-s / 0.5) - 1);
+    EXPECT_NEAR(out.force_n.z(), expected, 1e-12) << "age " << s << " s";
+  }
+  // Bad parts: the model is rejected (counted), the previous one stays in use.
+  nh::ContactModelData bad = m;
+  bad.tool_sequence = 2;
+  bad.relaxing[1].tau_s = 0;
+  fm.step(input(41 * kTick, x, &bad));
+  bad.relaxing[1].tau_s = std::numeric_limits<double>::quiet_NaN();
+  fm.step(input(42 * kTick, x, &bad));
+  EXPECT_EQ(fm.counters().nan_models, 2u);
+  EXPECT_EQ(fm.step(input(43 * kTick, x)).model_sequence, 1u);
+
+  // Scaled to the passive limit: f0, K and the parts alike (the held force keeps its shape).
+  nh::ForceModelConfig lim = open_config();
+  lim.max_stiffness_n_per_m = 150;
+  lim.enforce_passivity = false;
+  lim.damping_n_s_per_m = 0;
+  nh::ForceModel fl(lim);
+  const double sc = 150.0 / 300.0;
+  for (int k = 0; k <= 20; ++k) {
+    const double s = 1e-3 * k;
+    const auto out = fl.step(input(k * kTick, m.x0_m, k == 0 ? &m : nullptr));
+    const double expected = sc * (1.0 + 0.4 * (std::exp(-s / 0.01) - 1) + 0.2 * (std::exp(-s / 0.5) - 1));
+    EXPECT_NEAR(out.force_n.z(), expected, 1e-12) << "age " << s << " s";
+  }
+}

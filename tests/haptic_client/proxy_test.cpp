@@ -188,6 +188,20 @@ TEST(haptic_proxy, ReceivedContactModelDropsAndCountsBadPlanes) {
   EXPECT_EQ(nh::copy_contact_model(*empty, 999, m), 0u);
   EXPECT_EQ(m.rigid_planes.count, 0u);
   EXPECT_EQ(m.reference_time_ns, 999) << "no echoed source time: arrival time";
+  EXPECT_EQ(m.num_relaxing, 0u);
+  // Viscoelastic tissue's relaxing parts are copied as sent (the force model checks them).
+  neurosim_RelaxingForce parts[2] = {};
+  parts[0].force_n[2] = 0.25;
+  parts[0].tau_s = 0.5;
+  parts[1].force_n[0] = -0.1;
+  parts[1].tau_s = 50;
+  neurosim::wire::assign(c->relaxing_forces, parts, 2);
+  nh::copy_contact_model(*c, 999, m);
+  ASSERT_EQ(m.num_relaxing, 2u);
+  EXPECT_EQ(m.relaxing[0].force_n, Vector3d(0, 0, 0.25));
+  EXPECT_EQ(m.relaxing[0].tau_s, 0.5);
+  EXPECT_EQ(m.relaxing[1].force_n, Vector3d(-0.1, 0, 0));
+  EXPECT_EQ(m.relaxing[1].tau_s, 50);
 }
 
 TEST(haptic_proxy, ForceModelDropsAndCountsBadPlanesFromAnyLink) {

@@ -313,6 +313,67 @@ TEST(interaction_viscoelastic, WarmStepDoesNotAllocate) {
   EXPECT_EQ(neurosim::testing::allocations_on_this_thread() - before, 0);
 }
 
+// What the haptic client extrapolates from one answer (its ContactModel): held at the answer's
+// pose, F(t_n + s) = F_n + sum_i (e^{-s/tau_i} - 1) P_i with the answer's relaxing parts P_i.
+Vec3 held_prediction(const ToolContact& c, double s) {
+  Vec3 f = c.force_n;
+  for (int i = 0; i < c.num_relaxing; ++i)
+    f += (std::exp(-s / c.relaxing[i].tau_s) - 1.0) * c.relaxing[i].force_n;
+  return f;
+}
+
+// A press at 10 mm/s to 1 mm, then held: from the answers during the press, at its end and
+// during the hold, the relaxing parts predict the force the tool meets 5, 20 and 50 ms later
+// with the pose held (what a held tool feels between two models); the stiffness is the
+// instantaneous one (the elastic block's at the same rows); an elastic block has no parts.
+TEST(interaction_viscoelastic, AnswersCarryTheRelaxationOfAHeldTool) {
+  const double depth = 0.001;
+  const int press_steps = 120;  // 0.2 mm above the face to 1 mm deep
+  auto path = [&](int k) { return k >= press_steps ? depth : -0.0002 + (depth + 0.0002) * k / press_steps; };
+  auto visco = block(kTerms);
+  std::vector<ToolContact> c;
+  StepStats st;
+  std::vector<ToolContact> answers;
+  std::vector<int> answer_steps{60, 100, press_steps, press_steps + 30, press_steps + 400};
+  double worst = 0.0, largest_change = 0.0;
+  for (int k0 : answer_steps) {
+    // The answer at step k0 (the path up to it), then the pose held.
+    auto sim = block(kTerms);
+    for (int k = 0; k <= k0; ++k) {
+      sim->step_at(k * kDt, press(path(k)), c, st);
+      ASSERT_TRUE(st.converged);
+    }
+    const ToolContact answer = c[0];
+    ASSERT_TRUE(answer.in_contact);
+    ASSERT_EQ(answer.num_relaxing, 2);
+    EXPECT_EQ(answer.relaxing[0].tau_s, kTerms[0].tau_s);
+    EXPECT_EQ(answer.relaxing[1].tau_s, kTerms[1].tau_s);
+    int k = k0;
+    for (int ms : {5, 20, 50}) {
+      for (; k < k0 + ms; ++k) sim->step_at((k + 1) * kDt, press(path(k0)), c, st);
+      const Vec3 expected = held_prediction(answer, ms * kDt);
+      const double err = (c[0].force_n - expected).norm() / answer.force_n.norm();
+      largest_change = std::max(largest_change, (c[0].force_n - answer.force_n).norm() / answer.force_n.norm());
+      worst = std::max(worst, err);
+      EXPECT_LT(err, 1e-3) << "answer at step " << k0 << ", " << ms << " ms held";
+    }
+  }
+  // The prediction is not trivially the held force: the force does change by tens of percent.
+  EXPECT_GT(largest_change, 0.1);
+  std::printf("held after an answer: worst |F - prediction| / F_n = %.3g (force changed up to %.3g)\n",
+              worst, largest_change);
+
+  // Instantaneous stiffness: the elastic block's at the same (rest-surface) rows.
+  auto elastic = block({});
+  std::vector<ToolContact> ce;
+  elastic->step_at(0.0, press(depth), ce, st);
+  for (int k = 0; k <= 200; ++k) visco->step_at(k * kDt, press(path(k)), c, st);
+  const double kn = ce[0].stiffness_n_per_m.norm();
+  ASSERT_GT(kn, 0.0);
+  EXPECT_LT((c[0].stiffness_n_per_m - ce[0].stiffness_n_per_m).norm(), 1e-9 * kn);
+  EXPECT_EQ(ce[0].num_relaxing, 0);
+}
+
 // Without terms time does not enter: any times give the same forces.
 TEST(interaction_viscoelastic, ElasticSceneIgnoresTime) {
   auto a = block({});
@@ -327,7 +388,7 @@ TEST(interaction_viscoelastic, ElasticSceneIgnoresTime) {
 // (dt = 0) is J(0) = 1.
 TEST(interaction_viscoelastic, HistoryIntegratesTheCreepFunctionExactlyForAHeldForce) {
   const auto creep = fem::creep_spectrum(kernel(kTerms));
-  ViscoelasticHistory h(creep, 4);
+  ViscoelasticHistory h(kernel(kTerms), creep, 4);
   const std::vector<int> slots{2};
   const Eigen::Vector3d f(0.0, 0.0, -0.3);
   h.begin(0.0);

@@ -8,6 +8,7 @@
 #include "server/service/station_admission.hpp"
 #include "server/service/step_loop.hpp"
 
+#include <array>
 #include <cstring>
 #include <map>
 #include <stdexcept>
@@ -72,18 +73,22 @@ struct ModelOut {
   bool in_contact{false};
   bool rejected{false};
   double f0_x_n{0.0};
+  std::vector<std::array<double, 2>> relaxing;  // per relaxing part: (force x, unit N; tau_s)
 };
 class RecordingSink : public ContactModelSink {
  public:
   void write(const neurosim_ContactModel& m) override {
-    written.push_back({m.station_id, m.tool_sequence, m.in_contact, m.tool_sample_rejected, m.f0_n[0]});
+    written.push_back({m.station_id, m.tool_sequence, m.in_contact, m.tool_sample_rejected, m.f0_n[0], {}});
+    for (std::uint32_t j = 0; j < m.relaxing_forces._length; ++j)
+      written.back().relaxing.push_back({m.relaxing_forces._buffer[j].force_n[0], m.relaxing_forces._buffer[j].tau_s});
   }
   void dispose(const neurosim_ContactModel& k) override { disposed.emplace_back(k.station_id); }
   std::vector<ModelOut> written;
   std::vector<std::string> disposed;
 };
 
-// One tetrahedron; every tool below x = 0 is in contact with force (-k x, 0, 0). A step with any
+// One tetrahedron; every tool below x = 0 is in contact with force (-k x, 0, 0), of which 40 %
+// relaxes with 0.5 s and 20 % with 50 s when held (viscoelastic answers). A step with any
 // tip at x >= kPoisonX throws (as a step meeting a pose it cannot solve), so the stations whose
 // pose is poisoned can be told from the others.
 class PoisonSimulation : public interaction::Simulation {
@@ -106,6 +111,9 @@ class PoisonSimulation : public interaction::Simulation {
       const double x = poses[k].tip_m.x();
       c.in_contact = x < 0.0;
       c.force_n = interaction::Vec3(c.in_contact ? -kStiffness * x : 0.0, 0, 0);
+      c.num_relaxing = c.in_contact ? 2 : 0;
+      c.relaxing[0] = {0.4 * c.force_n, 0.5};
+      c.relaxing[1] = {0.2 * c.force_n, 50.0};
       c.reference_tip_m = poses[k].tip_m;
       c.mesh = c.in_contact ? 0 : -1;
     }

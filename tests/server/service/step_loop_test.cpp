@@ -68,6 +68,14 @@ TEST(service_step_loop, EveryStationWithAPoseGetsItsContactModel) {
   EXPECT_FALSE(t.models_of("b")[0].in_contact);
   EXPECT_EQ(t.loop->counters().steps.load(), 1u);
   EXPECT_EQ(t.sim.calls, 1) << "one step for all stations";
+  // Viscoelastic answers: the relaxing parts of f0 with their times, none out of contact.
+  const auto a = t.models_of("a")[0].relaxing;
+  ASSERT_EQ(a.size(), 2u);
+  EXPECT_NEAR(a[0][0], 0.4, 1e-12);
+  EXPECT_EQ(a[0][1], 0.5);
+  EXPECT_NEAR(a[1][0], 0.2, 1e-12);
+  EXPECT_EQ(a[1][1], 50.0);
+  EXPECT_TRUE(t.models_of("b")[0].relaxing.empty());
 }
 
 // A step that throws for one station's pose: that station is reset (zero force, flagged
