@@ -4,7 +4,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <stdexcept>
+#include <string>
+#include <utility>
 
 namespace neurosim::haptic {
 
@@ -33,6 +36,30 @@ class PressScript : public Script {
       s = 1 - smooth((c - 2.0) / 1.5);
     return {0, 0, 0.004 - 0.008 * s};
   }
+};
+
+// Hold: the press's descent (1.5 s, from 4 mm above the surface to 4 mm into it), held there
+// for hold_s, the press's withdrawal (1.5 s), then 4 mm above (a viscoelastic tissue's force
+// relaxes during the hold).
+class HoldScript : public Script {
+ public:
+  explicit HoldScript(double hold_s, std::string name) : hold_s_(hold_s), name_(std::move(name)) {}
+  std::string name() const override { return name_; }
+  Eigen::Vector3d position(double t) const override {
+    t = std::max(t, 0.0);
+    double s = 0;
+    if (t < 1.5)
+      s = smooth(t / 1.5);
+    else if (t < 1.5 + hold_s_)
+      s = 1;
+    else
+      s = 1 - smooth((t - 1.5 - hold_s_) / 1.5);
+    return {0, 0, 0.004 - 0.008 * s};
+  }
+
+ private:
+  double hold_s_;
+  std::string name_;
 };
 
 // Stroke: descend to 2 mm depth in 1 s, then slide ±10 mm along x (3 s period).
@@ -126,7 +153,7 @@ Eigen::Vector3d Script::velocity(double t_s) const {
 
 const std::vector<std::string>& script_names() {
   static const std::vector<std::string> names{"press", "stroke", "circle", "retract",
-                                              "approach"};
+                                              "approach", "hold"};
   return names;
 }
 
@@ -147,6 +174,16 @@ std::unique_ptr<Script> make_script(const std::string& name) {
   if (name == "circle") return std::make_unique<CircleScript>();
   if (name == "retract") return std::make_unique<RetractScript>();
   if (name == "approach") return std::make_unique<ApproachScript>();
+  // hold (10 s) or hold:S, the hold time in seconds.
+  if (name == "hold") return std::make_unique<HoldScript>(10.0, name);
+  if (name.rfind("hold:", 0) == 0) {
+    const std::string arg = name.substr(5);
+    char* end = nullptr;
+    const double s = std::strtod(arg.c_str(), &end);
+    if (arg.empty() || end != arg.c_str() + arg.size() || !std::isfinite(s) || s < 0 || s > 86400)
+      throw std::invalid_argument("script '" + name + "': the hold time must be a number of seconds in [0, 86400]");
+    return std::make_unique<HoldScript>(s, name);
+  }
   throw std::invalid_argument("unknown script '" + name + "' (known: " + script_list() + ")");
 }
 

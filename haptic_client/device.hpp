@@ -52,7 +52,8 @@ class Script {
   Eigen::Vector3d velocity(double t_s) const;
 };
 
-// Built-in scripts: press, stroke, circle, retract, approach. Throws std::invalid_argument listing them.
+// Built-in scripts: press, stroke, circle, retract, approach, hold (hold:S: the press held S s).
+// Throws std::invalid_argument listing them.
 std::unique_ptr<Script> make_script(const std::string& name);
 const std::vector<std::string>& script_names();
 

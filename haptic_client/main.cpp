@@ -5,7 +5,7 @@
 //          [--up X,Y,Z] [--label TEXT] [--no-server] [--no-rt] [--wait-server SECONDS]
 //          [--topic-prefix P] [--trace FILE.csv] [--spin-us US]
 //          [--rt-priority loop=80,publisher=70,receiver=60] [--rt-cpus loop=1]
-// SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract, approach) | hand:SCRIPT
+// SPEC: omni[:NAME] | replay:FILE | script:NAME (press, stroke, circle, retract, approach, hold[:S]) | hand:SCRIPT
 // --help lists the options, --version prints the version; usage errors exit 2.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
@@ -41,7 +41,8 @@ void sched_line(const char* m) { std::fprintf(stderr, "neurosim-haptic: %s\n", m
 
 const char* kSpecHelp =
     "SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, circle,\n"
-    "      retract, approach). Scripts press along device -z onto a surface at device z = 0;\n"
+    "      retract, approach, hold[:S]: the press held S s, default 10). Scripts press along\n"
+    "      device -z onto a surface at device z = 0;\n"
     "      --origin puts that point in the scene (m) and --up is the surface's outward normal\n"
     "      there. approach goes through a craniotomy: use it with --at-opening.";
 

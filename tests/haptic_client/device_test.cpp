@@ -154,3 +154,19 @@ TEST(haptic_device, EmptyRecordingAndBadSpecsAreRefused) {
 }
 
 }  // namespace
+
+// hold:S: the press's descent, S s at 4 mm deep, the withdrawal; a bad hold time is refused.
+TEST(haptic_device, HoldScriptHoldsThePressForItsTime) {
+  const auto s = nh::make_script("hold:2.5");
+  EXPECT_EQ(s->name(), "hold:2.5");
+  EXPECT_NEAR(s->position(0).z(), 0.004, 1e-15);
+  for (double t : {1.5, 2.0, 3.0, 3.999}) EXPECT_NEAR(s->position(t).z(), -0.004, 1e-15) << t;
+  EXPECT_GT(s->position(4.5).z(), -0.004);
+  EXPECT_NEAR(s->position(5.5).z(), 0.004, 1e-15);
+  EXPECT_NEAR(s->position(100).z(), 0.004, 1e-15);
+  EXPECT_NEAR(nh::make_script("hold")->position(11.4).z(), -0.004, 1e-15);  // 10 s by default
+  for (const char* bad : {"hold:", "hold:x", "hold:-1", "hold:1e9", "hold:nan"}) {
+    const std::string m = neurosim::testing::message_of([&] { nh::make_script(bad); });
+    EXPECT_NE(m.find("hold time"), std::string::npos) << bad << ": " << m;
+  }
+}
