@@ -27,7 +27,7 @@
 // limit (DIR/converged.csv lists C3D10 on every mesh, so its own mesh trend is visible).
 // model_error = |f - f_nl| / |f_nl| with f_nl the NONLINEAR tier's force on the same mesh, element
 // and press (the tier's error; 0 for NONLINEAR, which is the model). total_error =
-// discretization_error + model_error (a bound: the two parts may cancel).
+// discretization_error + model_error (the two parts may also cancel).
 // The cube is also compared with CalculiX (NLGEOM, neo-Hookean, C3D4 on the same mesh): the
 // tool's footprint prescribed to the press depth, DIR/calculix.csv.
 //
