@@ -535,18 +535,27 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     r.rest_depth_m = radius - n.dot(h.centre_m - rest_point) + n.dot(offset);
     tool_rows_.push_back(r);
   }
-  // The tool pushes the surface it entered: a row behind the surface (height < 0) whose normal
-  // turns more than 60 degrees from the row the centre is least deep under belongs to another
-  // side of the body (a ridge's far flank, the far face of a thin part) and is dropped.
+  // The tool pushes the surface it entered: a row behind the surface whose normal turns more
+  // than 60 degrees from the row the centre is least deep under belongs to another side of the
+  // body (a ridge's far flank, the far face of a thin part) and is dropped. The entry is chosen
+  // among the rows the part touches (depth >= 0): a feature the part is clear of (in front by
+  // more than its radius) says nothing about where it entered. A centre on the surface (the
+  // height zero up to round-off, kOnSurfaceM) is not behind it. Seen on a 5 mm brain: the tip
+  // centre exactly on a crease edge (heights -1e-18 m), a far flank's untouched row the highest,
+  // and every row under the tool dropped: 0 N at 2 mm deep.
+  constexpr double kOnSurfaceM = 1e-12;
   if (tool_rows_.size() <= first) return;
-  std::size_t entry = first;
-  for (std::size_t k = first + 1; k < tool_rows_.size(); ++k)
-    if (tool_rows_[k].height_m > tool_rows_[entry].height_m) entry = k;
+  std::size_t entry = tool_rows_.size();
+  for (std::size_t k = first; k < tool_rows_.size(); ++k) {
+    if (tool_rows_[k].depth_m < 0.0) continue;
+    if (entry == tool_rows_.size() || tool_rows_[k].height_m > tool_rows_[entry].height_m) entry = k;
+  }
+  if (entry == tool_rows_.size()) return;  // nothing touched: no row is behind a surface
   const Vec3 n_entry = tool_rows_[entry].normal;
   tool_rows_.erase(std::remove_if(tool_rows_.begin() + static_cast<std::ptrdiff_t>(first),
                                   tool_rows_.end(),
                                   [&](const Row& r) {
-                                    return r.height_m < 0.0 && r.normal.dot(n_entry) < 0.5;
+                                    return r.height_m < -kOnSurfaceM && r.normal.dot(n_entry) < 0.5;
                                   }),
                    tool_rows_.end());
 }
