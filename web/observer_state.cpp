@@ -294,6 +294,7 @@ bool ObserverState::ingest_status(const neurosim_SimStatus& st) {
                    {"expected_force_error",
                     std::isfinite(st.expected_force_error) ? st.expected_force_error : -1.0},
                    {"tier_update_failures", st.tier_update_failures},
+                   {"columns_not_ready", st.columns_not_ready},
                    {"stations", std::move(stations)}}
           .dump();
   status_received_ = true;

@@ -8,21 +8,28 @@ namespace neurosim::interaction {
 
 ContactColumns::ContactColumns(const CoupledBody& body, bool keep_full_columns)
     : body_(&body), keep_full_(keep_full_columns) {
-  column_of_.assign(body.contact_nodes().size(), -1);
+  const std::size_t n = body.contact_nodes().size();
+  columns_.resize(n);
+  sliding_columns_.resize(n);
+  if (keep_full_) full_columns_.resize(n);
+  ready_ = std::make_unique<std::atomic<unsigned char>[]>(n);
+  for (std::size_t s = 0; s < n; ++s) ready_[s].store(0, std::memory_order_relaxed);
 }
 
-void ContactColumns::ensure(const std::vector<int>& slots) {
+int ContactColumns::ensure(const std::vector<int>& slots) { return ensure(slots, *ws_); }
+
+int ContactColumns::ensure(const std::vector<int>& slots, fem::SolveWorkspace& ws) {
   std::vector<int> missing;
   for (int s : slots) {
-    if (s < 0 || s >= static_cast<int>(column_of_.size())) {
+    if (s < 0 || s >= num_slots()) {
       throw std::invalid_argument("ContactColumns::ensure: contact slot " + std::to_string(s) +
                                   " out of range");
     }
-    if (column_of_[s] < 0) missing.push_back(s);
+    if (!has(s)) missing.push_back(s);
   }
   std::sort(missing.begin(), missing.end());
   missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
-  if (missing.empty()) return;
+  if (missing.empty()) return 0;
   const auto& solver = body_->host_solver();
   const auto& reduced = solver.reduced_index();
   const auto& contact = body_->contact_nodes();
@@ -36,22 +43,26 @@ void ContactColumns::ensure(const std::vector<int>& slots) {
     const std::size_t n = std::min(chunk, missing.size() - first);
     const std::vector<int> part(missing.begin() + static_cast<std::ptrdiff_t>(first),
                                 missing.begin() + static_cast<std::ptrdiff_t>(first + n));
-    body_->solve_contact_columns(part, x, ws_.get(), &iterations_);
+    body_->solve_contact_columns(part, x, &ws, &iterations_);
     for (std::size_t j = 0; j < n; ++j) {
       const int c = 3 * static_cast<int>(j);
+      const int slot = part[j];
       Columns col(s3, 3);
       for (int r = 0; r < s3; ++r)
         for (int a = 0; a < 3; ++a) col(r, a) = x(reduced[3 * contact[r / 3] + r % 3], c + a);
-      column_of_[part[j]] = static_cast<int>(columns_.size());
-      columns_.push_back(std::move(col));
-      if (sliding.size() > 0) sliding_columns_.emplace_back(sliding.apply(x.middleCols(c, 3)));
+      columns_[slot] = std::move(col);
+      if (sliding.size() > 0) sliding_columns_[slot] = sliding.apply(x.middleCols(c, 3));
       if (keep_full_) {
         Columns full = Columns::Zero(n3, 3);
         for (int r = 0; r < nf; ++r) full.row(solver.free_dofs()[r]) = x.block<1, 3>(r, c);
-        full_columns_.push_back(std::move(full));
+        full_columns_[slot] = std::move(full);
       }
+      // Publish: the storage above is complete before a reader can see the slot ready.
+      ready_[slot].store(1, std::memory_order_release);
+      count_.fetch_add(1, std::memory_order_acq_rel);
     }
   }
+  return static_cast<int>(missing.size());
 }
 
 bool ContactColumns::full_field(const std::vector<int>& slots,
@@ -59,10 +70,10 @@ bool ContactColumns::full_field(const std::vector<int>& slots,
                                 Eigen::VectorXd& u_host_m) const {
   if (!keep_full_) return false;
   for (int s : slots)
-    if (s < 0 || s >= static_cast<int>(column_of_.size()) || column_of_[s] < 0) return false;
+    if (s < 0 || s >= num_slots() || !has(s)) return false;
   u_host_m.setZero(3 * static_cast<int>(body_->host().num_vertices()));
   for (std::size_t k = 0; k < slots.size(); ++k)
-    u_host_m.noalias() += full_columns_[column_of_[slots[k]]] * forces_n[k];
+    u_host_m.noalias() += full_columns_[slots[k]] * forces_n[k];
   return true;
 }
 

@@ -1,15 +1,23 @@
 // Cache of a body's coupled compliance columns at its contact nodes (the contact-compliance
 // cache): L[contact dofs, slot] (3s x 3 per touched node, unit m/N), filled on first touch (block
-// solves, milliseconds) or all at load; with sliding rows also J_A L[:, slot] (rows x 3); and,
-// on request, the full columns L[:, slot] (3N x 3, memory!) so the host field for contact forces
-// is a sum of columns instead of a sparse solve. It changes during stepping, so it belongs to the
-// per-step State, never to the constant CoupledBody it reads.
+// solves, milliseconds), all at load, or ahead of the tool by a ColumnWorker (column_worker.hpp);
+// with sliding rows also J_A L[:, slot] (rows x 3); and, on request, the full columns L[:, slot]
+// (3N x 3, memory!) so the host field for contact forces is a sum of columns instead of a sparse
+// solve. It changes during stepping, so it belongs to the per-step State, never to the constant
+// CoupledBody it reads.
+//
+// One writer, one reader: the writer (the step itself when it solves synchronously, or the
+// ColumnWorker's thread) fills a slot's storage, then marks it ready with a release store; the
+// reader (the step) reads a slot only after has(slot) saw it ready (acquire). A slot is written
+// once and never changed or freed while the cache lives, so the hand-over is lock-free and the
+// step never waits for the writer.
 #pragma once
 
 #include "server/interaction/coupled_body.hpp"
 
 #include <Eigen/Core>
 
+#include <atomic>
 #include <cstddef>
 #include <memory>
 #include <vector>
@@ -23,21 +31,28 @@ class ContactColumns {
   // body must be finalized and outlive the cache.
   explicit ContactColumns(const CoupledBody& body, bool keep_full_columns = false);
 
-  bool has(int slot) const { return column_of_[slot] >= 0; }
-  std::size_t size() const { return columns_.size(); }
-  // Iterations the ITERATIVE baseline's coupling needed for the columns computed so far.
+  int num_slots() const { return static_cast<int>(columns_.size()); }
+  // Whether the columns of a slot are ready (any thread; acquire: its storage may then be read).
+  bool has(int slot) const { return ready_[slot].load(std::memory_order_acquire) != 0; }
+  // Slots ready so far (any thread).
+  std::size_t size() const { return count_.load(std::memory_order_acquire); }
+  // Iterations the ITERATIVE baseline's coupling needed for the columns computed so far (read it
+  // from the writer's thread, or once the writer is stopped).
   const IterativeReport& iterative_report() const { return iterations_; }
-  // Computes the columns of the given slots that are missing (block solves; allocates).
-  // Throws std::invalid_argument for a slot out of range.
-  void ensure(const std::vector<int>& slots);
+  // Writer: computes the columns of the given slots that are missing (block solves; allocates)
+  // with the cache's own solve scratch (synchronous use: the step's) or the caller's `ws` (a
+  // ColumnWorker's), and publishes each. Returns how many it computed. Throws
+  // std::invalid_argument for a slot out of range.
+  int ensure(const std::vector<int>& slots);
+  int ensure(const std::vector<int>& slots, fem::SolveWorkspace& ws);
 
   // Coupled compliance block L(i, j) (3x3, unit m/N) between contact slots i and j; the
-  // columns of j must be cached.
+  // columns of j must be ready.
   Eigen::Matrix3d block(int slot_i, int slot_j) const {
-    return columns_[column_of_[slot_j]].block<3, 3>(3 * slot_i, 0);
+    return columns_[slot_j].block<3, 3>(3 * slot_i, 0);
   }
-  // J_A L[:, slot] (sliding rows x 3) of a cached slot, unit m/N.
-  const Columns& sliding_block(int slot) const { return sliding_columns_[column_of_[slot]]; }
+  // J_A L[:, slot] (sliding rows x 3) of a ready slot, unit m/N.
+  const Columns& sliding_block(int slot) const { return sliding_columns_[slot]; }
   // u_host = sum_k L[:, slot_k] f_k from the full columns; false if one is missing or full
   // columns are not kept.
   bool full_field(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
@@ -45,14 +60,17 @@ class ContactColumns {
 
  private:
   const CoupledBody* body_;
-  // The State's own solve scratch: a first touch inside the step locks nothing in the Model.
+  // The State's own solve scratch for synchronous first touches: locks nothing in the Model.
   std::unique_ptr<fem::SolveWorkspace> ws_ = std::make_unique<fem::SolveWorkspace>();
-  IterativeReport iterations_;  // the ITERATIVE baseline's iterations for these columns
+  IterativeReport iterations_;  // the ITERATIVE baseline's iterations for these columns (writer)
   bool keep_full_;
-  std::vector<int> column_of_;  // contact slot -> index in columns_ or -1
+  // Per contact slot (sized at construction, never reallocated): written once by the writer
+  // before ready_[slot] is set.
   std::vector<Columns> columns_;          // L[contact dofs, slot]
-  std::vector<Columns> full_columns_;     // L[:, slot], same order (keep_full_)
-  std::vector<Columns> sliding_columns_;  // J_A L[:, slot], same order (sliding rows)
+  std::vector<Columns> full_columns_;     // L[:, slot] (keep_full_)
+  std::vector<Columns> sliding_columns_;  // J_A L[:, slot] (sliding rows)
+  std::unique_ptr<std::atomic<unsigned char>[]> ready_;
+  std::atomic<std::size_t> count_{0};
 };
 
 }  // namespace neurosim::interaction

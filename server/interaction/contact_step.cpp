@@ -119,6 +119,18 @@ State::State(const Model& m) {
     }
   }
   missing_.resize(m.bodies_.size());
+  not_ready_stamp_.resize(m.bodies_.size());
+  for (std::size_t i = 0; i < m.bodies_.size(); ++i)
+    not_ready_stamp_[i].assign(m.bodies_[i].rest_m.size(), -1);
+  if (m.options_.column_worker && !m.bodies_.empty()) {
+    std::vector<ColumnWorkerBody> targets;
+    for (std::size_t i = 0; i < m.bodies_.size(); ++i)
+      targets.push_back({&m.bodies_[i].rest_m, bodies_[i].columns.get(), m.bodies_[i].behind_reach_m});
+    ColumnWorkerOptions o;
+    o.horizon_s = m.options_.column_horizon_s;
+    o.max_tool_speed_m_per_s = m.options_.column_max_tool_speed_m_per_s;
+    column_worker_ = std::make_unique<ColumnWorker>(std::move(targets), m.tools_, o);
+  }
   sliding_active_.assign(m.num_sliding_, 0);
   tier_loads_.resize(m.bodies_.size());
   if (m.tier_ != scene::Tier::kLinear && !m.bodies_.empty()) {
@@ -604,8 +616,13 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
 }
 
 // Phase "compliance columns": the coupled columns of every node a row acts on (cached after the
-// first touch; block solves, milliseconds, inside the step).
+// first touch; block solves, milliseconds, inside the step), or, with the column worker, the
+// fallback for those it has not solved yet (no solve in the step).
 void State::compliance_columns(StepStats& stats) {
+  if (column_worker_) {
+    columns_fallback(stats);
+    return;
+  }
   for (auto& list : missing_) list.clear();
   for (const Row& r : rows_)
     for (int k = 0; k < 3; ++k)
@@ -618,6 +635,53 @@ void State::compliance_columns(StepStats& stats) {
     bodies_[bi].columns->ensure(missing_[bi]);
     stats.columns_computed += static_cast<int>(bodies_[bi].columns->size() - before);
   }
+}
+
+// Column worker: a row node whose columns are not ready yet (counted once per geometry) carries
+// nothing this step and its barycentric weight moves to the row's ready nodes, in proportion to
+// theirs (the point is held by the part of its triangle whose compliance is known: the nearest
+// ready nodes); a row with no ready node (a node row, or a triangle none of whose nodes is
+// ready) is left out of this step. Passive and bounded: the rows left act on nodes of the real
+// body with known columns, so W = H C H^T (+ the row compliance in series) stays positive
+// definite and the LCP solvable, and the forces are those of the elastic body loaded at those
+// nodes (it stores the tool's work and gives it back, no more); a row left out can only lower
+// the force. When the columns arrive the row switches to its own nodes (a change of compliance
+// between neighbouring nodes at the same depth). The rows keep their order (deterministic for
+// a given set of ready slots).
+void State::columns_fallback(StepStats& stats) {
+  stats.columns_computed = 0;
+  stats.columns_not_ready = 0;
+  const long long g = geometry_counter_;
+  std::size_t kept = 0;
+  for (std::size_t r = 0; r < rows_.size(); ++r) {
+    Row row = rows_[r];
+    const ContactColumns& cols = *bodies_[row.body].columns;
+    double ready_w = 0.0, missing_w = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      const int s = row.slot[k];
+      if (s < 0) continue;
+      if (cols.has(s)) {
+        ready_w += row.w[k];
+        continue;
+      }
+      missing_w += row.w[k];
+      long long& stamp = not_ready_stamp_[row.body][s];
+      if (stamp != g) {
+        stamp = g;
+        ++stats.columns_not_ready;
+      }
+      row.slot[k] = -1;  // carries nothing (as a fixed node)
+      row.w[k] = 0.0;
+    }
+    if (missing_w > 0.0) {
+      if (!(ready_w > 0.0)) continue;  // no ready node: the row waits for its columns
+      const double scale = (ready_w + missing_w) / ready_w;
+      for (int k = 0; k < 3; ++k)
+        if (row.slot[k] >= 0) row.w[k] *= scale;
+    }
+    rows_[kept++] = row;
+  }
+  rows_.resize(kept);
 }
 
 // Phase "Delassus": W_rs = sum_a sum_b w_ra w_sb m_ra . L(a, b) m_sb (coupled compliance, unit
@@ -1024,6 +1088,7 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
                              StepStats& stats, std::chrono::steady_clock::time_point t0) {
   const std::vector<ToolPose>& poses = held_;
   const int nt = static_cast<int>(poses.size());
+  if (column_worker_) column_worker_->post(poses);  // look ahead of the held poses (never waits)
   begin_step(m, nt, stats);
   begin_history(m, time_s);
   if (static_cast<int>(contacts.size()) != nt) contacts.resize(nt);
@@ -1037,12 +1102,14 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
   if (iterate) restore_forces(true);  // from rest
   previous_row_keys_.clear();
   stats.columns_computed = 0;
+  stats.columns_not_ready = 0;
   stats.geometry_iterations = 0;
   LcpResult lcp;
-  int columns = 0;
+  int columns = 0, not_ready = 0;
   for (int it = 0;; ++it) {
     lcp = solve_geometry(m, poses, stats);
     columns += stats.columns_computed;
+    not_ready = std::max(not_ready, stats.columns_not_ready);
     ++stats.geometry_iterations;
     if (!lcp.converged) break;
     for (int k = 0; k < ns; ++k) sliding_active_[k] = lambda_[k] > 0.0 ? 1 : 0;
@@ -1052,6 +1119,8 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
       break;
   }
   stats.columns_computed = columns;
+  stats.columns_not_ready = not_ready;  // the most of one geometry (the same nodes recur)
+  columns_not_ready_ += static_cast<std::uint64_t>(not_ready);
   stats.contact_rows = static_cast<int>(rows_.size());
   stats.sliding_rows = ns;
   stats.converged = lcp.converged;

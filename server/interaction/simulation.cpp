@@ -119,6 +119,16 @@ class SimulationImpl final : public Simulation {
     if (b < 0 || !state_->bodies_[static_cast<std::size_t>(b)].columns) return {};
     return state_->bodies_[static_cast<std::size_t>(b)].columns->iterative_report();
   }
+  std::uint64_t columns_not_ready() const override { return state_->columns_not_ready_; }
+  std::uint64_t columns_solved_ahead() const override {
+    return state_->column_worker_ ? state_->column_worker_->columns_solved() : 0;
+  }
+  bool wait_columns_ready(double timeout_s) const override {
+    return state_->column_worker_ && state_->column_worker_->wait_ready(timeout_s);
+  }
+  void pause_column_worker(bool paused) override {
+    if (state_->column_worker_) state_->column_worker_->set_paused(paused);
+  }
   scene::Tier tier() const override { return model_->tier_; }
   double tier_update_rate_hz() const override {
     return state_->tier_ ? state_->tier_->rate_hz() : 0.0;
@@ -147,6 +157,12 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       !(options_.contact_row_compliance >= 0.0) || !(options_.contact_row_compliance < 1.0) ||
       options_.contact_geometry_iterations < 1) {
     throw std::invalid_argument(source_ + ": invalid SimulationOptions");
+  }
+  if (!(options_.column_horizon_s >= 0.0) || !(options_.column_max_tool_speed_m_per_s >= 0.0) ||
+      !std::isfinite(options_.column_horizon_s * options_.column_max_tool_speed_m_per_s)) {
+    throw std::invalid_argument(source_ +
+                                ": invalid SimulationOptions.column_horizon_s or "
+                                "column_max_tool_speed_m_per_s (finite, >= 0)");
   }
   tier_ = model.effects.tier;
   if (!(options_.tier_newton_tolerance > 0.0) || !(options_.tier_newton_tolerance < 1e-2) ||

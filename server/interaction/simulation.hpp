@@ -83,8 +83,13 @@ struct StepStats {
   int contact_rows{0};
   bool converged{true};
   // Contact nodes touched for the first time in this step: their coupled compliance columns were
-  // computed (block solves, milliseconds) inside the step.
+  // computed (block solves, milliseconds) inside the step, on the step's thread. Always 0 with
+  // SimulationOptions::column_worker (the worker solves them ahead of the tool).
   int columns_computed{0};
+  // column_worker only: contact nodes the step's rows needed whose columns were not ready yet
+  // (handled by the fallback of contact_step.cpp's compliance_columns: the row's weight moves to
+  // its ready nodes, a row with none is left out of this step). 0 when the worker kept ahead.
+  int columns_not_ready{0};
   // LINEAR: LCPs of this step (rows found again on the surface each answer deformed, from rest).
   int geometry_iterations{0};
   int sliding_rows{0};    // unilateral rows of SLIDING couplings in this step's LCP
@@ -161,6 +166,16 @@ struct SimulationOptions {
   // Compute the coupled compliance columns of every contactable node at load (else on first
   // touch, a few ms each).
   bool precompute_contact_columns{false};
+  // The step never solves a compliance column: a worker thread (column_worker.hpp) solves the
+  // columns of the contact nodes within column_max_tool_speed_m_per_s x column_horizon_s (+ the
+  // part's radius) of each tool, nearest first, ahead of the tool; a row whose columns are not
+  // ready yet takes the fallback (StepStats::columns_not_ready). The live server sets it; false
+  // (the default: tests, neurosim-replay, offline tools) solves first touches inside the step,
+  // so the answer depends on the poses alone (a replay equals a live run whose steps reported
+  // columns_not_ready = 0).
+  bool column_worker{false};
+  double column_horizon_s{0.05};              // unit s
+  double column_max_tool_speed_m_per_s{0.5};  // unit m/s
   // Keep the full coupled compliance columns of touched nodes (3N x 3 doubles each: 0.4 MB per
   // node on a 25k-tet brain) so displacements() of a host is a sum of columns, not a sparse solve.
   bool cache_full_field_columns{false};
@@ -336,6 +351,20 @@ class Simulation {
   // body's host solver, tied interior and sliding compliance: set-up only. Steps and fields
   // (the State's and a FieldSnapshot's scratch) never add to it.
   virtual std::uint64_t shared_workspace_uses() const { return 0; }
+
+  // SimulationOptions::column_worker: contact nodes whose columns were not ready when a step's
+  // rows needed them, summed over the steps since build (StepStats::columns_not_ready); columns
+  // the worker solved ahead of the tools; and (tests, benchmarks) a wait until every column
+  // within reach of the last step's poses is ready (false: timeout, or no worker). Stepping
+  // thread, except columns_solved_ahead (any thread).
+  virtual std::uint64_t columns_not_ready() const { return 0; }
+  virtual std::uint64_t columns_solved_ahead() const { return 0; }
+  virtual bool wait_columns_ready(double timeout_s) const {
+    (void)timeout_s;
+    return false;
+  }
+  // Tests: hold the column worker (a solve under way finishes, none starts) or let it go.
+  virtual void pause_column_worker(bool paused) { (void)paused; }
 
   // The elasticity tier that runs (the scene's effects.tier; never another one).
   virtual scene::Tier tier() const { return scene::Tier::kLinear; }

@@ -3,6 +3,7 @@
 // fields; contact_step.cpp is the step, in named phases.
 #pragma once
 
+#include "server/interaction/column_worker.hpp"
 #include "server/interaction/contact_columns.hpp"
 #include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/contact_surface.hpp"
@@ -191,6 +192,10 @@ class State {
   std::unique_ptr<fem::SolveWorkspace> field_workspace = std::make_unique<fem::SolveWorkspace>();
 
   std::vector<BodyState> bodies_;
+  // SimulationOptions::column_worker: solves the columns ahead of the tools (declared after
+  // bodies_: stopped before the caches it fills are destroyed); null otherwise.
+  std::unique_ptr<ColumnWorker> column_worker_;
+  std::uint64_t columns_not_ready_{0};  // StepStats::columns_not_ready summed over the steps
   double columns_s_{0.0};  // compliance columns computed at construction, unit s
   double sliding_s_{0.0};  // step workspace and constant sliding block at construction, unit s
   // COROTATIONAL and NONLINEAR: every body's equilibrium, following the contact forces
@@ -218,6 +223,7 @@ class State {
                      const std::vector<Vec3>& node_normals, BodyState& bs, long long memo);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape);
   void compliance_columns(StepStats& stats);
+  void columns_fallback(StepStats& stats);
   void delassus(const Model& m, int ns);
   void store_forces(const Model& m, int ns);
   void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations, int tools,
@@ -259,6 +265,7 @@ class State {
   std::vector<Row> tool_rows_;     // rows of one tool, before the per-tool limit
   std::vector<Row> rows_;          // the step's contact rows
   std::vector<std::vector<int>> missing_;
+  std::vector<std::vector<long long>> not_ready_stamp_;  // per body and slot: geometry counted
   Eigen::MatrixXd w_;
   Eigen::VectorXd delta_, lambda_;
   std::vector<char> sliding_active_;  // per sliding row: carried a force in the last good step

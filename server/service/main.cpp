@@ -4,6 +4,10 @@
 
 int main(int argc, char** argv) {
   return neurosim::service::run_main(argc, argv, [](const neurosim::scene::Model& model) {
-    return neurosim::interaction::Simulation::build(model);
+    // The live server's mode: compliance columns are solved by a worker ahead of the tools, never
+    // inside the step (neurosim-replay and the tests solve them in the step: deterministic).
+    neurosim::interaction::SimulationOptions options;
+    options.column_worker = true;
+    return neurosim::interaction::Simulation::build(model, options);
   });
 }

@@ -170,6 +170,8 @@ void StatusPublisher::report_accuracy(neurosim_SimStatus& st) {
       }
     }
   }
+  st.columns_not_ready = sim_.columns_not_ready();
+  st.columns_solved_ahead = sim_.columns_solved_ahead();
   const std::uint64_t failures = sim_.tier_update_failures();
   st.tier_update_failures = failures;
   if (failures > tier_failures_logged_) {

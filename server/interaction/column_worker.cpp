@@ -1,0 +1,128 @@
+#include "server/interaction/column_worker.hpp"
+
+#include "server/interaction/contact_columns.hpp"
+#include "server/interaction/coupled_body.hpp"
+
+#include <pthread.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <utility>
+
+namespace neurosim::interaction {
+
+ColumnWorker::ColumnWorker(std::vector<ColumnWorkerBody> bodies, const std::vector<ToolShape>& tools,
+                           const ColumnWorkerOptions& options)
+    : bodies_(std::move(bodies)), tools_(tools), options_(options) {
+  if (!(options_.horizon_s >= 0.0) || !(options_.max_tool_speed_m_per_s >= 0.0) ||
+      !std::isfinite(options_.horizon_s * options_.max_tool_speed_m_per_s)) {
+    throw std::invalid_argument(
+        "ColumnWorkerOptions: horizon_s and max_tool_speed_m_per_s must be finite and >= 0");
+  }
+  if (!(options_.idle_sleep_s > 0.0 && options_.idle_sleep_s <= 1.0))
+    throw std::invalid_argument("ColumnWorkerOptions: idle_sleep_s must be in (0, 1] s");
+  for (const auto& b : bodies_)
+    if (b.rest_m == nullptr || b.columns == nullptr)
+      throw std::invalid_argument("ColumnWorker: a body without rest positions or cache");
+  lookahead_m_ = options_.max_tool_speed_m_per_s * options_.horizon_s;
+  workspaces_.resize(bodies_.size());
+  thread_ = std::thread([this] { run(); });
+}
+
+ColumnWorker::~ColumnWorker() {
+  stop_.store(true, std::memory_order_release);
+  if (thread_.joinable()) thread_.join();
+}
+
+void ColumnWorker::post(const std::vector<ToolPose>& poses) {
+  int n = 0;
+  for (const ToolPose& p : poses) {
+    if (n + 2 > static_cast<int>(posting_.parts.size())) break;
+    if (p.tool < 0 || p.tool >= static_cast<int>(tools_.size())) continue;
+    const ToolShape& s = tools_[p.tool];
+    const double len = p.axis.norm();
+    const Vec3 axis = len > 0.0 ? Vec3(p.axis / len) : Vec3::UnitZ();
+    posting_.parts[n++] = Part{p.tip_m, p.tip_m, s.tip_radius_m};
+    if (s.shaft_radius_m > 0.0 && s.shaft_length_m > 0.0)
+      posting_.parts[n++] = Part{p.tip_m, p.tip_m + s.shaft_length_m * axis, s.shaft_radius_m};
+  }
+  posting_.count = n;
+  posting_.sequence = ++posted_;
+  posted_last_.store(posted_, std::memory_order_release);
+  poses_.publish(posting_);
+}
+
+bool ColumnWorker::wanted(const Poses& poses, int body, std::size_t most, std::vector<int>& out) {
+  const ColumnWorkerBody& b = bodies_[body];
+  const auto& rest = *b.rest_m;
+  // (distance beyond the part's surface, slot) of every slot within reach that is not ready.
+  std::vector<std::pair<double, int>>& near = near_;
+  near.clear();
+  for (int s = 0; s < static_cast<int>(rest.size()); ++s) {
+    if (b.columns->has(s)) continue;
+    double best = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < poses.count; ++k) {
+      const Part& p = poses.parts[k];
+      const double d = (rest[s] - closest_on_segment(rest[s], p.p0, p.p1)).norm() - p.radius_m;
+      best = std::min(best, d);
+    }
+    if (best <= lookahead_m_ + b.behind_reach_m) near.emplace_back(best, s);
+  }
+  if (near.empty()) return false;
+  const std::size_t n = std::min(most, near.size());
+  std::partial_sort(near.begin(), near.begin() + static_cast<std::ptrdiff_t>(n), near.end());
+  out.clear();
+  for (std::size_t k = 0; k < n; ++k) out.push_back(near[k].second);
+  return true;
+}
+
+void ColumnWorker::run() {
+  pthread_setname_np(pthread_self(), "ns-columns");
+  Poses poses;
+  std::vector<int> slots;
+  const auto idle = std::chrono::duration<double>(options_.idle_sleep_s);
+  const std::size_t chunk = static_cast<std::size_t>(CoupledBody::kBlockColumns / 3);
+  while (!stop_.load(std::memory_order_acquire)) {
+    poses_.take(poses);
+    bool worked = false;
+    if (paused_.load(std::memory_order_acquire)) {
+      std::this_thread::sleep_for(idle);
+      continue;
+    }
+    for (int b = 0; b < static_cast<int>(bodies_.size()) && poses.count > 0; ++b) {
+      if (stop_.load(std::memory_order_acquire)) return;
+      if (!wanted(poses, b, chunk, slots)) continue;
+      try {
+        const int n = bodies_[b].columns->ensure(slots, workspaces_[static_cast<std::size_t>(b)]);
+        solved_.fetch_add(static_cast<std::uint64_t>(n), std::memory_order_acq_rel);
+      } catch (const std::exception&) {
+        // A failed solve (out of memory, CHOLMOD): the worker stops; the step keeps stepping
+        // with the columns it has and counts the rest as not ready.
+        failed_.store(true, std::memory_order_release);
+        return;
+      }
+      worked = true;
+      break;  // the newest poses first, then this body again
+    }
+    if (!worked) {
+      idle_at_.store(poses.sequence, std::memory_order_release);
+      std::this_thread::sleep_for(idle);
+    }
+  }
+}
+
+bool ColumnWorker::wait_ready(double timeout_s) const {
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::uint64_t want = posted_last_.load(std::memory_order_acquire);
+  while (idle_at_.load(std::memory_order_acquire) < want) {
+    if (failed()) return false;
+    if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > timeout_s)
+      return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return true;
+}
+
+}  // namespace neurosim::interaction
