@@ -9,12 +9,16 @@
 // factor of the active rows), unless --no-sliding-ref.
 // --brain-contact: scenes/brain_artery.scene as it is (TIE, LINEAR, the 2 mm probe): a press
 // breathing 0.6-1.4 mm deep on a 4 mm circle (after 200 warm-up steps), and a 10 s slide at
-// 20 mm/s, 1 mm deep, over fresh surface (five 36 mm lines 5 mm apart joined by 4 mm moves, the
-// first touches of compliance columns included): per-step p50 / p99 / max (us) of the wall time
-// and of the thread's CPU time (the step's own work: on a loaded machine the wall time of a
-// preempted step includes another process's time slice), rows and LCPs per step, steps with no
-// force, columns computed. Only the Simulation contract: the same source builds against an older
-// library for side-by-side runs.
+// 20 mm/s, 1 mm deep, over fresh surface (five 36 mm lines 5 mm apart joined by 4 mm moves),
+// paced at 1 kHz by the clock, twice side by side: `brain_slide_step_solves` (the old way: a
+// first touch's compliance columns solved inside the step) and `brain_slide_worker`
+// (SimulationOptions::column_worker, the live server's: solved ahead of the tool on the worker
+// thread, which starts at the slide's first pose as it does when a station joins): per-step
+// p50 / p99 / max (us) of the wall time and of the thread's CPU time (the step's own work: on a
+// loaded machine the wall time of a preempted step includes another process's time slice), rows
+// and LCPs per step, steps with no force, columns computed in the step, and columns not ready
+// (nodes whose row took the worker's fallback, summed over the steps). Only the Simulation
+// contract.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "common/stats.hpp"
@@ -35,6 +39,7 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace ni = neurosim::interaction;
@@ -107,16 +112,23 @@ struct RunTimes {
   double rows{0.0};
   int zero_force{0};
   int columns{0};
+  long not_ready{0};  // StepStats::columns_not_ready summed over the steps
 };
 
-// Steps the poses, timing each step.
-RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses) {
+// Steps the poses, timing each step (paced: one step per millisecond of the clock, as the server
+// steps, so that a worker thread beside the step runs in real time).
+RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses, bool paced = false) {
   RunTimes r;
   std::vector<ni::ToolContact> contacts;
   ni::StepStats stats;
   std::vector<ni::ToolPose> one(1);
+  auto next = Clock::now();
   for (const auto& p : poses) {
     one[0] = p;
+    if (paced) {
+      next += std::chrono::microseconds(1000);
+      std::this_thread::sleep_until(next);
+    }
     const auto ts = Clock::now();
     const double c0 = thread_cpu_us();
     sim.step(one, contacts, stats);
@@ -126,6 +138,7 @@ RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses) 
     r.lcps += stats.geometry_iterations;
     r.rows += stats.contact_rows;
     r.columns += stats.columns_computed;
+    r.not_ready += stats.columns_not_ready;
     if (!(contacts[0].force_n.norm() > 0.0)) ++r.zero_force;
   }
   r.rows /= static_cast<double>(std::max<std::size_t>(1, poses.size()));
@@ -185,21 +198,37 @@ int brain_contact(int steps) {
     }
     dir = -dir;
   }
-  auto fresh = ni::Simulation::build(model);
-  const RunTimes ts = run_poses(*fresh, slide);
+  sim.reset();
+  RunTimes ts, tw;
+  {
+    auto fresh = ni::Simulation::build(model);
+    ts = run_poses(*fresh, slide, true);
+  }
+  {
+    ni::SimulationOptions options;
+    options.column_worker = true;
+    auto fresh = ni::Simulation::build(model, options);
+    run_poses(*fresh, {slide.front()});  // the worker starts where the tool joins
+    if (!fresh->wait_columns_ready(600.0)) {
+      std::cerr << "brain-contact: the column worker did not finish the first pose's reach\n";
+      return 1;
+    }
+    tw = run_poses(*fresh, slide, true);
+  }
   std::cout << "case,steps,p50_us,p99_us,max_us,cpu_p50_us,cpu_p99_us,cpu_max_us,rows_per_step,"
-               "lcps_per_step,zero_force_steps,columns_computed\n";
+               "lcps_per_step,zero_force_steps,columns_computed,columns_not_ready\n";
   auto print = [](const char* name, const RunTimes& t) {
     char line[320];
-    std::snprintf(line, sizeof line, "%s,%zu,%.1f,%.1f,%.1f,%.1f,%.1f,%.1f,%.2f,%.2f,%d,%d\n", name,
+    std::snprintf(line, sizeof line, "%s,%zu,%.1f,%.1f,%.1f,%.1f,%.1f,%.1f,%.2f,%.2f,%d,%d,%ld\n", name,
                   t.us.size(), percentile(t.us, 0.5), percentile(t.us, 0.99),
                   *std::max_element(t.us.begin(), t.us.end()), percentile(t.cpu_us, 0.5),
                   percentile(t.cpu_us, 0.99), *std::max_element(t.cpu_us.begin(), t.cpu_us.end()),
-                  t.rows, t.lcps, t.zero_force, t.columns);
+                  t.rows, t.lcps, t.zero_force, t.columns, t.not_ready);
     std::cout << line;
   };
   print("brain_press", tp);
-  print("brain_slide", ts);
+  print("brain_slide_step_solves", ts);
+  print("brain_slide_worker", tw);
   return 0;
 }
 

@@ -6,13 +6,16 @@
 // - rss_mb: the process's peak resident memory after both (getrusage ru_maxrss: sizes should be
 //   given from coarse to fine, so that each row's peak is its own);
 // - step_p50/p99/max_us: the contact step (one probe, LINEAR tier, the step's own thread) along a
-//   10 s slide at 20 mm/s over fresh brain surface, 1000 steps per second of the slide: the tip
-//   2 mm deep under the right lateral surface, sweeping anteroposteriorly, moving 6 mm up at each
-//   end so the way back is fresh surface as well. The rows measured are today's node rows
-//   (the contact nodes under the tip and shaft), not triangle rows;
-// - columns_not_ready: steps in which a node touched for the first time had its compliance
-//   columns solved inside the step (StepStats::columns_computed > 0; no column worker exists yet,
-//   so every first touch is solved on the step thread);
+//   10 s slide at 20 mm/s over fresh brain surface, 1000 steps per second of the slide paced by
+//   the clock (as the server steps): the tip 2 mm deep under the right lateral surface, sweeping
+//   anteroposteriorly, moving 6 mm up at each end so the way back is fresh surface as well; the
+//   step's rows are triangle rows (contact_step.cpp). With --column-solves worker (the default,
+//   the live server's SimulationOptions::column_worker) the compliance columns are solved ahead
+//   of the tool on the worker thread, which starts at the slide's first pose (as when a station
+//   joins); with --column-solves step (the old way) a first touch is solved inside the step;
+// - columns_not_ready: worker: contact nodes whose row took the fallback because their columns
+//   were not ready yet, summed over the slide's steps (StepStats::columns_not_ready); step: the
+//   first touches solved inside the step (StepStats::columns_computed, summed);
 // - field_hz: 1 / mean time of the host's full displacement field (Simulation::displacements)
 //   at the end of the slide;
 // - nonlinear_update_hz: not measured here (nan): multirate_bench measures the NONLINEAR tier's
@@ -38,6 +41,7 @@
 #include <limits>
 #include <map>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace fs = std::filesystem;
@@ -77,12 +81,18 @@ int main(int argc, char** argv) {
   std::string dir = "/tmp/neurosim_scale_bench";
   double seconds = 10.0, speed = 0.020, depth = 0.002;
   bool csv = false;
+  std::string column_solves = "worker";
   neurosim::cli::Parser p("scale_bench", "The brain/artery scene at several cell sizes.");
   p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
   p->add_option("--models", dir, "folder of the built scenes")->capture_default_str();
   p->add_option("--seconds", seconds, "slide duration, unit s")->capture_default_str();
   p->add_option("--speed", speed, "slide speed, unit m/s")->capture_default_str();
   p->add_flag("--csv", csv, "CSV only (the default adds comments on stderr)");
+  p->add_option("--column-solves", column_solves,
+                "worker: compliance columns solved ahead of the tool (the live server); step: "
+                "first touches solved inside the step (the old way)")
+      ->check(CLI::IsMember({"worker", "step"}))
+      ->capture_default_str();
   if (auto rc = p.parse(argc, argv)) return *rc;
   if (cells.empty()) cells = {7.0};
   std::cout << "cell_mm,host_vertices,host_tets,setup_cold_s,setup_cached_s,rss_mb,step_p50_us,"
@@ -92,6 +102,7 @@ int main(int argc, char** argv) {
       const fs::path scene = scene_at(cell, dir);
       const neurosim::scene::Model model = neurosim::scene::load_model(scene);
       ni::SimulationOptions options;
+      options.column_worker = column_solves == "worker";
       const fs::path cache = fs::path(dir) / ("cache_" + std::to_string(::getpid()));
       fs::remove_all(cache);
       options.compliance_cache_dir = cache.string();
@@ -127,7 +138,10 @@ int main(int argc, char** argv) {
       ni::StepStats stats;
       std::vector<double> times;
       times.reserve(steps);
-      int not_ready = 0;
+      long not_ready = 0;
+      int steps_not_ready = 0;
+      auto next = Clock::now();
+      bool started = false;
       for (int k = 0; k < steps; ++k) {
         const double s = speed * k * 1e-3;  // path length so far, m
         const int pass = static_cast<int>(s / length);
@@ -140,10 +154,22 @@ int main(int argc, char** argv) {
         if (!std::isfinite(it->second)) continue;
         one[0].tip_m = Vec3(it->second + 0.002 - depth, y, z);  // tip radius 2 mm, centre inside
         one[0].axis = Vec3::UnitX();
+        if (!started && options.column_worker) {
+          // The worker starts at the first pose (a station joining), before the timed slide.
+          sim->step(one, contacts, stats);
+          if (!sim->wait_columns_ready(600.0))
+            throw std::runtime_error("the column worker did not finish the first pose's reach");
+          next = Clock::now();
+        }
+        started = true;
+        next += std::chrono::microseconds(1000);
+        std::this_thread::sleep_until(next);
         const auto ts = Clock::now();
         sim->step(one, contacts, stats);
         times.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
-        if (stats.columns_computed > 0) ++not_ready;
+        const int missed = options.column_worker ? stats.columns_not_ready : stats.columns_computed;
+        not_ready += missed;
+        steps_not_ready += missed > 0;
       }
       Eigen::VectorXd u;
       double field_s = 0.0;
@@ -153,13 +179,16 @@ int main(int argc, char** argv) {
         field_s += neurosim::common::seconds_since(tf);
       }
       const auto pc = neurosim::common::percentiles(times);
-      std::printf("%g,%zu,%zu,%.2f,%.2f,%.0f,%.1f,%.1f,%.1f,%d,%.1f,nan\n", cell, mesh.num_vertices(),
+      std::printf("%g,%zu,%zu,%.2f,%.2f,%.0f,%.1f,%.1f,%.1f,%ld,%.1f,nan\n", cell, mesh.num_vertices(),
                   mesh.num_tets(), cold_s, cached_s, peak_rss_mb(), pc.p50, pc.p99, pc.max,
                   not_ready, 5.0 / field_s);
       std::fflush(stdout);
       if (!csv)
-        std::cerr << "scale_bench: cell " << cell << " mm: " << times.size() << " steps, "
-                  << not_ready << " with a first touch solved in the step\n";
+        std::cerr << "scale_bench: cell " << cell << " mm, column solves " << column_solves << ": "
+                  << times.size() << " steps, " << steps_not_ready
+                  << (options.column_worker ? " with columns not ready (" : " with first touches solved in the step (")
+                  << not_ready << " nodes), " << sim->columns_solved_ahead()
+                  << " columns solved by the worker\n";
     }
   } catch (const std::exception& e) {
     std::cerr << "scale_bench: " << e.what() << "\n";

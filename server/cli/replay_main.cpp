@@ -85,6 +85,9 @@ int run(const Options& opt) {
 
   neurosim::interaction::SimulationOptions sim_options;
   sim_options.tier_worker_thread = false;
+  // Compliance columns solved inside the step on first touch, never by the live server's column
+  // worker: the replay's answer is the poses' alone (docs/ARCHITECTURE.md, "compliance").
+  sim_options.column_worker = false;
   std::unique_ptr<neurosim::interaction::Simulation> sim =
       neurosim::interaction::Simulation::build(model, sim_options);
   // The live server's filter on every sample (its code, server/service/tool_filter.hpp): a

@@ -119,6 +119,10 @@ class PoisonSimulation : public interaction::Simulation {
     }
   }
   void displacements(int, Eigen::VectorXd& u) const override { u.setZero(12); }
+  // The column worker's counts as the Simulation reports them (set by a test).
+  std::uint64_t columns_not_ready() const override { return not_ready; }
+  std::uint64_t columns_solved_ahead() const override { return solved_ahead; }
+  std::uint64_t not_ready{0}, solved_ahead{0};
   bool mesh_active(int) const override { return true; }
   double tie_residual_m() const override { return 0.0; }
   const interaction::SetupStats& setup_stats() const override { return setup_; }

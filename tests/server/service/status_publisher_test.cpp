@@ -51,8 +51,12 @@ TEST(service_status_publisher, TheSampleCarriesTheStepsStationsAndStepTimes) {
   t.send(7, "omni-1", "omni-1", 1);
   t.loop->step_once();
   t.loop->step_once();
+  t.sim.not_ready = 7;
+  t.sim.solved_ahead = 1234;
   for (int us = 1; us <= 100; ++us) t.status->after_step(0, us * 1000);  // 1..100 us, within the period
   const neurosim_SimStatus& st = t.status->publish(2 * kSecond);
+  EXPECT_EQ(st.columns_not_ready, 7u) << "the Simulation's count of columns not ready";
+  EXPECT_EQ(st.columns_solved_ahead, 1234u);
   EXPECT_EQ(st.steps, 2u);
   EXPECT_DOUBLE_EQ(st.step_rate_measured_hz, 1.0) << "2 steps in 2 s";
   ASSERT_EQ(st.stations._length, 1u);
