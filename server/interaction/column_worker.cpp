@@ -4,6 +4,8 @@
 #include "server/interaction/coupled_body.hpp"
 
 #include <pthread.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -80,6 +82,10 @@ bool ColumnWorker::wanted(const Poses& poses, int body, std::size_t most, std::v
 
 void ColumnWorker::run() {
   pthread_setname_np(pthread_self(), "ns-columns");
+  // Below the other normal threads (nice 10): on a loaded machine the step (and, without real-
+  // time priority, the DDS and field threads) go first; a lagging worker only means more rows
+  // take the fallback. Lowering one's own priority needs no privilege.
+  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 10);
   Poses poses;
   std::vector<int> slots;
   const auto idle = std::chrono::duration<double>(options_.idle_sleep_s);

@@ -55,7 +55,7 @@ class ColumnWorker {
   // Tools beyond this many in one post are not looked ahead of (their rows use the fallback).
   static constexpr int kMaxTools = 64;
 
-  // Starts the thread (named "ns-columns", normal priority). bodies and tools must outlive it.
+  // Starts the thread (named "ns-columns", SCHED_OTHER at nice 10). bodies and tools must outlive it.
   ColumnWorker(std::vector<ColumnWorkerBody> bodies, const std::vector<ToolShape>& tools,
                const ColumnWorkerOptions& options);
   ~ColumnWorker();  // stops and joins (a block solve under way finishes first)

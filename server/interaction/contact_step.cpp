@@ -23,6 +23,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <utility>
 #include <stdexcept>
 #include <string>
 
@@ -123,6 +124,7 @@ State::State(const Model& m) {
   for (std::size_t i = 0; i < m.bodies_.size(); ++i)
     not_ready_stamp_[i].assign(m.bodies_[i].rest_m.size(), -1);
   if (m.options_.column_worker && !m.bodies_.empty()) {
+    preload_columns(m);
     std::vector<ColumnWorkerBody> targets;
     for (std::size_t i = 0; i < m.bodies_.size(); ++i)
       targets.push_back({&m.bodies_[i].rest_m, bodies_[i].columns.get(), m.bodies_[i].behind_reach_m});
@@ -232,6 +234,47 @@ void State::reserve_workspace(const Model& m, int tools) {
     lcp_constant_block_ = true;
     if (m.options_.sliding_inactive_set) lcp_.set_constant_block(w_, m.num_sliding_);
   }
+}
+
+// Column worker, at load: the columns a first touch needs at once, so it never waits for the
+// worker (SimulationOptions::column_preload_budget_mb): all of a body whose columns fit in the
+// budget (a small body), else, with rigid openings (the skull's craniotomy), the contact nodes
+// within an opening's radius + the widest tool part + the worker's reach of its axis, nearest
+// the axis first, while the budget lasts. Allocates; never in a step.
+void State::preload_columns(const Model& m) {
+  const auto t0 = Clock::now();
+  double budget = m.options_.column_preload_budget_mb * 1e6;  // unit byte
+  double widest = 0.0;
+  for (const ToolShape& t : m.tools_) widest = std::max({widest, t.tip_radius_m, t.shaft_radius_m});
+  const double reach =
+      widest + m.options_.column_max_tool_speed_m_per_s * m.options_.column_horizon_s;
+  std::vector<std::pair<double, int>> near;
+  std::vector<int> slots;
+  for (std::size_t i = 0; i < m.bodies_.size(); ++i) {
+    const BodyModel& b = m.bodies_[i];
+    const std::size_t n = b.rest_m.size();
+    // A node's columns: L[contact dofs, slot], J_A L[:, slot] and the optional full column.
+    double bytes = 8.0 * 3.0 * (3.0 * static_cast<double>(n) + b.body->sliding().size());
+    if (m.options_.cache_full_field_columns)
+      bytes += 8.0 * 9.0 * static_cast<double>(b.body->host().num_vertices());
+    slots.clear();
+    if (bytes * static_cast<double>(n) <= budget) {
+      for (std::size_t s = 0; s < n; ++s) slots.push_back(static_cast<int>(s));
+    } else if (!m.openings_.empty()) {
+      near.clear();
+      for (std::size_t s = 0; s < n; ++s) {
+        double d = std::numeric_limits<double>::infinity();
+        for (const auto& o : m.openings_) d = std::min(d, o.radial_m(b.rest_m[s]) - o.radius_m);
+        if (d <= reach + b.behind_reach_m) near.emplace_back(d, static_cast<int>(s));
+      }
+      std::sort(near.begin(), near.end());
+      const auto most = static_cast<std::size_t>(budget / bytes);
+      for (std::size_t k = 0; k < near.size() && k < most; ++k) slots.push_back(near[k].second);
+    }
+    bodies_[i].columns->ensure(slots);
+    budget -= bytes * static_cast<double>(slots.size());
+  }
+  columns_s_ += seconds_since(t0);
 }
 
 // Phase "pose", first the inputs: nothing changes on a bad pose.

@@ -159,10 +159,12 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     throw std::invalid_argument(source_ + ": invalid SimulationOptions");
   }
   if (!(options_.column_horizon_s >= 0.0) || !(options_.column_max_tool_speed_m_per_s >= 0.0) ||
-      !std::isfinite(options_.column_horizon_s * options_.column_max_tool_speed_m_per_s)) {
+      !std::isfinite(options_.column_horizon_s * options_.column_max_tool_speed_m_per_s) ||
+      !(options_.column_preload_budget_mb >= 0.0) || !std::isfinite(options_.column_preload_budget_mb)) {
     throw std::invalid_argument(source_ +
-                                ": invalid SimulationOptions.column_horizon_s or "
-                                "column_max_tool_speed_m_per_s (finite, >= 0)");
+                                ": invalid SimulationOptions.column_horizon_s, "
+                                "column_max_tool_speed_m_per_s or column_preload_budget_mb "
+                                "(finite, >= 0)");
   }
   tier_ = model.effects.tier;
   if (!(options_.tier_newton_tolerance > 0.0) || !(options_.tier_newton_tolerance < 1e-2) ||
@@ -421,6 +423,8 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
           std::max(proxy_options_.reach_m, 1.5 * tool.max_speed_m_per_s / model.rates.step_hz);
     proxy_options_.max_reach_m = std::max(proxy_options_.max_reach_m, proxy_options_.reach_m);
   }
+  for (const auto& r : model.rigid)
+    openings_.insert(openings_.end(), r.openings.begin(), r.openings.end());
   setup_.sliding_rows = num_sliding_;
   setup_.total_s = seconds_since(t_start);
 }

@@ -176,6 +176,12 @@ struct SimulationOptions {
   bool column_worker{false};
   double column_horizon_s{0.05};              // unit s
   double column_max_tool_speed_m_per_s{0.5};  // unit m/s
+  // column_worker: columns solved at load, so the first touch of a small body or of the tissue
+  // under a rigid opening never waits for the worker: every contact node's when they all fit in
+  // this budget, else the nodes within the opening's radius + the widest tool part + the
+  // worker's reach of each opening's axis (the surface a tool entering through it reaches first),
+  // nearest the axis first, up to the budget, unit MB.
+  double column_preload_budget_mb{256.0};
   // Keep the full coupled compliance columns of touched nodes (3N x 3 doubles each: 0.4 MB per
   // node on a 25k-tet brain) so displacements() of a host is a sum of columns, not a sparse solve.
   bool cache_full_field_columns{false};

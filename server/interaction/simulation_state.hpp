@@ -146,6 +146,7 @@ class Model {
   // each station's tool outside them (State: a ToolProxy per station, with these options).
   std::unique_ptr<const RigidObstacle> rigid_;
   ToolProxyOptions proxy_options_;
+  std::vector<scene::RigidOpening> openings_;  // of the rigid meshes (the skull's craniotomy)
   SetupStats setup_;
   int num_sliding_{0};  // sliding rows, first in the LCP
   double step_period_s_{1e-3};  // 1 / rates.step_hz: the time of a step given none, unit s
@@ -224,6 +225,7 @@ class State {
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape);
   void compliance_columns(StepStats& stats);
   void columns_fallback(StepStats& stats);
+  void preload_columns(const Model& m);
   void delassus(const Model& m, int ns);
   void store_forces(const Model& m, int ns);
   void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations, int tools,

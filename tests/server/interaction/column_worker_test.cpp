@@ -61,6 +61,7 @@ Brain load_brain() {
   b.model = scene::load_model(neurosim::testing::source_dir() / "scenes/brain_artery.scene");
   SimulationOptions on;
   on.column_worker = true;
+  on.column_preload_budget_mb = 0.0;  // nothing at load: every column by the worker
   b.worker = Simulation::build(b.model, on);
   b.sync = Simulation::build(b.model, SimulationOptions{});
   b.tip_radius_m = b.model.tools.at(0).tip_radius_m;
@@ -196,6 +197,59 @@ TEST(interaction_column_worker, FastSlideOverFreshSurfaceNeverSolvesOnTheStepThr
       << "the steps' columns_not_ready add up to the reported count";
   EXPECT_GT(compared, 0);
   EXPECT_EQ(differing, 0) << "a step with every column ready differs from the synchronous one";
+}
+
+// At load (SimulationOptions::column_preload_budget_mb): a small body's columns all, and on the
+// brain under the skull the nodes around the craniotomy's axis, so a probe going in along the
+// axis to the cerebellum at 0.5 m/s (as in service_rigid) with the worker held finds every
+// column ready and feels the synchronous force at every step.
+TEST(interaction_column_worker, ColumnsOfASmallBodyAndUnderAnOpeningAreReadyAtLoad) {
+  SimulationOptions on;
+  on.column_worker = true;
+  {
+    const scene::Model cube =
+        scene::load_model(neurosim::testing::source_dir() / "scenes/cube_cylinder.scene");
+    auto sim = Simulation::build(cube, on);
+    auto ref = Simulation::build(cube, SimulationOptions{});
+    sim->pause_column_worker(true);
+    ToolPose press;  // 3 mm into the +x face (tip radius from the scene)
+    press.tip_m = Vec3(0.1 + cube.tools.at(0).tip_radius_m - 0.003, 0.05, 0.05);
+    press.axis = Vec3::UnitX();
+    std::vector<ToolContact> c, r;
+    StepStats st, rst;
+    sim->step({press}, c, st);
+    ref->step({press}, r, rst);
+    EXPECT_EQ(st.columns_not_ready, 0);
+    EXPECT_EQ(st.columns_computed, 0);
+    ASSERT_GT(r[0].force_n.norm(), 0.0);
+    EXPECT_TRUE(same_force(c[0].force_n, r[0].force_n));
+  }
+  const scene::Model skull =
+      scene::load_model(neurosim::testing::source_dir() / "scenes/brain_skull.scene");
+  ASSERT_FALSE(skull.rigid.empty());
+  ASSERT_FALSE(skull.rigid.front().openings.empty());
+  const scene::RigidOpening& hole = skull.rigid.front().openings.front();
+  auto sim = Simulation::build(skull, on);
+  auto ref = Simulation::build(skull, SimulationOptions{});
+  sim->pause_column_worker(true);
+  EXPECT_EQ(sim->columns_solved_ahead(), 0u);
+  std::vector<ToolPose> one(1);
+  std::vector<ToolContact> c, r;
+  StepStats st, rst;
+  int in_contact = 0;
+  const int cap = SimulationOptions{}.contact_geometry_iterations;
+  for (int k = 0; k < 200; ++k) {
+    one[0].tip_m = hole.center_m + (0.04 - 0.0005 * k) * hole.axis;
+    one[0].axis = hole.axis;
+    sim->step(one, c, st);
+    ref->step(one, r, rst);
+    EXPECT_EQ(st.columns_not_ready, 0) << "step " << k;
+    if (rst.geometry_iterations < cap && st.geometry_iterations < cap) {
+      EXPECT_TRUE(same_force(c[0].force_n, r[0].force_n)) << "step " << k;
+    }
+    in_contact += r[0].in_contact;
+  }
+  EXPECT_GT(in_contact, 20) << "the probe reaches the brain through the opening";
 }
 
 }  // namespace
