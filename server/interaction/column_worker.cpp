@@ -23,6 +23,8 @@ ColumnWorker::ColumnWorker(std::vector<ColumnWorkerBody> bodies, const std::vect
     throw std::invalid_argument(
         "ColumnWorkerOptions: horizon_s and max_tool_speed_m_per_s must be finite and >= 0");
   }
+  if (!(options_.idle_slack_m >= 0.0) || !std::isfinite(options_.idle_slack_m))
+    throw std::invalid_argument("ColumnWorkerOptions: idle_slack_m must be finite and >= 0");
   if (!(options_.idle_sleep_s > 0.0 && options_.idle_sleep_s <= 1.0))
     throw std::invalid_argument("ColumnWorkerOptions: idle_sleep_s must be in (0, 1] s");
   for (const auto& b : bodies_)
@@ -70,13 +72,25 @@ bool ColumnWorker::wanted(const Poses& poses, int body, std::size_t most, std::v
       const double d = (rest[s] - closest_on_segment(rest[s], p.p0, p.p1)).norm() - p.radius_m;
       best = std::min(best, d);
     }
-    if (best <= lookahead_m_ + b.behind_reach_m) near.emplace_back(best, s);
+    if (best <= lookahead_m_ + options_.idle_slack_m + b.behind_reach_m) near.emplace_back(best, s);
   }
   if (near.empty()) return false;
   const std::size_t n = std::min(most, near.size());
   std::partial_sort(near.begin(), near.begin() + static_cast<std::ptrdiff_t>(n), near.end());
   out.clear();
   for (std::size_t k = 0; k < n; ++k) out.push_back(near[k].second);
+  return true;
+}
+
+// Whether every part of `now` lies within `slack` of the same part of `then` (then each point a
+// part of `now` reaches lies within reach + slack of `then`'s).
+bool ColumnWorker::within_slack(const Poses& now, const Poses& then, double slack) {
+  if (now.count != then.count) return false;
+  for (int k = 0; k < now.count; ++k) {
+    const Part &a = now.parts[k], &b = then.parts[k];
+    if ((a.p0 - b.p0).norm() > slack || (a.p1 - b.p1).norm() > slack || a.radius_m != b.radius_m)
+      return false;
+  }
   return true;
 }
 
@@ -87,6 +101,8 @@ void ColumnWorker::run() {
   // take the fallback. Lowering one's own priority needs no privilege.
   setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 10);
   Poses poses;
+  Poses idle_poses;         // the poses of the last scan that found nothing to solve
+  bool idle_valid = false;  // nothing within reach + slack of idle_poses is missing
   std::vector<int> slots;
   const auto idle = std::chrono::duration<double>(options_.idle_sleep_s);
   const std::size_t chunk = static_cast<std::size_t>(CoupledBody::kBlockColumns / 3);
@@ -94,6 +110,14 @@ void ColumnWorker::run() {
     poses_.take(poses);
     bool worked = false;
     if (paused_.load(std::memory_order_acquire)) {
+      idle_valid = false;
+      std::this_thread::sleep_for(idle);
+      continue;
+    }
+    // A tool that moved less than the slack since a scan found everything ready needs nothing
+    // new: no scan (a fine mesh's scan costs ~0.1 ms).
+    if (idle_valid && within_slack(poses, idle_poses, options_.idle_slack_m)) {
+      idle_at_.store(poses.sequence, std::memory_order_release);
       std::this_thread::sleep_for(idle);
       continue;
     }
@@ -112,7 +136,9 @@ void ColumnWorker::run() {
       worked = true;
       break;  // the newest poses first, then this body again
     }
+    idle_valid = !worked;
     if (!worked) {
+      idle_poses = poses;
       idle_at_.store(poses.sequence, std::memory_order_release);
       std::this_thread::sleep_for(idle);
     }

@@ -8,7 +8,7 @@
 //                  ContactColumns (contact_columns.hpp: written once, release/acquire flag)
 //
 // Reach: a contact node is wanted when its rest position lies within
-//   part radius + max_tool_speed_m_per_s x horizon_s + the body's behind reach
+//   part radius + max_tool_speed_m_per_s x horizon_s + idle_slack_m + the body's behind reach
 // of a tool part (the tip sphere, the shaft capsule): the surface the tool can touch within the
 // horizon at the tool's maximum speed (defaults: 0.5 m/s for 50 ms, 25 mm, so a tool sliding at
 // 20 mm/s sees its next 1.25 s of surface ready). Nearest first (distance to the part's surface),
@@ -41,6 +41,9 @@ struct ColumnWorkerOptions {
   double horizon_s{0.05};              // how far ahead of the tool, unit s
   double max_tool_speed_m_per_s{0.5};  // the tool's fastest motion assumed, unit m/s
   double idle_sleep_s{0.001};          // nothing to solve: look again after this, unit s
+  // The reach is solved this much wider, so a tool that moved less since everything was ready
+  // needs no new scan of the surface, unit m.
+  double idle_slack_m{0.001};
 };
 
 // One body the worker fills: its contact slots' rest positions and the State's cache.
@@ -87,6 +90,7 @@ class ColumnWorker {
     std::array<Part, 2 * kMaxTools> parts{};
   };
   void run();
+  static bool within_slack(const Poses& now, const Poses& then, double slack);
   // The nearest wanted slots that are not ready, at most `most`, of one body; false: none.
   bool wanted(const Poses& poses, int body, std::size_t most, std::vector<int>& out);
 
