@@ -153,7 +153,7 @@ int brain_contact(int steps) {
   auto sim = ni::Simulation::build(model);
   const auto& mesh = sim->mesh(0);
   auto pose_at = [&](double x, double y, double depth, ni::ToolPose& pose) {
-    Eigen::Vector3d p, n;
+    Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::UnitZ();
     if (!top_of_surface(mesh, x, y, p, n)) return false;
     pose.tip_m = p + (r - depth) * n;
     pose.axis = n;
