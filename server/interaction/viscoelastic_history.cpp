@@ -36,11 +36,46 @@ ViscoelasticHistory::ViscoelasticHistory(const fem::Viscoelastic& kernel,
   slots_.reserve(num_slots);
   h_.reserve(num_slots);
   next_slots_.reserve(num_slots);
+  touched_.reserve(num_slots);
+  last_f_.assign(num_slots, Vec3::Zero());
+  last_q_.assign(q_.size(), Vec3::Zero());
+  last_eq_.assign(num_slots, Vec3::Zero());
+  last_z_.assign(z_.size(), Vec3::Zero());
+  last_slots_.reserve(num_slots);
+}
+
+void ViscoelasticHistory::swap_last_commit() {
+  for (std::size_t j = 0; j < touched_.size(); ++j) {
+    const auto s = static_cast<std::size_t>(touched_[j]);
+    std::swap(f_prev_[s], last_f_[j]);
+    std::swap(eq_prev_[s], last_eq_[j]);
+    for (int k = 0; k < num_terms_; ++k)
+      std::swap(q_[s * num_terms_ + k], last_q_[j * num_terms_ + k]);
+    for (int i = 0; i < num_kernel_; ++i)
+      std::swap(z_[s * num_kernel_ + i], last_z_[j * num_kernel_ + i]);
+  }
+  for (int s : slots_) index_[s] = -1;
+  slots_.swap(last_slots_);  // both reserved for every slot: no allocation
+  for (std::size_t i = 0; i < slots_.size(); ++i) index_[slots_[i]] = static_cast<int>(i);
+  h_.resize(slots_.size());
+  std::swap(force_scale_n_, last_force_scale_n_);
 }
 
 void ViscoelasticHistory::begin(double dt_s) {
   if (!(dt_s >= 0.0) || !std::isfinite(dt_s))
     throw std::invalid_argument("ViscoelasticHistory: time step must be finite and >= 0");
+  // A step taken back and not solved again (it failed): the committed history comes back.
+  if (taken_back_) {
+    swap_last_commit();
+    taken_back_ = false;
+  }
+  // The time of the last step again: that step is replaced (taken back, solved again with its dt).
+  if (dt_s == 0.0 && has_last_) {
+    swap_last_commit();
+    taken_back_ = true;
+    dt_s = last_dt_s_;
+  }
+  dt_s_ = dt_s;
   alpha_ = 1.0;
   for (int k = 0; k < num_terms_; ++k) {
     decay(dt_s, terms_[k].rho_s, e_[k], beta_[k]);
@@ -80,6 +115,20 @@ void ViscoelasticHistory::commit(const std::vector<int>& slots,
     seen_[s] = 1;
     next_slots_.push_back(s);
   }
+  // What this commit changes, as it was (a step at the same time replaces this one).
+  touched_.assign(next_slots_.begin(), next_slots_.end());
+  for (std::size_t j = 0; j < touched_.size(); ++j) {
+    const auto s = static_cast<std::size_t>(touched_[j]);
+    last_f_[j] = f_prev_[s];
+    last_eq_[j] = eq_prev_[s];
+    for (int k = 0; k < num_terms_; ++k) last_q_[j * num_terms_ + k] = q_[s * num_terms_ + k];
+    for (int i = 0; i < num_kernel_; ++i) last_z_[j * num_kernel_ + i] = z_[s * num_kernel_ + i];
+  }
+  last_slots_.assign(slots_.begin(), slots_.end());
+  last_force_scale_n_ = force_scale_n_;
+  has_last_ = true;
+  taken_back_ = false;
+  last_dt_s_ = dt_s_;
   // The new forces, kept in h_'s place per slot until the internal variables are updated.
   for (std::size_t i = 0; i < slots.size(); ++i) {
     const int s = slots[i];

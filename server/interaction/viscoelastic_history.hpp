@@ -20,7 +20,13 @@
 // The step's LCP is then W' = alpha W on the same rows and columns and a depth shifted by the
 // history displacement C h_n along each row: exact for the model and a force linear between the
 // step times; the only error is that interpolation (relative (dt / rho_min)^2 / 12 at most on a
-// step's increment of the hereditary integral). dt = 0 is a jump (alpha = 1, J(0) = 1).
+// step's increment of the hereditary integral). dt = 0 is a jump (alpha = 1, J(0) = 1) for the
+// first step; after a committed step it REPLACES that step: a step at the time of the last one
+// (a newer pose for the same instant, or the same pose stepped again on a deadline) goes back to
+// the history before it and solves that step again from there with its dt. One instant has one
+// state: a pose stepped again at its own time gives the same answer bit for bit, so a live server
+// that repeats a step while it waits for the next sample and a replay that steps each sample time
+// once give the same forces.
 //
 // What a held tool feels next (the haptic client's extrapolation between models): per slot the
 // actual force is the relaxation integral of the creep-equivalent one, f = int g(t - s) df~(s)
@@ -50,7 +56,9 @@ class ViscoelasticHistory {
   ViscoelasticHistory(const fem::Viscoelastic& kernel, const fem::CreepSpectrum& creep,
                       int num_slots);
 
-  // The step to t_n = t_n-1 + dt_s (dt_s >= 0): alpha and the history forces h_n.
+  // The step to t_n = t_n-1 + dt_s (dt_s >= 0): alpha and the history forces h_n. dt_s = 0 after
+  // a committed step: that step is taken back and solved again (see above); a step begun and
+  // not committed (it failed) leaves the committed history as it was.
   void begin(double dt_s);
   double alpha() const { return alpha_; }
   // Slots with a history force, and h_n per slot (unit N; the force the elastic body would need
@@ -78,6 +86,9 @@ class ViscoelasticHistory {
  private:
   // The relaxation variables of `slot` for its creep-equivalent force of this step.
   void relax(int slot, const Vec3& equivalent_n);
+  // Exchanges the per-slot state of the slots the last commit touched (and the slot list) with
+  // the copy kept of it: before that commit <-> after it.
+  void swap_last_commit();
 
   std::vector<fem::CreepTerm> terms_;
   int num_terms_;
@@ -97,6 +108,14 @@ class ViscoelasticHistory {
   std::vector<int> next_slots_;
   std::vector<char> seen_;
   double force_scale_n_{0.0};
+  // The last commit, to replace it (dt = 0): its dt, the slots it touched and their state on the
+  // other side of it (packed in touched_ order), the slot list and force scale likewise.
+  bool has_last_{false}, taken_back_{false};
+  double dt_s_{0.0}, last_dt_s_{0.0};
+  std::vector<int> touched_;
+  std::vector<Vec3> last_f_, last_q_, last_eq_, last_z_;
+  std::vector<int> last_slots_;
+  double last_force_scale_n_{0.0};
 };
 
 }  // namespace neurosim::interaction

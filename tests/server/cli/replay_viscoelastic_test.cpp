@@ -2,7 +2,8 @@
 // step, and the replay steps at the recording's sample times. Two replays give bit-identical
 // forces; they equal a Simulation stepped in process at the same sample times (what the live
 // server does with the stations' source times); the same poses at other times give other forces
-// (the held press relaxes by the kernel's amount over the recording's time, not the step count).
+// (the held press relaxes by the kernel's amount over the recording's time, not the step count);
+// a step at the time of the last one replaces it.
 #include "server/cli/replay.hpp"
 #include "server/scene/compile.hpp"
 
@@ -88,6 +89,41 @@ TEST(replay_viscoelastic, DeterministicAtTheSampleTimesAndEqualToTheInProcessSte
   EXPECT_LT(slow.force_z.back(), a.force_z.back() * (1.0 - 1e-3));
   std::printf("held press: end of ramp %.5f N, after 0.4 s %.5f N, after 0.8 s %.5f N\n",
               a.force_z[100], a.force_z.back(), slow.force_z.back());
+}
+
+// A step at the time of the last one replaces it (the live server repeats a pose at its time on a
+// deadline while it waits for the next sample): every pose stepped twice at its time gives, bit
+// for bit, the forces of stepping it once; and a newer pose at the same time gives what that pose
+// alone at that time gives.
+TEST(replay_viscoelastic, AStepAtTheSameTimeReplacesTheLastOne) {
+  const scene::Model model = block_model();
+  const replay::Station s = press_station(1.0);
+  auto once = ni::Simulation::build(model), twice = ni::Simulation::build(model),
+       replaced = ni::Simulation::build(model);
+  std::vector<ni::ToolContact> a, b, c;
+  ni::StepStats st;
+  int in_contact = 0;
+  for (std::size_t k = 0; k < s.samples.size(); ++k) {
+    const double t = s.samples[k].time_s();
+    const ni::ToolPose p = replay::pose_of(s.samples[k], 0);
+    once->step_at(t, {p}, a, st);
+    twice->step_at(t, {p}, b, st);
+    twice->step_at(t, {p}, b, st);
+    // First a pose 0.2 mm off, then the sample's pose at the same time.
+    ni::ToolPose off = p;
+    off.tip_m.z() -= 2e-4;
+    replaced->step_at(t, {off}, c, st);
+    replaced->step_at(t, {p}, c, st);
+    ASSERT_EQ(a[0].in_contact, b[0].in_contact) << "sample " << k;
+    in_contact += a[0].in_contact;
+    EXPECT_EQ(a[0].force_n, b[0].force_n) << "sample " << k;
+    EXPECT_EQ(a[0].force_n, c[0].force_n) << "sample " << k;
+    EXPECT_EQ(a[0].num_relaxing, b[0].num_relaxing);
+    for (int j = 0; j < a[0].num_relaxing; ++j)
+      EXPECT_EQ(a[0].relaxing[j].force_n, b[0].relaxing[j].force_n) << "sample " << k;
+    if (::testing::Test::HasFailure()) break;
+  }
+  EXPECT_GT(in_contact, 400);
 }
 
 }  // namespace

@@ -202,6 +202,13 @@ class ModelCollector {
     for (const auto& r : recs_) n += r.station == station;
     return n;
   }
+  // The tool_sequence of the newest ContactModel received for `station` (0: none).
+  std::uint64_t newest_sequence(const std::string& station) {
+    std::lock_guard<std::mutex> lk(m_);
+    for (auto it = recs_.rbegin(); it != recs_.rend(); ++it)
+      if (it->station == station) return it->tool_sequence;
+    return 0;
+  }
   bool disposed(const std::string& station) {
     std::lock_guard<std::mutex> lk(m_);
     for (const auto& s : disposed_) if (s == station) return true;
