@@ -154,11 +154,14 @@ void set_material(scene::Material* m, MaterialSet set, bool artery) {
   } else if (!artery) {
     m->set_name("brain_literature");
     m->set_youngs_modulus_pa(3.0e3);
-    m->set_poisson_ratio(0.45);
+    m->set_poisson_ratio(0.49);
+    m->set_element("smoothed-tet");
     m->set_source(
         "Brain tissue, literature: E of order 1-3 kPa (Miller et al. 2000, J Biomech 33:1369, "
         "in vivo indentation; Budday et al. 2015, J Mech Behav Biomed Mater 46:318, ~1 kPa); "
-        "nu = 0.45, nearly incompressible but below 0.49 where linear tetrahedra lock");
+        "nu = 0.49, nearly incompressible (the value of the patient-specific brain models of "
+        "Wittek et al. 2007, J Biomech 40:919, as quoted, not re-read here), on smoothed-tet, "
+        "which does not lock there (linear tetrahedra do)");
   } else {
     m->set_name("artery_literature");
     m->set_youngs_modulus_pa(1.0e6);

@@ -17,7 +17,7 @@ namespace neurosim::model {
 using mesh::Vec3;
 
 enum class MaterialSet {
-  Literature,  // brain E = 3 kPa, nu = 0.45; artery E = 1 MPa, nu = 0.45
+  Literature,  // brain E = 3 kPa, nu = 0.49, smoothed-tet; artery E = 1 MPa, nu = 0.45
   Paper,       // the mesh fusion paper's E = 1 MPa, nu = 0.4 for both
 };
 
