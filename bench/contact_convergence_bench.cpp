@@ -18,8 +18,8 @@
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "server/fem/element.hpp"
-#include "server/interaction/contact_surface.hpp"
 #include "server/interaction/simulation.hpp"
+#include "server/interaction/surface_probe.hpp"
 #include "server/scene/compile.hpp"
 
 #include <Eigen/Core>
@@ -56,45 +56,6 @@ fs::path scene_at(double cell_mm, const fs::path& dir) {
       throw std::runtime_error("neurosim-model failed (log: " + (d / "model.log").string() + ")");
   }
   return scene;
-}
-
-// The highest surface point of `mesh` on the vertical line through (x, y), and its triangle's
-// outward normal; false if the line misses the surface.
-bool top_of_surface(const neurosim::mesh::TetMesh& mesh, double x, double y, Vec3& point, Vec3& normal) {
-  const auto& v = mesh.vertices();
-  double best = -std::numeric_limits<double>::infinity();
-  for (const auto& t : mesh.surface()) {
-    const Vec3 &a = v[t[0]], &b = v[t[1]], &c = v[t[2]];
-    const Vec3 n = (b - a).cross(c - a);
-    if (n.z() <= 0.0) continue;
-    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
-    const double l1 = ((x - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y - a.y())) / det;
-    const double l2 = ((b.x() - a.x()) * (y - a.y()) - (x - a.x()) * (b.y() - a.y())) / det;
-    if (l1 < 0.0 || l2 < 0.0 || l1 + l2 > 1.0) continue;
-    const Vec3 p = a + l1 * (b - a) + l2 * (c - a);
-    if (p.z() > best) {
-      best = p.z();
-      point = p;
-      normal = n.normalized();
-    }
-  }
-  return std::isfinite(best);
-}
-
-// The closest point of the mesh's surface triangles to x (brute force) and its triangle's normal.
-void closest_on_surface(const neurosim::mesh::TetMesh& mesh, const Vec3& x, Vec3& point, Vec3& normal) {
-  double best = std::numeric_limits<double>::infinity();
-  const auto& v = mesh.vertices();
-  for (const auto& t : mesh.surface()) {
-    const std::array<Vec3, 3> p{v[t[0]], v[t[1]], v[t[2]]};
-    const ni::TrianglePoint at = ni::closest_on_triangle(x, p);
-    const double d = (x - at.point_m).squaredNorm();
-    if (d < best) {
-      best = d;
-      point = at.point_m;
-      normal = (p[1] - p[0]).cross(p[2] - p[0]).normalized();
-    }
-  }
 }
 
 // Order p with (h1^p - h2^p) / (h2^p - h3^p) = ratio (bisection on p in (0.05, 6)); nan if the
@@ -150,9 +111,9 @@ int main(int argc, char** argv) {
       auto sim = ni::Simulation::build(model);
       const double build_s = neurosim::common::seconds_since(t0);
       const auto& mesh = sim->mesh(0);
-      Vec3 top = Vec3::Zero(), n = Vec3::UnitZ();
-      if (!top_of_surface(mesh, 1e-3 * x_mm, 1e-3 * y_mm, top, n))
-        throw std::runtime_error(scene.string() + ": the press line misses the brain's surface");
+      const auto press_at = ni::top_of_surface(mesh, 1e-3 * x_mm, 1e-3 * y_mm);
+      if (!press_at) throw std::runtime_error(scene.string() + ": the press line misses the brain's surface");
+      const Vec3 top = press_at->point_m, n = press_at->normal;
       const double r = model.tools.at(0).tip_radius_m;
       std::vector<ni::ToolPose> poses(1);
       std::vector<ni::ToolContact> contacts;
@@ -172,15 +133,14 @@ int main(int argc, char** argv) {
         int steps = 0;
         double y_at_min = 0.0, depth_at_min = 0.0;  // where |F| / depth is least, unit mm / m
         for (int k = 0; k <= 400; ++k) {
-          Vec3 at = Vec3::Zero(), up = Vec3::UnitZ();
-          if (!top_of_surface(mesh, 0.060, 0.080 + 1e-4 * k, at, up))
-            throw std::runtime_error(scene.string() + ": the slide leaves the surface at step " + std::to_string(k));
+          const auto on = ni::top_of_surface(mesh, 0.060, 0.080 + 1e-4 * k);
+          if (!on) throw std::runtime_error(scene.string() + ": the slide leaves the surface at step " + std::to_string(k));
+          const Vec3 at = on->point_m, up = on->normal;
           poses[0].tip_m = at + (r - 1e-3 * depth_mm) * up;
           poses[0].axis = up;
           sim->step(poses, contacts, stats);
-          Vec3 q = Vec3::Zero(), nq = Vec3::UnitZ();
-          closest_on_surface(mesh, poses[0].tip_m, q, nq);
-          const double depth = r - nq.dot(poses[0].tip_m - q);
+          const ni::SurfacePoint near = ni::closest_on_surface(mesh, poses[0].tip_m);
+          const double depth = r - near.normal.dot(poses[0].tip_m - near.point_m);
           const double f = contacts[0].force_n.norm();
           f_min = std::min(f_min, f);
           if (f / depth < fpd_min) {

@@ -25,6 +25,7 @@
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/iterative_tie.hpp"
 #include "server/interaction/simulation.hpp"
+#include "server/interaction/surface_probe.hpp"
 #include "server/scene/compile.hpp"
 
 #include <unistd.h>
@@ -72,30 +73,6 @@ effects { tier: LINEAR coupling: true tool_contact: true deformation_output: tru
 )";
 }
 
-
-// The highest point of the host's surface above (x, y) and its triangle's normal (a vertical
-// ray from above); false if the ray misses.
-bool top_of_surface(const neurosim::mesh::TetMesh& mesh, double x, double y, Eigen::Vector3d& p,
-                    Eigen::Vector3d& n) {
-  const auto& v = mesh.vertices();
-  double best = -1e300;
-  for (const auto& t : mesh.surface()) {
-    const Eigen::Vector3d &a = v[t[0]], &b = v[t[1]], &c = v[t[2]];
-    const Eigen::Vector3d nn = (b - a).cross(c - a);
-    if (nn.z() <= 0.0) continue;
-    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
-    const double l1 = ((x - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y - a.y())) / det;
-    const double l2 = ((b.x() - a.x()) * (y - a.y()) - (x - a.x()) * (b.y() - a.y())) / det;
-    if (l1 < 0.0 || l2 < 0.0 || l1 + l2 > 1.0) continue;
-    const Eigen::Vector3d q = a + l1 * (b - a) + l2 * (c - a);
-    if (q.z() > best) {
-      best = q.z();
-      p = q;
-      n = nn.normalized();
-    }
-  }
-  return best > -1e300;
-}
 
 // CPU time of the calling thread, unit us: a step's own work, without the time the scheduler
 // gave other processes (on a loaded machine a preempted step's wall time includes a time slice).
@@ -153,10 +130,10 @@ int brain_contact(int steps) {
   auto sim = ni::Simulation::build(model);
   const auto& mesh = sim->mesh(0);
   auto pose_at = [&](double x, double y, double depth, ni::ToolPose& pose) {
-    Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::UnitZ();
-    if (!top_of_surface(mesh, x, y, p, n)) return false;
-    pose.tip_m = p + (r - depth) * n;
-    pose.axis = n;
+    const auto on = ni::top_of_surface(mesh, x, y);
+    if (!on) return false;
+    pose.tip_m = on->point_m + (r - depth) * on->normal;
+    pose.axis = on->normal;
     return true;
   };
   // Press: breathing 0.6-1.4 mm on a 4 mm circle around (60, 100) mm.

@@ -9,6 +9,7 @@
 // Checked by counts, never by time (CI runs under load): how many columns were not ready along
 // the slide depends on the machine and is printed, not asserted.
 #include "server/interaction/simulation.hpp"
+#include "server/interaction/surface_probe.hpp"
 #include "server/scene/compile.hpp"
 #include "tests/test_support.hpp"
 #include "thread_allocation_counter.hpp"
@@ -26,28 +27,6 @@
 
 namespace neurosim::interaction {
 namespace {
-
-// The highest point of the surface above (x, y) and its triangle's normal; false if none.
-bool top_of_surface(const mesh::TetMesh& mesh, double x, double y, Vec3& point, Vec3& normal) {
-  const auto& v = mesh.vertices();
-  double best = -std::numeric_limits<double>::infinity();
-  for (const auto& t : mesh.surface()) {
-    const Vec3 &a = v[t[0]], &b = v[t[1]], &c = v[t[2]];
-    const Vec3 n = (b - a).cross(c - a);
-    if (n.z() <= 0.0) continue;
-    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
-    const double l1 = ((x - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y - a.y())) / det;
-    const double l2 = ((b.x() - a.x()) * (y - a.y()) - (x - a.x()) * (b.y() - a.y())) / det;
-    if (l1 < 0.0 || l2 < 0.0 || l1 + l2 > 1.0) continue;
-    const Vec3 p = a + l1 * (b - a) + l2 * (c - a);
-    if (p.z() > best) {
-      best = p.z();
-      point = p;
-      normal = n.normalized();
-    }
-  }
-  return std::isfinite(best);
-}
 
 struct Brain {
   scene::Model model;
@@ -70,14 +49,14 @@ Brain load_brain() {
 
 // The tip depth_m below the top surface at (x, y), along its normal.
 ToolPose pose_at(const Brain& b, double x, double y, double depth_m) {
-  Vec3 p = Vec3::Zero(), n = Vec3::UnitZ();
-  if (!top_of_surface(b.sync->mesh(0), x, y, p, n)) {
+  const auto on = top_of_surface(b.sync->mesh(0), x, y);
+  if (!on) {
     ADD_FAILURE() << "no surface above (" << x << ", " << y << ")";
     return {};
   }
   ToolPose pose;
-  pose.tip_m = p + (b.tip_radius_m - depth_m) * n;
-  pose.axis = n;
+  pose.tip_m = on->point_m + (b.tip_radius_m - depth_m) * on->normal;
+  pose.axis = on->normal;
   return pose;
 }
 

@@ -5,6 +5,7 @@
 // meet and on an edge gives one row, and a tip just off them (a face row next to a node row:
 // nearly dependent rows) converges to the same force.
 #include "server/interaction/simulation.hpp"
+#include "server/interaction/surface_probe.hpp"
 #include "server/interaction/contact_surface.hpp"
 
 #include "server/fem/fem_test_meshes.hpp"
@@ -269,51 +270,6 @@ namespace {
 // A path over a mesh's rest surface seen from above: the tip centre kept `depth_m` below the
 // highest surface point under (x, y) along that triangle's normal; the depth the test divides by
 // is measured to the closest point of the surface triangles (brute force).
-struct SurfacePoint {
-  Vec3 point_m;
-  Vec3 normal;  // the triangle's outward normal
-};
-
-SurfacePoint closest_on_surface(const mesh::TetMesh& mesh, const Vec3& x) {
-  SurfacePoint best{Vec3::Zero(), Vec3::UnitZ()};
-  double best_d = std::numeric_limits<double>::infinity();
-  const auto& v = mesh.vertices();
-  for (const auto& t : mesh.surface()) {
-    const std::array<Vec3, 3> p{v[t[0]], v[t[1]], v[t[2]]};
-    const TrianglePoint at = closest_on_triangle(x, p);
-    const double d = (x - at.point_m).squaredNorm();
-    if (d < best_d) {
-      best_d = d;
-      best.point_m = at.point_m;
-      best.normal = (p[1] - p[0]).cross(p[2] - p[0]).normalized();
-    }
-  }
-  return best;
-}
-
-// The highest point of the surface above (x, y) (a vertical ray from above), or none.
-bool top_of_surface(const mesh::TetMesh& mesh, double x, double y, SurfacePoint& out) {
-  const auto& v = mesh.vertices();
-  double best = -std::numeric_limits<double>::infinity();
-  for (const auto& t : mesh.surface()) {
-    const Vec3 &a = v[t[0]], &b = v[t[1]], &c = v[t[2]];
-    const Vec3 n = (b - a).cross(c - a);
-    if (n.z() <= 0.0) continue;  // faces looking up only
-    // Barycentric coordinates of (x, y) in the triangle's projection on z = 0.
-    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
-    const double l1 = ((x - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y - a.y())) / det;
-    const double l2 = ((b.x() - a.x()) * (y - a.y()) - (x - a.x()) * (b.y() - a.y())) / det;
-    if (l1 < 0.0 || l2 < 0.0 || l1 + l2 > 1.0) continue;
-    const Vec3 p = a + l1 * (b - a) + l2 * (c - a);
-    if (p.z() > best) {
-      best = p.z();
-      out.point_m = p;
-      out.normal = n.normalized();
-    }
-  }
-  return std::isfinite(best);
-}
-
 struct Slide {
   std::vector<double> force_per_depth;  // |F| / measured depth per step, unit N/m
   double min_force_n{std::numeric_limits<double>::infinity()};
@@ -331,11 +287,12 @@ Slide slide(const scene::Model& model, const Vec3& start, const Vec3& heading, d
   const int steps = static_cast<int>(std::lround(length_m / step_m));
   for (int k = 0; k <= steps; ++k) {
     const Vec3 at = start + (k * step_m) * heading;
-    SurfacePoint p{Vec3::Zero(), Vec3::UnitZ()};
-    if (!top_of_surface(mesh, at.x(), at.y(), p)) {
+    const auto on = top_of_surface(mesh, at.x(), at.y());
+    if (!on) {
       ADD_FAILURE() << "the path leaves the surface at step " << k;
       break;
     }
+    const SurfacePoint& p = *on;
     ToolPose pose;
     pose.tip_m = p.point_m + (r - depth_m) * p.normal;
     pose.axis = p.normal;

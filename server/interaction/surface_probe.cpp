@@ -1,0 +1,67 @@
+#include "server/interaction/surface_probe.hpp"
+
+#include "server/interaction/contact_surface.hpp"
+
+#include <array>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace neurosim::interaction {
+namespace {
+
+void check_surface(const mesh::TetMesh& mesh, const char* what) {
+  if (mesh.surface().empty())
+    throw std::invalid_argument(std::string(what) + ": the mesh has no surface triangles");
+}
+
+}  // namespace
+
+std::optional<SurfacePoint> top_of_surface(const mesh::TetMesh& mesh, double x_m, double y_m) {
+  if (!std::isfinite(x_m) || !std::isfinite(y_m))
+    throw std::invalid_argument("top_of_surface: non-finite (x, y)");
+  check_surface(mesh, "top_of_surface");
+  const auto& v = mesh.vertices();
+  double best = -std::numeric_limits<double>::infinity();
+  SurfacePoint out;
+  for (const auto& t : mesh.surface()) {
+    const mesh::Vec3 &a = v[t[0]], &b = v[t[1]], &c = v[t[2]];
+    const mesh::Vec3 n = (b - a).cross(c - a);
+    if (n.z() <= 0.0) continue;  // faces looking up only (this also excludes vertical ones)
+    // Barycentric coordinates of (x, y) in the triangle's projection on z = 0.
+    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
+    const double l1 = ((x_m - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y_m - a.y())) / det;
+    const double l2 = ((b.x() - a.x()) * (y_m - a.y()) - (x_m - a.x()) * (b.y() - a.y())) / det;
+    if (l1 < 0.0 || l2 < 0.0 || l1 + l2 > 1.0) continue;
+    const mesh::Vec3 p = a + l1 * (b - a) + l2 * (c - a);
+    if (p.z() > best) {
+      best = p.z();
+      out.point_m = p;
+      out.normal = n.normalized();
+    }
+  }
+  if (!std::isfinite(best)) return std::nullopt;
+  return out;
+}
+
+SurfacePoint closest_on_surface(const mesh::TetMesh& mesh, const mesh::Vec3& x_m) {
+  if (!x_m.allFinite()) throw std::invalid_argument("closest_on_surface: non-finite point");
+  check_surface(mesh, "closest_on_surface");
+  const auto& v = mesh.vertices();
+  double best = std::numeric_limits<double>::infinity();
+  SurfacePoint out;
+  for (const auto& t : mesh.surface()) {
+    const std::array<mesh::Vec3, 3> p{v[t[0]], v[t[1]], v[t[2]]};
+    const TrianglePoint at = closest_on_triangle(x_m, p);
+    const double d = (x_m - at.point_m).squaredNorm();
+    if (d < best) {
+      best = d;
+      out.point_m = at.point_m;
+      out.normal = (p[1] - p[0]).cross(p[2] - p[0]).normalized();
+    }
+  }
+  return out;
+}
+
+}  // namespace neurosim::interaction

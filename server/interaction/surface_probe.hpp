@@ -1,0 +1,27 @@
+// Points on a mesh's boundary surface for placing a tool (benches, tests, tools): the highest
+// surface point on a vertical line, and the closest surface point to a point. Brute force over
+// the surface triangles (O(triangles) per call): for set-up and measurement, not for the step.
+#pragma once
+
+#include "server/mesh/tet_mesh.hpp"
+
+#include <optional>
+
+namespace neurosim::interaction {
+
+// A point of the boundary surface (unit m) and the outward unit normal of its triangle.
+struct SurfacePoint {
+  mesh::Vec3 point_m{mesh::Vec3::Zero()};
+  mesh::Vec3 normal{mesh::Vec3::UnitZ()};
+};
+
+// The highest point of the surface on the vertical line through (x_m, y_m) (a ray from +z), among
+// triangles facing up; none if the line misses them. Throws std::invalid_argument on a
+// non-finite coordinate or a mesh without surface triangles.
+std::optional<SurfacePoint> top_of_surface(const mesh::TetMesh& mesh, double x_m, double y_m);
+
+// The closest point of the surface triangles to x_m (Euclidean). Throws std::invalid_argument on
+// a non-finite point or a mesh without surface triangles.
+SurfacePoint closest_on_surface(const mesh::TetMesh& mesh, const mesh::Vec3& x_m);
+
+}  // namespace neurosim::interaction

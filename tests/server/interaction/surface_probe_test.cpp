@@ -1,0 +1,59 @@
+// surface_probe: the top of a box's surface on a vertical line and the closest surface point to
+// points above, beside and inside a box (the answers are the box's faces, known exactly).
+#include "server/interaction/surface_probe.hpp"
+
+#include "server/fem/fem_test_meshes.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <stdexcept>
+
+namespace neurosim::interaction {
+namespace {
+
+using mesh::Vec3;
+
+mesh::TetMesh box() {
+  fem::testing::BoxSpec s;
+  s.nx = 4;
+  s.ny = 3;
+  s.nz = 2;
+  s.lo = Vec3(0.0, 0.0, 0.0);
+  s.hi = Vec3(0.04, 0.03, 0.02);  // unit m
+  return fem::testing::box_mesh(s);
+}
+
+TEST(interaction_surface_probe, TopOfABoxIsItsUpperFace) {
+  const mesh::TetMesh m = box();
+  // Inside a triangle, on an edge of the grid and on a vertex of the upper face.
+  for (const Vec3& xy : {Vec3(0.013, 0.017, 0), Vec3(0.02, 0.015, 0), Vec3(0.01, 0.01, 0)}) {
+    const auto top = top_of_surface(m, xy.x(), xy.y());
+    ASSERT_TRUE(top.has_value());
+    EXPECT_NEAR(top->point_m.z(), 0.02, 1e-15);
+    EXPECT_NEAR(top->point_m.x(), xy.x(), 1e-15);
+    EXPECT_NEAR(top->point_m.y(), xy.y(), 1e-15);
+    EXPECT_NEAR(top->normal.z(), 1.0, 1e-12);
+  }
+  EXPECT_FALSE(top_of_surface(m, 0.05, 0.01).has_value());  // beside the box
+  EXPECT_THROW(top_of_surface(m, std::nan(""), 0.01), std::invalid_argument);
+}
+
+TEST(interaction_surface_probe, ClosestPointAboveBesideAndInside) {
+  const mesh::TetMesh m = box();
+  SurfacePoint p = closest_on_surface(m, Vec3(0.011, 0.012, 0.025));  // above the upper face
+  EXPECT_LT((p.point_m - Vec3(0.011, 0.012, 0.02)).norm(), 1e-15);
+  EXPECT_NEAR(p.normal.z(), 1.0, 1e-12);
+  p = closest_on_surface(m, Vec3(0.045, 0.012, 0.01));  // beside the x = 0.04 face
+  EXPECT_LT((p.point_m - Vec3(0.04, 0.012, 0.01)).norm(), 1e-15);
+  EXPECT_NEAR(p.normal.x(), 1.0, 1e-12);
+  p = closest_on_surface(m, Vec3(0.02, 0.015, 0.018));  // inside, 2 mm under the upper face
+  EXPECT_LT((p.point_m - Vec3(0.02, 0.015, 0.02)).norm(), 1e-15);
+  p = closest_on_surface(m, Vec3(0.05, 0.04, 0.03));  // outside the corner (0.04, 0.03, 0.02)
+  EXPECT_LT((p.point_m - Vec3(0.04, 0.03, 0.02)).norm(), 1e-15);
+  EXPECT_THROW(closest_on_surface(m, Vec3(0, std::nan(""), 0)), std::invalid_argument);
+  EXPECT_THROW(closest_on_surface(mesh::TetMesh{}, Vec3::Zero()), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
