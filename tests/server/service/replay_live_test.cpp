@@ -9,6 +9,7 @@
 #include "common/clock.hpp"
 #include "idl/wire/recording_io.hpp"
 #include "server/scene/compile.hpp"
+#include "tests/server/service/replay_fixture.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
 #include <cstdlib>
@@ -46,46 +47,20 @@ TEST(service_replay, LiveServerAndReplayGiveTheSameForces) {
   const auto dir = nt::temp_dir("service_replay_live");
   const auto rec = dir / "replay-1.rec";
   const std::uint64_t sent = station.sent_count();
-  {
-    neurosim::recording::Header h;
-    h.set_scene_name("cube_cylinder");
-    h.set_station_id("replay-1");
-    h.set_tool_id("probe");
-    h.set_sample_rate_hz(1000.0);
-    neurosim::wire::RecordingWriter w(rec, h);
-    for (std::uint64_t k = 1; k <= sent; ++k) {
-      const auto p = station.sent(k);
-      neurosim::recording::Sample s;
-      s.set_time_s(1e-3 * static_cast<double>(k - 1));
-      s.mutable_position_m()->set_x(p[0]);
-      s.mutable_position_m()->set_y(p[1]);
-      s.mutable_position_m()->set_z(p[2]);
-      s.mutable_orientation()->set_w(1.0);
-      s.set_tool_sequence(k);
-      w.write(s);
-    }
-    w.close();
+  std::vector<st::RecordedPose> poses(sent);
+  for (std::uint64_t k = 1; k <= sent; ++k) {
+    poses[k - 1].time_s = 1e-3 * static_cast<double>(k - 1);
+    poses[k - 1].tip_m = station.sent(k);
   }
-  const std::string cmd = (nt::bin_dir() / "neurosim-replay").string() + " --scene " +
-                          setup.scene.string() + " --recording " + rec.string() + " --out " +
-                          (dir / "out").string() + " > " + (dir / "replay.log").string() + " 2>&1";
-  const int status = std::system(cmd.c_str());
-  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << nt::slurp(dir / "replay.log");
+  st::write_recording(rec, "cube_cylinder", "replay-1", poses);
+  ASSERT_EQ(st::run_replay(setup.scene, {rec}, dir / "out", dir / "replay.log"), 0) << nt::slurp(dir / "replay.log");
 
   // forces.csv: one row per sample, in order (one station).
-  std::ifstream csv(dir / "out" / "forces.csv");
-  std::string line;
-  ASSERT_TRUE(std::getline(csv, line));
   std::vector<ni::Vec3> force;
   std::vector<bool> contact;
-  while (std::getline(csv, line)) {
-    std::stringstream ss(line);
-    std::string cell;
-    std::vector<std::string> cells;
-    while (std::getline(ss, cell, ',')) cells.push_back(cell);
-    ASSERT_EQ(cells.size(), 9u) << line;
-    force.emplace_back(std::stod(cells[5]), std::stod(cells[6]), std::stod(cells[7]));
-    contact.push_back(cells[8] == "1" || cells[8] == "true");
+  for (const st::ReplayedForce& row : st::read_replay_forces(dir / "out" / "forces.csv")) {
+    force.push_back(row.force_n);
+    contact.push_back(row.contact);
   }
   ASSERT_EQ(force.size(), sent);
 
@@ -166,28 +141,14 @@ class PathStation {
 };
 
 // What a station sent, as its recording: sample k at (k - 1) ms.
-void write_recording(const std::filesystem::path& file, const std::string& scene, const std::string& id,
-                     const std::vector<SentPose>& sent) {
-  neurosim::recording::Header h;
-  h.set_scene_name(scene);
-  h.set_station_id(id);
-  h.set_tool_id("probe");
-  h.set_sample_rate_hz(1000.0);
-  neurosim::wire::RecordingWriter w(file, h);
+std::vector<st::RecordedPose> as_recorded(const std::vector<SentPose>& sent) {
+  std::vector<st::RecordedPose> out(sent.size());
   for (std::size_t k = 0; k < sent.size(); ++k) {
-    neurosim::recording::Sample s;
-    s.set_time_s(1e-3 * static_cast<double>(k));
-    s.mutable_position_m()->set_x(sent[k].tip_m[0]);
-    s.mutable_position_m()->set_y(sent[k].tip_m[1]);
-    s.mutable_position_m()->set_z(sent[k].tip_m[2]);
-    s.mutable_orientation()->set_w(sent[k].q[0]);
-    s.mutable_orientation()->set_x(sent[k].q[1]);
-    s.mutable_orientation()->set_y(sent[k].q[2]);
-    s.mutable_orientation()->set_z(sent[k].q[3]);
-    s.set_tool_sequence(k + 1);
-    w.write(s);
+    out[k].time_s = 1e-3 * static_cast<double>(k);
+    out[k].tip_m = sent[k].tip_m;
+    out[k].q = sent[k].q;
   }
-  w.close();
+  return out;
 }
 
 struct Replayed {
@@ -270,33 +231,16 @@ TEST(service_replay, BrainSkullLiveServerAndReplayGiveTheSameForcesWithTheSkullH
       << ses.server.log();
 
   const auto dir = nt::temp_dir("service_replay_live_skull");
-  write_recording(dir / "top.rec", "brain_skull", a.id(), a.sent());
-  write_recording(dir / "hole.rec", "brain_skull", b.id(), b.sent());
-  const std::string cmd = (nt::bin_dir() / "neurosim-replay").string() + " --scene " + scene_path.string() +
-                          " --recording " + (dir / "top.rec").string() + " --recording " +
-                          (dir / "hole.rec").string() + " --out " + (dir / "out").string() + " > " +
-                          (dir / "replay.log").string() + " 2>&1";
-  const int status = std::system(cmd.c_str());
-  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << nt::slurp(dir / "replay.log");
+  st::write_recording(dir / "top.rec", "brain_skull", a.id(), as_recorded(a.sent()));
+  st::write_recording(dir / "hole.rec", "brain_skull", b.id(), as_recorded(b.sent()));
+  ASSERT_EQ(st::run_replay(scene_path, {dir / "top.rec", dir / "hole.rec"}, dir / "out", dir / "replay.log"), 0)
+      << nt::slurp(dir / "replay.log");
 
   // forces.csv: per step (sample time (k - 1) ms) and station.
   std::map<std::pair<std::string, std::uint64_t>, Replayed> replayed;
-  {
-    std::ifstream csv(dir / "out" / "forces.csv");
-    std::string line;
-    ASSERT_TRUE(std::getline(csv, line));
-    while (std::getline(csv, line)) {
-      std::stringstream ss(line);
-      std::string cell;
-      std::vector<std::string> cells;
-      while (std::getline(ss, cell, ',')) cells.push_back(cell);
-      ASSERT_EQ(cells.size(), 9u) << line;
-      const auto seq = static_cast<std::uint64_t>(std::llround(1e3 * std::stod(cells[0]))) + 1;
-      Replayed r;
-      r.force_n = ni::Vec3(std::stod(cells[5]), std::stod(cells[6]), std::stod(cells[7]));
-      r.contact = cells[8] == "1" || cells[8] == "true";
-      replayed[{cells[1], seq}] = r;
-    }
+  for (const st::ReplayedForce& f : st::read_replay_forces(dir / "out" / "forces.csv")) {
+    const auto seq = static_cast<std::uint64_t>(std::llround(1e3 * f.time_s)) + 1;
+    replayed[{f.station, seq}] = Replayed{f.force_n, f.contact};
   }
   // Both stations in every step (the shorter recording keeps its last pose).
   ASSERT_EQ(replayed.size(), 2 * std::max(a_sent, b_sent));

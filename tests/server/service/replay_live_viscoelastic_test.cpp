@@ -12,6 +12,7 @@
 #include "common/clock.hpp"
 #include "idl/wire/recording_io.hpp"
 #include "server/scene/compile.hpp"
+#include "tests/server/service/replay_fixture.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
 #include <cstdlib>
@@ -27,38 +28,11 @@ namespace ni = neurosim::interaction;
 
 namespace {
 
-struct Replayed {
-  ni::Vec3 force_n{ni::Vec3::Zero()};
-  bool contact{false};
-};
-
-// forces.csv of one station: per sample time (unit s) its force and contact.
-std::map<double, Replayed> read_forces(const std::filesystem::path& csv_path) {
-  std::map<double, Replayed> out;
-  std::ifstream csv(csv_path);
-  std::string line;
-  if (!std::getline(csv, line)) return out;
-  while (std::getline(csv, line)) {
-    std::stringstream ss(line);
-    std::string cell;
-    std::vector<std::string> cells;
-    while (std::getline(ss, cell, ',')) cells.push_back(cell);
-    if (cells.size() != 9u) throw std::runtime_error("forces.csv: bad row " + line);
-    Replayed r;
-    r.force_n = ni::Vec3(std::stod(cells[5]), std::stod(cells[6]), std::stod(cells[7]));
-    r.contact = cells[8] == "1" || cells[8] == "true";
-    out[std::stod(cells[0])] = r;
-  }
+// forces.csv's rows by sample time (one station).
+std::map<double, st::ReplayedForce> forces_by_time(const std::filesystem::path& csv_path) {
+  std::map<double, st::ReplayedForce> out;
+  for (const st::ReplayedForce& r : st::read_replay_forces(csv_path)) out[r.time_s] = r;
   return out;
-}
-
-int run_replay(const std::filesystem::path& scene, const std::filesystem::path& rec,
-               const std::filesystem::path& out, const std::filesystem::path& log) {
-  const std::string cmd = (nt::bin_dir() / "neurosim-replay").string() + " --scene " + scene.string() +
-                          " --recording " + rec.string() + " --out " + out.string() + " > " +
-                          log.string() + " 2>&1";
-  const int status = std::system(cmd.c_str());
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 }  // namespace
@@ -147,33 +121,20 @@ TEST(service_replay_viscoelastic, LiveServerAndReplayGiveTheSameRelaxingForces) 
   const auto dir = nt::temp_dir("service_replay_live_visco");
   const auto rec = dir / "visco-1.rec";
   std::vector<double> time_s(sent.size());
-  {
-    neurosim::recording::Header h;
-    h.set_scene_name("brain_viscoelastic");
-    h.set_station_id(id);
-    h.set_tool_id("probe");
-    h.set_sample_rate_hz(1000.0);
-    neurosim::wire::RecordingWriter w(rec, h);
-    for (std::size_t k = 0; k < sent.size(); ++k) {
-      time_s[k] = 1e-9 * static_cast<double>(source_ns[k] - source_ns[0]);
-      neurosim::recording::Sample r;
-      r.set_time_s(time_s[k]);
-      r.mutable_position_m()->set_x(sent[k].x());
-      r.mutable_position_m()->set_y(sent[k].y());
-      r.mutable_position_m()->set_z(sent[k].z());
-      r.mutable_orientation()->set_w(1.0);
-      r.set_tool_sequence(k + 1);
-      w.write(r);
-    }
-    w.close();
+  std::vector<st::RecordedPose> poses(sent.size());
+  for (std::size_t k = 0; k < sent.size(); ++k) {
+    time_s[k] = 1e-9 * static_cast<double>(source_ns[k] - source_ns[0]);
+    poses[k].time_s = time_s[k];
+    poses[k].tip_m = {sent[k].x(), sent[k].y(), sent[k].z()};
   }
-  ASSERT_EQ(run_replay(scene_path, rec, dir / "out1", dir / "replay1.log"), 0) << nt::slurp(dir / "replay1.log");
-  ASSERT_EQ(run_replay(scene_path, rec, dir / "out2", dir / "replay2.log"), 0) << nt::slurp(dir / "replay2.log");
+  st::write_recording(rec, "brain_viscoelastic", id, poses);
+  ASSERT_EQ(st::run_replay(scene_path, {rec}, dir / "out1", dir / "replay1.log"), 0) << nt::slurp(dir / "replay1.log");
+  ASSERT_EQ(st::run_replay(scene_path, {rec}, dir / "out2", dir / "replay2.log"), 0) << nt::slurp(dir / "replay2.log");
   // Deterministic: the two replays wrote the same bytes.
   const std::string csv1 = nt::slurp(dir / "out1" / "forces.csv"), csv2 = nt::slurp(dir / "out2" / "forces.csv");
   ASSERT_FALSE(csv1.empty());
   EXPECT_EQ(csv1, csv2) << "two replays of one recording differ";
-  const std::map<double, Replayed> replayed = read_forces(dir / "out1" / "forces.csv");
+  const std::map<double, st::ReplayedForce> replayed = forces_by_time(dir / "out1" / "forces.csv");
   ASSERT_EQ(replayed.size(), sent.size()) << "one step per sample time";
 
   // Every ContactModel against the replay at its pose's sample time.
@@ -184,7 +145,7 @@ TEST(service_replay_viscoelastic, LiveServerAndReplayGiveTheSameRelaxingForces) 
     ASSERT_LE(m.tool_sequence, sent.size());
     const auto it = replayed.find(time_s[m.tool_sequence - 1]);
     ASSERT_NE(it, replayed.end()) << "seq " << m.tool_sequence;
-    const Replayed& r = it->second;
+    const st::ReplayedForce& r = it->second;
     ASSERT_EQ(m.in_contact, r.contact) << "seq " << m.tool_sequence;
     ++compared;
     if (!m.in_contact) continue;
