@@ -3,7 +3,8 @@
 // each, within a factor 2 of each other, in every tier; a tip wider than its distance to the
 // nodes, centred in a face cell, is stopped; a tip centred on vertices where 3 to 7 triangles
 // meet and on an edge gives one row, and a tip just off them (a face row next to a node row:
-// nearly dependent rows) converges to the same force.
+// nearly dependent rows) converges to the same force; a tip centred exactly on a crease of a
+// 5 mm brain feels the tissue as 1 nm beside it.
 #include "server/interaction/simulation.hpp"
 #include "server/interaction/surface_probe.hpp"
 #include "server/interaction/contact_surface.hpp"
@@ -19,6 +20,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <map>
 #include <sstream>
@@ -349,6 +351,47 @@ TEST(interaction_contact_step, SlideOverTheSurfaceNeverLosesTheTissue) {
     EXPECT_GT(s.min_force_n, 0.0) << k.scene;
     EXPECT_LE(s.spread, brain ? 3.1 : 2.0) << k.scene << " " << k.depth_m;
   }
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
+
+namespace neurosim::interaction {
+namespace {
+
+// A tip centred exactly on a crease of the surface: on the 5 mm brain (neurosim-model
+// --cell-size 5) at (60, 112.6) mm the 2 mm tip 2 mm deep has its centre on the rest surface,
+// on the edge where the surface under the slide turns 17 degrees; round-off put the rows under
+// it 1e-18 m behind the surface, and the step once dropped them all (0 N there, 61 mN 1 nm to
+// either side). The force there must be of the size of its neighbours'.
+TEST(interaction_contact_step, TipCentredOnACreaseFeelsTheTissue) {
+  const auto dir = neurosim::testing::temp_dir("contact_crease");
+  const std::string cmd = (neurosim::testing::bin_dir() / "neurosim-model").string() +
+                          " --cell-size 5 --out-dir " + dir.string() + " > " + (dir / "model.log").string() +
+                          " 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << neurosim::testing::slurp(dir / "model.log");
+  scene::Model model = scene::load_model(dir / "brain_artery.scene");
+  model.effects.tier = scene::Tier::kLinear;
+  auto sim = Simulation::build(model);
+  const mesh::TetMesh& mesh = sim->mesh(0);
+  const double r = model.tools.at(0).tip_radius_m;
+  std::vector<ToolContact> c;
+  StepStats st;
+  std::vector<double> force_n;
+  for (const double dy : {-1e-9, 0.0, 1e-9}) {
+    const auto on = top_of_surface(mesh, 0.060, 0.1126 + dy);
+    ASSERT_TRUE(on.has_value());
+    ToolPose pose;
+    pose.tip_m = on->point_m + (r - 2e-3) * on->normal;
+    pose.axis = on->normal;
+    sim->step({pose}, c, st);
+    ASSERT_TRUE(st.converged);
+    force_n.push_back(c.at(0).force_n.norm());
+    std::printf("y = 112.6 mm %+g nm: |F| %.2f mN, %d rows\n", dy * 1e9, 1e3 * force_n.back(), st.contact_rows);
+  }
+  EXPECT_GT(force_n[1], 0.25 * std::min(force_n[0], force_n[2]));
+  EXPECT_GT(force_n[0], 0.0);
+  EXPECT_GT(force_n[2], 0.0);
 }
 
 }  // namespace
