@@ -33,9 +33,12 @@
 //
 // Writes DIR/accuracy.csv (the table printed), DIR/converged.csv, DIR/calculix.csv,
 // DIR/pareto.png (total error against step time, log-log, one colour per element and tier, the
-// Pareto front drawn), and the measured tier-error table the server reads (--table, default
-// DIR/force_error.csv, from the first --element's rows; the committed one is
-// share/accuracy/force_error.csv).
+// Pareto front drawn), and the two measured tables the server reads for its live estimate
+// (SimStatus expected_force_error, discretization_error_estimate, total_error_estimate): the
+// tier's error (--table, default DIR/force_error.csv: finest mesh, exact coupling, every
+// element, with the element and the host's nu) and the discretization error (--disc-table,
+// default DIR/discretization_error.csv: every element and mesh, keyed by the host's element, nu,
+// vertex and tetrahedron counts). The committed ones are in share/accuracy/.
 #include "common/cli.hpp"
 #include "common/stats.hpp"
 #include "idl/wire/recording_io.hpp"
@@ -502,7 +505,7 @@ bool have_program(const char* name) {
 int main(int argc, char** argv) {
   bool csv = false;
   bool exact_only = false;
-  std::string out_dir, table_path;
+  std::string out_dir, table_path, disc_table_path;
   std::vector<std::string> elements, press_filter;
   std::vector<std::string> scenes{"cube_cylinder", "brain_artery"};
   neurosim::cli::Parser cli("accuracy_bench",
@@ -523,11 +526,15 @@ int main(int argc, char** argv) {
   cli->add_flag("--exact-only", exact_only, "leave out the ITERATIVE coupling runs");
   cli->add_option("--table", table_path,
                   "measured force-error table for the server (default DIR/force_error.csv)");
+  cli->add_option("--disc-table", disc_table_path,
+                  "measured discretization-error table for the server (default "
+                  "DIR/discretization_error.csv)");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   try {
     const fs::path out(out_dir);
     fs::create_directories(out);
     if (table_path.empty()) table_path = (out / "force_error.csv").string();
+    if (disc_table_path.empty()) disc_table_path = (out / "discretization_error.csv").string();
     const std::string src = NEUROSIM_SOURCE_DIR;
     std::vector<Press> presses;
     for (const Press& p : {Press{"5", 0.005, false}, Press{"10", 0.010, false},
@@ -588,6 +595,7 @@ int main(int argc, char** argv) {
       double p50, p99, update_hz, disp_err, force_err, strain;
       std::string element;
       double disc_err, model_err, total_err;
+      double nu;  // the host's Poisson ratio
     };
     const bool ccx = have_program("ccx");
     if (!ccx)
@@ -597,6 +605,7 @@ int main(int argc, char** argv) {
     conv_csv << "scene,resolution,element,patch_nodes,patch_force_n,rel_error_vs_c3d10_finest,"
                 "solve_s\n";
     std::vector<Row> rows;
+    std::vector<std::string> disc_rows;  // the server's discretization table
     using neurosim::fem::Tier;
     for (const auto& sc : cases) {
       std::vector<std::string> recordings;
@@ -635,6 +644,14 @@ int main(int argc, char** argv) {
             const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             const double e = std::abs(f - f_c3d10.back()) / f_c3d10.back();
             disc[{el_name, static_cast<int>(ri)}] = e;
+            {
+              const auto& host = res.model.meshes.at(0);
+              char drow[256];
+              std::snprintf(drow, sizeof drow, "%s,%s,%.6g,%zu,%zu,%.4g", sc.name.c_str(),
+                            el_name.c_str(), host.material.poisson_ratio, host.mesh.num_vertices(),
+                            host.mesh.num_tets(), e);
+              disc_rows.emplace_back(drow);
+            }
             char line[256];
             std::snprintf(line, sizeof line, "%s,%d,%s,%zu,%.6g,%.4g,%.1f", sc.name.c_str(),
                           res.host_vertices, el_name.c_str(), patches[ri].size(), f, e, dt);
@@ -709,7 +726,8 @@ int main(int argc, char** argv) {
                     cfg.iterations ? "iterative" : "exact", res.host_vertices, cfg.iterations,
                     presses[pi].label, neurosim::common::percentile(r.step_us, 0.5),
                     neurosim::common::percentile(r.step_us, 0.99),
-                    update_hz, de, fe, r.max_strain, el_name, disc_err, me, disc_err + me};
+                    update_hz, de, fe, r.max_strain, el_name, disc_err, me, disc_err + me,
+                    res.model.meshes.at(0).material.poisson_ratio};
             char line[512];
             std::snprintf(line, sizeof line,
                           "%s,%s,%d,%s,%d,%s,%.1f,%.1f,%.1f,%.4g,%.4g,%.4g,%s,%.4g,%.4g,%.4g",
@@ -747,8 +765,9 @@ int main(int argc, char** argv) {
       if (!t) throw std::runtime_error(table_path + ": cannot write");
       t << "# Expected tool-force error of each elasticity tier against the largest strain in the\n"
            "# field, measured by accuracy_bench (finest mesh, exact coupling, errors against the\n"
-           "# nonlinear tier). Read by neurosim-server for SimStatus.expected_force_error.\n"
-           "scene,tier,max_strain,force_rel_error\n";
+           "# nonlinear tier on the same mesh and element). Read by neurosim-server for\n"
+           "# SimStatus.expected_force_error (rows of the running element and host nu).\n"
+           "scene,tier,max_strain,force_rel_error,element,poisson_ratio\n";
       for (const auto& r : rows) {
         const int finest = [&] {
           int m = 0;
@@ -757,18 +776,23 @@ int main(int argc, char** argv) {
           return m;
         }();
         if (r.resolution != finest || r.coupling != "exact") continue;
-        // One element per scene (the server's table has no element column): the first.
-        const std::string first_element = [&] {
-          for (const auto& q : rows)
-            if (q.scene == r.scene) return q.element;
-          return r.element;
-        }();
-        if (r.element != first_element) continue;
         char line[256];
-        std::snprintf(line, sizeof line, "%s,%s,%.4g,%.4g\n", r.scene.c_str(), r.tier.c_str(),
-                      r.strain, r.force_err);
+        std::snprintf(line, sizeof line, "%s,%s,%.4g,%.4g,%s,%.6g\n", r.scene.c_str(),
+                      r.tier.c_str(), r.strain, r.force_err, r.element.c_str(), r.nu);
         t << line;
       }
+    }
+    // The discretization table the server reads (only with ccx: no outside answer, no rows).
+    {
+      std::ofstream t(disc_table_path);
+      if (!t) throw std::runtime_error(disc_table_path + ": cannot write");
+      t << "# Discretization error (element + mesh) of each scene's host mesh against the\n"
+           "# converged answer, CalculiX C3D10 on the finest mesh of the scene's series, in\n"
+           "# accuracy_bench's small-strain patch press (docs/accuracy.md). Read by\n"
+           "# neurosim-server for SimStatus.discretization_error_estimate: the row of the host's\n"
+           "# element, nu, vertex and tetrahedron counts, none: unknown.\n"
+           "scene,element,poisson_ratio,host_vertices,host_tetrahedra,discretization_error\n";
+      for (const auto& line : disc_rows) t << line << '\n';
     }
 
     // CalculiX on the cube.
