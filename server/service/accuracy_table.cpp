@@ -1,5 +1,7 @@
 #include "server/service/accuracy_table.hpp"
 
+#include "server/fem/element.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -43,23 +45,30 @@ AccuracyTable AccuracyTable::read(const std::filesystem::path& file) {
   std::string line;
   int n = 0;
   bool header = false;
+  std::size_t fields = 4;
   while (std::getline(in, line)) {
     ++n;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#') continue;
     const std::string where = file.string() + ":" + std::to_string(n);
     if (!header) {
-      if (line != "scene,tier,max_strain,force_rel_error") {
+      if (line == "scene,tier,max_strain,force_rel_error") {
+        fields = 4;
+      } else if (line == "scene,tier,max_strain,force_rel_error,element,poisson_ratio") {
+        fields = 6;
+      } else {
         throw std::runtime_error(where + ": expected the header "
-                                         "'scene,tier,max_strain,force_rel_error', got '" +
+                                         "'scene,tier,max_strain,force_rel_error,element,"
+                                         "poisson_ratio', got '" +
                                  line + "'");
       }
       header = true;
       continue;
     }
     const auto f = split(line);
-    if (f.size() != 4) {
-      throw std::runtime_error(where + ": " + std::to_string(f.size()) + " fields, expected 4");
+    if (f.size() != fields) {
+      throw std::runtime_error(where + ": " + std::to_string(f.size()) + " fields, expected " +
+                               std::to_string(fields));
     }
     Row r;
     r.scene = f[0];
@@ -68,6 +77,13 @@ AccuracyTable AccuracyTable::read(const std::filesystem::path& file) {
     r.tier = *tier;
     r.max_strain = number(f[2], where + " max_strain");
     r.force_rel_error = number(f[3], where + " force_rel_error");
+    if (fields == 6) {
+      if (!fem::parse_element(f[4]))
+        throw std::runtime_error(where + ": unknown element '" + f[4] + "' (known: " +
+                                 fem::element_names() + ")");
+      r.element = f[4];
+      r.poisson_ratio = number(f[5], where + " poisson_ratio");
+    }
     rows.push_back(std::move(r));
   }
   if (!header) throw std::runtime_error(file.string() + ": no header line (empty table)");
@@ -76,18 +92,27 @@ AccuracyTable AccuracyTable::read(const std::filesystem::path& file) {
 
 AccuracyTable::AccuracyTable(std::vector<Row> rows) : rows_(std::move(rows)) {}
 
-ExpectedError AccuracyTable::expected(fem::Tier tier, double strain,
-                                      const std::string& scene) const {
+ExpectedError AccuracyTable::expected(fem::Tier tier, double strain, const std::string& scene,
+                                      const std::string& element, double poisson_ratio) const {
   ExpectedError out;
+  const auto fits = [&](const Row& r) {
+    if (r.tier != tier) return false;
+    if (!element.empty() && r.element != element) return false;
+    if (std::isfinite(poisson_ratio) &&
+        !(std::isfinite(r.poisson_ratio) && std::abs(r.poisson_ratio - poisson_ratio) <= 1e-9))
+      return false;
+    return true;
+  };
   std::vector<std::pair<double, double>> pts;
   for (const auto& r : rows_)
-    if (r.tier == tier && r.scene == scene) pts.emplace_back(r.max_strain, r.force_rel_error);
+    if (fits(r) && r.scene == scene) pts.emplace_back(r.max_strain, r.force_rel_error);
   out.basis = scene;
   if (pts.empty()) {
     for (const auto& r : rows_)
-      if (r.tier == tier) pts.emplace_back(r.max_strain, r.force_rel_error);
+      if (fits(r)) pts.emplace_back(r.max_strain, r.force_rel_error);
     out.basis = "every scene";
   }
+  if (!element.empty()) out.basis += ", " + element;
   if (pts.empty() || !std::isfinite(strain)) return out;
   out.known = true;
   std::sort(pts.begin(), pts.end());

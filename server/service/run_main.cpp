@@ -111,6 +111,17 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
        },
        "the tiers' measured force error against strain (accuracy_bench's table; 'none': no "
        "estimate). Default: " NEUROSIM_DEFAULT_ACCURACY_TABLE " when it exists");
+  std::string disc_table = NEUROSIM_DEFAULT_DISCRETIZATION_TABLE;
+  bool disc_table_given = false;
+  p->add_option_function<std::string>(
+       "--discretization-table",
+       [&](const std::string& v) {
+         disc_table = v;
+         disc_table_given = true;
+       },
+       "the hosts' measured discretization error against the converged answer (CalculiX C3D10, "
+       "accuracy_bench's table; 'none': unknown). Default: " NEUROSIM_DEFAULT_DISCRETIZATION_TABLE
+       " when it exists");
   p->add_option("--station-idle-timeout", opt.station_idle_timeout_s,
                 "a station that sends no ToolState for S seconds loses its slot (and its writer "
                 "its binding to the station id)")
@@ -167,6 +178,14 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
     accuracy_table.clear();
   }
   opt.accuracy_table = accuracy_table;
+  if (disc_table == "none") {
+    disc_table.clear();
+  } else if (!disc_table_given && !std::filesystem::exists(disc_table)) {
+    std::cerr << "neurosim-server: note: no discretization table at " << disc_table
+              << ": the total error estimate is unknown\n";
+    disc_table.clear();
+  }
+  opt.discretization_table = disc_table;
 
   struct sigaction sa {};
   sa.sa_handler = on_signal;

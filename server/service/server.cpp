@@ -9,6 +9,7 @@
 #include "server/interaction/rigid_obstacle.hpp"
 #include "server/service/accuracy_table.hpp"
 #include "server/service/deformation_publisher.hpp"
+#include "server/service/discretization_table.hpp"
 #include "server/service/station_admission.hpp"
 #include "server/service/status_publisher.hpp"
 
@@ -92,6 +93,10 @@ struct Server::Impl {
       mesh_info.push_back(std::move(mi));
     }
     rigid_surfaces = model.rigid;
+    if (!model.meshes.empty()) {
+      host_vertices = model.meshes.front().mesh.num_vertices();
+      host_tetrahedra = model.meshes.front().mesh.num_tets();
+    }
   }
 
   // ---- Model (built once) --------------------------------------------------------------------
@@ -105,6 +110,9 @@ struct Server::Impl {
     std::vector<std::string> region_names;  // and their names
   };
   std::vector<MeshInfo> mesh_info;
+  // The scene's host mesh as loaded (before any coupling removes tetrahedra from it): what the
+  // discretization table is keyed by.
+  std::size_t host_vertices{0}, host_tetrahedra{0};
   std::vector<scene::RigidSurface> rigid_surfaces;  // published as rigid MeshTopology samples
   std::unique_ptr<interaction::Simulation> sim;
   ServerOptions opt;
@@ -123,6 +131,9 @@ struct Server::Impl {
   std::vector<std::string> tool_ids;
   Workspace workspace;                 // scene bounding box + opt.workspace_margin_m
   std::optional<AccuracyTable> accuracy;
+  double discretization_error{-1.0};  // host vs converged C3D10 (fraction), -1: unknown
+  std::string host_element;
+  double host_poisson_ratio{0.0};
 
   // ---- The parts -----------------------------------------------------------------------------
   // Declared before the participant: its topic filter points into it, so it must outlive it.
@@ -260,6 +271,34 @@ void Server::Impl::configure() {
   } else {
     log("no accuracy table: SimStatus.expected_force_error stays -1 (unknown)");
   }
+  // The host (the scene's first deformable mesh): its element and nu choose the tier table's
+  // rows, and with its size the discretization error against the converged answer.
+  const fem::Material& host_material = mesh_info.at(0).material;
+  host_element = fem::element_name(host_material.element);
+  host_poisson_ratio = host_material.poisson_ratio;
+  {
+    std::ostringstream d;
+    d << "error vs converged C3D10: host '" << mesh_info.at(0).id << "' (" << host_element
+      << ", nu " << host_poisson_ratio << ", " << host_vertices << " vertices, "
+      << host_tetrahedra << " tetrahedra as loaded): ";
+    if (opt.discretization_table.empty()) {
+      d << "discretization error unknown (no discretization table): SimStatus "
+           "discretization_error_estimate and total_error_estimate stay -1";
+    } else {
+      const auto table = DiscretizationTable::read(opt.discretization_table);
+      const auto row =
+          table.find(host_material.element, host_poisson_ratio, host_vertices, host_tetrahedra);
+      if (row) {
+        discretization_error = row->discretization_error;
+        d << "discretization error " << 100.0 * discretization_error << " % (measured on scene '"
+          << row->scene << "', " << opt.discretization_table << ")";
+      } else {
+        d << "discretization error unknown: no row of " << opt.discretization_table
+          << " for this element, nu and mesh (SimStatus total_error_estimate -1)";
+      }
+    }
+    log(d.str());
+  }
   // Workspace: the bounding box of every mesh's rest vertices, enlarged by the margin.
   WorkspaceBounds bounds;
   for (int m = 0; m < sim->num_meshes(); ++m)
@@ -364,6 +403,9 @@ void Server::Impl::create_entities() {
   sd.step_hz = step_hz;
   sd.viewer_hz = deformation_output ? viewer_hz : 0.0;
   sd.status_hz = status_hz;
+  sd.discretization_error = discretization_error;
+  sd.host_element = host_element;
+  sd.host_poisson_ratio = host_poisson_ratio;
   sd.status_period_ns = status_period_ns;
   sd.step_times_per_period =
       static_cast<std::size_t>(static_cast<double>(status_every) * (opt.max_step_rate_factor + 1.0)) + 64;

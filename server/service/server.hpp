@@ -50,6 +50,11 @@ struct ServerOptions {
   // empty: none (SimStatus.expected_force_error -1). A file that is given but unreadable or
   // malformed is an error.
   std::string accuracy_table{};
+  // The host meshes' measured discretization error against the converged answer
+  // (DiscretizationTable, written by accuracy_bench); empty: none (SimStatus
+  // discretization_error_estimate and total_error_estimate -1, unknown). A file that is given
+  // but unreadable or malformed is an error.
+  std::string discretization_table{};
   // Station identity and hostile input (docs/ARCHITECTURE.md "Station identity"):
   double station_idle_timeout_s{2.0};      // a station with no sample this long frees its slot, unit s
   int max_stations_per_participant{2};     // stations one DDS participant may hold at once (>= 1)

@@ -145,7 +145,8 @@ void StatusPublisher::report_accuracy(neurosim_SimStatus& st) {
   st.max_strain = strain;
   st.expected_force_error = -1.0;
   if (accuracy_ && strain >= 0.0) {
-    const ExpectedError e = accuracy_->expected(sim_.tier(), strain, settings_.name);
+    const ExpectedError e = accuracy_->expected(sim_.tier(), strain, settings_.name,
+                                                def_.host_element, def_.host_poisson_ratio);
     if (e.known) {
       st.expected_force_error = e.force_rel_error;
       if (e.beyond_table && !beyond_table_noted_) {
@@ -170,6 +171,11 @@ void StatusPublisher::report_accuracy(neurosim_SimStatus& st) {
       }
     }
   }
+  // Against the converged answer: the host's discretization error (set-up) + the tier's.
+  st.discretization_error_estimate = def_.discretization_error;
+  st.total_error_estimate = def_.discretization_error >= 0.0 && st.expected_force_error >= 0.0
+                                ? def_.discretization_error + st.expected_force_error
+                                : -1.0;
   st.columns_not_ready = sim_.columns_not_ready();
   st.columns_solved_ahead = sim_.columns_solved_ahead();
   const std::uint64_t failures = sim_.tier_update_failures();

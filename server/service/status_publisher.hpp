@@ -15,6 +15,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -29,6 +30,11 @@ struct StatusPublisherDef {
   double step_hz{1000}, viewer_hz{0}, status_hz{1};  // viewer_hz 0: no Deformation, unit Hz
   std::int64_t status_period_ns{1000000000};
   std::size_t step_times_per_period{2000};  // capacity of the step-time buffer (no allocation per step)
+  // The host's discretization error against the converged answer (DiscretizationTable), a
+  // fraction, -1: unknown; and the host's element and nu (the tier table's rows are theirs).
+  double discretization_error{-1.0};
+  std::string host_element;        // fem::element_name; "": any row (tests of the tier table)
+  double host_poisson_ratio{std::numeric_limits<double>::quiet_NaN()};
 };
 
 class StatusPublisher {

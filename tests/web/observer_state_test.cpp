@@ -224,6 +224,8 @@ TEST(ObserverState, StationsAndStatusMessages) {
   st->step_time_p50_us = std::nan("");  // before the first steps
   st->max_strain = 0.14;
   st->expected_force_error = -1;  // unknown
+  st->discretization_error_estimate = 0.056;
+  st->total_error_estimate = -1;  // unknown: the tier's part is
   ASSERT_TRUE(s.ingest_status(*st));
   web::BridgeRates r;
   r.deformation_hz = 30;
@@ -238,6 +240,8 @@ TEST(ObserverState, StationsAndStatusMessages) {
   EXPECT_TRUE(j["server"]["step_time_p50_us"].is_null());
   EXPECT_EQ(j["server"]["max_strain"], 0.14);
   EXPECT_EQ(j["server"]["expected_force_error"], -1.0);
+  EXPECT_EQ(j["server"]["discretization_error_estimate"], 0.056);
+  EXPECT_EQ(j["server"]["total_error_estimate"], -1.0);
   EXPECT_EQ(j["bridge"]["clients"], 2);
   EXPECT_EQ(j["bridge"]["deformation_hz"], 30.0);
   s.set_server_alive(false);

@@ -123,6 +123,11 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
   EXPECT_GT(s["meshes"][0]["triangles"].get<int>(), 500);
   EXPECT_EQ(s["server"]["tier"], "LINEAR");
   EXPECT_TRUE(s["banner"].is_null()) << s["banner"];
+  // The status panel states the error against the converged answer (a number or "unknown").
+  const Json page_text = browser.evaluate(session, "document.body.innerText");
+  ASSERT_TRUE(page_text.is_string());
+  EXPECT_NE(page_text.get<std::string>().find("error vs converged C3D10"), std::string::npos)
+      << page_text;
   const int frames_at_rest = s["framesDecoded"];
   const int generation = s["generation"];
 

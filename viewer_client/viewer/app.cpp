@@ -22,9 +22,8 @@ using common::Clock;
 using common::seconds_since;
 
 // "tier NONLINEAR, equilibrium 12 Hz" ("tier LINEAR": nothing to update); then, once the server
-// measures it, the cost of the tier's accuracy: "tier LINEAR, strain 14 %: force error ~9 %"
-// (SimStatus max_strain and expected_force_error; the error is left out when the server has no
-// table). "" before the first SimStatus. Rates under 10 Hz keep one decimal.
+// measures it, the strain: "tier LINEAR, strain 14 %". "" before the first SimStatus. Rates
+// under 10 Hz keep one decimal.
 std::string tier_text(const ServerStatusView& st) {
   if (!st.received) return {};
   std::ostringstream os;
@@ -37,13 +36,10 @@ std::string tier_text(const ServerStatusView& st) {
   if (st.max_strain >= 0) {
     os.precision(0);
     os << ", strain " << 100.0 * st.max_strain << " %";
-    if (st.expected_force_error >= 0) {
-      os.precision(st.expected_force_error < 0.01 ? 1 : 0);
-      os << ": force error ~" << 100.0 * st.expected_force_error << " %";
-    }
   }
   return os.str();
 }
+
 
 std::string status_line(const ViewerOptions& o, const ViewerState& s, std::uint64_t frame,
                         bool has_image) {
@@ -56,7 +52,7 @@ std::string status_line(const ViewerOptions& o, const ViewerState& s, std::uint6
     // Only while live: a gone server's tier would pass for the running one. A line of its own:
     // the navigation mode's 3D viewport is a quarter of the frame and clips long lines.
     const std::string tier = tier_text(s.server_status());
-    if (!tier.empty()) os << "\n" << tier;
+    if (!tier.empty()) os << "\n" << tier << "\n" << error_text(s.server_status());
   } else
     os << "WAITING FOR SERVER (showing the last state)";
   os << "\nmax |u| " << s.max_displacement_m() * 1e3 << " mm";
@@ -105,6 +101,13 @@ void write_summary(const std::string& path, const ViewerOptions& o, const Viewer
   j["expected_force_error"] = st.received && st.expected_force_error >= 0
                                   ? common::Json(st.expected_force_error)
                                   : common::Json(nullptr);
+  j["discretization_error_estimate"] = st.received && st.discretization_error_estimate >= 0
+                                           ? common::Json(st.discretization_error_estimate)
+                                           : common::Json(nullptr);
+  j["total_error_estimate"] = st.received && st.total_error_estimate >= 0
+                                  ? common::Json(st.total_error_estimate)
+                                  : common::Json(nullptr);
+  j["error_text"] = st.received ? common::Json(error_text(st)) : common::Json(nullptr);
   j["max_displacement_m"] = s.max_displacement_m();
   try {
     common::write_json(path, j);
@@ -260,7 +263,8 @@ int run_viewer(const ViewerOptions& o, std::ostream& log, const std::atomic<bool
       << " topologies, " << c.deformations << " deformation frames, " << c.malformed()
       << " malformed samples ignored, server lost " << c.server_lost << " times";
   if (state.server_status().received)
-    log << "; last SimStatus: " << tier_text(state.server_status());
+    log << "; last SimStatus: " << tier_text(state.server_status()) << "; "
+        << error_text(state.server_status());
   log << "\n";
   if (!error.empty()) {
     log << "neurosim-viewer: " << error << "\n";

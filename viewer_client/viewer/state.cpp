@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 
 namespace neurosim::viewer {
@@ -292,7 +293,9 @@ bool ViewerState::ingest_status(const neurosim_SimStatus& st) {
   const char* tier = tier_text(st.tier);
   const bool rates_ok = std::isfinite(st.tier_update_rate_hz) && st.tier_update_rate_hz >= 0 &&
                         std::isfinite(st.step_rate_measured_hz) && st.step_rate_measured_hz >= 0 &&
-                        std::isfinite(st.max_strain) && std::isfinite(st.expected_force_error);
+                        std::isfinite(st.max_strain) && std::isfinite(st.expected_force_error) &&
+                        std::isfinite(st.discretization_error_estimate) &&
+                        std::isfinite(st.total_error_estimate);
   if (tier == nullptr || !rates_ok) {
     ++counters_.malformed_status;
     warn(kStatus, "ignored a malformed SimStatus from server '" + std::string(st.server_id) +
@@ -301,7 +304,9 @@ bool ViewerState::ingest_status(const neurosim_SimStatus& st) {
                       std::to_string(st.tier_update_rate_hz) + ", step_rate_measured_hz " +
                       std::to_string(st.step_rate_measured_hz) + ", max_strain " +
                       std::to_string(st.max_strain) + ", expected_force_error " +
-                      std::to_string(st.expected_force_error));
+                      std::to_string(st.expected_force_error) + ", discretization_error_estimate " +
+                      std::to_string(st.discretization_error_estimate) + ", total_error_estimate " +
+                      std::to_string(st.total_error_estimate));
     return false;
   }
   ServerStatusView& v = server_status_;
@@ -311,6 +316,8 @@ bool ViewerState::ingest_status(const neurosim_SimStatus& st) {
                        v.step_rate_measured_hz != st.step_rate_measured_hz ||
                        v.max_strain != st.max_strain ||
                        v.expected_force_error != st.expected_force_error ||
+                       v.discretization_error_estimate != st.discretization_error_estimate ||
+                       v.total_error_estimate != st.total_error_estimate ||
                        v.server_id != st.server_id || v.scene_name != scene_name;
   v.received = true;
   v.server_id = st.server_id;
@@ -321,8 +328,37 @@ bool ViewerState::ingest_status(const neurosim_SimStatus& st) {
   // Negative: not measured / unknown (the server sends -1).
   v.max_strain = st.max_strain >= 0 ? st.max_strain : -1.0;
   v.expected_force_error = st.expected_force_error >= 0 ? st.expected_force_error : -1.0;
+  v.discretization_error_estimate =
+      st.discretization_error_estimate >= 0 ? st.discretization_error_estimate : -1.0;
+  v.total_error_estimate = st.total_error_estimate >= 0 ? st.total_error_estimate : -1.0;
   ++counters_.statuses;
   return changed;
+}
+
+namespace {
+std::string percent(double fraction) {
+  std::ostringstream os;
+  os.setf(std::ios::fixed);
+  os.precision(fraction < 0.01 ? 1 : 0);
+  os << "~" << 100.0 * fraction << " %";
+  return os.str();
+}
+}  // namespace
+
+std::string error_text(const ServerStatusView& st) {
+  if (!st.received) return {};
+  std::ostringstream os;
+  os << "error vs converged C3D10 "
+     << (st.total_error_estimate >= 0 ? percent(st.total_error_estimate) : std::string("unknown"))
+     << " (mesh + element "
+     << (st.discretization_error_estimate >= 0 ? percent(st.discretization_error_estimate)
+                                               : std::string("unknown"))
+     << ", tier "
+     << (st.expected_force_error >= 0 ? percent(st.expected_force_error)
+                                      : std::string(st.max_strain >= 0 ? "unknown"
+                                                                       : "not measured"))
+     << ")";
+  return os.str();
 }
 
 void ViewerState::remove_station(const std::string& station) { tools_.erase(station); }

@@ -50,6 +50,35 @@ TEST(AccuracyTable, ReadsTheBenchTableAndInterpolates) {
   EXPECT_FALSE(t.expected(fem::Tier::kCorotational, 0.1, "cube").known);
 }
 
+// The table with the element and host nu columns: a lookup for an element and nu uses only
+// their rows (none: unknown, not another element's error); without them, every row as before.
+TEST(AccuracyTable, RowsOfTheRunningElementAndNuOnly) {
+  const auto file = write("element.csv",
+                          "scene,tier,max_strain,force_rel_error,element,poisson_ratio\n"
+                          "brain,LINEAR,0.4,0.3,smoothed-tet,0.49\n"
+                          "brain,LINEAR,0.4,0.1,linear-tet,0.49\n"
+                          "brain,LINEAR,0.4,0.05,linear-tet,0.45\n");
+  const AccuracyTable t = AccuracyTable::read(file);
+  ASSERT_EQ(t.rows().size(), 3u);
+  EXPECT_EQ(t.rows()[0].element, "smoothed-tet");
+  EXPECT_EQ(t.rows()[0].poisson_ratio, 0.49);
+  ExpectedError e = t.expected(fem::Tier::kLinear, 0.4, "brain", "smoothed-tet", 0.49);
+  EXPECT_TRUE(e.known);
+  EXPECT_NEAR(e.force_rel_error, 0.3, 1e-15);
+  EXPECT_EQ(e.basis, "brain, smoothed-tet");
+  EXPECT_NEAR(t.expected(fem::Tier::kLinear, 0.4, "brain", "linear-tet", 0.45).force_rel_error,
+              0.05, 1e-15);
+  EXPECT_FALSE(t.expected(fem::Tier::kLinear, 0.4, "brain", "anp-tet", 0.49).known);
+  EXPECT_FALSE(t.expected(fem::Tier::kLinear, 0.4, "brain", "smoothed-tet", 0.499).known);
+  EXPECT_NEAR(t.expected(fem::Tier::kLinear, 0.4, "brain").force_rel_error, 0.3, 1e-15)
+      << "no element given: the envelope of every row";
+  // A table of the old header has no element: it answers no element-specific lookup.
+  const AccuracyTable old = AccuracyTable::read(
+      write("old.csv", "scene,tier,max_strain,force_rel_error\nbrain,LINEAR,0.4,0.3\n"));
+  EXPECT_FALSE(old.expected(fem::Tier::kLinear, 0.4, "brain", "smoothed-tet", 0.49).known);
+  EXPECT_TRUE(old.expected(fem::Tier::kLinear, 0.4, "brain").known);
+}
+
 void expect_error(const std::string& text, const std::string& part) {
   const auto file = write("bad.csv", text);
   try {
@@ -71,6 +100,12 @@ TEST(AccuracyTable, MalformedTablesNameFileAndLine) {
   expect_error("scene,tier,max_strain,force_rel_error\ncube,LINEAR,0.1,-0.2\n",
                "force_rel_error: '-0.2'");
   expect_error("scene,tier,max_strain,force_rel_error\ncube,LINEAR,0.1x,0.2\n", "'0.1x'");
+  expect_error("scene,tier,max_strain,force_rel_error,element,poisson_ratio\n"
+               "cube,LINEAR,0.1,0.2,quadratic-tet,0.4\n",
+               "bad.csv:2: unknown element 'quadratic-tet'");
+  expect_error("scene,tier,max_strain,force_rel_error,element,poisson_ratio\n"
+               "cube,LINEAR,0.1,0.2,linear-tet\n",
+               "bad.csv:2: 5 fields, expected 6");
   EXPECT_THROW(AccuracyTable::read("/nonexistent/force_error.csv"), std::runtime_error);
 }
 

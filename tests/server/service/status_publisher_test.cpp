@@ -67,7 +67,28 @@ TEST(service_status_publisher, TheSampleCarriesTheStepsStationsAndStepTimes) {
   EXPECT_NEAR(st.step_time_p99_us, 99.0, 1.0);
   EXPECT_EQ(st.max_strain, -1.0) << "no Deformation output: nothing measured";
   EXPECT_EQ(st.expected_force_error, -1.0) << "no accuracy table";
+  EXPECT_EQ(st.discretization_error_estimate, -1.0) << "no discretization table";
+  EXPECT_EQ(st.total_error_estimate, -1.0);
   EXPECT_EQ(st.refused._length, 0u);
+}
+
+// The host's discretization error (looked up at set-up) is published as it is; the total needs
+// the tier's part too: without a measured strain it stays unknown (-1), not the discretization
+// part alone passed off as the total.
+TEST(service_status_publisher, TheTotalErrorNeedsBothParts) {
+  Status t;
+  StatusPublisherDef def;
+  def.discretization_error = 0.056;
+  def.host_element = "smoothed-tet";
+  def.host_poisson_ratio = 0.49;
+  AccuracyTable table({{"fixture", neurosim::fem::Tier::kLinear, 0.5, 0.1, "smoothed-tet", 0.49}});
+  StatusPublisher p(def, t.settings, t.sim, t.stations, &*t.loop, nullptr, table, nullptr, nullptr);
+  p.begin(0);
+  const neurosim_SimStatus& st = p.publish(kSecond);
+  EXPECT_EQ(st.discretization_error_estimate, 0.056);
+  EXPECT_EQ(st.max_strain, -1.0) << "no Deformation output: no strain";
+  EXPECT_EQ(st.expected_force_error, -1.0);
+  EXPECT_EQ(st.total_error_estimate, -1.0);
 }
 
 // A refused station is told at once: the next step at least 0.2 s after the last status

@@ -6,9 +6,14 @@
 // The cost of the tier's accuracy in SimStatus: max_strain is the in-process field's largest
 // principal strain, expected_force_error the value the accuracy table given with
 // --accuracy-table gives at that strain (a test table: error = 20 x strain), and since that is
-// above the scene's bound (effects.max_expected_force_error) the server warns once.
+// above the scene's bound (effects.max_expected_force_error) the server warns once. Against
+// the converged answer (CalculiX C3D10): discretization_error_estimate is the committed
+// share/accuracy/discretization_error.csv's row for the host (the bundled brain must have one:
+// smoothed-tet, nu 0.49) and total_error_estimate that + expected_force_error; a host on an
+// element the table has no row for says -1 (unknown) in both, and the log says so.
 #include "server/fem/strain.hpp"
 #include "server/scene/compile.hpp"
+#include "server/service/discretization_table.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
 #include <cmath>
@@ -54,12 +59,28 @@ void press_and_hold(const Press& press, const char* tier) {
   };
   const std::array<double, 3> hold = tip(press.depth_m);
 
-  // Accuracy table: for this scene and tier, 20 % force error per 1 % of strain (up to 100 %).
+  // Accuracy table: for this scene, tier, element and nu, 20 % force error per 1 % of strain (up
+  // to 100 %).
+  const auto& host_material = model.meshes.at(0).material;
   const auto table = nt::temp_dir(std::string("tier_table_") + tier) / "force_error.csv";
   {
     std::ofstream t(table);
-    t << "# test table\nscene,tier,max_strain,force_rel_error\n"
-      << model.name << "," << tier << ",1.0,20\n";
+    t << "# test table\nscene,tier,max_strain,force_rel_error,element,poisson_ratio\n"
+      << model.name << "," << tier << ",1.0,20,"
+      << neurosim::fem::element_name(host_material.element) << "," << host_material.poisson_ratio
+      << "\n";
+  }
+  // The committed discretization table's row for this host (the server reads it by default).
+  const auto disc_row =
+      neurosim::service::DiscretizationTable::read(nt::source_dir() /
+                                                   "share/accuracy/discretization_error.csv")
+          .find(host_material.element, host_material.poisson_ratio,
+                model.meshes.at(0).mesh.num_vertices(), model.meshes.at(0).mesh.num_tets());
+  const bool bundled_brain = std::string(press.scene) == kBrain.scene;
+  if (bundled_brain) {
+    ASSERT_TRUE(disc_row) << "no discretization row for the bundled brain ("
+                          << neurosim::fem::element_name(host_material.element) << ", nu "
+                          << host_material.poisson_ratio << ")";
   }
   ASSERT_GT(model.effects.max_expected_force_error, 0.0) << "the bundled scenes set a bound";
 
@@ -155,18 +176,30 @@ void press_and_hold(const Press& press, const char* tier) {
   ASSERT_GT(strain, 0.0);
   // The strain is measured in the fields solved for viewers: a Deformation reader joins.
   neurosim::wire::Reader<neurosim_Deformation> viewer(ses.client.pp, ses.client.deform_topic);
-  double status_strain = -1.0, status_error = -1.0;
+  double status_strain = -1.0, status_error = -1.0, status_disc = -2.0, status_total = -2.0;
   const bool measured = ses.status.wait_for(
       [&](const neurosim_SimStatus& s) {
         status_strain = s.max_strain;
         status_error = s.expected_force_error;
+        status_disc = s.discretization_error_estimate;
+        status_total = s.total_error_estimate;
         return std::abs(s.max_strain - strain) <= 1e-6 * strain;
       },
       8);
-  std::printf("%s %s: max strain %.6g (server) vs %.6g (in process), expected force error %.6g\n",
-              press.scene, tier, status_strain, strain, status_error);
+  std::printf("%s %s: max strain %.6g (server) vs %.6g (in process), expected force error %.6g, "
+              "vs converged C3D10: discretization %.6g, total %.6g\n",
+              press.scene, tier, status_strain, strain, status_error, status_disc, status_total);
   EXPECT_TRUE(measured) << "SimStatus max_strain " << status_strain << ", in process " << strain;
   EXPECT_NEAR(status_error, std::min(20.0, 20.0 * status_strain), 1e-12 * status_error);
+  if (disc_row) {
+    EXPECT_EQ(status_disc, disc_row->discretization_error);
+    EXPECT_GT(status_disc, 0.0);
+    EXPECT_LT(status_disc, 1.0) << "a discretization error of 100 % is no estimate";
+    EXPECT_DOUBLE_EQ(status_total, status_disc + status_error);
+  } else {
+    EXPECT_EQ(status_disc, -1.0);
+    EXPECT_EQ(status_total, -1.0);
+  }
   const std::string log = ses.server.log();
   EXPECT_NE(log.find("exceeds the scene's bound effects.max_expected_force_error"),
             std::string::npos)
@@ -174,6 +207,41 @@ void press_and_hold(const Press& press, const char* tier) {
 }
 
 }  // namespace
+
+// A host on an element the committed discretization table has no row for (the cube on anp-tet,
+// `--element anp-tet`): SimStatus says unknown (-1) for the discretization part and the total,
+// not a number borrowed from another element, and the log says why.
+TEST(service_tier, ElementWithoutATableSaysUnknown) {
+  const auto scene = nt::source_dir() / kCube.scene;
+  neurosim::scene::Model model = neurosim::scene::load_model(scene);
+  const auto& host = model.meshes.at(0);
+  ASSERT_FALSE(neurosim::service::DiscretizationTable::read(
+                   nt::source_dir() / "share/accuracy/discretization_error.csv")
+                   .find(neurosim::fem::Element::kAnpTet, host.material.poisson_ratio,
+                         host.mesh.num_vertices(), host.mesh.num_tets()))
+      << "the test needs an element without a row";
+  st::Setup setup;
+  setup.exe = nt::bin_dir() / "neurosim-server";
+  setup.scene = scene;
+  setup.server_args = {"--element", "anp-tet"};
+  setup.startup_timeout_s = 300;
+  st::Session ses(setup, "tier_unknown", 120);
+  ASSERT_TRUE(ses.wait_ready());
+  double disc = 0.0, total = 0.0;
+  ASSERT_TRUE(ses.status.wait_for(
+      [&](const neurosim_SimStatus& s) {
+        disc = s.discretization_error_estimate;
+        total = s.total_error_estimate;
+        return s.steps > 0;
+      },
+      10))
+      << ses.status.last_text;
+  EXPECT_EQ(disc, -1.0);
+  EXPECT_EQ(total, -1.0);
+  const std::string log = ses.server.log();
+  EXPECT_NE(log.find("anp-tet"), std::string::npos) << log;
+  EXPECT_NE(log.find("discretization error unknown"), std::string::npos) << log;
+}
 
 TEST(service_tier, CubeLinear) { press_and_hold(kCube, "linear"); }
 TEST(service_tier, CubeNonlinear) { press_and_hold(kCube, "nonlinear"); }

@@ -211,6 +211,38 @@ TEST(ViewerState, SimStatusStrainAndExpectedErrorAreKept) {
   EXPECT_NE(warnings[0].find("max_strain nan"), std::string::npos) << warnings[0];
 }
 
+// The error against the converged answer (SimStatus discretization_error_estimate,
+// total_error_estimate) is kept, and the overlay's line names it and both parts; unknown parts
+// say so and leave the total unknown.
+TEST(ViewerState, TotalErrorAgainstTheConvergedAnswerIsShown) {
+  nv::ViewerState s([](const std::string&) {});
+  EXPECT_EQ(nv::error_text(s.server_status()), "") << "no SimStatus yet";
+  wire::Sample<neurosim_SimStatus> st;
+  wire::set_string(st->server_id, "srv");
+  st->tier = neurosim_TIER_LINEAR;
+  st->max_strain = 0.35;
+  st->expected_force_error = 0.09;
+  st->discretization_error_estimate = 0.056;
+  st->total_error_estimate = 0.146;
+  EXPECT_TRUE(s.ingest_status(*st));
+  EXPECT_EQ(s.server_status().discretization_error_estimate, 0.056);
+  EXPECT_EQ(s.server_status().total_error_estimate, 0.146);
+  EXPECT_EQ(nv::error_text(s.server_status()),
+            "error vs converged C3D10 ~15 % (mesh + element ~6 %, tier ~9 %)");
+  st->discretization_error_estimate = -1.0;
+  st->total_error_estimate = -1.0;
+  EXPECT_TRUE(s.ingest_status(*st)) << "unknown is a change";
+  EXPECT_EQ(nv::error_text(s.server_status()),
+            "error vs converged C3D10 unknown (mesh + element unknown, tier ~9 %)");
+  st->max_strain = -1.0;
+  st->expected_force_error = -1.0;
+  EXPECT_TRUE(s.ingest_status(*st));
+  EXPECT_EQ(nv::error_text(s.server_status()),
+            "error vs converged C3D10 unknown (mesh + element unknown, tier not measured)");
+  st->total_error_estimate = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(s.ingest_status(*st)) << "not finite: malformed";
+}
+
 TEST(ViewerOptions, GoodAndBadCommandLines) {
   bool help = false;
   const char* ok[] = {"v",        "--mode", "observe", "--headless", "--frames",       "3",
