@@ -52,7 +52,13 @@ std::string status_line(const ViewerOptions& o, const ViewerState& s, std::uint6
     // Only while live: a gone server's tier would pass for the running one. A line of its own:
     // the navigation mode's 3D viewport is a quarter of the frame and clips long lines.
     const std::string tier = tier_text(s.server_status());
-    if (!tier.empty()) os << "\n" << tier << "\n" << error_text(s.server_status());
+    if (!tier.empty()) {
+      // The error and its parts on two lines (the navigation viewport clips at ~60 characters).
+      std::string error = error_text(s.server_status());
+      const std::size_t parts = error.find(" (");
+      if (parts != std::string::npos) error.replace(parts, 1, "\n  ");
+      os << "\n" << tier << "\n" << error;
+    }
   } else
     os << "WAITING FOR SERVER (showing the last state)";
   os << "\nmax |u| " << s.max_displacement_m() * 1e3 << " mm";
