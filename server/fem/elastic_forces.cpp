@@ -78,6 +78,14 @@ Eigen::Matrix3d ElasticForces::displacement_gradient(std::size_t tet,
   return f;
 }
 
+Eigen::Matrix3d ElasticForces::elastic_second_piola(std::size_t tet,
+                                                    const Eigen::VectorXd& u_m) const {
+  const Eigen::Matrix3d h = displacement_gradient(tet, u_m);
+  const Eigen::Matrix3d p = first_piola(tier_, laws_[law_index_[tet]], h);
+  const Eigen::Matrix3d s = (Eigen::Matrix3d::Identity() + h).inverse() * p;
+  return 0.5 * (s + s.transpose());
+}
+
 void ElasticForces::nodal_state(const Eigen::VectorXd& u_m, Workspace& s) const {
   s.element.resize(tets_.size());
   s.theta.resize(tets_.size());
@@ -110,11 +118,17 @@ double ElasticForces::energy(const Eigen::VectorXd& u_m, ElasticForcesReport* re
       for (std::size_t e = 0; e < tets_.size(); ++e) note(report, displacement_gradient(e, u_m), {});
     }
   } else {
+    const ViscousStep* v = workspace ? workspace->viscous : nullptr;
     for (std::size_t e = 0; e < tets_.size(); ++e) {
       const Eigen::Matrix3d f = displacement_gradient(e, u_m);
       eval = LawEvaluation{};
       // anp-tet: the element's law is the deviatoric part, the nodes hold the volumetric one.
-      e_total += volume_m3_[e] * energy_density(tier_, laws_[law_index_[e]], f, &eval);
+      const double w = energy_density(tier_, laws_[law_index_[e]], f, &eval);
+      // A relaxing step: gamma W + S_h : E with E = (H + H^T + H^T H) / 2.
+      e_total += volume_m3_[e] *
+                 (v ? v->gamma * w + 0.5 * v->history_stress_pa[e].cwiseProduct(
+                                               f + f.transpose() + f.transpose() * f).sum()
+                    : w);
       note(report, f, eval);
     }
   }
@@ -149,6 +163,11 @@ void ElasticForces::internal_force(const Eigen::VectorXd& u_m, Eigen::VectorXd& 
       p = first_piola(tier_, laws_[law_index_[e]], f, &eval);
       // anp-tet: the deviatoric stress plus the element's average nodal pressure.
       if (nodal_) p += ws.pressure_pa[e] * ws.element[e].gradient;
+      // A relaxing step (linear-tet): gamma P + F S_h.
+      if (ws.viscous) {
+        p = ws.viscous->gamma * p +
+            (Eigen::Matrix3d::Identity() + f) * ws.viscous->history_stress_pa[e];
+      }
     }
     note(report, f, eval);
     const auto& t = tets_[e];
@@ -190,7 +209,17 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
     const Eigen::Matrix3d f = displacement_gradient(e, u_m);
     LawEvaluation eval;
     const LawConstants& law = laws_[law_index_[e]];
-    if (!nodal_) {
+    if (!nodal_ && ws.viscous) {
+      // A relaxing step: gamma dP/dF plus S_h's geometric term d(F S_h)_ij / dF_kl =
+      // delta_ik S_h(l, j), projected as a whole.
+      stress_tangent(tier_, law, f, false, c, &eval);
+      c *= ws.viscous->gamma;
+      const Eigen::Matrix3d& sh = ws.viscous->history_stress_pa[e];
+      for (int j = 0; j < 3; ++j)
+        for (int l = 0; l < 3; ++l)
+          for (int i = 0; i < 3; ++i) c(i + 3 * j, i + 3 * l) += sh(l, j);
+      if (project_psd || eval.clamped) project_to_psd(c);
+    } else if (!nodal_) {
       stress_tangent(tier_, law, f, project_psd, c, &eval);
     } else {
       const VolumetricStrain& v = ws.element[e];

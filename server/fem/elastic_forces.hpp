@@ -16,6 +16,7 @@
 #include "server/fem/elastic_law.hpp"
 #include "server/fem/material.hpp"
 #include "server/fem/nodal_pressure.hpp"
+#include "server/fem/quasi_linear_viscoelastic.hpp"
 #include "server/fem/smoothed_strain.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
@@ -45,6 +46,10 @@ class ElasticForces {
     std::vector<Eigen::Matrix<double, 4, 3>> w;         // d theta_e / d u_b (1/m)
     std::vector<double> q;                              // nodal stiffness scratch
     std::vector<Eigen::Matrix<double, 9, 3>> cell;      // smoothed-tet tangent scratch
+    // A relaxing mesh's step (quasi_linear_viscoelastic.hpp; linear-tet): every evaluation is then
+    // the step's, P = gamma P_e + F S_h per element (energy gamma W_e + S_h : E, tangent
+    // gamma dP_e/dF + dF S_h/dF). Null: elastic. Not owned.
+    const ViscousStep* viscous{nullptr};
   };
 
   // Throws std::invalid_argument for an invalid material map or a degenerate element (named).
@@ -59,6 +64,10 @@ class ElasticForces {
 
   // H = grad u = F - I of tetrahedron `tet` at displacement u (unit m), dimensionless.
   Eigen::Matrix3d displacement_gradient(std::size_t tet, const Eigen::VectorXd& u_m) const;
+
+  // The law's second Piola-Kirchhoff stress S_e = F^-1 P(F) of tetrahedron `tet` at u_m
+  // (symmetrized; linear-tet), unit Pa: what a relaxing mesh's internal variables integrate.
+  Eigen::Matrix3d elastic_second_piola(std::size_t tet, const Eigen::VectorXd& u_m) const;
 
   // Total strain energy sum_e V_e W(F_e), unit J.
   double energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report = nullptr,

@@ -647,6 +647,10 @@ const ElasticForces& EquilibriumSolver::forces() const { return impl_->bodies[0]
 const ElasticForces& EquilibriumSolver::body_forces(int body) const {
   return impl_->bodies.at(static_cast<std::size_t>(body));
 }
+void EquilibriumSolver::set_viscous_step(int body, const ViscousStep* step) {
+  impl_->workspaces.at(static_cast<std::size_t>(body)).viscous = step;
+  impl_->f_int_known = false;  // the internal forces are the new step's
+}
 int EquilibriumSolver::body_offset(int body) const {
   return impl_->offset.at(static_cast<std::size_t>(body));
 }

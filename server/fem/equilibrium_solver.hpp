@@ -158,6 +158,11 @@ class EquilibriumSolver {
   const std::vector<int>& prescribed_dofs() const;
   const ElasticForces& forces() const;  // the host's
   const ElasticForces& body_forces(int body) const;  // 0: the host, k: tied[k - 1]
+  // A relaxing body (quasi_linear_viscoelastic.hpp): every evaluation of body `body` from now on
+  // is that of `step` (not owned; its contents may change between solves: call again after
+  // QuasiLinearViscoelastic::begin, which forgets the internal forces kept from the last solve).
+  // Null: elastic.
+  void set_viscous_step(int body, const ViscousStep* step);
   int body_offset(int body) const;  // first stacked dof of a body
   int num_dofs() const;             // all stacked dofs
   Tier tier() const;

@@ -995,6 +995,7 @@ void State::tier_post(StepStats& stats) {
     tier_loads_[bi].slots = bodies_[bi].force_slots;
     tier_loads_[bi].forces_n = bodies_[bi].forces_n;
     tier_loads_[bi].linearization = tier_->linearization(static_cast<int>(bi)).count;
+    tier_loads_[bi].time_s = step_time_s_;  // a relaxing body's equilibrium moves in time
   }
   const auto u0 = Clock::now();
   stats.tier_updated = tier_->post(tier_loads_);

@@ -310,15 +310,19 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     setup_.factor_s += b.body->timing().factor_s;
     b.host_material = lm.material;
     b.host_fixed_nodes = lm.fixed_nodes;
-    // The body relaxes with its host's kernel (a tied mesh with another one: compile() warns).
+    // LINEAR: the body relaxes with its host's kernel (a tied mesh with another one: compile()
+    // warns). NONLINEAR: each mesh with its own, quasi-linear viscoelasticity in the tier's
+    // equilibrium (TierEquilibrium; it refuses what it does not implement, naming the mesh).
     if (!lm.material.viscoelastic.empty()) {
       const std::string what = source_ + ": mesh " + lm.id + ": material.viscoelastic";
-      if (tier_ != scene::Tier::kLinear)
-        throw std::runtime_error(what + ": the " + std::string(scene::tier_name(tier_)) +
-                                 " tier is elastic in this build (viscoelastic terms run in the "
-                                 "LINEAR tier; remove them or use --tier linear)");
-      b.creep = fem::creep_spectrum(lm.material.viscoelastic);
-      viscoelastic_ = true;
+      if (tier_ == scene::Tier::kCorotational)
+        throw std::runtime_error(what + ": the COROTATIONAL tier is elastic in this build "
+                                 "(viscoelastic terms run in the LINEAR and NONLINEAR tiers; "
+                                 "remove them or use --tier linear or --tier nonlinear)");
+      if (tier_ == scene::Tier::kLinear) {
+        b.creep = fem::creep_spectrum(lm.material.viscoelastic);
+        viscoelastic_ = true;
+      }
     }
     b.body->set_cache_dir(options_.compliance_cache_dir);
     if (iterative_host[m])

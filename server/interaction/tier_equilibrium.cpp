@@ -2,6 +2,8 @@
 
 #include "server/fem/polar_decomposition.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -52,6 +54,18 @@ TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
   solver_ = std::make_unique<fem::EquilibriumSolver>(
       equilibrium_definition(*body_, def.host_material, def.host_fixed_nodes, tier_));
   slot_node_ = body_->contact_nodes();
+  // Relaxing meshes: their internal variables, the solver evaluating each update's step.
+  std::vector<const fem::Viscoelastic*> kernels{&def.host_material.viscoelastic};
+  for (const auto& tie : body_->ties()) kernels.push_back(&tie.material().viscoelastic);
+  for (std::size_t b = 0; b < kernels.size(); ++b) {
+    if (kernels[b]->empty()) continue;
+    if (qlv_.empty()) qlv_.resize(kernels.size());
+    const std::string what = body_name(*body_) + (b == 0 ? ": host" : ": tied mesh " + std::to_string(b - 1)) +
+                             " material.viscoelastic";
+    qlv_[b] = std::make_unique<fem::QuasiLinearViscoelastic>(solver_->body_forces(static_cast<int>(b)),
+                                                             *kernels[b], what);
+    solver_->set_viscous_step(static_cast<int>(b), &qlv_[b]->step());
+  }
   u_.setZero(solver_->num_dofs());
   f_.setZero(solver_->num_dofs());
   rotation_.assign(slot_node_.size(), Eigen::Matrix3d::Identity());
@@ -104,6 +118,18 @@ int TierEquilibrium::inverted_elements() {
   return inverted;
 }
 
+bool TierEquilibrium::relaxing_at(double time_s) const {
+  if (qlv_.empty() || !timed_ || !(time_s > time_s_)) return false;
+  for (const auto& q : qlv_)
+    if (q && q->unrelaxed() > kRelaxedFraction) return true;
+  return false;
+}
+
+const fem::QuasiLinearViscoelastic* TierEquilibrium::history(int body) const {
+  if (body < 0 || body >= static_cast<int>(qlv_.size())) return nullptr;
+  return qlv_[static_cast<std::size_t>(body)].get();
+}
+
 void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   const int n_host = 3 * static_cast<int>(body_->host().num_vertices());
   if (load.slots.size() != load.forces_n.size()) {
@@ -119,6 +145,18 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
                                   ": bad contact load at slot " + std::to_string(s));
     }
     f_.segment<3>(3 * slot_node_[s]) += load.forces_n[k];
+  }
+  // Relaxing meshes: the step from the last update's time to the load's (0: replaces it).
+  if (!qlv_.empty()) {
+    if (!std::isfinite(load.time_s)) {
+      throw std::invalid_argument("TierEquilibrium: " + body_name(*body_) + ": load time not finite");
+    }
+    const double dt = timed_ ? std::max(0.0, load.time_s - time_s_) : 0.0;
+    for (std::size_t b = 0; b < qlv_.size(); ++b) {
+      if (!qlv_[b]) continue;
+      qlv_[b]->begin(dt);
+      solver_->set_viscous_step(static_cast<int>(b), &qlv_[b]->step());
+    }
   }
   // Newton from the previous equilibrium (one load step: the forces change little between
   // updates); a jump it cannot take goes the incremental load path from rest.
@@ -144,6 +182,18 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
     throw std::runtime_error("TierEquilibrium: " + body_name(*body_) + ": equilibrium not finite");
   }
   u_.swap(u);
+  // The update's equilibrium enters the relaxing meshes' history (converged or cut short: the
+  // fixed point moves in time; an update at the same time replaces it).
+  for (std::size_t b = 0; b < qlv_.size(); ++b) {
+    if (!qlv_[b]) continue;
+    const fem::ElasticForces& forces = solver_->body_forces(static_cast<int>(b));
+    u_mesh_ = u_.segment(solver_->body_offset(static_cast<int>(b)), forces.num_dofs());
+    qlv_[b]->commit(u_mesh_);
+  }
+  if (!qlv_.empty()) {
+    time_s_ = timed_ ? std::max(time_s_, load.time_s) : load.time_s;
+    timed_ = true;
+  }
 
   // Rotations at the contact slots, then u0 = u* - R C R^T f* there (C: the linear coupled
   // compliance, ties included, one coupled solve for the rotated forces).

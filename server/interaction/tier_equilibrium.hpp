@@ -18,9 +18,22 @@
 // The contact rows are those of the rest surface, their depth and forces taken in the reference
 // configuration (forces along the rows' normals as dead loads), so the tiers differ only in the
 // elasticity.
+//
+// Relaxing tissue (a mesh whose material has viscoelastic terms; NONLINEAR tier, linear-tet):
+// quasi-linear viscoelasticity (fem/quasi_linear_viscoelastic.hpp), internal variables per
+// element. Time enters the equilibrium: each update is the QLV equilibrium at its load's time
+// (TierLoad::time_s, the step's sample time) from the internal variables committed at the
+// previous update, which it then advances (dt = the time between the loads of two consecutive
+// updates; an update at the time of the last one replaces it). The fixed point of the step and
+// the updates therefore moves in time: while the tool moves, the history integrates the
+// updates' iterates (each the equilibrium under the worker's relaxed forces, converged or cut
+// short by the step limit); a held tool's forces converge, at each instant, to the viscoelastic
+// contact equilibrium, and with time to the relaxed one (the hyperelastic answer with every
+// modulus scaled by g_inf, exact for the stated model).
 #pragma once
 
 #include "server/fem/equilibrium_solver.hpp"
+#include "server/fem/quasi_linear_viscoelastic.hpp"
 #include "server/fem/material.hpp"
 #include "server/fem/tier.hpp"
 #include "server/interaction/coupled_body.hpp"
@@ -38,6 +51,7 @@ struct TierLoad {
   std::vector<int> slots;
   std::vector<mesh::Vec3> forces_n;
   std::uint64_t linearization{0};  // TierLinearization::count of the model they were found with
+  double time_s{0.0};  // the step's time (its poses' sample time), unit s; relaxing bodies only
 };
 
 // What the contact step reads of a body's latest equilibrium.
@@ -90,6 +104,16 @@ class TierEquilibrium {
 
   int num_slots() const { return static_cast<int>(slot_node_.size()); }  // contact slots
 
+  // Some mesh of the body relaxes (viscoelastic terms).
+  bool viscoelastic() const { return !qlv_.empty(); }
+  // An update for a load at time_s would move the equilibrium although the forces did not: the
+  // body relaxes, time_s is past the last update's, and some element's stress is more than
+  // kRelaxedFraction of the largest from its relaxed value.
+  static constexpr double kRelaxedFraction = 1e-9;
+  bool relaxing_at(double time_s) const;
+  // The internal variables of body mesh `body` (0: host, k: tied k - 1), or null (elastic).
+  const fem::QuasiLinearViscoelastic* history(int body) const;
+
  private:
   const CoupledBody* body_;
   fem::Tier tier_;
@@ -102,6 +126,10 @@ class TierEquilibrium {
   std::unique_ptr<fem::SolveWorkspace> ws_ = std::make_unique<fem::SolveWorkspace>();
   std::vector<Eigen::Matrix3d> rotation_;  // per contact slot
   std::uint64_t count_{0};
+  // Relaxing meshes: per solver body (null: elastic), the time of the last update.
+  std::vector<std::unique_ptr<fem::QuasiLinearViscoelastic>> qlv_;
+  double time_s_{0.0};
+  bool timed_{false};
   void rotations(const Eigen::VectorXd& u_host_m);
   int inverted_elements();  // in u_, every mesh of the body
 };

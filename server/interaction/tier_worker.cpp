@@ -102,8 +102,12 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
   // update cut short by the step limit goes on for the same forces. (The tool leaving the tissue
   // is a fixed point at once, forces 0 = 0, and would otherwise leave the tissue in the last
   // unconverged iterate, up to 1e-5 m off rest.)
+  // Relaxing tissue moves with time although its forces do not: a body whose stress has not
+  // relaxed yet is updated at every newer load time.
   bool settled = true;
   for (const TierLinearization& lin : current_) settled = settled && lin.converged;
+  for (std::size_t b = 0; b < bodies_.size() && settled && !moved; ++b)
+    settled = !bodies_[b]->relaxing_at(loads[b].time_s);
   if (!moved && settled) return false;
   const auto t0 = common::Clock::now();
   for (std::size_t b = 0; b < bodies_.size(); ++b) {
@@ -130,6 +134,7 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
       out.forces_n.push_back(rx.f.segment<3>(3 * s));
     }
     out.linearization = loads[b].linearization;
+    out.time_s = loads[b].time_s;
     try {
       bodies_[b]->update(out, current_[b]);
     } catch (const std::exception& e) {

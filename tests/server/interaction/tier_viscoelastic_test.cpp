@@ -1,0 +1,166 @@
+// Relaxing tissue in the NONLINEAR tier (quasi-linear viscoelasticity in the tier's equilibrium,
+// tier_equilibrium.hpp): a block pressed by the tool, the step and the synchronous updates
+// (deterministic). Stepping one pose again at one time iterates the multirate fixed point at that
+// instant (a step at the time of the last one replaces it), so:
+//  - a small press held: the converged force at each time is the elastic one times g(t), the
+//    Prony relaxation (analytic; 1e-3 at small strain);
+//  - a 1 mm press (5 % of the block) held with one step per ms, then per 10 ms (the fixed point
+//    moving in time, one update per step): the force converges to the relaxed answer, the same
+//    press on the hyperelastic block with every modulus scaled by g_inf (exact for QLV);
+//  - relaxation times of 1 ms and 1000 s and a pause of 1e4 s stay finite and bounded;
+//  - the anp-tet and smoothed-tet elements are refused naming the mesh (not implemented).
+#include "server/interaction/simulation.hpp"
+#include "server/scene/compile.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace neurosim::interaction {
+namespace {
+
+constexpr double kTip = 0.003;  // tip radius, unit m
+constexpr double kTop = 0.02;   // the block's top face, unit m
+
+std::string block_scene(const std::vector<fem::PronyTerm>& terms, double e_pa = 3000.0,
+                        const char* tier = "NONLINEAR", const char* element = "") {
+  std::ostringstream o;
+  o.precision(17);
+  o << "name: \"visco_block\"\n"
+    << "meshes { id: \"block\" generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.02 y: 0.02 "
+       "z: 0.02 } } cell_size_m: 0.004 seed: 1 }\n"
+    << "  material { name: \"tissue\" youngs_modulus_pa: " << e_pa << " poisson_ratio: 0.45\n";
+  if (*element) o << "    element: \"" << element << "\"\n";
+  if (!terms.empty()) {
+    o << "    viscoelastic { source: \"test values\"\n";
+    for (const auto& t : terms) o << "      terms { g: " << t.g << " tau_s: " << t.tau_s << " }\n";
+    o << "    }\n";
+  }
+  o << "  }\n"
+    << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 1 z: 1e-6 } } } }\n"
+    << "tools { id: \"probe\" tip_radius_m: " << kTip
+    << " shaft_radius_m: 0.001 shaft_length_m: 0.05 max_speed_m_per_s: 2 }\n"
+    << "effects { tier: " << tier << " coupling: false tool_contact: true deformation_output: true }\n";
+  return o.str();
+}
+
+std::unique_ptr<Simulation> block(const std::string& text) {
+  SimulationOptions o;
+  o.tier_worker_thread = false;  // deterministic: the update runs inside each step
+  o.tier_newton_tolerance = 1e-12;
+  return Simulation::build(scene::compile(scene::parse_scene(text, "visco_block.scene"), "visco_block.scene"), o);
+}
+
+std::vector<ToolPose> press(double depth_m) {
+  ToolPose p;
+  p.tip_m = Vec3(0.0101, 0.0098, kTop + kTip - depth_m);
+  p.axis = Vec3::UnitZ();
+  return {p};
+}
+
+const std::vector<fem::PronyTerm> kTerms{{0.3, 0.05}, {0.2, 0.5}};
+
+double relaxation(const std::vector<fem::PronyTerm>& terms, double t) {
+  fem::Viscoelastic v;
+  v.terms = terms;
+  return v.relaxation(t);
+}
+
+// Steps `pose` at time t until the force settles (the fixed point at that instant); returns it.
+Vec3 settle_at(Simulation& sim, double t, const std::vector<ToolPose>& pose, int max_steps = 200) {
+  std::vector<ToolContact> c;
+  StepStats st;
+  Vec3 prev = Vec3::Constant(1e300);
+  for (int k = 0; k < max_steps; ++k) {
+    sim.step_at(t, pose, c, st);
+    if (c[0].in_contact && (c[0].force_n - prev).norm() <= 1e-12 * c[0].force_n.norm()) break;
+    prev = c[0].force_n;
+  }
+  return c[0].in_contact ? c[0].force_n : Vec3::Zero();
+}
+
+TEST(interaction_tier_viscoelastic, HeldSmallPressRelaxesAsTheKernel) {
+  auto sim = block(block_scene(kTerms));
+  const auto pose = press(1e-6);
+  const double f0 = settle_at(*sim, 0.0, pose).z();
+  ASSERT_GT(f0, 0.0);
+  double worst = 0.0, t = 0.0;
+  for (int k = 1; k <= 250; ++k) {  // 2.5 s = 5 tau_max: 10 ms per time
+    t = 0.01 * k;
+    const double f = settle_at(*sim, t, pose).z();
+    const double err = std::abs(f / f0 - relaxation(kTerms, t));
+    worst = std::max(worst, err);
+    ASSERT_LT(err, 1e-3) << "t = " << t << " s";
+  }
+  std::printf("NONLINEAR, 1 um press held: F(t) / F(0) against g(t) within %.2e over %.1f s\n", worst, t);
+}
+
+TEST(interaction_tier_viscoelastic, HeldPressConvergesToTheRelaxedAnswer) {
+  const double depth = 0.001;
+  // The relaxed answer: the hyperelastic block with E g_inf (nu unchanged: every modulus scaled).
+  const double g_inf = 1.0 - 0.3 - 0.2;
+  auto relaxed = block(block_scene({}, 3000.0 * g_inf));
+  const Vec3 f_relaxed = settle_at(*relaxed, 0.0, press(depth), 400);
+  auto elastic = block(block_scene({}));
+  const Vec3 f_elastic = settle_at(*elastic, 0.0, press(depth), 400);
+  ASSERT_GT(f_relaxed.z(), 0.0);
+
+  // The press in 100 ms (1 ms steps), held: 1 ms steps to 1 s, then 10 ms steps to 10 s = 20
+  // tau_max; one step (one update) per time: the fixed point moves in time.
+  auto sim = block(block_scene(kTerms));
+  std::vector<ToolContact> c;
+  StepStats st;
+  double t = 0.0, f_end_of_press = 0.0;
+  for (int k = 0; t < 10.0; ++k) {
+    t = k < 1000 ? 1e-3 * k : 1.0 + 0.01 * (k - 1000);
+    sim->step_at(t, press(depth * std::min(1.0, t / 0.1)), c, st);
+    ASSERT_TRUE(c[0].force_n.allFinite()) << "t = " << t;
+    if (k == 100) f_end_of_press = c[0].force_n.z();
+  }
+  ASSERT_TRUE(c[0].in_contact);
+  const double rel = (c[0].force_n - f_relaxed).norm() / f_relaxed.norm();
+  EXPECT_LT(rel, 1e-6);
+  EXPECT_GT(f_end_of_press, 1.2 * f_relaxed.z());  // it did relax
+  std::printf("NONLINEAR, 1 mm press: elastic %.6f N, at the end of a 100 ms press %.6f N, after 10 s "
+              "%.8f N, relaxed answer (E g_inf) %.8f N: %.2e apart\n",
+              f_elastic.z(), f_end_of_press, c[0].force_n.z(), f_relaxed.z(), rel);
+}
+
+TEST(interaction_tier_viscoelastic, ExtremeRelaxationTimesStayFinite) {
+  const std::vector<fem::PronyTerm> terms{{0.5, 1e-3}, {0.3, 1e3}};
+  auto sim = block(block_scene(terms));
+  const auto pose = press(0.0005);
+  const double f0 = settle_at(*sim, 0.0, pose).z();
+  ASSERT_GT(f0, 0.0);
+  std::vector<double> times;
+  for (int k = 1; k <= 100; ++k) times.push_back(1e-3 * k);
+  times.push_back(1e4);
+  times.push_back(1e4 + 1e-3);
+  for (double t : times) {
+    const double f = settle_at(*sim, t, pose).z();
+    ASSERT_TRUE(std::isfinite(f)) << "t = " << t;
+    EXPECT_LE(f, f0 * (1.0 + 1e-6)) << "t = " << t;
+    EXPECT_GE(f, f0 * 0.2 * (1.0 - 1e-3)) << "t = " << t;
+  }
+}
+
+TEST(interaction_tier_viscoelastic, RefusesWhatIsNotImplementedNamingTheMesh) {
+  for (const char* element : {"anp-tet", "smoothed-tet"}) {
+    try {
+      auto sim = block(block_scene(kTerms, 3000.0, "NONLINEAR", element));
+      ADD_FAILURE() << element << " accepted";
+    } catch (const std::exception& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("block"), std::string::npos) << what;
+      EXPECT_NE(what.find("viscoelastic"), std::string::npos) << what;
+      EXPECT_NE(what.find(element), std::string::npos) << what;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
