@@ -323,8 +323,9 @@ Slide slide(const scene::Model& model, const Vec3& start, const Vec3& heading, d
 // smoothed-tet at nu = 0.49: spread 3.01 at 1 mm (|F|/depth 9.6 .. 28.8 N/m), 2.61 at 2 mm. The
 // same slide on the same mesh (the scene's element and nu edited): smoothed-tet nu = 0.45 3.01 /
 // 2.82, anp-tet 0.49 2.54 / 2.37, linear-tet 0.49 2.92 / 2.39, linear-tet 0.45 2.63 / 2.43. Not
-// nu: the node-smoothed half of smoothed-tet's deviatoric energy, softer under one node than
-// under a face point (anp-tet, the same nodal volumetric part without it, stays at 2.5). Every
+// nu but smoothed-tet's softer deviatoric energy under one node than under a face point: its
+// node-smoothed share (SmoothedStrain::kNodeShare) 0 / 0.25 / 0.5 gives 2.77 / 2.84 / 3.01 at
+// 1 mm, and anp-tet (the same nodal volumetric part, the stiffer per-element shear) 2.54. Every
 // smoothed-tet value is nearer the continuum (Hertz for the 2 mm tip 1 mm into a half-space,
 // E = 3 kPa, nu = 0.49: 7.4 N/m) than linear-tet's 31 .. 92 N/m at nu = 0.49: the nodes came
 // down towards it more than the faces. Hence 3.1 (the spread is the contact's point load on one
