@@ -12,6 +12,11 @@
 // the viscoelastic brain, and the hereditary integral int g(t - s) dF_el(s) of the elastic
 // forces along the same path (what the stated model predicts, g the brain's kernel), to FILE;
 // a summary (start of the hold, 1 s, end) on stdout. Deterministic (sample times, no clock).
+//   viscoelastic_bench --nonlinear-hold [--hold S] [--sample-ms M]
+// The same held press in the NONLINEAR tier (quasi-linear viscoelasticity in the tier's
+// equilibrium), brain_viscoelastic.scene with and without its kernel alternating step by step, synchronous updates
+// (one equilibrium update per step, at M ms sample times, default 10: a 100 Hz worker): the force
+// during the hold and the update's wall time (p50 / p99 / max) with and without the history.
 #include "common/cli.hpp"
 #include "common/stats.hpp"
 #include "server/interaction/simulation.hpp"
@@ -115,6 +120,62 @@ int hold_relaxation(const std::string& dir, const std::string& file, double hold
   return 0;
 }
 
+// --nonlinear-hold: the held press in the NONLINEAR tier, elastic and viscoelastic brain.
+int nonlinear_hold(const std::string& dir, double hold_s, double sample_ms) {
+  const Eigen::Vector3d origin(0.1605, 0.1125, 0.0787);
+  const Eigen::Vector3d up = Eigen::Vector3d(0.963, 0.176, 0.202).normalized();
+  ni::SimulationOptions o;
+  o.tier_worker_thread = false;  // one update inside each step: deterministic, timed
+  std::vector<std::unique_ptr<ni::Simulation>> sims;
+  std::vector<std::vector<double>> update_us(2), force(2);
+  // The elastic reference is the same scene without its kernel (brain_artery.scene's brain has
+  // another material since it moved to nu = 0.49 on smoothed-tet).
+  for (bool relaxing : {false, true}) {
+    auto model = neurosim::scene::load_model(dir + "brain_viscoelastic.scene");
+    model.effects.tier = neurosim::scene::Tier::kNonlinear;
+    if (!relaxing)
+      for (auto& m : model.meshes) {
+        m.material.viscoelastic = {};
+        for (auto& mm : m.materials.materials) mm.viscoelastic = {};
+      }
+    sims.push_back(ni::Simulation::build(model, o));
+  }
+  const double tip = neurosim::scene::load_model(dir + "brain_viscoelastic.scene").tools.at(0).tip_radius_m;
+  const double depth = 0.004, press_s = 1.5, dt = 1e-3 * sample_ms;
+  const int n = static_cast<int>(std::lround((press_s + hold_s) / dt));
+  std::vector<ni::ToolPose> poses(1);
+  std::vector<ni::ToolContact> c;
+  ni::StepStats st;
+  for (int k = 0; k <= n; ++k) {
+    const double t = k * dt;
+    const double u = std::min(1.0, t / press_s);
+    const double d = depth * (0.5 - 0.5 * std::cos(M_PI * u));
+    poses[0].tip_m = origin + (tip - d) * up;
+    poses[0].axis = up;
+    for (int i = 0; i < 2; ++i) {
+      sims[i]->step_at(t, poses, c, st);
+      if (st.tier_updated) update_us[i].push_back(st.tier_update_us);
+      force[i].push_back(c[0].force_n.norm());
+    }
+  }
+  const int k0 = static_cast<int>(std::lround(press_s / dt));
+  std::printf("# held press in the NONLINEAR tier (4 mm in over %.1f s, held %.1f s; one update per "
+              "%.0f ms sample): |F| in N\n", press_s, hold_s, sample_ms);
+  std::printf("t_into_hold_s,f_elastic_n,f_viscoelastic_n,f_over_f_hold_start\n");
+  for (double s : {0.0, 0.5, 1.0, 2.0, 5.0, hold_s}) {
+    if (s > hold_s) continue;
+    const int k = k0 + static_cast<int>(std::lround(s / dt));
+    std::printf("%.1f,%.4f,%.4f,%.3f\n", s, force[0][k], force[1][k], force[1][k] / force[1][k0]);
+  }
+  std::printf("scene,updates,update_p50_us,update_p99_us,update_max_us\n");
+  const char* names[] = {"brain_viscoelastic without its kernel (elastic)", "brain_viscoelastic (QLV)"};
+  for (int i = 0; i < 2; ++i) {
+    const auto p = neurosim::common::percentiles(update_us[i]);
+    std::printf("%s,%zu,%.0f,%.0f,%.0f\n", names[i], update_us[i].size(), p.p50, p.p99, p.max);
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -139,8 +200,17 @@ int main(int argc, char** argv) {
   cli->add_option("--hold", hold_s, "with --hold-csv: seconds held")
       ->check(CLI::Range(0.0, 600.0))
       ->capture_default_str();
+  bool nonlinear = false;
+  cli->add_flag("--nonlinear-hold", nonlinear,
+                "the held press in the NONLINEAR tier (quasi-linear viscoelasticity), elastic and "
+                "viscoelastic: forces and update times");
+  double sample_ms = 10.0;
+  cli->add_option("--sample-ms", sample_ms, "with --nonlinear-hold: ms between samples (one update each)")
+      ->check(CLI::Range(1.0, 100.0))
+      ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;
   const std::string dir = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/";
+  if (nonlinear) return nonlinear_hold(dir, hold_s, sample_ms);
   if (!hold_csv.empty()) return hold_relaxation(dir, hold_csv, hold_s, rest_rows);
   const Eigen::Vector3d origin(0.1605, 0.1125, 0.0787);
   const Eigen::Vector3d up = Eigen::Vector3d(0.963, 0.176, 0.202).normalized();
