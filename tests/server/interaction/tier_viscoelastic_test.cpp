@@ -7,6 +7,7 @@
 //  - a 1 mm press (5 % of the block) held with one step per ms, then per 10 ms (the fixed point
 //    moving in time, one update per step): the force converges to the relaxed answer, the same
 //    press on the hyperelastic block with every modulus scaled by g_inf (exact for QLV);
+//  - the same with the worker on its own thread (the server's mode, coarse uneven update times);
 //  - relaxation times of 1 ms and 1000 s and a pause of 1e4 s stay finite and bounded;
 //  - the anp-tet and smoothed-tet elements are refused naming the mesh (not implemented).
 #include "server/interaction/simulation.hpp"
@@ -17,7 +18,9 @@
 #include <cmath>
 #include <cstdio>
 #include <sstream>
+#include <chrono>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace neurosim::interaction {
@@ -128,6 +131,45 @@ TEST(interaction_tier_viscoelastic, HeldPressConvergesToTheRelaxedAnswer) {
   std::printf("NONLINEAR, 1 mm press: elastic %.6f N, at the end of a 100 ms press %.6f N, after 10 s "
               "%.8f N, relaxed answer (E g_inf) %.8f N: %.2e apart\n",
               f_elastic.z(), f_end_of_press, c[0].force_n.z(), f_relaxed.z(), rel);
+}
+
+// The server's mode: the worker on its own thread takes the newest loads, so its updates' times
+// are whatever sample times it finds (coarse, uneven steps); a held press still ends at the
+// relaxed answer. The press in 100 sample-ms, held to 20 s = 40 tau_max (10 sample-ms per step,
+// 1 ms apart in real time: a worker starved for seconds still ends relaxed), then stepped at 20 s
+// until the force is still for a second (at most a minute).
+TEST(interaction_tier_viscoelastic, WorkerThreadReachesTheRelaxedAnswer) {
+  const double depth = 0.001;
+  auto relaxed = block(block_scene({}, 3000.0 * (1.0 - 0.3 - 0.2)));
+  const Vec3 f_relaxed = settle_at(*relaxed, 0.0, press(depth), 400);
+  SimulationOptions o;
+  o.tier_newton_tolerance = 1e-12;  // worker thread (the default)
+  auto sim = Simulation::build(
+      scene::compile(scene::parse_scene(block_scene(kTerms), "visco_block.scene"), "visco_block.scene"), o);
+  std::vector<ToolContact> c;
+  StepStats st;
+  double t = 0.0;
+  for (int k = 0; t < 20.0; ++k) {
+    t = k < 100 ? 1e-3 * k : 0.1 + 0.01 * (k - 100);
+    sim->step_at(t, press(depth * std::min(1.0, t / 0.1)), c, st);
+    std::this_thread::sleep_for(std::chrono::microseconds(1000));
+  }
+  Vec3 prev = Vec3::Zero();
+  const auto t0 = std::chrono::steady_clock::now();
+  auto still_since = t0;
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60)) {
+    sim->step_at(t, press(depth), c, st);
+    const auto now = std::chrono::steady_clock::now();
+    if ((c[0].force_n - prev).norm() > 1e-11 * c[0].force_n.norm()) still_since = now;
+    if (now - still_since > std::chrono::seconds(1)) break;
+    prev = c[0].force_n;
+    std::this_thread::sleep_for(std::chrono::microseconds(1000));
+  }
+  ASSERT_TRUE(c[0].in_contact);
+  const double rel = (c[0].force_n - f_relaxed).norm() / f_relaxed.norm();
+  std::printf("worker thread: after %.2f s held %.8f N, relaxed answer %.8f N: %.2e apart\n", t,
+              c[0].force_n.z(), f_relaxed.z(), rel);
+  EXPECT_LT(rel, 1e-6);
 }
 
 TEST(interaction_tier_viscoelastic, ExtremeRelaxationTimesStayFinite) {
