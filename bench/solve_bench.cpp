@@ -1,9 +1,12 @@
 // solve_bench: the offline nonlinear static solve against the reference it is checked against.
 // For each press depth the scene's prescribed displacement (the probe's footprint on the brain)
 // is scaled to that depth, then
-//   neurosim-solve --scene DIR/pressD.scene --tier nonlinear --uncoupled --mesh brain --out ...
+//   neurosim-solve --scene DIR/pressD.scene --tier nonlinear --uncoupled --mesh brain
+//                  --element linear-tet --out ...
 // and CalculiX (ccx, one thread: OMP_NUM_THREADS=1, *HYPERELASTIC NEO HOOKE, NLGEOM, C3D4 on the
-// same mesh, same fixed and prescribed nodes, fem::run_calculix) run one after the other. Both
+// same mesh, same fixed and prescribed nodes, fem::run_calculix) run one after the other, both
+// with the scene's material and the linear tetrahedron (C3D4 = linear-tet, whatever element the
+// scene names). Both
 // start from 4 equal load increments. Printed per depth: wall and CPU seconds of each process
 // (CPU: getrusage of the children, what load on the machine does not inflate), the speed-up
 // ccx / neurosim (CPU), Newton increments/iterations, and the agreement
@@ -11,6 +14,7 @@
 // the reactions at the prescribed nodes, ns - ccx| / |ccx's|.
 #include "common/cli.hpp"
 #include "server/fem/calculix.hpp"
+#include "server/fem/element.hpp"
 #include "server/scene/compile.hpp"
 #include "server/scene/scene.hpp"
 #include "scene.pb.h"
@@ -148,7 +152,7 @@ int main(int argc, char** argv) {
       std::ostringstream cmd;
       cmd << "OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 " << NEUROSIM_BIN_DIR
           << "/neurosim-solve --scene '" << sp.string() << "' --tier nonlinear --uncoupled --mesh "
-          << mesh_id << " --increments " << increments << " --out '" << out.string() << "' > '"
+          << mesh_id << " --element linear-tet --increments " << increments << " --out '" << out.string() << "' > '"
           << out.string() << ".log' 2>&1";
       double cpu0 = children_cpu_s();
       auto t0 = std::chrono::steady_clock::now();
@@ -165,7 +169,8 @@ int main(int argc, char** argv) {
         iters = std::stoi(m[2]);
       }
 
-      const neurosim::scene::Model model = neurosim::scene::compile(s, sp.string());
+      neurosim::scene::Model model = neurosim::scene::compile(s, sp.string());
+      model.set_element(neurosim::fem::Element::kLinearTet);  // what C3D4 is
       const int mi = model.find_mesh(mesh_id);
       if (mi < 0) throw std::runtime_error("no mesh " + mesh_id);
       const auto& lm = model.meshes[mi];

@@ -6,6 +6,7 @@
 #include "common/clock.hpp"
 #include "common/load_watch.hpp"
 #include "server/fem/assembly.hpp"
+#include "server/fem/cholmod_threads.hpp"
 #include "server/fem/served_tiers.hpp"
 #include "server/fem/equilibrium_solver.hpp"
 #include "server/fem/static_solver.hpp"
@@ -211,6 +212,7 @@ void print_newton(const neurosim::fem::EquilibriumResult& sol, neurosim::fem::Ti
               << inc.load_factor << ": Newton residual (N)";
     for (double res : inc.residual_n) std::cout << ' ' << std::setprecision(3) << res;
     if (inc.cutbacks > 0) std::cout << " (after " << inc.cutbacks << " cutback(s))";
+    if (inc.predicted) std::cout << " (tangent predictor)";
     if (inc.projected_iterations > 0) {
       std::cout << " (" << inc.projected_iterations << " projected-tangent step(s))";
     }
@@ -237,6 +239,7 @@ neurosim::fem::NewtonOptions offline_newton_options(int increments) {
   o.increments = increments;
   o.reuse_factorization = true;
   o.path_tolerance = 1e-4;
+  o.tangent_predictor = true;
   return o;
 }
 
@@ -708,6 +711,9 @@ int main(int argc, char** argv) {
   cli->add_flag("--quiet", opt.quiet, "less output");
   cli->footer(kFooter);
   if (auto rc = cli.parse(argc, argv)) return *rc;
+  // One thread means one: CHOLMOD's OpenMP regions follow OMP_NUM_THREADS (the solves run on
+  // this thread).
+  neurosim::fem::cholmod_threads_follow_omp_num_threads();
   try {
     return run(opt);
   } catch (const std::exception& e) {

@@ -98,7 +98,7 @@ struct EquilibriumSolver::Impl {
   cholmod_dense* solve_e{nullptr};
 
   // Scratch.
-  Eigen::VectorXd f_int, rq, f_ext, r_free, delta, trial, step_full, body_u, body_f;
+  Eigen::VectorXd kdc, f_int, rq, f_ext, r_free, delta, trial, step_full, body_u, body_f;
 
   explicit Impl(const EquilibriumDefinition& d)
       : where("EquilibriumSolver (" + std::string(tier_name(d.tier)) + ", mesh '" +
@@ -259,6 +259,60 @@ struct EquilibriumSolver::Impl {
     }
     delta = Eigen::Map<const Eigen::VectorXd>(static_cast<const double*>(solve_x->x),
                                               r_free.size());
+  }
+
+  // The tangent predictor (NewtonOptions::tangent_predictor): u, converged at load factor t_now
+  // with f_int(u) in f_int, becomes the start of the increment to t_next (f_ext = fext_next),
+  // its constrained dofs at their new values. The step u_f += K_ff^-1 (f_ext - f_int(u) -
+  // K_fc dc) uses the last factorized tangent (the matrix in k_body / kq is the one factorized;
+  // a factorization at u when there is none). Kept when its residual is finite and below the
+  // plain start's (u with the constrained dofs moved only); returns whether it was kept.
+  bool predict(Eigen::VectorXd& u, double t_now, double t_next, const Eigen::VectorXd& fext_next,
+               NewtonIncrement& inc) {
+    const int nf = static_cast<int>(free_dofs.size());
+    const bool start_known = forces_known_at(u);
+    auto plain_start = [&] { set_constrained(u, t_next); };
+    if (nf == 0 || (!factor_valid && !factor(u, false, inc) && !factor(u, true, inc))) {
+      plain_start();
+      return false;
+    }
+    const SparseMatrix& k = tied() ? kq : k_body[0];
+    residual(u, fext_next, start_known);  // rq = T^T (f_int(u) - f_ext(t_next))
+    kdc.setZero(k.rows());
+    for (std::size_t c = 0; c < constrained_dofs.size(); ++c) {
+      const double dc = (t_next - t_now) * constrained_values[static_cast<Eigen::Index>(c)];
+      if (dc == 0.0) continue;
+      for (SparseMatrix::InnerIterator it(k, constrained_dofs[c]); it; ++it) {
+        kdc[it.row()] += it.value() * dc;
+      }
+    }
+    r_free.resize(nf);
+    for (int i = 0; i < nf; ++i) {
+      r_free[i] = -rq[free_dofs[i]] - kdc[q_index[free_dofs[i]]];
+    }
+    solve_step();
+    step_full.setZero(u.size());
+    for (int i = 0; i < nf; ++i) step_full[free_dofs[i]] = delta[i];
+    trial = u + step_full;
+    set_constrained(trial, t_next);
+    plain_start();
+    auto residual_or_inf = [&](const Eigen::VectorXd& v) {
+      try {
+        return residual(v, fext_next);
+      } catch (const Failure&) {
+        return std::numeric_limits<double>::infinity();
+      }
+    };
+    const double r_plain = residual_or_inf(u);
+    const double r_predicted = trial.allFinite() ? residual_or_inf(trial) : r_plain;
+    if (!(r_predicted < r_plain)) {
+      f_int_known = false;  // f_int belongs to the plain start or to nothing
+      return false;
+    }
+    u.swap(trial);
+    f_int_u = u;  // the last residual evaluated was the predicted start's
+    f_int_known = true;
+    return true;
   }
 
   // Tied dofs follow their host triangle.
@@ -681,7 +735,6 @@ EquilibriumResult EquilibriumSolver::solve(const Eigen::VectorXd& forces_n,
   while (t < 1.0 - 1e-12) {
     const double t_next = std::min(1.0, t + step);
     u_try = u;
-    s.set_constrained(u_try, t_next);
     NewtonIncrement inc;
     inc.load_factor = t_next;
     inc.cutbacks = cutbacks;
@@ -690,6 +743,11 @@ EquilibriumResult EquilibriumSolver::solve(const Eigen::VectorXd& forces_n,
       increment_options.tolerance = options.path_tolerance;
     try {
       s.f_ext = t_next * f_full;
+      if (options.tangent_predictor) {
+        inc.predicted = s.predict(u_try, t, t_next, s.f_ext, inc);
+      } else {
+        s.set_constrained(u_try, t_next);
+      }
       s.newton(s.f_ext, u_try, increment_options, inc);
     } catch (const Failure& e) {
       if (++cutbacks > options.max_cutbacks) {

@@ -104,6 +104,16 @@ struct NewtonOptions {
   // contracting components a changed tangent leaves; 0: plain chord steps. Iterations, at most
   // 16. Only read when reuse_factorization is set.
   int anderson_depth{5};
+  // solve only. true: each increment starts from the tangent predictor instead of the converged
+  // u with only the constrained dofs moved to their new values: one linear step
+  // u_f += K_ff^-1 (f_ext(t_next) - f_int(u) - K_fc dc), dc the change of the constrained values,
+  // with the last factorized tangent K (assembled at u if there is none), i.e. the first Newton
+  // step of the increment taken before the prescribed displacement is imposed, as CalculiX
+  // does. Without it a prescribed step on a few nodes first crushes the one layer of elements
+  // around them (the first residual of the increment grows, the tangent there is indefinite and
+  // Newton spends iterations undoing it). The predicted start is kept only when its residual
+  // is finite and below the plain start's. Same convergence test: the answer does not change.
+  bool tangent_predictor{false};
 };
 
 struct NewtonIncrement {
@@ -117,6 +127,9 @@ struct NewtonIncrement {
   // the projected one counts 2). Full Newton: at least one per iteration; with
   // reuse_factorization it may be 0 (every step taken with an earlier factor).
   int factorizations{0};
+  // NewtonOptions::tangent_predictor: the increment started from the predicted u (false: from
+  // the plain start, or the option is off).
+  bool predicted{false};
 };
 
 struct EquilibriumResult {
