@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
+#include <thread>
 
 namespace neurosim::fem {
 namespace {
@@ -25,17 +26,30 @@ int threads_of_this_process() {
   return n;
 }
 
-// A 12^3-hexahedra box (6.6k free dofs): large enough for CHOLMOD's parallel regions.
+// A 12^3-hexahedra box (6.6k free dofs): large enough for CHOLMOD's parallel regions, which a
+// thread that did not make the call then shows (its factorization starts threads: the check on
+// the calling thread is not vacuous).
 TEST(FemCholmodThreads, CholmodStartsNoThreadWhenOmpNumThreadsIsOne) {
   const char* env = std::getenv("OMP_NUM_THREADS");
   if (!env || std::string(env) != "1") GTEST_SKIP() << "needs OMP_NUM_THREADS=1 (deploy/test sets it)";
-  ASSERT_TRUE(cholmod_threads_follow_omp_num_threads());
-  const int before = threads_of_this_process();
   const mesh::TetMesh m = box_mesh({12, 12, 12, {0, 0, 0}, {0.06, 0.06, 0.06}, 0.0, 1});
   const auto fixed = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
-  const StaticSolver solver(m, MaterialMap::uniform({3000.0, 0.45, "brain"}), fixed);
+  const MaterialMap mats = MaterialMap::uniform({3000.0, 0.45, "brain"});
+  ASSERT_TRUE(cholmod_threads_follow_omp_num_threads());
+  const int before = threads_of_this_process();
+  const StaticSolver solver(m, mats, fixed);
   EXPECT_GT(solver.factor_info().factor_nnz, 0);
-  EXPECT_EQ(threads_of_this_process(), before);
+  EXPECT_EQ(threads_of_this_process(), before) << "CHOLMOD started threads after the call";
+  int other_before = 0, other_after = 0;
+  std::thread other([&] {
+    other_before = threads_of_this_process();
+    const StaticSolver s(m, mats, fixed);
+    other_after = threads_of_this_process();
+  });
+  other.join();
+  EXPECT_GT(other_after, other_before)
+      << "a thread without the call started none either: this CHOLMOD has no OpenMP regions "
+         "this box enters, the check above proves nothing";
 }
 
 }  // namespace
