@@ -104,6 +104,7 @@ State::State(const Model& m) {
     bs.force_index.assign(b.rest_m.size(), -1);
     bs.node_test_stamp.assign(4 * b.rest_m.size(), -1);
     bs.node_test_in.assign(4 * b.rest_m.size(), 0);
+    bs.node_hit.assign(4 * b.rest_m.size(), -1);
     bs.sliding_lambda.setZero(b.body->sliding().size());
     if (!b.creep.terms.empty()) {
       bs.history = std::make_unique<ViscoelasticHistory>(b.host_material.viscoelastic, b.creep,
@@ -455,17 +456,30 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   h.shaft = shaft;
   h.at_rest = at_rest;
   h.face_normal = n;
-  // Node hits: the triangle's vertices inside the part (each node's own closest centre).
+  // Node hits: the triangle's vertices inside the part (each node's own closest centre). One hit
+  // per node, geometry and part: a node seen again from another of its triangles adds that
+  // triangle's normal to the hit's sum (the mean normal of the merge) and the hit keeps the
+  // lowest triangle (the merge's choice), so the merge sorts nodes, not node-triangle pairs.
   for (int k = 0; k < 3; ++k) {
     if (tri.slot[k] < 0) continue;
     const std::size_t i = 4 * static_cast<std::size_t>(tri.slot[k]) + (at_rest ? 2 : 0) + shaft;
-    if (bs.node_test_stamp[i] == memo && !bs.node_test_in[i]) continue;
-    const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
-    if (bs.node_test_stamp[i] != memo) {
-      bs.node_test_stamp[i] = memo;
-      bs.node_test_in[i] = within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m);
+    if (bs.node_test_stamp[i] == memo) {
       if (!bs.node_test_in[i]) continue;
+      FeatureHit& seen = hits_[static_cast<std::size_t>(bs.node_hit[i])];
+      seen.face_normal += n;
+      if (t < seen.triangle) {
+        seen.triangle = t;
+        seen.at.weights = {0.0, 0.0, 0.0};
+        seen.at.weights[k] = 1.0;
+        seen.at.a = k;
+      }
+      continue;
     }
+    const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
+    bs.node_test_stamp[i] = memo;
+    bs.node_test_in[i] = within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m);
+    if (!bs.node_test_in[i]) continue;
+    bs.node_hit[i] = static_cast<int>(hits_.size());
     h.key = feature_key(shaft, TriangleFeature::kVertex, 0, tri.node[k]);
     h.at.point_m = x[k];
     h.at.weights = {0.0, 0.0, 0.0};

@@ -80,7 +80,8 @@ struct FeatureHit {
   bool at_rest{false};          // found on the rest surface (else on the deformed one)
   TrianglePoint at;             // closest point of the deformed triangle, its weights
   Vec3 centre_m{Vec3::Zero()};  // the tool part's centre for this feature
-  Vec3 face_normal{Vec3::Zero()};  // the deformed triangle's outward unit normal
+  // The triangle's outward unit normal; a node hit: the sum over the node's reporting triangles.
+  Vec3 face_normal{Vec3::Zero()};
 };
 
 // What a step changes on a body.
@@ -94,6 +95,7 @@ struct BodyState {
   // made it (its stamp) and whether the node was inside the part (each node tested once).
   std::vector<long long> node_test_stamp;
   std::vector<char> node_test_in;
+  std::vector<int> node_hit;  // per slot and (rest, shaft): its hit in State::hits_ (tested in)
   double max_displacement_m{0.0};  // largest displacement at the loaded slots, last good step
   // Last good step's contact forces on the body, per slot (unit N), and sliding row forces.
   std::vector<int> force_slots;
