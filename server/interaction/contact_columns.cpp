@@ -47,7 +47,7 @@ int ContactColumns::ensure(const std::vector<int>& slots, fem::SolveWorkspace& w
     for (std::size_t j = 0; j < n; ++j) {
       const int c = 3 * static_cast<int>(j);
       const int slot = part[j];
-      Columns col(s3, 3);
+      Blocks col(s3, 3);
       for (int r = 0; r < s3; ++r)
         for (int a = 0; a < 3; ++a) col(r, a) = x(reduced[3 * contact[r / 3] + r % 3], c + a);
       columns_[slot] = std::move(col);

@@ -48,8 +48,9 @@ class ContactColumns {
 
   // Coupled compliance block L(i, j) (3x3, unit m/N) between contact slots i and j; the
   // columns of j must be ready.
-  Eigen::Matrix3d block(int slot_i, int slot_j) const {
-    return columns_[slot_j].block<3, 3>(3 * slot_i, 0);
+  Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> block(int slot_i, int slot_j) const {
+    return Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(
+        columns_[slot_j].data() + 9 * static_cast<std::ptrdiff_t>(slot_i));
   }
   // J_A L[:, slot] (sliding rows x 3) of a ready slot, unit m/N.
   const Columns& sliding_block(int slot) const { return sliding_columns_[slot]; }
@@ -66,7 +67,10 @@ class ContactColumns {
   bool keep_full_;
   // Per contact slot (sized at construction, never reallocated): written once by the writer
   // before ready_[slot] is set.
-  std::vector<Columns> columns_;          // L[contact dofs, slot]
+  // L[contact dofs, slot], row-major: the 3 x 3 block of a slot pair is 9 contiguous doubles
+  // (the step reads blocks: positions, Delassus, forces).
+  using Blocks = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+  std::vector<Blocks> columns_;
   std::vector<Columns> full_columns_;     // L[:, slot] (keep_full_)
   std::vector<Columns> sliding_columns_;  // J_A L[:, slot] (sliding rows)
   std::unique_ptr<std::atomic<unsigned char>[]> ready_;

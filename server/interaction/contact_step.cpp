@@ -359,10 +359,21 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
   if (sc.step != step_counter_) {
     sc.step = step_counter_;
     sc.rest_hits_valid = false;
-  } else if (sc.slack_m >= slack) {
+  } else if (sc.slack_m >= slack && sc.moved_m >= bs.max_displacement_m) {
     return;  // a list found with at least this slack holds every triangle this geometry reaches
   }
   sc.slack_m = slack;
+  // A hit is a point of the deformed triangle (within `moved` of its rest point) within reach of
+  // the part's centre, or with the centre behind it by at most `behind` and laterally within
+  // reach: at most sqrt(reach^2 + behind^2) from the centre. A quarter more than this geometry's
+  // displacement, so the step's next geometries mostly keep the list.
+  sc.moved_m = 1.25 * bs.max_displacement_m;
+  auto bound = [&](double radius) {
+    const double reach = radius + m.options_.candidate_margin * shape.tip_radius_m;
+    const double behind = std::max(reach, b.behind_reach_m);
+    return std::sqrt(reach * reach + behind * behind) + sc.moved_m;
+  };
+  const double tip_bound = bound(shape.tip_radius_m), shaft_bound = bound(shape.shaft_radius_m);
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   std::vector<int>& list = sc.triangles;
   list.clear();
@@ -382,10 +393,13 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
     bs.triangle_stamp[t] = stamp;
     const Vec3& c = b.surface.centroid(t);
     const double radius = b.surface.radius_m(t);
-    const bool tip = (c - p0).norm() <= shape.tip_radius_m + slack + radius;
-    const bool shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0 &&
-                       (c - closest_on_segment(c, p0, p1)).norm() <=
-                           shape.shaft_radius_m + slack + radius;
+    const double to_tip = (c - p0).norm();
+    const bool tip = to_tip <= std::min(shape.tip_radius_m + slack, tip_bound) + radius;
+    bool shaft = false;
+    if (shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0) {
+      const double to_axis = (c - closest_on_segment(c, p0, p1)).norm();
+      shaft = to_axis <= std::min(shape.shaft_radius_m + slack, shaft_bound) + radius;
+    }
     if (tip || shaft) list[kept++] = t;
   }
   list.resize(kept);

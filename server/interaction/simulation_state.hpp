@@ -258,6 +258,7 @@ class State {
   struct StepCandidates {
     long long step{-1};
     double slack_m{0.0};
+    double moved_m{0.0};  // the surface displacement the list allows for, unit m
     std::vector<int> triangles;
     bool rest_hits_valid{false};
     std::vector<FeatureHit> rest_hits;
