@@ -9,6 +9,7 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -24,6 +25,7 @@
 #include <optional>
 #include <random>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -37,8 +39,23 @@ using neurosim::common::seconds_since;
 // A DDS domain of its own per test run, so parallel tests and other people's processes on the
 // loopback never see each other's samples.
 inline int private_domain() {
+  // Reserved, not only drawn: two tests running at once once drew the same domain and each
+  // server answered the other test's station (same station ids). Domains 20..219 are tried from
+  // a random start; each is taken with an exclusive lock on a file in the temporary directory,
+  // kept (the descriptor stays open, closed on exec) until this process exits, so no other test
+  // process gets it meanwhile; a second call in one process gets another domain.
   std::random_device rd;
-  return 20 + static_cast<int>(rd() % 200);
+  const int start = static_cast<int>(rd() % 200);
+  for (int k = 0; k < 200; ++k) {
+    const int d = 20 + (start + k) % 200;
+    const std::string path =
+        (std::filesystem::temp_directory_path() / ("neurosim_dds_domain_" + std::to_string(d) + ".lock")).string();
+    const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+    if (fd < 0) continue;
+    if (::flock(fd, LOCK_EX | LOCK_NB) == 0) return d;
+    ::close(fd);
+  }
+  throw std::runtime_error("private_domain: every test DDS domain (20-219) is held by another process");
 }
 
 // A child process (fork + execv), stdout/stderr to a log file. Killed (SIGKILL) if still alive
