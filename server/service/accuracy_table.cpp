@@ -1,11 +1,10 @@
 #include "server/service/accuracy_table.hpp"
 
 #include "server/fem/element.hpp"
+#include "server/service/csv_fields.hpp"
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
-#include <sstream>
 #include <stdexcept>
 #include <utility>
 
@@ -13,80 +12,37 @@ namespace neurosim::service {
 
 namespace {
 
-std::vector<std::string> split(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  std::string item;
-  while (std::getline(ss, item, ',')) out.push_back(item);
-  if (!line.empty() && line.back() == ',') out.emplace_back();
-  return out;
-}
-
-double number(const std::string& text, const std::string& where) {
-  std::size_t used = 0;
-  double v = 0.0;
-  try {
-    v = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != text.size() || !std::isfinite(v) || v < 0.0) {
-    throw std::runtime_error(where + ": '" + text + "' is not a finite number >= 0");
-  }
-  return v;
-}
+constexpr const char* kHeader = "scene,tier,max_strain,force_rel_error,element,poisson_ratio";
+// The header before the element axis (4 fields).
+constexpr const char* kOldHeader = "scene,tier,max_strain,force_rel_error";
 
 }  // namespace
 
 AccuracyTable AccuracyTable::read(const std::filesystem::path& file) {
-  std::ifstream in(file);
-  if (!in) throw std::runtime_error(file.string() + ": cannot open the accuracy table");
+  CsvFields in(file, "accuracy table");
+  if (!in.next()) throw std::runtime_error(file.string() + ": no header line (empty table)");
+  std::size_t fields = 6;
+  if (in.line() == kOldHeader) fields = 4;
+  else if (in.line() != kHeader)
+    in.fail(std::string("expected the header '") + kHeader + "', got '" + in.line() + "'");
   std::vector<Row> rows;
-  std::string line;
-  int n = 0;
-  bool header = false;
-  std::size_t fields = 4;
-  while (std::getline(in, line)) {
-    ++n;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.empty() || line[0] == '#') continue;
-    const std::string where = file.string() + ":" + std::to_string(n);
-    if (!header) {
-      if (line == "scene,tier,max_strain,force_rel_error") {
-        fields = 4;
-      } else if (line == "scene,tier,max_strain,force_rel_error,element,poisson_ratio") {
-        fields = 6;
-      } else {
-        throw std::runtime_error(where + ": expected the header "
-                                         "'scene,tier,max_strain,force_rel_error,element,"
-                                         "poisson_ratio', got '" +
-                                 line + "'");
-      }
-      header = true;
-      continue;
-    }
-    const auto f = split(line);
-    if (f.size() != fields) {
-      throw std::runtime_error(where + ": " + std::to_string(f.size()) + " fields, expected " +
-                               std::to_string(fields));
-    }
+  while (in.next()) {
+    in.split(fields);
     Row r;
-    r.scene = f[0];
-    const auto tier = fem::parse_tier(f[1]);
-    if (!tier) throw std::runtime_error(where + ": unknown tier '" + f[1] + "'");
+    r.scene = in.text(0);
+    const auto tier = fem::parse_tier(in.text(1));
+    if (!tier) in.fail("unknown tier '" + in.text(1) + "'");
     r.tier = *tier;
-    r.max_strain = number(f[2], where + " max_strain");
-    r.force_rel_error = number(f[3], where + " force_rel_error");
+    r.max_strain = in.number(2, "max_strain");
+    r.force_rel_error = in.number(3, "force_rel_error");
     if (fields == 6) {
-      if (!fem::parse_element(f[4]))
-        throw std::runtime_error(where + ": unknown element '" + f[4] + "' (known: " +
-                                 fem::element_names() + ")");
-      r.element = f[4];
-      r.poisson_ratio = number(f[5], where + " poisson_ratio");
+      if (!fem::parse_element(in.text(4)))
+        in.fail("unknown element '" + in.text(4) + "' (known: " + fem::element_names() + ")");
+      r.element = in.text(4);
+      r.poisson_ratio = in.number(5, "poisson_ratio");
     }
     rows.push_back(std::move(r));
   }
-  if (!header) throw std::runtime_error(file.string() + ": no header line (empty table)");
   return AccuracyTable(std::move(rows));
 }
 
