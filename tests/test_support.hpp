@@ -48,6 +48,19 @@ inline std::string message_of(const std::function<void()>& f) {
   return "";
 }
 
+// Whether text contains part: EXPECT_PRED2(contains, message, part) prints both when it fails.
+inline bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+// A file `name` holding `text` in a fresh temporary directory of `tag` (temp_dir); its path.
+inline std::filesystem::path write_temp_file(const std::string& tag, const std::string& name,
+                                             const std::string& text) {
+  const auto file = temp_dir(tag) / name;
+  std::ofstream(file) << text;
+  return file;
+}
+
 // The whole content of a text file ("" when it cannot be read: the caller's assertion says what
 // was expected).
 inline std::string slurp(const std::filesystem::path& path) {

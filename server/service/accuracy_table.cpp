@@ -20,11 +20,7 @@ constexpr const char* kOldHeader = "scene,tier,max_strain,force_rel_error";
 
 AccuracyTable AccuracyTable::read(const std::filesystem::path& file) {
   CsvFields in(file, "accuracy table");
-  if (!in.next()) throw std::runtime_error(file.string() + ": no header line (empty table)");
-  std::size_t fields = 6;
-  if (in.line() == kOldHeader) fields = 4;
-  else if (in.line() != kHeader)
-    in.fail(std::string("expected the header '") + kHeader + "', got '" + in.line() + "'");
+  const std::size_t fields = in.header({kHeader, kOldHeader});
   std::vector<Row> rows;
   while (in.next()) {
     in.split(fields);

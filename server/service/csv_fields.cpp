@@ -1,5 +1,6 @@
 #include "server/service/csv_fields.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -9,6 +10,14 @@ namespace neurosim::service {
 CsvFields::CsvFields(const std::filesystem::path& file, const std::string& what)
     : file_(file), in_(file) {
   if (!in_) throw std::runtime_error(file.string() + ": cannot open the " + what);
+}
+
+std::size_t CsvFields::header(std::initializer_list<std::string_view> accepted) {
+  if (!next()) throw std::runtime_error(file_.string() + ": no header line (empty table)");
+  for (const std::string_view h : accepted)
+    if (line_ == h) return static_cast<std::size_t>(std::count(h.begin(), h.end(), ',')) + 1;
+  fail("expected the header '" + std::string(accepted.size() ? *accepted.begin() : "") +
+       "', got '" + line_ + "'");
 }
 
 bool CsvFields::next() {

@@ -8,7 +8,9 @@
 #include <cstddef>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace neurosim::service {
@@ -18,10 +20,16 @@ class CsvFields {
   // Opens `file`; throws std::runtime_error "<file>: cannot open the <what>".
   CsvFields(const std::filesystem::path& file, const std::string& what);
 
+  // Reads the header: the first line that is neither blank nor a comment must be one of
+  // `accepted` (the first is the current one, named in the error). Returns its number of fields.
+  // Throws "<file>: no header line (empty table)" or "<file>:<line>: expected the header '...',
+  // got '...'".
+  std::size_t header(std::initializer_list<std::string_view> accepted);
+
   // Moves to the next line that is neither blank nor a '#' comment (a trailing '\r' dropped);
   // false at the end of the file.
   bool next();
-  // The current line, as read (the header is compared whole).
+  // The current line, as read.
   const std::string& line() const { return line_; }
   // "<file>:<line>" of the current line.
   std::string where() const;

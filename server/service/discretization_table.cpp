@@ -17,9 +17,7 @@ constexpr const char* kHeader =
 
 DiscretizationTable DiscretizationTable::read(const std::filesystem::path& file) {
   CsvFields in(file, "discretization table");
-  if (!in.next()) throw std::runtime_error(file.string() + ": no header line (empty table)");
-  if (in.line() != kHeader)
-    in.fail(std::string("expected the header '") + kHeader + "', got '" + in.line() + "'");
+  in.header({kHeader});
   std::vector<Row> rows;
   while (in.next()) {
     in.split(6);

@@ -7,7 +7,6 @@
 
 #include <gtest/gtest.h>
 
-#include <fstream>
 #include <stdexcept>
 
 namespace neurosim::service {
@@ -16,9 +15,7 @@ namespace {
 using neurosim::testing::message_of;
 
 std::filesystem::path write(const std::string& text) {
-  const auto file = neurosim::testing::temp_dir("csv_fields") / "t.csv";
-  std::ofstream(file) << text;
-  return file;
+  return neurosim::testing::write_temp_file("csv_fields", "t.csv", text);
 }
 
 // The message of reading field 0 of the first line of `text` with `read`.
@@ -90,6 +87,23 @@ TEST(CsvFields, CountsAreWholeFromOneTo2To53) {
   in.split(2);
   EXPECT_EQ(in.count(0, "v"), 5354u);
   EXPECT_EQ(in.count(1, "t"), 1000u);
+}
+
+TEST(CsvFields, TheHeaderIsOneOfThoseAcceptedAndGivesTheFieldCount) {
+  const auto header_of = [](const std::string& text) {
+    CsvFields in(write(text), "table");
+    return in.header({"a,b,c", "a,b"});
+  };
+  EXPECT_EQ(header_of("# comment\n\na,b,c\n1,2,3\n"), 3u);
+  EXPECT_EQ(header_of("a,b\r\n"), 2u);
+  const auto file = write("# comment\na,b,d\n");
+  EXPECT_EQ(message_of([&] {
+              CsvFields(file, "table").header({"a,b,c", "a,b"});
+            }),
+            file.string() + ":2: expected the header 'a,b,c', got 'a,b,d'");
+  const auto empty = write("# only a comment\n\n");
+  EXPECT_EQ(message_of([&] { CsvFields(empty, "table").header({"a,b,c"}); }),
+            empty.string() + ": no header line (empty table)");
 }
 
 TEST(CsvFields, AMissingFileNamesItAndWhatItHolds) {
