@@ -11,13 +11,12 @@
 //  - relaxation times of 1 ms and 1000 s and a pause of 1e4 s stay finite and bounded;
 //  - the anp-tet and smoothed-tet elements are refused naming the mesh (not implemented).
 #include "server/interaction/simulation.hpp"
-#include "server/scene/compile.hpp"
+#include "visco_block_fixtures.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdio>
-#include <sstream>
 #include <chrono>
 #include <string>
 #include <thread>
@@ -26,43 +25,16 @@
 namespace neurosim::interaction {
 namespace {
 
-constexpr double kTip = 0.003;  // tip radius, unit m
-constexpr double kTop = 0.02;   // the block's top face, unit m
+using visco_testing::BlockSpec;
+using visco_testing::press;
 
-std::string block_scene(const std::vector<fem::PronyTerm>& terms, double e_pa = 3000.0,
-                        const char* tier = "NONLINEAR", const char* element = "") {
-  std::ostringstream o;
-  o.precision(17);
-  o << "name: \"visco_block\"\n"
-    << "meshes { id: \"block\" generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.02 y: 0.02 "
-       "z: 0.02 } } cell_size_m: 0.004 seed: 1 }\n"
-    << "  material { name: \"tissue\" youngs_modulus_pa: " << e_pa << " poisson_ratio: 0.45\n";
-  if (*element) o << "    element: \"" << element << "\"\n";
-  if (!terms.empty()) {
-    o << "    viscoelastic { source: \"test values\"\n";
-    for (const auto& t : terms) o << "      terms { g: " << t.g << " tau_s: " << t.tau_s << " }\n";
-    o << "    }\n";
-  }
-  o << "  }\n"
-    << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 1 z: 1e-6 } } } }\n"
-    << "tools { id: \"probe\" tip_radius_m: " << kTip
-    << " shaft_radius_m: 0.001 shaft_length_m: 0.05 max_speed_m_per_s: 2 }\n"
-    << "effects { tier: " << tier << " coupling: false tool_contact: true deformation_output: true }\n";
-  return o.str();
-}
-
-std::unique_ptr<Simulation> block(const std::string& text) {
+// The block in the NONLINEAR tier, its worker's updates inside each step (deterministic).
+std::unique_ptr<Simulation> block(BlockSpec b) {
+  b.tier = "NONLINEAR";
   SimulationOptions o;
   o.tier_worker_thread = false;  // deterministic: the update runs inside each step
   o.tier_newton_tolerance = 1e-12;
-  return Simulation::build(scene::compile(scene::parse_scene(text, "visco_block.scene"), "visco_block.scene"), o);
-}
-
-std::vector<ToolPose> press(double depth_m) {
-  ToolPose p;
-  p.tip_m = Vec3(0.0101, 0.0098, kTop + kTip - depth_m);
-  p.axis = Vec3::UnitZ();
-  return {p};
+  return visco_testing::build_block(b, o);
 }
 
 const std::vector<fem::PronyTerm> kTerms{{0.3, 0.05}, {0.2, 0.5}};
@@ -87,7 +59,7 @@ Vec3 settle_at(Simulation& sim, double t, const std::vector<ToolPose>& pose, int
 }
 
 TEST(interaction_tier_viscoelastic, HeldSmallPressRelaxesAsTheKernel) {
-  auto sim = block(block_scene(kTerms));
+  auto sim = block({kTerms});
   const auto pose = press(1e-6);
   const double f0 = settle_at(*sim, 0.0, pose).z();
   ASSERT_GT(f0, 0.0);
@@ -106,15 +78,15 @@ TEST(interaction_tier_viscoelastic, HeldPressConvergesToTheRelaxedAnswer) {
   const double depth = 0.001;
   // The relaxed answer: the hyperelastic block with E g_inf (nu unchanged: every modulus scaled).
   const double g_inf = 1.0 - 0.3 - 0.2;
-  auto relaxed = block(block_scene({}, 3000.0 * g_inf));
+  auto relaxed = block({{}, 3000.0 * g_inf});
   const Vec3 f_relaxed = settle_at(*relaxed, 0.0, press(depth), 400);
-  auto elastic = block(block_scene({}));
+  auto elastic = block({});
   const Vec3 f_elastic = settle_at(*elastic, 0.0, press(depth), 400);
   ASSERT_GT(f_relaxed.z(), 0.0);
 
   // The press in 100 ms (1 ms steps), held: 1 ms steps to 1 s, then 10 ms steps to 10 s = 20
   // tau_max; one step (one update) per time: the fixed point moves in time.
-  auto sim = block(block_scene(kTerms));
+  auto sim = block({kTerms});
   std::vector<ToolContact> c;
   StepStats st;
   double t = 0.0, f_end_of_press = 0.0;
@@ -140,12 +112,11 @@ TEST(interaction_tier_viscoelastic, HeldPressConvergesToTheRelaxedAnswer) {
 // until the force is still for a second (at most a minute).
 TEST(interaction_tier_viscoelastic, WorkerThreadReachesTheRelaxedAnswer) {
   const double depth = 0.001;
-  auto relaxed = block(block_scene({}, 3000.0 * (1.0 - 0.3 - 0.2)));
+  auto relaxed = block({{}, 3000.0 * (1.0 - 0.3 - 0.2)});
   const Vec3 f_relaxed = settle_at(*relaxed, 0.0, press(depth), 400);
   SimulationOptions o;
   o.tier_newton_tolerance = 1e-12;  // worker thread (the default)
-  auto sim = Simulation::build(
-      scene::compile(scene::parse_scene(block_scene(kTerms), "visco_block.scene"), "visco_block.scene"), o);
+  auto sim = visco_testing::build_block({kTerms, 3000.0, "NONLINEAR"}, o);
   std::vector<ToolContact> c;
   StepStats st;
   double t = 0.0;
@@ -174,7 +145,7 @@ TEST(interaction_tier_viscoelastic, WorkerThreadReachesTheRelaxedAnswer) {
 
 TEST(interaction_tier_viscoelastic, ExtremeRelaxationTimesStayFinite) {
   const std::vector<fem::PronyTerm> terms{{0.5, 1e-3}, {0.3, 1e3}};
-  auto sim = block(block_scene(terms));
+  auto sim = block({terms});
   const auto pose = press(0.0005);
   const double f0 = settle_at(*sim, 0.0, pose).z();
   ASSERT_GT(f0, 0.0);
@@ -193,7 +164,7 @@ TEST(interaction_tier_viscoelastic, ExtremeRelaxationTimesStayFinite) {
 TEST(interaction_tier_viscoelastic, RefusesWhatIsNotImplementedNamingTheMesh) {
   for (const char* element : {"anp-tet", "smoothed-tet"}) {
     try {
-      auto sim = block(block_scene(kTerms, 3000.0, "NONLINEAR", element));
+      auto sim = block({kTerms, 3000.0, "NONLINEAR", element});
       ADD_FAILURE() << element << " accepted";
     } catch (const std::exception& e) {
       const std::string what = e.what();

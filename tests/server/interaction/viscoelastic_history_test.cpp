@@ -11,7 +11,6 @@
 //  - no allocation once warmed up; the elastic scene ignores time.
 #include "server/interaction/simulation.hpp"
 #include "server/interaction/viscoelastic_history.hpp"
-#include "server/scene/compile.hpp"
 
 #include <gtest/gtest.h>
 
@@ -20,38 +19,17 @@
 #include <functional>
 #include <memory>
 #include <random>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "thread_allocation_counter.hpp"
+#include "visco_block_fixtures.hpp"
 
 namespace neurosim::interaction {
 namespace {
 
-constexpr double kTip = 0.003;  // tip radius, unit m
-constexpr double kTop = 0.02;   // the block's top face, unit m
-constexpr double kDt = 1e-3;    // step, unit s
-
-std::string block_scene(const std::vector<fem::PronyTerm>& terms) {
-  std::ostringstream o;
-  o.precision(17);
-  o << "name: \"visco_block\"\n"
-    << "meshes { id: \"block\" generate { box { min_m { x: 0 y: 0 z: 0 } max_m { x: 0.02 y: 0.02 "
-       "z: 0.02 } } cell_size_m: 0.004 seed: 1 }\n"
-    << "  material { name: \"tissue\" youngs_modulus_pa: 3000 poisson_ratio: 0.45\n";
-  if (!terms.empty()) {
-    o << "    viscoelastic { source: \"test values\"\n";
-    for (const auto& t : terms) o << "      terms { g: " << t.g << " tau_s: " << t.tau_s << " }\n";
-    o << "    }\n";
-  }
-  o << "  }\n"
-    << "  fixed { box { min_m { x: -1 y: -1 z: -1 } max_m { x: 1 y: 1 z: 1e-6 } } } }\n"
-    << "tools { id: \"probe\" tip_radius_m: " << kTip
-    << " shaft_radius_m: 0.001 shaft_length_m: 0.05 max_speed_m_per_s: 2 }\n"
-    << "effects { tier: LINEAR coupling: false tool_contact: true deformation_output: true }\n";
-  return o.str();
-}
+using visco_testing::press;
+constexpr double kDt = 1e-3;  // step, unit s
 
 // The analytic comparisons take the rows on the rest surface (one LCP per step): the rows are
 // then the same features, weights and normals whatever the history, and the comparison measures
@@ -62,16 +40,7 @@ std::unique_ptr<Simulation> block(const std::vector<fem::PronyTerm>& terms,
                                   int geometry_iterations = 1) {
   SimulationOptions o;
   o.contact_geometry_iterations = geometry_iterations;
-  return Simulation::build(
-      scene::compile(scene::parse_scene(block_scene(terms), "visco_block.scene"), "visco_block.scene"), o);
-}
-
-// The tip `depth_m` into the top face near its centre (negative: above it).
-std::vector<ToolPose> press(double depth_m) {
-  ToolPose p;
-  p.tip_m = Vec3(0.0101, 0.0098, kTop + kTip - depth_m);
-  p.axis = Vec3::UnitZ();
-  return {p};
+  return visco_testing::build_block({terms}, o);
 }
 
 // Reaction along +z (out of the block) at time t.
