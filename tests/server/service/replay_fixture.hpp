@@ -1,9 +1,10 @@
-// What the replay-versus-live tests share: the poses a station sent written as a recording, one
-// neurosim-replay run over recordings, and its forces.csv read back.
+// What the replay-versus-live tests share: the live server, the poses a station sent written as a
+// recording, one neurosim-replay run over recordings, and its forces.csv read back.
 #pragma once
 
 #include "idl/wire/recording_io.hpp"
 #include "server/interaction/simulation.hpp"
+#include "tests/server/service/service_scenarios.hpp"
 #include "tests/test_support.hpp"
 
 #include <sys/wait.h>
@@ -18,6 +19,24 @@
 #include <vector>
 
 namespace neurosim::service::testing {
+
+// The live side of a comparison: the real neurosim-server on `scene` (start-up up to 240 s: a
+// bundled scene's compliance precompute) on a private domain, and the ContactModels it answers.
+// Wait for ses.wait_ready() before sending.
+struct LiveServer {
+  LiveServer(const std::filesystem::path& scene, const std::string& tag, double duration_s)
+      : setup(make_setup(scene)), ses(setup, tag, duration_s), models(ses.client) {}
+  static Setup make_setup(const std::filesystem::path& scene) {
+    Setup s;
+    s.exe = neurosim::testing::bin_dir() / "neurosim-server";
+    s.scene = scene;
+    s.startup_timeout_s = 240;
+    return s;
+  }
+  Setup setup;  // before ses: a Session holds a reference to it
+  Session ses;
+  ModelCollector models;
+};
 
 // One sample of a recording: its time (unit s, from the recording's start), the tool tip (unit
 // m) and the unit quaternion (w, x, y, z) taking the tool's +z onto the shaft axis.

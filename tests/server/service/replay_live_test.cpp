@@ -24,13 +24,11 @@ namespace nt = neurosim::testing;
 namespace ni = neurosim::interaction;
 
 TEST(service_replay, LiveServerAndReplayGiveTheSameForces) {
-  st::Setup setup;
-  setup.exe = nt::bin_dir() / "neurosim-server";
-  setup.scene = nt::source_dir() / "scenes/cube_cylinder.scene";
-  setup.startup_timeout_s = 240;
-  st::Session ses(setup, "replay_live", 60);
-  ASSERT_TRUE(ses.wait_ready());
-  st::ModelCollector models(ses.client);
+  st::LiveServer live(nt::source_dir() / "scenes/cube_cylinder.scene", "replay_live", 60);
+  ASSERT_TRUE(live.ses.wait_ready());
+  const st::Setup& setup = live.setup;
+  auto& ses = live.ses;
+  auto& models = live.models;
   // Into the +x face from 4 mm outside to 3 mm in over 1.2 s, then held (tip radius 3 mm).
   const double r = setup.tip_radius_m, x0 = 0.1 + r + 0.004, x1 = 0.1 + r - 0.003;
   auto path = [&](double t) -> std::array<double, 3> {
@@ -212,13 +210,10 @@ TEST(service_replay, BrainSkullLiveServerAndReplayGiveTheSameForcesWithTheSkullH
   for (int k = 0; k <= top_touch + 15; ++k) top_poses.push_back(sent_pose(top_path(k).tip_m, -down));
   for (int k = 0; k <= hole_touch + 8; ++k) hole_poses.push_back(sent_pose(hole_path(k).tip_m, hole.axis));
 
-  st::Setup setup;
-  setup.exe = nt::bin_dir() / "neurosim-server";
-  setup.scene = scene_path;
-  setup.startup_timeout_s = 240;
-  st::Session ses(setup, "replay_live_skull", 60);
-  ASSERT_TRUE(ses.wait_ready());
-  st::ModelCollector models(ses.client);
+  st::LiveServer live(scene_path, "replay_live_skull", 60);
+  ASSERT_TRUE(live.ses.wait_ready());
+  auto& ses = live.ses;
+  auto& models = live.models;
   PathStation a(ses.client, "skull-top", top_poses), b(ses.client, "skull-hole", hole_poses);
   ASSERT_TRUE(a.writer().wait_for_readers(1, DDS_SECS(10)));
   ASSERT_TRUE(b.writer().wait_for_readers(1, DDS_SECS(10)));

@@ -55,13 +55,10 @@ TEST(service_replay_viscoelastic, LiveServerAndReplayGiveTheSameRelaxingForces) 
     return ni::Vec3(top.x(), top.y(), top.z() + r_tip - depth);
   };
 
-  st::Setup setup;
-  setup.exe = nt::bin_dir() / "neurosim-server";
-  setup.scene = scene_path;
-  setup.startup_timeout_s = 240;
-  st::Session ses(setup, "replay_live_visco", 90);
-  ASSERT_TRUE(ses.wait_ready());
-  st::ModelCollector models(ses.client);
+  st::LiveServer live(scene_path, "replay_live_visco", 90);
+  ASSERT_TRUE(live.ses.wait_ready());
+  auto& ses = live.ses;
+  auto& models = live.models;
   const std::string id = "visco-1";
   neurosim::wire::Writer<neurosim_ToolState> writer(ses.client.pp, ses.client.tool_topic, id);
   ASSERT_TRUE(writer.wait_for_readers(1, DDS_SECS(10)));
