@@ -4,7 +4,6 @@
 #include "server/fem/assembly.hpp"
 #include "server/fem/tet_element.hpp"
 #include "server/mesh/io.hpp"
-#include "server/mesh/tri_surface.hpp"
 #include "server/scene/compile.hpp"
 
 #include "test_support.hpp"
@@ -214,29 +213,6 @@ TEST_F(RigidTissue, TetrahedronWithUnlistedLabelRefused) {
   const std::string e = refusal(brain_entry("tissues { label: 1 name: \"cerebrum\" }"));
   EXPECT_NE(e.find("tetrahedron 1 has label 2, which no tissue lists"), std::string::npos) << e;
   EXPECT_NE(e.find("t.scene"), std::string::npos) << e;
-}
-
-TEST(TriSurface, ClosedCheckCountsEveryDefect) {
-  const std::vector<mesh::Vec3> x{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-  const std::vector<mesh::Tri> closed{{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
-  auto r = mesh::check_closed(x, closed);
-  EXPECT_TRUE(r.closed());
-  EXPECT_EQ(r.edges, 6);
-  EXPECT_NEAR(r.volume_m3, 1.0 / 6.0, 1e-15);
-  auto open = closed;
-  open.pop_back();
-  r = mesh::check_closed(x, open);
-  EXPECT_FALSE(r.closed());
-  EXPECT_EQ(r.boundary_edges, 3);
-  auto flipped = closed;
-  std::swap(flipped[3][1], flipped[3][2]);
-  r = mesh::check_closed(x, flipped);
-  EXPECT_EQ(r.misoriented_edges, 3);
-  auto extra = closed;
-  extra.push_back({1, 2, 3});
-  r = mesh::check_closed(x, extra);
-  EXPECT_EQ(r.nonmanifold_edges, 3);
-  EXPECT_THROW(mesh::require_closed_outward(x, open, "o.mesh"), std::runtime_error);
 }
 
 TEST(TriSurface, MeditSurfaceReaderNeedsTriangles) {
