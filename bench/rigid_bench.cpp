@@ -7,6 +7,7 @@
 #include "common/stats.hpp"
 #include "server/interaction/rigid_obstacle.hpp"
 #include "server/interaction/simulation.hpp"
+#include "server/interaction/surface_probe.hpp"
 #include "server/interaction/tool_proxy.hpp"
 #include "server/scene/compile.hpp"
 
@@ -57,14 +58,8 @@ int main(int argc, char** argv) {
 
     // Paths: the top of the skull (where the vertical line through the bounding box centre
     // enters the bone) and the opening's axis.
-    ni::Vec3 lo = obstacle->vertices_m().front(), hi = lo;
-    for (const auto& v : obstacle->vertices_m()) {
-      lo = lo.cwiseMin(v);
-      hi = hi.cwiseMax(v);
-    }
     const ni::Vec3 down(0, 0, -1);
-    ni::Vec3 top(0.5 * (lo.x() + hi.x()), 0.5 * (lo.y() + hi.y()), hi.z() + 0.01);
-    while (!obstacle->inside(top)) top += 5e-5 * down;
+    const ni::Vec3 top = ni::top_of_obstacle(*obstacle);
     const auto& hole = model.rigid.front().openings.front();
     struct Path {
       const char* name;

@@ -1,6 +1,7 @@
 #include "server/interaction/surface_probe.hpp"
 
 #include "server/interaction/contact_surface.hpp"
+#include "server/interaction/rigid_obstacle.hpp"
 
 #include <array>
 #include <cmath>
@@ -62,6 +63,27 @@ SurfacePoint closest_on_surface(const mesh::TetMesh& mesh, const mesh::Vec3& x_m
     }
   }
   return out;
+}
+
+mesh::Vec3 top_of_obstacle(const RigidObstacle& obstacle, double step_m) {
+  if (!std::isfinite(step_m) || step_m <= 0.0)
+    throw std::invalid_argument("top_of_obstacle: step " + std::to_string(step_m) +
+                                " m is not finite and > 0");
+  mesh::Vec3 lo = obstacle.vertices_m().front(), hi = lo;
+  for (const auto& v : obstacle.vertices_m()) {
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  const mesh::Vec3 down(0, 0, -1);
+  mesh::Vec3 top(0.5 * (lo.x() + hi.x()), 0.5 * (lo.y() + hi.y()), hi.z() + 0.01);
+  while (!obstacle.inside(top)) {
+    top += step_m * down;
+    if (top.z() < lo.z())
+      throw std::invalid_argument(
+          "top_of_obstacle: the vertical line through the bounding box's centre misses the "
+          "obstacle");
+  }
+  return top;
 }
 
 }  // namespace neurosim::interaction

@@ -1,6 +1,7 @@
 // Points on a mesh's boundary surface for placing a tool (benches, tests, tools): the highest
-// surface point on a vertical line, and the closest surface point to a point. Brute force over
-// the surface triangles (O(triangles) per call): for set-up and measurement, not for the step.
+// surface point on a vertical line, the closest surface point to a point, and the top of a rigid
+// obstacle. Brute force over the surface triangles (O(triangles) per call): for set-up and
+// measurement, not for the step.
 #pragma once
 
 #include "server/mesh/tet_mesh.hpp"
@@ -8,6 +9,8 @@
 #include <optional>
 
 namespace neurosim::interaction {
+
+class RigidObstacle;  // rigid_obstacle.hpp
 
 // A point of the boundary surface (unit m) and the outward unit normal of its triangle.
 struct SurfacePoint {
@@ -23,5 +26,12 @@ std::optional<SurfacePoint> top_of_surface(const mesh::TetMesh& mesh, double x_m
 // The closest point of the surface triangles to x_m (Euclidean). Throws std::invalid_argument on
 // a non-finite point or a mesh without surface triangles.
 SurfacePoint closest_on_surface(const mesh::TetMesh& mesh, const mesh::Vec3& x_m);
+
+// Where the vertical line through the centre of the obstacle's bounding box enters it from above
+// (the top of the skull): from 10 mm above the box down in steps of step_m (unit m) to the first
+// point inside (generalized winding number), so within step_m below the surface. Throws
+// std::invalid_argument for a step that is not finite and > 0, or when the line leaves the box
+// without entering the obstacle.
+mesh::Vec3 top_of_obstacle(const RigidObstacle& obstacle, double step_m = 5e-5);
 
 }  // namespace neurosim::interaction

@@ -1,8 +1,10 @@
 // surface_probe: the top of a box's surface on a vertical line and the closest surface point to
-// points above, beside and inside a box (the answers are the box's faces, known exactly).
+// points above, beside and inside a box (the answers are the box's faces, known exactly); the
+// top of a rigid box obstacle, and a ring of two boxes whose centre line misses it.
 #include "server/interaction/surface_probe.hpp"
 
 #include "server/fem/fem_test_meshes.hpp"
+#include "server/interaction/rigid_obstacle.hpp"
 
 #include <gtest/gtest.h>
 
@@ -53,6 +55,34 @@ TEST(interaction_surface_probe, ClosestPointAboveBesideAndInside) {
   EXPECT_LT((p.point_m - Vec3(0.04, 0.03, 0.02)).norm(), 1e-15);
   EXPECT_THROW(closest_on_surface(m, Vec3(0, std::nan(""), 0)), std::invalid_argument);
   EXPECT_THROW(closest_on_surface(mesh::TetMesh{}, Vec3::Zero()), std::invalid_argument);
+}
+
+// The box's surface triangles as a rigid obstacle.
+scene::RigidSurface rigid(const mesh::TetMesh& m, const Vec3& shift = Vec3::Zero()) {
+  scene::RigidSurface r;
+  r.id = "box";
+  for (const Vec3& v : m.vertices()) r.vertices_m.push_back(v + shift);
+  r.triangles = m.surface();
+  return r;
+}
+
+TEST(interaction_surface_probe, TopOfARigidObstacleIsWhereTheCentreLineEntersIt) {
+  const mesh::TetMesh m = box();
+  const auto obstacle = RigidObstacle::build({rigid(m)});
+  ASSERT_NE(obstacle, nullptr);
+  const Vec3 top = top_of_obstacle(*obstacle);
+  EXPECT_EQ(top.x(), 0.02);
+  EXPECT_EQ(top.y(), 0.015);
+  EXPECT_LE(top.z(), 0.02);  // inside, within one step of the upper face
+  EXPECT_GT(top.z(), 0.02 - 5e-5);
+  EXPECT_TRUE(obstacle->inside(top));
+  const Vec3 fine = top_of_obstacle(*obstacle, 1e-6);
+  EXPECT_GT(fine.z(), 0.02 - 1e-6);
+  EXPECT_THROW(top_of_obstacle(*obstacle, 0.0), std::invalid_argument);
+  EXPECT_THROW(top_of_obstacle(*obstacle, std::nan("")), std::invalid_argument);
+  // Two boxes 20 mm apart: the line through the middle of their bounding box misses both.
+  const auto pair = RigidObstacle::build({rigid(m), rigid(m, Vec3(0.06, 0.0, 0.0))});
+  EXPECT_THROW(top_of_obstacle(*pair), std::invalid_argument);
 }
 
 }  // namespace

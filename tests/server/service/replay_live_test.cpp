@@ -8,6 +8,7 @@
 // no tissue force, live or replayed), one through the craniotomy onto the cerebellum.
 #include "common/clock.hpp"
 #include "idl/wire/recording_io.hpp"
+#include "server/interaction/surface_probe.hpp"
 #include "server/scene/compile.hpp"
 #include "tests/server/service/replay_fixture.hpp"
 #include "tests/server/service/service_scenarios.hpp"
@@ -167,14 +168,8 @@ TEST(service_replay, BrainSkullLiveServerAndReplayGiveTheSameForcesWithTheSkullH
   neurosim::scene::Model no_skull = scene;
   no_skull.rigid.clear();
   const auto model = ni::build_model(no_skull);
-  ni::Vec3 lo = obstacle->vertices_m().front(), hi = lo;
-  for (const auto& v : obstacle->vertices_m()) {
-    lo = lo.cwiseMin(v);
-    hi = hi.cwiseMax(v);
-  }
   const ni::Vec3 down(0, 0, -1);
-  ni::Vec3 top(0.5 * (lo.x() + hi.x()), 0.5 * (lo.y() + hi.y()), hi.z() + 0.01);
-  while (!obstacle->inside(top)) top += 5e-5 * down;
+  const ni::Vec3 top = ni::top_of_obstacle(*obstacle);
   auto first_touch = [&](const std::function<ni::ToolPose(int)>& path, int max_steps) {
     auto state = ni::make_state(*model);
     std::vector<ni::ToolPose> poses(1);

@@ -9,6 +9,7 @@
 #include "haptic_client/force_model.hpp"
 #include "server/interaction/rigid_obstacle.hpp"
 #include "server/interaction/simulation.hpp"
+#include "server/interaction/surface_probe.hpp"
 #include "server/scene/compile.hpp"
 #include "tests/server/service/service_scenarios.hpp"
 
@@ -128,14 +129,8 @@ TEST(service_rigid, DrivenIntoTheSkullHeldOutsideWhileTheDeviceGoesTenMillimetre
   EXPECT_NE(ses.server.log().find("built: rigid obstacles (7538 triangles)"), std::string::npos)
       << ses.server.log();
   // Straight down onto the top of the skull: the line's entry into the bone.
-  mesh::Vec3 lo = obstacle->vertices_m().front(), hi = lo;
-  for (const auto& v : obstacle->vertices_m()) {
-    lo = lo.cwiseMin(v);
-    hi = hi.cwiseMax(v);
-  }
   const mesh::Vec3 down(0, 0, -1);
-  mesh::Vec3 surface(0.5 * (lo.x() + hi.x()), 0.5 * (lo.y() + hi.y()), hi.z() + 0.01);
-  while (!obstacle->inside(surface)) surface += 5e-5 * down;
+  const mesh::Vec3 surface = interaction::top_of_obstacle(*obstacle);
   const double r_tip = skull_scene().tools.front().tip_radius_m;
   const mesh::Vec3 start = surface - (r_tip + 0.005) * down;
   auto at_depth = [&](double depth_m) {  // depth of the tip centre below the outer table
