@@ -1,9 +1,6 @@
 #include "server/fusion/coupling_map.hpp"
 
-#include <CGAL/AABB_traits.h>
-#include <CGAL/AABB_tree.h>
-#include <CGAL/AABB_triangle_primitive.h>
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include "server/fusion/cgal_aabb.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -13,14 +10,7 @@
 namespace neurosim::fusion {
 namespace {
 
-using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-using P3 = K::Point_3;
-using T3 = K::Triangle_3;
-using TriIt = std::vector<T3>::const_iterator;
-using Primitive = CGAL::AABB_triangle_primitive<K, TriIt>;
-using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
-
-P3 to_point(const Vec3& v) { return P3(v.x(), v.y(), v.z()); }
+using namespace cgal_aabb;
 
 // For each node, the closest point on the triangle set (tree finds the triangle, Ericson's
 // routine gives the weights).

@@ -1,9 +1,6 @@
 #include "server/fusion/inclusion.hpp"
 
-#include <CGAL/AABB_traits.h>
-#include <CGAL/AABB_tree.h>
-#include <CGAL/AABB_triangle_primitive.h>
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include "server/fusion/cgal_aabb.hpp"
 
 #include <algorithm>
 #include <array>
@@ -16,15 +13,7 @@
 namespace neurosim::fusion {
 namespace {
 
-using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-using P3 = K::Point_3;
-using T3 = K::Triangle_3;
-using TriIt = std::vector<T3>::const_iterator;
-using Primitive = CGAL::AABB_triangle_primitive<K, TriIt>;
-using Traits = CGAL::AABB_traits<K, Primitive>;
-using Tree = CGAL::AABB_tree<Traits>;
-
-P3 to_point(const Vec3& v) { return P3(v.x(), v.y(), v.z()); }
+using namespace cgal_aabb;
 
 CGAL::Bbox_3 box_of(const P3& a, const P3& b, const P3& c) {
   return a.bbox() + b.bbox() + c.bbox();

@@ -1,9 +1,6 @@
 #include "server/fusion/triangle_bvh.hpp"
 
-#include <CGAL/AABB_traits.h>
-#include <CGAL/AABB_tree.h>
-#include <CGAL/AABB_triangle_primitive.h>
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include "server/fusion/cgal_aabb.hpp"
 
 #include <boost/iterator/function_output_iterator.hpp>
 
@@ -12,14 +9,7 @@
 
 namespace neurosim::fusion {
 namespace {
-using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-using P3 = K::Point_3;
-using T3 = K::Triangle_3;
-using TriIt = std::vector<T3>::const_iterator;
-using Primitive = CGAL::AABB_triangle_primitive<K, TriIt>;
-using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
-
-P3 to_p3(const mesh::Vec3& v) { return P3(v.x(), v.y(), v.z()); }
+using namespace cgal_aabb;
 }  // namespace
 
 struct TriangleBvh::Impl {
@@ -38,9 +28,9 @@ TriangleBvh::TriangleBvh(const std::vector<mesh::Vec3>& vertices_m,
         throw std::invalid_argument("TriangleBvh: triangle " + std::to_string(t) +
                                     " has vertex index " + std::to_string(triangles[t][k]) +
                                     " outside [0, " + std::to_string(vertices_m.size()) + ")");
-    impl_->triangles.emplace_back(to_p3(vertices_m[triangles[t][0]]),
-                                  to_p3(vertices_m[triangles[t][1]]),
-                                  to_p3(vertices_m[triangles[t][2]]));
+    impl_->triangles.emplace_back(to_point(vertices_m[triangles[t][0]]),
+                                  to_point(vertices_m[triangles[t][1]]),
+                                  to_point(vertices_m[triangles[t][2]]));
   }
   impl_->tree.insert(impl_->triangles.cbegin(), impl_->triangles.cend());
   impl_->tree.build();
@@ -65,7 +55,7 @@ void TriangleBvh::triangles_in_box(const mesh::Vec3& lo, const mesh::Vec3& hi,
 }
 
 ClosestTriangle TriangleBvh::closest(const mesh::Vec3& p) const {
-  const auto [point, it] = impl_->tree.closest_point_and_primitive(to_p3(p));
+  const auto [point, it] = impl_->tree.closest_point_and_primitive(to_point(p));
   ClosestTriangle c;
   c.triangle = static_cast<int>(it - impl_->triangles.cbegin());
   c.point_m = mesh::Vec3(point.x(), point.y(), point.z());
