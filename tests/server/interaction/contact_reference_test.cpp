@@ -6,6 +6,8 @@
 // surface-to-surface contact (a rigid spherical cap) pressed into the same mesh.
 #include "server/interaction/simulation.hpp"
 
+#include "graded_block_fixtures.hpp"
+
 #include "server/mesh/io.hpp"
 #include "server/mesh/tet_mesh.hpp"
 #include "server/scene/compile.hpp"
@@ -30,54 +32,8 @@
 namespace neurosim::interaction {
 namespace {
 
-// Node coordinates of one axis, symmetric about 0: cells of `fine_m` out to `fine_half_m`, then
-// each cell `growth` times the last until `half_m` is passed (the last node at the total).
-std::vector<double> graded_axis(double fine_m, double fine_half_m, double growth, double half_m,
-                                bool symmetric) {
-  std::vector<double> side{0.0};
-  double h = fine_m;
-  while (side.back() < fine_half_m - 1e-12) side.push_back(side.back() + fine_m);
-  while (side.back() < half_m - 1e-12) {
-    h *= growth;
-    side.push_back(side.back() + h);
-  }
-  std::vector<double> out;
-  if (symmetric)
-    for (std::size_t k = side.size() - 1; k > 0; --k) out.push_back(-side[k]);
-  out.insert(out.end(), side.begin(), side.end());
-  return out;
-}
-
-// Block [-X, X]^2 x [-Z, 0] (top face z = 0), graded grid, six Kuhn tetrahedra per cell.
-mesh::TetMesh graded_block(const std::vector<double>& xs, const std::vector<double>& zs) {
-  const int n = static_cast<int>(xs.size()), nz = static_cast<int>(zs.size());
-  auto node = [&](int i, int j, int k) { return i + n * (j + n * k); };
-  std::vector<mesh::Vec3> x;
-  x.reserve(static_cast<std::size_t>(n) * n * nz);
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) x.emplace_back(xs[i], xs[j], -zs[nz - 1 - k]);
-  static constexpr int kPerm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2},
-                                      {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  std::vector<mesh::Tet> tets;
-  for (int k = 0; k + 1 < nz; ++k)
-    for (int j = 0; j + 1 < n; ++j)
-      for (int i = 0; i + 1 < n; ++i)
-        for (const auto& p : kPerm) {
-          std::array<int, 3> c{i, j, k};
-          mesh::Tet t;
-          t[0] = node(c[0], c[1], c[2]);
-          for (int s = 0; s < 3; ++s) {
-            ++c[p[s]];
-            t[s + 1] = node(c[0], c[1], c[2]);
-          }
-          if (mesh::signed_volume(x[t[0]], x[t[1]], x[t[2]], x[t[3]]) < 0.0) std::swap(t[2], t[3]);
-          tets.push_back(t);
-        }
-  mesh::BuildOptions opt;
-  opt.source = "graded block";
-  return mesh::TetMesh::build(std::move(x), std::move(tets), opt);
-}
+using testing::graded_axis;
+using testing::graded_block;
 
 struct HertzCase {
   double youngs_pa{3000.0};
