@@ -10,6 +10,9 @@
 // Per cell size and depth: |F| (mN) and the contact rows. Then, per depth, the differences of
 // successive sizes and the order p of F(h) = F* + C h^p that two successive differences imply
 // ((F(h1) - F(h2)) / (F(h2) - F(h3)) = (h1^p - h2^p) / (h2^p - h3^p), solved for p).
+// Prints a table (--csv: one line per mesh and depth, then the same differences and orders as
+// CSV). --geometry-iterations sets SimulationOptions::contact_geometry_iterations (1: the rows of
+// the rest surface only), to tell the contact geometry's share from the element's.
 // With --slide, per cell size also the slide of ctest
 // interaction_contact_step.SlideOverTheSurfaceNeverLosesTheTissue: the probe slid 40 mm (y 80 to
 // 120 mm at x 60 mm, 0.1 mm steps) 1 mm and 2 mm below the rest surface (the highest surface point
@@ -81,7 +84,8 @@ int main(int argc, char** argv) {
   std::vector<double> cells;
   std::string dir = "/tmp/neurosim_scale_bench";
   double x_mm = 45.0, y_mm = 100.0;
-  bool slide = false;
+  bool slide = false, csv = false;
+  int geometry_iterations = 0;
   std::string element;
   neurosim::cli::Parser p("contact_convergence_bench",
                           "The same press on the brain at several cell sizes: force convergence.");
@@ -91,12 +95,17 @@ int main(int argc, char** argv) {
   p->add_option("--y", y_mm, "press line y, unit mm")->capture_default_str();
   p->add_option("--element", element, "every mesh's element (default: the scene's)");
   p->add_flag("--slide", slide, "also the 40 mm slide at 1 and 2 mm (|F| / depth spread)");
+  p->add_flag("--csv", csv, "CSV instead of the table");
+  p->add_option("--geometry-iterations", geometry_iterations,
+                "SimulationOptions::contact_geometry_iterations (default: the library's)");
   if (auto rc = p.parse(argc, argv)) return *rc;
   if (cells.empty()) cells = {7.0, 5.0, 4.0, 3.0};
   const std::vector<double> depths_mm{0.5, 1.0, 1.5, 2.0, 2.5, 3.0};
   std::vector<std::vector<double>> force_mn(cells.size(), std::vector<double>(depths_mm.size(), 0.0));
+  std::vector<std::vector<int>> rows(cells.size(), std::vector<int>(depths_mm.size(), 0));
+  std::vector<std::string> mesh_rows;  // cell size, vertices / tets, surface point, build time
   std::vector<std::string> slide_rows;
-  std::printf("cell_mm,host_vertices,host_tets,surface_z_mm,normal_z,depth_mm,force_mn,rows,build_s\n");
+  if (csv) std::printf("cell_mm,host_vertices,host_tets,surface_z_mm,normal_z,depth_mm,force_mn,rows,build_s\n");
   try {
     for (std::size_t ci = 0; ci < cells.size(); ++ci) {
       const fs::path scene = scene_at(cells[ci], dir);
@@ -108,7 +117,9 @@ int main(int argc, char** argv) {
         model.set_element(*e);
       }
       const auto t0 = neurosim::common::Clock::now();
-      auto sim = ni::Simulation::build(model);
+      ni::SimulationOptions options;
+      if (geometry_iterations > 0) options.contact_geometry_iterations = geometry_iterations;
+      auto sim = ni::Simulation::build(model, options);
       const double build_s = neurosim::common::seconds_since(t0);
       const auto& mesh = sim->mesh(0);
       const auto press_at = ni::top_of_surface(mesh, 1e-3 * x_mm, 1e-3 * y_mm);
@@ -124,10 +135,16 @@ int main(int argc, char** argv) {
         sim->step(poses, contacts, stats);
         if (!stats.converged) throw std::runtime_error(scene.string() + ": the contact LCP did not converge");
         force_mn[ci][di] = 1e3 * contacts[0].force_n.norm();
-        std::printf("%g,%zu,%zu,%.3f,%.4f,%g,%.4f,%d,%.1f\n", cells[ci], mesh.num_vertices(), mesh.num_tets(),
-                    1e3 * top.z(), n.z(), depths_mm[di], force_mn[ci][di], stats.contact_rows, build_s);
+        rows[ci][di] = stats.contact_rows;
+        if (csv)
+          std::printf("%g,%zu,%zu,%.3f,%.4f,%g,%.4f,%d,%.1f\n", cells[ci], mesh.num_vertices(), mesh.num_tets(),
+                      1e3 * top.z(), n.z(), depths_mm[di], force_mn[ci][di], stats.contact_rows, build_s);
         std::fflush(stdout);
       }
+      char mesh_row[160];
+      std::snprintf(mesh_row, sizeof mesh_row, "| %g mm | %zu / %zu | %.2f / %.4f | %.1f |", cells[ci],
+                    mesh.num_vertices(), mesh.num_tets(), 1e3 * top.z(), n.z(), build_s);
+      mesh_rows.emplace_back(mesh_row);
       for (double depth_mm : slide ? std::vector<double>{1.0, 2.0} : std::vector<double>{}) {
         double fpd_min = std::numeric_limits<double>::infinity(), fpd_max = 0.0, f_min = fpd_min;
         int steps = 0;
@@ -162,20 +179,53 @@ int main(int argc, char** argv) {
     return 1;
   }
   // Successive differences and the order they imply.
-  std::printf("\ndepth_mm");
-  for (std::size_t ci = 0; ci + 1 < cells.size(); ++ci) std::printf(",F%g-F%g_mn", cells[ci], cells[ci + 1]);
-  for (std::size_t ci = 0; ci + 2 < cells.size(); ++ci)
-    std::printf(",order_%g_%g_%g", cells[ci], cells[ci + 1], cells[ci + 2]);
-  std::printf("\n");
-  for (std::size_t di = 0; di < depths_mm.size(); ++di) {
-    std::printf("%g", depths_mm[di]);
-    for (std::size_t ci = 0; ci + 1 < cells.size(); ++ci)
-      std::printf(",%.4f", force_mn[ci][di] - force_mn[ci + 1][di]);
+  auto order = [&](std::size_t ci, std::size_t di) {
+    return observed_order(cells[ci], cells[ci + 1], cells[ci + 2], force_mn[ci][di] - force_mn[ci + 1][di],
+                          force_mn[ci + 1][di] - force_mn[ci + 2][di]);
+  };
+  if (csv) {
+    std::printf("\ndepth_mm");
+    for (std::size_t ci = 0; ci + 1 < cells.size(); ++ci) std::printf(",F%g-F%g_mn", cells[ci], cells[ci + 1]);
     for (std::size_t ci = 0; ci + 2 < cells.size(); ++ci)
-      std::printf(",%.2f", observed_order(cells[ci], cells[ci + 1], cells[ci + 2],
-                                           force_mn[ci][di] - force_mn[ci + 1][di],
-                                           force_mn[ci + 1][di] - force_mn[ci + 2][di]));
+      std::printf(",order_%g_%g_%g", cells[ci], cells[ci + 1], cells[ci + 2]);
     std::printf("\n");
+    for (std::size_t di = 0; di < depths_mm.size(); ++di) {
+      std::printf("%g", depths_mm[di]);
+      for (std::size_t ci = 0; ci + 1 < cells.size(); ++ci)
+        std::printf(",%.4f", force_mn[ci][di] - force_mn[ci + 1][di]);
+      for (std::size_t ci = 0; ci + 2 < cells.size(); ++ci) std::printf(",%.2f", order(ci, di));
+      std::printf("\n");
+    }
+  } else {
+    std::printf("| cells | brain vertices / tets | surface z mm / normal z | build s |\n|---|---|---|---|\n");
+    for (const auto& r : mesh_rows) std::printf("%s\n", r.c_str());
+    std::printf("\n| cells |");
+    for (double d : depths_mm) std::printf(" %g mm |", d);
+    std::printf("\n|---|");
+    for (std::size_t di = 0; di < depths_mm.size(); ++di) std::printf("---|");
+    std::printf("\n");
+    for (std::size_t ci = 0; ci < cells.size(); ++ci) {
+      std::printf("| %g mm |", cells[ci]);
+      for (std::size_t di = 0; di < depths_mm.size(); ++di)
+        std::printf(" %.2f mN (%d) |", force_mn[ci][di], rows[ci][di]);
+      std::printf("\n");
+    }
+    if (cells.size() >= 2) {
+      std::printf("\n| depth |");
+      for (std::size_t ci = 0; ci + 1 < cells.size(); ++ci) std::printf(" F%g - F%g mN |", cells[ci], cells[ci + 1]);
+      for (std::size_t ci = 0; ci + 2 < cells.size(); ++ci)
+        std::printf(" order %g/%g/%g |", cells[ci], cells[ci + 1], cells[ci + 2]);
+      std::printf("\n|---|");
+      for (std::size_t k = 0; k + 3 < 2 * cells.size(); ++k) std::printf("---|");
+      std::printf("\n");
+      for (std::size_t di = 0; di < depths_mm.size(); ++di) {
+        std::printf("| %g mm |", depths_mm[di]);
+        for (std::size_t ci = 0; ci + 1 < cells.size(); ++ci)
+          std::printf(" %.2f |", force_mn[ci][di] - force_mn[ci + 1][di]);
+        for (std::size_t ci = 0; ci + 2 < cells.size(); ++ci) std::printf(" %.2f |", order(ci, di));
+        std::printf("\n");
+      }
+    }
   }
   if (slide) {
     std::printf("\ncell_mm,slide_depth_mm,steps,min_force_mn,force_per_depth_min_n_per_m,"

@@ -47,8 +47,7 @@ scene::Model block_scene(const Press& p, const mesh::TetMesh& block) {
     << "  fixed { half_space { point_m { z: " << -p.half_m + 1e-9 << " } normal { z: 1 } } }\n"
     << "  priority: 0 }\n"
     << "tools { id: \"probe\" tip_radius_m: " << p.tip_radius_m
-    << " shaft_radius_m: " << p.shaft_radius_m
-    << " shaft_length_m: 0.05 max_speed_m_per_s: 2 }\n"
+    << " shaft_radius_m: " << p.shaft_radius_m << " shaft_length_m: 0.05 max_speed_m_per_s: 2 }\n"
     << "effects { tier: LINEAR coupling: false tool_contact: true deformation_output: true }\n";
   const std::string source = (dir / "convergence.scene").string();
   scene::Model model = scene::compile(scene::parse_scene(s.str(), source), source);
@@ -71,7 +70,10 @@ scene::Model block_scene(const Press& p, const mesh::TetMesh& block) {
 // one cell, the press is a point load on one triangle, as a node row's on one node); below, the
 // patch spans 1-4 cells and the force settles. Asserted: a force on every mesh at every depth,
 // growing with depth, and each successive difference smaller than the one before it or under
-// 2 % of the finest force (the level at which the row set changes between meshes).
+// 2 % of the finest force (the level at which the row set changes between meshes). Not run
+// here (60025 vertices, 100 s): at 0.25 mm the force is 15.15 / 37.73 / 56.65 mN, the 1 mm
+// force rises again by 9.7 % (2 and 3 mm fall by 3.5 %): settled to about 10 %, not converged
+// monotonically (bench/RESULTS.md, "the press on a graded block").
 TEST(interaction_contact_convergence, SamePressOnEverFinerCellsConverges) {
   const std::vector<double> cells_m{0.004, 0.002, 0.001, 0.0005};
   const std::vector<double> depths_m{0.001, 0.002, 0.003};
@@ -108,7 +110,8 @@ TEST(interaction_contact_convergence, SamePressOnEverFinerCellsConverges) {
       sim->step({pose}, c, st);
       ASSERT_TRUE(st.converged) << "cells " << h << " depth " << d;
       force_n[ci].push_back(c.at(0).force_n.z());
-      std::printf("  %.0f mm %.3f mN (%d rows)", d * 1e3, 1e3 * force_n[ci].back(), st.contact_rows);
+      std::printf("  %.0f mm %.3f mN (%d rows)", d * 1e3, 1e3 * force_n[ci].back(),
+                  st.contact_rows);
       EXPECT_GT(force_n[ci].back(), 0.0) << "cells " << h << " depth " << d;
       if (force_n[ci].size() > 1) {
         EXPECT_GT(force_n[ci].back(), force_n[ci][force_n[ci].size() - 2])
