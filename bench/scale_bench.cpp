@@ -1,8 +1,10 @@
 // scale_bench: the brain/artery scene at several brain cell sizes. Per size (the scene built by
 // `neurosim-model --cell-size C --out-dir DIR/cC` when DIR/cC/brain_artery.scene is missing):
 // - setup_cold_s: Simulation::build with an empty compliance cache folder (factorization,
-//   carving, tie, boundary operator); setup_cached_s: the same build again, the boundary
-//   operator read from the disk cache (the factorization is not cached yet: it is redone);
+//   carving, tie, boundary operator; the factor and the operator written to the cache);
+//   setup_cached_s: the same build again, the host's factor (fem/factor_cache) and the boundary
+//   operator read from that disk cache (files just written: from the page cache, as on a
+//   second start soon after the first; the set-up's parts are printed on stderr without --csv);
 // - rss_mb: the process's peak resident memory after both (getrusage ru_maxrss: sizes should be
 //   given from coarse to fine, so that each row's peak is its own);
 // - step_p50/p99/max_us: the contact step (one probe, LINEAR tier, the step's own thread) along a
@@ -109,10 +111,12 @@ int main(int argc, char** argv) {
       auto t0 = Clock::now();
       auto cold = ni::Simulation::build(model, options);
       const double cold_s = neurosim::common::seconds_since(t0);
+      const ni::SetupStats cold_setup = cold->setup_stats();
       cold.reset();
       t0 = Clock::now();
       auto sim = ni::Simulation::build(model, options);
       const double cached_s = neurosim::common::seconds_since(t0);
+      const ni::SetupStats cached_setup = sim->setup_stats();
       fs::remove_all(cache);
       const int host = 0;
       const auto& mesh = sim->mesh(host);
@@ -183,6 +187,14 @@ int main(int argc, char** argv) {
                   mesh.num_tets(), cold_s, cached_s, peak_rss_mb(), pc.p50, pc.p99, pc.max,
                   not_ready, 5.0 / field_s);
       std::fflush(stdout);
+      if (!csv) {
+        for (const auto* st : {&cold_setup, &cached_setup})
+          std::cerr << "scale_bench: cell " << cell << " mm, set-up " << (st == &cold_setup ? "cold" : "cached")
+                    << ": meshes " << st->load_meshes_s << " s, factor " << st->factor_s << " s, fusion "
+                    << st->fusion_s << " s, condense " << st->condense_s << " s, boundary " << st->boundary_s
+                    << " s, operator " << st->operator_s << " s, columns " << st->columns_s << " s, total "
+                    << st->total_s << " s, cache hits " << st->cache_hits << " (factor " << st->factor_cache_hits << ")\n";
+      }
       if (!csv)
         std::cerr << "scale_bench: cell " << cell << " mm, column solves " << column_solves << ": "
                   << times.size() << " steps, " << steps_not_ready

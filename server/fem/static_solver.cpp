@@ -2,6 +2,7 @@
 
 #include "common/clock.hpp"
 #include "common/process_stats.hpp"
+#include "server/fem/factor_cache.hpp"
 #include "server/fem/power_iteration.hpp"
 #include "server/fem/supports.hpp"
 
@@ -34,6 +35,16 @@ class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen:
  public:
   cholmod_factor* factor() const { return this->m_cholmodFactor; }
   cholmod_common& common() const { return const_cast<SupernodalFactor*>(this)->cholmod(); }
+  // Takes a numeric factor made elsewhere (the disk cache) as if analyzePattern and factorize
+  // had made it.
+  void adopt(cholmod_factor* f) {
+    if (this->m_cholmodFactor) cholmod_free_factor(&this->m_cholmodFactor, &common());
+    this->m_cholmodFactor = f;
+    this->m_isInitialized = true;
+    this->m_info = Eigen::Success;
+    this->m_analysisIsOk = true;
+    this->m_factorizationIsOk = true;
+  }
 };
 
 cholmod_dense dense_view(double* data, std::size_t rows, std::size_t cols) {
@@ -211,7 +222,54 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   auto& llt = impl_->llt;
   cholmod_common& c = llt.common();
   c.print = options_.cholmod_verbose ? 3 : 0;
-  t0 = Clock::now();
+  const char* source = "SolverOptions::max_factor_bytes";
+  const double limit = options_.max_factor_bytes > 0.0 ? options_.max_factor_bytes
+                                                       : common::memory_available_bytes(&source);
+  double lnz = 0.0;  // nnz(L), CHOLMOD's count
+  std::string cache_file;
+  std::uint64_t cache_key = 0;
+  if (!options_.factor_cache_dir.empty()) {
+    // The factor of this very matrix from an earlier start (a too large one is left to the
+    // analysis below, which refuses it with its numbers).
+    t0 = Clock::now();
+    cache_key = factor_key(kff);
+    cache_file = factor_file(options_.factor_cache_dir, cache_key);
+    const FactorLoad cached = load_factor(cache_file, cache_key, nf, limit, c);
+    if (cached.factor != nullptr) {
+      llt.adopt(cached.factor);
+      info_.from_cache = true;
+      lnz = cached.lnz;
+    }
+    info_.cache_s = seconds_since(t0);
+  }
+  if (!info_.from_cache) factorize(kff, where, limit, source, lnz);
+  if (!cache_file.empty() && !info_.from_cache) {
+    t0 = Clock::now();
+    save_factor(cache_file, cache_key, *llt.factor(), lnz);
+    info_.cache_s += seconds_since(t0);
+  }
+  const cholmod_factor* l = llt.factor();
+  info_.rcond = cholmod_rcond(llt.factor(), &c);
+  if (!(info_.rcond >= options_.min_rcond)) {
+    std::ostringstream msg;
+    msg << where << ": stiffness K_ff is numerically singular (CHOLMOD rcond " << info_.rcond
+        << " < " << options_.min_rcond
+        << "): are there enough fixed nodes in every part of the mesh?";
+    throw std::runtime_error(msg.str());
+  }
+  info_.supernodal = l->is_super != 0;
+  info_.factor_nnz = static_cast<long long>(lnz);
+  info_.factor_entries = static_cast<long long>(l->is_super ? l->xsize : l->nzmax);
+  info_.factor_bytes = info_.factor_entries * sizeof(double) + l->ssize * sizeof(int) +
+                       3 * (l->nsuper + 1) * sizeof(int) + 2 * l->n * sizeof(int);
+}
+
+void StaticSolver::factorize(const SparseMatrix& kff, const std::string& where, double limit,
+                             const char* source, double& lnz) {
+  auto& llt = impl_->llt;
+  cholmod_common& c = llt.common();
+  const int nf = num_free_dofs();
+  auto t0 = Clock::now();
   llt.analyzePattern(kff);
   info_.analyze_s = seconds_since(t0);
   if (llt.info() != Eigen::Success || !llt.factor()) {
@@ -227,10 +285,6 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
                           static_cast<double>(ls->ssize) * sizeof(int) +
                           3.0 * static_cast<double>(ls->nsuper + 1) * sizeof(int) +
                           2.0 * static_cast<double>(ls->n) * sizeof(int);
-    const char* source = "SolverOptions::max_factor_bytes";
-    const double limit = options_.max_factor_bytes > 0.0
-                             ? options_.max_factor_bytes
-                             : common::memory_available_bytes(&source);
     if (needed > limit) {
       std::ostringstream msg;
       msg << where << ": the factor of K_ff needs " << std::fixed << std::setprecision(1)
@@ -255,19 +309,7 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
     }
     throw std::runtime_error(msg + "): too few fixed nodes (rigid-body modes) or bad materials?");
   }
-  info_.rcond = cholmod_rcond(llt.factor(), &c);
-  if (!(info_.rcond >= options_.min_rcond)) {
-    std::ostringstream msg;
-    msg << where << ": stiffness K_ff is numerically singular (CHOLMOD rcond " << info_.rcond
-        << " < " << options_.min_rcond
-        << "): are there enough fixed nodes in every part of the mesh?";
-    throw std::runtime_error(msg.str());
-  }
-  info_.supernodal = l->is_super != 0;
-  info_.factor_nnz = static_cast<long long>(c.lnz);
-  info_.factor_entries = static_cast<long long>(l->is_super ? l->xsize : l->nzmax);
-  info_.factor_bytes = info_.factor_entries * sizeof(double) + l->ssize * sizeof(int) +
-                       3 * (l->nsuper + 1) * sizeof(int) + 2 * l->n * sizeof(int);
+  lnz = c.lnz;
 }
 
 StaticSolver::~StaticSolver() = default;

@@ -36,6 +36,10 @@ struct SolverOptions {
   double max_factor_bytes{0.0};
   // Let CHOLMOD print its own warnings to stdout (errors become exceptions either way).
   bool cholmod_verbose{false};
+  // Folder of the disk cache of the factor (factor_cache.hpp), keyed by K_ff itself: a second
+  // solver of the same matrix reads the factor instead of analysing and factoring (the same
+  // factor bit for bit). Empty: no cache.
+  std::string factor_cache_dir{};
 };
 
 // The factor of K_ff would not fit in SolverOptions::max_factor_bytes (or the memory available).
@@ -59,6 +63,10 @@ struct FactorInfo {
   double assembly_s{0.0};   // wall time of pattern + assembly, unit s
   double analyze_s{0.0};    // symbolic analysis (ordering), unit s
   double factorize_s{0.0};  // numeric factorization, unit s
+  // SolverOptions::factor_cache_dir: the factor was read from the cache (analyze_s and
+  // factorize_s are then 0) in cache_s; without a hit, cache_s is the key and the write.
+  bool from_cache{false};
+  double cache_s{0.0};  // unit s
 };
 
 // Extreme eigenvalues of K_ff by power / inverse power iteration (unit N/m).
@@ -191,6 +199,10 @@ class StaticSolver {
   std::vector<int> reduced_index_;
   FactorInfo info_;
 
+  // Analysis, memory check against `limit` (from `source`) and numeric factorization of K_ff;
+  // lnz gets nnz(L).
+  void factorize(const SparseMatrix& kff, const std::string& where, double limit,
+                 const char* source, double& lnz);
   void check_forces(const Eigen::VectorXd& forces_n, const char* what) const;
   void solve_free(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m, SolveWorkspace::Impl& ws) const;
   // ws null: the solver's own workspace (each solve takes the lock).

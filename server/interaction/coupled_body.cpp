@@ -39,11 +39,12 @@ std::vector<mesh::Vec3> surface_vertex_normals(const mesh::TetMesh& m) {
 }
 
 CoupledBody::CoupledBody(int host_index, const mesh::TetMesh& host, const fem::Material& material,
-                         const std::vector<int>& host_fixed)
+                         const std::vector<int>& host_fixed,
+                         const fem::SolverOptions& solver_options)
     : host_index_(host_index), host_(&host), material_(material) {
   const auto t0 = std::chrono::steady_clock::now();
-  solver_ =
-      std::make_unique<fem::StaticSolver>(host, fem::MaterialMap::uniform(material), host_fixed);
+  solver_ = std::make_unique<fem::StaticSolver>(host, fem::MaterialMap::uniform(material),
+                                                host_fixed, solver_options);
   timing_.factor_s = seconds_since(t0);
   boundary_slot_.assign(host.num_vertices(), -1);
   contact_slot_.assign(host.num_vertices(), -1);

@@ -28,7 +28,7 @@
 namespace neurosim::interaction {
 
 struct CoupledBodyTiming {
-  double factor_s{0.0};    // host assembly + factorization, unit s
+  double factor_s{0.0};    // host assembly + factorization (or its read from the cache), unit s
   double boundary_s{0.0};  // compliance columns of A at S' and rows at the contact nodes, unit s
   double condense_s{0.0};  // Schur complements of the embedded meshes, unit s
   double operator_s{0.0};  // K_add and the factored coupling operator G, unit s
@@ -38,8 +38,10 @@ struct CoupledBodyTiming {
 class CoupledBody {
  public:
   // host_fixed must hold enough nodes to remove A's rigid modes (StaticSolver checks).
+  // solver_options: the host's StaticSolver's (SolverOptions::factor_cache_dir: the factor's
+  // disk cache).
   CoupledBody(int host_index, const mesh::TetMesh& host, const fem::Material& material,
-              const std::vector<int>& host_fixed);
+              const std::vector<int>& host_fixed, const fem::SolverOptions& solver_options = {});
 
   // Adds an embedded mesh tied through the map (B's surface node -> S' triangle of A, weights):
   // condensed onto its tied nodes at once (TieCondensation; throws what its constructor throws).

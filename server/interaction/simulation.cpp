@@ -302,12 +302,15 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     }
     BodyModel b;
     try {
-      b.body =
-          std::make_unique<CoupledBody>(static_cast<int>(m), lm.mesh, lm.material, lm.fixed_nodes);
+      fem::SolverOptions solver_options;
+      solver_options.factor_cache_dir = options_.compliance_cache_dir;
+      b.body = std::make_unique<CoupledBody>(static_cast<int>(m), lm.mesh, lm.material,
+                                             lm.fixed_nodes, solver_options);
     } catch (const std::exception& ex) {
       throw std::runtime_error(source_ + ": mesh " + lm.id + ": " + ex.what());
     }
     setup_.factor_s += b.body->timing().factor_s;
+    if (b.body->host_solver().factor_info().from_cache) ++setup_.factor_cache_hits;
     b.host_material = lm.material;
     b.host_fixed_nodes = lm.fixed_nodes;
     // LINEAR: the body relaxes with its host's kernel (a tied mesh with another one: compile()

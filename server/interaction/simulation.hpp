@@ -153,7 +153,9 @@ struct SimulationOptions {
   int lcp_max_iterations{200};
   double lcp_tolerance{1e-10};  // relative
   // Disk cache of each body's boundary operator (keyed by meshes, materials, fixed nodes and the
-  // coupling map), so a second start skips the boundary compliance solves. Empty: no cache.
+  // coupling map) and of its host's factor (keyed by the factored stiffness, fem/factor_cache),
+  // so a second start skips the factorization and the boundary compliance solves: the same
+  // numbers bit for bit. Empty: no cache.
   std::string compliance_cache_dir{};
   // A tool part (tip or shaft) whose centre lies deeper than this below a surface node's patch
   // does not push that node (so a tool that jumps through the body feels a bounded force, at
@@ -238,6 +240,7 @@ struct SetupStats {
   int tied_nodes{0};      // embedded nodes tied (all couplings)
   int carved_tets{0};     // host tetrahedra removed inside S' (carve_host)
   int cache_hits{0};      // bodies whose boundary operator came from compliance_cache_dir
+  int factor_cache_hits{0};  // bodies whose host factor came from compliance_cache_dir
   int sliding_rows{0};    // unilateral rows of SLIDING couplings (all couplings)
 };
 

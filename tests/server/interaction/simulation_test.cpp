@@ -212,20 +212,38 @@ TEST(interaction_simulation, ComplianceCacheRoundTrip) {
   options.compliance_cache_dir = dir.string();
   auto a = run(SceneSpec{}, {push_right(0.004)}, options);
   EXPECT_EQ(a.sim->setup_stats().cache_hits, 0);
+  EXPECT_EQ(a.sim->setup_stats().factor_cache_hits, 0);
   auto b = run(SceneSpec{}, {push_right(0.004)}, options);
+  // The boundary operator and the host's factor both read: the same numbers bit for bit.
   EXPECT_EQ(b.sim->setup_stats().cache_hits, 1);
+  EXPECT_EQ(b.sim->setup_stats().factor_cache_hits, 1);
   EXPECT_EQ(a.contacts[0].force_n, b.contacts[0].force_n);
   EXPECT_EQ(a.contacts[0].stiffness_n_per_m, b.contacts[0].stiffness_n_per_m);
-  // Another material is another key: no hit.
+  for (int m = 0; m < a.sim->num_meshes(); ++m) {
+    Eigen::VectorXd ua, ub;
+    a.sim->displacements(m, ua);
+    b.sim->displacements(m, ub);
+    ASSERT_EQ(ua.size(), ub.size());
+    EXPECT_EQ(ua, ub) << "mesh " << m;
+  }
+  // Another embedded material is another boundary operator on the same host factor.
   SceneSpec other;
   other.embedded_e_pa = 2.0e5;
   auto c = run(other, {push_right(0.004)}, options);
   EXPECT_EQ(c.sim->setup_stats().cache_hits, 0);
+  EXPECT_EQ(c.sim->setup_stats().factor_cache_hits, 1);
+  // Another host material: neither (another mesh: fem_factor_cache_test).
+  SceneSpec host_e;
+  host_e.host_e_pa = 1.2e6;
+  auto e = run(host_e, {push_right(0.004)}, options);
+  EXPECT_EQ(e.sim->setup_stats().cache_hits, 0);
+  EXPECT_EQ(e.sim->setup_stats().factor_cache_hits, 0);
   // A damaged file is ignored (recomputed), never trusted.
   for (const auto& entry : std::filesystem::directory_iterator(dir))
     std::filesystem::resize_file(entry.path(), 40);
   auto d = run(SceneSpec{}, {push_right(0.004)}, options);
   EXPECT_EQ(d.sim->setup_stats().cache_hits, 0);
+  EXPECT_EQ(d.sim->setup_stats().factor_cache_hits, 0);
   EXPECT_EQ(a.contacts[0].force_n, d.contacts[0].force_n);
   std::filesystem::remove_all(dir);
 }
