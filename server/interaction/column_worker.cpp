@@ -1,5 +1,7 @@
 #include "server/interaction/column_worker.hpp"
 
+#include "server/fem/cholmod_threads.hpp"
+
 #include "server/interaction/contact_columns.hpp"
 #include "server/interaction/coupled_body.hpp"
 
@@ -100,6 +102,9 @@ void ColumnWorker::run() {
   // time priority, the DDS and field threads) go first; a lagging worker only means more rows
   // take the fallback. Lowering one's own priority needs no privilege.
   setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 10);
+  // Its block solves go through CHOLMOD: with OMP_NUM_THREADS=1, any parallel region of it runs
+  // on this thread alone (cholmod_threads.hpp).
+  fem::cholmod_threads_follow_omp_num_threads();
   Poses poses;
   Poses idle_poses;         // the poses of the last scan that found nothing to solve
   bool idle_valid = false;  // nothing within reach + slack of idle_poses is missing

@@ -1,5 +1,7 @@
 #include "server/interaction/tier_worker.hpp"
 
+#include "server/fem/cholmod_threads.hpp"
+
 #include "common/clock.hpp"
 
 #include <algorithm>
@@ -174,6 +176,9 @@ bool TierWorker::post(const std::vector<TierLoad>& loads) {
 }
 
 void TierWorker::run() {
+  // Each update factors a tangent: with OMP_NUM_THREADS=1, CHOLMOD's parallel regions run on
+  // this thread alone (cholmod_threads.hpp), as on neurosim-solve's.
+  fem::cholmod_threads_follow_omp_num_threads();
   while (!stop_.load(std::memory_order_relaxed)) {
     // Nothing new, stale, or a fixed point: wait a little.
     bool updated = false;

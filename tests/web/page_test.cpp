@@ -1,7 +1,8 @@
 // The observer page in headless Chromium against the real programs: neurosim-server on the
 // paper's cube/cylinder scene, neurosim-web, and a scripted neurosim-haptic station pressing the
 // cube's right face (x = 0.1 m) along -x. The page must
-//  - report the topology (cube and cylinder) and the server's status (scene, tier);
+//  - report the topology (cube and cylinder) and the server's status (scene, tier, the columns
+//    not ready);
 //  - receive and decode at least 10 deformation frames;
 //  - show a non-zero force for the station while it presses (state, panel, plot);
 //  - look different from the at-rest render where the tool pushes, with and without the tool
@@ -127,6 +128,12 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
   const Json page_text = browser.evaluate(session, "document.body.innerText");
   ASSERT_TRUE(page_text.is_string());
   EXPECT_NE(page_text.get<std::string>().find("error vs converged C3D10"), std::string::npos)
+      << page_text;
+  // And the contact nodes whose columns were not ready when a step needed them (SimStatus).
+  ASSERT_TRUE(s["server"]["columns_not_ready"].is_number()) << s["server"];
+  EXPECT_NE(page_text.get<std::string>().find(
+                "columns not ready\n" + std::to_string(s["server"]["columns_not_ready"].get<long long>())),
+            std::string::npos)
       << page_text;
   const int frames_at_rest = s["framesDecoded"];
   const int generation = s["generation"];

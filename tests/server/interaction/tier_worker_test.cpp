@@ -3,13 +3,21 @@
 // closed-form fixed point a / (1 - beta) in two updates (Aitken is exact for an affine map of
 // one rate) and stay there; constant forces, once reached, are not updated again; the
 // equilibrium handed out is the one a fresh TierEquilibrium finds for those forces; stale and
-// malformed loads are skipped or refused naming the body and the slot.
+// malformed loads are skipped or refused naming the body and the slot; the threaded worker
+// starts no CHOLMOD thread under OMP_NUM_THREADS=1.
 #include "server/interaction/tier_worker.hpp"
 
+#include "server/fem/cholmod_threads.hpp"
 #include "test_support.hpp"
 #include "tied_box_fixtures.hpp"
 
 #include <gtest/gtest.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <thread>
 
 namespace neurosim::interaction {
 namespace {
@@ -136,6 +144,69 @@ TEST(interaction_tier_worker, StaleAndMalformedLoadsAreSkippedOrRefused) {
   EXPECT_NE(
       testing::message_of([&] { TierWorker t(std::move(none), false, 8); }).find("body 0 null"),
       std::string::npos);
+}
+
+int threads_of_this_process() {
+  int n = 0;
+  for ([[maybe_unused]] const auto& task : std::filesystem::directory_iterator("/proc/self/task"))
+    ++n;
+  return n;
+}
+
+// With OMP_NUM_THREADS=1 the worker thread's Newton updates (CHOLMOD factorizations of the
+// tangent) start no OpenMP thread: the process gains the worker's own thread and nothing more.
+// The same update on a thread without the call does start some (the check is not vacuous).
+TEST(interaction_tier_worker, WorkerStartsNoCholmodThreadsWhenOmpNumThreadsIsOne) {
+  const char* env = std::getenv("OMP_NUM_THREADS");
+  if (!env || std::string(env) != "1") GTEST_SKIP() << "needs OMP_NUM_THREADS=1 (deploy/test sets it)";
+  fem::cholmod_threads_follow_omp_num_threads();  // this thread's own factorizations start none
+  // A box of ~7k dofs: large enough for CHOLMOD's parallel regions.
+  mesh::MeshingOptions o;
+  o.cell_size_m = 0.0033;
+  o.seed = 1;
+  const mesh::TetMesh host = mesh::generate_box({0, 0, 0}, {0.04, 0.04, 0.04}, o).mesh;
+  std::vector<int> fixed;
+  for (std::size_t v = 0; v < host.num_vertices(); ++v)
+    if (host.vertices()[v].z() < 1e-9) fixed.push_back(static_cast<int>(v));
+  const fem::Material material{3000.0, 0.45, "host"};
+  CoupledBody body(0, host, material, fixed);
+  body.finalize();
+  auto equilibrium = [&] {
+    TierEquilibriumDefinition d;
+    d.body = &body;
+    d.host_material = material;
+    d.host_fixed_nodes = fixed;
+    d.tier = fem::Tier::kNonlinear;
+    return std::make_unique<TierEquilibrium>(d);
+  };
+  const TierLoad a = applied(body);
+  const int before = threads_of_this_process();
+  {
+    std::vector<std::unique_ptr<TierEquilibrium>> bodies;
+    bodies.push_back(equilibrium());
+    TierWorker w(std::move(bodies), /*threaded=*/true, 8);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    while (w.linearization(0).count == 0 && std::chrono::steady_clock::now() < deadline) {
+      w.post({step(a, 0.0, w.linearization(0))});
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      w.begin_step();
+    }
+    ASSERT_GT(w.linearization(0).count, 0u) << "the worker made no update in 120 s";
+    EXPECT_EQ(threads_of_this_process(), before + 1) << "the tier worker started threads";
+  }
+  int other_before = 0, other_after = 0;
+  std::thread other([&] {
+    other_before = threads_of_this_process();
+    auto eq = equilibrium();
+    TierLinearization out;
+    TierLoad l = a;
+    eq->update(l, out);
+    other_after = threads_of_this_process();
+  });
+  other.join();
+  EXPECT_GT(other_after, other_before)
+      << "a thread without the call started none either: this CHOLMOD has no OpenMP regions "
+         "this box enters, the check above proves nothing";
 }
 
 }  // namespace

@@ -56,6 +56,9 @@ export class StatusPanel {
       rows.push(['effects', s.effects || '–']);
       rows.push(['uptime', fmt(s.uptime_s, 0, 's')]);
       rows.push(['deadline misses', String(s.deadline_misses)]);
+      // Contact nodes a step needed before the column worker had solved them (each took the
+      // step's fallback), summed since the server started: 0 while the worker keeps ahead.
+      if (s.columns_not_ready !== undefined) rows.push(['columns not ready', String(s.columns_not_ready)]);
     }
     if (status) rows.push(['observers', `${status.bridge.clients} of ${status.bridge.max_clients}`]);
     this.server.replaceChildren(...rows.flatMap(([k, v, cls]) => [element('dt', k), element('dd', v, cls)]));
