@@ -28,7 +28,8 @@
 // model_error = |f - f_nl| / |f_nl| with f_nl the NONLINEAR tier's force on the same mesh, element
 // and press (the tier's error; 0 for NONLINEAR, which is the model). total_error =
 // discretization_error + model_error (the two parts may also cancel).
-// The cube is also compared with CalculiX (NLGEOM, neo-Hookean, C3D4 on the same mesh): the
+// The cube is also compared with CalculiX (NLGEOM, neo-Hookean, C3D4 on the same mesh, against
+// the tiers with linear-tet, the element C3D4 is, whatever --element says): the
 // tool's footprint prescribed to the press depth, DIR/calculix.csv.
 //
 // Writes DIR/accuracy.csv (the table printed), DIR/converged.csv, DIR/calculix.csv,
@@ -346,7 +347,11 @@ std::vector<CalculixRow> calculix_rows(const SceneCase& sc, const std::vector<Pr
         footprint.push_back(static_cast<int>(v));
     }
     if (footprint.empty()) throw std::runtime_error(res.label + ": no node under the footprint");
-    neurosim::fem::MaterialMap mats = neurosim::fem::MaterialMap::uniform(host.material);
+    // C3D4 is linear-tet: both sides use it, whatever element the scene names (run_calculix
+    // refuses the others).
+    neurosim::fem::Material linear = host.material;
+    linear.element = neurosim::fem::Element::kLinearTet;
+    const neurosim::fem::MaterialMap mats = neurosim::fem::MaterialMap::uniform(linear);
     for (const auto& press : presses) {
       if (press.lateral) continue;
       neurosim::fem::CalculixLoads loads;

@@ -43,6 +43,17 @@ void write_calculix_input(const std::filesystem::path& inp_file, const mesh::Tet
                           const MaterialMap& materials, const CalculixLoads& loads) {
   const std::size_t n = mesh.num_vertices();
   materials.validate(mesh.num_tets());
+  if (materials.element() != Element::kLinearTet) {
+    // The deck is C3D4, which is linear-tet: another element would be compared with an answer
+    // that is not its own.
+    const Material& m = materials.materials.front();
+    throw std::invalid_argument(std::string("write_calculix_input: material '") + m.name +
+                                "' asks for element '" + element_name(m.element) +
+                                "'; the CalculiX deck is C3D4, which is 'linear-tet' (no CalculiX "
+                                "element is written for '" + element_name(m.element) +
+                                "'): set the materials' element to linear-tet to compare with "
+                                "C3D4");
+  }
   for (int v : loads.fixed_nodes) {
     check_node(v, n, "fixed");
   }

@@ -42,7 +42,10 @@ struct CalculixLoads {
 // *BOUNDARY, *CLOAD, *NODE PRINT U (all nodes) and RF (fixed + prescribed nodes, set NRF).
 // prescribed_sets[k] becomes node set NPk and one *BOUNDARY line "NPk, a, a, value" per
 // prescribed component a (1 = x, 2 = y, 3 = z); ccx leaves the other components free.
-// Numbers are written with 17 significant digits. Throws on non-finite or out-of-range input.
+// Numbers are written with 17 significant digits. Throws on non-finite or out-of-range input,
+// and (std::invalid_argument, naming the material and the element) for materials whose element
+// is not linear-tet: C3D4 is linear-tet's element, and no deck is written for anp-tet or
+// smoothed-tet (their external reference is C3D10 on the same mesh: tests/server/fem).
 void write_calculix_input(const std::filesystem::path& inp_file, const mesh::TetMesh& mesh,
                           const MaterialMap& materials, const CalculixLoads& loads);
 
@@ -68,7 +71,8 @@ struct CalculixRunOptions {
 };
 
 // Writes <work_dir>/<job>.inp, runs `ccx -i <job>` with cwd work_dir (bounded by timeout_s,
-// one thread), reads <job>.dat. Throws std::runtime_error with the tail of ccx's log on failure,
+// one thread), reads <job>.dat. Refuses what write_calculix_input refuses (before running ccx).
+// Throws std::runtime_error with the tail of ccx's log on failure,
 // including an NLGEOM step that stopped before its end (time < 1).
 CalculixResult run_calculix(const std::filesystem::path& work_dir, const std::string& job,
                             const mesh::TetMesh& mesh, const MaterialMap& materials,

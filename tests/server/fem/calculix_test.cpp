@@ -146,6 +146,46 @@ TEST(FemCalculix, DeckWriterAndDatReader) {
   std::filesystem::remove_all(dir);
 }
 
+// The deck is C3D4, linear-tet's element: materials asking for another element are refused by
+// name (the deck, and run_calculix before ccx runs), not silently solved with C3D4.
+TEST(FemCalculix, RefusesElementsOtherThanLinearTet) {
+  const auto m = box_mesh(BoxSpec{1, 1, 1});
+  const auto dir = neurosim::testing::temp_dir("ccx_element");
+  CalculixLoads loads;
+  loads.fixed_nodes = {0, 1, 2, 3};
+  loads.forces_n = Eigen::VectorXd::Zero(3 * m.num_vertices());
+  loads.forces_n[3 * 7 + 2] = -1.0;
+  for (Element element : {Element::kAnpTet, Element::kSmoothedTet}) {
+    Material mat{1e6, 0.3, "tissue"};
+    mat.element = element;
+    const std::string name = element_name(element);
+    for (int run = 0; run < 2; ++run) {
+      try {
+        if (run == 0) {
+          write_calculix_input(dir / "e.inp", m, MaterialMap::uniform(mat), loads);
+        } else {
+          CalculixRunOptions o;
+          o.executable = "/nonexistent/ccx";  // refused before ccx would run
+          run_calculix(dir, "e", m, MaterialMap::uniform(mat), loads, o);
+        }
+        ADD_FAILURE() << name << " accepted (run " << run << ")";
+      } catch (const std::invalid_argument& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find("material 'tissue' asks for element '" + name + "'"), std::string::npos)
+            << what;
+        EXPECT_NE(what.find("C3D4, which is 'linear-tet'"), std::string::npos) << what;
+      }
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir / "e.inp")) << name;
+  }
+  // linear-tet is written as C3D4.
+  write_calculix_input(dir / "e.inp", m, MaterialMap::uniform({1e6, 0.3, "tissue"}), loads);
+  std::ifstream in(dir / "e.inp");
+  const std::string deck((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(deck.find("*ELEMENT, TYPE=C3D4"), std::string::npos);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(FemCalculix, BeamMatches) {
   const auto m = box_mesh(BoxSpec{20, 2, 2, {0, 0, 0}, {1.0, 0.1, 0.1}, 0.15, 5});
   CalculixLoads loads;
