@@ -164,18 +164,28 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   u = u_;
   int iterations = 0;
   bool converged = true;
-  try {
-    const fem::NewtonIncrement inc = solver_->solve_from(f_, u, newton_);
-    iterations = static_cast<int>(inc.residual_n.size()) - 1;
-    converged = inc.converged;
-  } catch (const std::runtime_error&) {
+  if (qlv_.empty() && f_.isZero(0.0)) {
+    // No force on an elastic body (every tool has left it): its equilibrium is the rest state,
+    // exactly (the body carries no other load and nothing is prescribed). Newton from the last
+    // deformed equilibrium would walk back over several step-limited updates, during which the
+    // step finds its rows on a surface that is no longer there (a tool released deep in the
+    // tissue felt nothing until the tissue closed on its shaft).
+    u.setZero();
+  } else {
     try {
-      const fem::EquilibriumResult r = solver_->solve(f_, newton_);
-      u = r.displacement_m;
-      for (const auto& inc : r.increments) iterations += static_cast<int>(inc.residual_n.size()) - 1;
-    } catch (const std::runtime_error& e) {
-      throw std::runtime_error("TierEquilibrium: " + body_name(*body_) + " in tier " +
-                               fem::tier_name(tier_) + ": " + e.what());
+      const fem::NewtonIncrement inc = solver_->solve_from(f_, u, newton_);
+      iterations = static_cast<int>(inc.residual_n.size()) - 1;
+      converged = inc.converged;
+    } catch (const std::runtime_error&) {
+      try {
+        const fem::EquilibriumResult r = solver_->solve(f_, newton_);
+        u = r.displacement_m;
+        for (const auto& inc : r.increments)
+          iterations += static_cast<int>(inc.residual_n.size()) - 1;
+      } catch (const std::runtime_error& e) {
+        throw std::runtime_error("TierEquilibrium: " + body_name(*body_) + " in tier " +
+                                 fem::tier_name(tier_) + ": " + e.what());
+      }
     }
   }
   if (!u.allFinite()) {

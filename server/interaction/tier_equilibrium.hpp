@@ -99,7 +99,8 @@ class TierEquilibrium {
   // The equilibrium for `load`, warm-started from the previous one (Newton at full load; when
   // that fails, the load path from rest in increments), and its linearization. Throws
   // std::runtime_error (naming the body) when the tier does not converge; `out` and the warm
-  // start are then unchanged. One thread at a time.
+  // start are then unchanged. A load without force on a body that does not relax is the rest
+  // state, exactly (u* = 0, no Newton iteration). One thread at a time.
   void update(const TierLoad& load, TierLinearization& out);
 
   int num_slots() const { return static_cast<int>(slot_node_.size()); }  // contact slots

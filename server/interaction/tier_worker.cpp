@@ -114,7 +114,20 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
   const auto t0 = common::Clock::now();
   for (std::size_t b = 0; b < bodies_.size(); ++b) {
     Relaxation& rx = relax_[b];
-    if (moved) {
+    // The step's forces on this elastic body are all zero (a relaxing body is not at rest
+    // without force: its history holds it).
+    bool released = !bodies_[b]->viscoelastic();
+    for (const mesh::Vec3& f : loads[b].forces_n)
+      released = released && f.cwiseAbs().maxCoeff() == 0.0;
+    if (moved && released) {
+      // Every tool has left the body: its forces are 0 at once (a body without force is at rest,
+      // TierEquilibrium::update), not relaxed towards 0 over several updates, during which the
+      // tissue would stay deformed where no tool holds it and the step would find its rows on
+      // that surface. The relaxation starts again from there.
+      rx.f.setZero();
+      rx.has_previous = false;
+      rx.omega = 1.0;
+    } else if (moved) {
       if (rx.has_previous) {  // Aitken: omega <- -omega r_prev . (r - r_prev) / |r - r_prev|^2
         rx.previous = rx.residual - rx.previous;
         const double den = rx.previous.squaredNorm();

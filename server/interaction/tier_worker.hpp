@@ -17,6 +17,9 @@
 // amplitude. So f' = f + omega (lambda - f) with Aitken's dynamic relaxation factor (as in
 // partitioned fluid-structure coupling, Kuettler & Wall 2008), per body, clamped to
 // [kMinRelaxation, kMaxRelaxation]: the fixed point is the same, it is reached in both cases.
+// A step whose forces on an elastic body are all zero (the tools left it) sets f' = 0 at once and restarts
+// the relaxation: the body is then at rest in one update (TierEquilibrium::update), instead of
+// relaxing towards rest while the step finds its rows on a surface no tool holds any more.
 #pragma once
 
 #include "common/triple_buffer.hpp"
