@@ -112,6 +112,39 @@ TEST(interaction_tier_worker, AitkenReachesTheFixedPointOfADivergingMap) {
   EXPECT_LE((u - ref.u_m).norm(), 1e-9 * ref.u_m.norm());
 }
 
+// The tools leave the body (the step's forces all 0, on the same slots or on none): the next
+// update is the rest state, exactly and without Newton, not a relaxed step towards it; the
+// relaxation then starts again from zero forces (omega = 1: the next load is taken as it is).
+TEST(interaction_tier_worker, ReleasedBodyIsAtRestAfterOneUpdate) {
+  const Case c;
+  for (bool same_slots : {true, false}) {
+    TierWorker w = c.worker();
+    const TierLoad a = applied(*c.body);
+    constexpr double kBeta = -1.5;  // a load Aitken relaxes (omega != 1 after two updates)
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE(w.post({step(a, kBeta, w.linearization(0))}));
+    ASSERT_GT(w.linearization(0).u_m.norm(), 0.0);
+    TierLoad released = step(a, 0.0, w.linearization(0));
+    for (auto& f : released.forces_n) f.setZero();
+    if (!same_slots) {
+      released.slots.clear();
+      released.forces_n.clear();
+    }
+    ASSERT_TRUE(w.post({released}));
+    const TierLinearization& rest = w.linearization(0);
+    EXPECT_EQ(rest.u_m.cwiseAbs().maxCoeff(), 0.0) << same_slots;
+    EXPECT_TRUE(rest.load.slots.empty()) << same_slots;
+    EXPECT_EQ(rest.iterations, 0) << same_slots;
+    EXPECT_TRUE(rest.converged) << same_slots;
+    for (const auto& u0 : rest.offset_m) EXPECT_EQ(u0.norm(), 0.0) << same_slots;
+    // At rest without force: a fixed point, no further update.
+    EXPECT_FALSE(w.post({step(released, 0.0, w.linearization(0))})) << same_slots;
+    // Touched again: the new forces are taken whole (relaxation restarted).
+    ASSERT_TRUE(w.post({step(a, 0.0, w.linearization(0))}));
+    EXPECT_LE(distance(w.linearization(0).load, a.forces_n), 0.0) << same_slots;
+    EXPECT_EQ(w.failures(), 0u);
+  }
+}
+
 TEST(interaction_tier_worker, StaleAndMalformedLoadsAreSkippedOrRefused) {
   const Case c;
   TierWorker w = c.worker();
