@@ -155,6 +155,10 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
                 "thread priorities, ROLE=P,... (roles step, dds, field; P 1..99 SCHED_FIFO, 0 "
                 "normal; default " + opt.threads.priorities_text() + "); refused priorities are logged, "
                 "the server runs anyway");
+  p->add_option("--cache-dir", opt.cache_dir,
+                "disk cache of the hosts' factors and boundary operators, keyed by their "
+                "content: a second start of the same scene reads them instead of factoring "
+                "(default: none)");
   p->add_option("--rt-cpus", rt_cpus,
                 "CPU sets, ROLE=CPUS,... (CPUS: numbers and ranges joined by '+', e.g. "
                 "step=1,dds=0,field=0-1; default: any CPU)");
@@ -238,7 +242,7 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
                 << scene::tier_name(scene_tier) << ")\n";
     auto sim = watch.run("building the simulation of " + opt.scene_path +
                              " (meshes, compliance, inclusion decision)",
-                         [&] { return factory(model); });
+                         [&] { return factory(model, opt); });
     const double build_s = common::seconds_since(t0);
     std::cerr << "neurosim-server: simulation built in " << build_s << " s\n";
     if (g_stop.load()) {

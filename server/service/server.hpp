@@ -49,6 +49,10 @@ struct ServerOptions {
   // The tiers' measured force error against strain (AccuracyTable, written by accuracy_bench);
   // empty: none (SimStatus.expected_force_error -1). A file that is given but unreadable or
   // malformed is an error.
+  // --cache-dir: the disk cache of the hosts' factors and boundary operators
+  // (SimulationOptions::compliance_cache_dir; a second start of the same scene reads them
+  // instead of factoring); empty: none.
+  std::string cache_dir{};
   std::string accuracy_table{};
   // The host meshes' measured discretization error against the converged answer
   // (DiscretizationTable, written by accuracy_bench); empty: none (SimStatus
@@ -124,8 +128,9 @@ class Server {
   std::unique_ptr<Impl> impl_;
 };
 
-using SimulationFactory =
-    std::function<std::unique_ptr<interaction::Simulation>(const scene::Model& model)>;
+// Builds the simulation of a compiled scene; `options` are the server's (cache_dir).
+using SimulationFactory = std::function<std::unique_ptr<interaction::Simulation>(
+    const scene::Model& model, const ServerOptions& options)>;
 
 // The neurosim-server command line:
 //   neurosim-server --scene FILE [--tier linear|corotational|nonlinear] [--duration SECONDS]
@@ -134,6 +139,7 @@ using SimulationFactory =
 //                   [--workspace-margin M] [--log-lines-per-second N]
 //                   [--step-mode event|clock] [--max-step-rate-factor F]
 //                   [--rt-priority step=50,dds=45,field=0] [--rt-cpus step=1,dds=0]
+//                   [--cache-dir DIR]
 // Sets OPENBLAS_NUM_THREADS=1 (unless set), installs SIGINT/SIGTERM handlers, compiles the
 // scene, replaces its effects.tier by --tier if given, builds the simulation with `factory`,
 // serves until a signal or the duration. SIGINT/SIGTERM are honoured in every phase: during the

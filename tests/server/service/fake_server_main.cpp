@@ -4,7 +4,8 @@
 #include "tests/server/service/fake_simulation.hpp"
 
 int main(int argc, char** argv) {
-  return neurosim::service::run_main(argc, argv, [](const neurosim::scene::Model& model) {
+  return neurosim::service::run_main(argc, argv, [](const neurosim::scene::Model& model,
+                                                      const neurosim::service::ServerOptions&) {
     return neurosim::service::testing::make_fake(model);
   });
 }
