@@ -294,6 +294,21 @@ bool outside_closed_surface(const Vec3& p_m, const TriangleSurface& surface) {
   return outside_brute(to_point(p_m), prepare(surface, true));
 }
 
+std::vector<char> outside_closed_surface(const std::vector<Vec3>& points_m,
+                                         const TriangleSurface& surface) {
+  std::vector<char> out(points_m.size(), 1);
+  if (points_m.empty()) return out;
+  const Prepared b = prepare(surface, true);
+  Tree tree(b.tris.cbegin(), b.tris.cend());
+  tree.do_not_accelerate_distance_queries();
+  for (std::size_t i = 0; i < points_m.size(); ++i) {
+    if (!points_m[i].allFinite())
+      throw std::invalid_argument("outside_closed_surface: non-finite point " + std::to_string(i));
+    out[i] = outside_tree(to_point(points_m[i]), b, tree) ? 1 : 0;
+  }
+  return out;
+}
+
 NewBoundary find_new_boundary_bruteforce(const mesh::TetMesh& host,
                                          const TriangleSurface& embedded) {
   const Prepared b = prepare(embedded, true);

@@ -71,4 +71,10 @@ NewBoundary find_new_boundary(const mesh::TetMesh& host, const TriangleSurface& 
 // (throws std::invalid_argument if it does). Uses every triangle (no hierarchy).
 bool outside_closed_surface(const Vec3& p_m, const TriangleSurface& surface);
 
+// The same test for many points through one hierarchy over the surface's triangles (validated
+// closed first): per point 1 when strictly outside, 0 when inside. Throws
+// std::invalid_argument if a point lies on the surface.
+std::vector<char> outside_closed_surface(const std::vector<Vec3>& points_m,
+                                         const TriangleSurface& surface);
+
 }  // namespace neurosim::fusion

@@ -6,6 +6,7 @@
 #include "common/clock.hpp"
 #include "server/fusion/carve.hpp"
 #include "server/fusion/coupling_map.hpp"
+#include "server/fusion/exposure.hpp"
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/triangle_surface.hpp"
 #include "server/interaction/contact_columns.hpp"
@@ -17,6 +18,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -30,6 +32,9 @@ namespace {
 using common::Clock;
 using common::seconds_since;
 
+// An embedded surface node closer than this many host mean edges to the host's surface counts
+// as inside it (see the exposure check in Model::Model).
+constexpr double kExposureToleranceEdges = 0.1;
 
 }  // namespace
 
@@ -238,6 +243,29 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       map = fusion::build_coupling_map(host.mesh.vertices(), boundary, surface);
     } catch (const std::exception& ex) {
       throw std::runtime_error(what + ": " + ex.what());
+    }
+    // Only the host's surface is contactable: an embedded surface outside the host would be
+    // neither carved around nor touched by a tool (no contact rows over it), so a scene with
+    // tools is refused rather than letting the tool pass through it without force. Nodes
+    // within a fraction of the host's mean edge of its surface count as inside (two meshes
+    // meshed separately never share a boundary exactly).
+    if (model.effects.tool_contact && !model.tools.empty()) {
+      fusion::ExposureOptions eo;
+      eo.tolerance_m = kExposureToleranceEdges * host.mesh.mean_edge_length();
+      const fusion::Exposure ex = fusion::embedded_outside_host(host.mesh, emb.mesh, eo);
+      if (ex.nodes_outside > 0) {
+        char buf[320];
+        std::snprintf(buf, sizeof buf,
+                      "%d of its %d surface nodes lie outside host %s (farthest: node %d, "
+                      "%.2f mm outside; tolerance %.2f mm = %.2f x the host's mean edge)",
+                      ex.nodes_outside, ex.surface_nodes, host.id.c_str(), ex.farthest_node,
+                      1e3 * ex.max_distance_m, 1e3 * eo.tolerance_m, kExposureToleranceEdges);
+        throw std::runtime_error(
+            source_ + ": embedded mesh " + emb.id + ": " + buf +
+            "; tool contact with an exposed embedded mesh is not implemented (only the host's "
+            "surface has contact rows): place the embedded mesh inside its host, or remove the "
+            "tools or effects.tool_contact");
+      }
     }
     setup_.fusion_s += seconds_since(t0);
     PendingTie& p = pending[m];

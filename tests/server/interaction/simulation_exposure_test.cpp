@@ -1,0 +1,57 @@
+// The simulation's set-up refuses a scene whose embedded mesh sticks out of its host while a
+// tool touches tissue (its exposed part would have no contact rows); the bundled scenes load.
+#include "server/interaction/simulation.hpp"
+#include "server/scene/compile.hpp"
+#include "server/scene/scene.hpp"
+#include "test_support.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <stdexcept>
+#include <string>
+
+namespace neurosim::interaction {
+namespace {
+
+std::string build_error(const scene::Model& model) {
+  try {
+    (void)build_model(model, SimulationOptions{});
+  } catch (const std::exception& ex) {
+    return ex.what();
+  }
+  return {};
+}
+
+TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefused) {
+  const auto path = neurosim::testing::source_dir() / "scenes" / "cube_cylinder.scene";
+  scene::Scene s = scene::read_scene(path);
+  // The cylinder (r = 15 mm, axis along y) moved up so that it sticks 20 mm out of the cube's
+  // top face (z = 0.1 m): its axis at z = 0.105 m, its top at z = 0.12 m.
+  auto* cyl =
+      s.mutable_meshes(scene::find_mesh(s, "cylinder"))->mutable_generate()->mutable_cylinder();
+  cyl->mutable_base_center_m()->set_z(0.105);
+  const std::string what = build_error(scene::compile(s, path.string()));
+  ASSERT_FALSE(what.empty()) << "an exposed embedded mesh was accepted with a tool";
+  std::printf("refused as expected: %s\n", what.c_str());
+  EXPECT_NE(what.find(path.string()), std::string::npos) << what;
+  EXPECT_NE(what.find("embedded mesh cylinder"), std::string::npos) << what;
+  EXPECT_NE(what.find("outside host cube"), std::string::npos) << what;
+  EXPECT_NE(what.find("not implemented"), std::string::npos) << what;
+
+  // Without tools nothing touches the exposed part: the same geometry builds.
+  s.clear_tools();
+  s.mutable_effects()->set_tool_contact(false);
+  EXPECT_EQ(build_error(scene::compile(s, path.string())), "");
+}
+
+TEST(interaction_simulation_exposure, BundledScenesLoad) {
+  for (const char* name : {"cube_cylinder.scene", "brain_artery.scene", "brain_skull.scene",
+                           "brain_viscoelastic.scene"}) {
+    const auto path = neurosim::testing::source_dir() / "scenes" / name;
+    EXPECT_EQ(build_error(scene::load_model(path)), "") << name;
+  }
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
