@@ -316,20 +316,18 @@ Slide slide(const scene::Model& model, const Vec3& start, const Vec3& heading, d
 // The 2 mm probe slid 40 mm over the bundled brain (triangles about 7 mm, four tip radii) 1 mm and
 // 2 mm below its rest surface, and the cube's 3 mm probe over its top face: the force is never
 // zero (node contact: zero in 94 % of such a slide). |F| / depth varies along the path by at most
-// 2x on the cube (measured 1.7x) and 3.1x on the brain (the target of 2x is not reached): a face
+// 2x on the cube (measured 1.79x) and 4x on the brain (the target of 2x is not reached): a face
 // point is stiffer than a node (its row loads three nodes: 1.5x on the flat block), and on the
 // brain the tip also crosses creases of the surface, where it touches two faces at once while its
-// depth is measured to the closest one, and gyri of varying thickness. The bundled brain is
-// smoothed-tet at nu = 0.49: spread 3.01 at 1 mm (|F|/depth 9.6 .. 28.8 N/m), 2.61 at 2 mm. The
-// same slide on the same mesh (the scene's element and nu edited): smoothed-tet nu = 0.45 3.01 /
-// 2.82, anp-tet 0.49 2.54 / 2.37, linear-tet 0.49 2.92 / 2.39, linear-tet 0.45 2.63 / 2.43. Not
-// nu but smoothed-tet's softer deviatoric energy under one node than under a face point: its
-// node-smoothed share (SmoothedStrain::kNodeShare) 0 / 0.25 / 0.5 gives 2.77 / 2.84 / 3.01 at
-// 1 mm, and anp-tet (the same nodal volumetric part, the stiffer per-element shear) 2.54. Every
-// smoothed-tet value is nearer the continuum (Hertz for the 2 mm tip 1 mm into a half-space,
-// E = 3 kPa, nu = 0.49: 7.4 N/m) than linear-tet's 31 .. 92 N/m at nu = 0.49: the nodes came
-// down towards it more than the faces. Hence 3.1 (the spread is the contact's point load on one
-// triangle of a 7 mm mesh, not the element's error; docs/accuracy.md).
+// depth is measured to the closest one, and gyri of varying thickness. With the rows on the rest
+// surface (the LINEAR default) the bundled brain (smoothed-tet, nu = 0.49) gives 7.2 .. 28.5 N/m
+// at 1 mm (spread 3.93) and 8.9 .. 28.5 N/m at 2 mm (3.20); its softest point is the continuum's
+// value (Hertz for the 2 mm tip 1 mm into a half-space, E = 3 kPa, nu = 0.49: 7.4 N/m) and the
+// stiff end is a face point of a 7 mm triangle. The rows iterated on the deformed surface
+// (contact_geometry_iterations 6) gave 9.6 .. 28.8 N/m (3.01) and 11.0 .. 28.6 (2.61): the same
+// stiff end, a softest point further from the continuum. The spread is the contact's point load on
+// one triangle of a 7 mm mesh, not the element's error (docs/accuracy.md); it shrinks with the
+// cells (bench/RESULTS.md, the slide on finer brains).
 TEST(interaction_contact_step, SlideOverTheSurfaceNeverLosesTheTissue) {
   struct Case {
     const char* scene;
@@ -350,7 +348,7 @@ TEST(interaction_contact_step, SlideOverTheSurfaceNeverLosesTheTissue) {
                 *std::min_element(s.force_per_depth.begin(), s.force_per_depth.end()),
                 *std::max_element(s.force_per_depth.begin(), s.force_per_depth.end()), s.spread);
     EXPECT_GT(s.min_force_n, 0.0) << k.scene;
-    EXPECT_LE(s.spread, brain ? 3.1 : 2.0) << k.scene << " " << k.depth_m;
+    EXPECT_LE(s.spread, brain ? 4.0 : 2.0) << k.scene << " " << k.depth_m;
   }
 }
 
