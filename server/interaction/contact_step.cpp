@@ -571,12 +571,21 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     if (f == TriangleFeature::kFace) {
       n = h.face_normal;
     } else {
-      // A node or an edge: radial from the part's centre when the centre is in front of the
-      // surface there (within 60 degrees of its normal); else (the centre beside the point, on
-      // the surface or behind it) along the mean normal of the triangles that report it.
+      // A node or an edge: radial from the part's centre (the point against a rigid sphere or
+      // capsule) when the centre is in front of the surface there; else (the centre beside the
+      // point, on the surface or behind it) along the mean normal of the triangles that report
+      // it. LINEAR: radial up to 90 degrees from the mean normal. With 60 a point 60-90 degrees
+      // off the part's axis took the half-space depth (radius - n.d), far more than the
+      // sphere's, and a flat press doubled its force as it passed half the tip radius (2 mm tip
+      // on 0.5 mm cells: 6.27 mN at 0.9 mm, 12.69 mN at 1.0 mm, 2.15x the rigid sphere's answer,
+      // Sneddon). The multirate tiers keep 60: their depth adds n . u0 of an equilibrium that
+      // may have carried the point far along the surface, which a nearly tangential normal
+      // turns into a depth (measured with 90: a 10 mm vertex press cycle in NONLINEAR reached
+      // 101.6 N against the block's 50.5 N bound, stability_test).
       const Vec3 mean = normal_sum.normalized();
+      const double radial_from = tier_ ? 0.5 * dn : 0.0;  // cos 60 or cos 90 degrees
       n = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
-                  d.dot(mean) > 0.5 * dn
+                  d.dot(mean) > radial_from
               ? Vec3(d / dn)
               : mean;
     }
