@@ -113,7 +113,12 @@ inline void scripted_path_and_late_joiner(const Setup& setup) {
       interaction::Mat3 K;
       for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) K(i, j) = r.K[3 * i + j];
-      EXPECT_LE((K - c.stiffness_n_per_m).norm(), 1e-9 * c.stiffness_n_per_m.norm()) << "seq " << r.tool_sequence;
+      // K goes through the inverse of the active rows' W, where a face row and the node rows of
+      // its vertices are nearly dependent (kept definite by the 1e-8 row compliance): the
+      // columns' last bits (the server's column worker groups its block solves otherwise than
+      // the in-process solver, 1e-16 relative) come out up to 1/eps larger in K. Measured at
+      // the first touch of this path: 1.4e-8 relative (the force agrees to 1e-9); 1e-6 leaves 70x.
+      EXPECT_LE((K - c.stiffness_n_per_m).norm(), 1e-6 * c.stiffness_n_per_m.norm()) << "seq " << r.tool_sequence;
       const interaction::Vec3 nrm(r.normal[0], r.normal[1], r.normal[2]);
       EXPECT_LE((nrm - c.normal).norm(), 1e-9) << "seq " << r.tool_sequence;
       const interaction::Vec3 x0(r.x0[0], r.x0[1], r.x0[2]);
