@@ -1,5 +1,7 @@
 #include "server/fem/factor_cache.hpp"
 
+#include "common/cache_file.hpp"
+
 #include <cholmod.h>
 #include <unistd.h>
 
@@ -213,13 +215,7 @@ void save_factor(const std::string& file, std::uint64_t key, const cholmod_facto
   h.ordering = f.ordering;
   h.is_monotonic = f.is_monotonic;
   h.lnz = lnz;
-  std::error_code ec;
-  std::filesystem::create_directories(std::filesystem::path(file).parent_path(), ec);
-  // A name of its own per process: two servers filling the same cache never share a temporary.
-  const std::string tmp = file + ".tmp." + std::to_string(::getpid());
-  bool ok = false;
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+  common::write_cache_file(file, "StaticSolver", "factor cache", [&](std::ostream& out) {
     const std::uint64_t sum = checksum(h, f);
     out.write(kMagic, sizeof kMagic);
     out.write(reinterpret_cast<const char*>(&key), sizeof key);
@@ -227,21 +223,7 @@ void save_factor(const std::string& file, std::uint64_t key, const cholmod_facto
     out.write(reinterpret_cast<const char*>(&h), sizeof h);
     for (const Array& a : arrays_of(f))
       out.write(static_cast<const char*>(a.data), static_cast<std::streamsize>(a.count * a.size));
-    out.flush();
-    ok = static_cast<bool>(out);
-  }
-  if (!ok) {  // disk full, read-only folder: said once, the session goes on without the cache
-    std::cerr << "StaticSolver: could not write factor cache " << file << ": "
-              << std::strerror(errno) << " (continuing without it)\n";
-    std::filesystem::remove(tmp, ec);
-    return;
-  }
-  std::filesystem::rename(tmp, file, ec);
-  if (ec) {
-    std::cerr << "StaticSolver: could not store factor cache " << file << ": " << ec.message()
-              << " (continuing without it)\n";
-    std::filesystem::remove(tmp, ec);
-  }
+  });
 }
 
 }  // namespace neurosim::fem

@@ -1,5 +1,7 @@
 #include "server/interaction/boundary_cache.hpp"
 
+#include "common/cache_file.hpp"
+
 #include <unistd.h>
 
 #include <cerrno>
@@ -83,13 +85,7 @@ bool load_boundary_operator(const std::string& file, std::uint64_t key, int m3_e
 
 void save_boundary_operator(const std::string& file, std::uint64_t key,
                             const BoundaryOperator& op) {
-  std::error_code ec;
-  std::filesystem::create_directories(std::filesystem::path(file).parent_path(), ec);
-  // A name of its own per process: two servers filling the same cache never share a temporary.
-  const std::string tmp = file + ".tmp." + std::to_string(::getpid());
-  bool ok = false;
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+  common::write_cache_file(file, "CoupledBody", "compliance cache", [&](std::ostream& out) {
     const std::int32_t m3 = static_cast<std::int32_t>(op.l_bb.rows()),
                        s3 = static_cast<std::int32_t>(op.l_sb.rows());
     const std::uint64_t sum = payload_checksum(op);
@@ -101,21 +97,7 @@ void save_boundary_operator(const std::string& file, std::uint64_t key,
     for (const Eigen::MatrixXd* mat : {&op.l_bb, &op.l_sb, &op.k_add, &op.g})
       out.write(reinterpret_cast<const char*>(mat->data()),
                 static_cast<std::streamsize>(mat->size() * sizeof(double)));
-    out.flush();
-    ok = static_cast<bool>(out);
-  }
-  if (!ok) {  // disk full, read-only folder: said once, the session goes on without the cache
-    std::cerr << "CoupledBody: could not write compliance cache " << file << ": "
-              << std::strerror(errno) << " (continuing without it)\n";
-    std::filesystem::remove(tmp, ec);
-    return;
-  }
-  std::filesystem::rename(tmp, file, ec);
-  if (ec) {
-    std::cerr << "CoupledBody: could not store compliance cache " << file << ": " << ec.message()
-              << " (continuing without it)\n";
-    std::filesystem::remove(tmp, ec);
-  }
+  });
 }
 
 }  // namespace neurosim::interaction

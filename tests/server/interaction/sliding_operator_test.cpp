@@ -4,6 +4,7 @@
 // with a message naming it.
 #include "server/interaction/sliding_operator.hpp"
 
+#include "fixed_base_box.hpp"
 #include "interaction_fixtures.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/mesh/generate.hpp"
@@ -92,13 +93,9 @@ TEST(interaction_sliding_operator, ComplianceEqualsIndependentCoupledSolvesWithA
 // A box without ties: W_A = J_A K_ff^-1 J_A^T from the host's own solver; rows with a node on
 // the fixed face lose those dofs.
 TEST(interaction_sliding_operator, ComplianceWithoutTieIsTheHostCompliance) {
-  mesh::MeshingOptions o;
-  o.cell_size_m = 0.01;
-  o.seed = 1;
-  const mesh::TetMesh box = mesh::generate_box({0, 0, 0}, {0.04, 0.04, 0.04}, o).mesh;
-  std::vector<int> fixed;
-  for (std::size_t v = 0; v < box.num_vertices(); ++v)
-    if (box.vertices()[v].z() < 1e-9) fixed.push_back(static_cast<int>(v));
+  const fixtures::FixedBaseBox base = fixtures::fixed_base_box(0.01);
+  const mesh::TetMesh& box = base.mesh;
+  const std::vector<int>& fixed = base.fixed;
   fem::Material m;
   m.youngs_modulus_pa = 3000.0;
   m.poisson_ratio = 0.45;
@@ -188,13 +185,9 @@ TEST(interaction_sliding_operator, BadRowsAreRefusedNamingTheRow) {
 }
 
 TEST(interaction_sliding_operator, BodyAndOperatorRefuseBadRows) {
-  mesh::MeshingOptions o;
-  o.cell_size_m = 0.02;
-  o.seed = 1;
-  const mesh::TetMesh box = mesh::generate_box({0, 0, 0}, {0.04, 0.04, 0.04}, o).mesh;
-  std::vector<int> fixed;
-  for (std::size_t v = 0; v < box.num_vertices(); ++v)
-    if (box.vertices()[v].z() < 1e-9) fixed.push_back(static_cast<int>(v));
+  const fixtures::FixedBaseBox base = fixtures::fixed_base_box(0.02);
+  const mesh::TetMesh& box = base.mesh;
+  const std::vector<int>& fixed = base.fixed;
   fem::Material m;
   m.youngs_modulus_pa = 3000.0;
   m.poisson_ratio = 0.45;

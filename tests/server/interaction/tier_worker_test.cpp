@@ -9,6 +9,7 @@
 
 #include "server/fem/cholmod_threads.hpp"
 #include "test_support.hpp"
+#include "fixed_base_box.hpp"
 #include "tied_box_fixtures.hpp"
 
 #include <gtest/gtest.h>
@@ -194,13 +195,9 @@ TEST(interaction_tier_worker, WorkerStartsNoCholmodThreadsWhenOmpNumThreadsIsOne
   if (!env || std::string(env) != "1") GTEST_SKIP() << "needs OMP_NUM_THREADS=1 (deploy/test sets it)";
   fem::cholmod_threads_follow_omp_num_threads();  // this thread's own factorizations start none
   // A box of ~7k dofs: large enough for CHOLMOD's parallel regions.
-  mesh::MeshingOptions o;
-  o.cell_size_m = 0.0033;
-  o.seed = 1;
-  const mesh::TetMesh host = mesh::generate_box({0, 0, 0}, {0.04, 0.04, 0.04}, o).mesh;
-  std::vector<int> fixed;
-  for (std::size_t v = 0; v < host.num_vertices(); ++v)
-    if (host.vertices()[v].z() < 1e-9) fixed.push_back(static_cast<int>(v));
+  const fixtures::FixedBaseBox box = fixtures::fixed_base_box(0.0033);
+  const mesh::TetMesh& host = box.mesh;
+  const std::vector<int>& fixed = box.fixed;
   const fem::Material material{3000.0, 0.45, "host"};
   CoupledBody body(0, host, material, fixed);
   body.finalize();
