@@ -5,8 +5,11 @@
 //   setup_cached_s: the same build again, the host's factor (fem/factor_cache) and the boundary
 //   operator read from that disk cache (files just written: from the page cache, as on a
 //   second start soon after the first; the set-up's parts are printed on stderr without --csv);
-// - rss_mb: the process's peak resident memory after both (getrusage ru_maxrss: sizes should be
-//   given from coarse to fine, so that each row's peak is its own);
+// - rss_mb: the peak resident memory of a cached start: from the cached build through the slide
+//   and the fields (VmHWM reset after the cold build was freed, /proc/self/clear_refs; the whole
+//   process's peak where that is refused); on stderr without --csv also the cold start's peak and
+//   the resident memory after each stage, the host factor's size and the column cache's nodes,
+//   bytes per node, bound and evictions;
 // - step_p50/p99/max_us: the contact step (one probe, LINEAR tier, the step's own thread) along a
 //   10 s slide at 20 mm/s over fresh brain surface, 1000 steps per second of the slide paced by
 //   the clock (as the server steps): the tip 2 mm deep under the right lateral surface, sweeping
@@ -39,6 +42,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <limits>
 #include <map>
@@ -70,10 +74,23 @@ fs::path scene_at(double cell_mm, const fs::path& dir) {
   return scene;
 }
 
-double peak_rss_mb() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return static_cast<double>(u.ru_maxrss) / 1024.0;
+// VmRSS / VmHWM of /proc/self/status, unit MB (-1 if unreadable).
+double status_mb(const char* field) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  const std::string key = std::string(field) + ":";
+  while (std::getline(in, line))
+    if (line.compare(0, key.size(), key) == 0) return std::stod(line.substr(key.size())) / 1024.0;
+  return -1.0;
+}
+double rss_mb() { return status_mb("VmRSS"); }
+double peak_rss_mb() { return status_mb("VmHWM"); }
+// The peak so far forgotten (Linux: clear_refs 5 resets VmHWM to the current RSS); false if not.
+bool reset_peak_rss() {
+  std::ofstream out("/proc/self/clear_refs");
+  out << "5";
+  out.flush();
+  return static_cast<bool>(out);
 }
 
 }  // namespace
@@ -112,9 +129,14 @@ int main(int argc, char** argv) {
       auto cold = ni::Simulation::build(model, options);
       const double cold_s = neurosim::common::seconds_since(t0);
       const ni::SetupStats cold_setup = cold->setup_stats();
+      const double cold_peak_mb = peak_rss_mb();
       cold.reset();
+      const double after_cold_mb = rss_mb();
+      // From here the peak of a cached start: the process as a server started with the cache.
+      const bool peak_reset = reset_peak_rss();
       t0 = Clock::now();
       auto sim = ni::Simulation::build(model, options);
+      const double after_cached_mb = rss_mb();
       const double cached_s = neurosim::common::seconds_since(t0);
       const ni::SetupStats cached_setup = sim->setup_stats();
       fs::remove_all(cache);
@@ -144,6 +166,7 @@ int main(int argc, char** argv) {
       times.reserve(steps);
       long not_ready = 0;
       int steps_not_ready = 0;
+      double first_reach_mb = -1.0;
       auto next = Clock::now();
       bool started = false;
       for (int k = 0; k < steps; ++k) {
@@ -163,6 +186,7 @@ int main(int argc, char** argv) {
           sim->step(one, contacts, stats);
           if (!sim->wait_columns_ready(600.0))
             throw std::runtime_error("the column worker did not finish the first pose's reach");
+          first_reach_mb = rss_mb();
           next = Clock::now();
         }
         started = true;
@@ -175,6 +199,8 @@ int main(int argc, char** argv) {
         not_ready += missed;
         steps_not_ready += missed > 0;
       }
+      const double after_slide_mb = rss_mb();
+      const auto columns = sim->column_cache(host);
       Eigen::VectorXd u;
       double field_s = 0.0;
       for (int k = 0; k < 5; ++k) {
@@ -182,10 +208,11 @@ int main(int argc, char** argv) {
         sim->displacements(host, u);
         field_s += neurosim::common::seconds_since(tf);
       }
+      field_s /= 5.0;
       const auto pc = neurosim::common::percentiles(times);
       std::printf("%g,%zu,%zu,%.2f,%.2f,%.0f,%.1f,%.1f,%.1f,%ld,%.1f,nan\n", cell, mesh.num_vertices(),
                   mesh.num_tets(), cold_s, cached_s, peak_rss_mb(), pc.p50, pc.p99, pc.max,
-                  not_ready, 5.0 / field_s);
+                  not_ready, 1.0 / field_s);
       std::fflush(stdout);
       if (!csv) {
         for (const auto* st : {&cold_setup, &cached_setup})
@@ -193,7 +220,18 @@ int main(int argc, char** argv) {
                     << ": meshes " << st->load_meshes_s << " s, factor " << st->factor_s << " s, fusion "
                     << st->fusion_s << " s, condense " << st->condense_s << " s, boundary " << st->boundary_s
                     << " s, operator " << st->operator_s << " s, columns " << st->columns_s << " s, total "
-                    << st->total_s << " s, cache hits " << st->cache_hits << " (factor " << st->factor_cache_hits << ")\n";
+                    << st->total_s << " s, cache hits " << st->cache_hits << " (factor " << st->factor_cache_hits
+                    << "), host factor " << st->factor_bytes / 1e6 << " MB\n";
+      }
+      if (!csv) {
+        std::cerr << "scale_bench: cell " << cell << " mm, memory (MB): cold start peak " << cold_peak_mb
+                  << ", after the cold one freed " << after_cold_mb << ", after the cached start "
+                  << after_cached_mb << ", after the first pose's reach " << first_reach_mb
+                  << ", after the slide " << after_slide_mb << ", after the fields " << rss_mb()
+                  << ", peak since the cached start " << peak_rss_mb()
+                  << (peak_reset ? "" : " (peak not reset: the whole process's)") << "; column cache "
+                  << columns.ready_slots << " nodes x " << columns.bytes_per_slot / 1e6 << " MB, bound "
+                  << columns.capacity_slots << " nodes, evicted " << columns.evicted << "\n";
       }
       if (!csv)
         std::cerr << "scale_bench: cell " << cell << " mm, column solves " << column_solves << ": "

@@ -34,6 +34,8 @@ ColumnWorker::ColumnWorker(std::vector<ColumnWorkerBody> bodies, const std::vect
       throw std::invalid_argument("ColumnWorker: a body without rest positions or cache");
   lookahead_m_ = options_.max_tool_speed_m_per_s * options_.horizon_s;
   workspaces_.resize(bodies_.size());
+  last_reach_.resize(bodies_.size());
+  for (std::size_t b = 0; b < bodies_.size(); ++b) last_reach_[b].assign(bodies_[b].rest_m->size(), 0);
   thread_ = std::thread([this] { run(); });
 }
 
@@ -66,15 +68,21 @@ bool ColumnWorker::wanted(const Poses& poses, int body, std::size_t most, std::v
   // (distance beyond the part's surface, slot) of every slot within reach that is not ready.
   std::vector<std::pair<double, int>>& near = near_;
   near.clear();
+  const bool bounded = b.capacity_slots > 0;
+  const std::uint64_t scan = ++scan_;
   for (int s = 0; s < static_cast<int>(rest.size()); ++s) {
-    if (b.columns->has(s)) continue;
+    const bool ready = b.columns->has(s);
+    if (ready && !bounded) continue;
     double best = std::numeric_limits<double>::infinity();
     for (int k = 0; k < poses.count; ++k) {
       const Part& p = poses.parts[k];
       const double d = (rest[s] - closest_on_segment(rest[s], p.p0, p.p1)).norm() - p.radius_m;
       best = std::min(best, d);
     }
-    if (best <= lookahead_m_ + options_.idle_slack_m + b.behind_reach_m) near.emplace_back(best, s);
+    if (best <= lookahead_m_ + options_.idle_slack_m + b.behind_reach_m) {
+      last_reach_[body][s] = scan;
+      if (!ready) near.emplace_back(best, s);
+    }
   }
   if (near.empty()) return false;
   const std::size_t n = std::min(most, near.size());
@@ -82,6 +90,36 @@ bool ColumnWorker::wanted(const Poses& poses, int body, std::size_t most, std::v
   out.clear();
   for (std::size_t k = 0; k < n; ++k) out.push_back(near[k].second);
   return true;
+}
+
+// A bounded body: room for at most `chunk` more slots. When the ready slots and a block would
+// pass the bound, the ready slots outside the last scan's reach are proposed for eviction, least
+// recently within reach first (the step grants those it does not hold, reclaim() frees them).
+std::size_t ColumnWorker::room(int body, std::size_t chunk) {
+  ColumnWorkerBody& b = bodies_[body];
+  b.columns->reclaim();
+  stuck_ = false;
+  if (b.capacity_slots == 0) return chunk;
+  const std::size_t ready = b.columns->size();
+  if (ready + chunk > b.capacity_slots) {
+    old_.clear();
+    const auto& last = last_reach_[body];
+    for (int s = 0; s < static_cast<int>(last.size()); ++s)
+      if (b.columns->has(s) && last[s] != scan_) old_.emplace_back(last[s], s);
+    const std::size_t want = std::min<std::size_t>(
+        {ready + chunk - b.capacity_slots, old_.size(), ContactColumns::kMaxVictims});
+    if (want > 0) {
+      std::partial_sort(old_.begin(), old_.begin() + static_cast<std::ptrdiff_t>(want), old_.end());
+      victims_.clear();
+      for (std::size_t k = 0; k < want; ++k) victims_.push_back(old_[k].second);
+      if (b.columns->propose_eviction(victims_))
+        proposed_.fetch_add(want, std::memory_order_acq_rel);
+    }
+  }
+  if (ready < b.capacity_slots) return std::min(chunk, b.capacity_slots - ready);
+  // Full: an eviction pending (or just proposed) frees room soon; none possible: stuck.
+  stuck_ = old_.empty();
+  return 0;
 }
 
 // Whether every part of `now` lies within `slack` of the same part of `then` (then each point a
@@ -126,9 +164,17 @@ void ColumnWorker::run() {
       std::this_thread::sleep_for(idle);
       continue;
     }
+    bool waiting = false;  // a bounded body is full: the step's grant or the tool's move awaited
     for (int b = 0; b < static_cast<int>(bodies_.size()) && poses.count > 0; ++b) {
       if (stop_.load(std::memory_order_acquire)) return;
       if (!wanted(poses, b, chunk, slots)) continue;
+      const std::size_t n_room = room(b, slots.size());
+      if (n_room == 0) {
+        if (stuck_) capacity_full_.fetch_add(1, std::memory_order_acq_rel);
+        waiting = true;
+        continue;
+      }
+      if (slots.size() > n_room) slots.resize(n_room);
       try {
         const int n = bodies_[b].columns->ensure(slots, workspaces_[static_cast<std::size_t>(b)]);
         solved_.fetch_add(static_cast<std::uint64_t>(n), std::memory_order_acq_rel);
@@ -140,6 +186,14 @@ void ColumnWorker::run() {
       }
       worked = true;
       break;  // the newest poses first, then this body again
+    }
+    if (!worked && waiting) {
+      // Full: look again soon (the step grants at its next start; the tool may move on). With
+      // nothing to evict the worker has done what it can for these poses (wait_ready).
+      idle_valid = false;
+      if (stuck_) idle_at_.store(poses.sequence, std::memory_order_release);
+      std::this_thread::sleep_for(idle);
+      continue;
     }
     idle_valid = !worked;
     if (!worked) {

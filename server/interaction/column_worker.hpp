@@ -51,6 +51,12 @@ struct ColumnWorkerBody {
   const std::vector<mesh::Vec3>* rest_m{nullptr};  // per contact slot, unit m
   ContactColumns* columns{nullptr};
   double behind_reach_m{0.0};  // how far behind the surface a part still pushes it, unit m
+  // At most this many slots ready at once (0: no bound). Before a block solve that would pass
+  // it, the worker proposes the least recently reached ready slots for eviction (never one
+  // within reach of the newest poses; the step keeps those it holds, contact_columns.hpp); with
+  // nothing left to evict it solves no more (the rest of the reach takes the step's fallback).
+  // The bound may be passed by one block until the step grants.
+  std::size_t capacity_slots{0};
 };
 
 class ColumnWorker {
@@ -69,8 +75,8 @@ class ColumnWorker {
   void post(const std::vector<ToolPose>& poses);
   // Columns this worker solved so far (any thread).
   std::uint64_t columns_solved() const { return solved_.load(std::memory_order_acquire); }
-  // Tests and benchmarks: true once every slot within reach of the newest posted poses is ready
-  // (waits at most timeout_s, unit s).
+  // Tests and benchmarks: true once every slot within reach of the newest posted poses is ready,
+  // or a bounded cache is full of slots within reach (waits at most timeout_s, unit s).
   bool wait_ready(double timeout_s) const;
   // Tests and benchmarks: a paused worker starts no solve (one under way finishes).
   void set_paused(bool paused) { paused_.store(paused, std::memory_order_release); }
@@ -78,6 +84,10 @@ class ColumnWorker {
   bool failed() const { return failed_.load(std::memory_order_acquire); }
   // Reach beyond a part's radius, unit m (max_tool_speed_m_per_s x horizon_s).
   double lookahead_m() const { return lookahead_m_; }
+  // Slots proposed for eviction so far, and scans that found the cache full of slots within
+  // reach (nothing to evict, a wanted slot left unsolved) (any thread).
+  std::uint64_t evictions_proposed() const { return proposed_.load(std::memory_order_acquire); }
+  std::uint64_t capacity_full() const { return capacity_full_.load(std::memory_order_acquire); }
 
  private:
   struct Part {
@@ -92,7 +102,10 @@ class ColumnWorker {
   void run();
   static bool within_slack(const Poses& now, const Poses& then, double slack);
   // The nearest wanted slots that are not ready, at most `most`, of one body; false: none.
+  // Stamps every slot within reach with this scan's number (last_reach_).
   bool wanted(const Poses& poses, int body, std::size_t most, std::vector<int>& out);
+  // A bounded body: how many slots the next block may solve (proposing evictions when full).
+  std::size_t room(int body, std::size_t chunk);
 
   std::vector<ColumnWorkerBody> bodies_;
   std::vector<ToolShape> tools_;
@@ -108,6 +121,14 @@ class ColumnWorker {
   std::atomic<bool> failed_{false};
   std::atomic<bool> paused_{false};
   std::vector<std::pair<double, int>> near_;  // worker: candidates (distance, slot)
+  // Worker: per body and slot, the number of the last scan that found the slot within reach.
+  std::vector<std::vector<std::uint64_t>> last_reach_;
+  std::uint64_t scan_{0};
+  bool stuck_{false};  // room(): full of slots within reach, nothing to evict
+  std::vector<std::pair<std::uint64_t, int>> old_;  // worker: eviction candidates (scan, slot)
+  std::vector<int> victims_;
+  std::atomic<std::uint64_t> proposed_{0};
+  std::atomic<std::uint64_t> capacity_full_{0};
   std::atomic<bool> stop_{false};
   std::thread thread_;
 };

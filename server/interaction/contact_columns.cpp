@@ -14,6 +14,43 @@ ContactColumns::ContactColumns(const CoupledBody& body, bool keep_full_columns)
   if (keep_full_) full_columns_.resize(n);
   ready_ = std::make_unique<std::atomic<unsigned char>[]>(n);
   for (std::size_t s = 0; s < n; ++s) ready_[s].store(0, std::memory_order_relaxed);
+  bytes_per_slot_ = sizeof(double) * 3 * (3 * n + static_cast<std::size_t>(body.sliding().size()));
+  if (keep_full_) bytes_per_slot_ += sizeof(double) * 9 * body.host().num_vertices();
+}
+
+bool ContactColumns::propose_eviction(const std::vector<int>& victims) {
+  if (mailbox_.load(std::memory_order_acquire) != kIdle) return false;
+  int n = 0;
+  for (int s : victims) {
+    if (s < 0 || s >= num_slots()) {
+      throw std::invalid_argument("ContactColumns::propose_eviction: contact slot " +
+                                  std::to_string(s) + " out of range");
+    }
+    if (n == kMaxVictims) break;
+    victims_[n++] = s;
+  }
+  if (n == 0) return true;
+  num_victims_ = n;
+  mailbox_.store(kProposed, std::memory_order_release);
+  return true;
+}
+
+int ContactColumns::reclaim() {
+  if (mailbox_.load(std::memory_order_acquire) != kGranted) return 0;
+  int freed = 0;
+  for (int k = 0; k < num_victims_; ++k) {
+    const int s = victims_[k];
+    // Published again by this writer after the grant (fresh storage, ready): keep it.
+    if (!granted_[k] || has(s)) continue;
+    columns_[s] = Blocks();
+    sliding_columns_[s] = Columns();
+    if (keep_full_) full_columns_[s] = Columns();
+    ++freed;
+  }
+  evicted_.fetch_add(static_cast<std::uint64_t>(freed), std::memory_order_acq_rel);
+  num_victims_ = 0;
+  mailbox_.store(kIdle, std::memory_order_release);
+  return freed;
 }
 
 int ContactColumns::ensure(const std::vector<int>& slots) { return ensure(slots, *ws_); }

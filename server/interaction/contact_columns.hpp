@@ -8,9 +8,19 @@
 //
 // One writer, one reader: the writer (the step itself when it solves synchronously, or the
 // ColumnWorker's thread) fills a slot's storage, then marks it ready with a release store; the
-// reader (the step) reads a slot only after has(slot) saw it ready (acquire). A slot is written
-// once and never changed or freed while the cache lives, so the hand-over is lock-free and the
-// step never waits for the writer.
+// reader (the step) reads a slot only after has(slot) saw it ready (acquire). A ready slot is
+// never changed while it is ready, so the hand-over is lock-free and the step never waits for
+// the writer.
+//
+// Bounded (the column worker): the writer may free ready slots, but only those the reader gave
+// up, by a three-state mailbox (never a lock, never a wait on either side):
+//   writer: propose_eviction(victims)  -> the victims listed, state "proposed" (release)
+//   reader: grant_eviction(holds)      -> at the start of a step, before it reads any column:
+//           each victim the step does not hold (holds(slot) false: not a force slot of the last
+//           answer, not in a relaxing body's history) is marked not ready; state "granted"
+//   writer: reclaim()                  -> frees the granted slots' storage; state "idle"
+// After the grant the reader reaches a slot only through has() (false now), so the writer frees
+// storage nobody reads; a freed slot may be solved and published again later.
 #pragma once
 
 #include "server/interaction/coupled_body.hpp"
@@ -19,6 +29,7 @@
 
 #include <atomic>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -34,8 +45,39 @@ class ContactColumns {
   int num_slots() const { return static_cast<int>(columns_.size()); }
   // Whether the columns of a slot are ready (any thread; acquire: its storage may then be read).
   bool has(int slot) const { return ready_[slot].load(std::memory_order_acquire) != 0; }
-  // Slots ready so far (any thread).
+  // Slots ready now (any thread).
   std::size_t size() const { return count_.load(std::memory_order_acquire); }
+  // Bytes of column storage one ready slot holds (the contact columns, the sliding rows' and the
+  // full columns when kept), unit byte.
+  std::size_t bytes_per_slot() const { return bytes_per_slot_; }
+  // Slots freed so far by reclaim() (any thread).
+  std::uint64_t evicted() const { return evicted_.load(std::memory_order_acquire); }
+
+  // Eviction (see above). Most victims of one proposal.
+  static constexpr int kMaxVictims = 64;
+  // Writer: proposes up to kMaxVictims ready slots for eviction; false (nothing done) while an
+  // earlier proposal is not reclaimed yet. Throws std::invalid_argument for a slot out of range.
+  bool propose_eviction(const std::vector<int>& victims);
+  // Reader (the step, before it reads any column in a step): grants each proposed slot for which
+  // holds(slot) is false by marking it not ready. Never allocates; O(victims).
+  template <class Holds>
+  void grant_eviction(const Holds& holds) {
+    if (mailbox_.load(std::memory_order_acquire) != kProposed) return;
+    std::size_t n = 0;
+    for (int k = 0; k < num_victims_; ++k) {
+      const int s = victims_[k];
+      granted_[k] = !holds(s) && ready_[s].load(std::memory_order_relaxed) != 0;
+      if (granted_[k]) {
+        ready_[s].store(0, std::memory_order_relaxed);
+        ++n;
+      }
+    }
+    if (n > 0) count_.fetch_sub(n, std::memory_order_acq_rel);
+    mailbox_.store(kGranted, std::memory_order_release);
+  }
+  // Writer: frees the storage of the slots granted (unless the writer published one again since
+  // the grant); returns how many (0 if no grant yet). Call it before each ensure().
+  int reclaim();
   // Iterations the ITERATIVE baseline's coupling needed for the columns computed so far (read it
   // from the writer's thread, or once the writer is stopped).
   const IterativeReport& iterative_report() const { return iterations_; }
@@ -75,6 +117,15 @@ class ContactColumns {
   std::vector<Columns> sliding_columns_;  // J_A L[:, slot] (sliding rows)
   std::unique_ptr<std::atomic<unsigned char>[]> ready_;
   std::atomic<std::size_t> count_{0};
+  std::size_t bytes_per_slot_{0};
+  // Eviction mailbox: victims_ and num_victims_ written by the writer before kProposed, granted_
+  // by the reader before kGranted.
+  static constexpr int kIdle = 0, kProposed = 1, kGranted = 2;
+  std::atomic<int> mailbox_{kIdle};
+  int victims_[kMaxVictims]{};
+  bool granted_[kMaxVictims]{};
+  int num_victims_{0};
+  std::atomic<std::uint64_t> evicted_{0};
 };
 
 }  // namespace neurosim::interaction

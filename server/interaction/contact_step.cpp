@@ -129,6 +129,17 @@ State::State(const Model& m) {
     std::vector<ColumnWorkerBody> targets;
     for (std::size_t i = 0; i < m.bodies_.size(); ++i)
       targets.push_back({&m.bodies_[i].rest_m, bodies_[i].columns.get(), m.bodies_[i].behind_reach_m});
+    for (std::size_t i = 0; i < targets.size(); ++i) {
+      // The bound: the budget over one slot's bytes, never below what the preload put in.
+      const double per_slot = static_cast<double>(bodies_[i].columns->bytes_per_slot());
+      const double budget = m.options_.column_cache_budget_mb * 1e6;
+      if (budget > 0.0) {
+        targets[i].capacity_slots =
+            std::max<std::size_t>(bodies_[i].columns->size() + 2 * CoupledBody::kBlockColumns / 3,
+                                  static_cast<std::size_t>(budget / per_slot));
+      }
+      bodies_[i].capacity_slots = targets[i].capacity_slots;
+    }
     ColumnWorkerOptions o;
     o.horizon_s = m.options_.column_horizon_s;
     o.max_tool_speed_m_per_s = m.options_.column_max_tool_speed_m_per_s;
@@ -1168,12 +1179,27 @@ void State::restore_proxies() {
   proxy_before_.clear();
 }
 
+// Column worker with a bounded cache: before any column is read in this step, the slots the
+// worker proposed for eviction are given up unless this State holds them (a force slot of the
+// last answer, which the step's positions and its restore read without has(), or a relaxing
+// body's history slot); contact_columns.hpp.
+void State::grant_evictions() {
+  for (BodyState& bs : bodies_) {
+    bs.columns->grant_eviction([&bs](int s) {
+      return bs.force_index[s] >= 0 || (bs.history && bs.history->holds(s));
+    });
+  }
+}
+
 // The held poses through candidates, rows, columns, Delassus, LCP, answer and tier post.
 void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolContact>& contacts,
                              StepStats& stats, std::chrono::steady_clock::time_point t0) {
   const std::vector<ToolPose>& poses = held_;
   const int nt = static_cast<int>(poses.size());
-  if (column_worker_) column_worker_->post(poses);  // look ahead of the held poses (never waits)
+  if (column_worker_) {
+    column_worker_->post(poses);  // look ahead of the held poses (never waits)
+    grant_evictions();
+  }
   begin_step(m, nt, stats);
   begin_history(m, time_s);
   if (static_cast<int>(contacts.size()) != nt) contacts.resize(nt);

@@ -131,6 +131,13 @@ class SimulationImpl final : public Simulation {
   bool wait_columns_ready(double timeout_s) const override {
     return state_->column_worker_ && state_->column_worker_->wait_ready(timeout_s);
   }
+  ColumnCacheStats column_cache(int m) const override {
+    const int b = model_->entry(m).body;
+    if (b < 0) return {};
+    const BodyState& bs = state_->bodies_[static_cast<std::size_t>(b)];
+    return ColumnCacheStats{bs.columns->size(), bs.capacity_slots, bs.columns->bytes_per_slot(),
+                            bs.columns->evicted()};
+  }
   void pause_column_worker(bool paused) override {
     if (state_->column_worker_) state_->column_worker_->set_paused(paused);
   }
@@ -339,6 +346,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     }
     setup_.factor_s += b.body->timing().factor_s;
     if (b.body->host_solver().factor_info().from_cache) ++setup_.factor_cache_hits;
+    setup_.factor_bytes += static_cast<double>(b.body->host_solver().factor_info().factor_bytes);
     b.host_material = lm.material;
     b.host_fixed_nodes = lm.fixed_nodes;
     // LINEAR: the body relaxes with its host's kernel (a tied mesh with another one: compile()

@@ -190,6 +190,12 @@ struct SimulationOptions {
   // worker's reach of each opening's axis (the surface a tool entering through it reaches first),
   // nearest the axis first, up to the budget, unit MB.
   double column_preload_budget_mb{256.0};
+  // column_worker: at most this much column storage per body, unit MB (ContactColumns::
+  // bytes_per_slot: 3 x (3s + sliding rows) doubles per node of a body with s contact nodes, so
+  // the node count follows from the mesh: 0.85 MB per node on the 3 mm brain). Beyond it the
+  // worker evicts the nodes least recently within a tool's reach (never one the step holds); at
+  // least the preloaded nodes + two blocks. 0: no bound.
+  double column_cache_budget_mb{1024.0};
   // Keep the full coupled compliance columns of touched nodes (3N x 3 doubles each: 0.4 MB per
   // node on a 25k-tet brain) so displacements() of a host is a sum of columns, not a sparse solve.
   bool cache_full_field_columns{false};
@@ -247,6 +253,7 @@ struct SetupStats {
   int carved_tets{0};     // host tetrahedra removed inside S' (carve_host)
   int cache_hits{0};      // bodies whose boundary operator came from compliance_cache_dir
   int factor_cache_hits{0};  // bodies whose host factor came from compliance_cache_dir
+  double factor_bytes{0.0};  // the host factors' values and structure (all bodies), unit byte
   int sliding_rows{0};    // unilateral rows of SLIDING couplings (all couplings)
 };
 
@@ -377,6 +384,17 @@ class Simulation {
   virtual bool wait_columns_ready(double timeout_s) const {
     (void)timeout_s;
     return false;
+  }
+  // The contact-compliance cache of the host of mesh `m` (column_worker's bound; any thread).
+  struct ColumnCacheStats {
+    std::size_t ready_slots{0};     // contact nodes with columns now
+    std::size_t capacity_slots{0};  // the bound (0: none)
+    std::size_t bytes_per_slot{0};  // unit byte
+    std::uint64_t evicted{0};       // nodes freed so far
+  };
+  virtual ColumnCacheStats column_cache(int m) const {
+    (void)m;
+    return {};
   }
   // Tests: hold the column worker (a solve under way finishes, none starts) or let it go.
   virtual void pause_column_worker(bool paused) { (void)paused; }

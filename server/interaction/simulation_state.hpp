@@ -87,6 +87,7 @@ struct FeatureHit {
 // What a step changes on a body.
 struct BodyState {
   std::unique_ptr<ContactColumns> columns;  // filled on first touch (or when the state is made)
+  std::size_t capacity_slots{0};  // column worker: at most this many ready at once (0: no bound)
   std::vector<long long> triangle_stamp;    // per triangle: last tool query that listed it
   std::vector<long long> position_stamp;    // per contact slot: step of position_m
   std::vector<mesh::Vec3> position_m;       // per contact slot: deformed position, unit m
@@ -227,6 +228,7 @@ class State {
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape);
   void compliance_columns(StepStats& stats);
   void columns_fallback(StepStats& stats);
+  void grant_evictions();
   void preload_columns(const Model& m);
   void delassus(const Model& m, int ns);
   void store_forces(const Model& m, int ns);

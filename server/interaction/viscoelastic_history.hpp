@@ -65,6 +65,8 @@ class ViscoelasticHistory {
   // for the displacement the history leaves).
   const std::vector<int>& slots() const { return slots_; }
   const std::vector<Vec3>& forces_n() const { return h_; }
+  // Whether `slot` has a history force (its columns are read by displacement()).
+  bool holds(int slot) const { return index_[slot] >= 0; }
   // The history force of `slot` (zero when it has none).
   Vec3 force_of(int slot) const { return index_[slot] >= 0 ? h_[index_[slot]] : Vec3::Zero(); }
   // Displacement of `slot` from the history forces, C h_n (unit m); columns of slots() cached.

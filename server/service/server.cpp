@@ -37,7 +37,7 @@ std::string describe_setup(const interaction::Simulation& sim) {
   const auto& st = sim.setup_stats();
   std::ostringstream os;
   os << "physics built in " << st.total_s << " s: meshes " << st.load_meshes_s << " s, factor "
-     << st.factor_s << " s, ";
+     << st.factor_s << " s (" << st.factor_bytes / 1e6 << " MB), ";
   if (st.fusion_s == 0 && st.tied_nodes == 0)
     os << "inclusion decision: not run (no coupling)";
   else
@@ -45,6 +45,21 @@ std::string describe_setup(const interaction::Simulation& sim) {
        << " s, boundary columns " << st.boundary_s << " s, coupling operator " << st.operator_s
        << " s (" << st.boundary_nodes << " boundary nodes, " << st.tied_nodes << " tied nodes)";
   os << ", contact columns " << st.columns_s << " s";
+  // The column worker's bound per body (SimulationOptions::column_cache_budget_mb).
+  std::vector<int> seen;
+  for (int m = 0; m < sim.num_meshes(); ++m) {
+    const int b = sim.body_index(m);
+    if (b < 0 || std::find(seen.begin(), seen.end(), b) != seen.end()) continue;
+    seen.push_back(b);
+    const auto c = sim.column_cache(m);
+    if (c.bytes_per_slot == 0) continue;
+    os << "; column cache of '" << sim.mesh_id(m) << "': " << c.bytes_per_slot / 1e6 << " MB per node, ";
+    if (c.capacity_slots > 0)
+      os << "at most " << c.capacity_slots << " nodes (" << c.capacity_slots * c.bytes_per_slot / 1e6
+         << " MB), the least recently reached evicted";
+    else
+      os << "not bounded";
+  }
   return os.str();
 }
 

@@ -8,6 +8,7 @@
 // counted), and once the worker has solved the reach the same pose gives the synchronous force.
 // Checked by counts, never by time (CI runs under load): how many columns were not ready along
 // the slide depends on the machine and is printed, not asserted.
+#include "server/interaction/coupled_body.hpp"
 #include "server/interaction/simulation.hpp"
 #include "server/interaction/surface_probe.hpp"
 #include "server/scene/compile.hpp"
@@ -233,6 +234,74 @@ TEST(interaction_column_worker, ColumnsOfASmallBodyAndUnderAnOpeningAreReadyAtLo
   }
   EXPECT_GT(in_contact, 20) << "the probe reaches the brain through the opening";
   EXPECT_GT(compared, 100) << "steps compared with the synchronous force";
+}
+
+// SimulationOptions::column_cache_budget_mb: a bound just above one pose's reach. Pressing at
+// five places 25 mm apart across the top of the left hemisphere and back to the first, each
+// pose stepped until the worker has its reach (the step grants evictions at its start): the
+// ready nodes never pass the bound by more than one block, nodes are evicted, no step solves a
+// column, and at every pose, the first one too after its nodes were evicted and solved again,
+// the force equals the synchronous one. Counts only: no timing enters.
+TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForces) {
+  const scene::Model model =
+      scene::load_model(neurosim::testing::source_dir() / "scenes/brain_artery.scene");
+  const double tip = model.tools.at(0).tip_radius_m;
+  SimulationOptions on;
+  on.column_worker = true;
+  on.column_preload_budget_mb = 0.0;
+  on.column_cache_budget_mb = 0.0;  // first unbounded: the size of one pose's reach
+  auto sync = Simulation::build(model, SimulationOptions{});
+  auto pose_at = [&](double x, double y) {
+    const auto at = top_of_surface(sync->mesh(0), x, y);
+    EXPECT_TRUE(at.has_value());
+    ToolPose p;
+    p.tip_m = at->point_m + (tip - 2e-3) * at->normal;
+    p.axis = at->normal;
+    return p;
+  };
+  std::vector<ToolPose> poses;
+  for (int k = 0; k < 5; ++k) poses.push_back(pose_at(0.060, 0.060 + 0.025 * k));
+  poses.push_back(poses.front());
+  std::vector<ToolContact> c, ref;
+  StepStats st, ref_st;
+  std::size_t reach = 0, per_slot = 0;
+  {
+    auto probe = Simulation::build(model, on);
+    probe->step({poses[0]}, c, st);
+    ASSERT_TRUE(probe->wait_columns_ready(600.0));
+    reach = probe->column_cache(0).ready_slots;
+    per_slot = probe->column_cache(0).bytes_per_slot;
+    EXPECT_EQ(probe->column_cache(0).capacity_slots, 0u) << "budget 0: no bound";
+  }
+  ASSERT_GT(reach, 20u);
+  ASSERT_GT(per_slot, 0u);
+  const std::size_t bound = reach + 2 * CoupledBody::kBlockColumns / 3 + 10;
+  on.column_cache_budget_mb = static_cast<double>(bound * per_slot) * 1e-6 + 1e-9;
+  auto sim = Simulation::build(model, on);
+  ASSERT_EQ(sim->column_cache(0).capacity_slots, bound);
+  const std::size_t block = CoupledBody::kBlockColumns / 3;
+  std::size_t most = 0;
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    int rounds = 0;
+    do {
+      sim->step({poses[k]}, c, st);
+      EXPECT_TRUE(st.converged);
+      EXPECT_EQ(st.columns_computed, 0) << "a column was solved on the step thread";
+      most = std::max(most, sim->column_cache(0).ready_slots);
+      ASSERT_LT(++rounds, 100000) << "pose " << k << ": the worker never finished its reach";
+    } while (!sim->wait_columns_ready(0.01));
+    sim->step({poses[k]}, c, st);
+    sync->step({poses[k]}, ref, ref_st);
+    ASSERT_TRUE(ref_st.converged);
+    ASSERT_GT(ref[0].force_n.norm(), 0.0) << "pose " << k;
+    EXPECT_EQ(st.columns_not_ready, 0) << "pose " << k;
+    EXPECT_TRUE(same_force(c[0].force_n, ref[0].force_n))
+        << "pose " << k << ": " << c[0].force_n.transpose() << " vs " << ref[0].force_n.transpose();
+  }
+  std::printf("bound %zu nodes (reach %zu, %zu bytes each): at most %zu ready, %llu evicted\n", bound,
+              reach, per_slot, most, static_cast<unsigned long long>(sim->column_cache(0).evicted));
+  EXPECT_LE(most, bound + block) << "the bound passed by more than one block";
+  EXPECT_GT(sim->column_cache(0).evicted, 0u) << "five reaches 25 mm apart never fit the bound";
 }
 
 }  // namespace

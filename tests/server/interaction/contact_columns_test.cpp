@@ -1,6 +1,7 @@
 // ContactColumns: the cached coupled compliance columns of a body without ties equal the host's
 // compliance from independent solves (CoupledBody::host_block), the full-column field equals the
-// sparse-solve field, and only missing columns are computed.
+// sparse-solve field, and only missing columns are computed; eviction frees only the slots the
+// reader grants (not those it holds), and a freed slot solved again has the same columns.
 #include "server/interaction/contact_columns.hpp"
 
 #include "server/mesh/generate.hpp"
@@ -60,6 +61,42 @@ TEST(interaction_contact_columns, BlocksEqualIndependentSolvesAndOnlyMissingAreC
   // A slot without columns: no field from columns, never a wrong one.
   EXPECT_FALSE(cols.full_field({1}, {{0.0, 0.0, 1.0}}, from_columns));
   EXPECT_THROW(cols.ensure({slots}), std::invalid_argument);
+}
+
+TEST(interaction_contact_columns, EvictionFreesOnlyGrantedSlotsAndASolvedAgainSlotIsTheSame) {
+  const Block b = make_block();
+  const int slots = static_cast<int>(b.body->contact_nodes().size());
+  ContactColumns cols(*b.body);
+  EXPECT_EQ(cols.bytes_per_slot(), sizeof(double) * 3 * (3 * static_cast<std::size_t>(slots)));
+  cols.ensure({0, 1, 2, 3});
+  const Eigen::Matrix3d before = cols.block(2, 2);
+  // Nothing granted before the reader's grant: reclaim frees nothing.
+  ASSERT_TRUE(cols.propose_eviction({1, 2, 3}));
+  EXPECT_FALSE(cols.propose_eviction({0})) << "one proposal at a time";
+  EXPECT_EQ(cols.reclaim(), 0);
+  EXPECT_TRUE(cols.has(1) && cols.has(2) && cols.has(3));
+  // The reader holds slot 3 (a force slot): it keeps it; 1 and 2 are given up.
+  cols.grant_eviction([](int s) { return s == 3; });
+  EXPECT_FALSE(cols.has(1));
+  EXPECT_FALSE(cols.has(2));
+  EXPECT_TRUE(cols.has(3));
+  EXPECT_EQ(cols.size(), 2u);
+  EXPECT_EQ(cols.reclaim(), 2);
+  EXPECT_EQ(cols.evicted(), 2u);
+  EXPECT_EQ(cols.reclaim(), 0) << "the mailbox is idle again";
+  // Slot 1 granted, then solved again by the writer before reclaim: kept (fresh storage).
+  ASSERT_TRUE(cols.propose_eviction({1}));
+  cols.ensure({1, 2});
+  EXPECT_EQ(cols.size(), 4u);
+  cols.grant_eviction([](int) { return false; });  // nothing held: slot 1 granted
+  EXPECT_FALSE(cols.has(1));
+  cols.ensure({1});  // published again by the writer after the grant
+  EXPECT_EQ(cols.reclaim(), 0) << "a slot published again after its grant is not freed";
+  EXPECT_TRUE(cols.has(1));
+  EXPECT_EQ(cols.size(), 4u);
+  // Solved again: the same numbers (same factor, same right-hand side).
+  EXPECT_EQ((cols.block(2, 2) - before).norm(), 0.0);
+  EXPECT_THROW(cols.propose_eviction({slots}), std::invalid_argument);
 }
 
 }  // namespace
