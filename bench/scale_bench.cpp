@@ -21,14 +21,20 @@
 // - columns_not_ready: worker: contact nodes whose row took the fallback because their columns
 //   were not ready yet, summed over the slide's steps (StepStats::columns_not_ready); step: the
 //   first touches solved inside the step (StepStats::columns_computed, summed);
-// - field_hz: 1 / mean time of the host's full displacement field (Simulation::displacements)
-//   at the end of the slide;
+// - field_hz: 1 / mean time of the fields of every mesh as the server's field thread makes them
+//   (a FieldSnapshot: with SimulationOptions::field_column_budget_mb a sum of the loaded nodes'
+//   full columns, field_columns.hpp) for the forces held at the end of the slide, after the
+//   first such field (which solves the columns of nodes not kept yet); on stderr also that first
+//   field, the plain sparse solve, and the slide's first --field-frames viewer frames (30 Hz)
+//   replayed in order (each newly loaded node's columns solved once: a moving tool's rate);
 // - nonlinear_update_hz: not measured here (nan): multirate_bench measures the NONLINEAR tier's
 //   update rate on the bundled scene.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "common/stats.hpp"
+#include "server/interaction/field_columns.hpp"
 #include "server/interaction/simulation.hpp"
+#include "server/fem/static_solver.hpp"
 #include "server/scene/compile.hpp"
 
 #include <sys/resource.h>
@@ -100,12 +106,16 @@ int main(int argc, char** argv) {
   std::string dir = "/tmp/neurosim_scale_bench";
   double seconds = 10.0, speed = 0.020, depth = 0.002;
   bool csv = false;
+  int field_frames = 60;
   std::string column_solves = "worker";
   neurosim::cli::Parser p("scale_bench", "The brain/artery scene at several cell sizes.");
   p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
   p->add_option("--models", dir, "folder of the built scenes")->capture_default_str();
   p->add_option("--seconds", seconds, "slide duration, unit s")->capture_default_str();
   p->add_option("--speed", speed, "slide speed, unit m/s")->capture_default_str();
+  p->add_option("--field-frames", field_frames,
+                "viewer frames of the slide (30 Hz from its start) whose fields are replayed")
+      ->capture_default_str();
   p->add_flag("--csv", csv, "CSV only (the default adds comments on stderr)");
   p->add_option("--column-solves", column_solves,
                 "worker: compliance columns solved ahead of the tool (the live server); step: "
@@ -167,6 +177,7 @@ int main(int argc, char** argv) {
       long not_ready = 0;
       int steps_not_ready = 0;
       double first_reach_mb = -1.0;
+      std::vector<ni::FieldSnapshot> frames;
       auto next = Clock::now();
       bool started = false;
       for (int k = 0; k < steps; ++k) {
@@ -195,20 +206,53 @@ int main(int argc, char** argv) {
         const auto ts = Clock::now();
         sim->step(one, contacts, stats);
         times.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
+        // The viewer's frames along the slide (30 Hz), for the field replay below.
+        if (times.size() % 33 == 1 && frames.size() < static_cast<std::size_t>(field_frames)) {
+          frames.emplace_back();
+          sim->snapshot(frames.back());
+        }
         const int missed = options.column_worker ? stats.columns_not_ready : stats.columns_computed;
         not_ready += missed;
         steps_not_ready += missed > 0;
       }
       const double after_slide_mb = rss_mb();
       const auto columns = sim->column_cache(host);
+      // Fields as the server's field thread makes them (a FieldSnapshot per frame, every mesh):
+      // (1) the slide's frames replayed in order, the full columns kept from frame to frame
+      // (each newly loaded node solved once); (2) held forces: the slide's last snapshot, its
+      // first field (the columns of nodes not kept yet) then field_repeats more (sums);
+      // (3) the plain solve (Simulation::displacements without a snapshot: a sparse solve).
       Eigen::VectorXd u;
-      double field_s = 0.0;
-      for (int k = 0; k < 5; ++k) {
-        const auto tf = Clock::now();
-        sim->displacements(host, u);
-        field_s += neurosim::common::seconds_since(tf);
+      auto fields_of = [&](ni::FieldSnapshot& snap) {
+        for (int m = 0; m < sim->num_meshes(); ++m) sim->displacements(snap, m, u);
+      };
+      std::shared_ptr<ni::FieldColumns> kept;
+      std::shared_ptr<neurosim::fem::SolveWorkspace> ws;
+      auto tr = Clock::now();
+      for (auto& f : frames) {
+        if (kept) f.bodies[host].field_columns = kept;
+        if (ws) f.bodies[host].workspace = ws;
+        fields_of(f);
+        kept = f.bodies[host].field_columns;
+        ws = f.bodies[host].workspace;
       }
-      field_s /= 5.0;
+      const double replay_s = neurosim::common::seconds_since(tr);
+      ni::FieldSnapshot held;
+      sim->snapshot(held);
+      auto tf = Clock::now();
+      fields_of(held);
+      const double held_first_s = neurosim::common::seconds_since(tf);
+      const int field_repeats = 20;
+      tf = Clock::now();
+      for (int k = 0; k < field_repeats; ++k) {
+        sim->snapshot(held);
+        fields_of(held);
+      }
+      const double field_s = neurosim::common::seconds_since(tf) / field_repeats;
+      tf = Clock::now();
+      sim->displacements(host, u);
+      const double solve_s = neurosim::common::seconds_since(tf);
+      const std::size_t held_nodes = held.bodies[host].slots.size();
       const auto pc = neurosim::common::percentiles(times);
       std::printf("%g,%zu,%zu,%.2f,%.2f,%.0f,%.1f,%.1f,%.1f,%ld,%.1f,nan\n", cell, mesh.num_vertices(),
                   mesh.num_tets(), cold_s, cached_s, peak_rss_mb(), pc.p50, pc.p99, pc.max,
@@ -224,6 +268,13 @@ int main(int argc, char** argv) {
                     << "), host factor " << st->factor_bytes / 1e6 << " MB\n";
       }
       if (!csv) {
+        std::cerr << "scale_bench: cell " << cell << " mm, fields (every mesh): held forces on "
+                  << held_nodes << " nodes " << 1e3 * field_s << " ms each (the first "
+                  << 1e3 * held_first_s << " ms), the plain solve of the host " << 1e3 * solve_s
+                  << " ms; the slide's first " << frames.size() << " viewer frames (30 Hz) replayed: "
+                  << (frames.empty() ? 0.0 : 1e3 * replay_s / static_cast<double>(frames.size()))
+                  << " ms per frame, " << (kept ? kept->columns_solved() : 0)
+                  << " nodes' full columns solved, " << (kept ? kept->evicted() : 0) << " evicted\n";
         std::cerr << "scale_bench: cell " << cell << " mm, memory (MB): cold start peak " << cold_peak_mb
                   << ", after the cold one freed " << after_cold_mb << ", after the cached start "
                   << after_cached_mb << ", after the first pose's reach " << first_reach_mb

@@ -10,6 +10,7 @@
 #include "server/fusion/inclusion.hpp"
 #include "server/fusion/triangle_surface.hpp"
 #include "server/interaction/contact_columns.hpp"
+#include "server/interaction/field_columns.hpp"
 #include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/sliding_coupling.hpp"
@@ -603,8 +604,25 @@ void SimulationImpl::displacements(FieldSnapshot& s, int m, Eigen::VectorXd& u_m
     // Never the step's column cache: this may run on another thread than step(); the
     // snapshot's own solve scratch, so the step's solves and this one share no lock.
     if (!sb.workspace) sb.workspace = std::make_shared<fem::SolveWorkspace>();
-    model_->host_field(model_->bodies_[e.body], sb.slots, sb.forces_n, sb.sliding_lambda_n,
-                       sb.nodal_forces_n, nullptr, sb.u_host_m, sb.workspace.get());
+    const BodyModel& bm = model_->bodies_[e.body];
+    // Contact forces alone: a sum of the loaded nodes' full columns (solved once per node).
+    const bool contact_only =
+        sb.nodal_forces_n.size() == 0 &&
+        !(sb.sliding_lambda_n.size() > 0 && sb.sliding_lambda_n.maxCoeff() > 0.0);
+    const double budget = model_->options_.field_column_budget_mb * 1e6;
+    bool done = false;
+    if (contact_only && budget > 0.0) {
+      if (!sb.field_columns) {
+        const double per_node = static_cast<double>(FieldColumns::bytes_per_slot(*bm.body));
+        sb.field_columns = std::make_shared<FieldColumns>(
+            *bm.body, static_cast<std::size_t>(std::max(1.0, std::floor(budget / per_node))));
+      }
+      done = sb.field_columns->field(sb.slots, sb.forces_n, sb.u_host_m, *sb.workspace);
+    }
+    if (!done) {
+      model_->host_field(bm, sb.slots, sb.forces_n, sb.sliding_lambda_n, sb.nodal_forces_n,
+                         nullptr, sb.u_host_m, sb.workspace.get());
+    }
     sb.host_done = true;
   }
   if (!sb.workspace) sb.workspace = std::make_shared<fem::SolveWorkspace>();

@@ -24,7 +24,8 @@ class SolveWorkspace;  // server/fem/static_solver.hpp
 
 namespace neurosim::interaction {
 
-class CoupledBody;  // server/interaction/coupled_body.hpp
+class CoupledBody;   // server/interaction/coupled_body.hpp
+class FieldColumns;  // server/interaction/field_columns.hpp
 
 using Vec3 = Eigen::Vector3d;
 using Mat3 = Eigen::Matrix3d;
@@ -135,6 +136,9 @@ struct FieldSnapshot {
     bool host_done{false};
     // The solve scratch of whoever computes the fields (made on the first request).
     std::shared_ptr<fem::SolveWorkspace> workspace;
+    // SimulationOptions::field_column_budget_mb: the full columns of recently loaded nodes
+    // (field_columns.hpp), kept across snapshots by whoever computes the fields.
+    std::shared_ptr<FieldColumns> field_columns;
   };
   std::vector<Body> bodies;  // one per body (Simulation::body_index)
 };
@@ -199,6 +203,13 @@ struct SimulationOptions {
   // Keep the full coupled compliance columns of touched nodes (3N x 3 doubles each: 0.4 MB per
   // node on a 25k-tet brain) so displacements() of a host is a sum of columns, not a sparse solve.
   bool cache_full_field_columns{false};
+  // Fields from a FieldSnapshot (the server's field thread) of LINEAR contact forces alone (no
+  // sliding force, no other nodal force): a sum of the loaded nodes' full columns
+  // (field_columns.hpp: solved once per node when a field first needs it, the least recently
+  // used evicted) instead of a sparse solve per field; this much memory per body at most, unit
+  // MB (3N x 3 doubles per node: 0.37 MB on the bundled brain, 3.9 MB on the 3 mm one). 0: every
+  // field is a sparse solve.
+  double field_column_budget_mb{256.0};
   // With coupling: remove the host's tetrahedra inside S' (the embedded mesh keeps its volume,
   // paper 2.4); false keeps the host whole and adds the embedded mesh's stiffness on top.
   bool carve_host{true};
