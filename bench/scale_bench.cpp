@@ -23,12 +23,17 @@
 //   first touches solved inside the step (StepStats::columns_computed, summed);
 // - field_hz: 1 / mean time of the fields of every mesh as the server's field thread makes them
 //   (a FieldSnapshot: with SimulationOptions::field_column_budget_mb a sum of the loaded nodes'
-//   full columns, field_columns.hpp) for the forces held at the end of the slide, after the
-//   first such field (which solves the columns of nodes not kept yet); on stderr also that first
+//   full columns, field_columns.hpp) for the forces of the slide's last viewer frame that
+//   loaded a node (held), after the first such field (which solves the columns of nodes not kept yet); on stderr also that first
 //   field, the plain sparse solve, and the slide's first --field-frames viewer frames (30 Hz)
 //   replayed in order (each newly loaded node's columns solved once: a moving tool's rate);
-// - nonlinear_update_hz: not measured here (nan): multirate_bench measures the NONLINEAR tier's
-//   update rate on the bundled scene.
+// - nonlinear_update_hz: the NONLINEAR tier's equilibrium updates per second of its worker
+//   (Simulation::tier_update_rate_hz: 1 / mean update time over the last second's updates) while
+//   the probe presses at the slide's first pose, paced at 1 kHz, for --nonlinear-seconds and
+//   until at least one update finished (at most --nonlinear-max-s; nan if none finished by
+//   then): the same scene with effects.tier = NONLINEAR, built (from the disk cache) after the
+//   LINEAR simulation was freed; its set-up time and memory on stderr. --nonlinear-seconds 0
+//   skips it (nan).
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "common/stats.hpp"
@@ -107,6 +112,7 @@ int main(int argc, char** argv) {
   double seconds = 10.0, speed = 0.020, depth = 0.002;
   bool csv = false;
   int field_frames = 60;
+  double nonlinear_seconds = 3.0, nonlinear_max_s = 900.0;
   std::string column_solves = "worker";
   neurosim::cli::Parser p("scale_bench", "The brain/artery scene at several cell sizes.");
   p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
@@ -115,6 +121,12 @@ int main(int argc, char** argv) {
   p->add_option("--speed", speed, "slide speed, unit m/s")->capture_default_str();
   p->add_option("--field-frames", field_frames,
                 "viewer frames of the slide (30 Hz from its start) whose fields are replayed")
+      ->capture_default_str();
+  p->add_option("--nonlinear-seconds", nonlinear_seconds,
+                "NONLINEAR press at least this long, unit s (0: not measured)")
+      ->capture_default_str();
+  p->add_option("--nonlinear-max-s", nonlinear_max_s,
+                "NONLINEAR press at most this long waiting for a first update, unit s")
       ->capture_default_str();
   p->add_flag("--csv", csv, "CSV only (the default adds comments on stderr)");
   p->add_option("--column-solves", column_solves,
@@ -149,9 +161,9 @@ int main(int argc, char** argv) {
       const double after_cached_mb = rss_mb();
       const double cached_s = neurosim::common::seconds_since(t0);
       const ni::SetupStats cached_setup = sim->setup_stats();
-      fs::remove_all(cache);
       const int host = 0;
       const auto& mesh = sim->mesh(host);
+      const std::size_t num_vertices = mesh.num_vertices(), num_tets = mesh.num_tets();
       // Lateral surface profile: per 1 mm of y, the largest x of the surface nodes within
       // +-3 mm of the slide's height z.
       Vec3 lo, hi;
@@ -178,6 +190,9 @@ int main(int argc, char** argv) {
       int steps_not_ready = 0;
       double first_reach_mb = -1.0;
       std::vector<ni::FieldSnapshot> frames;
+      ni::FieldSnapshot held, probe;
+      ni::ToolPose first;
+      bool has_first = false;
       auto next = Clock::now();
       bool started = false;
       for (int k = 0; k < steps; ++k) {
@@ -192,6 +207,10 @@ int main(int argc, char** argv) {
         if (!std::isfinite(it->second)) continue;
         one[0].tip_m = Vec3(it->second + 0.002 - depth, y, z);  // tip radius 2 mm, centre inside
         one[0].axis = Vec3::UnitX();
+        if (!has_first) {
+          first = one[0];
+          has_first = true;
+        }
         if (!started && options.column_worker) {
           // The worker starts at the first pose (a station joining), before the timed slide.
           sim->step(one, contacts, stats);
@@ -207,9 +226,14 @@ int main(int argc, char** argv) {
         sim->step(one, contacts, stats);
         times.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
         // The viewer's frames along the slide (30 Hz), for the field replay below.
-        if (times.size() % 33 == 1 && frames.size() < static_cast<std::size_t>(field_frames)) {
-          frames.emplace_back();
-          sim->snapshot(frames.back());
+        if (times.size() % 33 == 1) {
+          if (frames.size() < static_cast<std::size_t>(field_frames)) {
+            frames.emplace_back();
+            sim->snapshot(frames.back());
+          }
+          // The held forces measured below: the last frame with a loaded node.
+          sim->snapshot(probe);
+          if (!probe.bodies[host].slots.empty()) std::swap(held, probe);
         }
         const int missed = options.column_worker ? stats.columns_not_ready : stats.columns_computed;
         not_ready += missed;
@@ -237,15 +261,14 @@ int main(int argc, char** argv) {
         ws = f.bodies[host].workspace;
       }
       const double replay_s = neurosim::common::seconds_since(tr);
-      ni::FieldSnapshot held;
-      sim->snapshot(held);
+      if (held.bodies.empty()) sim->snapshot(held);  // never loaded: the last step's (zero) forces
       auto tf = Clock::now();
       fields_of(held);
       const double held_first_s = neurosim::common::seconds_since(tf);
       const int field_repeats = 20;
       tf = Clock::now();
       for (int k = 0; k < field_repeats; ++k) {
-        sim->snapshot(held);
+        held.bodies[host].host_done = false;  // the same forces again: a field per frame
         fields_of(held);
       }
       const double field_s = neurosim::common::seconds_since(tf) / field_repeats;
@@ -253,10 +276,44 @@ int main(int argc, char** argv) {
       sim->displacements(host, u);
       const double solve_s = neurosim::common::seconds_since(tf);
       const std::size_t held_nodes = held.bodies[host].slots.size();
+      const double rss_peak_mb = peak_rss_mb();
+      const double after_fields_mb = rss_mb();
+      const std::uint64_t solved_ahead = sim->columns_solved_ahead();
+      const ni::ToolPose first_pose = first;
+      // The NONLINEAR tier on the same mesh: its worker's update rate under a held press.
+      double nonlinear_hz = std::numeric_limits<double>::quiet_NaN();
+      double nonlinear_setup_s = 0.0, nonlinear_press_s = 0.0, nonlinear_mb = 0.0;
+      sim.reset();
+      if (nonlinear_seconds > 0.0 && has_first) {
+        neurosim::scene::Model nl_model = model;
+        nl_model.effects.tier = neurosim::fem::Tier::kNonlinear;
+        fs::create_directories(cache);
+        const auto tn = Clock::now();
+        auto nl = ni::Simulation::build(nl_model, options);
+        nonlinear_setup_s = neurosim::common::seconds_since(tn);
+        nl->step({first_pose}, contacts, stats);
+        if (options.column_worker) nl->wait_columns_ready(600.0);
+        const auto tp = Clock::now();
+        auto due = Clock::now();
+        for (;;) {
+          due += std::chrono::microseconds(1000);
+          std::this_thread::sleep_until(due);
+          nl->step({first_pose}, contacts, stats);
+          const double t = neurosim::common::seconds_since(tp);
+          const double rate = nl->tier_update_rate_hz();
+          if ((t >= nonlinear_seconds && rate > 0.0) || t >= nonlinear_max_s) {
+            if (rate > 0.0) nonlinear_hz = rate;
+            nonlinear_press_s = t;
+            break;
+          }
+        }
+        nonlinear_mb = rss_mb();
+      }
+      fs::remove_all(cache);
       const auto pc = neurosim::common::percentiles(times);
-      std::printf("%g,%zu,%zu,%.2f,%.2f,%.0f,%.1f,%.1f,%.1f,%ld,%.1f,nan\n", cell, mesh.num_vertices(),
-                  mesh.num_tets(), cold_s, cached_s, peak_rss_mb(), pc.p50, pc.p99, pc.max,
-                  not_ready, 1.0 / field_s);
+      std::printf("%g,%zu,%zu,%.2f,%.2f,%.0f,%.1f,%.1f,%.1f,%ld,%.1f,%.2f\n", cell, num_vertices,
+                  num_tets, cold_s, cached_s, rss_peak_mb, pc.p50, pc.p99, pc.max,
+                  not_ready, 1.0 / field_s, nonlinear_hz);
       std::fflush(stdout);
       if (!csv) {
         for (const auto* st : {&cold_setup, &cached_setup})
@@ -275,11 +332,14 @@ int main(int argc, char** argv) {
                   << (frames.empty() ? 0.0 : 1e3 * replay_s / static_cast<double>(frames.size()))
                   << " ms per frame, " << (kept ? kept->columns_solved() : 0)
                   << " nodes' full columns solved, " << (kept ? kept->evicted() : 0) << " evicted\n";
+        std::cerr << "scale_bench: cell " << cell << " mm, NONLINEAR: set-up " << nonlinear_setup_s
+                  << " s, pressed " << nonlinear_press_s << " s at the slide's first pose, "
+                  << nonlinear_hz << " updates/s, resident " << nonlinear_mb << " MB\n";
         std::cerr << "scale_bench: cell " << cell << " mm, memory (MB): cold start peak " << cold_peak_mb
                   << ", after the cold one freed " << after_cold_mb << ", after the cached start "
                   << after_cached_mb << ", after the first pose's reach " << first_reach_mb
-                  << ", after the slide " << after_slide_mb << ", after the fields " << rss_mb()
-                  << ", peak since the cached start " << peak_rss_mb()
+                  << ", after the slide " << after_slide_mb << ", after the fields " << after_fields_mb
+                  << ", peak since the cached start " << rss_peak_mb
                   << (peak_reset ? "" : " (peak not reset: the whole process's)") << "; column cache "
                   << columns.ready_slots << " nodes x " << columns.bytes_per_slot / 1e6 << " MB, bound "
                   << columns.capacity_slots << " nodes, evicted " << columns.evicted << "\n";
@@ -288,7 +348,7 @@ int main(int argc, char** argv) {
         std::cerr << "scale_bench: cell " << cell << " mm, column solves " << column_solves << ": "
                   << times.size() << " steps, " << steps_not_ready
                   << (options.column_worker ? " with columns not ready (" : " with first touches solved in the step (")
-                  << not_ready << " nodes), " << sim->columns_solved_ahead()
+                  << not_ready << " nodes), " << solved_ahead
                   << " columns solved by the worker\n";
     }
   } catch (const std::exception& e) {
