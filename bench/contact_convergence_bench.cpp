@@ -17,7 +17,9 @@
 // interaction_contact_step.SlideOverTheSurfaceNeverLosesTheTissue: the probe slid 40 mm (y 80 to
 // 120 mm at x 60 mm, 0.1 mm steps) 1 mm and 2 mm below the rest surface (the highest surface point
 // under the tip, along its triangle's normal), |F| / depth with the depth measured to the closest
-// point of the surface triangles: its range and spread (max / min) along the path.
+// point of the surface triangles: its range and spread (max / min) along the path, and its
+// jumps (the largest relative change of |F| between two steps whose tip moved < 0.25 mm, and
+// how many exceed 10 %). --contact-spread sets SimulationOptions::contact_spread.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "server/fem/element.hpp"
@@ -86,6 +88,9 @@ int main(int argc, char** argv) {
   double x_mm = 45.0, y_mm = 100.0;
   bool slide = false, csv = false;
   int geometry_iterations = 0;
+  double contact_spread = -1.0;
+  bool smooth_normals = false, near_field = false;
+  std::string trace_path;
   std::string element;
   neurosim::cli::Parser p("contact_convergence_bench",
                           "The same press on the brain at several cell sizes: force convergence.");
@@ -98,6 +103,11 @@ int main(int argc, char** argv) {
   p->add_flag("--csv", csv, "CSV instead of the table");
   p->add_option("--geometry-iterations", geometry_iterations,
                 "SimulationOptions::contact_geometry_iterations (default: the library's)");
+  p->add_option("--slide-trace", trace_path, "CSV of every slide step (cell, depth, y, |F|, rows, ...)");
+  p->add_flag("--smooth-normals", smooth_normals, "SimulationOptions::contact_smooth_normals");
+  p->add_flag("--near-field", near_field, "SimulationOptions::contact_near_field");
+  p->add_option("--contact-spread", contact_spread,
+                "SimulationOptions::contact_spread (default: the library's)");
   if (auto rc = p.parse(argc, argv)) return *rc;
   if (cells.empty()) cells = {7.0, 5.0, 4.0, 3.0};
   const std::vector<double> depths_mm{0.5, 1.0, 1.5, 2.0, 2.5, 3.0};
@@ -105,6 +115,8 @@ int main(int argc, char** argv) {
   std::vector<std::vector<int>> rows(cells.size(), std::vector<int>(depths_mm.size(), 0));
   std::vector<std::string> mesh_rows;  // cell size, vertices / tets, surface point, build time
   std::vector<std::string> slide_rows;
+  FILE* trace = trace_path.empty() ? nullptr : std::fopen(trace_path.c_str(), "w");
+  if (trace) std::fprintf(trace, "cell_mm,slide_depth_mm,y_mm,tip_x_mm,tip_y_mm,tip_z_mm,depth_mm,force_mn,rows\n");
   if (csv) std::printf("cell_mm,host_vertices,host_tets,surface_z_mm,normal_z,depth_mm,force_mn,rows,build_s\n");
   try {
     for (std::size_t ci = 0; ci < cells.size(); ++ci) {
@@ -119,6 +131,9 @@ int main(int argc, char** argv) {
       const auto t0 = neurosim::common::Clock::now();
       ni::SimulationOptions options;
       if (geometry_iterations > 0) options.contact_geometry_iterations = geometry_iterations;
+      if (contact_spread >= 0.0) options.contact_spread = contact_spread;
+      if (smooth_normals) options.contact_smooth_normals = true;
+      if (near_field) options.contact_near_field = true;
       auto sim = ni::Simulation::build(model, options);
       const double build_s = neurosim::common::seconds_since(t0);
       const auto& mesh = sim->mesh(0);
@@ -149,6 +164,12 @@ int main(int argc, char** argv) {
         double fpd_min = std::numeric_limits<double>::infinity(), fpd_max = 0.0, f_min = fpd_min;
         int steps = 0;
         double y_at_min = 0.0, depth_at_min = 0.0;  // where |F| / depth is least, unit mm / m
+        // Jumps: the largest relative change of |F| between two steps whose tip moved less than
+        // 0.25 mm (the path's own jumps, where the highest triangle under it changes, excluded),
+        // and how many such changes exceed 10 %.
+        double jump = 0.0, jump_y = 0.0, f_prev = -1.0;
+        int jumps = 0;
+        Vec3 tip_prev = Vec3::Zero();
         for (int k = 0; k <= 400; ++k) {
           const auto on = ni::top_of_surface(mesh, 0.060, 0.080 + 1e-4 * k);
           if (!on) throw std::runtime_error(scene.string() + ": the slide leaves the surface at step " + std::to_string(k));
@@ -159,6 +180,20 @@ int main(int argc, char** argv) {
           const ni::SurfacePoint near = ni::closest_on_surface(mesh, poses[0].tip_m);
           const double depth = r - near.normal.dot(poses[0].tip_m - near.point_m);
           const double f = contacts[0].force_n.norm();
+          if (f_prev >= 0.0 && (poses[0].tip_m - tip_prev).norm() < 2.5e-4 && std::max(f, f_prev) > 0.0) {
+            const double rel = std::abs(f - f_prev) / std::max(f, f_prev);
+            if (rel > 0.1) ++jumps;
+            if (rel > jump) {
+              jump = rel;
+              jump_y = 80.0 + 0.1 * k;
+            }
+          }
+          f_prev = f;
+          tip_prev = poses[0].tip_m;
+          if (trace)
+            std::fprintf(trace, "%g,%g,%.1f,%.5f,%.5f,%.5f,%.4f,%.4f,%d\n", cells[ci], depth_mm, 80.0 + 0.1 * k,
+                         1e3 * poses[0].tip_m.x(), 1e3 * poses[0].tip_m.y(), 1e3 * poses[0].tip_m.z(),
+                         1e3 * depth, 1e3 * f, stats.contact_rows);
           f_min = std::min(f_min, f);
           if (f / depth < fpd_min) {
             y_at_min = 80.0 + 0.1 * k;
@@ -169,8 +204,9 @@ int main(int argc, char** argv) {
           ++steps;
         }
         char row[256];
-        std::snprintf(row, sizeof row, "%g,%g,%d,%.3f,%.1f,%.1f,%.2f,%.1f,%.3f", cells[ci], depth_mm, steps,
-                      1e3 * f_min, fpd_min, fpd_max, fpd_max / fpd_min, y_at_min, 1e3 * depth_at_min);
+        std::snprintf(row, sizeof row, "%g,%g,%d,%.3f,%.1f,%.1f,%.2f,%.1f,%.3f,%.3f,%.1f,%d", cells[ci], depth_mm,
+                      steps, 1e3 * f_min, fpd_min, fpd_max, fpd_max / fpd_min, y_at_min, 1e3 * depth_at_min,
+                      jump, jump_y, jumps);
         slide_rows.emplace_back(row);
       }
     }
@@ -227,9 +263,11 @@ int main(int argc, char** argv) {
       }
     }
   }
+  if (trace) std::fclose(trace);
   if (slide) {
     std::printf("\ncell_mm,slide_depth_mm,steps,min_force_mn,force_per_depth_min_n_per_m,"
-                "force_per_depth_max_n_per_m,spread,y_at_min_mm,depth_at_min_mm\n");
+                "force_per_depth_max_n_per_m,spread,y_at_min_mm,depth_at_min_mm,max_jump,y_at_max_jump_mm,"
+                "jumps_over_10pct\n");
     for (const auto& row : slide_rows) std::printf("%s\n", row.c_str());
   }
   return 0;

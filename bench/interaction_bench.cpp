@@ -3,7 +3,7 @@
 // with the coupling kind SLIDING (frictionless unilateral pairs solved with the tool contact).
 //   interaction_bench [--csv] [--steps N] [--sliding-steps N] [--quick] [--residual-csv FILE]
 //                     [--only SCENARIO] [--no-sliding-ref]
-//   interaction_bench --brain-contact [--steps N]
+//   interaction_bench --brain-contact [--steps N] [--smooth-contact]
 // --csv prints only the table; set-up times and notes go to stderr. SLIDING rows: `sliding` (the
 // default LCP path, inverse of the sliding block at load) and `sliding_ref` (the reference path,
 // factor of the active rows), unless --no-sliding-ref.
@@ -123,11 +123,11 @@ RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses, 
   return r;
 }
 
-int brain_contact(int steps) {
+int brain_contact(int steps, const ni::SimulationOptions& contact) {
   const std::string path = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/brain_artery.scene";
   const neurosim::scene::Model model = neurosim::scene::load_model(path);
   const double r = model.tools.at(0).tip_radius_m;
-  auto sim = ni::Simulation::build(model);
+  auto sim = ni::Simulation::build(model, contact);
   const auto& mesh = sim->mesh(0);
   auto pose_at = [&](double x, double y, double depth, ni::ToolPose& pose) {
     const auto on = ni::top_of_surface(mesh, x, y);
@@ -178,11 +178,11 @@ int brain_contact(int steps) {
   sim.reset();
   RunTimes ts, tw;
   {
-    auto fresh = ni::Simulation::build(model);
+    auto fresh = ni::Simulation::build(model, contact);
     ts = run_poses(*fresh, slide, true);
   }
   {
-    ni::SimulationOptions options;
+    ni::SimulationOptions options = contact;
     options.column_worker = true;
     auto fresh = ni::Simulation::build(model, options);
     run_poses(*fresh, {slide.front()});  // the worker starts where the tool joins
@@ -219,7 +219,7 @@ int main(int argc, char** argv) {
   bool sliding_ref = true;
   std::string residual_csv;
   bool no_sliding_ref = false;
-  bool brain = false;
+  bool brain = false, smooth_contact = false;
   neurosim::cli::Parser cli("interaction_bench",
                             "Per-step contact solve: exact vs iterative coupling, sliding.");
   cli->add_flag("--csv", csv, "print CSV");
@@ -230,8 +230,19 @@ int main(int argc, char** argv) {
   cli->add_option("--only", only, "one scenario by name");
   cli->add_flag("--no-sliding-ref", no_sliding_ref, "no sliding reference solve");
   cli->add_flag("--brain-contact", brain, "brain_artery press and 10 s slide (contact rows)");
+  cli->add_flag("--smooth-contact", smooth_contact,
+                "with --brain-contact: SimulationOptions contact_spread 0.5, contact_smooth_normals, "
+                "contact_near_field");
   if (auto rc = cli.parse(argc, argv)) return *rc;
-  if (brain) return brain_contact(steps);
+  if (brain) {
+    ni::SimulationOptions contact;
+    if (smooth_contact) {
+      contact.contact_spread = 0.5;
+      contact.contact_smooth_normals = true;
+      contact.contact_near_field = true;
+    }
+    return brain_contact(steps, contact);
+  }
   sliding_ref = !no_sliding_ref;
   if (sliding_steps < 0) sliding_steps = steps;
   std::vector<Scenario> scenarios;

@@ -213,12 +213,13 @@ void State::reserve_workspace(const Model& m, int tools) {
     sc.rest_hits.reserve(hits_.capacity());
   }
   tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
+  spread_triangles_.reserve(triangles);
   for (auto& b : bodies_) {
-    b.force_slots.reserve(3 * max_rows);
-    b.forces_n.reserve(3 * max_rows);
+    b.force_slots.reserve(kSpreadNodes * max_rows);
+    b.forces_n.reserve(kSpreadNodes * max_rows);
   }
-  for (auto& list : missing_) list.reserve(3 * max_rows);
-  relax_slots_.reserve(3 * max_rows);
+  for (auto& list : missing_) list.reserve(kSpreadNodes * max_rows);
+  relax_slots_.reserve(kSpreadNodes * max_rows);
   backup_.resize(bodies_.size());
   for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
     // A viscoelastic body's forces also hold its history slots: room for every slot.
@@ -456,9 +457,11 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
       Vec3 n = (x[1] - x[0]).cross(x[2] - x[0]);
       if (!(n.norm() > 0.0)) continue;
       n.normalize();
+      const std::array<Vec3, 3>* smooth =
+          m.options_.contact_smooth_normals ? &b.surface.node_normals(t) : nullptr;
       for (int part = 0; part < (has_shaft ? 2 : 1); ++part)
         part_features(t, tri, x, n, part == 1, g == 1, shape, p0, p1, margin,
-                      b.behind_reach_m, b.body->contact_normals(), bs, memo);
+                      b.behind_reach_m, b.body->contact_normals(), bs, memo, smooth);
     }
   }
   if (first_is_rest) {
@@ -474,7 +477,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
                           const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
                           const Vec3& p0, const Vec3& p1, double margin,
                           double max_penetration_m, const std::vector<Vec3>& node_normals,
-                          BodyState& bs, long long memo) {
+                          BodyState& bs, long long memo, const std::array<Vec3, 3>* smooth_normals) {
   const double reach = (shaft ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
   FeatureHit h;
   h.triangle = t;
@@ -502,7 +505,9 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
     }
     const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
     bs.node_test_stamp[i] = memo;
-    bs.node_test_in[i] = within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m);
+    // The shaft's hits inside the tip sphere are the tip's (its own rows hold them, deeper).
+    bs.node_test_in[i] = !(shaft && (x[k] - p0).norm() < shape.tip_radius_m) &&
+                         within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m);
     if (!bs.node_test_in[i]) continue;
     bs.node_hit[i] = static_cast<int>(hits_.size());
     h.key = feature_key(shaft, TriangleFeature::kVertex, 0, tri.node[k]);
@@ -518,6 +523,23 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   // their face or edge point is skipped by a plane test before the closest-point search.
   if (!may_touch_face(x, n, p0, shaft ? p1 : p0, reach, std::max(reach, max_penetration_m)))
     return;
+  // SimulationOptions::contact_smooth_normals, the tip: the centre projected along the normals
+  // interpolated from the nodes' (project_along_normals), one face row per triangle that holds
+  // the projection, its normal the interpolated one: no edge rows, and the row, its normal and
+  // its depth pass continuously from a triangle to the next across edges and creases.
+  if (!shaft && smooth_normals != nullptr) {
+    TrianglePoint at;
+    Vec3 smooth_n;
+    double height = 0.0;
+    if (!project_along_normals(p0, x, *smooth_normals, at, smooth_n, height)) return;
+    if (!within(p0 - at.point_m, smooth_n, reach, max_penetration_m)) return;
+    h.key = feature_key(false, TriangleFeature::kFace, 0, static_cast<std::uint64_t>(t));
+    h.at = at;
+    h.centre_m = p0;
+    h.face_normal = smooth_n;
+    hits_.push_back(h);
+    return;
+  }
   // The part's centre for this triangle: the tip centre, or the shaft axis point closest to the
   // triangle (alternating projections between the two convex sets).
   Vec3 c = p0;
@@ -533,6 +555,10 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   // An edge by its distance only (behind a ridge the far flank's edge is not the surface the
   // tool went through); a face also from behind.
   if (at.feature == TriangleFeature::kVertex) return;
+  // A shaft point inside the tip sphere: the tip's rows hold it (with SimulationOptions::
+  // contact_smooth_normals the two would differ in normal and weights, and the shaft, starting
+  // at the tip's centre, took most of a 2 mm press's force at a flat face's normal).
+  if (shaft && (at.point_m - p0).norm() < shape.tip_radius_m) return;
   if (at.feature == TriangleFeature::kEdge ? (c - at.point_m).norm() > reach
                                            : !within(c - at.point_m, n, reach, max_penetration_m))
     return;
@@ -579,6 +605,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     const Vec3 d = h.centre_m - h.at.point_m;
     const double dn = d.norm();
     Vec3 n;
+    bool radial = false;
     if (f == TriangleFeature::kFace) {
       n = h.face_normal;
     } else {
@@ -595,27 +622,57 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       // 101.6 N against the block's 50.5 N bound, stability_test).
       const Vec3 mean = normal_sum.normalized();
       const double radial_from = tier_ ? 0.5 * dn : 0.0;  // cos 60 or cos 90 degrees
-      n = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
-                  d.dot(mean) > radial_from
-              ? Vec3(d / dn)
-              : mean;
+      radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
+               d.dot(mean) > radial_from;
+      n = radial ? Vec3(d / dn) : mean;
     }
     // A part whose centre lies deeper than behind_reach behind the surface does not push it.
     if (n.dot(d) < -b.behind_reach_m) continue;
-    const double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+    double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+    // A node or edge row along the mean normal: the part's point on the feature's normal line
+    // (the depth sqrt(r^2 - perp^2) - height, perp the centre's offset from the line), not the
+    // half-space's r - height. Where the line misses the part (perp >= r) the feature is beside
+    // it: the radial gap r - |d| (not touching), which the radial rows take at height 0 too.
+    // The half-space depth gave a node 2.12 mm from the 2 mm tip's centre, the centre 0.02 mm
+    // behind its tangent plane, a depth of 2.02 mm for one step of the brain slide (|F| 11 ->
+    // 18.6 -> 10.8 mN over 0.2 mm of tip motion).
+    if (f != TriangleFeature::kFace && n.dot(d) < dn * (1.0 - 1e-12)) {
+      const double height = n.dot(d);
+      const double perp2 = std::max(0.0, dn * dn - height * height);
+      radius = perp2 < radius * radius ? std::sqrt(radius * radius - perp2) : radius - dn + height;
+    }
     Row r;
     r.body = body;
     r.tool = tool;
     r.shaft = h.shaft;
     r.key = h.key;
     r.normal = n;
+    r.radial = radial;
     r.point_m = h.at.point_m;
-    double mobile = 0.0;
-    Vec3 rest_point = Vec3::Zero(), offset = Vec3::Zero();
+    // The row's nodes: its triangle's, by the point's barycentric weights, or the load spread
+    // around the point (SimulationOptions::contact_spread). The gap is the point's either way.
+    Vec3 rest_point = Vec3::Zero();
+    r.nodes = 3;
     for (int k = 0; k < 3; ++k) {
+      rest_point += h.at.weights[k] * rest[tri.node[k]];
       r.slot[k] = tri.slot[k];
       r.w[k] = h.at.weights[k];
-      rest_point += r.w[k] * rest[tri.node[k]];
+    }
+    if (m.options_.contact_spread > 0.0) {
+      const Vec3 surface_n = f == TriangleFeature::kFace ? h.face_normal : normal_sum.normalized();
+      const double rho = m.options_.contact_spread * b.surface.edge_at_m(h.triangle, h.at.weights);
+      if (b.surface.spread(rest_point, surface_n, rho, spread_triangles_, spread_load_)) {
+        r.spread_radius_m = rho;
+        r.nodes = spread_load_.nodes;
+        for (int k = 0; k < r.nodes; ++k) {
+          r.slot[k] = spread_load_.slot[k];
+          r.w[k] = spread_load_.weight[k];
+        }
+      }
+    }
+    double mobile = 0.0;
+    Vec3 offset = Vec3::Zero();
+    for (int k = 0; k < r.nodes; ++k) {
       if (r.slot[k] < 0 || r.w[k] == 0.0) {
         r.slot[k] = -1;  // a fixed node (or no weight): carries nothing
         r.m[k] = n;
@@ -648,9 +705,14 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   // and every row under the tool dropped: 0 N at 2 mm deep.
   constexpr double kOnSurfaceM = 1e-12;
   if (tool_rows_.size() <= first) return;
+  // A radial row (a node or edge against the part's sphere, the centre in front of it) is never
+  // behind the surface and its normal is the sphere's, not a side of the body: not an entry.
+  // (Seen with a curved contact surface: a face row 0.1 mm behind it at a 2 mm press, a node row
+  // beside the tip with a radial normal 70 degrees from it the highest, and the face row
+  // dropped: 0.4 mN.)
   std::size_t entry = tool_rows_.size();
   for (std::size_t k = first; k < tool_rows_.size(); ++k) {
-    if (tool_rows_[k].depth_m < 0.0) continue;
+    if (tool_rows_[k].depth_m < 0.0 || tool_rows_[k].radial) continue;
     if (entry == tool_rows_.size() || tool_rows_[k].height_m > tool_rows_[entry].height_m) entry = k;
   }
   if (entry == tool_rows_.size()) return;  // nothing touched: no row is behind a surface
@@ -675,6 +737,7 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
     triangle_features(m, bi, tool, pose, axis);
     merge_features(m, bi, tool, shape);
   }
+  near_field_of_tool(m, shape);
   // Rows within the margin enter the LCP inactive (caught if the deformation pushes them in).
   tool_rows_.erase(std::remove_if(tool_rows_.begin(), tool_rows_.end(),
                                   [&](const Row& r) { return !(r.depth_m > -margin); }),
@@ -687,7 +750,7 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
   // the tools, a stiffness of 1/eps); the deeper tool carries it.
   auto main_slot = [](const Row& r) {
     int best = 0;
-    for (int k = 1; k < 3; ++k)
+    for (int k = 1; k < r.nodes; ++k)
       if (r.w[k] > r.w[best]) best = k;
     return r.slot[best];
   };
@@ -706,6 +769,63 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
   }
 }
 
+// SimulationOptions::contact_near_field, per body the tool's tip rows: the compliance the
+// mesh cannot show under a contact patch smaller than its cells, in series with all of them
+// (the tip's local indentation grows with the sum of its rows' forces): Hertz's secant
+// compliance at the tip's depth d (its deepest row), 3 / (4 E* a) with a = sqrt(R d), less the
+// half-space's compliance under the spread load the rows already carry, k / (E* rho) with
+// k = 0.766 (the work-conjugate mean displacement of the pressure (1 - s^2 / rho^2)^2 on an
+// elastic half-space, Monte Carlo; a uniform disk's is 16 / (3 pi^2) = 0.540), at least 0.
+// E* = E / (1 - nu^2) of the body's host. Zero where the patch spans the spread (a >= 0.98 rho:
+// the mesh resolves it), so it fades as the cells shrink; large at first touch (d -> 0), so a
+// tip's force grows from zero with the depth.
+void State::near_field_of_tool(const Model& m, const ToolShape& shape) {
+  if (!m.options_.contact_near_field) return;
+  for (std::size_t i = 0; i < tool_rows_.size(); ++i) {
+    if (tool_rows_[i].shaft) continue;
+    const int body = tool_rows_[i].body;
+    bool seen = false;
+    for (std::size_t j = 0; j < i && !seen; ++j)
+      seen = !tool_rows_[j].shaft && tool_rows_[j].body == body;
+    if (seen) continue;
+    double depth = 0.0, rho = 0.0;
+    for (std::size_t j = i; j < tool_rows_.size(); ++j) {
+      const Row& r = tool_rows_[j];
+      if (r.shaft || r.body != body || !(r.depth_m > depth)) continue;
+      depth = r.depth_m;
+      rho = r.spread_radius_m;
+    }
+    const fem::Material& mat = m.bodies_[body].host_material;
+    const double e_star =
+        mat.youngs_modulus_pa / (1.0 - mat.poisson_ratio * mat.poisson_ratio);
+    const double radius = shape.tip_radius_m;
+    const double a = std::sqrt(radius * std::max(depth, 1e-4 * radius));
+    const double c = rho > 0.0 ? std::max(0.0, 0.75 / (e_star * a) - 0.766 / (e_star * rho)) : 0.0;
+    for (std::size_t j = i; j < tool_rows_.size(); ++j)
+      if (!tool_rows_[j].shaft && tool_rows_[j].body == body) tool_rows_[j].near_field_m_per_n = c;
+  }
+}
+
+// Phase "near field" (after Delassus): the tip's near-field compliance in series with its rows,
+// W_rs += alpha c n_r . n_s over the tip rows r, s of one tool on one body (positive
+// semidefinite: W stays definite).
+void State::near_field(int ns) {
+  const int nc = static_cast<int>(rows_.size());
+  for (int r = 0; r < nc; ++r) {
+    const Row& a = rows_[r];
+    if (a.shaft || !(a.near_field_m_per_n > 0.0)) continue;
+    const ViscoelasticHistory* hist = bodies_[a.body].history.get();
+    const double c = (hist ? hist->alpha() : 1.0) * a.near_field_m_per_n;
+    for (int s = r; s < nc; ++s) {
+      const Row& b = rows_[s];
+      if (b.shaft || b.tool != a.tool || b.body != a.body) continue;
+      const double v = c * a.normal.dot(b.normal);
+      w_(ns + r, ns + s) += v;
+      if (s != r) w_(ns + s, ns + r) += v;
+    }
+  }
+}
+
 // Phase "compliance columns": the coupled columns of every node a row acts on (cached after the
 // first touch; block solves, milliseconds, inside the step), or, with the column worker, the
 // fallback for those it has not solved yet (no solve in the step).
@@ -716,7 +836,7 @@ void State::compliance_columns(StepStats& stats) {
   }
   for (auto& list : missing_) list.clear();
   for (const Row& r : rows_)
-    for (int k = 0; k < 3; ++k)
+    for (int k = 0; k < r.nodes; ++k)
       if (r.slot[k] >= 0 && !bodies_[r.body].columns->has(r.slot[k]))
         missing_[r.body].push_back(r.slot[k]);
   stats.columns_computed = 0;
@@ -748,7 +868,7 @@ void State::columns_fallback(StepStats& stats) {
     Row row = rows_[r];
     const ContactColumns& cols = *bodies_[row.body].columns;
     double ready_w = 0.0, missing_w = 0.0;
-    for (int k = 0; k < 3; ++k) {
+    for (int k = 0; k < row.nodes; ++k) {
       const int s = row.slot[k];
       if (s < 0) continue;
       if (cols.has(s)) {
@@ -767,7 +887,7 @@ void State::columns_fallback(StepStats& stats) {
     if (missing_w > 0.0) {
       if (!(ready_w > 0.0)) continue;  // no ready node: the row waits for its columns
       const double scale = (ready_w + missing_w) / ready_w;
-      for (int k = 0; k < 3; ++k)
+      for (int k = 0; k < row.nodes; ++k)
         if (row.slot[k] >= 0) row.w[k] *= scale;
     }
     rows_[kept++] = row;
@@ -792,16 +912,16 @@ void State::delassus(const Model& m, int ns) {
     // and the step's compliance is alpha W (viscoelastic_history.hpp).
     const double alpha = hist ? hist->alpha() : 1.0;
     if (hist && !hist->slots().empty())
-      for (int p = 0; p < 3; ++p)
+      for (int p = 0; p < a.nodes; ++p)
         if (a.slot[p] >= 0) delta_[i] += a.w[p] * a.m[p].dot(hist->displacement(cols, a.slot[p]));
     for (int s = r; s < nc; ++s) {
       const Row& c = rows_[s];
       double v = 0.0;
       if (c.body == a.body) {
-        for (int q = 0; q < 3; ++q) {
+        for (int q = 0; q < c.nodes; ++q) {
           if (c.slot[q] < 0) continue;
           Vec3 y = Vec3::Zero();  // sum_p w_p L(slot_p, slot_q)^T m_p
-          for (int p = 0; p < 3; ++p)
+          for (int p = 0; p < a.nodes; ++p)
             if (a.slot[p] >= 0) y.noalias() += a.w[p] * (cols.block(a.slot[p], c.slot[q]).transpose() * a.m[p]);
           v += c.w[q] * y.dot(c.m[q]);
         }
@@ -816,7 +936,7 @@ void State::delassus(const Model& m, int ns) {
     const int rows_a = m.bodies_[a.body].body->sliding().size();
     if (rows_a > 0) {
       const int o = m.bodies_[a.body].sliding_offset;
-      for (int p = 0; p < 3; ++p)
+      for (int p = 0; p < a.nodes; ++p)
         if (a.slot[p] >= 0)
           w_.col(i).segment(o, rows_a).noalias() -= a.w[p] * (cols.sliding_block(a.slot[p]) * a.m[p]);
     }
@@ -844,7 +964,7 @@ void State::store_forces(const Model& m, int ns) {
     const Row& row = rows_[r];
     auto& bs = bodies_[row.body];
     const double alpha = bs.history ? bs.history->alpha() : 1.0;  // creep-equivalent force
-    for (int k = 0; k < 3; ++k) {
+    for (int k = 0; k < row.nodes; ++k) {
       const int s = row.slot[k];
       if (s < 0 || row.w[k] == 0.0) continue;
       if (bs.force_index[s] < 0) {
@@ -953,7 +1073,7 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
     if (row.body != main_body) continue;
     centre += (l / best) * row.point_m;
     const auto& nodes = m.bodies_[row.body].body->contact_nodes();
-    for (int k = 0; k < 3; ++k) {
+    for (int k = 0; k < row.nodes; ++k) {
       if (row.slot[k] < 0 || row.w[k] == 0.0) continue;
       const int v = nodes[row.slot[k]];
       if (std::find(c.nodes.begin(), c.nodes.end(), v) == c.nodes.end()) c.nodes.push_back(v);
@@ -1010,7 +1130,7 @@ void State::relaxation(const Model& m, int t, int ns, ToolContact& c) {
     const ViscoelasticHistory* h = bodies_[row.body].history.get();
     if ((h ? h->alpha() : 1.0) != hist.alpha()) one_alpha = false;
     if (row.body != b) continue;
-    for (int k = 0; k < 3; ++k) {
+    for (int k = 0; k < row.nodes; ++k) {
       const int s = row.slot[k];
       if (s < 0 || row.w[k] == 0.0) continue;
       if (bs.relax_stamp[s] != stamp) {
@@ -1071,6 +1191,7 @@ LcpResult State::solve_geometry(const Model& m, const std::vector<ToolPose>& pos
   const int ns = m.num_sliding_;  // sliding rows first (constant block of W), then contact rows
   compliance_columns(stats);
   delassus(m, ns);
+  near_field(ns);
   for (int k = 0; k < ns; ++k) warm_[k] = sliding_active_[k];
   for (int r = 0; r < nc; ++r) warm_[ns + r] = delta_[ns + r] > 0.0 ? 1 : 0;
   LcpOptions lcp_options;

@@ -1,6 +1,9 @@
 #include "server/interaction/contact_surface.hpp"
 
+#include <Eigen/Dense>
+
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <utility>
 
@@ -51,6 +54,58 @@ TrianglePoint closest_on_triangle(const mesh::Vec3& x, const std::array<mesh::Ve
   r.feature = TriangleFeature::kFace;
   r.a = 0;
   return r;
+}
+
+bool project_along_normals(const mesh::Vec3& x, const std::array<mesh::Vec3, 3>& p,
+                           const std::array<mesh::Vec3, 3>& nn, TrianglePoint& at,
+                           mesh::Vec3& unit_normal, double& height_m) {
+  const mesh::Vec3 e1 = p[1] - p[0], e2 = p[2] - p[0];
+  const mesh::Vec3 n1 = nn[1] - nn[0], n2 = nn[2] - nn[0];
+  const mesh::Vec3 flat = e1.cross(e2);
+  const double area2 = flat.squaredNorm();
+  if (!(area2 > 0.0)) return false;
+  // Start: the flat projection's barycentric coordinates and height.
+  const mesh::Vec3 r0 = x - p[0];
+  double u = r0.cross(e2).dot(flat) / area2;
+  double v = e1.cross(r0).dot(flat) / area2;
+  double h = r0.dot(flat) / std::sqrt(area2);
+  const double scale = std::sqrt(std::max(e1.squaredNorm(), e2.squaredNorm()));
+  bool converged = false;
+  for (int it = 0; it < 12; ++it) {
+    const mesh::Vec3 nv = nn[0] + u * n1 + v * n2;
+    const mesh::Vec3 res = p[0] + u * e1 + v * e2 + h * nv - x;
+    if (res.norm() <= 1e-13 * scale) {
+      converged = true;
+      break;
+    }
+    Eigen::Matrix3d j;
+    j.col(0) = e1 + h * n1;
+    j.col(1) = e2 + h * n2;
+    j.col(2) = nv;
+    const double det = j.determinant();
+    if (!(std::abs(det) > 1e-300)) return false;
+    const mesh::Vec3 step = j.inverse() * res;
+    u -= step[0];
+    v -= step[1];
+    h -= step[2];
+    if (!std::isfinite(u + v + h) || std::abs(u) > 4.0 || std::abs(v) > 4.0) return false;
+  }
+  if (!converged) {
+    const mesh::Vec3 nv = nn[0] + u * n1 + v * n2;
+    if ((p[0] + u * e1 + v * e2 + h * nv - x).norm() > 1e-9 * scale) return false;
+  }
+  constexpr double kTol = 1e-12;
+  if (u < -kTol || v < -kTol || u + v > 1.0 + kTol) return false;
+  const mesh::Vec3 nv = nn[0] + u * n1 + v * n2;
+  const double len = nv.norm();
+  if (!(len > 0.0)) return false;
+  unit_normal = nv / len;
+  at.point_m = p[0] + u * e1 + v * e2;
+  at.weights = {1.0 - u - v, u, v};
+  height_m = h * len;
+  at.feature = TriangleFeature::kFace;
+  at.a = 0;
+  return true;
 }
 
 ContactSurface::ContactSurface(const ContactSurfaceDefinition& def) {
@@ -110,6 +165,44 @@ ContactSurface::ContactSurface(const ContactSurfaceDefinition& def) {
   }
   if (triangles_.empty()) return;
   mean_edge_m_ = edge_sum / (3.0 * static_cast<double>(triangles_.size()));
+  // Rest geometry for spread loads: vertices, normals, each node's mean incident edge.
+  const auto& v = host.vertices();
+  std::vector<double> edge_of(v.size(), 0.0);
+  std::vector<int> edges_of(v.size(), 0);
+  rest_m_.reserve(triangles_.size());
+  normal_.reserve(triangles_.size());
+  for (const auto& t : triangles_) {
+    rest_m_.push_back({v[t.node[0]], v[t.node[1]], v[t.node[2]]});
+    const mesh::Vec3 nt = (v[t.node[1]] - v[t.node[0]]).cross(v[t.node[2]] - v[t.node[0]]);
+    normal_.push_back(nt.norm() > 0.0 ? mesh::Vec3(nt.normalized()) : mesh::Vec3::Zero());
+    for (int k = 0; k < 3; ++k) {
+      const double len = (v[t.node[k]] - v[t.node[(k + 1) % 3]]).norm();
+      for (int e : {t.node[k], t.node[(k + 1) % 3]}) {
+        edge_of[e] += len;
+        ++edges_of[e];
+      }
+    }
+  }
+  node_edge_m_.reserve(triangles_.size());
+  for (const auto& t : triangles_) {
+    std::array<double, 3> h{};
+    for (int k = 0; k < 3; ++k) h[k] = edge_of[t.node[k]] / edges_of[t.node[k]];
+    node_edge_m_.push_back(h);
+  }
+  std::vector<mesh::Vec3> normal_of(v.size(), mesh::Vec3::Zero());
+  for (const auto& t : triangles_) {
+    const mesh::Vec3 area2 = (v[t.node[1]] - v[t.node[0]]).cross(v[t.node[2]] - v[t.node[0]]);
+    for (int k = 0; k < 3; ++k) normal_of[t.node[k]] += area2;
+  }
+  node_normal_.reserve(triangles_.size());
+  for (std::size_t i = 0; i < triangles_.size(); ++i) {
+    std::array<mesh::Vec3, 3> nn;
+    for (int k = 0; k < 3; ++k) {
+      const mesh::Vec3& sum = normal_of[triangles_[i].node[k]];
+      nn[k] = sum.norm() > 0.0 ? mesh::Vec3(sum.normalized()) : normal_[i];
+    }
+    node_normal_.push_back(nn);
+  }
   grid_ = PointGrid(centroid_, 2.0 * mean_edge_m_);
 }
 
@@ -117,6 +210,88 @@ void ContactSurface::query(const mesh::Vec3& lo, const mesh::Vec3& hi,
                            std::vector<int>& out) const {
   const mesh::Vec3 pad = mesh::Vec3::Constant(max_radius_m_);
   grid_.query(lo - pad, hi + pad, out);
+}
+
+double ContactSurface::edge_at_m(int t, const std::array<double, 3>& bary) const {
+  const auto& h = node_edge_m_[t];
+  return bary[0] * h[0] + bary[1] * h[1] + bary[2] * h[2];
+}
+
+bool ContactSurface::spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho_m,
+                            std::vector<int>& scratch, SpreadLoad& out) const {
+  if (!(rho_m > 0.0)) return false;
+  scratch.clear();
+  const mesh::Vec3 r = mesh::Vec3::Constant(rho_m);
+  query(p - r, p + r, scratch);
+  // Accumulated weights per node (a linear list: a spread covers a few dozen nodes at most).
+  constexpr int kMost = 4 * kSpreadNodes;
+  std::array<int, kMost> node{};
+  std::array<int, kMost> slot{};
+  std::array<double, kMost> weight{};
+  int count = 0, lost = 0;
+  double total = 0.0;
+  const double inv_rho2 = 1.0 / (rho_m * rho_m);
+  for (int t : scratch) {
+    if ((centroid_[t] - p).norm() > radius_m_[t] + rho_m) continue;
+    if (!(normal_[t].dot(n) > 0.0)) continue;
+    const auto& x = rest_m_[t];
+    const mesh::Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0];
+    const double area = 0.5 * e1.cross(e2).norm();
+    const double longest = std::max({e1.norm(), e2.norm(), (x[2] - x[1]).norm()});
+    const int sub = std::clamp(static_cast<int>(std::ceil(3.0 * longest / rho_m)), 1, 8);
+    const double da = area / (sub * sub);
+    std::array<double, 3> acc{0.0, 0.0, 0.0};
+    auto sample = [&](double u, double w) {
+      const mesh::Vec3 y = x[0] + u * e1 + w * e2;
+      const double s2 = (y - p).squaredNorm() * inv_rho2;
+      if (s2 >= 1.0) return;
+      const double k = (1.0 - s2) * (1.0 - s2) * da;
+      acc[0] += k * (1.0 - u - w);
+      acc[1] += k * u;
+      acc[2] += k * w;
+    };
+    const double inv = 1.0 / sub;
+    for (int i = 0; i < sub; ++i)
+      for (int j = 0; i + j < sub; ++j) {
+        sample((i + 1.0 / 3.0) * inv, (j + 1.0 / 3.0) * inv);                          // upward
+        if (i + j + 2 <= sub) sample((i + 2.0 / 3.0) * inv, (j + 2.0 / 3.0) * inv);  // downward
+      }
+    for (int k = 0; k < 3; ++k) {
+      if (!(acc[k] > 0.0)) continue;
+      total += acc[k];
+      const int id = triangles_[t].node[k];
+      int at = 0;
+      while (at < count && node[at] != id) ++at;
+      if (at == count) {
+        if (count == kMost) {
+          ++lost;
+          continue;
+        }
+        node[count] = id;
+        slot[count] = triangles_[t].slot[k];
+        weight[count] = 0.0;
+        ++count;
+      }
+      weight[at] += acc[k];
+    }
+  }
+  if (count == 0 || !(total > 0.0)) return false;
+  // The largest kSpreadNodes weights, in descending order (ties by node id: deterministic).
+  std::array<int, kMost> order{};
+  for (int k = 0; k < count; ++k) order[k] = k;
+  std::sort(order.begin(), order.begin() + count, [&](int a, int b) {
+    return weight[a] != weight[b] ? weight[a] > weight[b] : node[a] < node[b];
+  });
+  out.nodes = std::min(count, kSpreadNodes);
+  out.dropped = count - out.nodes + lost;
+  double kept = 0.0;
+  for (int k = 0; k < out.nodes; ++k) kept += weight[order[k]];
+  for (int k = 0; k < out.nodes; ++k) {
+    out.node[k] = node[order[k]];
+    out.slot[k] = slot[order[k]];
+    out.weight[k] = weight[order[k]] / kept;
+  }
+  return true;
 }
 
 }  // namespace neurosim::interaction

@@ -168,8 +168,14 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       !(options_.lcp_tolerance > 0.0) || !(options_.max_penetration_m >= 0.0) ||
       !std::isfinite(options_.max_penetration_m) || !(options_.candidate_margin >= 0.0) ||
       !(options_.contact_row_compliance >= 0.0) || !(options_.contact_row_compliance < 1.0) ||
+      !(options_.contact_spread >= 0.0) || !(options_.contact_spread <= 4.0) ||
       options_.contact_geometry_iterations < 1) {
     throw std::invalid_argument(source_ + ": invalid SimulationOptions");
+  }
+  if (options_.contact_near_field && !(options_.contact_spread > 0.0)) {
+    throw std::invalid_argument(source_ +
+                                ": SimulationOptions.contact_near_field needs contact_spread > 0 "
+                                "(the near field is the part the spread load does not carry)");
   }
   if (!(options_.column_horizon_s >= 0.0) || !(options_.column_max_tool_speed_m_per_s >= 0.0) ||
       !std::isfinite(options_.column_horizon_s * options_.column_max_tool_speed_m_per_s) ||

@@ -160,6 +160,26 @@ struct SimulationOptions {
   // sphere, face rows come and go: 5.9 of 6 geometries per step on the cube's 25 mm tip, the
   // force alternating 10-20 % between them and jumping with the pose), contact_step.cpp.
   int contact_geometry_iterations{1};
+  // Spread each contact row's load over the surface around its point, over a radius of
+  // contact_spread x the local edge length (ContactSurface::spread: consistent nodal weights of
+  // a smooth pressure on the rest triangles, at most 16 nodes), instead of the point's
+  // barycentric weights on its triangle: a tip whose contact patch is smaller than a triangle
+  // then loads about the same surface wherever in the triangle it lands (a vertex and a face
+  // centre differ less), and the row's weights change continuously as it slides. 0: barycentric
+  // (dimensionless).
+  double contact_spread{0.0};
+  // The tip's face rows from the tip centre projected along the normal field interpolated from
+  // the surface nodes' normals (ContactSurface project_along_normals: a smooth contact surface
+  // over the flat triangles) instead of the closest point of each flat triangle with edge rows
+  // between them: the row's point, normal and depth pass continuously across edges and creases
+  // (no row entering or leaving with a force). The node rows and the shaft's rows are as without.
+  bool contact_smooth_normals{false};
+  // With contact_spread: the compliance the mesh cannot show under a tip whose contact patch is
+  // smaller than the spread, in series with the tip's rows (Hertz's secant compliance at the
+  // tip's depth less the half-space's under the spread load, contact_step.cpp near_field_of_tool):
+  // the force of a tip smaller than the cells approaches the continuum's and converges as they
+  // shrink (the term vanishes once the patch spans the spread).
+  bool contact_near_field{false};
   int lcp_max_iterations{200};
   double lcp_tolerance{1e-10};  // relative
   // Disk cache of each body's boundary operator (keyed by meshes, materials, fixed nodes and the

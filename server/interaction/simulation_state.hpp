@@ -61,15 +61,24 @@ struct Row {
   int body{-1};
   int tool{-1};
   bool shaft{false};           // pushed by the shaft (else by the tip)
+  bool radial{false};          // a node or edge row along the part's radius (else a surface normal)
   std::uint64_t key{0};        // feature (contact_step.cpp: feature_key)
-  std::array<int, 3> slot{};   // contact slots (-1: a fixed node, or no node)
-  std::array<double, 3> w{};   // barycentric weights (sum 1; on fixed nodes they carry nothing)
-  std::array<Vec3, 3> m{};     // per node the normal as its compliance sees it (R^T n; LINEAR n)
+  // The nodes the row acts on: its triangle's three (barycentric weights), or with
+  // SimulationOptions::contact_spread the nodes of the load spread around the point
+  // (ContactSurface::spread, at most kSpreadNodes).
+  int nodes{3};
+  std::array<int, kSpreadNodes> slot{};   // contact slots (-1: a fixed node, or no node)
+  std::array<double, kSpreadNodes> w{};   // weights (sum 1; on fixed nodes they carry nothing)
+  std::array<Vec3, kSpreadNodes> m{};     // per node the normal as its compliance sees it (R^T n; LINEAR n)
   Vec3 normal{Vec3::Zero()};   // unit, out of the tissue towards the tool
   Vec3 point_m{Vec3::Zero()};  // the contact point on the deformed surface, unit m
   double height_m{0.0};        // the centre's height above the point along n (deformed), unit m
   double depth_m{0.0};         // -gap on the deformed surface (current answer), unit m
   double rest_depth_m{0.0};    // -gap with the nodes at rest, unit m
+  double spread_radius_m{0.0};  // SimulationOptions::contact_spread: the load's radius, unit m
+  // SimulationOptions::contact_near_field: the tip's near-field compliance, shared in series by
+  // the tip's rows on this body (contact_step.cpp, near_field), unit m/N.
+  double near_field_m_per_n{0.0};
 };
 
 // A candidate feature of one tool part on one triangle, before merging (contact_step.cpp).
@@ -224,8 +233,11 @@ class State {
   void part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                      const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
                      const Vec3& p0, const Vec3& p1, double margin, double max_penetration_m,
-                     const std::vector<Vec3>& node_normals, BodyState& bs, long long memo);
+                     const std::vector<Vec3>& node_normals, BodyState& bs, long long memo,
+                     const std::array<Vec3, 3>* smooth_normals);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape);
+  void near_field_of_tool(const Model& m, const ToolShape& shape);
+  void near_field(int ns);
   void compliance_columns(StepStats& stats);
   void columns_fallback(StepStats& stats);
   void grant_evictions();
@@ -270,6 +282,8 @@ class State {
   long long node_memo_counter_{0};
   const StepCandidates* candidates_{nullptr};  // of the body and tool being searched
   std::vector<Row> tool_rows_;     // rows of one tool, before the per-tool limit
+  std::vector<int> spread_triangles_;  // ContactSurface::spread's candidates (capacity: triangles)
+  SpreadLoad spread_load_;             // one row's spread load
   std::vector<Row> rows_;          // the step's contact rows
   std::vector<std::vector<int>> missing_;
   std::vector<std::vector<long long>> not_ready_stamp_;  // per body and slot: geometry counted

@@ -279,8 +279,8 @@ struct Slide {
 };
 
 Slide slide(const scene::Model& model, const Vec3& start, const Vec3& heading, double depth_m,
-            double length_m, double step_m) {
-  auto sim = Simulation::build(model);
+            double length_m, double step_m, const SimulationOptions& options = {}) {
+  auto sim = Simulation::build(model, options);
   const mesh::TetMesh& mesh = sim->mesh(0);
   const double r = model.tools.at(0).tip_radius_m;
   std::vector<ToolContact> c;
@@ -349,6 +349,43 @@ TEST(interaction_contact_step, SlideOverTheSurfaceNeverLosesTheTissue) {
                 *std::max_element(s.force_per_depth.begin(), s.force_per_depth.end()), s.spread);
     EXPECT_GT(s.min_force_n, 0.0) << k.scene;
     EXPECT_LE(s.spread, brain ? 4.0 : 2.0) << k.scene << " " << k.depth_m;
+  }
+}
+
+// The same slides with the rows' load spread over half a local edge, the tip's rows projected
+// along the interpolated node normals and the near field in series (SimulationOptions::
+// contact_spread 0.5, contact_smooth_normals, contact_near_field): never zero, and |F| / depth
+// within the measured bounds (bench/RESULTS.md, "The slide with spread loads, smooth normals
+// and the near field"): on the brain 3.3..10.6 N/m at 1 mm (spread 3.24) and 9.9..13.4 N/m at
+// 2 mm (1.36; Hertz for the 2 mm tip in E = 3 kPa, nu = 0.49: 7.4 and 10.5 N/m), where the
+// barycentric face and edge rows give 3.93 / 3.20; the cube 1.15 / 1.24 (1.79 / 1.79). The
+// brain's 1 mm spread is the surface's shape, not the contact's: its soft end is a convex ridge
+// where the tip, 1 mm below the flat triangle under it, is 0.6 mm below the smooth surface
+// (depth measured along the interpolated normal), and the near field's F ~ d^1.5 halves F / d.
+TEST(interaction_contact_step, SlideWithSpreadLoadsSmoothNormalsAndTheNearField) {
+  struct Case {
+    const char* scene;
+    double depth_m;
+    double bound;
+  };
+  SimulationOptions options;
+  options.contact_spread = 0.5;
+  options.contact_smooth_normals = true;
+  options.contact_near_field = true;
+  for (const Case& k : {Case{"brain_artery", 1e-3, 3.3}, Case{"brain_artery", 2e-3, 1.4},
+                        Case{"cube_cylinder", 1e-3, 1.2}, Case{"cube_cylinder", 2e-3, 1.3}}) {
+    const scene::Model model = scene::load_model(neurosim::testing::source_dir() / "scenes" /
+                                                 (std::string(k.scene) + ".scene"));
+    const bool brain = std::string(k.scene) == "brain_artery";
+    const Vec3 start = brain ? Vec3(0.060, 0.080, 0.0) : Vec3(0.030, 0.050, 0.0);
+    const Vec3 heading = brain ? Vec3::UnitY() : Vec3::UnitX();
+    const Slide s = slide(model, start, heading, k.depth_m, 0.04, 1e-4, options);
+    std::printf("%s, %.0f mm deep: min |F| %.3f mN, |F|/depth %.1f .. %.1f N/m, spread %.2f\n",
+                k.scene, k.depth_m * 1e3, s.min_force_n * 1e3,
+                *std::min_element(s.force_per_depth.begin(), s.force_per_depth.end()),
+                *std::max_element(s.force_per_depth.begin(), s.force_per_depth.end()), s.spread);
+    EXPECT_GT(s.min_force_n, 0.0) << k.scene;
+    EXPECT_LE(s.spread, k.bound) << k.scene << " " << k.depth_m;
   }
 }
 

@@ -1,6 +1,8 @@
 // ContactSurface and closest_on_triangle: the closest point against a dense sampling of the
 // triangle (brute force), its feature and weights; the contactable triangles and edge incidence
-// of a box's surface.
+// of a box's surface; the spread load's weights (sum, first moment, continuity); the projection
+// along interpolated normals (the flat closest point where the normals agree, continuous across
+// a crease).
 #include "server/interaction/contact_surface.hpp"
 
 #include "server/fem/fem_test_meshes.hpp"
@@ -8,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 #include <vector>
 
@@ -93,6 +96,116 @@ TEST(interaction_contact_surface, BoxSurfaceTrianglesAndEdgeIncidence) {
   std::vector<int> near;
   s.query(Vec3(0.5, 0.5, 1.0), Vec3(0.5, 0.5, 1.0), near);
   EXPECT_FALSE(near.empty());
+}
+
+// The box's top face (z = 1, cells of 1/3) and its contactable surface, every non-bottom
+// surface node a slot.
+struct TopFace {
+  mesh::TetMesh box = fem::testing::box_mesh(fem::testing::BoxSpec{3, 3, 3});
+  std::vector<int> slot, fixed;
+  ContactSurface surface;
+  TopFace() {
+    slot.assign(box.num_vertices(), -1);
+    int slots = 0;
+    for (int v : box.surface_vertices()) {
+      if (box.vertices()[v].z() < 1e-9) {
+        fixed.push_back(v);
+      } else {
+        slot[v] = slots++;
+      }
+    }
+    std::sort(fixed.begin(), fixed.end());
+    surface = ContactSurface(ContactSurfaceDefinition{&box, &slot, &fixed});
+  }
+};
+
+TEST(interaction_contact_surface, SpreadLoadWeightsAreConsistentAndContinuous) {
+  const TopFace f;
+  std::vector<int> scratch;
+  scratch.reserve(f.surface.triangles().size());
+  const double rho = 0.25;
+  auto weights_at = [&](const Vec3& p) {
+    SpreadLoad load;
+    EXPECT_TRUE(f.surface.spread(p, Vec3::UnitZ(), rho, scratch, load));
+    EXPECT_EQ(load.dropped, 0);
+    std::vector<double> w(f.box.num_vertices(), 0.0);
+    double sum = 0.0;
+    Vec3 moment = Vec3::Zero();
+    for (int k = 0; k < load.nodes; ++k) {
+      EXPECT_GE(load.weight[k], 0.0);
+      EXPECT_EQ(load.slot[k], f.slot[load.node[k]]);
+      // Only the top face's nodes: the side faces are at 90 degrees to n.
+      EXPECT_NEAR(f.box.vertices()[load.node[k]].z(), 1.0, 1e-12);
+      w[load.node[k]] = load.weight[k];
+      sum += load.weight[k];
+      moment += load.weight[k] * f.box.vertices()[load.node[k]];
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-12);
+    // Linear shape functions reproduce position: the first moment is the kernel's mean point,
+    // p itself for a kernel wholly on the plane (up to the midpoint rule's asymmetry).
+    EXPECT_LT((moment - p).norm(), 0.02 * rho) << p.transpose();
+    return w;
+  };
+  // At a vertex, on an edge, on a face, and across the edge (1/3, y) between two triangles:
+  // a step of 1e-7 changes no weight by more than 1e-5 (continuous, no feature switch).
+  for (const Vec3& p : {Vec3(1.0 / 3, 1.0 / 3, 1), Vec3(0.5, 1.0 / 3, 1), Vec3(0.45, 0.4, 1),
+                        Vec3(0.5, 0.5, 1)}) {
+    const auto w0 = weights_at(p);
+    for (const Vec3& step : {Vec3(1e-7, 0, 0), Vec3(0, 1e-7, 0), Vec3(-7e-8, 7e-8, 0)}) {
+      const auto w1 = weights_at(p + step);
+      for (std::size_t v = 0; v < w0.size(); ++v) EXPECT_NEAR(w1[v], w0[v], 1e-5) << v;
+    }
+  }
+  // Spread over more than the point's triangle: a vertex keeps well under all of the load.
+  SpreadLoad at_vertex;
+  ASSERT_TRUE(f.surface.spread(Vec3(1.0 / 3, 1.0 / 3, 1), Vec3::UnitZ(), rho, scratch, at_vertex));
+  EXPECT_GT(at_vertex.nodes, 3);
+  EXPECT_LT(at_vertex.weight[0], 0.8);
+}
+
+TEST(interaction_contact_surface, ProjectionAlongNormalsIsFlatWhereTheyAgreeAndContinuousAcrossACrease) {
+  // Equal normals: the flat triangle's closest point and height.
+  const std::array<Vec3, 3> p{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)};
+  const std::array<Vec3, 3> up{Vec3::UnitZ(), Vec3::UnitZ(), Vec3::UnitZ()};
+  TrianglePoint at;
+  Vec3 n;
+  double h = 0.0;
+  ASSERT_TRUE(project_along_normals(Vec3(0.2, 0.3, 0.7), p, up, at, n, h));
+  EXPECT_LT((at.point_m - Vec3(0.2, 0.3, 0)).norm(), 1e-12);
+  EXPECT_NEAR(h, 0.7, 1e-12);
+  EXPECT_LT((n - Vec3::UnitZ()).norm(), 1e-12);
+  EXPECT_FALSE(project_along_normals(Vec3(0.8, 0.8, 0.7), p, up, at, n, h));  // beyond the edge
+  // A ridge along the y axis: the left flank rises to it, the right one falls (30 degrees each
+  // side); the edge's nodes carry the mean normal (vertical). A centre moving across the ridge
+  // projects on one flank, then the other, with the same point, normal and height at the edge.
+  const double s = std::tan(M_PI / 6);
+  const Vec3 a(0, 0, 0), b(0, 1, 0), l(-1, 0.5, -s), r(1, 0.5, -s);
+  const std::array<Vec3, 3> left{a, b, l}, right{a, r, b};  // outward (up) orientation
+  const Vec3 nl = (b - a).cross(l - a).normalized(), nr = (r - a).cross(b - a).normalized();
+  ASSERT_GT(nl.z(), 0.0);
+  ASSERT_GT(nr.z(), 0.0);
+  const std::array<Vec3, 3> nn_left{Vec3::UnitZ(), Vec3::UnitZ(), nl};
+  const std::array<Vec3, 3> nn_right{Vec3::UnitZ(), nr, Vec3::UnitZ()};
+  double last_h = 0.0;
+  Vec3 last_n = Vec3::Zero();
+  int found = 0;
+  for (int i = -20; i <= 20; ++i) {
+    const Vec3 c(1e-3 * i, 0.5, 0.6);
+    TrianglePoint tl, tr;
+    Vec3 n_l, n_r;
+    double h_l = 0.0, h_r = 0.0;
+    const bool on_l = project_along_normals(c, left, nn_left, tl, n_l, h_l);
+    const bool on_r = project_along_normals(c, right, nn_right, tr, n_r, h_r);
+    ASSERT_TRUE(on_l || on_r) << i;  // no gap between the flanks
+    const double hc = on_l ? h_l : h_r;
+    const Vec3 nc = on_l ? n_l : n_r;
+    if (found++ > 0) {
+      EXPECT_NEAR(hc, last_h, 2e-3) << i;        // 1 um steps: no jump in height
+      EXPECT_LT((nc - last_n).norm(), 1e-2) << i;  // nor in the normal
+    }
+    last_h = hc;
+    last_n = nc;
+  }
 }
 
 }  // namespace
