@@ -636,7 +636,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     // The half-space depth gave a node 2.12 mm from the 2 mm tip's centre, the centre 0.02 mm
     // behind its tangent plane, a depth of 2.02 mm for one step of the brain slide (|F| 11 ->
     // 18.6 -> 10.8 mN over 0.2 mm of tip motion).
-    if (f != TriangleFeature::kFace && n.dot(d) < dn * (1.0 - 1e-12)) {
+    if (!tier_ && f != TriangleFeature::kFace && n.dot(d) < dn * (1.0 - 1e-12)) {
       const double height = n.dot(d);
       const double perp2 = std::max(0.0, dn * dn - height * height);
       radius = perp2 < radius * radius ? std::sqrt(radius * radius - perp2) : radius - dn + height;
