@@ -151,6 +151,8 @@ void ColumnWorker::run() {
   const std::size_t chunk = static_cast<std::size_t>(CoupledBody::kBlockColumns / 3);
   while (!stop_.load(std::memory_order_acquire)) {
     poses_.take(poses);
+    // Evictions the step granted are freed now, whether or not this body needs room next.
+    for (auto& b : bodies_) b.columns->reclaim();
     bool worked = false;
     if (paused_.load(std::memory_order_acquire)) {
       idle_valid = false;
