@@ -189,6 +189,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   delta_.setZero(max_rows);
   lambda_.setZero(max_rows);
   warm_.assign(max_rows, 0);
+  column_terms_.assign(kSpreadNodes * static_cast<std::size_t>(max_contact), LcpColumnTerm{});
   rows_.reserve(max_contact);
   // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
   for (const auto& b : m.bodies_) {
@@ -934,11 +935,21 @@ void State::delassus(const Model& m, int ns) {
     if (ns == 0) continue;
     w_.col(i).head(ns).setZero();
     const int rows_a = m.bodies_[a.body].body->sliding().size();
+    for (int p = 0; p < kSpreadNodes; ++p)
+      column_terms_[kSpreadNodes * static_cast<std::size_t>(r) + p] = LcpColumnTerm{};
     if (rows_a > 0) {
       const int o = m.bodies_[a.body].sliding_offset;
-      for (int p = 0; p < a.nodes; ++p)
-        if (a.slot[p] >= 0)
-          w_.col(i).segment(o, rows_a).noalias() -= a.w[p] * (cols.sliding_block(a.slot[p]) * a.m[p]);
+      for (int p = 0; p < a.nodes; ++p) {
+        if (a.slot[p] < 0) continue;
+        const ContactColumns::Columns& sb = cols.sliding_block(a.slot[p]);
+        w_.col(i).segment(o, rows_a).noalias() -= a.w[p] * (sb * a.m[p]);
+        LcpColumnTerm& term = column_terms_[kSpreadNodes * static_cast<std::size_t>(r) + p];
+        term.block = sb.data();
+        term.key = (static_cast<std::uint64_t>(a.body) << 32) | static_cast<std::uint32_t>(a.slot[p]);
+        term.offset = o;
+        term.length = rows_a;
+        term.coef = -a.w[p] * a.m[p];
+      }
     }
     w_.row(i).head(ns) = w_.col(i).head(ns).transpose();
   }
@@ -1201,7 +1212,12 @@ LcpResult State::solve_geometry(const Model& m, const std::vector<ToolPose>& pos
   lcp_options.path = !m.options_.sliding_inactive_set        ? LcpPath::reference
                      : m.options_.sliding_inactive_set_always ? LcpPath::inactive_set
                                                               : LcpPath::automatic;
-  return lcp_.solve(LcpProblem{&w_, &delta_, ns + nc, ns, &warm_}, lcp_options, lambda_);
+  LcpProblem problem{&w_, &delta_, ns + nc, ns, &warm_};
+  if (ns > 0) {
+    problem.column_terms = &column_terms_;
+    problem.terms_per_row = kSpreadNodes;
+  }
+  return lcp_.solve(problem, lcp_options, lambda_);
 }
 
 // The last good forces of every body, kept while the step iterates (no allocation: reserved).

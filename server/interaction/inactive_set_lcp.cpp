@@ -101,6 +101,14 @@ void InactiveSetLcp::size_workspace() {
   uc_.setZero(ns, entries);
   chash_.assign(entries, 0);
   cstamp_.assign(entries, -1);
+  const int term_entries = std::max(32, 4 * cap);
+  tg_.setZero(ns, 3 * term_entries);
+  tkey_.assign(term_entries, 0);
+  tblock_.assign(term_entries, nullptr);
+  toffset_.assign(term_entries, 0);
+  tlength_.assign(term_entries, 0);
+  tstamp_.assign(term_entries, -1);
+  ur_.setZero(ns, cap);
   centry_.assign(cap, -1);
   miss_.reserve(cap);
   h_.setZero(cap, cap);
@@ -145,10 +153,7 @@ bool InactiveSetLcp::append_inactive(int row) {
   auto zr = zrow_.head(cols);
   zr.noalias() = zx_.topLeftCorner(m, cols).transpose() * y;
   zx_(m, 0) = (a_[row] - zr[0]) / ljj;
-  for (int c = 1; c < cols; ++c) {
-    const int e = c - 1 < static_cast<int>(centry_.size()) ? centry_[c - 1] : -1;
-    zx_(m, c) = e >= 0 ? (uc_(row, e) - zr[c]) / ljj : 0.0;
-  }
+  for (int c = 1; c < cols; ++c) zx_(m, c) = c - 1 < nc_ ? (ur_(row, c - 1) - zr[c]) / ljj : 0.0;
   inact_[m] = row;
   m_ = m + 1;
   return true;
@@ -171,35 +176,56 @@ void InactiveSetLcp::remove_inactive(int pos) {
   m_ = k - 1;
 }
 
-bool InactiveSetLcp::solve(const LcpProblem& problem, const LcpOptions& options,
-                           Eigen::VectorXd& lambda, LcpResult& result) {
-  const Eigen::MatrixXd& w = *problem.compliance;
-  const Eigen::VectorXd& delta = *problem.depth;
-  const int n = problem.rows;
-  const std::vector<char>* initial_active = problem.initial_active;
-  const double tolerance = options.tolerance;
-  const int max_iterations = options.max_iterations;
-  const int ns = constant_rows_, nc = n - ns;
-  ++solve_count_;
-  p_ = 0;
-  result = LcpResult{};
-  lambda.head(n).setZero();
-  double delta_scale = 0.0;  // max |delta|, unit m: the scale of the slack tolerance
-  for (int i = 0; i < n; ++i) delta_scale = std::max(delta_scale, std::abs(delta[i]));
-  if (delta_scale == 0.0) {
-    result.converged = true;
-    return true;
+int InactiveSetLcp::term_entry(const LcpColumnTerm& term) {
+  const int entries = static_cast<int>(tkey_.size());
+  int found = -1;
+  for (int e = 0; e < entries && found < 0; ++e) {
+    if (tstamp_[e] >= 0 && tkey_[e] == term.key && tblock_[e] == term.block &&
+        toffset_[e] == term.offset && tlength_[e] == term.length)
+      found = e;
   }
-  // a = G d_s, only when d_s changed.
-  bool new_a = false;
-  for (int i = 0; i < ns && !new_a; ++i) new_a = !(ds_[i] == delta[i]);
-  if (new_a) {
-    ds_ = delta.head(ns);
-    a_.noalias() = g_ * ds_;
-    carry_ = false;
+  if (found < 0) {
+    long long oldest = solve_count_ + 1;
+    for (int e = 0; e < entries; ++e) {
+      if (tstamp_[e] < oldest) {
+        oldest = tstamp_[e];
+        found = e;
+      }
+    }
+    tkey_[found] = term.key;
+    tblock_[found] = term.block;
+    toffset_[found] = term.offset;
+    tlength_[found] = term.length;
+    const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3>> b(term.block, term.length, 3);
+    tg_.middleCols(3 * found, 3).noalias() = g_.middleCols(term.offset, term.length) * b;
   }
+  tstamp_[found] = solve_count_;
+  return found;
+}
 
-  // Trailing rows: U_r = G C_r from the cache (one pass over G for all misses).
+void InactiveSetLcp::trailing_columns(const LcpProblem& problem) {
+  const Eigen::MatrixXd& w = *problem.compliance;
+  const int ns = constant_rows_, nc = problem.rows - ns;
+  if (problem.column_terms != nullptr && problem.terms_per_row > 0) {
+    // U_r = sum over the row's terms of (G B) coef.
+    const std::vector<LcpColumnTerm>& terms = *problem.column_terms;
+    const int per_row = problem.terms_per_row;
+    if (static_cast<int>(terms.size()) < per_row * nc)
+      throw std::invalid_argument("InactiveSetLcp::solve: fewer column terms than trailing rows");
+    for (int r = 0; r < nc; ++r) {
+      auto u = ur_.col(r);
+      u.setZero();
+      for (int k = 0; k < per_row; ++k) {
+        const LcpColumnTerm& t = terms[static_cast<std::size_t>(r * per_row + k)];
+        if (t.block == nullptr || t.length == 0) continue;
+        if (t.offset < 0 || t.length < 0 || t.offset + t.length > ns)
+          throw std::invalid_argument("InactiveSetLcp::solve: a column term exceeds the constant rows");
+        u.noalias() += tg_.middleCols(3 * term_entry(t), 3) * t.coef;
+      }
+    }
+    return;
+  }
+  // U_r = G C_r from the cache (one pass over G for all misses).
   miss_.clear();
   for (int r = 0; r < nc; ++r) {
     const double* col = &w(0, ns + r);
@@ -233,12 +259,44 @@ bool InactiveSetLcp::solve(const LcpProblem& problem, const LcpOptions& options,
       if (c != 0.0) uc_.col(e) += c * gj;
     }
   }
-  for (int r = nc; r < trailing_cap_; ++r) centry_[r] = -1;
+  for (int r = 0; r < nc; ++r) ur_.col(r) = uc_.col(centry_[r]);
+}
+
+bool InactiveSetLcp::solve(const LcpProblem& problem, const LcpOptions& options,
+                           Eigen::VectorXd& lambda, LcpResult& result) {
+  const Eigen::MatrixXd& w = *problem.compliance;
+  const Eigen::VectorXd& delta = *problem.depth;
+  const int n = problem.rows;
+  const std::vector<char>* initial_active = problem.initial_active;
+  const double tolerance = options.tolerance;
+  const int max_iterations = options.max_iterations;
+  const int ns = constant_rows_, nc = n - ns;
+  ++solve_count_;
+  p_ = 0;
+  result = LcpResult{};
+  lambda.head(n).setZero();
+  double delta_scale = 0.0;  // max |delta|, unit m: the scale of the slack tolerance
+  for (int i = 0; i < n; ++i) delta_scale = std::max(delta_scale, std::abs(delta[i]));
+  if (delta_scale == 0.0) {
+    result.converged = true;
+    return true;
+  }
+  // a = G d_s, only when d_s changed.
+  bool new_a = false;
+  for (int i = 0; i < ns && !new_a; ++i) new_a = !(ds_[i] == delta[i]);
+  if (new_a) {
+    ds_ = delta.head(ns);
+    a_.noalias() = g_ * ds_;
+    carry_ = false;
+  }
+
+  nc_ = nc;
+  trailing_columns(problem);
   for (int r = 0; r < nc; ++r) {
     const auto cr = w.col(ns + r).head(ns);
     e_[r] = delta[ns + r] - cr.dot(a_);
     for (int q = 0; q <= r; ++q) {
-      const double v = w(ns + r, ns + q) - cr.dot(uc_.col(centry_[q]));
+      const double v = w(ns + r, ns + q) - cr.dot(ur_.col(q));
       h_(r, q) = v;
       h_(q, r) = v;
     }
@@ -262,7 +320,7 @@ bool InactiveSetLcp::solve(const LcpProblem& problem, const LcpOptions& options,
     const int m0 = m_;
     for (int r = 0; r < nc; ++r) {
       auto z = zx_.col(1 + r).head(m0);
-      for (int q = 0; q < m0; ++q) z[q] = uc_(inact_[q], centry_[r]);
+      for (int q = 0; q < m0; ++q) z[q] = ur_(inact_[q], r);
       li_.topLeftCorner(m0, m0).triangularView<Eigen::Lower>().solveInPlace(z);
     }
     for (int r = 0; r < nc; ++r) {
@@ -320,7 +378,7 @@ bool InactiveSetLcp::solve(const LcpProblem& problem, const LcpOptions& options,
       for (int q = 0; q < m; ++q) x.noalias() += y[q] * g_.col(inact_[q]);
       term_scale = std::max(x.cwiseAbs().maxCoeff(), a_scale);
       x += a_;
-      for (int a = 0; a < p; ++a) x.noalias() -= l[a] * uc_.col(centry_[act_[a]]);
+      for (int a = 0; a < p; ++a) x.noalias() -= l[a] * ur_.col(act_[a]);
       drift = 0.0;
       for (int q = 0; q < m; ++q) {
         drift = std::max(drift, std::abs(x[inact_[q]]));

@@ -16,17 +16,23 @@
 // n_s |A_c|) plus O(m^2) per flipped leading row, instead of O(k^2) per pivot for k active rows
 // (active_set_lcp.hpp); an uncached coupling column costs O(n_s^2) once (cache of 16 x trailing
 // capacity columns, LRU, keyed by a hash of the column and checked entry by entry, so a changed
-// column is never taken from it). The result is checked as in the reference path: slack
+// column is never taken from it). With column terms (LcpProblem::column_terms: a row's column as
+// sum_t B_t c_t over fixed blocks, e.g. a contact row's nodes) the cache holds G B_t per block
+// instead (max(32, 4 x trailing capacity) blocks of 3 columns, LRU, keyed by the term's key,
+// address, offset and length): U_r = sum_t (G B_t) c_t costs O(n_s) per term, and a row whose
+// weights change every step over the same nodes (a triangle row under a moving tool) no longer
+// misses the cache; a new block costs O(n_s x its length) once. The result is checked as in the reference path: slack
 // W_i lambda - delta_i of every inactive row from W itself, lambda_I = 0 to round-off (drift of
 // the kept factor: past 1e3 x tolerance the solve is redone from a fresh factor, then reported
 // as not converged). Memory: n_s^2 doubles for G, n_s^2 for L_I, 2 x 16 x trailing capacity x
-// n_s for the cache. No allocation per solve once reserve() and set_constant_block() are done.
+// n_s for the column cache, 3 x max(32, 4 x trailing capacity) x n_s for the block cache. No allocation per solve once reserve() and set_constant_block() are done.
 #pragma once
 
 #include "server/interaction/lcp_problem.hpp"
 
 #include <Eigen/Core>
 
+#include <cstdint>
 #include <vector>
 
 namespace neurosim::interaction {
@@ -80,6 +86,14 @@ class InactiveSetLcp {
   long long solve_count_{0};
   std::vector<int> centry_;  // per trailing row: its cache entry
   std::vector<int> miss_;
+  // With column terms (LcpProblem::column_terms): cache of G B per block B (n_s x 3 each, LRU).
+  Eigen::MatrixXd tg_;
+  std::vector<std::uint64_t> tkey_;
+  std::vector<const double*> tblock_;
+  std::vector<int> toffset_, tlength_;
+  std::vector<long long> tstamp_;  // last solve that used the entry (-1: empty)
+  Eigen::MatrixXd ur_;  // U_r = G C_r per trailing row of this solve
+  int nc_{0};           // trailing rows of this solve
   Eigen::MatrixXd h_;     // H = T - C^T U over the trailing rows
   Eigen::MatrixXd kl_;    // lower Cholesky factor of K over act_
   std::vector<int> act_;  // active trailing rows (factor order of K)
@@ -90,6 +104,11 @@ class InactiveSetLcp {
   std::vector<int> wanted_;  // positions in act_ of the rows invert_active returns
 
   void size_workspace();
+  // U_r of every trailing row into ur_: from the problem's column terms, or from the cache of
+  // coupling columns.
+  void trailing_columns(const LcpProblem& problem);
+  // The cache entry of G B for a term's block (computed on a miss, O(n_s length)).
+  int term_entry(const LcpColumnTerm& term);
   // Rebuilds li_ = chol(G_II) and v from inact_; false if G_II is not numerically definite.
   bool refactor_inactive();
   bool append_inactive(int row);  // false: G_II lost definiteness (round-off)

@@ -10,9 +10,24 @@
 
 #include <Eigen/Core>
 
+#include <cstdint>
 #include <vector>
 
 namespace neurosim::interaction {
+
+// One term of a trailing row's column against the constant leading rows (LcpProblem::
+// column_terms): the column's entries [offset, offset + length) hold block * coef, summed over the
+// row's terms (zero elsewhere).
+struct LcpColumnTerm {
+  // length x 3, column-major (e.g. Eigen::Matrix<double, Eigen::Dynamic, 3>), unit m/N; nullptr:
+  // no term. The storage behind a key must not change while the solver is in use (e.g. a contact
+  // node's sliding columns, written once).
+  const double* block{nullptr};
+  std::uint64_t key{0};  // names the block (with its address)
+  int offset{0};
+  int length{0};
+  Eigen::Vector3d coef{Eigen::Vector3d::Zero()};  // unitless (e.g. -w n: weight times direction)
+};
 
 // One LCP. Rows [0, rows) of the inputs are used; the matrix and vectors may be larger (a
 // workspace sized once).
@@ -28,6 +43,14 @@ struct LcpProblem {
   // Warm start (optional, first rows entries, nonzero: active): e.g. the last step's active set,
   // instead of the rows with delta > 0. The pivoting is finite from any start.
   const std::vector<char>* initial_active{nullptr};
+  // Optional: the trailing rows' columns against the constant leading rows as terms over fixed
+  // blocks, terms_per_row per trailing row (row r: entries [r * terms_per_row, (r + 1) *
+  // terms_per_row)). The inactive-set path then keeps G = W_ss^-1 times each block (one O(n_s^2)
+  // product per block, reused by every row and solve on it) instead of G times each row's
+  // column, which changes whenever a row's weights do. They must agree with W's columns to
+  // round-off (each solve's result is checked against W itself).
+  const std::vector<LcpColumnTerm>* column_terms{nullptr};
+  int terms_per_row{0};
 };
 
 // Which solver takes a problem whose stable rows are the constant block (ContactLcp).

@@ -291,6 +291,9 @@ class State {
   Eigen::VectorXd delta_, lambda_;
   std::vector<char> sliding_active_;  // per sliding row: carried a force in the last good step
   std::vector<char> warm_;            // LCP warm start
+  // Per contact row, kSpreadNodes terms: its column against the sliding rows by node (the LCP keeps
+  // W_ss^-1 times each node's sliding block, so a row whose weights change costs O(sliding rows)).
+  std::vector<LcpColumnTerm> column_terms_;
   ContactLcp lcp_;
   bool lcp_constant_block_{false};  // set_constant_block done
   std::vector<ToolContact> last_good_;

@@ -8,7 +8,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
+#include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace neurosim::interaction {
 namespace {
@@ -132,6 +135,102 @@ TEST(interaction_inactive_set_lcp, TrailingInverseMatchesReference) {
       }
   }
   EXPECT_GT(checked, 100);
+}
+
+// Trailing rows given as column terms over fixed node blocks (LcpProblem::column_terms, as the
+// contact step gives them: a row's column against the sliding rows is sum_p B_p c_p with new
+// weights every step on the same nodes): the same answer as from W's columns alone, on two
+// bodies (terms with an offset), nodes recurring between solves (the kept G B) and new ones.
+TEST(interaction_inactive_set_lcp, ColumnTermsGiveTheSameAnswer) {
+  // Compliance A over 2 bodies: leading rows [0, ns1) and nodes [0, k0) on body 0, the rest on
+  // body 1; A is block-diagonal between the bodies (SPD).
+  const int ns = 36, ns1 = 20, nodes = 14, k0 = 8, cap = ns + 12, dim = ns + 3 * nodes + 10;
+  const int dofs = ns + 3 * nodes;
+  std::mt19937 rng(7);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  Eigen::MatrixXd r(dofs, dim);
+  for (int i = 0; i < dofs; ++i)
+    for (int j = 0; j < dim; ++j) r(i, j) = g(rng);
+  Eigen::MatrixXd a = 1e-4 * (r * r.transpose() / dim);
+  a.diagonal().array() += 5e-6;
+  auto body_of = [&](int dof) { return dof < ns ? (dof < ns1 ? 0 : 1) : ((dof - ns) / 3 < k0 ? 0 : 1); };
+  for (int i = 0; i < dofs; ++i)
+    for (int j = 0; j < dofs; ++j)
+      if (body_of(i) != body_of(j)) a(i, j) = 0.0;
+  // Node k's block against its body's leading rows (column-major, length x 3).
+  std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>> blocks(nodes);
+  for (int k = 0; k < nodes; ++k) {
+    const int o = k < k0 ? 0 : ns1, len = k < k0 ? ns1 : ns - ns1;
+    blocks[k] = a.block(o, ns + 3 * k, len, 3);
+  }
+  InactiveSetLcp with_terms, from_w;
+  with_terms.reserve(cap);
+  from_w.reserve(cap);
+  Eigen::MatrixXd w = Eigen::MatrixXd::Zero(cap, cap);
+  w.topLeftCorner(ns, ns) = a.topLeftCorner(ns, ns);
+  ASSERT_TRUE(with_terms.set_constant_block(w, ns));
+  ASSERT_TRUE(from_w.set_constant_block(w, ns));
+  std::vector<LcpColumnTerm> terms(3 * (cap - ns));
+  int compared = 0;
+  for (int step = 0; step < 30; ++step) {
+    const int nc = 3 + step % 9;
+    const int n = ns + nc;
+    // Row q: selector h over the dofs (three nodes of one body, weights w_p times a direction).
+    Eigen::MatrixXd h = Eigen::MatrixXd::Zero(nc, dofs);
+    for (int q = 0; q < nc; ++q) {
+      const int body = q % 2;
+      const int first = body == 0 ? 0 : k0, count = body == 0 ? k0 : nodes - k0;
+      Eigen::Vector3d m(g(rng), g(rng), g(rng));
+      m.normalize();
+      double wsum = 0.0;
+      double wt[3];
+      for (double& x : wt) wsum += (x = 0.1 + u(rng));
+      for (int p = 0; p < 3; ++p) {
+        // Nodes recur between steps (a slow tool), one new one now and then.
+        const int k = first + (q + p + step / 4) % count;
+        const Eigen::Vector3d coef = -(wt[p] / wsum) * m;
+        h.block(q, ns + 3 * k, 1, 3) += coef.transpose();
+        LcpColumnTerm& t = terms[3 * q + p];
+        t.block = blocks[k].data();
+        t.key = static_cast<std::uint64_t>(k);
+        t.offset = body == 0 ? 0 : ns1;
+        t.length = body == 0 ? ns1 : ns - ns1;
+        t.coef = coef;
+      }
+    }
+    w.block(0, ns, ns, nc) = a.topRows(ns) * h.transpose();
+    w.block(ns, 0, nc, ns) = w.block(0, ns, ns, nc).transpose();
+    w.block(ns, ns, nc, nc) = h * a * h.transpose();
+    w.block(ns, ns, nc, nc).diagonal() *= 1.0 + 1e-3;  // the row compliance in series
+    Eigen::VectorXd d = Eigen::VectorXd::Zero(cap), lt = d, lw = d;
+    for (int i = 0; i < n; ++i) d[i] = 1e-3 * g(rng) + (i >= ns ? 5e-4 : 0.0);
+    LcpProblem pt = problem(w, d, n, nullptr, ns);
+    pt.column_terms = &terms;
+    pt.terms_per_row = 3;
+    LcpResult rt, rw;
+    const std::string what = "step " + std::to_string(step);
+    ASSERT_TRUE(with_terms.solve(pt, options(1e-12, 2000), lt, rt)) << what;
+    ASSERT_TRUE(from_w.solve(problem(w, d, n, nullptr, ns), options(1e-12, 2000), lw, rw)) << what;
+    ASSERT_TRUE(rt.converged) << what << " " << rt.max_violation;
+    ASSERT_TRUE(rw.converged) << what;
+    expect_kkt(w, d, lt, n, 1e-8, what);
+    const double scale = std::max(1e-300, lw.head(n).cwiseAbs().maxCoeff());
+    EXPECT_LE((lt.head(n) - lw.head(n)).cwiseAbs().maxCoeff(), 1e-9 * scale) << what;
+    compared += rt.active > ns / 4 ? 1 : 0;
+  }
+  EXPECT_GT(compared, 10);  // the comparisons had force on them
+  // Malformed terms: too few for the rows, or past the constant rows.
+  Eigen::VectorXd d = Eigen::VectorXd::Constant(cap, 1e-3), l = d;
+  LcpResult res;
+  std::vector<LcpColumnTerm> few(2);
+  LcpProblem bad = problem(w, d, ns + 3, nullptr, ns);
+  bad.column_terms = &few;
+  bad.terms_per_row = 3;
+  EXPECT_THROW(with_terms.solve(bad, options(1e-12, 200), l, res), std::invalid_argument);
+  terms[0].offset = ns - 2;
+  bad.column_terms = &terms;
+  EXPECT_THROW(with_terms.solve(bad, options(1e-12, 200), l, res), std::invalid_argument);
 }
 
 }  // namespace
