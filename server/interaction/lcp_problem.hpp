@@ -20,8 +20,9 @@ namespace neurosim::interaction {
 // row's terms (zero elsewhere).
 struct LcpColumnTerm {
   // length x 3, column-major (e.g. Eigen::Matrix<double, Eigen::Dynamic, 3>), unit m/N; nullptr:
-  // no term. The storage behind a key must not change while the solver is in use (e.g. a contact
-  // node's sliding columns, written once).
+  // no term. Whenever a block is passed with a key and address, it must hold the same values to
+  // round-off as the last time (e.g. a contact node's sliding columns: written once; evicted and
+  // solved again they are the same).
   const double* block{nullptr};
   std::uint64_t key{0};  // names the block (with its address)
   int offset{0};
