@@ -316,14 +316,23 @@ int main(int argc, char** argv) {
     std::vector<double> times;
     std::vector<ni::ToolPose> one(1);
     int max_nodes = 0, failures = 0;
+    std::vector<int> epivots;
+    double erows = 0.0;
     for (int k = 0; k < steps; ++k) {
       one[0] = pose(k);
       const auto ts = Clock::now();
       sim->step(one, contacts, stats);
       times.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
       max_nodes = std::max(max_nodes, static_cast<int>(contacts[0].nodes.size()));
+      epivots.push_back(contacts[0].iterations);
+      erows += stats.contact_rows;
       if (!stats.converged) ++failures;
     }
+    std::sort(epivots.begin(), epivots.end());
+    if (!epivots.empty())
+      std::cerr << sc.name << ": contact rows per step " << erows / static_cast<double>(steps)
+                << ", LCP pivots per step median " << epivots[epivots.size() / 2] << " max "
+                << epivots.back() << "\n";
     const double depth_now = sc.depth_m;
     const double tie = sim->tie_residual_m() / depth_now;
     const int host_tets = static_cast<int>(sim->mesh(0).num_tets());

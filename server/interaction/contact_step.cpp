@@ -190,6 +190,13 @@ void State::reserve_workspace(const Model& m, int tools) {
   lambda_.setZero(max_rows);
   warm_.assign(max_rows, 0);
   column_terms_.assign(kSpreadNodes * static_cast<std::size_t>(max_contact), LcpColumnTerm{});
+  delassus_node_.resize(m.bodies_.size());
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi)
+    delassus_node_[bi].assign(m.bodies_[bi].rest_m.size(), -1);
+  delassus_nodes_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  delassus_last_row_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  delassus_row_node_.reserve(max_contact);
+  delassus_y_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact) * max_contact);
   rows_.reserve(max_contact);
   // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
   for (const auto& b : m.bodies_) {
@@ -899,10 +906,48 @@ void State::columns_fallback(StepStats& stats) {
 // Phase "Delassus": W_rs = sum_a sum_b w_ra w_sb m_ra . L(a, b) m_sb (coupled compliance, unit
 // m/N; m = R^T n per node, n in LINEAR) with the row compliance in series on the diagonal;
 // against the sliding rows of the same body W_kr = -sum_a w_ra J_A,k L[:, a] m_ra; delta the
-// rows' depths.
+// rows' depths. The rows of a patch share nodes: sum_p w_rp L(slot_rp, b)^T m_rp is formed once
+// per row and node b (not once per row pair), the same sums in the same order as per pair.
 void State::delassus(const Model& m, int ns) {
   const int nc = static_cast<int>(rows_.size());
   const double eps = m.options_.contact_row_compliance;
+  // The rows' distinct nodes (rows of one patch share them).
+  delassus_nodes_.clear();
+  delassus_last_row_.clear();
+  delassus_row_node_.resize(nc);
+  for (int r = 0; r < nc; ++r) {
+    const Row& a = rows_[r];
+    for (int p = 0; p < a.nodes; ++p) {
+      int j = -1;
+      if (a.slot[p] >= 0) {
+        int& index = delassus_node_[a.body][a.slot[p]];
+        if (index < 0) {
+          index = static_cast<int>(delassus_nodes_.size());
+          delassus_nodes_.emplace_back(a.body, a.slot[p]);
+          delassus_last_row_.push_back(r);
+        }
+        j = index;
+        delassus_last_row_[j] = r;
+      }
+      delassus_row_node_[r][p] = j;
+    }
+  }
+  const int nn = static_cast<int>(delassus_nodes_.size());
+  for (const auto& [body, slot] : delassus_nodes_) delassus_node_[body][slot] = -1;
+  for (int r = 0; r < nc; ++r) {
+    // y_rj for the nodes of the rows s >= r on the row's body.
+    const Row& a = rows_[r];
+    const auto& acols = *bodies_[a.body].columns;
+    mesh::Vec3* yr = delassus_y_.data() + static_cast<std::size_t>(r) * nn;
+    for (int j = 0; j < nn; ++j) {
+      if (delassus_last_row_[j] < r || delassus_nodes_[j].first != a.body) continue;
+      const int slot_q = delassus_nodes_[j].second;
+      Vec3 y = Vec3::Zero();  // sum_p w_p L(slot_p, slot_q)^T m_p
+      for (int p = 0; p < a.nodes; ++p)
+        if (a.slot[p] >= 0) y.noalias() += a.w[p] * (acols.block(a.slot[p], slot_q).transpose() * a.m[p]);
+      yr[j] = y;
+    }
+  }
   for (int r = 0; r < nc; ++r) {
     const Row& a = rows_[r];
     const int i = ns + r;
@@ -919,12 +964,10 @@ void State::delassus(const Model& m, int ns) {
       const Row& c = rows_[s];
       double v = 0.0;
       if (c.body == a.body) {
+        const mesh::Vec3* yr = delassus_y_.data() + static_cast<std::size_t>(r) * nn;
         for (int q = 0; q < c.nodes; ++q) {
           if (c.slot[q] < 0) continue;
-          Vec3 y = Vec3::Zero();  // sum_p w_p L(slot_p, slot_q)^T m_p
-          for (int p = 0; p < a.nodes; ++p)
-            if (a.slot[p] >= 0) y.noalias() += a.w[p] * (cols.block(a.slot[p], c.slot[q]).transpose() * a.m[p]);
-          v += c.w[q] * y.dot(c.m[q]);
+          v += c.w[q] * yr[delassus_row_node_[s][q]].dot(c.m[q]);
         }
       }
       v *= alpha;

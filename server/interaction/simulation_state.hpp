@@ -294,6 +294,14 @@ class State {
   // Per contact row, kSpreadNodes terms: its column against the sliding rows by node (the LCP keeps
   // W_ss^-1 times each node's sliding block, so a row whose weights change costs O(sliding rows)).
   std::vector<LcpColumnTerm> column_terms_;
+  // Phase "Delassus": the step's distinct row nodes (per body and slot their index, -1 outside
+  // the phase), per row node its index, the last row on each node, and per row r and node j
+  // y_rj = sum_p w_rp L(slot_rp, j)^T m_rp (rows share nodes: computed once, not per row pair).
+  std::vector<std::vector<int>> delassus_node_;
+  std::vector<std::pair<int, int>> delassus_nodes_;  // (body, slot)
+  std::vector<int> delassus_last_row_;
+  std::vector<std::array<int, kSpreadNodes>> delassus_row_node_;
+  std::vector<mesh::Vec3> delassus_y_;
   ContactLcp lcp_;
   bool lcp_constant_block_{false};  // set_constant_block done
   std::vector<ToolContact> last_good_;
