@@ -68,36 +68,6 @@ TEST(interaction_contact_surface, FeaturesOfAPointAboveAVertexAnEdgeAFace) {
   EXPECT_LT((f.point_m - Vec3(0.2, 0.2, 0)).norm(), 1e-12);
 }
 
-TEST(interaction_contact_surface, BoxSurfaceTrianglesAndEdgeIncidence) {
-  fem::testing::BoxSpec spec{3, 3, 3};
-  const mesh::TetMesh box = fem::testing::box_mesh(spec);
-  // Every surface node but the bottom (z = 0, fixed) is a contact slot.
-  std::vector<int> slot(box.num_vertices(), -1), fixed;
-  int slots = 0;
-  for (int v : box.surface_vertices()) {
-    if (box.vertices()[v].z() < 1e-9) {
-      fixed.push_back(v);
-    } else {
-      slot[v] = slots++;
-    }
-  }
-  const ContactSurface s(ContactSurfaceDefinition{&box, &slot, &fixed});
-  // 6 faces x 9 quads x 2 triangles; the bottom face has only fixed nodes: not contactable.
-  EXPECT_EQ(s.triangles().size(), 5u * 18u);
-  for (const auto& t : s.triangles()) {
-    for (int k = 0; k < 3; ++k) {
-      // Edges on the bottom rim have one contactable triangle; every other edge two.
-      const Vec3& a = box.vertices()[t.node[k]];
-      const Vec3& b = box.vertices()[t.node[(k + 1) % 3]];
-      const bool rim = a.z() < 1e-9 && b.z() < 1e-9;
-      EXPECT_EQ(t.edge_triangles[k], rim ? 1 : 2);
-    }
-  }
-  std::vector<int> near;
-  s.query(Vec3(0.5, 0.5, 1.0), Vec3(0.5, 0.5, 1.0), near);
-  EXPECT_FALSE(near.empty());
-}
-
 // The box's top face (z = 1, cells of 1/3) and its contactable surface, every non-bottom
 // surface node a slot.
 struct TopFace {
@@ -118,6 +88,27 @@ struct TopFace {
     surface = ContactSurface(ContactSurfaceDefinition{&box, &slot, &fixed});
   }
 };
+
+TEST(interaction_contact_surface, BoxSurfaceTrianglesAndEdgeIncidence) {
+  const TopFace f;  // every surface node but the bottom (z = 0, fixed) is a contact slot
+  const mesh::TetMesh& box = f.box;
+  const ContactSurface& s = f.surface;
+  // 6 faces x 9 quads x 2 triangles; the bottom face has only fixed nodes: not contactable.
+  EXPECT_EQ(s.triangles().size(), 5u * 18u);
+  for (const auto& t : s.triangles()) {
+    for (int k = 0; k < 3; ++k) {
+      // Edges on the bottom rim have one contactable triangle; every other edge two.
+      const Vec3& a = box.vertices()[t.node[k]];
+      const Vec3& b = box.vertices()[t.node[(k + 1) % 3]];
+      const bool rim = a.z() < 1e-9 && b.z() < 1e-9;
+      EXPECT_EQ(t.edge_triangles[k], rim ? 1 : 2);
+    }
+  }
+  std::vector<int> near;
+  s.query(Vec3(0.5, 0.5, 1.0), Vec3(0.5, 0.5, 1.0), near);
+  EXPECT_FALSE(near.empty());
+}
+
 
 TEST(interaction_contact_surface, SpreadLoadWeightsAreConsistentAndContinuous) {
   const TopFace f;
