@@ -84,6 +84,13 @@ bool may_touch_face(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0,
   return lateral2 <= lateral_reach * lateral_reach;
 }
 
+// The shaft's points inside the tip sphere are the tip's: its own rows hold them, deeper (with
+// SimulationOptions::contact_smooth_normals the two would differ in normal and weights, and the
+// shaft, starting at the tip's centre, took most of a 2 mm press's force at a flat face's normal).
+bool inside_tip(const Vec3& point, const Vec3& tip_centre, const ToolShape& shape) {
+  return (point - tip_centre).norm() < shape.tip_radius_m;
+}
+
 bool deeper(const Row& a, const Row& b) {
   if (a.depth_m != b.depth_m) return a.depth_m > b.depth_m;
   if (a.body != b.body) return a.body < b.body;
@@ -513,8 +520,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
     }
     const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
     bs.node_test_stamp[i] = memo;
-    // The shaft's hits inside the tip sphere are the tip's (its own rows hold them, deeper).
-    bs.node_test_in[i] = !(shaft && (x[k] - p0).norm() < shape.tip_radius_m) &&
+    bs.node_test_in[i] = !(shaft && inside_tip(x[k], p0, shape)) &&
                          within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m);
     if (!bs.node_test_in[i]) continue;
     bs.node_hit[i] = static_cast<int>(hits_.size());
@@ -563,10 +569,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   // An edge by its distance only (behind a ridge the far flank's edge is not the surface the
   // tool went through); a face also from behind.
   if (at.feature == TriangleFeature::kVertex) return;
-  // A shaft point inside the tip sphere: the tip's rows hold it (with SimulationOptions::
-  // contact_smooth_normals the two would differ in normal and weights, and the shaft, starting
-  // at the tip's centre, took most of a 2 mm press's force at a flat face's normal).
-  if (shaft && (at.point_m - p0).norm() < shape.tip_radius_m) return;
+  if (shaft && inside_tip(at.point_m, p0, shape)) return;
   if (at.feature == TriangleFeature::kEdge ? (c - at.point_m).norm() > reach
                                            : !within(c - at.point_m, n, reach, max_penetration_m))
     return;
@@ -789,28 +792,26 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
 // tip's force grows from zero with the depth.
 void State::near_field_of_tool(const Model& m, const ToolShape& shape) {
   if (!m.options_.contact_near_field) return;
-  for (std::size_t i = 0; i < tool_rows_.size(); ++i) {
-    if (tool_rows_[i].shaft) continue;
-    const int body = tool_rows_[i].body;
-    bool seen = false;
-    for (std::size_t j = 0; j < i && !seen; ++j)
-      seen = !tool_rows_[j].shaft && tool_rows_[j].body == body;
-    if (seen) continue;
+  // One pass per body over the tool's rows (a few bodies, tens of rows).
+  for (int body = 0; body < static_cast<int>(m.bodies_.size()); ++body) {
     double depth = 0.0, rho = 0.0;
-    for (std::size_t j = i; j < tool_rows_.size(); ++j) {
-      const Row& r = tool_rows_[j];
-      if (r.shaft || r.body != body || !(r.depth_m > depth)) continue;
+    bool any = false;
+    for (const Row& r : tool_rows_) {
+      if (r.shaft || r.body != body) continue;
+      any = true;
+      if (!(r.depth_m > depth)) continue;
       depth = r.depth_m;
       rho = r.spread_radius_m;
     }
+    if (!any) continue;
     const fem::Material& mat = m.bodies_[body].host_material;
     const double e_star =
         mat.youngs_modulus_pa / (1.0 - mat.poisson_ratio * mat.poisson_ratio);
     const double radius = shape.tip_radius_m;
     const double a = std::sqrt(radius * std::max(depth, 1e-4 * radius));
     const double c = rho > 0.0 ? std::max(0.0, 0.75 / (e_star * a) - 0.766 / (e_star * rho)) : 0.0;
-    for (std::size_t j = i; j < tool_rows_.size(); ++j)
-      if (!tool_rows_[j].shaft && tool_rows_[j].body == body) tool_rows_[j].near_field_m_per_n = c;
+    for (Row& r : tool_rows_)
+      if (!r.shaft && r.body == body) r.near_field_m_per_n = c;
   }
 }
 
