@@ -43,28 +43,37 @@ TriangleFeature key_feature(std::uint64_t key) {
   return static_cast<TriangleFeature>((key >> 60) & 3u);
 }
 
+// sqrt(d2) <= bound (a norm against a bound), the square root taken only within 1e-9 of the
+// bound: the same answer as the norm's, without its cost for the far candidates.
+bool norm_at_most(double d2, double bound) {
+  if (bound >= 0.0) {
+    const double lo = bound * (1.0 - 1e-9), hi = bound * (1.0 + 1e-9);
+    if (d2 <= lo * lo) return true;
+    if (d2 > hi * hi) return false;
+  }
+  return std::sqrt(d2) <= bound;
+}
+
 // A hit counts when the part's centre c is within reach of the point p (in front of the surface
 // or just behind it), or behind the surface there (d . n < 0; n the face's, or the node's rest
 // normal) by at most max_penetration with p under c (lateral offset within reach): a tool that
 // entered the tissue deeper than its radius still pushes the surface it went through.
 bool within(const Vec3& d, const Vec3& n, double reach, double max_penetration_m) {
-  if (d.norm() <= reach) return true;
+  if (norm_at_most(d.squaredNorm(), reach)) return true;
   const double h = d.dot(n);
-  return h < 0.0 && -h <= max_penetration_m && (d - h * n).norm() <= reach;
+  return h < 0.0 && -h <= max_penetration_m && norm_at_most((d - h * n).squaredNorm(), reach);
 }
 
 // Whether a point c of the part's axis (the segment p0-p1; p0 = p1 for the tip) can have a face
 // or edge hit on the triangle x (unit normal n): its height h = n . (c - x0) in [-behind, reach]
 // and its projection on the plane within reach of the triangle (of the bounding circle about the
-// centroid). A face hit needs both (within: in front |d| <= reach, behind -h <= behind and the
-// lateral offset <= reach), an edge hit |c - p| <= reach. Exact as a rejection: no hit is lost.
-bool may_touch_face(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0, const Vec3& p1,
-                    double reach, double behind) {
+// centroid `centre`, radius rho: the largest centroid-vertex distance). A face hit needs both
+// (within: in front |d| <= reach, behind -h <= behind and the lateral offset <= reach), an edge
+// hit |c - p| <= reach. Exact as a rejection: no hit is lost.
+bool may_touch_face(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& centre, double rho,
+                    const Vec3& p0, const Vec3& p1, double reach, double behind) {
   reach *= 1.0 + 1e-9;  // rounding: never reject a hit the exact test would take
   behind *= 1.0 + 1e-9;
-  const Vec3 centre = (x[0] + x[1] + x[2]) / 3.0;
-  double rho2 = 0.0;
-  for (int k = 0; k < 3; ++k) rho2 = std::max(rho2, (x[k] - centre).squaredNorm());
   const double h0 = n.dot(p0 - x[0]), h1 = n.dot(p1 - x[0]);
   double ta = 0.0, tb = 1.0;
   if (h1 == h0) {
@@ -80,7 +89,7 @@ bool may_touch_face(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0,
   a -= n.dot(a - centre) * n;
   b -= n.dot(b - centre) * n;
   const double lateral2 = (closest_on_segment(centre, a, b) - centre).squaredNorm();
-  const double lateral_reach = std::sqrt(rho2) + reach;
+  const double lateral_reach = rho + reach;
   return lateral2 <= lateral_reach * lateral_reach;
 }
 
@@ -225,6 +234,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   step_candidates_.resize(static_cast<std::size_t>(tools) * bodies_.size());
   for (auto& sc : step_candidates_) {
     sc.triangles.reserve(2 * triangles);
+    sc.parts.reserve(2 * triangles);
     sc.rest_hits.reserve(hits_.capacity());
   }
   tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
@@ -404,6 +414,7 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   std::vector<int>& list = sc.triangles;
   list.clear();
+  sc.parts.clear();
   const long long stamp = ++stamp_counter_;
   b.surface.query(p0 - Vec3::Constant(shape.tip_radius_m + slack),
                   p0 + Vec3::Constant(shape.tip_radius_m + slack), list);
@@ -412,7 +423,13 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
     b.surface.query(p0.cwiseMin(p1) - Vec3::Constant(reach),
                     p0.cwiseMax(p1) + Vec3::Constant(reach), list);
   }
-  // Keep each triangle once, and only those whose rest bounding sphere can reach a tool part.
+  // Keep each triangle once, and only those whose rest bounding sphere can reach a tool part;
+  // per triangle, the parts it can reach. A part's hits (a node, an edge or face point) lie
+  // within its bound of the part (within(): sqrt(reach^2 + behind^2), the surface moved by at
+  // most `moved`), so a triangle whose rest bounding sphere is farther from a part than its bound
+  // has none of that part's hits: not even a node hit found from a neighbour, which would add
+  // this triangle's normal (the node is a vertex of it, within its radius of the centroid).
+  constexpr double kRound = 1.0 + 1e-9;  // never skip a part the exact tests would take
   std::size_t kept = 0;
   for (std::size_t k = 0; k < list.size(); ++k) {
     const int t = list[k];
@@ -420,14 +437,19 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
     bs.triangle_stamp[t] = stamp;
     const Vec3& c = b.surface.centroid(t);
     const double radius = b.surface.radius_m(t);
-    const double to_tip = (c - p0).norm();
-    const bool tip = to_tip <= std::min(shape.tip_radius_m + slack, tip_bound) + radius;
+    const double to_tip2 = (c - p0).squaredNorm();
+    const bool tip = norm_at_most(to_tip2, std::min(shape.tip_radius_m + slack, tip_bound) + radius);
     bool shaft = false;
+    double to_axis2 = std::numeric_limits<double>::infinity();
     if (shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0) {
-      const double to_axis = (c - closest_on_segment(c, p0, p1)).norm();
-      shaft = to_axis <= std::min(shape.shaft_radius_m + slack, shaft_bound) + radius;
+      to_axis2 = (c - closest_on_segment(c, p0, p1)).squaredNorm();
+      shaft = norm_at_most(to_axis2, std::min(shape.shaft_radius_m + slack, shaft_bound) + radius);
     }
-    if (tip || shaft) list[kept++] = t;
+    if (!(tip || shaft)) continue;
+    list[kept++] = t;
+    sc.parts.push_back(static_cast<std::uint8_t>(
+        (norm_at_most(to_tip2, (tip_bound + radius) * kRound) ? 1 : 0) |
+        (norm_at_most(to_axis2, (shaft_bound + radius) * kRound) ? 2 : 0)));
   }
   list.resize(kept);
 }
@@ -463,20 +485,43 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
   }
   BodyState& bs = bodies_[body];
   const long long memo = ++node_memo_counter_;  // each node tested once per geometry and part
-  for (int t : sc.triangles) {
+  // With no force on the body every geometry is the rest surface (LINEAR's one geometry per
+  // step, the tiers' rows): its vertices, normal, centroid and radius are the surface's, the same
+  // values as formed here from the host's vertices.
+  const bool deformed = !bs.force_slots.empty();
+  for (std::size_t i = 0; i < sc.triangles.size(); ++i) {
+    const int t = sc.triangles[i];
+    const int parts = sc.parts[i] & (has_shaft ? 3 : 1);
+    if (parts == 0) continue;
     const SurfaceTriangle& tri = tris[t];
     for (int g = g_first; g <= g_last; ++g) {
-      std::array<Vec3, 3> x;
-      for (int k = 0; k < 3; ++k)
-        x[k] = g == 0 && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
-      Vec3 n = (x[1] - x[0]).cross(x[2] - x[0]);
-      if (!(n.norm() > 0.0)) continue;
-      n.normalize();
+      std::array<Vec3, 3> moved;
+      const std::array<Vec3, 3>* x = &b.surface.rest_vertices(t);
+      Vec3 n, centre;
+      double rho = 0.0;
+      if (g == 0 && deformed) {
+        for (int k = 0; k < 3; ++k)
+          moved[k] = tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
+        x = &moved;
+        n = (moved[1] - moved[0]).cross(moved[2] - moved[0]);
+        if (!(n.norm() > 0.0)) continue;
+        n.normalize();
+        centre = (moved[0] + moved[1] + moved[2]) / 3.0;
+        double rho2 = 0.0;
+        for (int k = 0; k < 3; ++k) rho2 = std::max(rho2, (moved[k] - centre).squaredNorm());
+        rho = std::sqrt(rho2);
+      } else {
+        n = b.surface.rest_normal(t);
+        if (n.isZero(0.0)) continue;  // degenerate
+        centre = b.surface.centroid(t);
+        rho = b.surface.radius_m(t);
+      }
       const std::array<Vec3, 3>* smooth =
           m.options_.contact_smooth_normals ? &b.surface.node_normals(t) : nullptr;
-      for (int part = 0; part < (has_shaft ? 2 : 1); ++part)
-        part_features(t, tri, x, n, part == 1, g == 1, shape, p0, p1, margin,
-                      b.behind_reach_m, b.body->contact_normals(), bs, memo, smooth);
+      for (int part = 0; part < 2; ++part)
+        if (parts & (1 << part))
+          part_features(t, tri, *x, n, centre, rho, part == 1, g == 1, shape, p0, p1, margin,
+                        b.behind_reach_m, b.body->contact_normals(), bs, memo, smooth);
     }
   }
   if (first_is_rest) {
@@ -489,7 +534,8 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
 // The hits of one tool part on one triangle (positions x, unit normal n): its vertices inside
 // the part (+ margin) and the triangle's closest point when it is an edge or face point.
 void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
-                          const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
+                          const Vec3& n, const Vec3& centre, double rho, bool shaft,
+                          bool at_rest, const ToolShape& shape,
                           const Vec3& p0, const Vec3& p1, double margin,
                           double max_penetration_m, const std::vector<Vec3>& node_normals,
                           BodyState& bs, long long memo, const std::array<Vec3, 3>* smooth_normals) {
@@ -535,7 +581,8 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   }
   // Most candidates are far from the part (the box reaches behind_reach behind the surface):
   // their face or edge point is skipped by a plane test before the closest-point search.
-  if (!may_touch_face(x, n, p0, shaft ? p1 : p0, reach, std::max(reach, max_penetration_m)))
+  if (!may_touch_face(x, n, centre, rho, p0, shaft ? p1 : p0, reach,
+                      std::max(reach, max_penetration_m)))
     return;
   // SimulationOptions::contact_smooth_normals, the tip: the centre projected along the normals
   // interpolated from the nodes' (project_along_normals), one face row per triangle that holds

@@ -85,6 +85,11 @@ class ContactSurface {
   // Local edge length at the point with barycentric weights `bary` of triangle t: the weights'
   // blend of its nodes' mean incident edge lengths (continuous across edges), unit m.
   double edge_at_m(int t, const std::array<double, 3>& bary) const;
+  // Rest vertices of triangle t, unit m, and its rest unit normal (zero for a degenerate
+  // triangle): (x1 - x0) x (x2 - x0) normalized, the same values the contact step forms from the
+  // host's vertices, so a step on the rest surface reads them instead.
+  const std::array<mesh::Vec3, 3>& rest_vertices(int t) const { return rest_m_[t]; }
+  const mesh::Vec3& rest_normal(int t) const { return normal_[t]; }
   // Rest unit normals of triangle t's nodes (area-weighted over the contactable triangles).
   const std::array<mesh::Vec3, 3>& node_normals(int t) const { return node_normal_[t]; }
   // The consistent nodal weights of a unit load spread around the rest point p with the pressure

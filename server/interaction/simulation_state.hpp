@@ -231,7 +231,8 @@ class State {
                          const Vec3& axis);
   void rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis);
   void part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
-                     const Vec3& n, bool shaft, bool at_rest, const ToolShape& shape,
+                     const Vec3& n, const Vec3& centre, double rho, bool shaft, bool at_rest,
+                     const ToolShape& shape,
                      const Vec3& p0, const Vec3& p1, double margin, double max_penetration_m,
                      const std::vector<Vec3>& node_normals, BodyState& bs, long long memo,
                      const std::array<Vec3, 3>* smooth_normals);
@@ -274,6 +275,9 @@ class State {
     double slack_m{0.0};
     double moved_m{0.0};  // the surface displacement the list allows for, unit m
     std::vector<int> triangles;
+    // Per listed triangle, the parts whose bound its rest bounding sphere meets (1 the tip, 2 the
+    // shaft): the other part cannot have a hit on it and is not searched.
+    std::vector<std::uint8_t> parts;
     bool rest_hits_valid{false};
     std::vector<FeatureHit> rest_hits;
   };
