@@ -166,13 +166,19 @@ struct SimulationOptions {
   // barycentric weights on its triangle: a tip whose contact patch is smaller than a triangle
   // then loads about the same surface wherever in the triangle it lands (a vertex and a face
   // centre differ less), and the row's weights change continuously as it slides. 0: barycentric
-  // (dimensionless).
+  // (dimensionless). Off by default: with the near field on, the contact stiffness K the
+  // haptic client gets leaves out the near field's change with depth (a finite difference of the
+  // force was 3.2x K on the interaction tests' block, a 15 mm tip 3 mm into 12 mm cells;
+  // bench/RESULTS.md, "Contact options: the depth to the flat surface"). Measured best: 1.
   double contact_spread{0.0};
   // The tip's face rows from the tip centre projected along the normal field interpolated from
   // the surface nodes' normals (ContactSurface project_along_normals: a smooth contact surface
   // over the flat triangles) instead of the closest point of each flat triangle with edge rows
-  // between them: the row's point, normal and depth pass continuously across edges and creases
-  // (no row entering or leaving with a force). The node rows and the shaft's rows are as without.
+  // between them: the row's point and normal pass continuously across edges and creases (no row
+  // entering or leaving with a force). Its depth is the centre's distance to the closest point
+  // of the flat surface triangles (contact_step.cpp merge_features), not the height along the
+  // tilted interpolated normal, which over a convex ridge or a valley is longer (a shallower
+  // row). The node rows and the shaft's rows are as without.
   bool contact_smooth_normals{false};
   // With contact_spread: the compliance the mesh cannot show under a tip whose contact patch is
   // smaller than the spread, in series with the tip's rows (Hertz's secant compliance at the
