@@ -5,5 +5,6 @@
 add_executable(contact_convergence_bench ${CMAKE_CURRENT_LIST_DIR}/contact_convergence_bench.cpp)
 target_link_libraries(contact_convergence_bench PRIVATE neurosim::interaction neurosim::scene neurosim::fem neurosim::common
                       neurosim_warnings)
-target_compile_definitions(contact_convergence_bench PRIVATE NEUROSIM_BIN_DIR="${CMAKE_RUNTIME_OUTPUT_DIRECTORY}")
+target_compile_definitions(contact_convergence_bench PRIVATE NEUROSIM_BIN_DIR="${CMAKE_RUNTIME_OUTPUT_DIRECTORY}"
+                                                            NEUROSIM_SOURCE_DIR="${NEUROSIM_SOURCE_DIR}")
 add_dependencies(contact_convergence_bench neurosim-model)

@@ -19,7 +19,9 @@
 // under the tip, along its triangle's normal), |F| / depth with the depth measured to the closest
 // point of the surface triangles: its range and spread (max / min) along the path, and its
 // jumps (the largest relative change of |F| between two steps whose tip moved < 0.25 mm, and
-// how many exceed 10 %). --contact-spread sets SimulationOptions::contact_spread.
+// how many exceed 10 %); with --cube also the cube's slide (the ctest's, 40 mm along x across its
+// top face). --contact-spread, --smooth-normals 0|1 and --near-field 0|1 set the SimulationOptions
+// of the same names (the three options: --contact-spread 1 --smooth-normals 1 --near-field 1).
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "server/fem/element.hpp"
@@ -89,7 +91,8 @@ int main(int argc, char** argv) {
   bool slide = false, csv = false;
   int geometry_iterations = 0;
   double contact_spread = -1.0;
-  bool smooth_normals = false, near_field = false;
+  int smooth_normals = -1, near_field = -1;  // -1: the library's default
+  bool cube = false;
   std::string trace_path;
   std::string element;
   neurosim::cli::Parser p("contact_convergence_bench",
@@ -104,8 +107,13 @@ int main(int argc, char** argv) {
   p->add_option("--geometry-iterations", geometry_iterations,
                 "SimulationOptions::contact_geometry_iterations (default: the library's)");
   p->add_option("--slide-trace", trace_path, "CSV of every slide step (cell, depth, y, |F|, rows, ...)");
-  p->add_flag("--smooth-normals", smooth_normals, "SimulationOptions::contact_smooth_normals");
-  p->add_flag("--near-field", near_field, "SimulationOptions::contact_near_field");
+  p->add_option("--smooth-normals", smooth_normals,
+                "SimulationOptions::contact_smooth_normals, 0 or 1 (default: the library's)");
+  p->add_option("--near-field", near_field,
+                "SimulationOptions::contact_near_field, 0 or 1 (default: the library's)");
+  p->add_flag("--cube", cube,
+              "with --slide: also the cube's slide (scenes/cube_cylinder.scene, its tier and probe, "
+              "40 mm along x across the top face from (30, 50) mm)");
   p->add_option("--contact-spread", contact_spread,
                 "SimulationOptions::contact_spread (default: the library's)");
   if (auto rc = p.parse(argc, argv)) return *rc;
@@ -118,6 +126,67 @@ int main(int argc, char** argv) {
   FILE* trace = trace_path.empty() ? nullptr : std::fopen(trace_path.c_str(), "w");
   if (trace) std::fprintf(trace, "cell_mm,slide_depth_mm,y_mm,tip_x_mm,tip_y_mm,tip_z_mm,depth_mm,force_mn,rows\n");
   if (csv) std::printf("cell_mm,host_vertices,host_tets,surface_z_mm,normal_z,depth_mm,force_mn,rows,build_s\n");
+  // The slide (1 and 2 mm deep) along `heading` from `start` (x, y; unit m), 400 steps of 0.1 mm:
+  // a row of slide_rows per depth (cell 0: the cube), every step to the trace.
+  auto slide_path = [&](ni::Simulation& sim, double r, const Vec3& start, const Vec3& heading,
+                        double cell_mm, const std::string& where) {
+    const auto& mesh = sim.mesh(0);
+    std::vector<ni::ToolPose> poses(1);
+    std::vector<ni::ToolContact> contacts;
+    ni::StepStats stats;
+    const double s0 = 1e3 * start.dot(heading);
+    for (double depth_mm : {1.0, 2.0}) {
+      double fpd_min = std::numeric_limits<double>::infinity(), fpd_max = 0.0, f_min = fpd_min;
+      int steps = 0;
+      double y_at_min = 0.0, depth_at_min = 0.0;  // where |F| / depth is least, unit mm / m
+      // Jumps: the largest relative change of |F| between two steps whose tip moved less than
+      // 0.25 mm (the path's own jumps, where the highest triangle under it changes, excluded),
+      // and how many such changes exceed 10 %.
+      double jump = 0.0, jump_y = 0.0, f_prev = -1.0;
+      int jumps = 0;
+      Vec3 tip_prev = Vec3::Zero();
+      for (int k = 0; k <= 400; ++k) {
+        const Vec3 xy = start + 1e-4 * k * heading;
+        const double along_mm = s0 + 0.1 * k;
+        const auto on = ni::top_of_surface(mesh, xy.x(), xy.y());
+        if (!on) throw std::runtime_error(where + ": the slide leaves the surface at step " + std::to_string(k));
+        const Vec3 at = on->point_m, up = on->normal;
+        poses[0].tip_m = at + (r - 1e-3 * depth_mm) * up;
+        poses[0].axis = up;
+        sim.step(poses, contacts, stats);
+        const ni::SurfacePoint near = ni::closest_on_surface(mesh, poses[0].tip_m);
+        const double depth = r - near.normal.dot(poses[0].tip_m - near.point_m);
+        const double f = contacts[0].force_n.norm();
+        if (f_prev >= 0.0 && (poses[0].tip_m - tip_prev).norm() < 2.5e-4 && std::max(f, f_prev) > 0.0) {
+          const double rel = std::abs(f - f_prev) / std::max(f, f_prev);
+          if (rel > 0.1) ++jumps;
+          if (rel > jump) {
+            jump = rel;
+            jump_y = along_mm;
+          }
+        }
+        f_prev = f;
+        tip_prev = poses[0].tip_m;
+        if (trace)
+          std::fprintf(trace, "%g,%g,%.1f,%.5f,%.5f,%.5f,%.4f,%.4f,%d\n", cell_mm, depth_mm, along_mm,
+                       1e3 * poses[0].tip_m.x(), 1e3 * poses[0].tip_m.y(), 1e3 * poses[0].tip_m.z(),
+                       1e3 * depth, 1e3 * f, stats.contact_rows);
+        f_min = std::min(f_min, f);
+        if (f / depth < fpd_min) {
+          y_at_min = along_mm;
+          depth_at_min = depth;
+        }
+        fpd_min = std::min(fpd_min, f / depth);
+        fpd_max = std::max(fpd_max, f / depth);
+        ++steps;
+      }
+      char row[256];
+      std::snprintf(row, sizeof row, "%g,%g,%d,%.3f,%.1f,%.1f,%.2f,%.1f,%.3f,%.3f,%.1f,%d", cell_mm, depth_mm,
+                    steps, 1e3 * f_min, fpd_min, fpd_max, fpd_max / fpd_min, y_at_min, 1e3 * depth_at_min,
+                    jump, jump_y, jumps);
+      slide_rows.emplace_back(row);
+    }
+  };
   try {
     for (std::size_t ci = 0; ci < cells.size(); ++ci) {
       const fs::path scene = scene_at(cells[ci], dir);
@@ -132,8 +201,8 @@ int main(int argc, char** argv) {
       ni::SimulationOptions options;
       if (geometry_iterations > 0) options.contact_geometry_iterations = geometry_iterations;
       if (contact_spread >= 0.0) options.contact_spread = contact_spread;
-      if (smooth_normals) options.contact_smooth_normals = true;
-      if (near_field) options.contact_near_field = true;
+      if (smooth_normals >= 0) options.contact_smooth_normals = smooth_normals != 0;
+      if (near_field >= 0) options.contact_near_field = near_field != 0;
       auto sim = ni::Simulation::build(model, options);
       const double build_s = neurosim::common::seconds_since(t0);
       const auto& mesh = sim->mesh(0);
@@ -160,55 +229,18 @@ int main(int argc, char** argv) {
       std::snprintf(mesh_row, sizeof mesh_row, "| %g mm | %zu / %zu | %.2f / %.4f | %.1f |", cells[ci],
                     mesh.num_vertices(), mesh.num_tets(), 1e3 * top.z(), n.z(), build_s);
       mesh_rows.emplace_back(mesh_row);
-      for (double depth_mm : slide ? std::vector<double>{1.0, 2.0} : std::vector<double>{}) {
-        double fpd_min = std::numeric_limits<double>::infinity(), fpd_max = 0.0, f_min = fpd_min;
-        int steps = 0;
-        double y_at_min = 0.0, depth_at_min = 0.0;  // where |F| / depth is least, unit mm / m
-        // Jumps: the largest relative change of |F| between two steps whose tip moved less than
-        // 0.25 mm (the path's own jumps, where the highest triangle under it changes, excluded),
-        // and how many such changes exceed 10 %.
-        double jump = 0.0, jump_y = 0.0, f_prev = -1.0;
-        int jumps = 0;
-        Vec3 tip_prev = Vec3::Zero();
-        for (int k = 0; k <= 400; ++k) {
-          const auto on = ni::top_of_surface(mesh, 0.060, 0.080 + 1e-4 * k);
-          if (!on) throw std::runtime_error(scene.string() + ": the slide leaves the surface at step " + std::to_string(k));
-          const Vec3 at = on->point_m, up = on->normal;
-          poses[0].tip_m = at + (r - 1e-3 * depth_mm) * up;
-          poses[0].axis = up;
-          sim->step(poses, contacts, stats);
-          const ni::SurfacePoint near = ni::closest_on_surface(mesh, poses[0].tip_m);
-          const double depth = r - near.normal.dot(poses[0].tip_m - near.point_m);
-          const double f = contacts[0].force_n.norm();
-          if (f_prev >= 0.0 && (poses[0].tip_m - tip_prev).norm() < 2.5e-4 && std::max(f, f_prev) > 0.0) {
-            const double rel = std::abs(f - f_prev) / std::max(f, f_prev);
-            if (rel > 0.1) ++jumps;
-            if (rel > jump) {
-              jump = rel;
-              jump_y = 80.0 + 0.1 * k;
-            }
-          }
-          f_prev = f;
-          tip_prev = poses[0].tip_m;
-          if (trace)
-            std::fprintf(trace, "%g,%g,%.1f,%.5f,%.5f,%.5f,%.4f,%.4f,%d\n", cells[ci], depth_mm, 80.0 + 0.1 * k,
-                         1e3 * poses[0].tip_m.x(), 1e3 * poses[0].tip_m.y(), 1e3 * poses[0].tip_m.z(),
-                         1e3 * depth, 1e3 * f, stats.contact_rows);
-          f_min = std::min(f_min, f);
-          if (f / depth < fpd_min) {
-            y_at_min = 80.0 + 0.1 * k;
-            depth_at_min = depth;
-          }
-          fpd_min = std::min(fpd_min, f / depth);
-          fpd_max = std::max(fpd_max, f / depth);
-          ++steps;
-        }
-        char row[256];
-        std::snprintf(row, sizeof row, "%g,%g,%d,%.3f,%.1f,%.1f,%.2f,%.1f,%.3f,%.3f,%.1f,%d", cells[ci], depth_mm,
-                      steps, 1e3 * f_min, fpd_min, fpd_max, fpd_max / fpd_min, y_at_min, 1e3 * depth_at_min,
-                      jump, jump_y, jumps);
-        slide_rows.emplace_back(row);
-      }
+      if (slide) slide_path(*sim, r, Vec3(0.060, 0.080, 0.0), Vec3::UnitY(), cells[ci], scene.string());
+    }
+    if (slide && cube) {
+      const fs::path scene = fs::path(NEUROSIM_SOURCE_DIR) / "scenes" / "cube_cylinder.scene";
+      const neurosim::scene::Model model = neurosim::scene::load_model(scene);
+      ni::SimulationOptions options;
+      if (contact_spread >= 0.0) options.contact_spread = contact_spread;
+      if (smooth_normals >= 0) options.contact_smooth_normals = smooth_normals != 0;
+      if (near_field >= 0) options.contact_near_field = near_field != 0;
+      auto sim = ni::Simulation::build(model, options);
+      slide_path(*sim, model.tools.at(0).tip_radius_m, Vec3(0.030, 0.050, 0.0), Vec3::UnitX(), 0.0,
+                 scene.string());
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "contact_convergence_bench: %s\n", e.what());

@@ -3,7 +3,7 @@
 // with the coupling kind SLIDING (frictionless unilateral pairs solved with the tool contact).
 //   interaction_bench [--csv] [--steps N] [--sliding-steps N] [--quick] [--residual-csv FILE]
 //                     [--only SCENARIO] [--no-sliding-ref]
-//   interaction_bench --brain-contact [--steps N] [--smooth-contact]
+//   interaction_bench --brain-contact [--steps N] [--smooth-contact] [--contact-spread C]
 // --csv prints only the table; set-up times and notes go to stderr. SLIDING rows: `sliding` (the
 // default LCP path, inverse of the sliding block at load) and `sliding_ref` (the reference path,
 // factor of the active rows), unless --no-sliding-ref.
@@ -17,8 +17,9 @@
 // p50 / p99 / max (us) of the wall time and of the thread's CPU time (the step's own work: on a
 // loaded machine the wall time of a preempted step includes another process's time slice), rows
 // and LCPs per step, steps with no force, columns computed in the step, and columns not ready
-// (nodes whose row took the worker's fallback, summed over the steps). Only the Simulation
-// contract.
+// (nodes whose row took the worker's fallback, summed over the steps); the steps without force
+// and their tips to stderr. --smooth-contact: contact_spread 1, smooth normals, the near field.
+// Only the Simulation contract.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "common/stats.hpp"
@@ -88,6 +89,7 @@ struct RunTimes {
   double lcps{0.0};            // LCPs per step (StepStats::geometry_iterations)
   double rows{0.0};
   int zero_force{0};
+  std::vector<std::size_t> zero_force_at;  // the steps without force (the first 8)
   int columns{0};
   long not_ready{0};  // StepStats::columns_not_ready summed over the steps
 };
@@ -116,7 +118,10 @@ RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses, 
     r.rows += stats.contact_rows;
     r.columns += stats.columns_computed;
     r.not_ready += stats.columns_not_ready;
-    if (!(contacts[0].force_n.norm() > 0.0)) ++r.zero_force;
+    if (!(contacts[0].force_n.norm() > 0.0)) {
+      if (r.zero_force < 8) r.zero_force_at.push_back(r.us.size() - 1);
+      ++r.zero_force;
+    }
   }
   r.rows /= static_cast<double>(std::max<std::size_t>(1, poses.size()));
   r.lcps /= static_cast<double>(std::max<std::size_t>(1, poses.size()));
@@ -206,6 +211,13 @@ int brain_contact(int steps, const ni::SimulationOptions& contact) {
   print("brain_press", tp);
   print("brain_slide_step_solves", ts);
   print("brain_slide_worker", tw);
+  // Where a slide step had no force: its index and tip (unit mm), to stderr.
+  for (std::size_t k : ts.zero_force_at)
+    std::fprintf(stderr, "brain_slide: no force at step %zu, tip %.4f %.4f %.4f mm\n", k,
+                 1e3 * slide[k].tip_m.x(), 1e3 * slide[k].tip_m.y(), 1e3 * slide[k].tip_m.z());
+  for (std::size_t k : tw.zero_force_at)
+    std::fprintf(stderr, "brain_slide_worker: no force at step %zu, tip %.4f %.4f %.4f mm\n", k,
+                 1e3 * slide[k].tip_m.x(), 1e3 * slide[k].tip_m.y(), 1e3 * slide[k].tip_m.z());
   return 0;
 }
 
@@ -220,6 +232,7 @@ int main(int argc, char** argv) {
   std::string residual_csv;
   bool no_sliding_ref = false;
   bool brain = false, smooth_contact = false;
+  double contact_spread = -1.0;
   neurosim::cli::Parser cli("interaction_bench",
                             "Per-step contact solve: exact vs iterative coupling, sliding.");
   cli->add_flag("--csv", csv, "print CSV");
@@ -231,16 +244,19 @@ int main(int argc, char** argv) {
   cli->add_flag("--no-sliding-ref", no_sliding_ref, "no sliding reference solve");
   cli->add_flag("--brain-contact", brain, "brain_artery press and 10 s slide (contact rows)");
   cli->add_flag("--smooth-contact", smooth_contact,
-                "with --brain-contact: SimulationOptions contact_spread 0.5, contact_smooth_normals, "
-                "contact_near_field");
+                "with --brain-contact: SimulationOptions contact_spread 1 (or --contact-spread), "
+                "contact_smooth_normals, contact_near_field");
+  cli->add_option("--contact-spread", contact_spread,
+                  "with --brain-contact: SimulationOptions::contact_spread (default: the library's)");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   if (brain) {
     ni::SimulationOptions contact;
     if (smooth_contact) {
-      contact.contact_spread = 0.5;
+      contact.contact_spread = 1.0;
       contact.contact_smooth_normals = true;
       contact.contact_near_field = true;
     }
+    if (contact_spread >= 0.0) contact.contact_spread = contact_spread;
     return brain_contact(steps, contact);
   }
   sliding_ref = !no_sliding_ref;
