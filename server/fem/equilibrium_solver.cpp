@@ -1,5 +1,7 @@
 #include "server/fem/equilibrium_solver.hpp"
 
+#include "server/fem/factor_ordering.hpp"
+
 #include <Eigen/Cholesky>
 #include <Eigen/CholmodSupport>
 
@@ -27,6 +29,15 @@ class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen:
  public:
   cholmod_factor* factor() const { return this->m_cholmodFactor; }
   cholmod_common& common() { return this->cholmod(); }
+  // Takes a symbolic factor made by analyze_ordered as if analyzePattern had made it.
+  void adopt_analysis(cholmod_factor* f) {
+    if (this->m_cholmodFactor) cholmod_free_factor(&this->m_cholmodFactor, &common());
+    this->m_cholmodFactor = f;
+    this->m_isInitialized = true;
+    this->m_info = f != nullptr ? Eigen::Success : Eigen::NumericalIssue;
+    this->m_analysisIsOk = f != nullptr;
+    this->m_factorizationIsOk = false;
+  }
 };
 
 void check_options(const std::string& where, const NewtonOptions& o) {
@@ -50,6 +61,7 @@ void check_options(const std::string& where, const NewtonOptions& o) {
 
 struct EquilibriumSolver::Impl {
   std::string where;
+  FactorOrdering ordering{FactorOrdering::kNodeMetis};  // EquilibriumDefinition::ordering
   std::vector<ElasticForces> bodies;  // host first, then the tied meshes
   // Per body: the evaluation scratch (anp-tet, smoothed-tet), so no evaluation allocates.
   mutable std::vector<ElasticForces::Workspace> workspaces;
@@ -216,7 +228,10 @@ struct EquilibriumSolver::Impl {
     std::fill_n(kff.valuePtr(), inner.size(), 0.0);
     if (nf > 0) {
       llt.cholmod().print = 0;
-      llt.analyzePattern(kff);
+      // Each free dof's node (stacked dofs: 3 per node, meshes after one another).
+      std::vector<int> node_of(static_cast<std::size_t>(nf));
+      for (int i = 0; i < nf; ++i) node_of[static_cast<std::size_t>(i)] = free_dofs[i] / 3;
+      llt.adopt_analysis(analyze_ordered(kff, ordering, node_of, llt.common()));
       if (llt.info() != Eigen::Success) {
         throw std::runtime_error(where + ": CHOLMOD analysis failed");
       }
@@ -546,6 +561,7 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
   }
   impl_ = std::make_unique<Impl>(d);
   Impl& s = *impl_;
+  s.ordering = d.ordering;
   s.bodies.emplace_back(*d.mesh, d.materials, d.tier);
   for (std::size_t k = 0; k < d.tied.size(); ++k) {
     if (!d.tied[k].mesh) {

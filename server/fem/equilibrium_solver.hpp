@@ -3,9 +3,9 @@
 // total potential E(u) - f_ext . u, with a backtracking line search (Armijo on the potential, or
 // a decrease of the residual when the potential is flat to round-off) and load increments that
 // are cut back when an increment fails to converge. The tangent K_ff is refactorized by CHOLMOD
-// (supernodal LL^T, METIS ordering as CHOLMOD chooses it) at every iteration, reusing the one
-// symbolic analysis made at construction (the constrained dofs, hence the pattern, never
-// change). An indefinite tangent (compression with buckling modes, clamped elements) is
+// (supernodal LL^T, EquilibriumDefinition::ordering: METIS on the node graph) at every
+// iteration, reusing the one symbolic analysis made at construction (the constrained dofs, hence
+// the pattern, never change). An indefinite tangent (compression with buckling modes, clamped elements) is
 // replaced by the one with every element tangent projected to positive semidefinite, so each
 // step is a descent direction.
 //
@@ -20,6 +20,7 @@
 #pragma once
 
 #include "server/fem/elastic_forces.hpp"
+#include "server/fem/factor_ordering.hpp"
 #include "server/fem/prescribed.hpp"
 
 #include <Eigen/Core>
@@ -54,6 +55,9 @@ struct EquilibriumDefinition {
   // Meshes tied to the host, in the same tier. Displacements, forces and reactions are then
   // stacked: the host's 3 N_A dofs, then each tied mesh's 3 N_B (body_offset).
   std::vector<TiedMeshDefinition> tied;
+  // The fill-reducing ordering of the tangent's factor (factor_ordering.hpp): its size and the
+  // time of every factorization and solve, never the answer beyond round-off.
+  FactorOrdering ordering{FactorOrdering::kNodeMetis};
 };
 
 struct NewtonOptions {

@@ -114,7 +114,7 @@ bool consistent(const cholmod_factor& f) {
 
 }  // namespace
 
-std::uint64_t factor_key(const SparseMatrix& lower) {
+std::uint64_t factor_key(const SparseMatrix& lower, int ordering) {
   if (!lower.isCompressed())
     throw std::logic_error("factor_key: the matrix must be compressed");
   WordHash key;
@@ -127,6 +127,11 @@ std::uint64_t factor_key(const SparseMatrix& lower) {
   key.add(lower.outerIndexPtr(), static_cast<std::size_t>(cols + 1) * sizeof(int));
   key.add(lower.innerIndexPtr(), static_cast<std::size_t>(nnz) * sizeof(int));
   key.add(lower.valuePtr(), static_cast<std::size_t>(nnz) * sizeof(double));
+  // The default ordering (0) adds nothing: its keys stay those of the files already written.
+  if (ordering != 0) {
+    const std::int64_t o = ordering;
+    key.add(&o, sizeof o);
+  }
   return key.value();
 }
 

@@ -21,8 +21,9 @@ struct cholmod_common_struct;
 namespace neurosim::fem {
 
 // Hash of the lower triangle of K_ff as factored (CSC: size, column pointers, row indices,
-// values; compressed) and of the CHOLMOD version that factors it.
-std::uint64_t factor_key(const SparseMatrix& lower);
+// values; compressed), of the CHOLMOD version that factors it and of the ordering it is
+// factored with (an integer naming it: another ordering is another factor).
+std::uint64_t factor_key(const SparseMatrix& lower, int ordering = 0);
 
 // The cache file of `key` in `dir` (dir/factor_<key hex>.bin).
 std::string factor_file(const std::string& dir, std::uint64_t key);

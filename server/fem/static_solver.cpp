@@ -37,6 +37,15 @@ class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen:
   cholmod_common& common() const { return const_cast<SupernodalFactor*>(this)->cholmod(); }
   // Takes a numeric factor made elsewhere (the disk cache) as if analyzePattern and factorize
   // had made it.
+  // Takes a symbolic factor made elsewhere (analyze_ordered) as if analyzePattern had made it.
+  void adopt_analysis(cholmod_factor* f) {
+    if (this->m_cholmodFactor) cholmod_free_factor(&this->m_cholmodFactor, &common());
+    this->m_cholmodFactor = f;
+    this->m_isInitialized = true;
+    this->m_info = Eigen::Success;
+    this->m_analysisIsOk = true;
+    this->m_factorizationIsOk = false;
+  }
   void adopt(cholmod_factor* f) {
     if (this->m_cholmodFactor) cholmod_free_factor(&this->m_cholmodFactor, &common());
     this->m_cholmodFactor = f;
@@ -232,12 +241,13 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
     // The factor of this very matrix from an earlier start (a too large one is left to the
     // analysis below, which refuses it with its numbers).
     t0 = Clock::now();
-    cache_key = factor_key(kff);
+    cache_key = factor_key(kff, static_cast<int>(options_.ordering));
     cache_file = factor_file(options_.factor_cache_dir, cache_key);
     const FactorLoad cached = load_factor(cache_file, cache_key, nf, limit, c);
     if (cached.factor != nullptr) {
       llt.adopt(cached.factor);
       info_.from_cache = true;
+      info_.ordering = ordering_name(options_.ordering);
       lnz = cached.lnz;
     }
     info_.cache_s = seconds_since(t0);
@@ -270,9 +280,22 @@ void StaticSolver::factorize(const SparseMatrix& kff, const std::string& where, 
   cholmod_common& c = llt.common();
   const int nf = num_free_dofs();
   auto t0 = Clock::now();
-  llt.analyzePattern(kff);
+  {
+    // Each free dof's node: the node-graph ordering keeps a node's rows together.
+    std::vector<int> node_of(static_cast<std::size_t>(nf));
+    for (int r = 0; r < nf; ++r) node_of[static_cast<std::size_t>(r)] = free_dofs_[r] / 3;
+    cholmod_factor* symbolic = analyze_ordered(kff, options_.ordering, node_of, c);
+    if (symbolic != nullptr) llt.adopt_analysis(symbolic);
+  }
   info_.analyze_s = seconds_since(t0);
-  if (llt.info() != Eigen::Success || !llt.factor()) {
+  info_.factor_flops = c.fl;
+  info_.ordering = ordering_name(options_.ordering);
+  if (options_.ordering == FactorOrdering::kCholmodDefault && c.selected >= 0 &&
+      c.selected <= CHOLMOD_MAXMETHODS) {
+    const int chosen = c.method[c.selected].ordering;
+    info_.ordering += chosen == CHOLMOD_AMD ? ":amd" : chosen == CHOLMOD_METIS ? ":metis" : ":other";
+  }
+  if (!llt.factor()) {
     throw std::runtime_error(where + ": CHOLMOD analysis failed (status " +
                              std::to_string(c.status) + ")");
   }

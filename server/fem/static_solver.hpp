@@ -4,6 +4,7 @@
 #pragma once
 
 #include "server/fem/assembly.hpp"
+#include "server/fem/factor_ordering.hpp"
 #include "server/fem/material.hpp"
 #include "server/fem/prescribed.hpp"
 #include "server/mesh/tet_mesh.hpp"
@@ -40,6 +41,11 @@ struct SolverOptions {
   // solver of the same matrix reads the factor instead of analysing and factoring (the same
   // factor bit for bit). Empty: no cache.
   std::string factor_cache_dir{};
+  // The fill-reducing ordering of K_ff (factor_ordering.hpp): the factor's size and time, never
+  // the answer beyond round-off. Part of the factor cache's key. METIS on the node graph: the
+  // same factor size as CHOLMOD's own choice (METIS on the dof graph) within 2 % on the brain,
+  // its analysis 2-5x faster (bench/RESULTS.md "The host factor's ordering").
+  FactorOrdering ordering{FactorOrdering::kNodeMetis};
 };
 
 // The factor of K_ff would not fit in SolverOptions::max_factor_bytes (or the memory available).
@@ -59,6 +65,10 @@ struct FactorInfo {
   long long factor_entries{0};  // stored values of the supernodal L (with padding)
   std::size_t factor_bytes{0};  // values + integer structure of L, unit byte
   bool supernodal{false};
+  // The ordering the factor was made with: SolverOptions::ordering's name, and for "cholmod"
+  // the method CHOLMOD chose ("cholmod:amd", "cholmod:metis"); a cached factor: its option's.
+  std::string ordering;
+  double factor_flops{0.0};  // CHOLMOD's flop count of the factorization (0 from the cache)
   double rcond{0.0};        // CHOLMOD's rough reciprocal condition estimate
   double assembly_s{0.0};   // wall time of pattern + assembly, unit s
   double analyze_s{0.0};    // symbolic analysis (ordering), unit s
