@@ -1,10 +1,11 @@
 // The disk cache of a CHOLMOD supernodal factor: a second start with the same stiffness reads
 // the factor of K_ff instead of analysing and factoring it again (tens of seconds on a 3 mm
 // brain, bench/RESULTS.md "scale_bench"). A file is keyed by a 64-bit hash of the factored
-// matrix itself (the lower triangle of K_ff: size, pattern and values) and the CHOLMOD version,
-// so another mesh, material, element or set of fixed nodes is another key. It carries a checksum
-// of its arrays; a file with another key, other sizes, another length, a checksum mismatch or a
-// structure that does not hold together is ignored (with a message when damaged), never used.
+// matrix itself (the lower triangle of K_ff: size, pattern and values), the CHOLMOD version and
+// the ordering, so another mesh, material, element, set of fixed nodes or ordering is another
+// key. It carries a checksum of its arrays; a file with another key, other sizes, another length,
+// a checksum mismatch or a structure that does not hold together is ignored (with a message when
+// damaged), never used.
 // The factor read is the stored one bit for bit: solves with it give bit-identical answers.
 #pragma once
 
