@@ -79,6 +79,10 @@ struct Row {
   // SimulationOptions::contact_near_field: the tip's near-field compliance, shared in series by
   // the tip's rows on this body (contact_step.cpp, near_field), unit m/N.
   double near_field_m_per_n{0.0};
+  // The tip's deepest row on this body (the depth the near field is taken at): d c / d depth
+  // (unit 1/N; 0 where the near field is constant), for the tangent stiffness (answer).
+  bool near_field_deepest{false};
+  double near_field_slope_per_n{0.0};
 };
 
 // A candidate feature of one tool part on one triangle, before merging (contact_step.cpp).
@@ -250,6 +254,7 @@ class State {
   void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations, int tools,
               ToolContact& c);
   Mat3 own_stiffness(int ns, int tool);
+  void near_field_tangent(int tool, int ns, Mat3& k) const;
   int main_body_of(const Model& m, int tool, int ns, double& sum_n) const;
   void relaxation(const Model& m, int tool, int ns, ToolContact& c);
   void tier_post(StepStats& stats);
