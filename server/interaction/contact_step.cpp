@@ -238,6 +238,7 @@ void State::reserve_workspace(const Model& m, int tools) {
     sc.rest_hits.reserve(hits_.capacity());
   }
   tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
+  tool_order_.reserve(tool_rows_.capacity());
   spread_triangles_.reserve(triangles);
   for (auto& b : bodies_) {
     b.force_slots.reserve(kSpreadNodes * max_rows);
@@ -840,12 +841,17 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
   }
   near_field_of_tool(m, shape);
   // Rows within the margin enter the LCP inactive (caught if the deformation pushes them in).
-  tool_rows_.erase(std::remove_if(tool_rows_.begin(), tool_rows_.end(),
-                                  [&](const Row& r) { return !(r.depth_m > -margin); }),
-                   tool_rows_.end());
+  // The deepest first, sorted by index (a Row holds kSpreadNodes nodes: moving the rows through
+  // the heap cost more than finding them); `deeper` is a total order on one tool's rows, so the
+  // kept rows and their order are those of sorting the rows themselves.
+  tool_order_.clear();
+  for (std::size_t k = 0; k < tool_rows_.size(); ++k)
+    if (tool_rows_[k].depth_m > -margin) tool_order_.push_back(static_cast<int>(k));
   const std::size_t keep =
-      std::min<std::size_t>(tool_rows_.size(), m.options_.max_contact_nodes_per_tool);
-  std::partial_sort(tool_rows_.begin(), tool_rows_.begin() + keep, tool_rows_.end(), deeper);
+      std::min<std::size_t>(tool_order_.size(), m.options_.max_contact_nodes_per_tool);
+  std::partial_sort(tool_order_.begin(), tool_order_.begin() + static_cast<std::ptrdiff_t>(keep),
+                    tool_order_.end(),
+                    [&](int a, int b) { return deeper(tool_rows_[a], tool_rows_[b]); });
   // Two tools on one feature, or on nearly the same constraint (the same main node, normals within
   // 30 degrees): one row (the same constraint twice would leave only the row compliance between
   // the tools, a stiffness of 1/eps); the deeper tool carries it.
@@ -856,7 +862,7 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
     return r.slot[best];
   };
   for (std::size_t k = 0; k < keep; ++k) {
-    const Row& r = tool_rows_[k];
+    const Row& r = tool_rows_[tool_order_[k]];
     auto same = std::find_if(rows_.begin(), rows_.end(), [&](const Row& o) {
       return o.body == r.body && o.tool != r.tool &&
              (o.key == r.key ||

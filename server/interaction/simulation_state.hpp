@@ -293,6 +293,7 @@ class State {
   long long node_memo_counter_{0};
   const StepCandidates* candidates_{nullptr};  // of the body and tool being searched
   std::vector<Row> tool_rows_;     // rows of one tool, before the per-tool limit
+  std::vector<int> tool_order_;    // indices of tool_rows_ within the margin, deepest first
   std::vector<int> spread_triangles_;  // ContactSurface::spread's candidates (capacity: triangles)
   SpreadLoad spread_load_;             // one row's spread load
   std::vector<Row> rows_;          // the step's contact rows
