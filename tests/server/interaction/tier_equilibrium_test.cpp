@@ -125,8 +125,17 @@ TEST_P(Tiers, HeldPressConvergesToTheTierContactEquilibrium) {
     if (!pressed) continue;
     nearest = std::min(nearest, (closest_on_triangle(pose.tip_m, x).point_m - pose.tip_m).norm());
   }
+  // With SimulationOptions::contact_near_field the tip's rows carry Hertz's local indentation in
+  // series (the part of the patch the cells cannot show): the mesh's surface then stays clear of
+  // the sphere by that indentation, c F with c below Hertz's secant compliance 3 / (4 E* a),
+  // a = sqrt(r d) at the press depth d (the near field subtracts the half-space's share, >= 0).
+  double indentation = 0.0;
+  if (SimulationOptions{}.contact_near_field) {
+    const double e_star = spec.host_e_pa / (1.0 - spec.nu * spec.nu);
+    indentation = 0.75 / (e_star * std::sqrt(r * press)) * c.force_n.norm();
+  }
   EXPECT_GE(nearest, r - 1e-7 * press);
-  EXPECT_LE(nearest, r + 1e-7 * press);
+  EXPECT_LE(nearest, r + indentation + 1e-7 * press);
 
   // Not linear in disguise: the linear tier's force differs.
   SceneSpec lin = spec;
