@@ -22,6 +22,7 @@
 // how many exceed 10 %); with --cube also the cube's slide (the ctest's, 40 mm along x across its
 // top face). --contact-spread, --smooth-normals 0|1 and --near-field 0|1 set the SimulationOptions
 // of the same names (the three options: --contact-spread 1 --smooth-normals 1 --near-field 1).
+#include "patient_models.hpp"
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "server/fem/element.hpp"
@@ -47,23 +48,6 @@ namespace ni = neurosim::interaction;
 using Vec3 = Eigen::Vector3d;
 
 namespace {
-
-fs::path scene_at(double cell_mm, const fs::path& dir) {
-  char name[32];
-  std::snprintf(name, sizeof name, "c%g", cell_mm);
-  const fs::path d = dir / name;
-  const fs::path scene = d / "brain_artery.scene";
-  if (!fs::exists(scene)) {
-    fs::create_directories(d);
-    const std::string cmd = std::string(NEUROSIM_BIN_DIR) + "/neurosim-model --out-dir '" +
-                            d.string() + "' --cell-size " + std::to_string(cell_mm) + " > '" +
-                            (d / "model.log").string() + "' 2>&1";
-    std::cerr << "contact_convergence_bench: building " << scene << "\n";
-    if (std::system(cmd.c_str()) != 0)
-      throw std::runtime_error("neurosim-model failed (log: " + (d / "model.log").string() + ")");
-  }
-  return scene;
-}
 
 // Order p with (h1^p - h2^p) / (h2^p - h3^p) = ratio (bisection on p in (0.05, 6)); nan if the
 // differences change sign (no monotone convergence) or the ratio is out of reach.
@@ -189,7 +173,7 @@ int main(int argc, char** argv) {
   };
   try {
     for (std::size_t ci = 0; ci < cells.size(); ++ci) {
-      const fs::path scene = scene_at(cells[ci], dir);
+      const fs::path scene = neurosim::bench::scene_at(cells[ci], dir, "contact_convergence_bench");
       neurosim::scene::Model model = neurosim::scene::load_model(scene);
       model.effects.tier = neurosim::scene::Tier::kLinear;
       if (!element.empty()) {

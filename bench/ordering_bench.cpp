@@ -16,6 +16,7 @@
 //   a node to its neighbours' neighbours; --element names another element for comparison).
 //   ordering_bench --cell-size 5 --cell-size 3 [--ordering cholmod --ordering node-metis ...]
 //                  [--element linear-tet] [--csv]
+#include "patient_models.hpp"
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "server/fem/element.hpp"
@@ -38,31 +39,8 @@ using namespace neurosim;
 
 namespace {
 
-fs::path scene_at(double cell_mm, const fs::path& dir) {
-  char name[32];
-  std::snprintf(name, sizeof name, "c%g", cell_mm);
-  const fs::path d = dir / name;
-  const fs::path scene = d / "brain_artery.scene";
-  if (!fs::exists(scene)) {
-    fs::create_directories(d);
-    const std::string cmd = std::string(NEUROSIM_BIN_DIR) + "/neurosim-model --out-dir '" +
-                            d.string() + "' --cell-size " + std::to_string(cell_mm) + " > '" +
-                            (d / "model.log").string() + "' 2>&1";
-    std::cerr << "ordering_bench: building " << scene << "\n";
-    if (std::system(cmd.c_str()) != 0)
-      throw std::runtime_error("neurosim-model failed (log: " + (d / "model.log").string() + ")");
-  }
-  return scene;
-}
+using neurosim::bench::status_mb;
 
-double status_mb(const char* field) {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  const std::string key = std::string(field) + ":";
-  while (std::getline(in, line))
-    if (line.compare(0, key.size(), key) == 0) return std::stod(line.substr(key.size())) / 1024.0;
-  return -1.0;
-}
 void reset_peak() {
   std::ofstream out("/proc/self/clear_refs");
   out << "5";
@@ -92,7 +70,7 @@ int main(int argc, char** argv) {
               "peak_mb,solve_ms,block63_ms,max_rel_diff\n");
   try {
     for (double cell : cells) {
-      scene::Model model = scene::load_model(scene_at(cell, dir));
+      scene::Model model = scene::load_model(neurosim::bench::scene_at(cell, dir, "ordering_bench"));
       if (!element.empty()) {
         const auto e = fem::parse_element(element);
         if (!e) throw std::runtime_error("unknown element '" + element + "'");

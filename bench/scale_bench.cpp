@@ -34,6 +34,7 @@
 //   then): the same scene with effects.tier = NONLINEAR, built (from the disk cache) after the
 //   LINEAR simulation was freed; its set-up time and memory on stderr. --nonlinear-seconds 0
 //   skips it (nan).
+#include "patient_models.hpp"
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "common/stats.hpp"
@@ -68,32 +69,8 @@ using Vec3 = Eigen::Vector3d;
 
 namespace {
 
-fs::path scene_at(double cell_mm, const fs::path& dir) {
-  char name[32];
-  std::snprintf(name, sizeof name, "c%g", cell_mm);
-  const fs::path d = dir / name;
-  const fs::path scene = d / "brain_artery.scene";
-  if (!fs::exists(scene)) {
-    fs::create_directories(d);
-    const std::string cmd = std::string(NEUROSIM_BIN_DIR) + "/neurosim-model --out-dir '" +
-                            d.string() + "' --cell-size " + std::to_string(cell_mm) + " > '" +
-                            (d / "model.log").string() + "' 2>&1";
-    std::cerr << "scale_bench: building " << scene << "\n";
-    if (std::system(cmd.c_str()) != 0)
-      throw std::runtime_error("neurosim-model failed (log: " + (d / "model.log").string() + ")");
-  }
-  return scene;
-}
+using neurosim::bench::status_mb;
 
-// VmRSS / VmHWM of /proc/self/status, unit MB (-1 if unreadable).
-double status_mb(const char* field) {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  const std::string key = std::string(field) + ":";
-  while (std::getline(in, line))
-    if (line.compare(0, key.size(), key) == 0) return std::stod(line.substr(key.size())) / 1024.0;
-  return -1.0;
-}
 double rss_mb() { return status_mb("VmRSS"); }
 double peak_rss_mb() { return status_mb("VmHWM"); }
 // The peak so far forgotten (Linux: clear_refs 5 resets VmHWM to the current RSS); false if not.
@@ -140,7 +117,7 @@ int main(int argc, char** argv) {
                "step_p99_us,step_max_us,columns_not_ready,field_hz,nonlinear_update_hz\n";
   try {
     for (double cell : cells) {
-      const fs::path scene = scene_at(cell, dir);
+      const fs::path scene = neurosim::bench::scene_at(cell, dir, "scale_bench");
       const neurosim::scene::Model model = neurosim::scene::load_model(scene);
       ni::SimulationOptions options;
       options.column_worker = column_solves == "worker";
