@@ -166,10 +166,10 @@ struct SimulationOptions {
   // barycentric weights on its triangle: a tip whose contact patch is smaller than a triangle
   // then loads about the same surface wherever in the triangle it lands (a vertex and a face
   // centre differ less), and the row's weights change continuously as it slides. 0: barycentric
-  // (dimensionless). Off by default: turned on with the near field, the NONLINEAR tier's held
-  // press (ctest interaction_tier) failed and was not analysed, and the whole suite was not run
-  // with them (bench/RESULTS.md, "Contact options: the depth to the flat surface"). Measured
-  // best: 1.
+  // (dimensionless). Off by default: with the near field it does not yet converge on a block
+  // graded under the tip (1 mm: 8.4 / 10.0 / 11.4 / 8.1 mN on 4 / 2 / 1 / 0.5 mm cells) and the
+  // near field does not relax with a viscoelastic tissue's kernel (bench/RESULTS.md, "Contact
+  // options: the depth to the flat surface"). Measured best: 1.
   double contact_spread{0.0};
   // The tip's face rows from the tip centre projected along the normal field interpolated from
   // the surface nodes' normals (ContactSurface project_along_normals: a smooth contact surface
