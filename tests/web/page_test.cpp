@@ -190,12 +190,21 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
   const std::string panel = pressed["panel"];
   const Json u_stats = pressed["u"];
   // The plot's line (the first station's colour, #4fc3f7) in the upper half of the plot.
-  const int plot_pixels = browser.evaluate(
-      session,
-      "(() => { const c = document.getElementById('force-plot');"
-      "  const d = c.getContext('2d').getImageData(0, 0, c.width, c.height / 2).data;"
-      "  let n = 0; for (let i = 0; i < d.length; i += 4)"
-      "    if (d[i] < 140 && d[i + 1] > 150 && d[i + 2] > 200) ++n; return n; })()");
+  // Drawn on the page's next animation frames, which a loaded headless Chromium delays: read
+  // until the line is there (at most 10 s; under stress-ng one read right after the press saw 0).
+  auto count_plot_pixels = [&] {
+    return static_cast<int>(browser.evaluate(
+        session,
+        "(() => { const c = document.getElementById('force-plot');"
+        "  const d = c.getContext('2d').getImageData(0, 0, c.width, c.height / 2).data;"
+        "  let n = 0; for (let i = 0; i < d.length; i += 4)"
+        "    if (d[i] < 140 && d[i + 1] > 150 && d[i + 2] > 200) ++n; return n; })()"));
+  };
+  int plot_pixels = count_plot_pixels();
+  for (const auto t_plot = wt::Clock::now(); plot_pixels <= 10 && wt::seconds_since(t_plot) < 10;) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    plot_pixels = count_plot_pixels();
+  }
   EXPECT_GT(plot_pixels, 10);
   std::cout << "cube |u| when pressed (m): " << u_stats.dump() << "\n";
   const std::string with_tool = browser.screenshot(session, rx, ry, rw, rh);
