@@ -35,24 +35,20 @@ class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen:
  public:
   cholmod_factor* factor() const { return this->m_cholmodFactor; }
   cholmod_common& common() const { return const_cast<SupernodalFactor*>(this)->cholmod(); }
+  // Takes a symbolic factor made elsewhere (analyze_ordered) as if analyzePattern had made it.
+  void adopt_analysis(cholmod_factor* f) { take(f, false); }
   // Takes a numeric factor made elsewhere (the disk cache) as if analyzePattern and factorize
   // had made it.
-  // Takes a symbolic factor made elsewhere (analyze_ordered) as if analyzePattern had made it.
-  void adopt_analysis(cholmod_factor* f) {
+  void adopt(cholmod_factor* f) { take(f, true); }
+
+ private:
+  void take(cholmod_factor* f, bool factorized) {
     if (this->m_cholmodFactor) cholmod_free_factor(&this->m_cholmodFactor, &common());
     this->m_cholmodFactor = f;
     this->m_isInitialized = true;
     this->m_info = Eigen::Success;
     this->m_analysisIsOk = true;
-    this->m_factorizationIsOk = false;
-  }
-  void adopt(cholmod_factor* f) {
-    if (this->m_cholmodFactor) cholmod_free_factor(&this->m_cholmodFactor, &common());
-    this->m_cholmodFactor = f;
-    this->m_isInitialized = true;
-    this->m_info = Eigen::Success;
-    this->m_analysisIsOk = true;
-    this->m_factorizationIsOk = true;
+    this->m_factorizationIsOk = factorized;
   }
 };
 
