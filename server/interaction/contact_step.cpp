@@ -128,6 +128,16 @@ State::State(const Model& m) {
       bs.tool_force_n.assign(b.rest_m.size(), Vec3::Zero());
       bs.relax_stamp.assign(b.rest_m.size(), -1);
     }
+    if (m.options_.contact_near_field && !b.host_material.viscoelastic.empty()) {
+      // One slot per pose index: the scene's tools or the stations (scene ranges), the more.
+      const int tools = std::max<int>(64, static_cast<int>(m.tools_.size()));
+      bs.near_field_slots = tools;
+      bs.near_field_history = std::make_unique<ViscoelasticHistory>(
+          b.host_material.viscoelastic, fem::creep_spectrum(b.host_material.viscoelastic), tools);
+      bs.near_field_tools.reserve(tools);
+      bs.near_field_forces_n.reserve(tools);
+      relaxing_near_field_ = true;
+    }
     if (m.options_.precompute_contact_columns) {
       const auto t0 = Clock::now();
       std::vector<int> all(b.rest_m.size());
@@ -937,23 +947,34 @@ void State::near_field_tangent(int t, int ns, Mat3& k) const {
       const double l = lambda_[ns + s];
       if (q.tool == t && !q.shaft && q.body == d.body && l > 0.0) f_b += l * q.normal;
     }
-    const ViscoelasticHistory* hist = bodies_[d.body].history.get();
-    const double slope = (hist ? hist->alpha() : 1.0) * d.near_field_slope_per_n;
-    const Mat3 term = -slope * (k * f_b) * d.normal.transpose();
+    // Relaxing: c multiplies the creep-equivalent force alpha F_b - h (on the tool).
+    double alpha = 1.0;
+    const Vec3 h = near_field_creep(d.body, t, alpha);
+    f_b = alpha * f_b - h;
+    const Mat3 term = -d.near_field_slope_per_n * (k * f_b) * d.normal.transpose();
     k += 0.5 * (term + term.transpose());
   }
 }
 
 // Phase "near field" (after Delassus): the tip's near-field compliance in series with its rows,
 // W_rs += alpha c n_r . n_s over the tip rows r, s of one tool on one body (positive
-// semidefinite: W stays definite).
+// semidefinite: W stays definite). A relaxing body: the near field is a compliance c in series
+// with the mesh's, so it follows the same hereditary law (viscoelastic_history.hpp): its
+// displacement is c times the creep-equivalent force F~ = int J(t - s) dF(s) of the tip's total
+// force F on the body, F~_n = alpha F_n + h_n with the tool's own internal variables
+// (BodyState::near_field_history): alpha c in W, and c h_n along each row's normal in its depth,
+// as the mesh's C h_n. With c held (a held depth) the series pair relaxes exactly as the kernel
+// g; with c(d) changing along a path the force is int g(t - s) dF_el(s), F_el the elastic force
+// along that path (F~ is the elastic answer at each depth, J and g inverse).
 void State::near_field(int ns) {
   const int nc = static_cast<int>(rows_.size());
   for (int r = 0; r < nc; ++r) {
     const Row& a = rows_[r];
     if (a.shaft || !(a.near_field_m_per_n > 0.0)) continue;
-    const ViscoelasticHistory* hist = bodies_[a.body].history.get();
-    const double c = (hist ? hist->alpha() : 1.0) * a.near_field_m_per_n;
+    double alpha = 1.0;
+    const Vec3 h = near_field_creep(a.body, a.tool, alpha);
+    const double c = alpha * a.near_field_m_per_n;
+    delta_[ns + r] += a.near_field_m_per_n * a.normal.dot(h);
     for (int s = r; s < nc; ++s) {
       const Row& b = rows_[s];
       if (b.shaft || b.tool != a.tool || b.body != a.body) continue;
@@ -962,6 +983,25 @@ void State::near_field(int ns) {
       if (s != r) w_(ns + s, ns + r) += v;
     }
   }
+}
+
+// The near field's step on a relaxing body, as the mesh's: in the LINEAR tier the creep form
+// (the mesh's, a force linear over the step: alpha and h of the history); in the NONLINEAR tier,
+// whose quasi-linear equilibrium relaxes with the displacement held between updates, the
+// relaxation form (F~ linear over the step: alpha = 1 / gamma, h = -r / gamma,
+// ViscoelasticHistory::relaxation_gamma). With the creep form there a held press stepped from
+// 0.1 s to 1e4 s (a 1000 s term) ended at 0.163 F(0) against g = 0.200: a force linear over a
+// step 10x the creep time is not the relaxing force of a held pose.
+Vec3 State::near_field_creep(int body, int tool, double& alpha) const {
+  alpha = 1.0;
+  const ViscoelasticHistory* hist = near_field_history(body, tool);
+  if (hist == nullptr) return Vec3::Zero();
+  if (bodies_[body].history) {
+    alpha = hist->alpha();
+    return hist->force_of(tool);
+  }
+  alpha = 1.0 / hist->relaxation_gamma();
+  return -alpha * hist->relaxation_history(tool);
 }
 
 // Phase "compliance columns": the coupled columns of every node a row acts on (cached after the
@@ -1158,6 +1198,35 @@ void State::store_forces(const Model& m, int ns) {
       }
       bs.forces_n[bs.force_index[s]] -= (alpha * l * row.w[k]) * row.normal;  // inward on the tissue
     }
+  }
+  // The near field's creep-equivalent forces per tool: alpha times the tip's force on the tissue
+  // plus the tool's history force (near_field).
+  for (auto& bs : bodies_) {
+    if (!bs.near_field_history) continue;
+    const ViscoelasticHistory& hist = *bs.near_field_history;
+    bs.near_field_tools.clear();
+    bs.near_field_forces_n.clear();
+    const int body = static_cast<int>(&bs - bodies_.data());
+    for (int s : hist.slots()) {
+      double alpha = 1.0;
+      bs.near_field_tools.push_back(s);
+      bs.near_field_forces_n.push_back(near_field_creep(body, s, alpha));
+    }
+  }
+  for (int r = 0; r < nc; ++r) {
+    const double l = lambda_[ns + r];
+    const Row& row = rows_[r];
+    auto& bs = bodies_[row.body];
+    if (l <= 0.0 || row.shaft || near_field_history(row.body, row.tool) == nullptr) continue;
+    auto at = std::find(bs.near_field_tools.begin(), bs.near_field_tools.end(), row.tool);
+    if (at == bs.near_field_tools.end()) {
+      bs.near_field_tools.push_back(row.tool);
+      bs.near_field_forces_n.push_back(Vec3::Zero());
+      at = bs.near_field_tools.end() - 1;
+    }
+    double alpha = 1.0;
+    near_field_creep(row.body, row.tool, alpha);
+    bs.near_field_forces_n[at - bs.near_field_tools.begin()] -= (alpha * l) * row.normal;
   }
   // Largest displacement at the loaded nodes: how far the next step's candidates may have moved.
   for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
@@ -1580,21 +1649,26 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
 // alpha and the history forces of each relaxing body (viscoelastic_history.hpp).
 void State::begin_history(const Model& m, double time_s) {
   step_time_s_ = time_s;
-  if (!m.viscoelastic_) return;
+  if (!m.viscoelastic_ && !relaxing_near_field_) return;
   if (!std::isfinite(time_s))
     throw std::invalid_argument("Simulation::step: the step's time is not finite");
   step_time_s_ = timed_ ? std::max(time_s, time_s_) : time_s;
   const double dt = timed_ ? step_time_s_ - time_s_ : 0.0;
-  for (auto& bs : bodies_)
+  for (auto& bs : bodies_) {
     if (bs.history) bs.history->begin(dt);
+    if (bs.near_field_history) bs.near_field_history->begin(dt);
+  }
 }
 
 // The step converged: its forces enter the history, its time is the last one.
 void State::commit_history() {
   time_s_ = step_time_s_;
   timed_ = true;
-  for (auto& bs : bodies_)
+  for (auto& bs : bodies_) {
     if (bs.history) bs.history->commit(bs.force_slots, bs.forces_n);
+    if (bs.near_field_history)
+      bs.near_field_history->commit(bs.near_field_tools, bs.near_field_forces_n);
+  }
 }
 
 // The history forces of a body as its first loaded slots (store_forces adds the rows' onto them).

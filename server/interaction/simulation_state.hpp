@@ -122,6 +122,15 @@ struct BodyState {
   // which entries belong to the current tool (sized with the history).
   std::vector<mesh::Vec3> tool_force_n;
   std::vector<long long> relax_stamp;
+  // SimulationOptions::contact_near_field on a relaxing body (its host material has Prony terms;
+  // LINEAR or NONLINEAR tier): the near field's own hereditary integral, one slot per tool (the
+  // tip's total force on the body), with the host's kernel, so the compliance in series creeps
+  // and relaxes as the mesh does (contact_step.cpp, near_field). The last good step's loaded
+  // tools and their creep-equivalent forces (tissue side, unit N), committed with the history.
+  std::unique_ptr<ViscoelasticHistory> near_field_history;
+  int near_field_slots{0};  // tools (pose indices) it follows; a later one's near field is elastic
+  std::vector<int> near_field_tools;
+  std::vector<mesh::Vec3> near_field_forces_n;
 };
 
 // The constant physics model: meshes, bodies (factorizations, coupling operators, contact
@@ -255,6 +264,14 @@ class State {
               ToolContact& c);
   Mat3 own_stiffness(int ns, int tool);
   void near_field_tangent(int tool, int ns, Mat3& k) const;
+  // The near field's history of `body` when it follows `tool` (else nullptr: elastic).
+  const ViscoelasticHistory* near_field_history(int body, int tool) const {
+    const BodyState& bs = bodies_[body];
+    return tool < bs.near_field_slots ? bs.near_field_history.get() : nullptr;
+  }
+  // The step's creep-equivalent force of the near field is alpha F + h (F the tip's force on
+  // the tissue): h returned, alpha set (1 and 0 without a history; contact_step.cpp near_field).
+  Vec3 near_field_creep(int body, int tool, double& alpha) const;
   int main_body_of(const Model& m, int tool, int ns, double& sum_n) const;
   void relaxation(const Model& m, int tool, int ns, ToolContact& c);
   void tier_post(StepStats& stats);
@@ -336,6 +353,7 @@ class State {
   std::vector<char> sliding_active_backup_;
   std::vector<std::uint64_t> row_keys_, previous_row_keys_;  // rows of the last two geometries
   long long relax_counter_{0};
+  bool relaxing_near_field_{false};  // a body has a near_field_history (time is kept for it)
   std::vector<int> relax_slots_;  // relaxation: the slots of one tool's rows on its main body
   std::vector<int> own_rows_;  // own_stiffness: one tool's active rows, its factor and N
   Eigen::MatrixXd own_factor_;

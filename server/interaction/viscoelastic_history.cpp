@@ -81,7 +81,11 @@ void ViscoelasticHistory::begin(double dt_s) {
     decay(dt_s, terms_[k].rho_s, e_[k], beta_[k]);
     alpha_ += terms_[k].a * (1.0 - beta_[k]);
   }
-  for (int i = 0; i < num_kernel_; ++i) decay(dt_s, kernel_[i].tau_s, er_[i], br_[i]);
+  gamma_ = 1.0;
+  for (int i = 0; i < num_kernel_; ++i) {
+    decay(dt_s, kernel_[i].tau_s, er_[i], br_[i]);
+    gamma_ -= kernel_[i].g * (1.0 - br_[i]);  // g_inf + sum g_i beta_i, sum g_i = 1 - g_inf
+  }
   for (std::size_t i = 0; i < slots_.size(); ++i) {
     const int s = slots_[i];
     Vec3 h = Vec3::Zero();
@@ -98,6 +102,15 @@ ViscoelasticHistory::Vec3 ViscoelasticHistory::displacement(const ContactColumns
   for (std::size_t i = 0; i < slots_.size(); ++i)
     u.noalias() += columns.block(slot, slots_[i]) * h_[i];
   return u;
+}
+
+ViscoelasticHistory::Vec3 ViscoelasticHistory::relaxation_history(int slot) const {
+  Vec3 r = Vec3::Zero();
+  if (index_[slot] < 0) return r;
+  for (int i = 0; i < num_kernel_; ++i)
+    r += kernel_[i].g * (er_[i] * z_[static_cast<std::size_t>(slot) * num_kernel_ + i] -
+                         br_[i] * eq_prev_[slot]);
+  return r;
 }
 
 void ViscoelasticHistory::commit(const std::vector<int>& slots,

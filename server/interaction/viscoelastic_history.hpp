@@ -84,6 +84,15 @@ class ViscoelasticHistory {
     return kernel_[term].g * z_[static_cast<std::size_t>(slot) * num_kernel_ + term];
   }
   const std::vector<fem::PronyTerm>& kernel() const { return kernel_; }
+  // The step in the relaxation form, for a compliance whose partner relaxes with its
+  // displacement driven (the NONLINEAR tier's quasi-linear equilibrium): with f~ (the slot's
+  // elastic force for its displacement) linear over the step, f_n = gamma f~_n + r_n,
+  //   gamma = g_inf + sum_i g_i beta_i,  r_n = sum_i g_i (E_i z_i,n-1 - beta_i f~_n-1)
+  // (E_i, beta_i of tau_i): exact at any dt for a held displacement, where the creep form above
+  // (f linear over the step) is not for a step much longer than the relaxation times. The step's
+  // creep-equivalent force is then f~_n = f_n / gamma - r_n / gamma; commit() takes it as above.
+  double relaxation_gamma() const { return gamma_; }
+  Vec3 relaxation_history(int slot) const;
 
  private:
   // The relaxation variables of `slot` for its creep-equivalent force of this step.
@@ -98,6 +107,7 @@ class ViscoelasticHistory {
   int num_kernel_;
   // Per step.
   double alpha_{1.0};
+  double gamma_{1.0};
   std::vector<double> e_, beta_;   // creep terms
   std::vector<double> er_, br_;    // relaxation (Prony) terms
   // Per slot: previous force, the internal variables q_k (slot-major), index into slots_ or -1;
