@@ -196,70 +196,88 @@ INSTANTIATE_TEST_SUITE_P(contact_step, ContactStepTier,
 
 // Vertices of the pressed face (x = L) of the generated cube by the number of its triangles
 // (4 to 8 occur on this mesh), and the tip centred on each, on an edge midpoint, and 0.05 mm off
-// each: one row where centred (the feature's triangles merged), about the same force just off it
-// (a face row beside the node row, nearly dependent: the row compliance keeps W definite; the
-// force has a kink at a node, where the row goes from one node to three: 2 % in 0.05 mm seen).
+// each: about the same force just off it (within 5 %). With the barycentric rows (the contact
+// options off) one row where centred (the feature's triangles merged; a face row beside the node
+// row just off it, nearly dependent: the row compliance keeps W definite; the force has a kink
+// at a node, where the row goes from one node to three: 2 % in 0.05 mm seen). With the default
+// rows (SimulationOptions{}; with the contact options one smooth face row per triangle holding
+// the projection and the node row: 5 to 9 at a vertex, measured 6.6-7.1 mN at 1 mm against
+// 29-45 mN barycentric) the force alone is checked.
 TEST(interaction_contact_step, TipOnVerticesOfEveryValenceAndOnAnEdge) {
   Block b;
   b.generated = true;
   b.cells = 5;
   // The rows of the rest surface (one geometry): what the merge by feature makes of them.
-  SimulationOptions one_geometry;
-  one_geometry.contact_geometry_iterations = 1;
-  const auto model = build_model(block_scene(b), one_geometry);
-  auto probe = Simulation::from_model(model);
-  const auto& mesh = probe->mesh(0);
-  std::map<int, int> valence;  // vertex -> triangles on the face x = L
-  std::vector<std::array<int, 3>> face;
-  for (const auto& t : mesh.surface()) {
-    bool on = true;
-    for (int v : t) on = on && std::abs(mesh.vertices()[v].x() - b.edge_m) < 1e-9;
-    if (!on) continue;
-    face.push_back({t[0], t[1], t[2]});
-    for (int v : t) ++valence[v];
-  }
-  auto interior = [&](const Vec3& p) {
-    return p.y() > 0.01 && p.y() < b.edge_m - 0.01 && p.z() > 0.01 && p.z() < b.edge_m - 0.01;
-  };
-  std::map<int, int> vertex_of_valence;
-  for (const auto& [v, n] : valence)
-    if (interior(mesh.vertices()[v]) && !vertex_of_valence.count(n)) vertex_of_valence[n] = v;
-  for (int n = 4; n <= 7; ++n) EXPECT_TRUE(vertex_of_valence.count(n)) << "valence " << n;
-  const double depth = 1e-3;
-  auto run = [&](const Vec3& on_face, StepStats& st) {
-    auto sim = Simulation::from_model(model);
-    std::vector<ToolContact> c;
-    sim->step({press(b, depth, on_face.y(), on_face.z())}, c, st);
-    EXPECT_TRUE(st.converged);
-    return c[0];
-  };
-  for (const auto& [n, v] : vertex_of_valence) {
-    const Vec3 p = mesh.vertices()[v];
-    StepStats st;
-    const ToolContact centred = run(p, st);
-    EXPECT_EQ(st.contact_rows, 1) << "valence " << n;
-    EXPECT_GT(centred.force_n.x(), 0.0) << "valence " << n;
-    for (const Vec3& off : {Vec3(0, 5e-5, 0), Vec3(0, 0, -5e-5), Vec3(0, -3.5e-5, 3.5e-5)}) {
-      StepStats so;
-      const ToolContact moved = run(p + off, so);
-      EXPECT_NEAR(moved.force_n.x(), centred.force_n.x(), 0.05 * centred.force_n.x())
-          << "valence " << n << " rows " << so.contact_rows;
+  SimulationOptions defaults;
+  defaults.contact_geometry_iterations = 1;
+  SimulationOptions barycentric = defaults;
+  barycentric.contact_spread = 0.0;
+  barycentric.contact_smooth_normals = false;
+  barycentric.contact_near_field = false;
+  for (const bool merged : {true, false}) {
+    SCOPED_TRACE(merged ? "barycentric rows" : "default rows");
+    const auto model = build_model(block_scene(b), merged ? barycentric : defaults);
+    auto probe = Simulation::from_model(model);
+    const auto& mesh = probe->mesh(0);
+    std::map<int, int> valence;  // vertex -> triangles on the face x = L
+    std::vector<std::array<int, 3>> face;
+    for (const auto& t : mesh.surface()) {
+      bool on = true;
+      for (int v : t) on = on && std::abs(mesh.vertices()[v].x() - b.edge_m) < 1e-9;
+      if (!on) continue;
+      face.push_back({t[0], t[1], t[2]});
+      for (int v : t) ++valence[v];
     }
-    std::printf("valence %d: %.3f mN at %.1f mm\n", n, centred.force_n.x() * 1e3, depth * 1e3);
-  }
-  // An interior edge of the face: centred on its midpoint, one row on its two triangles.
-  for (const auto& t : face) {
-    const Vec3 a = mesh.vertices()[t[0]], c = mesh.vertices()[t[1]];
-    const Vec3 mid = 0.5 * (a + c);
-    if (!interior(mid) || (a - c).norm() < 0.008) continue;
-    StepStats st;
-    const ToolContact on_edge = run(mid, st);
-    EXPECT_EQ(st.contact_rows, 1);
-    EXPECT_GT(on_edge.force_n.x(), 0.0);
-    StepStats so;
-    const ToolContact off = run(mid + 5e-5 * (c - a).cross(Vec3::UnitX()).normalized(), so);
-    EXPECT_NEAR(off.force_n.x(), on_edge.force_n.x(), 0.05 * on_edge.force_n.x());
-    break;
+    auto interior = [&](const Vec3& p) {
+      return p.y() > 0.01 && p.y() < b.edge_m - 0.01 && p.z() > 0.01 && p.z() < b.edge_m - 0.01;
+    };
+    std::map<int, int> vertex_of_valence;
+    for (const auto& [v, n] : valence)
+      if (interior(mesh.vertices()[v]) && !vertex_of_valence.count(n)) vertex_of_valence[n] = v;
+    for (int n = 4; n <= 7; ++n) EXPECT_TRUE(vertex_of_valence.count(n)) << "valence " << n;
+    const double depth = 1e-3;
+    auto run = [&](const Vec3& on_face, StepStats& st) {
+      auto sim = Simulation::from_model(model);
+      std::vector<ToolContact> c;
+      sim->step({press(b, depth, on_face.y(), on_face.z())}, c, st);
+      EXPECT_TRUE(st.converged);
+      return c[0];
+    };
+    for (const auto& [n, v] : vertex_of_valence) {
+      const Vec3 p = mesh.vertices()[v];
+      StepStats st;
+      const ToolContact centred = run(p, st);
+      if (merged) {
+        EXPECT_EQ(st.contact_rows, 1) << "valence " << n;
+      }
+      EXPECT_GT(centred.force_n.x(), 0.0) << "valence " << n;
+      for (const Vec3& off : {Vec3(0, 5e-5, 0), Vec3(0, 0, -5e-5), Vec3(0, -3.5e-5, 3.5e-5)}) {
+        StepStats so;
+        const ToolContact moved = run(p + off, so);
+        EXPECT_NEAR(moved.force_n.x(), centred.force_n.x(), 0.05 * centred.force_n.x())
+            << "valence " << n << " rows " << so.contact_rows;
+      }
+      std::printf("%s, valence %d: %.3f mN at %.1f mm, %d rows\n",
+                  merged ? "barycentric" : "default", n, centred.force_n.x() * 1e3, depth * 1e3,
+                  st.contact_rows);
+    }
+    // An interior edge of the face: centred on its midpoint (barycentric: one row on its two
+    // triangles).
+    for (const auto& t : face) {
+      const Vec3 a = mesh.vertices()[t[0]], c = mesh.vertices()[t[1]];
+      const Vec3 mid = 0.5 * (a + c);
+      if (!interior(mid) || (a - c).norm() < 0.008) continue;
+      StepStats st;
+      const ToolContact on_edge = run(mid, st);
+      if (merged) {
+        EXPECT_EQ(st.contact_rows, 1);
+      }
+      EXPECT_GT(on_edge.force_n.x(), 0.0);
+      StepStats so;
+      const ToolContact off = run(mid + 5e-5 * (c - a).cross(Vec3::UnitX()).normalized(), so);
+      EXPECT_NEAR(off.force_n.x(), on_edge.force_n.x(), 0.05 * on_edge.force_n.x());
+      break;
+    }
   }
 }
 
