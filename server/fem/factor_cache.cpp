@@ -22,7 +22,7 @@ namespace {
 constexpr char kMagic[8] = {'N', 'S', 'F', 'A', 'C', 'T', '1', '\0'};
 
 // 64-bit hash over 8-byte words (FNV-1a's multiply, plus a shift so that high bits reach low
-// ones): a few hundred MB per second, so a key of a 3 mm brain's K_ff or the checksum of its
+// ones): a few hundred MB per second, so the key of a 3 mm brain's mesh or the checksum of its
 // factor costs a fraction of the factorization it saves.
 class WordHash {
  public:
@@ -114,24 +114,33 @@ bool consistent(const cholmod_factor& f) {
 
 }  // namespace
 
-std::uint64_t factor_key(const SparseMatrix& lower, int ordering) {
-  if (!lower.isCompressed())
-    throw std::logic_error("factor_key: the matrix must be compressed");
+std::uint64_t factor_key(const mesh::TetMesh& mesh, const MaterialMap& materials,
+                         const std::vector<int>& fixed_nodes, int ordering) {
   WordHash key;
-  const std::int64_t version = CHOLMOD_VERSION, rows = lower.rows(), cols = lower.cols(),
-                     nnz = lower.nonZeros();
+  auto add_count = [&](std::size_t n) {
+    const std::int64_t v = static_cast<std::int64_t>(n);
+    key.add(&v, sizeof v);
+  };
+  const std::int64_t version = kFactorKeyVersion, cholmod = CHOLMOD_VERSION, o = ordering;
   key.add(&version, sizeof version);
-  key.add(&rows, sizeof rows);
-  key.add(&cols, sizeof cols);
-  key.add(&nnz, sizeof nnz);
-  key.add(lower.outerIndexPtr(), static_cast<std::size_t>(cols + 1) * sizeof(int));
-  key.add(lower.innerIndexPtr(), static_cast<std::size_t>(nnz) * sizeof(int));
-  key.add(lower.valuePtr(), static_cast<std::size_t>(nnz) * sizeof(double));
-  // The default ordering (0) adds nothing: its keys stay those of the files already written.
-  if (ordering != 0) {
-    const std::int64_t o = ordering;
-    key.add(&o, sizeof o);
+  key.add(&cholmod, sizeof cholmod);
+  key.add(&o, sizeof o);
+  // Counts before every array, so that [1,2],[3] and [1],[2,3] differ.
+  add_count(mesh.num_vertices());
+  key.add(mesh.vertices().data(), mesh.num_vertices() * sizeof(mesh::Vec3));
+  add_count(mesh.num_tets());
+  key.add(mesh.tets().data(), mesh.num_tets() * sizeof(mesh::Tet));
+  add_count(materials.materials.size());
+  for (const Material& m : materials.materials) {
+    const std::int64_t element = static_cast<std::int64_t>(m.element);
+    key.add(&m.youngs_modulus_pa, sizeof m.youngs_modulus_pa);
+    key.add(&m.poisson_ratio, sizeof m.poisson_ratio);
+    key.add(&element, sizeof element);
   }
+  add_count(materials.tet_material.size());
+  key.add(materials.tet_material.data(), materials.tet_material.size() * sizeof(int));
+  add_count(fixed_nodes.size());
+  key.add(fixed_nodes.data(), fixed_nodes.size() * sizeof(int));
   return key.value();
 }
 

@@ -1,19 +1,23 @@
 // The disk cache of a CHOLMOD supernodal factor: a second start with the same stiffness reads
 // the factor of K_ff instead of analysing and factoring it again (tens of seconds on a 3 mm
-// brain, bench/RESULTS.md "scale_bench"). A file is keyed by a 64-bit hash of the factored
-// matrix itself (the lower triangle of K_ff: size, pattern and values), the CHOLMOD version and
-// the ordering, so another mesh, material, element, set of fixed nodes or ordering is another
-// key. It carries a checksum of its arrays; a file with another key, other sizes, another length,
+// brain, bench/RESULTS.md "scale_bench"). A file is keyed by a 64-bit hash of what determines
+// the factored matrix K_ff: the mesh (vertices, tetrahedra), the material map (every material's
+// E, nu and element, the per-tetrahedron indices), the fixed nodes, the ordering, the CHOLMOD
+// version and the key's own format version (kFactorKeyVersion), so another mesh, material,
+// element, set of fixed nodes or ordering is another key, and a start that reads the factor
+// need not assemble K at all. It carries a checksum of its arrays; a file with another key, other sizes, another length,
 // a checksum mismatch or a structure that does not hold together is ignored (with a message when
 // damaged), never used.
 // The factor read is the stored one bit for bit: solves with it give bit-identical answers.
 #pragma once
 
-#include "server/fem/assembly.hpp"
+#include "server/fem/material.hpp"
+#include "server/mesh/tet_mesh.hpp"
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 // CHOLMOD stays out of the headers (cholmod_factor and cholmod_common are these structs).
 struct cholmod_factor_struct;
@@ -21,10 +25,18 @@ struct cholmod_common_struct;
 
 namespace neurosim::fem {
 
-// Hash of the lower triangle of K_ff as factored (CSC: size, column pointers, row indices,
-// values; compressed), of the CHOLMOD version that factors it and of the ordering it is
-// factored with (an integer naming it: another ordering is another factor).
-std::uint64_t factor_key(const SparseMatrix& lower, int ordering = 0);
+// The key's format: raised whenever what K_ff is made of changes without its inputs changing
+// (the assembly's formulas, the elimination of fixed nodes, the file layout), so that files
+// written before are not read. 2: the inputs of K_ff (1 was K_ff's own values).
+inline constexpr std::int64_t kFactorKeyVersion = 2;
+
+// Hash of the inputs of K_ff: the mesh's vertex coordinates and tetrahedra (with their counts),
+// the material map (per material E, nu and element; the per-tetrahedron indices), the fixed
+// nodes as given (StaticSolver passes them sorted and unique), the ordering (an integer naming
+// it: another ordering is another factor), the CHOLMOD version and kFactorKeyVersion. A
+// material's name and viscoelastic kernel do not enter K and are not hashed.
+std::uint64_t factor_key(const mesh::TetMesh& mesh, const MaterialMap& materials,
+                         const std::vector<int>& fixed_nodes, int ordering);
 
 // The cache file of `key` in `dir` (dir/factor_<key hex>.bin).
 std::string factor_file(const std::string& dir, std::uint64_t key);

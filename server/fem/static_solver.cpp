@@ -111,6 +111,12 @@ SolveWorkspace& SolveWorkspace::operator=(SolveWorkspace&&) noexcept = default;
 
 struct StaticSolver::Impl {
   SupernodalFactor llt;
+  // Full K. A factor read from the cache leaves it unassembled: the mesh and materials are kept
+  // until stiffness() first needs them (once, whichever thread asks first).
+  SparseMatrix k;
+  std::once_flag k_once;
+  std::unique_ptr<mesh::TetMesh> deferred_mesh;
+  MaterialMap deferred_materials;
   // The solver's own workspace, for the overloads without one (set-up, offline use).
   std::mutex mutex;
   SolveWorkspace shared;
@@ -175,11 +181,6 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
     }
   }
 
-  // Assembly (pattern + values).
-  auto t0 = Clock::now();
-  StiffnessAssembler(mesh, materials.element()).assemble(mesh, materials, k_);
-  info_.assembly_s = seconds_since(t0);
-
   // Dof numbering of the reduced system (keeps the original order, so rows stay sorted).
   const int ndof = 3 * num_nodes_;
   reduced_index_.assign(ndof, -1);
@@ -193,35 +194,18 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   const int nf = static_cast<int>(free_dofs_.size());
   info_.num_dofs = ndof;
   info_.num_free_dofs = nf;
-  info_.stiffness_nnz = k_.nonZeros();
   impl_->shared.impl_->rhs.resize(nf);
   impl_->shared.impl_->full.resize(ndof);
+  SparseMatrix& k = impl_->k;
+  auto assemble = [&] {
+    const auto ta = Clock::now();
+    StiffnessAssembler(mesh, materials.element()).assemble(mesh, materials, k);
+    info_.assembly_s = seconds_since(ta);
+    info_.stiffness_nnz = k.nonZeros();
+  };
   if (nf == 0) {
+    assemble();
     return;  // everything fixed: u = 0, nothing to factor
-  }
-
-  // Lower triangle of K_ff, built column by column (elimination of fixed dofs).
-  SparseMatrix kff(nf, nf);
-  {
-    std::vector<int> outer(nf + 1, 0);
-    std::vector<int> inner;
-    std::vector<double> values;
-    inner.reserve(k_.nonZeros() / 2 + nf);
-    values.reserve(k_.nonZeros() / 2 + nf);
-    for (int jr = 0; jr < nf; ++jr) {
-      for (SparseMatrix::InnerIterator it(k_, free_dofs_[jr]); it; ++it) {
-        const int ir = reduced_index_[it.row()];
-        if (ir >= jr) {
-          inner.push_back(ir);
-          values.push_back(it.value());
-        }
-      }
-      outer[jr + 1] = static_cast<int>(inner.size());
-    }
-    kff.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
-    std::copy(outer.begin(), outer.end(), kff.outerIndexPtr());
-    std::copy(inner.begin(), inner.end(), kff.innerIndexPtr());
-    std::copy(values.begin(), values.end(), kff.valuePtr());
   }
 
   auto& llt = impl_->llt;
@@ -234,10 +218,10 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   std::string cache_file;
   std::uint64_t cache_key = 0;
   if (!options_.factor_cache_dir.empty()) {
-    // The factor of this very matrix from an earlier start (a too large one is left to the
-    // analysis below, which refuses it with its numbers).
-    t0 = Clock::now();
-    cache_key = factor_key(kff, static_cast<int>(options_.ordering));
+    // The factor of this very problem from an earlier start, found by K_ff's inputs (a too
+    // large one is left to the analysis below, which refuses it with its numbers).
+    auto t0 = Clock::now();
+    cache_key = factor_key(mesh, materials, fixed_nodes_, static_cast<int>(options_.ordering));
     cache_file = factor_file(options_.factor_cache_dir, cache_key);
     const FactorLoad cached = load_factor(cache_file, cache_key, nf, limit, c);
     if (cached.factor != nullptr) {
@@ -245,14 +229,20 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
       info_.from_cache = true;
       info_.ordering = ordering_name(options_.ordering);
       lnz = cached.lnz;
+      // K itself only if asked for (same inputs: the same K the factor was made of).
+      impl_->deferred_mesh = std::make_unique<mesh::TetMesh>(mesh);
+      impl_->deferred_materials = materials;
     }
     info_.cache_s = seconds_since(t0);
   }
-  if (!info_.from_cache) factorize(kff, where, limit, source, lnz);
-  if (!cache_file.empty() && !info_.from_cache) {
-    t0 = Clock::now();
-    save_factor(cache_file, cache_key, *llt.factor(), lnz);
-    info_.cache_s += seconds_since(t0);
+  if (!info_.from_cache) {
+    assemble();
+    factorize(lower_free_block(k), where, limit, source, lnz);
+    if (!cache_file.empty()) {
+      const auto t0 = Clock::now();
+      save_factor(cache_file, cache_key, *llt.factor(), lnz);
+      info_.cache_s += seconds_since(t0);
+    }
   }
   const cholmod_factor* l = llt.factor();
   info_.rcond = cholmod_rcond(llt.factor(), &c);
@@ -268,6 +258,44 @@ StaticSolver::StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materia
   info_.factor_entries = static_cast<long long>(l->is_super ? l->xsize : l->nzmax);
   info_.factor_bytes = info_.factor_entries * sizeof(double) + l->ssize * sizeof(int) +
                        3 * (l->nsuper + 1) * sizeof(int) + 2 * l->n * sizeof(int);
+}
+
+SparseMatrix StaticSolver::lower_free_block(const SparseMatrix& k) const {
+  // Column by column, the fixed dofs eliminated.
+  const int nf = num_free_dofs();
+  SparseMatrix kff(nf, nf);
+  std::vector<int> outer(nf + 1, 0);
+  std::vector<int> inner;
+  std::vector<double> values;
+  inner.reserve(k.nonZeros() / 2 + nf);
+  values.reserve(k.nonZeros() / 2 + nf);
+  for (int jr = 0; jr < nf; ++jr) {
+    for (SparseMatrix::InnerIterator it(k, free_dofs_[jr]); it; ++it) {
+      const int ir = reduced_index_[it.row()];
+      if (ir >= jr) {
+        inner.push_back(ir);
+        values.push_back(it.value());
+      }
+    }
+    outer[jr + 1] = static_cast<int>(inner.size());
+  }
+  kff.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+  std::copy(outer.begin(), outer.end(), kff.outerIndexPtr());
+  std::copy(inner.begin(), inner.end(), kff.innerIndexPtr());
+  std::copy(values.begin(), values.end(), kff.valuePtr());
+  return kff;
+}
+
+const SparseMatrix& StaticSolver::stiffness() const {
+  std::call_once(impl_->k_once, [this] {
+    if (impl_->deferred_mesh == nullptr) return;
+    const mesh::TetMesh& mesh = *impl_->deferred_mesh;
+    StiffnessAssembler(mesh, impl_->deferred_materials.element())
+        .assemble(mesh, impl_->deferred_materials, impl_->k);
+    impl_->deferred_mesh.reset();
+    impl_->deferred_materials = MaterialMap{};
+  });
+  return impl_->k;
 }
 
 void StaticSolver::factorize(const SparseMatrix& kff, const std::string& where, double limit,
@@ -353,7 +381,7 @@ void StaticSolver::check_forces(const Eigen::VectorXd& forces_n, const char* wha
 void StaticSolver::check_residual(Eigen::VectorXd& r, const Eigen::VectorXd& u_m,
                                   const Eigen::VectorXd& forces_n,
                                   const std::vector<char>* constrained) const {
-  r.noalias() = k_ * u_m;
+  r.noalias() = stiffness() * u_m;
   // Scale: the applied forces or K u over all dofs (the reactions included), so that a problem
   // loaded only by prescribed displacements (f = 0 and K u ~ 0 on the free dofs) has one.
   double res2 = 0.0, ref2 = 0.0, ku2 = 0.0;
@@ -572,7 +600,7 @@ PrescribedSolution StaticSolver::prescribed_per_dof(const std::vector<int>& dofs
   for (int v : fixed_nodes_) {
     uc.segment<3>(3 * v) = u.segment<3>(3 * v);
   }
-  const Eigen::VectorXd kuc = k_ * uc;
+  const Eigen::VectorXd kuc = stiffness() * uc;
   Eigen::MatrixXd b(nf, 1), u0;
   for (int r = 0; r < nf; ++r) {
     b(r, 0) = (forces_n.size() ? forces_n[free_dofs_[r]] : 0.0) - kuc[free_dofs_[r]];
@@ -629,7 +657,7 @@ PrescribedSolution StaticSolver::prescribed_per_dof(const std::vector<int>& dofs
   }
 
   PrescribedSolution out;
-  out.reaction_n = k_ * u;
+  out.reaction_n = stiffness() * u;
   if (forces_n.size()) {
     out.reaction_n -= forces_n;
   }
@@ -671,12 +699,13 @@ ConditionEstimate StaticSolver::estimate_condition(int max_iterations, double to
   }
   // Power iteration: lambda_max of K_ff.
   Eigen::VectorXd full = Eigen::VectorXd::Zero(num_dofs()), kv(num_dofs());
+  const SparseMatrix& k = stiffness();
   const PowerIteration hi = power_iteration(
       [&](const Eigen::VectorXd& v, Eigen::VectorXd& w) {
         for (int r = 0; r < nf; ++r) {
           full[free_dofs_[r]] = v[r];
         }
-        kv.noalias() = k_ * full;
+        kv.noalias() = k * full;
         for (int r = 0; r < nf; ++r) {
           w[r] = kv[free_dofs_[r]];
         }

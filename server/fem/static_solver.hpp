@@ -37,9 +37,11 @@ struct SolverOptions {
   double max_factor_bytes{0.0};
   // Let CHOLMOD print its own warnings to stdout (errors become exceptions either way).
   bool cholmod_verbose{false};
-  // Folder of the disk cache of the factor (factor_cache.hpp), keyed by K_ff itself: a second
-  // solver of the same matrix reads the factor instead of analysing and factoring (the same
-  // factor bit for bit). Empty: no cache.
+  // Folder of the disk cache of the factor (factor_cache.hpp), keyed by the inputs of K_ff
+  // (mesh, materials, fixed nodes, ordering): a second solver of the same problem reads the
+  // factor instead of analysing and factoring (the same factor bit for bit), and assembles K
+  // only when something asks for it (stiffness(), reactions, the residual check, the condition
+  // estimate). Empty: no cache.
   std::string factor_cache_dir{};
   // The fill-reducing ordering of K_ff (factor_ordering.hpp): the factor's size and time, never
   // the answer beyond round-off. Part of the factor cache's key. METIS on the node graph: the
@@ -60,7 +62,7 @@ struct FactorTooLarge : std::runtime_error {
 struct FactorInfo {
   int num_dofs{0};              // 3N
   int num_free_dofs{0};         // 3N minus fixed dofs: size of the factored system
-  long long stiffness_nnz{0};   // stored entries of the full K (both triangles)
+  long long stiffness_nnz{0};   // stored entries of the full K (both triangles); 0 from the cache
   long long factor_nnz{0};      // nnz(L), CHOLMOD's lnz
   long long factor_entries{0};  // stored values of the supernodal L (with padding)
   std::size_t factor_bytes{0};  // values + integer structure of L, unit byte
@@ -70,11 +72,12 @@ struct FactorInfo {
   std::string ordering;
   double factor_flops{0.0};  // CHOLMOD's flop count of the factorization (0 from the cache)
   double rcond{0.0};        // CHOLMOD's rough reciprocal condition estimate
-  double assembly_s{0.0};   // wall time of pattern + assembly, unit s
+  double assembly_s{0.0};   // wall time of pattern + assembly, unit s (0 from the cache)
   double analyze_s{0.0};    // symbolic analysis (ordering), unit s
   double factorize_s{0.0};  // numeric factorization, unit s
   // SolverOptions::factor_cache_dir: the factor was read from the cache (analyze_s and
-  // factorize_s are then 0) in cache_s; without a hit, cache_s is the key and the write.
+  // factorize_s are then 0) in cache_s (the key and the read); without a hit, cache_s is the
+  // key, the attempt and the write.
   bool from_cache{false};
   double cache_s{0.0};  // unit s
 };
@@ -125,7 +128,8 @@ class StaticSolver {
   // there), analyses and factors K_ff. Throws std::invalid_argument for bad input (material,
   // element, node id out of range, nodes in no tetrahedron, too few fixed nodes: the message
   // says which part of the mesh is free to move) and std::runtime_error if CHOLMOD fails or
-  // the factor is numerically singular. The mesh is not referenced after construction.
+  // the factor is numerically singular. The mesh is not referenced after construction (a
+  // factor read from the cache keeps a copy of it until K is first asked for).
   StaticSolver(const mesh::TetMesh& mesh, const MaterialMap& materials,
                const std::vector<int>& fixed_nodes, const SolverOptions& options = {});
   ~StaticSolver();
@@ -191,7 +195,9 @@ class StaticSolver {
   const std::vector<int>& fixed_nodes() const { return fixed_nodes_; }      // sorted, unique
   bool is_fixed_node(int node) const { return reduced_index_[3 * node] < 0; }
 
-  const SparseMatrix& stiffness() const { return k_; }  // full K (3N x 3N), unit N/m
+  // Full K (3N x 3N), unit N/m. After a factor cache hit it is assembled on the first call
+  // (thread-safe; FactorInfo is not updated by it).
+  const SparseMatrix& stiffness() const;
   const FactorInfo& factor_info() const { return info_; }
   const SolverOptions& options() const { return options_; }
 
@@ -203,12 +209,13 @@ class StaticSolver {
   std::unique_ptr<Impl> impl_;
   SolverOptions options_;
   int num_nodes_{0};
-  SparseMatrix k_;
   std::vector<int> fixed_nodes_;
   std::vector<int> free_dofs_;
   std::vector<int> reduced_index_;
   FactorInfo info_;
 
+  // The lower triangle of K_ff (fixed dofs eliminated) of a full K.
+  SparseMatrix lower_free_block(const SparseMatrix& k) const;
   // Analysis, memory check against `limit` (from `source`) and numeric factorization of K_ff;
   // lnz gets nnz(L).
   void factorize(const SparseMatrix& kff, const std::string& where, double limit,

@@ -1,14 +1,19 @@
 // The factor's disk cache (SolverOptions::factor_cache_dir): a second solver of the same matrix
 // reads the factor and answers bit for bit as the one that factored it (and as one without the
-// cache); another material, mesh or set of fixed nodes misses; a damaged, truncated or foreign
-// file is ignored with a message, never used; a too large cached factor is still refused.
+// cache) without assembling K until it is asked for; the key is made of K_ff's inputs, and
+// another vertex, material, element, per-tetrahedron material, set of fixed nodes or ordering
+// misses; a damaged, truncated or foreign file is ignored with a message, never used; a too
+// large cached factor is still refused.
 #include "server/fem/static_solver.hpp"
+
+#include "server/fem/factor_cache.hpp"
 
 #include "fem_test_meshes.hpp"
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -81,6 +86,119 @@ TEST(fem_factor_cache, SecondSolverReadsTheSameFactor) {
   plain.solve_reduced(b, x_plain);
   second.solve_reduced(b, x_cached);
   EXPECT_TRUE(same_bits(x_plain, x_cached));
+  fs::remove_all(dir);
+}
+
+// The same mesh with one interior vertex moved by `delta_m` along x.
+mesh::TetMesh with_vertex_moved(const mesh::TetMesh& m, double delta_m) {
+  std::vector<mesh::Vec3> x = m.vertices();
+  int v = 0;
+  while (std::binary_search(m.surface_vertices().begin(), m.surface_vertices().end(), v)) ++v;
+  x[v].x() += delta_m;
+  return mesh::TetMesh::build(std::move(x), m.tets());
+}
+
+bool same_matrix(const SparseMatrix& a, const SparseMatrix& b) {
+  return a.rows() == b.rows() && a.cols() == b.cols() && a.nonZeros() == b.nonZeros() &&
+         std::equal(a.outerIndexPtr(), a.outerIndexPtr() + a.cols() + 1, b.outerIndexPtr()) &&
+         std::equal(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros(), b.innerIndexPtr()) &&
+         std::memcmp(a.valuePtr(), b.valuePtr(), sizeof(double) * a.nonZeros()) == 0;
+}
+
+TEST(fem_factor_cache, KeyIsMadeOfTheInputsOfK) {
+  const auto m = cube();
+  const auto fixed = bottom(m);
+  const auto uniform = MaterialMap::uniform(kBrain);
+  const int order = static_cast<int>(FactorOrdering::kNodeMetis);
+  const std::uint64_t base = factor_key(m, uniform, fixed, order);
+  EXPECT_EQ(factor_key(cube(), uniform, fixed, order), base);  // the same inputs again
+  // What does not enter K: the name, the relaxation kernel.
+  Material renamed = kBrain;
+  renamed.name = "other";
+  renamed.viscoelastic.terms.push_back({0.5, 0.1});
+  EXPECT_EQ(factor_key(m, MaterialMap::uniform(renamed), fixed, order), base);
+  // Each input of K_ff changed alone.
+  std::vector<std::uint64_t> keys{base};
+  keys.push_back(factor_key(with_vertex_moved(m, 1e-6), uniform, fixed, order));
+  keys.push_back(factor_key(m, MaterialMap::uniform({1.0e6 * (1 + 1e-12), 0.45, "brain"}), fixed,
+                            order));
+  keys.push_back(factor_key(m, MaterialMap::uniform({1.0e6, 0.46, "brain"}), fixed, order));
+  Material anp = kBrain;
+  anp.element = Element::kAnpTet;
+  keys.push_back(factor_key(m, MaterialMap::uniform(anp), fixed, order));
+  std::vector<int> tet_material(m.num_tets(), 0);
+  tet_material[5] = 1;
+  keys.push_back(factor_key(
+      m, MaterialMap::per_tet({kBrain, {2.0e6, 0.45, "stiff"}}, tet_material), fixed, order));
+  auto fewer = fixed;
+  fewer.pop_back();
+  keys.push_back(factor_key(m, uniform, fewer, order));
+  auto other = fixed;
+  other.back() += 1;
+  keys.push_back(factor_key(m, uniform, other, order));
+  keys.push_back(factor_key(m, uniform, fixed, static_cast<int>(FactorOrdering::kAmd)));
+  std::vector<std::uint64_t> distinct = keys;
+  std::sort(distinct.begin(), distinct.end());
+  distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
+  EXPECT_EQ(distinct.size(), keys.size());
+}
+
+TEST(fem_factor_cache, HitAssemblesKOnlyWhenAskedFor) {
+  const auto dir = neurosim::testing::temp_dir("factor_cache_lazy");
+  const auto m = cube();
+  const StaticSolver plain(m, MaterialMap::uniform(kBrain), bottom(m));
+  { const StaticSolver s(m, MaterialMap::uniform(kBrain), bottom(m), cached_in(dir)); }
+  SolverOptions checked = cached_in(dir);
+  const StaticSolver hit(m, MaterialMap::uniform(kBrain), bottom(m), cached_in(dir));
+  ASSERT_TRUE(hit.factor_info().from_cache);
+  EXPECT_EQ(hit.factor_info().assembly_s, 0.0);
+  EXPECT_EQ(hit.factor_info().stiffness_nnz, 0);
+  // What needs K assembles it then: reactions, the residual check, K itself; all as without
+  // the cache, bit for bit.
+  const auto top = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() > 0.12 - 1e-9; });
+  const Eigen::VectorXd down = Eigen::VectorXd::Constant(3 * static_cast<int>(top.size()), -1e-3);
+  const PrescribedSolution a = plain.solve_prescribed(top, down);
+  const PrescribedSolution b = hit.solve_prescribed(top, down);
+  EXPECT_TRUE(same_bits(a.displacement_m, b.displacement_m));
+  EXPECT_TRUE(same_bits(a.reaction_n, b.reaction_n));
+  EXPECT_TRUE(same_matrix(hit.stiffness(), plain.stiffness()));
+  checked.check_residual = true;
+  const StaticSolver residual(m, MaterialMap::uniform(kBrain), bottom(m), checked);
+  ASSERT_TRUE(residual.factor_info().from_cache);
+  EXPECT_TRUE(same_bits(residual.solve(load(plain)), plain.solve(load(plain))));
+  fs::remove_all(dir);
+}
+
+TEST(fem_factor_cache, AnotherVertexElementTetMaterialOrOrderingMisses) {
+  const auto dir = neurosim::testing::temp_dir("factor_cache_miss_inputs");
+  const auto m = cube();
+  const auto fixed = bottom(m);
+  { const StaticSolver s(m, MaterialMap::uniform(kBrain), fixed, cached_in(dir)); }
+  auto misses = [&](const mesh::TetMesh& mesh, const MaterialMap& materials,
+                    const SolverOptions& options, const char* what) {
+    const StaticSolver s(mesh, materials, fixed, options);
+    EXPECT_FALSE(s.factor_info().from_cache) << what;
+    // And answers its own problem: as without the cache.
+    SolverOptions plain_options = options;
+    plain_options.factor_cache_dir.clear();
+    const StaticSolver plain(mesh, materials, fixed, plain_options);
+    EXPECT_TRUE(same_bits(s.solve(load(s)), plain.solve(load(plain)))) << what;
+  };
+  misses(with_vertex_moved(m, 1e-6), MaterialMap::uniform(kBrain), cached_in(dir), "vertex");
+  Material anp = kBrain;
+  anp.element = Element::kAnpTet;
+  misses(m, MaterialMap::uniform(anp), cached_in(dir), "element");
+  std::vector<int> tet_material(m.num_tets(), 0);
+  tet_material[7] = 1;
+  misses(m, MaterialMap::per_tet({kBrain, {3.0e6, 0.45, "stiff"}}, tet_material), cached_in(dir),
+         "one tetrahedron's material");
+  SolverOptions amd = cached_in(dir);
+  amd.ordering = FactorOrdering::kAmd;
+  misses(m, MaterialMap::uniform(kBrain), amd, "ordering");
+  EXPECT_EQ(files_in(dir).size(), 5u);
+  // The first problem still hits.
+  const StaticSolver again(m, MaterialMap::uniform(kBrain), fixed, cached_in(dir));
+  EXPECT_TRUE(again.factor_info().from_cache);
   fs::remove_all(dir);
 }
 
