@@ -76,9 +76,19 @@ struct EquilibriumSolver::Impl {
   std::vector<TieTerm> tie_terms;
   std::vector<int> q_dof;    // q index -> stacked dof
   std::vector<int> q_index;  // stacked dof -> q index or -1 (tied)
-  SparseMatrix t;            // T (ndof x nq); empty when nothing is tied
-  SparseMatrix k_stacked;    // block-diagonal tangent of all bodies (ties present)
-  SparseMatrix kq;           // T^T K T (ties present)
+  SparseMatrix kq;           // T^T K T (ties present): its pattern made once, values refilled
+  // T^T K T by a fixed scatter (ties present), so a tangent allocates nothing: value p of body
+  // b's tangent adds into kq's value kq_direct[b][p] when its row and column are both q dofs
+  // (T's weight 1), and into tie_scatter's entries otherwise (a tied row or column: the weights'
+  // product, per host dof of the tied dof's triangle).
+  std::vector<std::vector<int>> kq_direct;  // per body, per tangent value: kq position or -1
+  struct TieScatter {
+    int dst;     // kq value
+    int body;    // tangent of body
+    int src;     // its value
+    double weight;
+  };
+  std::vector<TieScatter> tie_scatter;
 
   std::vector<int> constrained_dofs;   // q indices, ascending: fixed dofs and prescribed dofs
   Eigen::VectorXd constrained_values;  // at load factor 1, per constrained dof
@@ -88,8 +98,14 @@ struct EquilibriumSolver::Impl {
   double stiffness_force_scale{0.0};   // 1e-6 E_max h^2, unit N
 
   std::vector<SparseMatrix> k_body;  // per body tangent (assembler pattern)
-  SparseMatrix kff;                  // lower triangle of the free block
+  SparseMatrix kff;                  // lower triangle of the free block (the analysis' input)
   std::vector<int> kff_source;       // kff value p <- tangent value kff_source[p]
+  // The free block permuted by the factor's ordering, lower triangle (tril(P K_ff P^T)): what
+  // cholmod_super_numeric factors. Filled in place from the tangent (value q <- tangent value
+  // perm_source[q]), so a factorization neither transposes nor allocates the matrix (through
+  // cholmod_factorize every factorization made two permuted transposes of K_ff).
+  std::vector<int> perm_outer, perm_inner, perm_source;
+  std::vector<double> perm_values;
   Eigen::Index tangent_nnz{0};       // stored entries of the q-space tangent (fixed structure)
   // f_int holds the internal forces at f_int_u when f_int_known (set when Newton returns): the
   // next call, warm-started from that answer, starts without evaluating them again (one of the
@@ -194,13 +210,89 @@ struct EquilibriumSolver::Impl {
     if (!tied()) {
       return k_body[0];
     }
-    // Block-diagonal, columns body after body: the value array is the bodies' arrays in order.
-    double* dst = k_stacked.valuePtr();
-    for (const SparseMatrix& kb : k_body) {
-      dst = std::copy(kb.valuePtr(), kb.valuePtr() + kb.nonZeros(), dst);
+    // T^T K T into its fixed pattern (build_tie_scatter).
+    double* q = kq.valuePtr();
+    std::fill_n(q, kq.nonZeros(), 0.0);
+    for (std::size_t b = 0; b < k_body.size(); ++b) {
+      const double* v = k_body[b].valuePtr();
+      const int* to = kq_direct[b].data();
+      const Eigen::Index nnz = k_body[b].nonZeros();
+      for (Eigen::Index p = 0; p < nnz; ++p) {
+        if (to[p] >= 0) q[to[p]] += v[p];
+      }
     }
-    kq = SparseMatrix(t.transpose() * k_stacked * t);
+    for (const TieScatter& e : tie_scatter) {
+      q[e.dst] += e.weight * k_body[static_cast<std::size_t>(e.body)].valuePtr()[e.src];
+    }
     return kq;
+  }
+
+  // kq's pattern (the product T^T K T of the patterns, once) and the scatter of every tangent
+  // value into it.
+  void build_tie_scatter() {
+    const int nq = static_cast<int>(q_dof.size());
+    // T by rows: a q dof's row is (q index, 1); a tied dof's row its tie terms.
+    std::vector<int> t_start(ndof + 1, 0);
+    for (const TieTerm& term : tie_terms) ++t_start[term.tied_dof + 1];
+    for (int dof = 0; dof < ndof; ++dof) t_start[dof + 1] += t_start[dof];
+    std::vector<std::pair<int, double>> t_rows(tie_terms.size());
+    {
+      std::vector<int> next(t_start.begin(), t_start.end() - 1);
+      for (const TieTerm& term : tie_terms)
+        t_rows[next[term.tied_dof]++] = {q_index[term.host_dof], term.weight};
+    }
+    auto for_row = [&](int dof, auto&& f) {
+      if (q_index[dof] >= 0) {
+        f(q_index[dof], 1.0);
+      } else {
+        for (int k = t_start[dof]; k < t_start[dof + 1]; ++k) f(t_rows[k].first, t_rows[k].second);
+      }
+    };
+    // The pattern: T^T K T of the bodies' patterns (structural, no value pruned).
+    std::vector<Eigen::Triplet<double>> t_triplets, k_triplets;
+    for (int dof = 0; dof < ndof; ++dof)
+      for_row(dof, [&](int qi, double w) { t_triplets.emplace_back(dof, qi, w); });
+    for (std::size_t b = 0; b < bodies.size(); ++b) {
+      const SparseMatrix& pat = bodies[b].assembler().pattern();
+      for (int col = 0; col < pat.outerSize(); ++col)
+        for (SparseMatrix::InnerIterator it(pat, col); it; ++it)
+          k_triplets.emplace_back(offset[b] + it.row(), offset[b] + col, 1.0);
+    }
+    SparseMatrix t(ndof, nq), k_stacked(ndof, ndof);
+    t.setFromTriplets(t_triplets.begin(), t_triplets.end());
+    k_stacked.setFromTriplets(k_triplets.begin(), k_triplets.end());
+    kq = SparseMatrix(t.transpose() * k_stacked * t);
+    kq.makeCompressed();
+    auto position = [&](int i, int j) {
+      const int* begin = kq.innerIndexPtr() + kq.outerIndexPtr()[j];
+      const int* end = kq.innerIndexPtr() + kq.outerIndexPtr()[j + 1];
+      const int* at = std::lower_bound(begin, end, i);
+      if (at == end || *at != i) throw std::logic_error(where + ": T^T K T pattern lacks an entry");
+      return static_cast<int>(at - kq.innerIndexPtr());
+    };
+    kq_direct.resize(bodies.size());
+    for (std::size_t b = 0; b < bodies.size(); ++b) {
+      const SparseMatrix& pat = bodies[b].assembler().pattern();
+      kq_direct[b].assign(static_cast<std::size_t>(pat.nonZeros()), -1);
+      for (int col = 0; col < pat.outerSize(); ++col) {
+        const int cb = offset[b] + col;
+        for (int p = pat.outerIndexPtr()[col]; p < pat.outerIndexPtr()[col + 1]; ++p) {
+          const int ra = offset[b] + pat.innerIndexPtr()[p];
+          if (q_index[ra] >= 0 && q_index[cb] >= 0) {
+            kq_direct[b][static_cast<std::size_t>(p)] = position(q_index[ra], q_index[cb]);
+            continue;
+          }
+          for_row(ra, [&](int i, double wa) {
+            for_row(cb, [&](int j, double wb) {
+              tie_scatter.push_back({position(i, j), static_cast<int>(b), p, wa * wb});
+            });
+          });
+        }
+      }
+    }
+    // In memory order of the destination, for locality.
+    std::sort(tie_scatter.begin(), tie_scatter.end(),
+              [](const TieScatter& x, const TieScatter& y) { return x.dst < y.dst; });
   }
 
   // Pattern of the free block (lower triangle) and its source positions in `k` (q space).
@@ -235,6 +327,49 @@ struct EquilibriumSolver::Impl {
       if (llt.info() != Eigen::Success) {
         throw std::runtime_error(where + ": CHOLMOD analysis failed");
       }
+      build_permuted_pattern();
+    }
+  }
+
+  // perm_*: the pattern of tril(P K_ff P^T) (rows sorted in each column) and its sources.
+  void build_permuted_pattern() {
+    const cholmod_factor* l = llt.factor();
+    if (l == nullptr || !l->is_super) return;  // simplicial: cholmod_factorize (factor())
+    const int nf = static_cast<int>(kff.rows());
+    const int* perm = static_cast<const int*>(l->Perm);
+    std::vector<int> inverse(static_cast<std::size_t>(nf));
+    for (int k = 0; k < nf; ++k) inverse[static_cast<std::size_t>(perm[k])] = k;
+    // Entry (i, j), i >= j, of K_ff goes to (max, min) of (inverse[i], inverse[j]).
+    const Eigen::Index nnz = kff.nonZeros();
+    std::vector<int> row(static_cast<std::size_t>(nnz)), col(static_cast<std::size_t>(nnz));
+    perm_outer.assign(static_cast<std::size_t>(nf) + 1, 0);
+    for (int j = 0; j < nf; ++j) {
+      for (int p = kff.outerIndexPtr()[j]; p < kff.outerIndexPtr()[j + 1]; ++p) {
+        const int a = inverse[static_cast<std::size_t>(kff.innerIndexPtr()[p])];
+        const int b = inverse[static_cast<std::size_t>(j)];
+        row[static_cast<std::size_t>(p)] = std::max(a, b);
+        col[static_cast<std::size_t>(p)] = std::min(a, b);
+        ++perm_outer[static_cast<std::size_t>(col[static_cast<std::size_t>(p)]) + 1];
+      }
+    }
+    for (int j = 0; j < nf; ++j) perm_outer[j + 1] += perm_outer[j];
+    std::vector<int> order(static_cast<std::size_t>(nnz));
+    {
+      std::vector<int> next(perm_outer.begin(), perm_outer.end() - 1);
+      for (Eigen::Index p = 0; p < nnz; ++p)
+        order[static_cast<std::size_t>(next[col[static_cast<std::size_t>(p)]]++)] = static_cast<int>(p);
+    }
+    perm_inner.resize(static_cast<std::size_t>(nnz));
+    perm_source.resize(static_cast<std::size_t>(nnz));
+    perm_values.assign(static_cast<std::size_t>(nnz), 0.0);
+    for (int j = 0; j < nf; ++j) {
+      auto begin = order.begin() + perm_outer[j], end = order.begin() + perm_outer[j + 1];
+      std::sort(begin, end, [&](int x, int y) { return row[x] < row[y]; });
+      for (auto it = begin; it != end; ++it) {
+        const std::size_t q = static_cast<std::size_t>(it - order.begin());
+        perm_inner[q] = row[static_cast<std::size_t>(*it)];
+        perm_source[q] = kff_source[static_cast<std::size_t>(*it)];
+      }
     }
   }
 
@@ -249,13 +384,37 @@ struct EquilibriumSolver::Impl {
       throw std::logic_error(where + ": tangent structure changed after the symbolic analysis");
     }
     const double* src = k.valuePtr();
+    factor_projected = project;
+    if (!perm_source.empty()) {
+      // Supernodal: CHOLMOD's numeric factorization of the permuted block, filled in place.
+      for (std::size_t q = 0; q < perm_source.size(); ++q) perm_values[q] = src[perm_source[q]];
+      cholmod_sparse a{};
+      a.nrow = a.ncol = static_cast<std::size_t>(kff.rows());
+      a.nzmax = perm_values.size();
+      a.p = perm_outer.data();
+      a.i = perm_inner.data();
+      a.x = perm_values.data();
+      a.stype = -1;  // the lower triangle
+      a.itype = CHOLMOD_INT;
+      a.xtype = CHOLMOD_REAL;
+      a.dtype = CHOLMOD_DOUBLE;
+      a.sorted = 1;
+      a.packed = 1;
+      double beta[2] = {0.0, 0.0};
+      cholmod_factor* l = llt.factor();
+      cholmod_common& c = llt.common();
+      l->minor = l->n;
+      const int ok = cholmod_super_numeric(&a, nullptr, beta, l, &c);
+      // Not positive definite: ok, status CHOLMOD_NOT_POSDEF and minor the failing column.
+      factor_valid = ok != 0 && c.status == CHOLMOD_OK && l->minor == l->n;
+      return factor_valid;
+    }
     double* dst = kff.valuePtr();
     for (std::size_t p = 0; p < kff_source.size(); ++p) {
       dst[p] = src[kff_source[p]];
     }
     llt.factorize(kff);
     factor_valid = llt.info() == Eigen::Success;
-    factor_projected = project;
     return factor_valid;
   }
 
@@ -673,28 +832,7 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
     s.build_free_pattern(s.bodies[0].assembler().pattern());
     return;
   }
-  // T: identity on q dofs, weights on tied dofs.
-  std::vector<Eigen::Triplet<double>> triplets;
-  for (int dof = 0; dof < s.ndof; ++dof) {
-    if (s.q_index[dof] >= 0) triplets.emplace_back(dof, s.q_index[dof], 1.0);
-  }
-  for (const Impl::TieTerm& term : s.tie_terms) {
-    triplets.emplace_back(term.tied_dof, s.q_index[term.host_dof], term.weight);
-  }
-  s.t.resize(s.ndof, static_cast<int>(s.q_dof.size()));
-  s.t.setFromTriplets(triplets.begin(), triplets.end());
-  // Stacked block-diagonal pattern, then T^T K T at rest for the free-block pattern.
-  std::vector<Eigen::Triplet<double>> kt;
-  for (std::size_t b = 0; b < s.bodies.size(); ++b) {
-    const SparseMatrix& pat = s.bodies[b].assembler().pattern();
-    for (int col = 0; col < pat.outerSize(); ++col) {
-      for (SparseMatrix::InnerIterator it(pat, col); it; ++it) {
-        kt.emplace_back(s.offset[b] + it.row(), s.offset[b] + col, 1.0);
-      }
-    }
-  }
-  s.k_stacked.resize(s.ndof, s.ndof);
-  s.k_stacked.setFromTriplets(kt.begin(), kt.end());
+  s.build_tie_scatter();
   s.build_free_pattern(s.tangent(Eigen::VectorXd::Zero(s.ndof), false));
 }
 

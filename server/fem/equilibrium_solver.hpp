@@ -5,7 +5,8 @@
 // are cut back when an increment fails to converge. The tangent K_ff is refactorized by CHOLMOD
 // (supernodal LL^T, EquilibriumDefinition::ordering: METIS on the node graph) at every
 // iteration, reusing the one symbolic analysis made at construction (the constrained dofs, hence
-// the pattern, never change). An indefinite tangent (compression with buckling modes, clamped elements) is
+// the pattern, never change); the tangent of tied meshes, T^T K T, is scattered into a pattern
+// made once as well, so a tangent allocates nothing. An indefinite tangent (compression with buckling modes, clamped elements) is
 // replaced by the one with every element tangent projected to positive semidefinite, so each
 // step is a descent direction.
 //
