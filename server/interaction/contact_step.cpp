@@ -890,12 +890,21 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
 // mesh cannot show under a contact patch smaller than its cells, in series with all of them
 // (the tip's local indentation grows with the sum of its rows' forces): Hertz's secant
 // compliance at the tip's depth d (its deepest row), 3 / (4 E* a) with a = sqrt(R d), less the
-// half-space's compliance under the spread load the rows already carry, k / (E* rho) with
-// k = 0.766 (the work-conjugate mean displacement of the pressure (1 - s^2 / rho^2)^2 on an
-// elastic half-space, Monte Carlo; a uniform disk's is 16 / (3 pi^2) = 0.540), at least 0.
-// E* = E / (1 - nu^2) of the body's host. Zero where the patch spans the spread (a >= 0.98 rho:
-// the mesh resolves it), so it fades as the cells shrink; large at first touch (d -> 0), so a
-// tip's force grows from zero with the depth.
+// half-space's compliance under the load the rows carry: the tip's patch, each row's share of it
+// spread over rho (the row's spread radius) about its point, k / (E* sqrt(rho^2 + q a^2)).
+// k = 0.766 is the work-conjugate mean displacement of the spread pressure (1 - s^2 / rho^2)^2
+// alone (Monte Carlo; a uniform disk's is 16 / (3 pi^2) = 0.540); a pressure's compliance goes
+// as 1 / its rms radius (the two profiles: 0.383 / (E* s_rms), s_rms = rho / 2, and the Hertz
+// pressure's 0.379, s_rms = sqrt(2/5) a) and a spread patch's mean square radius is the sum of
+// the two, so rho^2 + q a^2; q = (0.766 / 0.75)^2 = 1.043 makes the term Hertz's own once the
+// spread is small against the patch (rho -> 0: cells finer than the patch, the rows sample the
+// sphere themselves). So c = (0.75 / a - 0.766 / sqrt(rho^2 + q a^2)) / E* >= 0: the former
+// rule's 0.766 / rho for rho >> a (the patch within the spread), vanishing smoothly as the
+// cells shrink below the patch, where the former max(0, 0.75 / a - 0.766 / rho) left the
+// spread's smear uncorrected for a > 0.98 rho (the 2 mm tip 1 mm into the block graded to 1 mm
+// cells: 11.4 mN against 8.4 now, Sneddon 6.7; bench/RESULTS.md, "The near field of a patch
+// wider than the spread"). E* = E / (1 - nu^2) of the body's host. Large at first touch
+// (d -> 0), so a tip's force grows from zero with the depth.
 void State::near_field_of_tool(const Model& m, const ToolShape& shape) {
   if (!m.options_.contact_near_field) return;
   // One pass per body over the tool's rows (a few bodies, tens of rows).
@@ -917,13 +926,17 @@ void State::near_field_of_tool(const Model& m, const ToolShape& shape) {
         mat.youngs_modulus_pa / (1.0 - mat.poisson_ratio * mat.poisson_ratio);
     const double radius = shape.tip_radius_m;
     const double a = std::sqrt(radius * std::max(depth, 1e-4 * radius));
-    const double c = rho > 0.0 ? std::max(0.0, 0.75 / (e_star * a) - 0.766 / (e_star * rho)) : 0.0;
+    constexpr double kSpread = 0.766, kHertz = 0.75, kQ = (kSpread / kHertz) * (kSpread / kHertz);
+    const double patch = std::sqrt(rho * rho + kQ * a * a);  // the spread patch's radius, unit m
+    const double c =
+        rho > 0.0 ? std::max(0.0, (kHertz / a - kSpread / patch) / e_star) : 0.0;
     for (Row& r : tool_rows_)
       if (!r.shaft && r.body == body) r.near_field_m_per_n = c;
-    // d c / d depth = -c_h / (2 d), c_h = 3 / (4 E* a) (Hertz's secant, a = sqrt(R d)).
+    // d c / d depth = (-kHertz / a + kSpread q a^2 / patch^3) / (2 d E*) (a^2 = R d).
     if (deepest != nullptr && c > 0.0 && depth > 1e-4 * radius) {
       deepest->near_field_deepest = true;
-      deepest->near_field_slope_per_n = -0.5 * (0.75 / (e_star * a)) / depth;
+      deepest->near_field_slope_per_n =
+          (-kHertz / a + kSpread * kQ * a * a / (patch * patch * patch)) / (2.0 * depth * e_star);
     }
   }
 }

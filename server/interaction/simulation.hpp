@@ -166,9 +166,8 @@ struct SimulationOptions {
   // barycentric weights on its triangle: a tip whose contact patch is smaller than a triangle
   // then loads about the same surface wherever in the triangle it lands (a vertex and a face
   // centre differ less), and the row's weights change continuously as it slides. 0: barycentric
-  // (dimensionless). Off by default: with the near field it does not yet converge on a block
-  // graded under the tip (1 mm: 8.4 / 10.0 / 11.4 / 8.1 mN on 4 / 2 / 1 / 0.5 mm cells;
-  // bench/RESULTS.md, "Contact options: the depth to the flat surface"). Measured best: 1.
+  // (dimensionless). Measured best: 1 (bench/RESULTS.md, "Contact options: the depth to the
+  // flat surface").
   double contact_spread{0.0};
   // The tip's face rows from the tip centre projected along the normal field interpolated from
   // the surface nodes' normals (ContactSurface project_along_normals: a smooth contact surface
@@ -181,9 +180,11 @@ struct SimulationOptions {
   bool contact_smooth_normals{false};
   // With contact_spread: the compliance the mesh cannot show under a tip whose contact patch is
   // smaller than the spread, in series with the tip's rows (Hertz's secant compliance at the
-  // tip's depth less the half-space's under the spread load, contact_step.cpp near_field_of_tool):
-  // the force of a tip smaller than the cells approaches the continuum's and converges as they
-  // shrink (the term vanishes once the patch spans the spread). On a viscoelastic body it
+  // tip's depth less the half-space's under the patch spread by the rows' loads,
+  // contact_step.cpp near_field_of_tool): the force of a tip smaller than the cells approaches
+  // the continuum's and converges as they shrink (the term vanishes smoothly as the spread
+  // becomes small against the patch: the press on a block graded to 4 / 2 / 1 / 0.5 mm cells,
+  // 1 mm deep, 8.3 / 8.8 / 8.4 / 7.4 mN, Sneddon 6.7). On a viscoelastic body it
   // relaxes with the host's kernel, as the mesh's compliance (contact_step.cpp, near_field).
   bool contact_near_field{false};
   int lcp_max_iterations{200};
