@@ -65,16 +65,17 @@ bool within(const Vec3& d, const Vec3& n, double reach, double max_penetration_m
 }
 
 // Whether a point c of the part's axis (the segment p0-p1; p0 = p1 for the tip) can have a face
-// or edge hit on the triangle x (unit normal n): its height h = n . (c - x0) in [-behind, reach]
-// and its projection on the plane within reach of the triangle (of the bounding circle about the
-// centroid `centre`, radius rho: the largest centroid-vertex distance). A face hit needs both
-// (within: in front |d| <= reach, behind -h <= behind and the lateral offset <= reach), an edge
-// hit |c - p| <= reach. Exact as a rejection: no hit is lost.
-bool may_touch_face(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& centre, double rho,
+// or edge hit on the triangle through x0 (unit normal n): its height h = n . (c - x0) in
+// [-behind, reach] and its projection on the plane within reach of the triangle (of the bounding
+// circle about the centroid `centre`, radius rho: the largest centroid-vertex distance). A face
+// hit needs both (within: in front |d| <= reach, behind -h <= behind and the lateral offset <=
+// reach), an edge hit |c - p| <= reach. Exact as a rejection: no hit is lost. With rho = 0 and
+// x0 = centre a node (normal n): the node test (within) needs the same.
+bool may_touch_face(const Vec3& x0, const Vec3& n, const Vec3& centre, double rho,
                     const Vec3& p0, const Vec3& p1, double reach, double behind) {
   reach *= 1.0 + 1e-9;  // rounding: never reject a hit the exact test would take
   behind *= 1.0 + 1e-9;
-  const double h0 = n.dot(p0 - x[0]), h1 = n.dot(p1 - x[0]);
+  const double h0 = n.dot(p0 - x0), h1 = n.dot(p1 - x0);
   double ta = 0.0, tb = 1.0;
   if (h1 == h0) {
     if (h0 > reach || h0 < -behind) return false;
@@ -99,6 +100,10 @@ bool may_touch_face(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& cen
 bool inside_tip(const Vec3& point, const Vec3& tip_centre, const ToolShape& shape) {
   return (point - tip_centre).norm() < shape.tip_radius_m;
 }
+
+// The reusable candidate list (State::reusable_candidates) holds for a tool moved by up to this
+// many mean surface edges (tip and shaft end): a hand moves the tool by far less per step.
+constexpr double kCandidateReuse = 0.25;
 
 bool deeper(const Row& a, const Row& b) {
   if (a.depth_m != b.depth_m) return a.depth_m > b.depth_m;
@@ -246,6 +251,7 @@ void State::reserve_workspace(const Model& m, int tools) {
     sc.triangles.reserve(2 * triangles);
     sc.parts.reserve(2 * triangles);
     sc.rest_hits.reserve(hits_.capacity());
+    sc.reusable.reserve(triangles);
   }
   tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
   tool_order_.reserve(tool_rows_.capacity());
@@ -393,6 +399,8 @@ const mesh::Vec3& State::position(const Model& m, int body, int slot) {
 // Phase "candidate triangles": of one body near one tool (rest grid, widened by the largest
 // displacement of the last good answer), each listed once. Found once per step and tool: the
 // later geometries of the step reuse the list unless their displacement needs a wider one.
+// On the rest surface (no force on the body: LINEAR's one geometry per step) the list is made
+// from reusable candidates (reusable_candidates), found again only when the tool moved farther.
 void State::candidate_triangles(const Model& m, int body, int tool, const ToolPose& pose,
                                 const Vec3& axis) {
   const BodyModel& b = m.bodies_[body];
@@ -407,7 +415,8 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
   if (sc.step != step_counter_) {
     sc.step = step_counter_;
     sc.rest_hits_valid = false;
-  } else if (sc.slack_m >= slack && sc.moved_m >= bs.max_displacement_m) {
+  } else if (sc.slack_m >= slack && sc.moved_m >= bs.max_displacement_m &&
+             !(sc.rest_only && !bs.force_slots.empty())) {
     return;  // a list found with at least this slack holds every triangle this geometry reaches
   }
   sc.slack_m = slack;
@@ -416,20 +425,53 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
   // reach: at most sqrt(reach^2 + behind^2) from the centre. A quarter more than this geometry's
   // displacement, so the step's next geometries mostly keep the list.
   sc.moved_m = 1.25 * bs.max_displacement_m;
+  const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
+  const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
+  std::vector<int>& list = sc.triangles;
+  list.clear();
+  sc.parts.clear();
+  // The rest surface, flat rows (the smooth tip's flat_distance reads the whole list).
+  sc.rest_only = sc.moved_m == 0.0 && bs.force_slots.empty() && !m.options_.contact_smooth_normals;
+  if (sc.rest_only) {
+    const double reuse_m = kCandidateReuse * b.surface.mean_edge_m();
+    if (!sc.reuse_valid || sc.reuse_tool != pose.tool || sc.reuse_slack_m != slack ||
+        (p0 - sc.reuse_p0).norm() > reuse_m || (p1 - sc.reuse_p1).norm() > reuse_m)
+      reusable_candidates(m, body, pose.tool, p0, p1, slack, reuse_m, sc);
+    list.clear();
+    // This pose's list: the reusable candidates its grid query lists, in the query's order (the
+    // tip's box, then the shaft's), so a node's hit sums its triangles' normals in the same
+    // order as the full search's list (the answer does not depend on where the list was found).
+    const auto tip_cells = b.surface.query_cells(p0 - Vec3::Constant(shape.tip_radius_m + slack),
+                                                 p0 + Vec3::Constant(shape.tip_radius_m + slack));
+    PointGrid::CellRange shaft_cells;
+    if (has_shaft) {
+      const double reach = shape.shaft_radius_m + slack;
+      shaft_cells = b.surface.query_cells(p0.cwiseMin(p1) - Vec3::Constant(reach),
+                                          p0.cwiseMax(p1) + Vec3::Constant(reach));
+    }
+    for (const auto& c : sc.reusable)
+      if (b.surface.listed(tip_cells, c.triangle)) {
+        list.push_back(c.triangle);
+        sc.parts.push_back(c.parts);
+      }
+    if (has_shaft)
+      for (const auto& c : sc.reusable)
+        if (!b.surface.listed(tip_cells, c.triangle) && b.surface.listed(shaft_cells, c.triangle)) {
+          list.push_back(c.triangle);
+          sc.parts.push_back(c.parts);
+        }
+    return;
+  }
   auto bound = [&](double radius) {
     const double reach = radius + m.options_.candidate_margin * shape.tip_radius_m;
     const double behind = std::max(reach, b.behind_reach_m);
     return std::sqrt(reach * reach + behind * behind) + sc.moved_m;
   };
   const double tip_bound = bound(shape.tip_radius_m), shaft_bound = bound(shape.shaft_radius_m);
-  const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
-  std::vector<int>& list = sc.triangles;
-  list.clear();
-  sc.parts.clear();
   const long long stamp = ++stamp_counter_;
   b.surface.query(p0 - Vec3::Constant(shape.tip_radius_m + slack),
                   p0 + Vec3::Constant(shape.tip_radius_m + slack), list);
-  if (shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0) {
+  if (has_shaft) {
     const double reach = shape.shaft_radius_m + slack;
     b.surface.query(p0.cwiseMin(p1) - Vec3::Constant(reach),
                     p0.cwiseMax(p1) + Vec3::Constant(reach), list);
@@ -452,7 +494,7 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
     const bool tip = norm_at_most(to_tip2, std::min(shape.tip_radius_m + slack, tip_bound) + radius);
     bool shaft = false;
     double to_axis2 = std::numeric_limits<double>::infinity();
-    if (shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0) {
+    if (has_shaft) {
       to_axis2 = (c - closest_on_segment(c, p0, p1)).squaredNorm();
       shaft = norm_at_most(to_axis2, std::min(shape.shaft_radius_m + slack, shaft_bound) + radius);
     }
@@ -463,6 +505,64 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
         (norm_at_most(to_axis2, (shaft_bound + radius) * kRound) ? 2 : 0)));
   }
   list.resize(kept);
+}
+
+// Phase "candidate triangles" on the rest surface, the reusable list: the triangles on which a
+// part of a tool at p0-p1 moved by at most reuse_m can have a hit (a vertex inside the part, an
+// edge or face point: may_touch_face of the triangle and of each mobile vertex with its normal,
+// reach and behind widened by reuse_m: a point of the moved part is within reuse_m of the point
+// of this part at the same place along it), with those parts, in the grid's order. Any other
+// triangle gives a moved part no hit and adds no normal to a node's hit, so searching these in
+// the list's order finds the full search's hits. Allocates nothing (reserved).
+void State::reusable_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
+                                const Vec3& p1, double slack, double reuse_m, StepCandidates& sc) {
+  const BodyModel& b = m.bodies_[body];
+  BodyState& bs = bodies_[body];
+  const ToolShape& shape = m.tools_[tool_index];
+  const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
+  const double w = reuse_m * (1.0 + 1e-6);  // the moved pose, with room for rounding
+  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
+  const double behind = b.behind_reach_m;
+  const std::vector<Vec3>& normals = b.body->contact_normals();
+  auto& found = sc.triangles;  // scratch (reserved: two queries' worth); the caller refills it
+  found.clear();
+  const double tip_box = shape.tip_radius_m + slack + w;
+  b.surface.query(p0 - Vec3::Constant(tip_box), p0 + Vec3::Constant(tip_box), found);
+  if (has_shaft) {
+    const double reach = shape.shaft_radius_m + slack + w;
+    b.surface.query(p0.cwiseMin(p1) - Vec3::Constant(reach),
+                    p0.cwiseMax(p1) + Vec3::Constant(reach), found);
+  }
+  sc.reusable.clear();
+  const long long stamp = ++stamp_counter_;
+  for (int t : found) {
+    if (bs.triangle_stamp[t] == stamp) continue;
+    bs.triangle_stamp[t] = stamp;
+    const auto& x = b.surface.rest_vertices(t);
+    const auto& slots = b.surface.triangles()[t].slot;
+    int parts = 0;
+    for (int part = 0; part < (has_shaft ? 2 : 1); ++part) {
+      const Vec3& q1 = part == 1 ? p1 : p0;
+      const double reach = (part == 1 ? shape.shaft_radius_m : shape.tip_radius_m) + margin + w;
+      const double back = std::max(reach, behind + w);
+      bool may = may_touch_face(x[0], b.surface.rest_normal(t), b.surface.centroid(t),
+                                b.surface.radius_m(t), p0, q1, reach, back);
+      for (int k = 0; k < 3 && !may; ++k)
+        may = slots[k] >= 0 && may_touch_face(x[k], normals[slots[k]], x[k], 0.0, p0, q1, reach, back);
+      if (may) parts |= 1 << part;
+    }
+    if (parts != 0)
+      sc.reusable.push_back({t, b.surface.query_rank(t), static_cast<std::uint8_t>(parts)});
+  }
+  std::sort(sc.reusable.begin(), sc.reusable.end(),
+            [](const StepCandidates::Reusable& a, const StepCandidates::Reusable& c) {
+              return a.rank < c.rank;
+            });
+  sc.reuse_valid = true;
+  sc.reuse_tool = tool_index;
+  sc.reuse_slack_m = slack;
+  sc.reuse_p0 = p0;
+  sc.reuse_p1 = p1;
 }
 
 // Phase "rows", geometry: the closest features of the deformed candidate triangles to the tip
@@ -592,7 +692,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   }
   // Most candidates are far from the part (the box reaches behind_reach behind the surface):
   // their face or edge point is skipped by a plane test before the closest-point search.
-  if (!may_touch_face(x, n, centre, rho, p0, shaft ? p1 : p0, reach,
+  if (!may_touch_face(x[0], n, centre, rho, p0, shaft ? p1 : p0, reach,
                       std::max(reach, max_penetration_m)))
     return;
   // SimulationOptions::contact_smooth_normals, the tip: the centre projected along the normals

@@ -212,6 +212,12 @@ void ContactSurface::query(const mesh::Vec3& lo, const mesh::Vec3& hi,
   grid_.query(lo - pad, hi + pad, out);
 }
 
+PointGrid::CellRange ContactSurface::query_cells(const mesh::Vec3& lo,
+                                                const mesh::Vec3& hi) const {
+  const mesh::Vec3 pad = mesh::Vec3::Constant(max_radius_m_);
+  return grid_.cells(lo - pad, hi + pad);
+}
+
 double ContactSurface::edge_at_m(int t, const std::array<double, 3>& bary) const {
   const auto& h = node_edge_m_[t];
   return bary[0] * h[0] + bary[1] * h[1] + bary[2] * h[2];

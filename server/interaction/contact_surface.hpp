@@ -76,6 +76,11 @@ class ContactSurface {
   const std::vector<SurfaceTriangle>& triangles() const { return triangles_; }
   // Appends the triangles whose rest bounding sphere may reach the box [lo, hi] (a superset).
   void query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const;
+  // The grid cells query(lo, hi) visits, whether triangle t is among the triangles they list,
+  // and t's rank in a query's order (by rank; PointGrid).
+  PointGrid::CellRange query_cells(const mesh::Vec3& lo, const mesh::Vec3& hi) const;
+  bool listed(const PointGrid::CellRange& r, int t) const { return grid_.contains(r, t); }
+  int query_rank(int t) const { return grid_.rank(t); }
   // Rest centroid and the largest centroid-vertex distance over all triangles, unit m.
   const mesh::Vec3& centroid(int t) const { return centroid_[t]; }
   // Largest centroid-vertex distance of triangle t (rest), unit m.

@@ -240,6 +240,9 @@ class State {
   void reserve_workspace(const Model& m, int tools);
   void candidate_triangles(const Model& m, int body, int tool, const ToolPose& pose,
                            const Vec3& axis);
+  struct StepCandidates;
+  void reusable_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
+                           const Vec3& p1, double slack, double reuse_m, StepCandidates& sc);
   void triangle_features(const Model& m, int body, int tool, const ToolPose& pose,
                          const Vec3& axis);
   void rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis);
@@ -304,6 +307,21 @@ class State {
     std::vector<std::uint8_t> parts;
     bool rest_hits_valid{false};
     std::vector<FeatureHit> rest_hits;
+    // The list is the rest surface's (no force on the body, flat rows): made from `reusable`.
+    bool rest_only{false};
+    // On the rest surface, kept across steps (contact_step.cpp, reusable_candidates): the
+    // triangles a part of the tool can have a hit on while its tip and shaft end stay within
+    // reuse of reuse_p0 / reuse_p1 (unit m), in the grid's query order (rank), with those parts.
+    struct Reusable {
+      int triangle{-1};
+      int rank{0};
+      std::uint8_t parts{0};
+    };
+    std::vector<Reusable> reusable;
+    bool reuse_valid{false};
+    int reuse_tool{-1};
+    double reuse_slack_m{0.0};
+    Vec3 reuse_p0{Vec3::Zero()}, reuse_p1{Vec3::Zero()};
   };
   std::vector<StepCandidates> step_candidates_;
   long long step_counter_{0};

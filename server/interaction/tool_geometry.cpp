@@ -25,8 +25,9 @@ PointGrid::PointGrid(const std::vector<mesh::Vec3>& points_m, double cell_m)
   const int cells = dims_[0] * dims_[1] * dims_[2];
   std::vector<int> cell_of(points_m.size());
   offsets_.assign(cells + 1, 0);
+  cell_of_.resize(points_m.size());
   for (std::size_t i = 0; i < points_m.size(); ++i) {
-    int idx[3];
+    auto& idx = cell_of_[i];
     for (int a = 0; a < 3; ++a)
       idx[a] = std::clamp(static_cast<int>(std::floor((points_m[i][a] - lo[a]) / cell_)), 0,
                           dims_[a] - 1);
@@ -35,23 +36,32 @@ PointGrid::PointGrid(const std::vector<mesh::Vec3>& points_m, double cell_m)
   }
   for (int c = 0; c < cells; ++c) offsets_[c + 1] += offsets_[c];
   items_.resize(points_m.size());
+  rank_.resize(points_m.size());
   std::vector<int> fill(offsets_.begin(), offsets_.end() - 1);
-  for (std::size_t i = 0; i < points_m.size(); ++i)
-    items_[fill[cell_of[i]]++] = static_cast<int>(i);
+  for (std::size_t i = 0; i < points_m.size(); ++i) {
+    rank_[i] = fill[cell_of[i]]++;
+    items_[rank_[i]] = static_cast<int>(i);
+  }
+}
+
+PointGrid::CellRange PointGrid::cells(const mesh::Vec3& lo, const mesh::Vec3& hi) const {
+  CellRange r;
+  if (count_ == 0) return r;
+  CellRange in;
+  for (int a = 0; a < 3; ++a) {
+    const double l = (lo[a] - origin_[a]) / cell_, h = (hi[a] - origin_[a]) / cell_;
+    if (h < 0.0 || l >= dims_[a]) return r;
+    in.lo[a] = std::max(0, static_cast<int>(std::floor(l)));
+    in.hi[a] = std::min(dims_[a] - 1, static_cast<int>(std::floor(h)));
+  }
+  return in;
 }
 
 void PointGrid::query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const {
-  if (count_ == 0) return;
-  int a0[3], a1[3];
-  for (int a = 0; a < 3; ++a) {
-    const double l = (lo[a] - origin_[a]) / cell_, h = (hi[a] - origin_[a]) / cell_;
-    if (h < 0.0 || l >= dims_[a]) return;
-    a0[a] = std::max(0, static_cast<int>(std::floor(l)));
-    a1[a] = std::min(dims_[a] - 1, static_cast<int>(std::floor(h)));
-  }
-  for (int z = a0[2]; z <= a1[2]; ++z)
-    for (int y = a0[1]; y <= a1[1]; ++y)
-      for (int x = a0[0]; x <= a1[0]; ++x) {
+  const CellRange r = cells(lo, hi);
+  for (int z = r.lo[2]; z <= r.hi[2]; ++z)
+    for (int y = r.lo[1]; y <= r.hi[1]; ++y)
+      for (int x = r.lo[0]; x <= r.hi[0]; ++x) {
         const int c = (z * dims_[1] + y) * dims_[0] + x;
         for (int k = offsets_[c]; k < offsets_[c + 1]; ++k) out.push_back(items_[k]);
       }

@@ -5,6 +5,7 @@
 #include "server/mesh/tet_mesh.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -55,6 +56,19 @@ class PointGrid {
   // Appends the indices of points in cells overlapping [lo, hi] (a superset of the points in it).
   void query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const;
   bool empty() const { return count_ == 0; }
+  // The cells query(lo, hi) visits (per axis lo..hi; none when some hi < lo), whether point i
+  // lies in one of them, and its rank in the grid's order: a query lists its points by rank.
+  struct CellRange {
+    int lo[3]{0, 0, 0};
+    int hi[3]{-1, -1, -1};
+  };
+  CellRange cells(const mesh::Vec3& lo, const mesh::Vec3& hi) const;
+  bool contains(const CellRange& r, int i) const {
+    const auto& c = cell_of_[i];
+    return c[0] >= r.lo[0] && c[0] <= r.hi[0] && c[1] >= r.lo[1] && c[1] <= r.hi[1] &&
+           c[2] >= r.lo[2] && c[2] <= r.hi[2];
+  }
+  int rank(int i) const { return rank_[i]; }
 
  private:
   mesh::Vec3 origin_{mesh::Vec3::Zero()};
@@ -63,6 +77,8 @@ class PointGrid {
   int count_{0};
   std::vector<int> offsets_;  // CSR per cell
   std::vector<int> items_;
+  std::vector<std::array<int, 3>> cell_of_;  // per point: its cell
+  std::vector<int> rank_;                 // per point: its index in items_
 };
 
 }  // namespace neurosim::interaction

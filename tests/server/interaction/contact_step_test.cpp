@@ -367,6 +367,55 @@ void slide_cases(const std::vector<SlideCase>& cases, const SimulationOptions& o
 // and 8.9 .. 28.5 N/m at 2 mm (3.20); its softest point is the continuum's value (Hertz for the
 // 2 mm tip 1 mm into a half-space, E = 3 kPa, nu = 0.49: 7.4 N/m) and the stiff end is a face
 // point of a 7 mm triangle.
+// The replay contract: the answer at a pose is the pose's, whatever the steps before it did
+// (the step keeps its candidate triangles while the tool moves little, and a node's normal sums
+// its triangles' in the list's order: the kept list must give the fresh search's order). A tip
+// with a tilted shaft walks over the generated block's face and its edge (the candidates found
+// again every few steps), at times deeper than its radius; at every 7th pose a fresh State steps that pose alone: the same force,
+// stiffness, nodes and validity radius, to the bit. All compliance columns are made with the
+// State (the columns a walk solves in blocks may differ from a fresh State's at round-off). The
+// block's faces are flat (their triangles' normals sum exactly in any order): this checks which
+// triangles are searched, not their order (checked on the brain's curved surface, RESULTS).
+TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
+  Block b;
+  b.generated = true;
+  b.cells = 6;
+  b.tip_radius_m = 0.004;
+  SimulationOptions o;
+  o.precompute_contact_columns = true;
+  const auto model = build_model(block_scene(b), o);
+  auto walked = Simulation::from_model(model);
+  std::vector<ToolContact> c, fresh_c;
+  StepStats st;
+  int compared = 0, touching = 0;
+  for (int k = 0; k < 120; ++k) {
+    // Across the face x = L towards its edge with the top (z = L), 0.2 mm per step, 2-6 mm deep
+    // (the tip's centre up to 2 mm behind the face: node and edge rows along their triangles'
+    // mean normal, which sums the normals in the list's order).
+    ToolPose p;
+    const double depth = 4e-3 + 2e-3 * std::sin(0.3 * k);
+    p.tip_m = Vec3(b.edge_m + b.tip_radius_m - depth, 0.03 + 1e-4 * k, 0.035 + 2e-4 * k);
+    p.axis = Vec3(1.0, 0.3, 0.4).normalized();
+    walked->step({p}, c, st);
+    ASSERT_TRUE(st.converged) << "step " << k;
+    if (k % 7 != 0) continue;
+    auto fresh = Simulation::from_model(model);
+    fresh->step({p}, fresh_c, st);
+    ++compared;
+    if (c[0].in_contact) ++touching;
+    EXPECT_EQ(c[0].in_contact, fresh_c[0].in_contact) << "step " << k;
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_EQ(c[0].force_n[i], fresh_c[0].force_n[i]) << "step " << k;
+      for (int j = 0; j < 3; ++j)
+        EXPECT_EQ(c[0].stiffness_n_per_m(i, j), fresh_c[0].stiffness_n_per_m(i, j)) << "step " << k;
+    }
+    EXPECT_EQ(c[0].nodes, fresh_c[0].nodes) << "step " << k;
+    EXPECT_EQ(c[0].validity_radius_m, fresh_c[0].validity_radius_m) << "step " << k;
+  }
+  EXPECT_EQ(compared, 18);
+  EXPECT_GE(touching, 15);  // the comparisons are of contacts, not of empty answers
+}
+
 TEST(interaction_contact_step, SlideOverTheSurfaceNeverLosesTheTissue) {
   slide_cases({{"brain_artery", 1e-3, 4.0}, {"brain_artery", 2e-3, 4.0},
                {"cube_cylinder", 1e-3, 2.0}, {"cube_cylinder", 2e-3, 2.0}},

@@ -43,6 +43,38 @@ TEST(interaction_tool_geometry, GridQueriesHoldEveryPointInTheBoxOnce) {
   EXPECT_TRUE(none.empty());
 }
 
+// The contact step's reusable candidates rebuild a query's list from cells() and rank(): the
+// points contains() says a box's cells hold, by rank, are exactly what query() lists, in order.
+TEST(interaction_tool_geometry, QueryListsTheBoxCellsPointsByRank) {
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<double> u(-0.05, 0.05);
+  std::vector<Vec3> points(1500);
+  for (auto& p : points) p = Vec3(u(rng), u(rng), u(rng));
+  const PointGrid grid(points, 0.006);
+  std::vector<int> by_rank(points.size(), -1);
+  for (int i = 0; i < static_cast<int>(points.size()); ++i) {
+    const int r = grid.rank(i);
+    ASSERT_TRUE(r >= 0 && r < static_cast<int>(points.size()) && by_rank[r] < 0) << "point " << i;
+    by_rank[r] = i;
+  }
+  std::vector<int> found, rebuilt;
+  for (int q = 0; q < 200; ++q) {
+    const Vec3 c(u(rng), u(rng), u(rng));
+    const double h = 0.0005 + 0.03 * std::abs(u(rng)) / 0.05;
+    const Vec3 lo = c - Vec3::Constant(h), hi = c + Vec3::Constant(1.3 * h);
+    found.clear();
+    grid.query(lo, hi, found);
+    const PointGrid::CellRange cells = grid.cells(lo, hi);
+    rebuilt.clear();
+    for (int i : by_rank)
+      if (grid.contains(cells, i)) rebuilt.push_back(i);
+    ASSERT_EQ(found, rebuilt) << "query " << q;
+  }
+  // A box beside the grid visits no cell.
+  const PointGrid::CellRange none = grid.cells(Vec3::Constant(0.2), Vec3::Constant(0.3));
+  for (int i = 0; i < static_cast<int>(points.size()); ++i) ASSERT_FALSE(grid.contains(none, i));
+}
+
 TEST(interaction_tool_geometry, NormalLineDepthIsTheSpheresReachAlongTheNormal) {
   const Vec3 x(0.01, 0.02, 0.03), n(0, 0, 1);
   const double r = 0.004;
