@@ -856,8 +856,16 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     }
     if (m.options_.contact_spread > 0.0) {
       const Vec3 surface_n = f == TriangleFeature::kFace ? h.face_normal : normal_sum.normalized();
-      const double rho = m.options_.contact_spread * b.surface.edge_at_m(h.triangle, h.at.weights);
-      if (b.surface.spread(rest_point, surface_n, rho, spread_triangles_, spread_load_)) {
+      // The spread fades where the cells resolve the tool part (radius R): full for a local edge
+      // of R and more, none (the triangle's own barycentric rows) at R / 2 and less, linear in
+      // between. A spread over cells finer than the part smears a load the rows already sample
+      // and stiffens the press (the 2 mm tip 1 mm into 0.5 mm cells: 8.06 mN with it, 7.20
+      // without, Sneddon 6.74). Fixed per mesh and part, so the force stays continuous in time.
+      const double edge = b.surface.edge_at_m(h.triangle, h.at.weights);
+      const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+      const double fade = std::clamp((edge - 0.5 * part_r) / (0.5 * part_r), 0.0, 1.0);
+      const double rho = m.options_.contact_spread * edge * fade;
+      if (rho > 0.0 && b.surface.spread(rest_point, surface_n, rho, spread_triangles_, spread_load_)) {
         r.spread_radius_m = rho;
         r.nodes = spread_load_.nodes;
         for (int k = 0; k < r.nodes; ++k) {

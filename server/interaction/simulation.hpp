@@ -166,8 +166,10 @@ struct SimulationOptions {
   // barycentric weights on its triangle: a tip whose contact patch is smaller than a triangle
   // then loads about the same surface wherever in the triangle it lands (a vertex and a face
   // centre differ less), and the row's weights change continuously as it slides. 0: barycentric
-  // (dimensionless). Measured best: 1 (bench/RESULTS.md, "Contact options: the depth to the
-  // flat surface").
+  // (dimensionless). The spread fades with the cells' size against the tool part's radius R:
+  // full where the local edge is R or more, none at R / 2 and less (the cells resolve the part:
+  // the barycentric rows). Measured best: 1 (bench/RESULTS.md, "Contact options: the depth to
+  // the flat surface", "The spread fading on cells finer than the tip").
   double contact_spread{0.0};
   // The tip's face rows from the tip centre projected along the normal field interpolated from
   // the surface nodes' normals (ContactSurface project_along_normals: a smooth contact surface
