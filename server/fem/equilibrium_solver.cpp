@@ -1,16 +1,20 @@
 #include "server/fem/equilibrium_solver.hpp"
 
+#include "server/fem/cholmod_threads.hpp"
 #include "server/fem/factor_ordering.hpp"
 
 #include <Eigen/Cholesky>
 #include <Eigen/CholmodSupport>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
+#include <utility>
 
 namespace neurosim::fem {
 
@@ -38,6 +42,9 @@ class SupernodalFactor : public Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen:
     this->m_analysisIsOk = f != nullptr;
     this->m_factorizationIsOk = false;
   }
+  // Exchanges the factors of two objects of the same analysis (each stays freed by its own
+  // common: the default allocator, so either common may free either factor).
+  void swap_factor(SupernodalFactor& other) { std::swap(this->m_cholmodFactor, other.m_cholmodFactor); }
 };
 
 void check_options(const std::string& where, const NewtonOptions& o) {
@@ -125,6 +132,25 @@ struct EquilibriumSolver::Impl {
   cholmod_dense* solve_y{nullptr};
   cholmod_dense* solve_e{nullptr};
 
+  // A factorization made on another thread (start_factorization; background_refactorization):
+  // the tangent at `u` assembled into its own matrices and scratch, factored into its own
+  // factor (the same symbolic analysis, copied), exchanged with llt's when adopted. The thread
+  // reads only what construction fixed (bodies, maps, patterns) and writes only here.
+  struct Pending {
+    std::thread thread;
+    std::atomic<bool> done{false};
+    bool ok{false}, projected{false};
+    bool stale{false};  // a factorization on the caller's thread came after it was started
+    SupernodalFactor llt;
+    std::vector<SparseMatrix> k_body;
+    SparseMatrix kq;
+    std::vector<ElasticForces::Workspace> workspaces;
+    std::vector<double> perm_values;
+    Eigen::VectorXd u, body_u;
+  };
+  std::unique_ptr<Pending> pending;  // made on first use
+  bool pending_running{false};       // its thread was started and not joined yet
+
   // Scratch.
   Eigen::VectorXd kdc, f_int, rq, f_ext, r_free, delta, trial, step_full, body_u, body_f;
 
@@ -132,6 +158,7 @@ struct EquilibriumSolver::Impl {
       : where("EquilibriumSolver (" + std::string(tier_name(d.tier)) + ", mesh '" +
               (d.mesh ? d.mesh->source() : std::string("?")) + "')") {}
   ~Impl() {
+    if (pending_running) pending->thread.join();
     for (cholmod_dense** x : {&solve_x, &solve_y, &solve_e}) {
       if (*x) cholmod_free_dense(x, &llt.common());
     }
@@ -203,28 +230,36 @@ struct EquilibriumSolver::Impl {
 
   // The tangent in q space: the host's own (nothing tied) or T^T K T.
   const SparseMatrix& tangent(const Eigen::VectorXd& u, bool project) {
+    return tangent_into(u, project, k_body, kq, workspaces, body_u);
+  }
+  // The same into the given matrices and scratch (only those written: a background
+  // factorization assembles into its own).
+  const SparseMatrix& tangent_into(const Eigen::VectorXd& u, bool project,
+                                   std::vector<SparseMatrix>& kb, SparseMatrix& kqv,
+                                   std::vector<ElasticForces::Workspace>& ws,
+                                   Eigen::VectorXd& bu) const {
     for (std::size_t b = 0; b < bodies.size(); ++b) {
-      body_u = u.segment(offset[b], bodies[b].num_dofs());
-      bodies[b].tangent(body_u, project, k_body[b], nullptr, &workspaces[b]);
+      bu = u.segment(offset[b], bodies[b].num_dofs());
+      bodies[b].tangent(bu, project, kb[b], nullptr, &ws[b]);
     }
     if (!tied()) {
-      return k_body[0];
+      return kb[0];
     }
     // T^T K T into its fixed pattern (build_tie_scatter).
-    double* q = kq.valuePtr();
-    std::fill_n(q, kq.nonZeros(), 0.0);
-    for (std::size_t b = 0; b < k_body.size(); ++b) {
-      const double* v = k_body[b].valuePtr();
+    double* q = kqv.valuePtr();
+    std::fill_n(q, kqv.nonZeros(), 0.0);
+    for (std::size_t b = 0; b < kb.size(); ++b) {
+      const double* v = kb[b].valuePtr();
       const int* to = kq_direct[b].data();
-      const Eigen::Index nnz = k_body[b].nonZeros();
+      const Eigen::Index nnz = kb[b].nonZeros();
       for (Eigen::Index p = 0; p < nnz; ++p) {
         if (to[p] >= 0) q[to[p]] += v[p];
       }
     }
     for (const TieScatter& e : tie_scatter) {
-      q[e.dst] += e.weight * k_body[static_cast<std::size_t>(e.body)].valuePtr()[e.src];
+      q[e.dst] += e.weight * kb[static_cast<std::size_t>(e.body)].valuePtr()[e.src];
     }
-    return kq;
+    return kqv;
   }
 
   // kq's pattern (the product T^T K T of the patterns, once) and the scatter of every tangent
@@ -383,32 +418,13 @@ struct EquilibriumSolver::Impl {
     if (k.nonZeros() != tangent_nnz) {
       throw std::logic_error(where + ": tangent structure changed after the symbolic analysis");
     }
-    const double* src = k.valuePtr();
     factor_projected = project;
+    if (pending_running) pending->stale = true;  // this factor is newer than the pending one
     if (!perm_source.empty()) {
-      // Supernodal: CHOLMOD's numeric factorization of the permuted block, filled in place.
-      for (std::size_t q = 0; q < perm_source.size(); ++q) perm_values[q] = src[perm_source[q]];
-      cholmod_sparse a{};
-      a.nrow = a.ncol = static_cast<std::size_t>(kff.rows());
-      a.nzmax = perm_values.size();
-      a.p = perm_outer.data();
-      a.i = perm_inner.data();
-      a.x = perm_values.data();
-      a.stype = -1;  // the lower triangle
-      a.itype = CHOLMOD_INT;
-      a.xtype = CHOLMOD_REAL;
-      a.dtype = CHOLMOD_DOUBLE;
-      a.sorted = 1;
-      a.packed = 1;
-      double beta[2] = {0.0, 0.0};
-      cholmod_factor* l = llt.factor();
-      cholmod_common& c = llt.common();
-      l->minor = l->n;
-      const int ok = cholmod_super_numeric(&a, nullptr, beta, l, &c);
-      // Not positive definite: ok, status CHOLMOD_NOT_POSDEF and minor the failing column.
-      factor_valid = ok != 0 && c.status == CHOLMOD_OK && l->minor == l->n;
+      factor_valid = numeric(k, perm_values, llt);
       return factor_valid;
     }
+    const double* src = k.valuePtr();
     double* dst = kff.valuePtr();
     for (std::size_t p = 0; p < kff_source.size(); ++p) {
       dst[p] = src[kff_source[p]];
@@ -416,6 +432,94 @@ struct EquilibriumSolver::Impl {
     llt.factorize(kff);
     factor_valid = llt.info() == Eigen::Success;
     return factor_valid;
+  }
+
+  // Supernodal: CHOLMOD's numeric factorization of the permuted free block of the q-space
+  // tangent k into f (values: the permuted block's values, filled in place); false if not
+  // positive definite.
+  bool numeric(const SparseMatrix& k, std::vector<double>& values, SupernodalFactor& f) const {
+    {
+      const double* src = k.valuePtr();
+      for (std::size_t q = 0; q < perm_source.size(); ++q) values[q] = src[perm_source[q]];
+      cholmod_sparse a{};
+      a.nrow = a.ncol = static_cast<std::size_t>(kff.rows());
+      a.nzmax = values.size();
+      a.p = const_cast<int*>(perm_outer.data());  // read only
+      a.i = const_cast<int*>(perm_inner.data());
+      a.x = values.data();
+      a.stype = -1;  // the lower triangle
+      a.itype = CHOLMOD_INT;
+      a.xtype = CHOLMOD_REAL;
+      a.dtype = CHOLMOD_DOUBLE;
+      a.sorted = 1;
+      a.packed = 1;
+      double beta[2] = {0.0, 0.0};
+      cholmod_factor* l = f.factor();
+      cholmod_common& c = f.common();
+      l->minor = l->n;
+      const int ok = cholmod_super_numeric(&a, nullptr, beta, l, &c);
+      // Not positive definite: ok, status CHOLMOD_NOT_POSDEF and minor the failing column.
+      return ok != 0 && c.status == CHOLMOD_OK && l->minor == l->n;
+    }
+  }
+
+  // Starts factorizing the tangent at u on another thread (the exact one, the projected one if
+  // that is not positive definite). Returns false, starting nothing, when one is running, the
+  // factor is not supernodal, or a body relaxes (its tangent reads the caller's viscous step).
+  bool launch(const Eigen::VectorXd& u) {
+    if (pending_running || perm_source.empty() || u.size() != ndof) return false;
+    for (const ElasticForces::Workspace& w : workspaces)
+      if (w.viscous != nullptr) return false;
+    if (!pending) {
+      auto p = std::make_unique<Pending>();
+      p->llt.cholmod().print = 0;
+      p->llt.adopt_analysis(cholmod_copy_factor(llt.factor(), &p->llt.common()));
+      if (p->llt.factor() == nullptr) return false;
+      p->k_body.resize(bodies.size());
+      p->kq = kq;
+      p->workspaces.resize(bodies.size());
+      p->perm_values.assign(perm_values.size(), 0.0);
+      pending = std::move(p);
+    }
+    Pending& p = *pending;
+    p.u = u;
+    p.ok = p.projected = p.stale = false;
+    p.done.store(false, std::memory_order_relaxed);
+    p.thread = std::thread([this] {
+      cholmod_threads_follow_omp_num_threads();  // as the caller's thread: no OpenMP pool of its own
+      Pending& q = *pending;
+      try {
+        q.ok = numeric(tangent_into(q.u, false, q.k_body, q.kq, q.workspaces, q.body_u),
+                       q.perm_values, q.llt);
+        if (!q.ok) {
+          q.projected = true;
+          q.ok = numeric(tangent_into(q.u, true, q.k_body, q.kq, q.workspaces, q.body_u),
+                         q.perm_values, q.llt);
+        }
+      } catch (...) {
+        q.ok = false;
+      }
+      q.done.store(true, std::memory_order_release);
+    });
+    pending_running = true;
+    return true;
+  }
+  bool pending_done() const {
+    return pending_running && pending->done.load(std::memory_order_acquire);
+  }
+  // Waits for the background factorization; true when its factor is now llt's (the matrices it
+  // factored now k_body / kq). A failed or stale one is dropped.
+  bool adopt_pending() {
+    if (!pending_running) return false;
+    pending->thread.join();
+    pending_running = false;
+    if (!pending->ok || pending->stale) return false;
+    llt.swap_factor(pending->llt);
+    std::swap(k_body, pending->k_body);
+    std::swap(kq, pending->kq);
+    factor_valid = true;
+    factor_projected = pending->projected;
+    return true;
   }
 
   // delta := K_ff^-1 r_free with the current factor (CHOLMOD's workspace reused).
@@ -511,7 +615,9 @@ struct EquilibriumSolver::Impl {
   // of the chord steps d and of the iterates u, on the free dofs.
   Eigen::MatrixXd aa_dd, aa_du;
   Eigen::VectorXd aa_prev_d, aa_prev_step, aa_chord;
-  static constexpr int kMaxAndersonDepth = 16;  // NewtonOptions::anderson_depth's limit
+  static constexpr int kMaxAndersonDepth = 16;
+  // Halvings of a chord step while a background factorization runs (alpha down to 1/16).
+  static constexpr int kChordHalvings = 4;  // NewtonOptions::anderson_depth's limit
   // Least-squares system, at most 16 x 16: fixed-capacity storage, no heap per iteration.
   using SmallMatrix =
       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxAndersonDepth, kMaxAndersonDepth>;
@@ -582,6 +688,14 @@ struct EquilibriumSolver::Impl {
     // without an energy evaluation per step.
     const double unknown = std::numeric_limits<double>::quiet_NaN();
     double pi_u = unknown;
+    const bool background = opt.reuse_factorization && opt.background_refactorization;
+    // A factorization started earlier (start_factorization, or a background one): waited for
+    // when there is no factor to step with (or the caller wants deterministic iterates),
+    // else taken once it is done.
+    if (opt.reuse_factorization && pending_running &&
+        (!factor_valid || !background || pending_done()) && adopt_pending()) {
+      ++inc.adopted_factorizations;
+    }
     bool refactor = !opt.reuse_factorization || !factor_valid;
     const bool accelerate = opt.reuse_factorization && opt.anderson_depth > 0;
     aa_reset();
@@ -604,6 +718,12 @@ struct EquilibriumSolver::Impl {
         msg << "no convergence in " << opt.max_iterations << " iterations (residual " << rnorm
             << " N, tolerance " << opt.tolerance * force_scale(fext) << " N)";
         throw Failure(msg.str());
+      }
+      // A background factorization that finished: its tangent (at a recent iterate) replaces
+      // the old factor from this step on.
+      if (background && !refactor && pending_done() && adopt_pending()) {
+        ++inc.adopted_factorizations;
+        aa_reset();
       }
       r_free.resize(nf);
       for (int i = 0; i < nf; ++i) {
@@ -677,7 +797,10 @@ struct EquilibriumSolver::Impl {
           expand_step();
           continue;
         }
-        if (!fresh) break;
+        // An old factor's step is shortened only while a background factorization is on its
+        // way (a descent direction: the factor is positive definite), to keep moving instead of
+        // waiting for it; else a fresh tangent is better than a short step.
+        if (!fresh && !(background && pending_running && h < kChordHalvings)) break;
         alpha *= 0.5;
         ++inc.line_search_halvings;
       }
@@ -688,9 +811,15 @@ struct EquilibriumSolver::Impl {
         return;
       }
       if (!accepted && !fresh) {
-        // The old factor's step is no good here: retry this iteration with a fresh tangent
-        // (rq belongs to the trial now: restore it for u).
+        // The old factor's step is no good here: retry this iteration with the background
+        // factorization if one is running (waited for), else with a fresh tangent (rq belongs to
+        // the trial now: restore it for u).
         refactor = true;
+        if (background && adopt_pending()) {
+          ++inc.adopted_factorizations;
+          aa_reset();
+          refactor = false;
+        }
         --it;
         residual(u, fext);
         continue;
@@ -706,8 +835,12 @@ struct EquilibriumSolver::Impl {
       // full one that contracted the residual well: a chord iteration costs a back-substitution
       // and a residual (~3-8 % of a factorization on the brain mesh); at a rate worse than 1/2
       // per step, ~30 of them are needed for 1e-9, more than a factorization saves.
+      const bool budget = 2 * (it + 1) >= opt.max_iterations;
       refactor = !opt.reuse_factorization || alpha < 1.0 ||
-                 r_trial > opt.refactor_contraction * rnorm || 2 * (it + 1) >= opt.max_iterations;
+                 r_trial > opt.refactor_contraction * rnorm || budget;
+      // Background: the tangent at the new u is factorized on another thread while the next
+      // steps go on with the old factor (a step it cannot take waits for it, above).
+      if (refactor && background && !budget && (pending_running || launch(u))) refactor = false;
       rnorm = r_trial;
       inc.residual_n.push_back(rnorm);
     }
@@ -837,6 +970,13 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
 }
 
 EquilibriumSolver::~EquilibriumSolver() = default;
+
+bool EquilibriumSolver::start_factorization(const Eigen::VectorXd& u_m) {
+  if (u_m.size() != impl_->ndof || !u_m.allFinite()) {
+    throw std::invalid_argument(impl_->where + ": start_factorization needs a finite u (3N)");
+  }
+  return impl_->launch(u_m);
+}
 
 void EquilibriumSolver::set_prescribed_values(const Eigen::VectorXd& values_m) {
   Impl& s = *impl_;

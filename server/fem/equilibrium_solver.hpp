@@ -109,6 +109,17 @@ struct NewtonOptions {
   // contracting components a changed tangent leaves; 0: plain chord steps. Iterations, at most
   // 16. Only read when reuse_factorization is set.
   int anderson_depth{5};
+  // With reuse_factorization: a refactorization that a poor contraction asks for is made on
+  // another thread, at the iterate where it was asked for, while the following steps go on with
+  // the old factor (Anderson-accelerated chord steps); the new factor is taken at the first
+  // iteration after it is done, and waited for only when a step with the old one fails. Same
+  // convergence test, same answer; the iterates then depend on the threads' timing (false: the
+  // factorization in line, deterministic iterates). For a worker whose every call must stay
+  // short (the NONLINEAR tier's updates: a factorization of the 7 mm brain takes seconds, a
+  // chord step tens of milliseconds). The factorization at the last iteration budget
+  // (max_iterations / 2) stays in line. Uses a second factor of the tangent's size. Not with a
+  // relaxing body (set_viscous_step): then in line.
+  bool background_refactorization{false};
   // solve only. true: each increment starts from the tangent predictor instead of the converged
   // u with only the constrained dofs moved to their new values: one linear step
   // u_f += K_ff^-1 (f_ext(t_next) - f_int(u) - K_fc dc), dc the change of the constrained values,
@@ -135,6 +146,9 @@ struct NewtonIncrement {
   // NewtonOptions::tangent_predictor: the increment started from the predicted u (false: from
   // the plain start, or the option is off).
   bool predicted{false};
+  // Factorizations made on another thread (start_factorization, background_refactorization)
+  // that this increment took as its factor.
+  int adopted_factorizations{0};
 };
 
 struct EquilibriumResult {
@@ -170,6 +184,13 @@ class EquilibriumSolver {
   // residual evaluations per call instead of a factorization per iteration.
   NewtonIncrement solve_from(const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m,
                              const NewtonOptions& options = {});
+
+  // Starts factorizing the tangent at u_m (3N) on another thread; the next call with
+  // reuse_factorization steps with it (waiting for it if there is no factor yet). A caller that
+  // knows where its first solve starts (the NONLINEAR tier: at rest) so factorizes ahead, while
+  // it does other work. Returns false (nothing started) while one runs, with a simplicial factor
+  // or a relaxing body. Throws std::invalid_argument for a wrong size or non-finite u.
+  bool start_factorization(const Eigen::VectorXd& u_m);
 
   // Values of the prescribed components, in the order of expand_prescribed's dofs (host dofs).
   void set_prescribed_values(const Eigen::VectorXd& values_m);

@@ -189,6 +189,9 @@ State::State(const Model& m) {
       d.tier = m.tier_;
       d.newton.tolerance = m.options_.tier_newton_tolerance;
       d.newton.step_limit = m.options_.tier_update_steps;
+      // On the worker's thread the updates stay short: refactorizations in the background.
+      // Inline (tests, replay) they stay in line: deterministic iterates.
+      d.newton.background_refactorization = m.options_.tier_worker_thread;
       try {
         eq.push_back(std::make_unique<TierEquilibrium>(d));
       } catch (const std::exception& ex) {

@@ -69,6 +69,10 @@ TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
   u_.setZero(solver_->num_dofs());
   f_.setZero(solver_->num_dofs());
   rotation_.assign(slot_node_.size(), Eigen::Matrix3d::Identity());
+  // The first update starts at rest: its tangent is factorized now, on another thread, while
+  // the simulation is set up (the first update waits for it only if it is not done; elastic
+  // bodies: a relaxing one's tangent depends on its step).
+  if (qlv_.empty()) solver_->start_factorization(u_);
 }
 
 TierEquilibrium::~TierEquilibrium() = default;

@@ -5,7 +5,9 @@
 // factorization (NewtonOptions::reuse_factorization) reach full Newton's answer with fewer
 // factorizations than iterations, on one mesh and on a tied pair; the tangent predictor
 // (NewtonOptions::tangent_predictor) starts each increment nearer equilibrium and reaches the
-// same answer in fewer iterations.
+// same answer in fewer iterations; with the refactorizations on another thread
+// (NewtonOptions::background_refactorization, start_factorization) the updates reach the same
+// answer.
 #include "server/fem/equilibrium_solver.hpp"
 
 #include "elastic_forces_checks.hpp"
@@ -362,6 +364,62 @@ TEST(FemEquilibriumSolver, ReusedFactorizationOnATiedPair) {
       return f;
     };
     check_reuse_sequence(def, load, 6, std::string("tied pair ") + tier_name(tier));
+  }
+}
+
+// The worker's loop again, with the refactorizations on another thread
+// (NewtonOptions::background_refactorization) and the first factor made ahead
+// (start_factorization, at rest): each update reaches full Newton's answer. Which iterations
+// take a background factor depends on the threads' timing; what does not: the first solve
+// steps with the factor made ahead (waited for, none of its own), and the first refactorization
+// the contraction asks for is started in the background (a call without the option takes it:
+// some factor was adopted).
+TEST(FemEquilibriumSolver, BackgroundRefactorizationReachesFullNewtonsAnswer) {
+  const Beam b = beam();
+  const MaterialMap mats = MaterialMap::uniform({1.0e6, 0.4, "beam"});
+  auto load = [&](int k) {
+    Eigen::VectorXd f = b.tip_load(4.0 * (1.0 + 0.03 * k));
+    for (int v : b.tip) f[3 * v + 1] = 0.02 * k * f[3 * v + 2];
+    return f;
+  };
+  for (Tier tier : {Tier::kCorotational, Tier::kNonlinear}) {
+    const EquilibriumDefinition def{&b.mesh, mats, tier, b.fixed, {}, {}};
+    const std::string what = std::string("beam ") + tier_name(tier);
+    EquilibriumSolver full(def), background(def);
+    NewtonOptions full_options;
+    full_options.tolerance = 1e-12;
+    NewtonOptions options = full_options;
+    options.reuse_factorization = true;
+    options.background_refactorization = true;
+    ASSERT_TRUE(background.start_factorization(Eigen::VectorXd::Zero(background.num_dofs())));
+    EXPECT_FALSE(background.start_factorization(Eigen::VectorXd::Zero(background.num_dofs())))
+        << "one at a time";
+    const EquilibriumResult first_full = full.solve(load(0), full_options);
+    const EquilibriumResult first = background.solve(load(0), options);
+    ASSERT_FALSE(first.increments.empty());
+    EXPECT_GE(first.increments[0].adopted_factorizations, 1) << what;  // the one made ahead
+    EXPECT_LT(testing::rel_max_diff(first.displacement_m, first_full.displacement_m), 1e-9) << what;
+    Eigen::VectorXd u_full = first_full.displacement_m, u_bg = first.displacement_m;
+    int adopted = 0, own = 0, its = 0;
+    for (int k = 1; k <= 6; ++k) {
+      const Eigen::VectorXd f = load(k);
+      full.solve_from(f, u_full, full_options);
+      const NewtonIncrement inc = background.solve_from(f, u_bg, options);
+      adopted += inc.adopted_factorizations;
+      own += inc.factorizations;
+      its += static_cast<int>(inc.residual_n.size()) - 1;
+      ASSERT_TRUE(u_bg.allFinite()) << what;
+      EXPECT_LT(testing::rel_max_diff(u_bg, u_full), 1e-9) << what << " update " << k;
+    }
+    // In line from here: a factorization still running is waited for and taken.
+    NewtonOptions in_line = options;
+    in_line.background_refactorization = false;
+    const NewtonIncrement last = background.solve_from(load(6), u_bg, in_line);
+    adopted += last.adopted_factorizations;
+    EXPECT_LT(testing::rel_max_diff(u_bg, u_full), 1e-9) << what;
+    std::printf("%s: 6 updates, %d iterations, %d factorizations in line, %d taken from the "
+                "background\n", what.c_str(), its, own, adopted);
+    EXPECT_GE(adopted, 1) << what;
   }
 }
 
