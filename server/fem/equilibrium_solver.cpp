@@ -1,5 +1,6 @@
 #include "server/fem/equilibrium_solver.hpp"
 
+#include "common/process_stats.hpp"
 #include "server/fem/cholmod_threads.hpp"
 #include "server/fem/factor_ordering.hpp"
 
@@ -150,6 +151,7 @@ struct EquilibriumSolver::Impl {
   };
   std::unique_ptr<Pending> pending;  // made on first use
   bool pending_running{false};       // its thread was started and not joined yet
+  bool pending_refused{false};       // no room for a second factor: refactorizations in line
 
   // Scratch.
   Eigen::VectorXd kdc, f_int, rq, f_ext, r_free, delta, trial, step_full, body_u, body_f;
@@ -467,10 +469,17 @@ struct EquilibriumSolver::Impl {
   // that is not positive definite). Returns false, starting nothing, when one is running, the
   // factor is not supernodal, or a body relaxes (its tangent reads the caller's viscous step).
   bool launch(const Eigen::VectorXd& u) {
-    if (pending_running || perm_source.empty() || u.size() != ndof) return false;
+    if (pending_running || pending_refused || perm_source.empty() || u.size() != ndof) return false;
     for (const ElasticForces::Workspace& w : workspaces)
       if (w.viscous != nullptr) return false;
     if (!pending) {
+      // A second factor of the tangent's size: only with room to spare (at most half of what
+      // this process can still get), else the refactorizations stay in line.
+      const double bytes = static_cast<double>(llt.factor()->xsize) * sizeof(double);
+      if (bytes > 0.5 * common::memory_available_bytes()) {
+        pending_refused = true;
+        return false;
+      }
       auto p = std::make_unique<Pending>();
       p->llt.cholmod().print = 0;
       p->llt.adopt_analysis(cholmod_copy_factor(llt.factor(), &p->llt.common()));

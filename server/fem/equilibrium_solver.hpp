@@ -117,7 +117,8 @@ struct NewtonOptions {
   // factorization in line, deterministic iterates). For a worker whose every call must stay
   // short (the NONLINEAR tier's updates: a factorization of the 7 mm brain takes seconds, a
   // chord step tens of milliseconds). The factorization at the last iteration budget
-  // (max_iterations / 2) stays in line. Uses a second factor of the tangent's size. Not with a
+  // (max_iterations / 2) stays in line. Uses a second factor of the tangent's size, made only
+  // when it is at most half of the memory the process can still get (else in line). Not with a
   // relaxing body (set_viscous_step): then in line.
   bool background_refactorization{false};
   // solve only. true: each increment starts from the tangent predictor instead of the converged
