@@ -18,7 +18,9 @@
 // loaded machine the wall time of a preempted step includes another process's time slice), rows
 // and LCPs per step, steps with no force, columns computed in the step, and columns not ready
 // (nodes whose row took the worker's fallback, summed over the steps); the steps without force
-// and their tips to stderr. --smooth-contact: contact_spread 1, smooth normals, the near field.
+// and their tips to stderr. --smooth-contact: contact_spread 1, smooth normals, the near field
+// (the library's defaults); --barycentric-contact: the rows on their triangle's three nodes
+// (contact_spread 0, no smooth normals, no near field: the default before them).
 // Only the Simulation contract.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
@@ -246,6 +248,9 @@ int main(int argc, char** argv) {
   cli->add_flag("--smooth-contact", smooth_contact,
                 "with --brain-contact: SimulationOptions contact_spread 1 (or --contact-spread), "
                 "contact_smooth_normals, contact_near_field");
+  bool barycentric_contact = false;
+  cli->add_flag("--barycentric-contact", barycentric_contact,
+                "with --brain-contact: contact_spread 0, no smooth normals, no near field");
   cli->add_option("--contact-spread", contact_spread,
                   "with --brain-contact: SimulationOptions::contact_spread (default: the library's)");
   if (auto rc = cli.parse(argc, argv)) return *rc;
@@ -255,6 +260,11 @@ int main(int argc, char** argv) {
       contact.contact_spread = 1.0;
       contact.contact_smooth_normals = true;
       contact.contact_near_field = true;
+    }
+    if (barycentric_contact) {
+      contact.contact_spread = 0.0;
+      contact.contact_smooth_normals = false;
+      contact.contact_near_field = false;
     }
     if (contact_spread >= 0.0) contact.contact_spread = contact_spread;
     return brain_contact(steps, contact);

@@ -168,9 +168,12 @@ struct SimulationOptions {
   // centre differ less), and the row's weights change continuously as it slides. 0: barycentric
   // (dimensionless). The spread fades with the cells' size against the tool part's radius R:
   // full where the local edge is R or more, none at R / 2 and less (the cells resolve the part:
-  // the barycentric rows). Measured best: 1 (bench/RESULTS.md, "Contact options: the depth to
-  // the flat surface", "The spread fading on cells finer than the tip").
-  double contact_spread{0.0};
+  // the barycentric rows). On by default (1, the best measured: the bundled brain's 40 mm slide
+  // |F|/depth spread 1.69 at 1 mm and 1.33 at 2 mm with the two options below, against 3.93 /
+  // 3.20 with barycentric rows; bench/RESULTS.md, "Contact options: the depth to the flat
+  // surface", "The near field of a patch wider than the spread", "The spread fading on cells
+  // finer than the tip").
+  double contact_spread{1.0};
   // The tip's face rows from the tip centre projected along the normal field interpolated from
   // the surface nodes' normals (ContactSurface project_along_normals: a smooth contact surface
   // over the flat triangles) instead of the closest point of each flat triangle with edge rows
@@ -179,7 +182,7 @@ struct SimulationOptions {
   // of the flat surface triangles (contact_step.cpp merge_features), not the height along the
   // tilted interpolated normal, which over a convex ridge or a valley is longer (a shallower
   // row). The node rows and the shaft's rows are as without.
-  bool contact_smooth_normals{false};
+  bool contact_smooth_normals{true};
   // With contact_spread: the compliance the mesh cannot show under a tip whose contact patch is
   // smaller than the spread, in series with the tip's rows (Hertz's secant compliance at the
   // tip's depth less the half-space's under the patch spread by the rows' loads,
@@ -188,7 +191,7 @@ struct SimulationOptions {
   // becomes small against the patch: the press on a block graded to 4 / 2 / 1 / 0.5 mm cells,
   // 1 mm deep, 8.3 / 8.8 / 8.4 / 7.4 mN, Sneddon 6.7). On a viscoelastic body it
   // relaxes with the host's kernel, as the mesh's compliance (contact_step.cpp, near_field).
-  bool contact_near_field{false};
+  bool contact_near_field{true};
   int lcp_max_iterations{200};
   double lcp_tolerance{1e-10};  // relative
   // Disk cache of each body's boundary operator (keyed by meshes, materials, fixed nodes and the
