@@ -189,7 +189,7 @@ struct SimulationOptions {
   // contact_step.cpp near_field_of_tool): the force of a tip smaller than the cells approaches
   // the continuum's and converges as they shrink (the term vanishes smoothly as the spread
   // becomes small against the patch: the press on a block graded to 4 / 2 / 1 / 0.5 mm cells,
-  // 1 mm deep, 8.3 / 8.8 / 8.4 / 7.4 mN, Sneddon 6.7). On a viscoelastic body it
+  // 1 mm deep, 8.3 / 8.8 / 8.7 / 7.2 mN, Sneddon 6.7). On a viscoelastic body it
   // relaxes with the host's kernel, as the mesh's compliance (contact_step.cpp, near_field).
   bool contact_near_field{true};
   int lcp_max_iterations{200};
