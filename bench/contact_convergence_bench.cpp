@@ -22,6 +22,13 @@
 // how many exceed 10 %); with --cube also the cube's slide (the ctest's, 40 mm along x across its
 // top face). --contact-spread, --smooth-normals 0|1 and --near-field 0|1 set the SimulationOptions
 // of the same names (the three options: --contact-spread 1 --smooth-normals 1 --near-field 1).
+// --no-shaft: the probe without its shaft (shaft length 0), the tip's own contact: the slide's
+// axis is the touched triangle's normal, and where that turns far from the surface around it (a
+// valley or a steep facet of a finer brain) the shaft leans into the tissue and carries part of
+// |F| (bench/RESULTS.md, "The 4 mm brain's slide: the shaft, the depth and a steep facet").
+// The trace (--slide-trace) also gives gap_depth_mm, r less the distance to the closest point
+// (depth_mm is r less the height along that triangle's normal, which is larger where the closest
+// point is an edge or a vertex).
 #include "patient_models.hpp"
 #include "common/cli.hpp"
 #include "common/clock.hpp"
@@ -77,6 +84,7 @@ int main(int argc, char** argv) {
   double contact_spread = -1.0;
   int smooth_normals = -1, near_field = -1;  // -1: the library's default
   bool cube = false;
+  bool no_shaft = false;
   std::string trace_path;
   std::string element;
   neurosim::cli::Parser p("contact_convergence_bench",
@@ -98,6 +106,7 @@ int main(int argc, char** argv) {
   p->add_flag("--cube", cube,
               "with --slide: also the cube's slide (scenes/cube_cylinder.scene, its tier and probe, "
               "40 mm along x across the top face from (30, 50) mm)");
+  p->add_flag("--no-shaft", no_shaft, "the probe without its shaft (shaft length 0): the tip's own contact");
   p->add_option("--contact-spread", contact_spread,
                 "SimulationOptions::contact_spread (default: the library's)");
   if (auto rc = p.parse(argc, argv)) return *rc;
@@ -108,7 +117,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> mesh_rows;  // cell size, vertices / tets, surface point, build time
   std::vector<std::string> slide_rows;
   FILE* trace = trace_path.empty() ? nullptr : std::fopen(trace_path.c_str(), "w");
-  if (trace) std::fprintf(trace, "cell_mm,slide_depth_mm,y_mm,tip_x_mm,tip_y_mm,tip_z_mm,depth_mm,force_mn,rows\n");
+  if (trace) std::fprintf(trace, "cell_mm,slide_depth_mm,y_mm,tip_x_mm,tip_y_mm,tip_z_mm,depth_mm,force_mn,rows,gap_depth_mm\n");
   if (csv) std::printf("cell_mm,host_vertices,host_tets,surface_z_mm,normal_z,depth_mm,force_mn,rows,build_s\n");
   // The slide (1 and 2 mm deep) along `heading` from `start` (x, y; unit m), 400 steps of 0.1 mm:
   // a row of slide_rows per depth (cell 0: the cube), every step to the trace.
@@ -140,6 +149,8 @@ int main(int argc, char** argv) {
         sim.step(poses, contacts, stats);
         const ni::SurfacePoint near = ni::closest_on_surface(mesh, poses[0].tip_m);
         const double depth = r - near.normal.dot(poses[0].tip_m - near.point_m);
+        const double gap = (poses[0].tip_m - near.point_m).norm();
+        const double gap_depth = r - (near.normal.dot(poses[0].tip_m - near.point_m) < 0.0 ? -gap : gap);
         const double f = contacts[0].force_n.norm();
         if (f_prev >= 0.0 && (poses[0].tip_m - tip_prev).norm() < 2.5e-4 && std::max(f, f_prev) > 0.0) {
           const double rel = std::abs(f - f_prev) / std::max(f, f_prev);
@@ -152,9 +163,9 @@ int main(int argc, char** argv) {
         f_prev = f;
         tip_prev = poses[0].tip_m;
         if (trace)
-          std::fprintf(trace, "%g,%g,%.1f,%.5f,%.5f,%.5f,%.4f,%.4f,%d\n", cell_mm, depth_mm, along_mm,
+          std::fprintf(trace, "%g,%g,%.1f,%.5f,%.5f,%.5f,%.4f,%.4f,%d,%.4f\n", cell_mm, depth_mm, along_mm,
                        1e3 * poses[0].tip_m.x(), 1e3 * poses[0].tip_m.y(), 1e3 * poses[0].tip_m.z(),
-                       1e3 * depth, 1e3 * f, stats.contact_rows);
+                       1e3 * depth, 1e3 * f, stats.contact_rows, 1e3 * gap_depth);
         f_min = std::min(f_min, f);
         if (f / depth < fpd_min) {
           y_at_min = along_mm;
@@ -176,6 +187,7 @@ int main(int argc, char** argv) {
       const fs::path scene = neurosim::bench::scene_at(cells[ci], dir, "contact_convergence_bench");
       neurosim::scene::Model model = neurosim::scene::load_model(scene);
       model.effects.tier = neurosim::scene::Tier::kLinear;
+      if (no_shaft) model.tools.at(0).shaft_length_m = 0.0;
       if (!element.empty()) {
         const auto e = neurosim::fem::parse_element(element);
         if (!e) throw std::runtime_error("--element " + element + ": expected " + neurosim::fem::element_names());
@@ -217,7 +229,8 @@ int main(int argc, char** argv) {
     }
     if (slide && cube) {
       const fs::path scene = fs::path(NEUROSIM_SOURCE_DIR) / "scenes" / "cube_cylinder.scene";
-      const neurosim::scene::Model model = neurosim::scene::load_model(scene);
+      neurosim::scene::Model model = neurosim::scene::load_model(scene);
+      if (no_shaft) model.tools.at(0).shaft_length_m = 0.0;
       ni::SimulationOptions options;
       if (contact_spread >= 0.0) options.contact_spread = contact_spread;
       if (smooth_normals >= 0) options.contact_smooth_normals = smooth_normals != 0;
