@@ -433,8 +433,9 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
   std::vector<int>& list = sc.triangles;
   list.clear();
   sc.parts.clear();
-  // The rest surface, flat rows (the smooth tip's flat_distance reads the whole list).
-  sc.rest_only = sc.moved_m == 0.0 && bs.force_slots.empty() && !m.options_.contact_smooth_normals;
+  // The rest surface (no force on the body): flat rows, and the smooth tip's (its flat_distance
+  // reads the list: reusable_candidates keeps every triangle nearer the tip than its row's height).
+  sc.rest_only = sc.moved_m == 0.0 && bs.force_slots.empty();
   if (sc.rest_only) {
     const double reuse_m = kCandidateReuse * b.surface.mean_edge_m();
     if (!sc.reuse_valid || sc.reuse_tool != pose.tool || sc.reuse_slack_m != slack ||
@@ -516,7 +517,12 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
 // reach and behind widened by reuse_m: a point of the moved part is within reuse_m of the point
 // of this part at the same place along it), with those parts, in the grid's order. Any other
 // triangle gives a moved part no hit and adds no normal to a node's hit, so searching these in
-// the list's order finds the full search's hits. Allocates nothing (reserved).
+// the list's order finds the full search's hits. With SimulationOptions::contact_smooth_normals
+// also (no part: no hit) every triangle whose rest bounding sphere is within the tip's flat bound
+// of the moved tip: flat_distance's minimum, below a tip face row's height (at most the tip's reach,
+// or behind_reach behind the surface), is over these, and a listed triangle not in the full
+// search's list is farther from the tip than that bound (its sphere test, at least the bound, failed),
+// so the minimum is the full list's. Allocates nothing (reserved).
 void State::reusable_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
                                 const Vec3& p1, double slack, double reuse_m, StepCandidates& sc) {
   const BodyModel& b = m.bodies_[body];
@@ -527,6 +533,7 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
   const double margin = m.options_.candidate_margin * shape.tip_radius_m;
   const double behind = b.behind_reach_m;
   const std::vector<Vec3>& normals = b.body->contact_normals();
+  const bool smooth_tip = m.options_.contact_smooth_normals;
   auto& found = sc.triangles;  // scratch (reserved: two queries' worth); the caller refills it
   found.clear();
   const double tip_box = shape.tip_radius_m + slack + w;
@@ -554,7 +561,14 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
         may = slots[k] >= 0 && may_touch_face(x[k], normals[slots[k]], x[k], 0.0, p0, q1, reach, back);
       if (may) parts |= 1 << part;
     }
-    if (parts != 0)
+    bool flat = false;  // within reach of flat_distance (the smooth tip's)
+    if (parts == 0 && smooth_tip) {
+      const double reach = shape.tip_radius_m + margin + w;
+      const double back = std::max(reach, behind + w);
+      flat = norm_at_most((b.surface.centroid(t) - p0).squaredNorm(),
+                          (b.surface.radius_m(t) + back) * (1.0 + 1e-9));
+    }
+    if (parts != 0 || flat)
       sc.reusable.push_back({t, b.surface.query_rank(t), static_cast<std::uint8_t>(parts)});
   }
   std::sort(sc.reusable.begin(), sc.reusable.end(),

@@ -171,8 +171,18 @@ ContactSurface::ContactSurface(const ContactSurfaceDefinition& def) {
   std::vector<int> edges_of(v.size(), 0);
   rest_m_.reserve(triangles_.size());
   normal_.reserve(triangles_.size());
+  spread_area_m2_.reserve(triangles_.size());
+  spread_longest_m_.reserve(triangles_.size());
   for (const auto& t : triangles_) {
     rest_m_.push_back({v[t.node[0]], v[t.node[1]], v[t.node[2]]});
+    {
+      // The spread's per-triangle constants (its area and longest edge, as spread() used to
+      // form them per call: the same expressions, the same values).
+      const auto& x = rest_m_.back();
+      const mesh::Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0];
+      spread_area_m2_.push_back(0.5 * e1.cross(e2).norm());
+      spread_longest_m_.push_back(std::max({e1.norm(), e2.norm(), (x[2] - x[1]).norm()}));
+    }
     const mesh::Vec3 nt = (v[t.node[1]] - v[t.node[0]]).cross(v[t.node[2]] - v[t.node[0]]);
     normal_.push_back(nt.norm() > 0.0 ? mesh::Vec3(nt.normalized()) : mesh::Vec3::Zero());
     for (int k = 0; k < 3; ++k) {
@@ -238,12 +248,18 @@ bool ContactSurface::spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho
   double total = 0.0;
   const double inv_rho2 = 1.0 / (rho_m * rho_m);
   for (int t : scratch) {
-    if ((centroid_[t] - p).norm() > radius_m_[t] + rho_m) continue;
+    // |c - p| > radius + rho, the square root taken only within 1e-9 of the bound (the same
+    // decision as the norm's).
+    {
+      const double d2 = (centroid_[t] - p).squaredNorm(), bound = radius_m_[t] + rho_m;
+      const double lo = bound * (1.0 - 1e-9), hi = bound * (1.0 + 1e-9);
+      if (d2 > hi * hi || (d2 > lo * lo && std::sqrt(d2) > bound)) continue;
+    }
     if (!(normal_[t].dot(n) > 0.0)) continue;
     const auto& x = rest_m_[t];
     const mesh::Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0];
-    const double area = 0.5 * e1.cross(e2).norm();
-    const double longest = std::max({e1.norm(), e2.norm(), (x[2] - x[1]).norm()});
+    const double area = spread_area_m2_[t];
+    const double longest = spread_longest_m_[t];
     const int sub = std::clamp(static_cast<int>(std::ceil(3.0 * longest / rho_m)), 1, 8);
     const double da = area / (sub * sub);
     std::array<double, 3> acc{0.0, 0.0, 0.0};

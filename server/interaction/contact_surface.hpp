@@ -117,6 +117,8 @@ class ContactSurface {
   std::vector<mesh::Vec3> normal_;                      // per triangle: rest unit normal
   std::vector<std::array<double, 3>> node_edge_m_;     // per triangle node: mean incident edge
   std::vector<std::array<mesh::Vec3, 3>> node_normal_;  // per triangle node: rest unit normal
+  std::vector<double> spread_area_m2_;                  // per triangle: rest area (spread)
+  std::vector<double> spread_longest_m_;                // per triangle: longest rest edge (spread)
   PointGrid grid_;
   double max_radius_m_{0.0};
   double mean_edge_m_{0.0};
