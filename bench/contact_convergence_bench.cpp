@@ -29,6 +29,15 @@
 // The trace (--slide-trace) also gives gap_depth_mm, r less the distance to the closest point
 // (depth_mm is r less the height along that triangle's normal, which is larger where the closest
 // point is an edge or a vertex).
+// --slide-path closest: the slide instead (the default, --slide-path normal, is the path
+// above, the ctest's): the same 40 mm line, the tool axis fixed for the whole slide
+// (--slide-axis start-normal, the default: the outward normal of the highest triangle at the
+// slide's start; --slide-axis vertical: +z), and at each sample the tip centre on the line through
+// the sample's highest surface point along that axis, where its distance to the closest point of
+// the rest surface triangles is exactly r - d (the first crossing, scanned outward from r - d in
+// 0.1 mm steps, then false position (Illinois) to 1e-10 m, checked to 1e-9 m; an error if the
+// line has no such point within 30 mm), so the gap depth is d at every sample; |F| / depth then
+// uses that depth.
 #include "patient_models.hpp"
 #include "common/cli.hpp"
 #include "common/clock.hpp"
@@ -87,6 +96,7 @@ int main(int argc, char** argv) {
   bool no_shaft = false;
   std::string trace_path;
   std::string element;
+  std::string slide_path_kind = "normal", slide_axis_kind = "start-normal";
   neurosim::cli::Parser p("contact_convergence_bench",
                           "The same press on the brain at several cell sizes: force convergence.");
   p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
@@ -106,6 +116,17 @@ int main(int argc, char** argv) {
   p->add_flag("--cube", cube,
               "with --slide: also the cube's slide (scenes/cube_cylinder.scene, its tier and probe, "
               "40 mm along x across the top face from (30, 50) mm)");
+  p->add_option("--slide-path", slide_path_kind,
+                "normal: the tip d along the highest triangle's normal, the axis along it (the ctest's "
+                "slide); closest: the axis fixed, the tip where its distance to the closest surface point "
+                "is r - d (the gap depth d at every sample)")
+      ->check(CLI::IsMember({"normal", "closest"}))
+      ->capture_default_str();
+  p->add_option("--slide-axis", slide_axis_kind,
+                "with --slide-path closest: the fixed axis, start-normal (the outward normal of the "
+                "highest triangle at the slide's start) or vertical (+z)")
+      ->check(CLI::IsMember({"start-normal", "vertical"}))
+      ->capture_default_str();
   p->add_flag("--no-shaft", no_shaft, "the probe without its shaft (shaft length 0): the tip's own contact");
   p->add_option("--contact-spread", contact_spread,
                 "SimulationOptions::contact_spread (default: the library's)");
@@ -128,6 +149,59 @@ int main(int argc, char** argv) {
     std::vector<ni::ToolContact> contacts;
     ni::StepStats stats;
     const double s0 = 1e3 * start.dot(heading);
+    const bool closest = slide_path_kind == "closest";
+    Vec3 axis = Vec3::UnitZ();  // the fixed axis of --slide-path closest
+    if (closest && slide_axis_kind == "start-normal") {
+      const auto on = ni::top_of_surface(mesh, start.x(), start.y());
+      if (!on) throw std::runtime_error(where + ": the slide's start misses the surface");
+      axis = on->normal;
+    }
+    if (closest)
+      std::fprintf(stderr, "contact_convergence_bench: %s: slide axis (%.4f, %.4f, %.4f)\n", where.c_str(), axis.x(),
+                   axis.y(), axis.z());
+    // Signed distance from c to the rest surface triangles (negative behind the closest triangle).
+    auto signed_gap = [&](const Vec3& c) {
+      const ni::SurfacePoint near = ni::closest_on_surface(mesh, c);
+      const double g = (c - near.point_m).norm();
+      return near.normal.dot(c - near.point_m) < 0.0 ? -g : g;
+    };
+    // The tip centre on at + t axis (t >= 0) at the signed distance `target` from the surface: the
+    // first crossing, scanned from t = target in 0.1 mm steps (the distance is at most t, since
+    // `at` is on the surface), then false position (Illinois) on the bracket.
+    auto place_at_gap = [&](const Vec3& at, double target, int k) -> Vec3 {
+      auto g = [&](double t) { return signed_gap(at + t * axis) - target; };
+      double lo = 0.0, g_lo = -target, hi = target, g_hi = g(hi);
+      while (g_hi < 0.0) {
+        lo = hi;
+        g_lo = g_hi;
+        hi += 1e-4;
+        if (hi > 0.03)
+          throw std::runtime_error(where + ": --slide-path closest: step " + std::to_string(k) +
+                                   ": no point within 30 mm along the axis at distance r - d from the surface");
+        g_hi = g(hi);
+      }
+      double t = hi, gt = g_hi;
+      int side = 0;
+      for (int it = 0; it < 200 && std::abs(gt) > 1e-10 && hi - lo > 1e-13; ++it) {
+        t = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
+        gt = g(t);
+        if (gt < 0.0) {
+          lo = t;
+          g_lo = gt;
+          if (side == -1) g_hi *= 0.5;
+          side = -1;
+        } else {
+          hi = t;
+          g_hi = gt;
+          if (side == 1) g_lo *= 0.5;
+          side = 1;
+        }
+      }
+      if (!(std::abs(gt) <= 1e-9))
+        throw std::runtime_error(where + ": --slide-path closest: step " + std::to_string(k) +
+                                 ": the distance did not converge to 1e-9 m");
+      return at + t * axis;
+    };
     for (double depth_mm : {1.0, 2.0}) {
       double fpd_min = std::numeric_limits<double>::infinity(), fpd_max = 0.0, f_min = fpd_min;
       int steps = 0;
@@ -144,13 +218,19 @@ int main(int argc, char** argv) {
         const auto on = ni::top_of_surface(mesh, xy.x(), xy.y());
         if (!on) throw std::runtime_error(where + ": the slide leaves the surface at step " + std::to_string(k));
         const Vec3 at = on->point_m, up = on->normal;
-        poses[0].tip_m = at + (r - 1e-3 * depth_mm) * up;
-        poses[0].axis = up;
+        if (closest) {
+          poses[0].tip_m = place_at_gap(at, r - 1e-3 * depth_mm, k);
+          poses[0].axis = axis;
+        } else {
+          poses[0].tip_m = at + (r - 1e-3 * depth_mm) * up;
+          poses[0].axis = up;
+        }
         sim.step(poses, contacts, stats);
         const ni::SurfacePoint near = ni::closest_on_surface(mesh, poses[0].tip_m);
         const double depth = r - near.normal.dot(poses[0].tip_m - near.point_m);
         const double gap = (poses[0].tip_m - near.point_m).norm();
         const double gap_depth = r - (near.normal.dot(poses[0].tip_m - near.point_m) < 0.0 ? -gap : gap);
+        const double per = closest ? gap_depth : depth;  // the depth of |F| / depth
         const double f = contacts[0].force_n.norm();
         if (f_prev >= 0.0 && (poses[0].tip_m - tip_prev).norm() < 2.5e-4 && std::max(f, f_prev) > 0.0) {
           const double rel = std::abs(f - f_prev) / std::max(f, f_prev);
@@ -167,12 +247,12 @@ int main(int argc, char** argv) {
                        1e3 * poses[0].tip_m.x(), 1e3 * poses[0].tip_m.y(), 1e3 * poses[0].tip_m.z(),
                        1e3 * depth, 1e3 * f, stats.contact_rows, 1e3 * gap_depth);
         f_min = std::min(f_min, f);
-        if (f / depth < fpd_min) {
+        if (f / per < fpd_min) {
           y_at_min = along_mm;
-          depth_at_min = depth;
+          depth_at_min = per;
         }
-        fpd_min = std::min(fpd_min, f / depth);
-        fpd_max = std::max(fpd_max, f / depth);
+        fpd_min = std::min(fpd_min, f / per);
+        fpd_max = std::max(fpd_max, f / per);
         ++steps;
       }
       char row[256];
