@@ -258,6 +258,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   }
   tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
   tool_order_.reserve(tool_rows_.capacity());
+  tool_row_centre_.reserve(tool_rows_.capacity());
   spread_triangles_.reserve(triangles);
   for (auto& b : bodies_) {
     b.force_slots.reserve(kSpreadNodes * max_rows);
@@ -793,6 +794,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   const auto& rest = b.body->host().vertices();
   const TierLinearization* lin = tier_ ? &tier_->linearization(body) : nullptr;
   const std::size_t first = tool_rows_.size();
+  tool_row_centre_.clear();  // per row from `first` on
   const bool smooth_tip = m.options_.contact_smooth_normals;
   // One row per feature, from the deformed surface's hits when there are any (else the rest
   // surface's): sorted by feature, then geometry, then triangle.
@@ -931,10 +933,27 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     // other tiers add the offset u0 of the latest equilibrium (tier_equilibrium.hpp).
     r.rest_depth_m = radius - n.dot(h.centre_m - rest_point) + lift + n.dot(offset);
     tool_rows_.push_back(r);
+    tool_row_centre_.push_back(h.centre_m);
   }
-  // The tool pushes the surface it entered: a row behind the surface whose normal turns more
-  // than 60 degrees from the row the centre is least deep under belongs to another side of the
-  // body (a ridge's far flank, the far face of a thin part) and is dropped. The entry is chosen
+  // The tool pushes the surface it entered; a row behind the surface (the part's centre behind
+  // its feature's plane) is kept only if the part can have reached its tissue through that
+  // surface. The entry is the row the centre is least deep under. A behind-row is dropped
+  // (a) when its normal turns more than 60 degrees from the entry's: another side of the body
+  // (a ridge's far flank, the far face of a thin part); or
+  // (b) when the part does not hold its feature point (the point farther than the part's radius
+  // r from the part's centre) and the point lies outside the layer the part has swept from the
+  // entry surface to where it is: more than r in front of the entry's plane (the part crossed
+  // that plane spanning r either side of it, and went on behind it) or more than r below the
+  // part's centre along the entry's normal (deeper than any point of the part). Such a point is
+  // on a surface the part never went through: the tissue behind it is not what the tool pushes.
+  // Seen on the 4 mm brain's slide at 2 mm deep (y 85.4 mm): a shaft face row on the far flank
+  // of the gyrus beside the tip, its normal 44 degrees from the entry's (a shaft row 0.05 mm in
+  // front of the near wall), the tip centre 5.24 mm behind its plane (6.74 mm deep), its point
+  // 3.0 mm in front of the entry's plane: 62.4 of the step's 69.7 mN. A row the part holds
+  // (|p - c| <= r) is a real intersection whatever its side, and a tool pushed deep through the
+  // surface keeps the rows of the surface it entered (their points lie in the layer: behind the
+  // entry's plane, not below the part).
+  // The entry is chosen
   // among the rows the part touches (depth >= 0): a feature the part is clear of (in front by
   // more than its radius) says nothing about where it entered. A centre on the surface (the
   // height zero up to round-off, kOnSurfaceM) is not behind it. Seen on a 5 mm brain: the tip
@@ -954,12 +973,25 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   }
   if (entry == tool_rows_.size()) return;  // nothing touched: no row is behind a surface
   const Vec3 n_entry = tool_rows_[entry].normal;
-  tool_rows_.erase(std::remove_if(tool_rows_.begin() + static_cast<std::ptrdiff_t>(first),
-                                  tool_rows_.end(),
-                                  [&](const Row& r) {
-                                    return r.height_m < -kOnSurfaceM && r.normal.dot(n_entry) < 0.5;
-                                  }),
-                   tool_rows_.end());
+  const Vec3 p_entry = tool_rows_[entry].point_m;
+  std::size_t kept = first;
+  for (std::size_t k = first; k < tool_rows_.size(); ++k) {
+    const Row& r = tool_rows_[k];
+    bool drop = false;
+    if (r.height_m < -kOnSurfaceM) {
+      const Vec3& c = tool_row_centre_[k - first];
+      const double part_r = r.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+      const double front = n_entry.dot(r.point_m - p_entry);  // in front of the entry's plane
+      const double below = n_entry.dot(c - r.point_m);        // below the part's centre
+      const bool held = (r.point_m - c).squaredNorm() <= part_r * part_r;
+      const bool swept = front <= part_r && below <= part_r;
+      drop = r.normal.dot(n_entry) < 0.5 || (!held && !swept);
+    }
+    if (drop) continue;
+    if (kept != k) tool_rows_[kept] = r;
+    ++kept;
+  }
+  tool_rows_.resize(kept);
 }
 
 // Phase "rows" of one tool: per body the candidates, their features, merged; then the deepest

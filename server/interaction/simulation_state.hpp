@@ -329,6 +329,8 @@ class State {
   const StepCandidates* candidates_{nullptr};  // of the body and tool being searched
   std::vector<Row> tool_rows_;     // rows of one tool, before the per-tool limit
   std::vector<int> tool_order_;    // indices of tool_rows_ within the margin, deepest first
+  // Per row of tool_rows_ appended by merge_features: its part's centre, unit m (the entry rule).
+  std::vector<mesh::Vec3> tool_row_centre_;
   std::vector<int> spread_triangles_;  // ContactSurface::spread's candidates (capacity: triangles)
   SpreadLoad spread_load_;             // one row's spread load
   std::vector<Row> rows_;          // the step's contact rows

@@ -4,7 +4,8 @@
 // nodes, centred in a face cell, is stopped; a tip centred on vertices where 3 to 7 triangles
 // meet and on an edge gives one row, and a tip just off them (a face row next to a node row:
 // nearly dependent rows) converges to the same force; a tip centred exactly on a crease of a
-// 5 mm brain feels the tissue as 1 nm beside it.
+// 5 mm brain feels the tissue as 1 nm beside it; a tip pressed into a floor beside a fold is not
+// pushed by the fold's far flank, whose plane it lies behind.
 #include "server/interaction/simulation.hpp"
 #include "server/interaction/surface_probe.hpp"
 #include "server/interaction/contact_surface.hpp"
@@ -483,6 +484,88 @@ TEST(interaction_contact_step, TipCentredOnACreaseFeelsTheTissue) {
   EXPECT_GT(force_n[1], 0.25 * std::min(force_n[0], force_n[2]));
   EXPECT_GT(force_n[0], 0.0);
   EXPECT_GT(force_n[2], 0.0);
+}
+
+}  // namespace
+}  // namespace neurosim::interaction
+
+namespace neurosim::interaction {
+namespace {
+
+// A floor z = 0 (x from -20 to 20 mm, y from 0 to 24 mm, z down to -16 mm, fixed at the bottom)
+// with a fold beside the tool: a steep near flank from (x, z) = (0, 0) to (0.5, 6) mm and a far
+// flank at 45 degrees from (0.5, 6) down to (6.5, 0) mm, its normal (1, 0, 1) / sqrt 2. Kuhn
+// tetrahedra of a grid whose columns follow the profile (the far flank's triangles coplanar).
+scene::Model fold_scene() {
+  const std::vector<double> xs_mm{-20, -16, -12, -9, -6.5, -4.5, -3, -1.5, 0,  0.5,
+                                  1.5, 2.5, 3.5, 4.5, 5.5,  6.5,  9,  12,   16, 20};
+  auto top_mm = [](double x) {
+    if (x <= 0.0 || x >= 6.5) return 0.0;
+    return x <= 0.5 ? 12.0 * x : 6.5 - x;
+  };
+  fem::testing::BoxSpec spec;
+  spec.nx = static_cast<int>(xs_mm.size()) - 1;
+  spec.ny = 8;
+  spec.nz = 4;
+  const mesh::TetMesh grid = fem::testing::box_mesh(spec);  // the unit cube
+  mesh::MeshData data = mesh::to_mesh_data(grid);
+  for (auto& v : data.vertices_m) {
+    const double x = xs_mm[static_cast<std::size_t>(std::lround(v.x() * spec.nx))];
+    v = 1e-3 * Vec3(x, 24.0 * v.y(), -16.0 + v.z() * (16.0 + top_mm(x)));
+  }
+  for (auto& t : data.tets) {
+    const auto& x = data.vertices_m;
+    if (mesh::signed_volume(x[t[0]], x[t[1]], x[t[2]], x[t[3]]) < 0.0) std::swap(t[2], t[3]);
+  }
+  const auto dir = neurosim::testing::temp_dir("contact_fold");
+  const auto file = dir / "fold.mesh";
+  mesh::write_medit(file.string(), data, 1.0);
+  std::ostringstream s;
+  s.precision(17);
+  s << "name: \"contact_fold\"\n"
+    << "meshes { id: \"brain\" file: \"" << file.string() << "\"\n"
+    << "  material { name: \"brain\" youngs_modulus_pa: 3000 poisson_ratio: 0.45 }\n"
+    << "  fixed { half_space { point_m { z: -0.015999 } normal { z: 1 } } }\n"
+    << "  priority: 0 }\n"
+    << "tools { id: \"probe\" tip_radius_m: 0.002 shaft_radius_m: 0.0005 shaft_length_m: 0.05 "
+       "max_speed_m_per_s: 2 }\n"
+    << "effects { tier: LINEAR coupling: false tool_contact: true deformation_output: true }\n";
+  const std::string source = (dir / "contact_fold.scene").string();
+  scene::Model model = scene::compile(scene::parse_scene(s.str(), source), source);
+  std::filesystem::remove_all(dir);
+  return model;
+}
+
+// The 2 mm tip pressed 1.5 mm into the floor 2.2 mm before the fold's near flank (clear of it):
+// its centre (-2.2, y, 0.5) mm lies 5.8 mm behind the far flank's plane, and its projection on
+// that plane, (1.9, y, 4.6) mm, is inside a far-flank triangle whose normal is 45 degrees from
+// the floor's. The tool never went through the far flank: the floor alone pushes it, along +z,
+// as hard as the same press away from the fold. A far-flank row kept (5.8 mm behind, 7.8 mm
+// deep, against the floor's 1.5 mm) pushed the tool along +x. Seen on the 4 mm brain's slide
+// (bench/RESULTS.md, "The 4 mm brain's slide: the shaft, the depth and a steep facet").
+TEST(interaction_contact_step, ToolBesideAFoldIsNotPushedByItsFarFlank) {
+  const scene::Model model = fold_scene();
+  const double y = 0.0105;  // inside a floor cell (cells of 3 mm in y)
+  const double r = model.tools.at(0).tip_radius_m;
+  std::vector<double> fx, fz;
+  for (const double x : {-0.0022, -0.0095}) {  // beside the fold; 9.5 mm from it
+    auto sim = Simulation::build(model);
+    ToolPose pose;
+    pose.tip_m = Vec3(x, y, r - 1.5e-3);
+    pose.axis = Vec3::UnitZ();
+    std::vector<ToolContact> c;
+    StepStats st;
+    sim->step({pose}, c, st);
+    ASSERT_TRUE(st.converged);
+    fx.push_back(c.at(0).force_n.x());
+    fz.push_back(c.at(0).force_n.z());
+    std::printf("x = %.1f mm: F = (%.3f, %.3f, %.3f) mN, %d rows\n", 1e3 * x, 1e3 * fx.back(),
+                1e3 * c.at(0).force_n.y(), 1e3 * fz.back(), st.contact_rows);
+  }
+  EXPECT_GT(fz[0], 0.0);
+  EXPECT_LT(std::abs(fx[0]), 0.1 * fz[0]);  // along the floor's normal
+  EXPECT_LT(fz[0], 1.3 * fz[1]);
+  EXPECT_GT(fz[0], 0.7 * fz[1]);
 }
 
 }  // namespace
