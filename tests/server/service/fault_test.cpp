@@ -117,8 +117,18 @@ TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUna
   // one before (the attacker's flood costs the server some CPU on these 2 cores; a server that
   // stopped serving legit-1 would fall to ~0). No fixed count: how many models a loaded machine
   // delivers in a few seconds is not the attacker's doing.
+  // The spoof's refusal is looked for in every status during the attack: the server keeps the 16
+  // newest refusals for 5 s, so the id flood at the attack's end (or a slow poll afterwards) pushes
+  // legit-1's out of SimStatus.refused.
   bool refusal_seen = false;
-  const double attack_hz = rate_over(20.0, [&] { return attacker.alive(); });
+  const auto note_refusal = [&](const neurosim_SimStatus& s) {
+    for (const auto& r : wire::view(s.refused))
+      if (std::string(r.station_id) == "legit-1" && r.reason == neurosim_REFUSED_IDENTITY) refusal_seen = true;
+  };
+  const double attack_hz = rate_over(20.0, [&] {
+    ses.status.wait_for([&](const neurosim_SimStatus& s) { return note_refusal(s), false; }, 0.05);
+    return attacker.alive();
+  });
   EXPECT_EQ(attacker.wait(10), 0) << attacker.log();
   std::printf("legit-1 models per second: %.0f before the attack, %.0f during it\n", baseline_hz,
               attack_hz);
@@ -128,8 +138,7 @@ TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUna
   // Every cause counted; the idle attacker station reclaimed after the 2 s timeout.
   const bool counted = ses.status.wait_for(
       [&](const neurosim_SimStatus& s) {
-        for (const auto& r : wire::view(s.refused))
-          if (std::string(r.station_id) == "legit-1" && r.reason == neurosim_REFUSED_IDENTITY) refusal_seen = true;
+        note_refusal(s);
         const auto* l = st::find_station(s, "legit-1");
         return s.samples_rejected_nonfinite > 0 && s.samples_rejected_workspace > 0 &&
                s.samples_rejected_time > 0 && s.samples_rejected_sequence > 0 &&
