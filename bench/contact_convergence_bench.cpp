@@ -13,14 +13,15 @@
 // Prints a table (--csv: one line per mesh and depth, then the same differences and orders as
 // CSV). --geometry-iterations sets SimulationOptions::contact_geometry_iterations (1: the rows of
 // the rest surface only), to tell the contact geometry's share from the element's.
-// With --slide, per cell size also the slide of ctest
-// interaction_contact_step.SlideOverTheSurfaceNeverLosesTheTissue: the probe slid 40 mm (y 80 to
+// With --slide, per cell size also a slide: the probe slid 40 mm (y 80 to
 // 120 mm at x 60 mm, 0.1 mm steps) 1 mm and 2 mm below the rest surface (the highest surface point
 // under the tip, along its triangle's normal), |F| / depth with the depth measured to the closest
 // point of the surface triangles: its range and spread (max / min) along the path, and its
 // jumps (the largest relative change of |F| between two steps whose tip moved < 0.25 mm, and
-// how many exceed 10 %); with --cube also the cube's slide (the ctest's, 40 mm along x across its
-// top face). --contact-spread, --smooth-normals 0|1 and --near-field 0|1 set the SimulationOptions
+// how many exceed 10 %); with --cube also the cube's slide (40 mm along x across its top face).
+// That is the default path, --slide-path normal (the former path of ctest
+// interaction_contact_step.SlideOverTheSurfaceNeverLosesTheTissue, kept for comparisons).
+// --contact-spread, --smooth-normals 0|1 and --near-field 0|1 set the SimulationOptions
 // of the same names (the three options: --contact-spread 1 --smooth-normals 1 --near-field 1).
 // --no-shaft: the probe without its shaft (shaft length 0), the tip's own contact: the slide's
 // axis is the touched triangle's normal, and where that turns far from the surface around it (a
@@ -29,15 +30,16 @@
 // The trace (--slide-trace) also gives gap_depth_mm, r less the distance to the closest point
 // (depth_mm is r less the height along that triangle's normal, which is larger where the closest
 // point is an edge or a vertex).
-// --slide-path closest: the slide instead (the default, --slide-path normal, is the path
-// above, the ctest's): the same 40 mm line, the tool axis fixed for the whole slide
+// --slide-path closest: the contact issue's slide instead (the ctest's slide now, with the start
+// normal's axis): the same 40 mm line, the tool axis fixed for the whole slide
 // (--slide-axis start-normal, the default: the outward normal of the highest triangle at the
 // slide's start; --slide-axis vertical: +z), and at each sample the tip centre on the line through
 // the sample's highest surface point along that axis, where its distance to the closest point of
-// the rest surface triangles is exactly r - d (the first crossing, scanned outward from r - d in
-// 0.1 mm steps, then false position (Illinois) to 1e-10 m, checked to 1e-9 m; an error if the
-// line has no such point within 30 mm), so the gap depth is d at every sample; |F| / depth then
-// uses that depth.
+// the rest surface triangles is exactly r - d (surface_probe's at_distance_along: the first
+// crossing, scanned outward from r - d in 0.1 mm steps, then false position (Illinois) to 1e-10 m,
+// checked to 1e-9 m; at d = r the sample's surface point itself; an error if the line has no
+// such point within 30 mm), so the gap depth is d at every sample; |F| / depth then uses that
+// depth.
 #include "patient_models.hpp"
 #include "common/cli.hpp"
 #include "common/clock.hpp"
@@ -117,8 +119,8 @@ int main(int argc, char** argv) {
               "with --slide: also the cube's slide (scenes/cube_cylinder.scene, its tier and probe, "
               "40 mm along x across the top face from (30, 50) mm)");
   p->add_option("--slide-path", slide_path_kind,
-                "normal: the tip d along the highest triangle's normal, the axis along it (the ctest's "
-                "slide); closest: the axis fixed, the tip where its distance to the closest surface point "
+                "normal: the tip d along the highest triangle's normal, the axis along it (the former "
+                "ctest's slide); closest: the axis fixed, the tip where its distance to the closest surface point "
                 "is r - d (the gap depth d at every sample)")
       ->check(CLI::IsMember({"normal", "closest"}))
       ->capture_default_str();
@@ -159,48 +161,14 @@ int main(int argc, char** argv) {
     if (closest)
       std::fprintf(stderr, "contact_convergence_bench: %s: slide axis (%.4f, %.4f, %.4f)\n", where.c_str(), axis.x(),
                    axis.y(), axis.z());
-    // Signed distance from c to the rest surface triangles (negative behind the closest triangle).
-    auto signed_gap = [&](const Vec3& c) {
-      const ni::SurfacePoint near = ni::closest_on_surface(mesh, c);
-      const double g = (c - near.point_m).norm();
-      return near.normal.dot(c - near.point_m) < 0.0 ? -g : g;
-    };
-    // The tip centre on at + t axis (t >= 0) at the signed distance `target` from the surface: the
-    // first crossing, scanned from t = target in 0.1 mm steps (the distance is at most t, since
-    // `at` is on the surface), then false position (Illinois) on the bracket.
+    // The tip centre on at + t axis (t >= 0) at the distance r - d from the surface: the first
+    // crossing (surface_probe's at_distance_along: at d = r the surface point itself).
     auto place_at_gap = [&](const Vec3& at, double target, int k) -> Vec3 {
-      auto g = [&](double t) { return signed_gap(at + t * axis) - target; };
-      double lo = 0.0, g_lo = -target, hi = target, g_hi = g(hi);
-      while (g_hi < 0.0) {
-        lo = hi;
-        g_lo = g_hi;
-        hi += 1e-4;
-        if (hi > 0.03)
-          throw std::runtime_error(where + ": --slide-path closest: step " + std::to_string(k) +
-                                   ": no point within 30 mm along the axis at distance r - d from the surface");
-        g_hi = g(hi);
-      }
-      double t = hi, gt = g_hi;
-      int side = 0;
-      for (int it = 0; it < 200 && std::abs(gt) > 1e-10 && hi - lo > 1e-13; ++it) {
-        t = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
-        gt = g(t);
-        if (gt < 0.0) {
-          lo = t;
-          g_lo = gt;
-          if (side == -1) g_hi *= 0.5;
-          side = -1;
-        } else {
-          hi = t;
-          g_hi = gt;
-          if (side == 1) g_lo *= 0.5;
-          side = 1;
-        }
-      }
-      if (!(std::abs(gt) <= 1e-9))
+      const auto x = ni::at_distance_along(mesh, at, axis, target);
+      if (!x)
         throw std::runtime_error(where + ": --slide-path closest: step " + std::to_string(k) +
-                                 ": the distance did not converge to 1e-9 m");
-      return at + t * axis;
+                                 ": no point within 30 mm along the axis at distance r - d from the surface");
+      return *x;
     };
     for (double depth_mm : {1.0, 2.0}) {
       double fpd_min = std::numeric_limits<double>::infinity(), fpd_max = 0.0, f_min = fpd_min;

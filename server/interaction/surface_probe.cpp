@@ -65,6 +65,49 @@ SurfacePoint closest_on_surface(const mesh::TetMesh& mesh, const mesh::Vec3& x_m
   return out;
 }
 
+std::optional<mesh::Vec3> at_distance_along(const mesh::TetMesh& mesh, const mesh::Vec3& at,
+                                            const mesh::Vec3& axis, double distance_m, double max_m) {
+  if (!at.allFinite() || !axis.allFinite() || !std::isfinite(distance_m) || !std::isfinite(max_m))
+    throw std::invalid_argument("at_distance_along: non-finite input");
+  if (distance_m < 0.0) throw std::invalid_argument("at_distance_along: negative distance");
+  if (std::abs(axis.norm() - 1.0) > 1e-9) throw std::invalid_argument("at_distance_along: axis not unit");
+  check_surface(mesh, "at_distance_along");
+  constexpr double kTolerance = 1e-10, kStep = 1e-4;  // unit m
+  auto g = [&](double t) {
+    const mesh::Vec3 x = at + t * axis;
+    const SurfacePoint near = closest_on_surface(mesh, x);
+    const double gap = (x - near.point_m).norm();
+    return (near.normal.dot(x - near.point_m) < 0.0 ? -gap : gap) - distance_m;
+  };
+  double lo = 0.0, g_lo = -distance_m, hi = distance_m, g_hi = g(hi);
+  while (g_hi < -kTolerance) {
+    lo = hi;
+    g_lo = g_hi;
+    hi += kStep;
+    if (hi > max_m) return std::nullopt;
+    g_hi = g(hi);
+  }
+  double t = hi, gt = g_hi;
+  int side = 0;
+  for (int it = 0; it < 200 && std::abs(gt) > kTolerance && hi - lo > 1e-13; ++it) {
+    t = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
+    gt = g(t);
+    if (gt < 0.0) {
+      lo = t;
+      g_lo = gt;
+      if (side == -1) g_hi *= 0.5;
+      side = -1;
+    } else {
+      hi = t;
+      g_hi = gt;
+      if (side == 1) g_lo *= 0.5;
+      side = 1;
+    }
+  }
+  if (!(std::abs(gt) <= 1e-9)) return std::nullopt;
+  return at + t * axis;
+}
+
 mesh::Vec3 top_of_obstacle(const RigidObstacle& obstacle, double step_m) {
   if (!std::isfinite(step_m) || step_m <= 0.0)
     throw std::invalid_argument("top_of_obstacle: step " + std::to_string(step_m) +

@@ -27,6 +27,19 @@ std::optional<SurfacePoint> top_of_surface(const mesh::TetMesh& mesh, double x_m
 // a non-finite point or a mesh without surface triangles.
 SurfacePoint closest_on_surface(const mesh::TetMesh& mesh, const mesh::Vec3& x_m);
 
+// The first point x = at + t axis (t >= 0) whose signed distance to the surface triangles is
+// distance_m (>= 0): the distance to closest_on_surface's point, negative where x lies behind
+// that triangle's plane. `at` is a point of the surface, so the distance at t is at most t: the
+// search starts at t = distance_m, steps out by 0.1 mm to the first crossing, then refines it by
+// false position (Illinois) to 1e-10 m (a distance within 1e-10 m at t = distance_m is taken as
+// it is: with distance_m = 0 the answer is `at` itself, not the line's exit from the body). The
+// tool placement of the contact slide at a fixed gap depth (tests, bench). None if no such point
+// lies within max_m along the axis. Throws std::invalid_argument on a non-finite input, a
+// negative distance, an axis that is not unit, or a mesh without surface triangles.
+std::optional<mesh::Vec3> at_distance_along(const mesh::TetMesh& mesh, const mesh::Vec3& at,
+                                            const mesh::Vec3& axis, double distance_m,
+                                            double max_m = 0.03);
+
 // Where the vertical line through the centre of the obstacle's bounding box enters it from above
 // (the top of the skull): from 10 mm above the box down in steps of step_m (unit m) to the first
 // point inside (generalized winding number), so within step_m below the surface. Throws

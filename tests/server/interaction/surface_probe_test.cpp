@@ -1,5 +1,6 @@
 // surface_probe: the top of a box's surface on a vertical line and the closest surface point to
-// points above, beside and inside a box (the answers are the box's faces, known exactly); the
+// points above, beside and inside a box (the answers are the box's faces, known exactly), the
+// point at a distance from the box along an axis; the
 // top of a rigid box obstacle, and a ring of two boxes whose centre line misses it.
 #include "server/interaction/surface_probe.hpp"
 
@@ -55,6 +56,32 @@ TEST(interaction_surface_probe, ClosestPointAboveBesideAndInside) {
   EXPECT_LT((p.point_m - Vec3(0.04, 0.03, 0.02)).norm(), 1e-15);
   EXPECT_THROW(closest_on_surface(m, Vec3(0, std::nan(""), 0)), std::invalid_argument);
   EXPECT_THROW(closest_on_surface(mesh::TetMesh{}, Vec3::Zero()), std::invalid_argument);
+}
+
+// The tip placement of the contact slide: from a point of the upper face along a tilted axis
+// (30 degrees from the face's normal) the point 1 mm from the face is t = 1 mm / cos 30 out; along
+// an axis into the box the first point 1 mm from the surface is 1 mm below the bottom face (the
+// line inside the box is behind the surface), none within a shorter reach; distance 0 is the
+// surface point itself, whichever way the axis points.
+TEST(interaction_surface_probe, PointAtADistanceAlongAnAxis) {
+  const mesh::TetMesh m = box();
+  const Vec3 at(0.02, 0.015, 0.02);
+  const Vec3 tilted = Vec3(0.5, 0.0, std::sqrt(0.75));
+  auto x = at_distance_along(m, at, tilted, 1e-3);
+  ASSERT_TRUE(x.has_value());
+  EXPECT_LT((*x - (at + (1e-3 / std::sqrt(0.75)) * tilted)).norm(), 1e-9);
+  const Vec3 down(0.0, 0.0, -1.0);
+  x = at_distance_along(m, at, down, 1e-3);
+  ASSERT_TRUE(x.has_value());
+  EXPECT_LT((*x - Vec3(0.02, 0.015, -0.001)).norm(), 1e-9);
+  EXPECT_FALSE(at_distance_along(m, at, down, 1e-3, 0.01).has_value());
+  for (const Vec3& axis : {tilted, down}) {
+    x = at_distance_along(m, at, axis, 0.0);
+    ASSERT_TRUE(x.has_value());
+    EXPECT_LT((*x - at).norm(), 1e-9);
+  }
+  EXPECT_THROW(at_distance_along(m, at, Vec3(0, 0, 2), 1e-3), std::invalid_argument);
+  EXPECT_THROW(at_distance_along(m, at, down, -1e-3), std::invalid_argument);
 }
 
 // The box's surface triangles as a rigid obstacle.
