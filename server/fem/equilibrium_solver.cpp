@@ -3,6 +3,7 @@
 #include "common/process_stats.hpp"
 #include "server/fem/cholmod_threads.hpp"
 #include "server/fem/factor_ordering.hpp"
+#include "server/fem/static_solver.hpp"
 
 #include <Eigen/Cholesky>
 #include <Eigen/CholmodSupport>
@@ -10,6 +11,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <iomanip>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -70,6 +72,7 @@ void check_options(const std::string& where, const NewtonOptions& o) {
 struct EquilibriumSolver::Impl {
   std::string where;
   FactorOrdering ordering{FactorOrdering::kNodeMetis};  // EquilibriumDefinition::ordering
+  double max_factor_bytes{0.0};                          // EquilibriumDefinition::max_factor_bytes
   std::vector<ElasticForces> bodies;  // host first, then the tied meshes
   // Per body: the evaluation scratch (anp-tet, smoothed-tet), so no evaluation allocates.
   mutable std::vector<ElasticForces::Workspace> workspaces;
@@ -364,7 +367,32 @@ struct EquilibriumSolver::Impl {
       if (llt.info() != Eigen::Success) {
         throw std::runtime_error(where + ": CHOLMOD analysis failed");
       }
+      check_factor_memory();
       build_permuted_pattern();
+    }
+  }
+
+  // The numeric factor's size from the symbolic analysis (supernodal: every supernode's values;
+  // simplicial: nnz(L); the count of StaticSolver and FactorInfo::factor_bytes) against the
+  // limit: FactorTooLarge before anything of it is allocated.
+  void check_factor_memory() {
+    const char* source = "EquilibriumDefinition::max_factor_bytes";
+    const double limit = max_factor_bytes > 0.0 ? max_factor_bytes
+                                                : common::memory_available_bytes(&source);
+    const cholmod_factor* l = llt.factor();
+    const cholmod_common& c = llt.common();
+    const double entries = l->is_super ? static_cast<double>(l->xsize) : c.lnz;
+    const double needed = entries * sizeof(double) + static_cast<double>(l->ssize) * sizeof(int) +
+                          3.0 * static_cast<double>(l->nsuper + 1) * sizeof(int) +
+                          2.0 * static_cast<double>(l->n) * sizeof(int);
+    if (needed > limit) {
+      std::ostringstream msg;
+      msg << where << ": the tangent's factor needs " << std::fixed << std::setprecision(1)
+          << needed / 1048576.0 << " MiB (CHOLMOD's symbolic analysis: " << kff.rows()
+          << " free dofs, nnz(L) " << static_cast<long long>(c.lnz) << "), more than the "
+          << limit / 1048576.0 << " MiB available (" << source << ")"
+          << ": refused before factoring; use a coarser mesh, the LINEAR tier or a machine with more memory";
+      throw FactorTooLarge(msg.str(), needed, limit);
     }
   }
 
@@ -524,8 +552,10 @@ struct EquilibriumSolver::Impl {
     pending_running = false;
     if (!pending->ok || pending->stale) return false;
     llt.swap_factor(pending->llt);
-    std::swap(k_body, pending->k_body);
-    std::swap(kq, pending->kq);
+    k_body.swap(pending->k_body);
+    // SparseMatrix::swap exchanges the arrays; std::swap copied T^T K T three times (Eigen 3.4's
+    // SparseMatrix has no move assignment): a quarter of a 7 mm brain update's time.
+    kq.swap(pending->kq);
     factor_valid = true;
     factor_projected = pending->projected;
     return true;
@@ -863,6 +893,10 @@ EquilibriumSolver::EquilibriumSolver(const EquilibriumDefinition& d) {
   impl_ = std::make_unique<Impl>(d);
   Impl& s = *impl_;
   s.ordering = d.ordering;
+  if (!(d.max_factor_bytes >= 0.0)) {
+    throw std::invalid_argument(s.where + ": max_factor_bytes must be >= 0 (0: the memory available)");
+  }
+  s.max_factor_bytes = d.max_factor_bytes;
   s.bodies.emplace_back(*d.mesh, d.materials, d.tier);
   for (std::size_t k = 0; k < d.tied.size(); ++k) {
     if (!d.tied[k].mesh) {

@@ -59,6 +59,14 @@ struct EquilibriumDefinition {
   // The fill-reducing ordering of the tangent's factor (factor_ordering.hpp): its size and the
   // time of every factorization and solve, never the answer beyond round-off.
   FactorOrdering ordering{FactorOrdering::kNodeMetis};
+  // Memory for the tangent's numeric factor, unit byte, as SolverOptions::max_factor_bytes: its
+  // size is known exactly from the symbolic analysis made at construction, and a larger one is
+  // refused there (FactorTooLarge, static_solver.hpp, with both numbers) instead of the process
+  // being killed by the kernel half-way through the first factorization. 0:
+  // common::memory_available_bytes() at construction (MemAvailable, RLIMIT_AS or the cgroup's
+  // limit, the smallest). The background refactorizations' second factor has its own test
+  // (NewtonOptions::background_refactorization).
+  double max_factor_bytes{0.0};
 };
 
 struct NewtonOptions {

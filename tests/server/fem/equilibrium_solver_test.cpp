@@ -7,7 +7,8 @@
 // (NewtonOptions::tangent_predictor) starts each increment nearer equilibrium and reaches the
 // same answer in fewer iterations; with the refactorizations on another thread
 // (NewtonOptions::background_refactorization, start_factorization) the updates reach the same
-// answer.
+// answer; a tangent factor larger than EquilibriumDefinition::max_factor_bytes is refused at
+// construction.
 #include "server/fem/equilibrium_solver.hpp"
 
 #include "elastic_forces_checks.hpp"
@@ -419,6 +420,36 @@ TEST(FemEquilibriumSolver, BackgroundRefactorizationReachesFullNewtonsAnswer) {
                 "background\n", what.c_str(), its, own, adopted);
     EXPECT_GE(adopted, 1) << what;
   }
+}
+
+// The tangent's factor is refused at construction when it needs more than max_factor_bytes,
+// with its size from the symbolic analysis: the size StaticSolver's factor of the same mesh,
+// supports and ordering has (the same pattern), and the one just enough for it is taken.
+TEST(FemEquilibriumSolver, FactorLargerThanTheMemoryLimitIsRefusedWithTheEstimate) {
+  const mesh::TetMesh m = box_mesh({6, 6, 6, {0, 0, 0}, {0.06, 0.06, 0.06}, 0.0, 1});
+  const auto fixed = nodes_where(m, [](const Eigen::Vector3d& p) { return p.z() < 1e-9; });
+  const MaterialMap mats = MaterialMap::uniform({3000.0, 0.45, "brain"});
+  const double bytes = static_cast<double>(StaticSolver(m, mats, fixed).factor_info().factor_bytes);
+  ASSERT_GT(bytes, 0.0);
+  EquilibriumDefinition d{&m, mats, Tier::kNonlinear, fixed, {}, {}};
+  EXPECT_NO_THROW(EquilibriumSolver{d});  // the default limit: the machine's available memory
+  d.max_factor_bytes = 0.5 * bytes;
+  try {
+    EquilibriumSolver refused(d);
+    FAIL() << "a factor of " << bytes << " bytes was not refused at a limit of half of it";
+  } catch (const FactorTooLarge& e) {
+    EXPECT_DOUBLE_EQ(e.needed_bytes, bytes);
+    EXPECT_DOUBLE_EQ(e.available_bytes, 0.5 * bytes);
+    const std::string what = e.what();
+    EXPECT_NE(what.find("MiB"), std::string::npos) << what;
+    EXPECT_NE(what.find("max_factor_bytes"), std::string::npos) << what;
+  }
+  d.max_factor_bytes = bytes;  // exactly enough: it factorizes and solves
+  EquilibriumSolver enough(d);
+  const Eigen::VectorXd f = Eigen::VectorXd::Constant(enough.num_dofs(), 1e-4);
+  EXPECT_TRUE(enough.solve(f).displacement_m.allFinite());
+  d.max_factor_bytes = -1.0;
+  EXPECT_THROW(EquilibriumSolver{d}, std::invalid_argument);
 }
 
 TEST(FemEquilibriumSolver, RefusesBadInput) {
