@@ -4,8 +4,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace neurosim::interaction {
 
@@ -68,7 +70,24 @@ TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
   }
   u_.setZero(solver_->num_dofs());
   f_.setZero(solver_->num_dofs());
+  trial_.setZero(solver_->num_dofs());
+  u_host_.setZero(3 * static_cast<int>(body_->host().num_vertices()));
+  u_body_.resize(body_->ties().size() + 1);
+  for (std::size_t b = 0; b < u_body_.size(); ++b)
+    u_body_[b].setZero(solver_->body_forces(static_cast<int>(b)).num_dofs());
   rotation_.assign(slot_node_.size(), Eigen::Matrix3d::Identity());
+  compliance_.assign(slot_node_.size(), mesh::Vec3::Zero());
+  // The linearization's compliance columns, as many slots as the budget holds.
+  if (!slot_node_.empty()) {
+    columns_ = std::make_unique<ContactColumns>(*body_);
+    column_capacity_ = def.column_budget_bytes / columns_->bytes_per_slot();
+    if (column_capacity_ == 0) {
+      columns_.reset();
+    } else {
+      last_load_.assign(slot_node_.size(), 0);
+      kept_.reserve(std::min(column_capacity_, slot_node_.size()));
+    }
+  }
   // The first update starts at rest: its tangent is factorized now, on another thread, while
   // the simulation is set up (the first update waits for it only if it is not done; elastic
   // bodies: a relaxing one's tangent depends on its step).
@@ -113,9 +132,10 @@ int TierEquilibrium::inverted_elements() {
   int inverted = 0;
   for (int b = 0; b <= static_cast<int>(body_->ties().size()); ++b) {
     const fem::ElasticForces& forces = solver_->body_forces(b);
-    u_mesh_ = u_.segment(solver_->body_offset(b), forces.num_dofs());
+    Eigen::VectorXd& u_mesh = u_body_[static_cast<std::size_t>(b)];
+    u_mesh = u_.segment(solver_->body_offset(b), forces.num_dofs());
     for (std::size_t t = 0; t < forces.num_tets(); ++t) {
-      const Eigen::Matrix3d h = forces.displacement_gradient(t, u_mesh_);
+      const Eigen::Matrix3d h = forces.displacement_gradient(t, u_mesh);
       if ((Eigen::Matrix3d::Identity() + h).determinant() <= 0.0) ++inverted;
     }
   }
@@ -135,7 +155,6 @@ const fem::QuasiLinearViscoelastic* TierEquilibrium::history(int body) const {
 }
 
 void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
-  const int n_host = 3 * static_cast<int>(body_->host().num_vertices());
   if (load.slots.size() != load.forces_n.size()) {
     throw std::invalid_argument("TierEquilibrium: " + body_name(*body_) + ": " +
                                 std::to_string(load.slots.size()) + " slots, " +
@@ -164,7 +183,7 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   }
   // Newton from the previous equilibrium (one load step: the forces change little between
   // updates); a jump it cannot take goes the incremental load path from rest.
-  Eigen::VectorXd& u = u_host_;  // scratch for the trial
+  Eigen::VectorXd& u = trial_;  // scratch for the trial (u_'s size: no allocation)
   u = u_;
   int iterations = 0;
   bool converged = true;
@@ -201,25 +220,49 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   for (std::size_t b = 0; b < qlv_.size(); ++b) {
     if (!qlv_[b]) continue;
     const fem::ElasticForces& forces = solver_->body_forces(static_cast<int>(b));
-    u_mesh_ = u_.segment(solver_->body_offset(static_cast<int>(b)), forces.num_dofs());
-    qlv_[b]->commit(u_mesh_);
+    u_body_[b] = u_.segment(solver_->body_offset(static_cast<int>(b)), forces.num_dofs());
+    qlv_[b]->commit(u_body_[b]);
   }
   if (!qlv_.empty()) {
     time_s_ = timed_ ? std::max(time_s_, load.time_s) : load.time_s;
     timed_ = true;
   }
 
+  linearize(load, out);
+  out.u_m = u_;
+  out.load = load;
+  out.iterations = iterations;
+  out.converged = converged;
+  out.inverted_elements = inverted_elements();
+  out.count = ++count_;
+}
+
+void TierEquilibrium::linearize(const TierLoad& load, TierLinearization& out) {
+  if (load.slots.size() != load.forces_n.size()) {
+    throw std::invalid_argument("TierEquilibrium::linearize: " + body_name(*body_) + ": " +
+                                std::to_string(load.slots.size()) + " slots, " +
+                                std::to_string(load.forces_n.size()) + " forces");
+  }
+  for (int s : load.slots) {
+    if (s < 0 || s >= num_slots()) {
+      throw std::invalid_argument("TierEquilibrium::linearize: " + body_name(*body_) +
+                                  ": contact slot " + std::to_string(s) + " out of range");
+    }
+  }
   // Rotations at the contact slots, then u0 = u* - R C R^T f* there (C: the linear coupled
-  // compliance, ties included, one coupled solve for the rotated forces).
-  u_host_ = u_.head(n_host);
+  // compliance, ties included): C R^T f* from the loaded slots' columns, or one coupled solve.
+  u_host_ = u_.head(u_host_.size());
   rotations(u_host_);
   rotated_.resize(load.slots.size());
   for (std::size_t k = 0; k < load.slots.size(); ++k)
     rotated_[k] = rotation_[load.slots[k]].transpose() * load.forces_n[k];
   if (load.slots.empty()) {
-    u_lin_.setZero(n_host);
-  } else {
+    std::fill(compliance_.begin(), compliance_.end(), mesh::Vec3::Zero());
+  } else if (!compliance_from_columns(load)) {
     body_->host_displacement(load.slots, rotated_, u_lin_, ws_.get());
+    ++linearization_solves_;
+    for (std::size_t s = 0; s < slot_node_.size(); ++s)
+      compliance_[s] = u_lin_.segment<3>(3 * slot_node_[s]);
   }
   const auto& normals = body_->contact_normals();
   out.offset_m.resize(slot_node_.size());
@@ -227,15 +270,58 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   out.rotation = rotation_;
   for (std::size_t s = 0; s < slot_node_.size(); ++s) {
     const int v = slot_node_[s];
-    out.offset_m[s] = u_host_.segment<3>(3 * v) - rotation_[s] * u_lin_.segment<3>(3 * v);
+    out.offset_m[s] = u_host_.segment<3>(3 * v) - rotation_[s] * compliance_[s];
     out.warped_normal[s] = rotation_[s].transpose() * normals[s];
   }
-  out.u_m = u_;
-  out.load = load;
-  out.iterations = iterations;
-  out.converged = converged;
-  out.inverted_elements = inverted_elements();
-  out.count = ++count_;
+}
+
+bool TierEquilibrium::compliance_from_columns(const TierLoad& load) {
+  if (!columns_) return false;
+  const std::uint64_t now = ++linearizations_;
+  std::size_t distinct = 0;
+  missing_.clear();
+  for (int s : load.slots) {
+    if (last_load_[s] == now) continue;  // a slot twice in the load
+    last_load_[s] = now;
+    ++distinct;
+    if (!columns_->has(s)) missing_.push_back(s);
+  }
+  if (distinct > column_capacity_) return false;
+  if (kept_.size() + missing_.size() > column_capacity_) {
+    // The least recently loaded kept slots make room (never one of this load: there are enough
+    // others, the load's distinct slots being at most the capacity). One thread plays both
+    // sides of the cache's eviction mailbox.
+    const std::size_t need = kept_.size() + missing_.size() - column_capacity_;
+    victims_.clear();
+    for (int s : kept_)
+      if (last_load_[s] != now) victims_.push_back(s);
+    std::sort(victims_.begin(), victims_.end(), [this](int a, int b) {
+      return last_load_[a] != last_load_[b] ? last_load_[a] < last_load_[b] : a < b;
+    });
+    victims_.resize(std::min(need, victims_.size()));
+    for (std::size_t first = 0; first < victims_.size(); first += ContactColumns::kMaxVictims) {
+      const std::size_t n = std::min<std::size_t>(ContactColumns::kMaxVictims, victims_.size() - first);
+      const std::vector<int> part(victims_.begin() + static_cast<std::ptrdiff_t>(first),
+                                  victims_.begin() + static_cast<std::ptrdiff_t>(first + n));
+      columns_->propose_eviction(part);
+      columns_->grant_eviction([this, now](int s) { return last_load_[s] == now; });
+      columns_->reclaim();
+    }
+    kept_.erase(std::remove_if(kept_.begin(), kept_.end(), [this](int s) { return !columns_->has(s); }),
+                kept_.end());
+  }
+  if (!missing_.empty()) {
+    columns_solved_ += static_cast<std::uint64_t>(columns_->ensure(missing_, *ws_));
+    kept_.insert(kept_.end(), missing_.begin(), missing_.end());
+  }
+  std::fill(compliance_.begin(), compliance_.end(), mesh::Vec3::Zero());
+  const int n = num_slots();
+  for (std::size_t k = 0; k < load.slots.size(); ++k) {
+    const int j = load.slots[k];
+    const mesh::Vec3 f = rotated_[k];
+    for (int i = 0; i < n; ++i) compliance_[static_cast<std::size_t>(i)] += columns_->block(i, j) * f;
+  }
+  return true;
 }
 
 }  // namespace neurosim::interaction

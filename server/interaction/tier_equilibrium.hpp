@@ -36,10 +36,12 @@
 #include "server/fem/quasi_linear_viscoelastic.hpp"
 #include "server/fem/material.hpp"
 #include "server/fem/tier.hpp"
+#include "server/interaction/contact_columns.hpp"
 #include "server/interaction/coupled_body.hpp"
 
 #include <Eigen/Core>
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -83,6 +85,13 @@ struct TierEquilibriumDefinition {
   std::vector<int> host_fixed_nodes;  // of the (carved) host
   fem::Tier tier{fem::Tier::kNonlinear};
   fem::NewtonOptions newton{};
+  // The linearization's C R^T f* at the contact slots (u0 = u* - R C R^T f*) is a sum of the
+  // loaded slots' coupled compliance columns at the contact nodes (ContactColumns, the worker's
+  // own: solved once per slot when first loaded, 3 s x 3 doubles per slot for s contact slots),
+  // kept up to this many bytes, the least recently loaded evicted. A load on more slots than
+  // fit, or 0: one coupled solve of the host per update (CoupledBody::host_displacement), as
+  // before. Same answer to round-off (tier_equilibrium_test). Unit byte.
+  std::size_t column_budget_bytes{std::size_t{64} << 20};
 };
 
 class TierEquilibrium {
@@ -105,6 +114,20 @@ class TierEquilibrium {
 
   int num_slots() const { return static_cast<int>(slot_node_.size()); }  // contact slots
 
+  // Phase "linearization" of update() for the equilibrium it holds (u*) under `load` (its forces
+  // f*): per contact slot the rotation R, the warped normal and the offset u0 = u* - R C R^T f*
+  // into `out` (offset_m, warped_normal, rotation; nothing else of it). Allocates nothing once
+  // `out` is sized and the load's slots have their columns (a held tool). Public for the tests.
+  void linearize(const TierLoad& load, TierLinearization& out);
+  // The compliance columns kept for the linearization: at most column_capacity() slots (0: no
+  // columns, every linearization solves), kept now, solved and evicted so far; and the
+  // linearizations made by a coupled solve instead (a load on more slots than the capacity).
+  std::size_t column_capacity() const { return column_capacity_; }
+  std::size_t columns_kept() const { return kept_.size(); }
+  std::uint64_t columns_solved() const { return columns_solved_; }
+  std::uint64_t columns_evicted() const { return columns_ ? columns_->evicted() : 0; }
+  std::uint64_t linearization_solves() const { return linearization_solves_; }
+
   // Some mesh of the body relaxes (viscoelastic terms).
   bool viscoelastic() const { return !qlv_.empty(); }
   // An update for a load at time_s would move the equilibrium although the forces did not: the
@@ -121,8 +144,19 @@ class TierEquilibrium {
   fem::NewtonOptions newton_;
   std::unique_ptr<fem::EquilibriumSolver> solver_;
   std::vector<int> slot_node_;                       // per contact slot: host node
-  Eigen::VectorXd u_, f_, u_host_, u_lin_, u_mesh_;  // warm start and scratch
+  Eigen::VectorXd u_, f_, trial_, u_host_, u_lin_;   // warm start and scratch
+  std::vector<Eigen::VectorXd> u_body_;              // per solver body: its part of u_ (scratch)
   std::vector<mesh::Vec3> rotated_;
+  // The linearization's compliance columns (null: column_budget_bytes too small for one slot).
+  std::unique_ptr<ContactColumns> columns_;
+  std::size_t column_capacity_{0};             // slots
+  std::vector<std::uint64_t> last_load_;       // per contact slot: the linearization that last loaded it
+  std::vector<int> kept_, missing_, victims_;  // slots with columns; scratch
+  std::vector<mesh::Vec3> compliance_;         // per contact slot: C R^T f* at its node, unit m
+  std::uint64_t linearizations_{0}, columns_solved_{0}, linearization_solves_{0};
+  // C R^T f* (rotated_ on the load's slots) at every contact slot into compliance_ from the
+  // columns; false (nothing changed) when the load's slots do not fit in the capacity.
+  bool compliance_from_columns(const TierLoad& load);
   // The worker's own solve scratch: its linearizations lock nothing the step or the fields use.
   std::unique_ptr<fem::SolveWorkspace> ws_ = std::make_unique<fem::SolveWorkspace>();
   std::vector<Eigen::Matrix3d> rotation_;  // per contact slot

@@ -13,12 +13,16 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <string>
 #include <thread>
+#include <vector>
+
+#include "thread_allocation_counter.hpp"
 
 namespace neurosim::interaction {
 namespace {
@@ -252,6 +256,116 @@ TEST(interaction_tier, TierEquilibriumRefusesLinear) {
   d.host_fixed_nodes = sim->fixed_nodes(0);
   d.tier = fem::Tier::kLinear;
   EXPECT_THROW(TierEquilibrium{d}, std::invalid_argument);
+}
+
+// The linearization's C R^T f* from the loaded slots' compliance columns (kept, evicted when
+// over the budget) equals the coupled solve of the host for those forces (budget 0) to 1e-10 of
+// its size, on the tied cube in NONLINEAR with loads that rotate the nodes under them by 1-3
+// degrees (|R - I| 0.03-0.08) and displace them by 1-3 mm, over loads that keep, add, drop, return to and exceed the kept slots;
+// and a held load's linearization allocates nothing.
+TEST(interaction_tier, ColumnLinearizationEqualsTheCoupledSolve) {
+  SceneSpec spec;
+  spec.tier = "NONLINEAR";
+  auto sim = Simulation::build(testing::make_scene(spec));
+  const CoupledBody& body = *sim->body_of(0);
+  ASSERT_FALSE(body.ties().empty());
+  TierEquilibriumDefinition d;
+  d.body = &body;
+  d.host_material = fem::Material{1.0e6, 0.4, "host"};
+  d.host_material.element = fem::kDefaultSceneElement;
+  d.host_fixed_nodes = sim->fixed_nodes(0);
+  d.tier = fem::Tier::kNonlinear;
+  d.newton.tolerance = 1e-12;
+  d.column_budget_bytes = 0;
+  TierEquilibrium solved(d);
+  EXPECT_EQ(solved.column_capacity(), 0u);
+  d.column_budget_bytes = TierEquilibriumDefinition{}.column_budget_bytes;
+  TierEquilibrium kept(d);
+  const std::size_t per_slot = sizeof(double) * 9 * body.contact_nodes().size();
+  d.column_budget_bytes = 6 * per_slot + per_slot / 2;  // six slots
+  TierEquilibrium small(d);
+  ASSERT_EQ(small.column_capacity(), 6u);
+  ASSERT_GE(kept.column_capacity(), 20u);
+
+  // The contact slots nearest the middle of the cube's +x face, nearest first.
+  const auto& nodes = body.contact_nodes();
+  const auto& x = body.host().vertices();
+  std::vector<int> near(nodes.size());
+  for (std::size_t s = 0; s < near.size(); ++s) near[s] = static_cast<int>(s);
+  const Vec3 centre(0.1, 0.05, 0.05);
+  std::sort(near.begin(), near.end(), [&](int a, int b) {
+    return (x[nodes[a]] - centre).norm() < (x[nodes[b]] - centre).norm();
+  });
+  ASSERT_GE(near.size(), 12u);
+  // Each load: slots near[i] for i in `which`, 10 N each inward and some sideways.
+  auto load_on = [&](std::initializer_list<int> which) {
+    TierLoad l;
+    for (int i : which) {
+      const int s = near[static_cast<std::size_t>(i)];
+      l.slots.push_back(s);
+      l.forces_n.push_back(-10.0 * body.contact_normals()[s] + Vec3(0.0, 1.0 * (i % 3), 0.8));
+    }
+    return l;
+  };
+  const std::vector<TierLoad> loads = {
+      load_on({0, 1, 2, 3}),              // four slots
+      load_on({0, 1, 2, 3}),              // held
+      load_on({2, 3, 4, 5}),              // two new
+      load_on({6, 7, 8, 9}),              // four new: the small one evicts the oldest four
+      load_on({0, 1, 2, 3}),              // back where it started
+      load_on({0, 1, 2, 3, 4, 5, 6, 7}),  // more than six slots: the small one solves
+      load_on({1, 2}),
+  };
+  TierLinearization ls, lk, lm;
+  double worst = 0.0;
+  for (std::size_t n = 0; n < loads.size(); ++n) {
+    SCOPED_TRACE("load " + std::to_string(n));
+    solved.update(loads[n], ls);
+    kept.update(loads[n], lk);
+    small.update(loads[n], lm);
+    ASSERT_EQ(ls.u_m.size(), lk.u_m.size());
+    // R C R^T f*'s size: u* - u0 at the slots, and how far the rotations are from I.
+    double scale = 0.0, turn = 0.0;
+    for (std::size_t s = 0; s < ls.offset_m.size(); ++s) {
+      const int v = nodes[s];
+      scale = std::max(scale, (ls.u_m.segment<3>(3 * v) - ls.offset_m[s]).cwiseAbs().maxCoeff());
+      turn = std::max(turn, (ls.rotation[s] - Eigen::Matrix3d::Identity()).norm());
+    }
+    ASSERT_GT(scale, 0.0);
+    std::printf("load %zu: R C R^T f* up to %.3g m, |R - I| up to %.3g\n", n, scale, turn);
+    EXPECT_GT(turn, 2e-2);  // the nodes under the load rotate
+    EXPECT_LE((ls.u_m - lk.u_m).cwiseAbs().maxCoeff(), 1e-14 * ls.u_m.cwiseAbs().maxCoeff());
+    EXPECT_LE((ls.u_m - lm.u_m).cwiseAbs().maxCoeff(), 1e-14 * ls.u_m.cwiseAbs().maxCoeff());
+    for (std::size_t s = 0; s < ls.offset_m.size(); ++s) {
+      const double dk = (ls.offset_m[s] - lk.offset_m[s]).cwiseAbs().maxCoeff();
+      const double dm = (ls.offset_m[s] - lm.offset_m[s]).cwiseAbs().maxCoeff();
+      worst = std::max(worst, std::max(dk, dm) / scale);
+      ASSERT_LE(dk, 1e-10 * scale) << "slot " << s;
+      ASSERT_LE(dm, 1e-10 * scale) << "slot " << s;
+    }
+  }
+  std::printf("largest offset difference, columns vs coupled solve: %.3g of R C R^T f*\n", worst);
+  EXPECT_EQ(solved.linearization_solves(), loads.size());
+  EXPECT_EQ(kept.linearization_solves(), 0u);
+  EXPECT_EQ(kept.columns_solved(), 10u);  // slots 0-9, each once
+  EXPECT_EQ(kept.columns_evicted(), 0u);
+  EXPECT_EQ(small.linearization_solves(), 1u);  // the eight-slot load
+  EXPECT_LE(small.columns_kept(), 6u);
+  EXPECT_GE(small.columns_evicted(), 4u);
+  EXPECT_GT(small.columns_solved(), 10u);  // some of slots 0-3 again after their eviction
+  EXPECT_EQ(small.columns_solved() - small.columns_evicted(), small.columns_kept());
+
+  // A held load's linearization (the last one's) allocates nothing; one on new slots does (their
+  // columns: this shows the counter counts).
+  kept.linearize(loads.back(), lk);
+  long before = neurosim::testing::allocations_on_this_thread();
+  kept.linearize(loads.back(), lk);
+  kept.linearize(loads.back(), lk);
+  EXPECT_EQ(neurosim::testing::allocations_on_this_thread() - before, 0);
+  const TierLoad fresh = load_on({10, 11});
+  before = neurosim::testing::allocations_on_this_thread();
+  kept.linearize(fresh, lk);
+  EXPECT_GT(neurosim::testing::allocations_on_this_thread() - before, 0);
 }
 
 }  // namespace
