@@ -35,6 +35,11 @@
 //   then): the same scene with effects.tier = NONLINEAR, built (from the disk cache) after the
 //   LINEAR simulation was freed; its set-up time and memory on stderr. --nonlinear-seconds 0
 //   skips it (nan).
+// - with --nonlinear-inline N (stderr only): the same NONLINEAR press with the updates inline
+//   (SimulationOptions::tier_worker_thread = false, no column worker: deterministic), one update
+//   per step for N steps: the first's time (it waits for the rest tangent's factor), the
+//   second's, the mean, median and max of the others (StepStats::tier_update_us), and the
+//   contact force after them (to 17 digits: old and new code compared).
 #include "patient_models.hpp"
 #include "common/cli.hpp"
 #include "common/clock.hpp"
@@ -56,6 +61,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
 #include <limits>
 #include <map>
@@ -92,6 +98,7 @@ int main(int argc, char** argv) {
   int field_frames = 60;
   double nonlinear_seconds = 3.0, nonlinear_max_s = 900.0;
   double first_reach_max_s = 120.0;
+  int nonlinear_inline = 0;
   std::string column_solves = "worker";
   neurosim::cli::Parser p("scale_bench", "The brain/artery scene at several cell sizes.");
   p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
@@ -111,6 +118,12 @@ int main(int argc, char** argv) {
                 "wait at most this long for the worker to solve the first pose's reach before the "
                 "timed slide starts anyway (the rows without columns take the fallback and count in "
                 "columns_not_ready), unit s")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  p->add_option("--nonlinear-inline", nonlinear_inline,
+                "NONLINEAR updates inline (SimulationOptions::tier_worker_thread = false, no column "
+                "worker: deterministic), one per step at the slide's first pose: their times on "
+                "stderr (0: not run)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   p->add_flag("--csv", csv, "CSV only (the default adds comments on stderr)");
@@ -303,6 +316,27 @@ int main(int argc, char** argv) {
       } catch (const std::exception& e) {
         nonlinear_error = e.what();  // refused (memory): the row says nan, stderr says why
       }
+      // The same press with the updates inline: each step one update (at most tier_update_steps
+      // Newton steps), its time StepStats::tier_update_us; the first factorizes the rest tangent.
+      std::vector<double> inline_ms;
+      double inline_force_n = std::numeric_limits<double>::quiet_NaN();
+      std::string inline_error;
+      if (nonlinear_inline > 0 && has_first) try {
+        neurosim::scene::Model nl_model = model;
+        nl_model.effects.tier = neurosim::fem::Tier::kNonlinear;
+        ni::SimulationOptions o = options;
+        o.tier_worker_thread = false;
+        o.column_worker = false;
+        fs::create_directories(cache);
+        auto nl = ni::Simulation::build(nl_model, o);
+        for (int k = 0; k < nonlinear_inline; ++k) {
+          nl->step({first_pose}, contacts, stats);
+          if (stats.tier_updated) inline_ms.push_back(1e-3 * stats.tier_update_us);
+        }
+        if (!contacts.empty()) inline_force_n = contacts[0].force_n.norm();
+      } catch (const std::exception& e) {
+        inline_error = e.what();
+      }
       fs::remove_all(cache);
       const auto pc = neurosim::common::percentiles(times);
       std::printf("%g,%zu,%zu,%.2f,%.2f,%.0f,%.1f,%.1f,%.1f,%ld,%.1f,%.2f\n", cell, num_vertices,
@@ -330,6 +364,20 @@ int main(int argc, char** argv) {
                   << " s, pressed " << nonlinear_press_s << " s at the slide's first pose, "
                   << nonlinear_hz << " updates/s, resident " << nonlinear_mb << " MB"
                   << (nonlinear_error.empty() ? "" : "; not measured: " + nonlinear_error) << "\n";
+        if (nonlinear_inline > 0) {
+          std::vector<double> rest(inline_ms.size() > 1 ? inline_ms.begin() + 1 : inline_ms.end(),
+                                   inline_ms.end());
+          double mean = 0.0;
+          for (double t : rest) mean += t / static_cast<double>(rest.size());
+          const auto pr = neurosim::common::percentiles(rest);
+          std::cerr << "scale_bench: cell " << cell << " mm, NONLINEAR inline: " << inline_ms.size()
+                    << " updates in " << nonlinear_inline << " steps, the first "
+                    << (inline_ms.empty() ? 0.0 : inline_ms[0]) << " ms, the second "
+                    << (inline_ms.size() > 1 ? inline_ms[1] : 0.0) << " ms, the rest mean " << mean
+                    << " ms (median " << pr.p50 << ", max " << pr.max << "), contact force "
+                    << std::setprecision(17) << inline_force_n << std::setprecision(6) << " N"
+                    << (inline_error.empty() ? "" : "; stopped: " + inline_error) << "\n";
+        }
         std::cerr << "scale_bench: cell " << cell << " mm, memory (MB): cold start peak " << cold_peak_mb
                   << ", after the cold one freed " << after_cold_mb << ", after the cached start "
                   << after_cached_mb << ", after the first pose's reach " << first_reach_mb
