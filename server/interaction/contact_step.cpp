@@ -259,6 +259,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
   tool_order_.reserve(tool_rows_.capacity());
   tool_row_centre_.reserve(tool_rows_.capacity());
+  tool_row_fallback_.reserve(tool_rows_.capacity());
   spread_triangles_.reserve(triangles);
   for (auto& b : bodies_) {
     b.force_slots.reserve(kSpreadNodes * max_rows);
@@ -721,14 +722,22 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
     TrianglePoint at;
     Vec3 smooth_n;
     double height = 0.0;
-    if (!project_along_normals(p0, x, *smooth_normals, at, smooth_n, height)) return;
-    if (!within(p0 - at.point_m, smooth_n, reach, max_penetration_m)) return;
-    h.key = feature_key(false, TriangleFeature::kFace, 0, static_cast<std::uint64_t>(t));
-    h.at = at;
-    h.centre_m = p0;
-    h.face_normal = smooth_n;
-    hits_.push_back(h);
-    return;
+    if (project_along_normals(p0, x, *smooth_normals, at, smooth_n, height) &&
+        within(p0 - at.point_m, smooth_n, reach, max_penetration_m)) {
+      h.key = feature_key(false, TriangleFeature::kFace, 0, static_cast<std::uint64_t>(t));
+      h.at = at;
+      h.centre_m = p0;
+      h.face_normal = smooth_n;
+      hits_.push_back(h);
+      return;
+    }
+    // No point of the triangle within reach has the centre on its interpolated normal (beside a
+    // steep facet whose node normals turn far from its face normal: on the 4 and 5 mm brains the
+    // tip 1 mm from a 2.9 mm step's top edge, the projection landing on none of the triangles
+    // within reach, and the tip left with one radial node row, 0.2-0.5 of the force around). The
+    // triangle's flat face or edge hit (the closest point, as without smooth normals) stands in;
+    // the merge keeps such rows only where the tip has no projected face row on the body.
+    h.flat_fallback = true;
   }
   // The part's centre for this triangle: the tip centre, or the shaft axis point closest to the
   // triangle (alternating projections between the two convex sets).
@@ -795,6 +804,8 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   const TierLinearization* lin = tier_ ? &tier_->linearization(body) : nullptr;
   const std::size_t first = tool_rows_.size();
   tool_row_centre_.clear();  // per row from `first` on
+  tool_row_fallback_.clear();
+  bool projected_face = false;  // the tip has a projected face row on the body (smooth_tip)
   const bool smooth_tip = m.options_.contact_smooth_normals;
   // One row per feature, from the deformed surface's hits when there are any (else the rest
   // surface's): sorted by feature, then geometry, then triangle.
@@ -921,7 +932,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     // to the flat surface is continuous as the centre moves (the minimum over the triangles of
     // continuous distances), as the projection's point and normal are.
     double lift = 0.0;  // along-normal height less the flat one, unit m
-    if (smooth_tip && f == TriangleFeature::kFace && !h.shaft) {
+    if (smooth_tip && f == TriangleFeature::kFace && !h.shaft && !h.flat_fallback) {
       const double along = r.height_m;
       const double flat =
           flat_distance(m, body, tool, h.centre_m, n, h.at_rest, std::abs(along));
@@ -934,6 +945,22 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     r.rest_depth_m = radius - n.dot(h.centre_m - rest_point) + lift + n.dot(offset);
     tool_rows_.push_back(r);
     tool_row_centre_.push_back(h.centre_m);
+    tool_row_fallback_.push_back(h.flat_fallback ? 1 : 0);
+    if (smooth_tip && f == TriangleFeature::kFace && !h.shaft && !h.flat_fallback) projected_face = true;
+  }
+  // The flat fallback rows only where no triangle holds the tip's projection.
+  if (projected_face) {
+    std::size_t kept = first;
+    for (std::size_t k = first; k < tool_rows_.size(); ++k) {
+      if (tool_row_fallback_[k - first]) continue;
+      if (kept != k) {
+        tool_rows_[kept] = tool_rows_[k];
+        tool_row_centre_[kept - first] = tool_row_centre_[k - first];
+      }
+      ++kept;
+    }
+    tool_rows_.resize(kept);
+    tool_row_centre_.resize(kept - first);
   }
   // The tool pushes the surface it entered; a row behind the surface (the part's centre behind
   // its feature's plane) is kept only if the part can have reached its tissue through that

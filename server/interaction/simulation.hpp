@@ -181,7 +181,10 @@ struct SimulationOptions {
   // entering or leaving with a force). Its depth is the centre's distance to the closest point
   // of the flat surface triangles (contact_step.cpp merge_features), not the height along the
   // tilted interpolated normal, which over a convex ridge or a valley is longer (a shallower
-  // row). The node rows and the shaft's rows are as without.
+  // row). Where no triangle within reach holds the projection (beside a steep facet whose node
+  // normals turn far from its face normal) and the tip has no projected face row on a body, its
+  // flat face and edge rows (closest points, their own heights) stand in. The node rows and the
+  // shaft's rows are as without.
   bool contact_smooth_normals{true};
   // With contact_spread: the compliance the mesh cannot show under a tip whose contact patch is
   // smaller than the spread, in series with the tip's rows (Hertz's secant compliance at the

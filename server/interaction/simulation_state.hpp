@@ -91,6 +91,10 @@ struct FeatureHit {
   int triangle{-1};
   bool shaft{false};
   bool at_rest{false};          // found on the rest surface (else on the deformed one)
+  // SimulationOptions::contact_smooth_normals, the tip: a flat face row of a triangle whose
+  // projection along the interpolated normals fails (contact_step.cpp, part_features), kept only
+  // where the tip has no projected face row on the body.
+  bool flat_fallback{false};
   TrianglePoint at;             // closest point of the deformed triangle, its weights
   Vec3 centre_m{Vec3::Zero()};  // the tool part's centre for this feature
   // The triangle's outward unit normal; a node hit: the sum over the node's reporting triangles.
@@ -331,6 +335,7 @@ class State {
   std::vector<int> tool_order_;    // indices of tool_rows_ within the margin, deepest first
   // Per row of tool_rows_ appended by merge_features: its part's centre, unit m (the entry rule).
   std::vector<mesh::Vec3> tool_row_centre_;
+  std::vector<char> tool_row_fallback_;  // per row from the body's first: a flat fallback row
   std::vector<int> spread_triangles_;  // ContactSurface::spread's candidates (capacity: triangles)
   SpreadLoad spread_load_;             // one row's spread load
   std::vector<Row> rows_;          // the step's contact rows

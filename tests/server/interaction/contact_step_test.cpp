@@ -461,12 +461,20 @@ TEST(interaction_contact_step, SlideWithBarycentricRowsFollowsTheMesh) {
 namespace neurosim::interaction {
 namespace {
 
-// A tip centred exactly on a crease of the surface: on the 5 mm brain (neurosim-model
-// --cell-size 5) at (60, 112.6) mm the 2 mm tip 2 mm deep has its centre on the rest surface,
-// on the edge where the surface under the slide turns 17 degrees; round-off put the rows under
-// it 1e-18 m behind the surface, and the step once dropped them all (0 N there, 61 mN 1 nm to
-// either side). The force there must be of the size of its neighbours'.
-TEST(interaction_contact_step, TipCentredOnACreaseFeelsTheTissue) {
+// Two sharp features of the 5 mm brain (neurosim-model --cell-size 5; one model, built once, for
+// both). A tip centred exactly on a crease of the surface: at (60, 112.6) mm the 2 mm tip 2 mm
+// deep has its centre on the rest surface, on the edge where the surface under the slide turns
+// 17 degrees; round-off put the rows under it 1e-18 m behind the surface, and the step once
+// dropped them all (0 N there, 61 mN 1 nm to either side). The force there must be of the size of
+// its neighbours'. And a tip beside a step's top edge: along the vertical line through (60, y)
+// mm, y 114.6 to 116.0 mm, the tip 1 mm deep to the closest surface point (at_distance_along, the
+// contact slide's placement with a vertical axis); at y 115.1-115.5 mm the line runs up the 2.9 mm
+// step's face, the tip stands beside its top edge, and the smooth tip's projection along the
+// interpolated normals lands on no triangle within reach: with only the radial row of a node
+// 1.5 mm away the force was 1.08-2.36 mN against 6.3-7.5 mN on either side; with the flat rows
+// standing in for a tip without a projected face row 5.61-8.78 mN, 0.86-1.34 of the window's
+// median (6.56 mN; the radial node row alone gave 0.17-0.36 of it): asserted within 0.6-1.5.
+TEST(interaction_contact_step, TipOnACreaseAndBesideAStepFeelsTheTissue) {
   const auto dir = neurosim::testing::temp_dir("contact_crease");
   const std::string cmd = (neurosim::testing::bin_dir() / "neurosim-model").string() +
                           " --cell-size 5 --out-dir " + dir.string() + " > " + (dir / "model.log").string() +
@@ -494,6 +502,29 @@ TEST(interaction_contact_step, TipCentredOnACreaseFeelsTheTissue) {
   EXPECT_GT(force_n[1], 0.25 * std::min(force_n[0], force_n[2]));
   EXPECT_GT(force_n[0], 0.0);
   EXPECT_GT(force_n[2], 0.0);
+  std::vector<double> beside;
+  for (int k = 0; k <= 14; ++k) {
+    const double y = 0.1146 + 1e-4 * k;
+    const auto on = top_of_surface(mesh, 0.060, y);
+    ASSERT_TRUE(on.has_value());
+    const auto tip = at_distance_along(mesh, on->point_m, Vec3::UnitZ(), r - 1e-3);
+    ASSERT_TRUE(tip.has_value());
+    ToolPose pose;
+    pose.tip_m = *tip;
+    pose.axis = Vec3::UnitZ();
+    sim->step({pose}, c, st);
+    ASSERT_TRUE(st.converged);
+    beside.push_back(c.at(0).force_n.norm());
+    std::printf("beside the step, y = %.1f mm: |F| %.2f mN, %d rows\n", 1e3 * y, 1e3 * beside.back(),
+                st.contact_rows);
+  }
+  std::vector<double> sorted = beside;
+  std::sort(sorted.begin(), sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  for (std::size_t k = 0; k < beside.size(); ++k) {
+    EXPECT_GT(beside[k], 0.6 * median) << "y = " << 1146 + static_cast<int>(k) << " x 0.1 mm";
+    EXPECT_LT(beside[k], 1.5 * median) << "y = " << 1146 + static_cast<int>(k) << " x 0.1 mm";
+  }
 }
 
 }  // namespace
