@@ -20,7 +20,8 @@
 // (nodes whose row took the worker's fallback, summed over the steps); the steps without force
 // and their tips to stderr. --smooth-contact: contact_spread 1, smooth normals, the near field
 // (the library's defaults); --barycentric-contact: the rows on their triangle's three nodes
-// (contact_spread 0, no smooth normals, no near field: the default before them).
+// (contact_spread 0, no smooth normals, no near field: the default before them); without
+// --brain-contact it sets the same for every scenario (the step without the contact options).
 // Only the Simulation contract.
 #include "common/cli.hpp"
 #include "common/clock.hpp"
@@ -250,7 +251,7 @@ int main(int argc, char** argv) {
                 "contact_smooth_normals, contact_near_field");
   bool barycentric_contact = false;
   cli->add_flag("--barycentric-contact", barycentric_contact,
-                "with --brain-contact: contact_spread 0, no smooth normals, no near field");
+                "contact_spread 0, no smooth normals, no near field (every scenario)");
   cli->add_option("--contact-spread", contact_spread,
                   "with --brain-contact: SimulationOptions::contact_spread (default: the library's)");
   if (auto rc = cli.parse(argc, argv)) return *rc;
@@ -300,6 +301,11 @@ int main(int argc, char** argv) {
     ni::SimulationOptions options;
     options.max_contact_nodes_per_tool = 20;
     options.cache_full_field_columns = true;
+    if (barycentric_contact) {
+      options.contact_spread = 0.0;
+      options.contact_smooth_normals = false;
+      options.contact_near_field = false;
+    }
     // Cold start (cache empty) and second start (boundary operator read from the disk cache).
     const auto cache_dir = std::filesystem::temp_directory_path() /
                            ("neurosim_interaction_bench_" + std::to_string(::getpid()));
@@ -453,6 +459,11 @@ int main(int argc, char** argv) {
       ni::SimulationOptions sopt;
       sopt.max_contact_nodes_per_tool = 20;
       sopt.sliding_inactive_set = variant == 0;
+      if (barycentric_contact) {
+        sopt.contact_spread = 0.0;
+        sopt.contact_smooth_normals = false;
+        sopt.contact_near_field = false;
+      }
       const auto t0 = Clock::now();
       auto ssim = ni::Simulation::build(model, sopt);
       const double build_s = std::chrono::duration<double>(Clock::now() - t0).count();
