@@ -105,6 +105,30 @@ bool inside_tip(const Vec3& point, const Vec3& tip_centre, const ToolShape& shap
 // many mean surface edges (tip and shaft end): a hand moves the tool by far less per step.
 constexpr double kCandidateReuse = 0.25;
 
+// A row's normal per node as its compliance sees it (m = R^T n in the tiers, n in LINEAR), its
+// fixed or weightless nodes marked (slot -1), and sum_k w_k u0_k (the tiers' offset) in offset;
+// false if the row rests on fixed nodes only (nothing can move).
+bool row_node_normals(Row& r, const TierLinearization* lin, Vec3& offset) {
+  const Vec3 n = r.normal;
+  double mobile = 0.0;
+  for (int k = 0; k < r.nodes; ++k) {
+    if (r.slot[k] < 0 || r.w[k] == 0.0) {
+      r.slot[k] = -1;  // a fixed node (or no weight): carries nothing
+      r.m[k] = n;
+      continue;
+    }
+    mobile += r.w[k];
+    if (lin) {
+      const Mat3& rot = lin->rotation[r.slot[k]];
+      r.m[k] = rot.transpose() * n;
+      offset += r.w[k] * lin->offset_m[r.slot[k]];
+    } else {
+      r.m[k] = n;
+    }
+  }
+  return !(mobile < 1e-6);
+}
+
 bool deeper(const Row& a, const Row& b) {
   if (a.depth_m != b.depth_m) return a.depth_m > b.depth_m;
   if (a.body != b.body) return a.body < b.body;
@@ -884,6 +908,8 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       r.slot[k] = tri.slot[k];
       r.w[k] = h.at.weights[k];
     }
+    // With the spread, the row is spread once the step keeps it (spread_row; 43 % of the rows
+    // merged here are dropped later: behind the surface, beyond the margin, the same constraint).
     if (m.options_.contact_spread > 0.0) {
       const Vec3 surface_n = f == TriangleFeature::kFace ? h.face_normal : normal_sum.normalized();
       // The spread fades where the cells resolve the tool part (radius R): full for a local edge
@@ -895,33 +921,15 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
       const double fade = std::clamp((edge - 0.5 * part_r) / (0.5 * part_r), 0.0, 1.0);
       const double rho = m.options_.contact_spread * edge * fade;
-      if (rho > 0.0 && b.surface.spread(rest_point, surface_n, rho, spread_triangles_, spread_load_)) {
+      if (rho > 0.0) {
+        r.spread_pending = true;
         r.spread_radius_m = rho;
-        r.nodes = spread_load_.nodes;
-        for (int k = 0; k < r.nodes; ++k) {
-          r.slot[k] = spread_load_.slot[k];
-          r.w[k] = spread_load_.weight[k];
-        }
+        r.spread_at_m = rest_point;
+        r.spread_normal = surface_n;
       }
     }
-    double mobile = 0.0;
     Vec3 offset = Vec3::Zero();
-    for (int k = 0; k < r.nodes; ++k) {
-      if (r.slot[k] < 0 || r.w[k] == 0.0) {
-        r.slot[k] = -1;  // a fixed node (or no weight): carries nothing
-        r.m[k] = n;
-        continue;
-      }
-      mobile += r.w[k];
-      if (lin) {
-        const Mat3& rot = lin->rotation[r.slot[k]];
-        r.m[k] = rot.transpose() * n;
-        offset += r.w[k] * lin->offset_m[r.slot[k]];
-      } else {
-        r.m[k] = n;
-      }
-    }
-    if (mobile < 1e-6) continue;  // all on fixed nodes: nothing can move
+    if (!r.spread_pending && !row_node_normals(r, lin, offset)) continue;  // all on fixed nodes
     r.height_m = n.dot(d);
     // SimulationOptions::contact_smooth_normals, a tip face row: the point and the normal are the
     // projection's along the interpolated normals, the height the centre's distance to the
@@ -942,7 +950,8 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     r.depth_m = radius - r.height_m;
     // LINEAR: the LCP's W lambda is the whole displacement, so its depth is the rest one; the
     // other tiers add the offset u0 of the latest equilibrium (tier_equilibrium.hpp).
-    r.rest_depth_m = radius - n.dot(h.centre_m - rest_point) + lift + n.dot(offset);
+    r.rest_depth_m = radius - n.dot(h.centre_m - rest_point) + lift;
+    if (!r.spread_pending) r.rest_depth_m += n.dot(offset);
     tool_rows_.push_back(r);
     tool_row_centre_.push_back(h.centre_m);
     tool_row_fallback_.push_back(h.flat_fallback ? 1 : 0);
@@ -1041,11 +1050,11 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
   tool_order_.clear();
   for (std::size_t k = 0; k < tool_rows_.size(); ++k)
     if (tool_rows_[k].depth_m > -margin) tool_order_.push_back(static_cast<int>(k));
-  const std::size_t keep =
-      std::min<std::size_t>(tool_order_.size(), m.options_.max_contact_nodes_per_tool);
-  std::partial_sort(tool_order_.begin(), tool_order_.begin() + static_cast<std::ptrdiff_t>(keep),
-                    tool_order_.end(),
-                    [&](int a, int b) { return deeper(tool_rows_[a], tool_rows_[b]); });
+  // The kept rows are spread here (spread_row), deepest first, until the limit: a row whose
+  // spread lands on fixed nodes only is left out and the next one taken.
+  const std::size_t limit = static_cast<std::size_t>(m.options_.max_contact_nodes_per_tool);
+  std::sort(tool_order_.begin(), tool_order_.end(),
+            [&](int a, int b) { return deeper(tool_rows_[a], tool_rows_[b]); });
   // Two tools on one feature, or on nearly the same constraint (the same main node, normals within
   // 30 degrees): one row (the same constraint twice would leave only the row compliance between
   // the tools, a stiffness of 1/eps); the deeper tool carries it.
@@ -1055,8 +1064,11 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
       if (r.w[k] > r.w[best]) best = k;
     return r.slot[best];
   };
-  for (std::size_t k = 0; k < keep; ++k) {
-    const Row& r = tool_rows_[tool_order_[k]];
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < tool_order_.size() && kept < limit; ++k) {
+    Row& r = tool_rows_[tool_order_[k]];
+    if (!spread_row(m, r)) continue;
+    ++kept;
     auto same = std::find_if(rows_.begin(), rows_.end(), [&](const Row& o) {
       return o.body == r.body && o.tool != r.tool &&
              (o.key == r.key ||
@@ -1068,6 +1080,30 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
       *same = r;
     }
   }
+}
+
+// Phase "rows", a kept row's spread (SimulationOptions::contact_spread): the unit load spread
+// about its point at rest (ContactSurface::spread; its triangle's nodes if the spread finds none),
+// its nodes' normals, and the tiers' offset along them added to its rest depth. False if the row
+// rests on fixed nodes only. A row without a pending spread is left as it is.
+bool State::spread_row(const Model& m, Row& r) {
+  if (!r.spread_pending) return true;
+  r.spread_pending = false;
+  if (m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal, r.spread_radius_m,
+                                       spread_triangles_, spread_load_)) {
+    r.nodes = spread_load_.nodes;
+    for (int k = 0; k < r.nodes; ++k) {
+      r.slot[k] = spread_load_.slot[k];
+      r.w[k] = spread_load_.weight[k];
+    }
+  } else {
+    r.spread_radius_m = 0.0;
+  }
+  const TierLinearization* lin = tier_ ? &tier_->linearization(r.body) : nullptr;
+  Vec3 offset = Vec3::Zero();
+  if (!row_node_normals(r, lin, offset)) return false;
+  r.rest_depth_m += r.normal.dot(offset);
+  return true;
 }
 
 // SimulationOptions::contact_near_field, per body the tool's tip rows: the compliance the
@@ -1301,18 +1337,19 @@ void State::delassus(const Model& m, int ns) {
   }
   const int nn = static_cast<int>(delassus_nodes_.size());
   for (const auto& [body, slot] : delassus_nodes_) delassus_node_[body][slot] = -1;
-  for (int r = 0; r < nc; ++r) {
-    // y_rj for the nodes of the rows s >= r on the row's body.
-    const Row& a = rows_[r];
-    const auto& acols = *bodies_[a.body].columns;
-    mesh::Vec3* yr = delassus_y_.data() + static_cast<std::size_t>(r) * nn;
-    for (int j = 0; j < nn; ++j) {
-      if (delassus_last_row_[j] < r || delassus_nodes_[j].first != a.body) continue;
-      const int slot_q = delassus_nodes_[j].second;
+  // y_rj for the nodes j of the rows s >= r on the row's body, node by node: the blocks L(., j)
+  // of node j's column stay in cache while every row reads them (row by row, each row read all
+  // the nodes' columns again: a cache miss per block, 24 % of four probes' step).
+  for (int j = 0; j < nn; ++j) {
+    const auto& [body, slot_q] = delassus_nodes_[j];
+    const auto& cols = *bodies_[body].columns;
+    for (int r = 0; r <= delassus_last_row_[j]; ++r) {
+      const Row& a = rows_[r];
+      if (a.body != body) continue;
       Vec3 y = Vec3::Zero();  // sum_p w_p L(slot_p, slot_q)^T m_p
       for (int p = 0; p < a.nodes; ++p)
-        if (a.slot[p] >= 0) y.noalias() += a.w[p] * (acols.block(a.slot[p], slot_q).transpose() * a.m[p]);
-      yr[j] = y;
+        if (a.slot[p] >= 0) y.noalias() += a.w[p] * (cols.block(a.slot[p], slot_q).transpose() * a.m[p]);
+      delassus_y_[static_cast<std::size_t>(r) * nn + j] = y;
     }
   }
   for (int r = 0; r < nc; ++r) {

@@ -76,6 +76,13 @@ struct Row {
   double depth_m{0.0};         // -gap on the deformed surface (current answer), unit m
   double rest_depth_m{0.0};    // -gap with the nodes at rest, unit m
   double spread_radius_m{0.0};  // SimulationOptions::contact_spread: the load's radius, unit m
+  // SimulationOptions::contact_spread: the spread is made only for the rows the step keeps
+  // (contact_step.cpp, spread_row); until then the row holds its triangle's nodes, the point at
+  // rest and the surface normal the load is spread about, and rest_depth_m without the tiers'
+  // offset along the spread nodes.
+  bool spread_pending{false};
+  Vec3 spread_at_m{Vec3::Zero()};
+  Vec3 spread_normal{Vec3::Zero()};
   // SimulationOptions::contact_near_field: the tip's near-field compliance, shared in series by
   // the tip's rows on this body (contact_step.cpp, near_field), unit m/N.
   double near_field_m_per_n{0.0};
@@ -260,6 +267,7 @@ class State {
   double flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
                        bool at_rest, double at_most_m);
   void near_field_of_tool(const Model& m, const ToolShape& shape);
+  bool spread_row(const Model& m, Row& r);
   void near_field(int ns);
   void compliance_columns(StepStats& stats);
   void columns_fallback(StepStats& stats);
