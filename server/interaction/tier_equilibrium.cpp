@@ -154,21 +154,26 @@ const fem::QuasiLinearViscoelastic* TierEquilibrium::history(int body) const {
   return qlv_[static_cast<std::size_t>(body)].get();
 }
 
-void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
+void TierEquilibrium::check_load(const TierLoad& load, const char* who) const {
   if (load.slots.size() != load.forces_n.size()) {
-    throw std::invalid_argument("TierEquilibrium: " + body_name(*body_) + ": " +
+    throw std::invalid_argument(std::string(who) + ": " + body_name(*body_) + ": " +
                                 std::to_string(load.slots.size()) + " slots, " +
                                 std::to_string(load.forces_n.size()) + " forces");
   }
-  f_.setZero();
   for (std::size_t k = 0; k < load.slots.size(); ++k) {
     const int s = load.slots[k];
-    if (s < 0 || s >= static_cast<int>(slot_node_.size()) || !load.forces_n[k].allFinite()) {
-      throw std::invalid_argument("TierEquilibrium: " + body_name(*body_) +
+    if (s < 0 || s >= num_slots() || !load.forces_n[k].allFinite()) {
+      throw std::invalid_argument(std::string(who) + ": " + body_name(*body_) +
                                   ": bad contact load at slot " + std::to_string(s));
     }
-    f_.segment<3>(3 * slot_node_[s]) += load.forces_n[k];
   }
+}
+
+void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
+  check_load(load, "TierEquilibrium");
+  f_.setZero();
+  for (std::size_t k = 0; k < load.slots.size(); ++k)
+    f_.segment<3>(3 * slot_node_[load.slots[k]]) += load.forces_n[k];
   // Relaxing meshes: the step from the last update's time to the load's (0: replaces it).
   if (!qlv_.empty()) {
     if (!std::isfinite(load.time_s)) {
@@ -238,17 +243,7 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
 }
 
 void TierEquilibrium::linearize(const TierLoad& load, TierLinearization& out) {
-  if (load.slots.size() != load.forces_n.size()) {
-    throw std::invalid_argument("TierEquilibrium::linearize: " + body_name(*body_) + ": " +
-                                std::to_string(load.slots.size()) + " slots, " +
-                                std::to_string(load.forces_n.size()) + " forces");
-  }
-  for (int s : load.slots) {
-    if (s < 0 || s >= num_slots()) {
-      throw std::invalid_argument("TierEquilibrium::linearize: " + body_name(*body_) +
-                                  ": contact slot " + std::to_string(s) + " out of range");
-    }
-  }
+  check_load(load, "TierEquilibrium::linearize");
   // Rotations at the contact slots, then u0 = u* - R C R^T f* there (C: the linear coupled
   // compliance, ties included): C R^T f* from the loaded slots' columns, or one coupled solve.
   u_host_ = u_.head(u_host_.size());

@@ -139,6 +139,9 @@ class TierEquilibrium {
   const fem::QuasiLinearViscoelastic* history(int body) const;
 
  private:
+  // The load's slots and forces agree in number, every slot exists and every force is finite;
+  // else std::invalid_argument naming `who` and the body.
+  void check_load(const TierLoad& load, const char* who) const;
   const CoupledBody* body_;
   fem::Tier tier_;
   fem::NewtonOptions newton_;
