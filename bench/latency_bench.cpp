@@ -12,8 +12,16 @@
 //                              --report-every 60
 //                 [--step-modes event,clock]  one server run per step mode, one row each
 //                              (neurosim-server --step-mode; default: event)
+//                 [--contact default,barycentric,...]  one server run per contact configuration,
+//                              one row each: "default" (the library's contact options) or items
+//                              joined by '+': barycentric, spread=X, smooth-normals=on|off,
+//                              near-field=on|off (neurosim-server --barycentric-contact,
+//                              --contact-spread X, --contact-smooth-normals, --contact-near-field),
+//                              e.g. --contact default,barycentric,spread=1+near-field=off
+//                 [--repeat N]  the whole list of runs (modes x contact configurations) N times,
+//                              interleaved, so configurations are compared under the same load
 //
-// CSV: stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load,mode
+// CSV: stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load,mode,contact
 //   samples        ToolStates answered during the measurement (after the warm-up)
 //   lost           ContactModels the server wrote for a station that the station never read
 //                  (gaps in ContactModel.server_step), all stations
@@ -75,6 +83,36 @@ void station_point(int k, int n, double p[3]) {
   p[0] = 0.1;
   p[1] = 0.05 + (n > 1 ? 0.025 * std::cos(a) : 0.0);
   p[2] = 0.05 + (n > 1 ? 0.025 * std::sin(a) : 0.0);
+}
+
+// One --contact configuration: its name (the CSV's contact column) and neurosim-server's switches.
+struct ContactConfig {
+  std::string name;
+  std::vector<std::string> server_args;
+};
+
+// "default" or items joined by '+' (see the header); throws std::invalid_argument naming the item.
+ContactConfig parse_contact(const std::string& text) {
+  ContactConfig c{text, {}};
+  if (text == "default") return c;
+  std::stringstream ss(text);
+  for (std::string item; std::getline(ss, item, '+');) {
+    const auto eq = item.find('=');
+    const std::string key = item.substr(0, eq), value = eq == std::string::npos ? "" : item.substr(eq + 1);
+    if (item == "barycentric") {
+      c.server_args.push_back("--barycentric-contact");
+    } else if (key == "spread" && !value.empty()) {
+      c.server_args.insert(c.server_args.end(), {"--contact-spread", value});
+    } else if ((key == "smooth-normals" || key == "near-field") && (value == "on" || value == "off")) {
+      c.server_args.insert(c.server_args.end(), {"--contact-" + key, value});
+    } else {
+      throw std::invalid_argument("--contact: unknown item '" + item + "' in '" + text +
+                                  "' (default, or barycentric, spread=X, smooth-normals=on|off, "
+                                  "near-field=on|off joined by '+')");
+    }
+  }
+  if (c.server_args.empty()) throw std::invalid_argument("--contact: empty configuration in '" + text + "'");
+  return c;
 }
 
 struct StationResult {
@@ -217,7 +255,26 @@ int main(int argc, char** argv) {
   cli->add_option("--step-modes", modes_text,
                   "comma-separated server step modes to compare side by side (event, clock)")
       ->capture_default_str();
+  std::string contact_text = "default";
+  cli->add_option("--contact", contact_text,
+                  "comma-separated contact configurations to compare side by side: default, or "
+                  "barycentric, spread=X, smooth-normals=on|off, near-field=on|off joined by '+' "
+                  "(neurosim-server's contact switches; the server refuses contradictions)")
+      ->capture_default_str();
+  int repeat = 1;
+  cli->add_option("--repeat", repeat, "run the whole list of configurations this many times, interleaved")
+      ->check(neurosim::cli::in_range(1, 100))
+      ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;
+  std::vector<ContactConfig> contacts;
+  try {
+    std::stringstream ss(contact_text);
+    for (std::string c; std::getline(ss, c, ',');) contacts.push_back(parse_contact(c));
+    if (contacts.empty()) throw std::invalid_argument("--contact: no configuration given");
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "latency_bench: " << e.what() << "\n";
+    return 2;
+  }
   std::vector<std::string> modes;
   {
     std::stringstream ss(modes_text);
@@ -238,8 +295,18 @@ int main(int argc, char** argv) {
   // Loopback only (docs/ARCHITECTURE.md "DDS"): the bench sets it for itself and the server when unset.
   setenv("CYCLONEDDS_URI", NEUROSIM_LOOPBACK_URI, 0);
   int rc = 0;
-  if (o.csv) std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load,mode\n");
-  for (const std::string& mode : modes) {
+  if (o.csv) std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load,mode,contact\n");
+  struct Run {
+    std::string mode;
+    const ContactConfig* contact;
+  };
+  std::vector<Run> runs;
+  for (int k = 0; k < repeat; ++k)
+    for (const std::string& m : modes)
+      for (const ContactConfig& c : contacts) runs.push_back({m, &c});
+  for (const Run& run : runs) {
+  const std::string& mode = run.mode;
+  const ContactConfig& contact = *run.contact;
   std::random_device rd;
   const int domain = 20 + static_cast<int>(rd() % 200);
   const fs::path log = fs::temp_directory_path() / ("latency_bench_server_" + std::to_string(getpid()) + ".log");
@@ -248,6 +315,7 @@ int main(int argc, char** argv) {
   const double server_duration = o.startup_timeout_s + o.warmup_s + o.seconds + 30;
   std::vector<std::string> args{o.server.string(), "--scene", o.scene.string(), "--domain", std::to_string(domain),
                                 "--duration", std::to_string(server_duration), "--server-id", "latency_bench", "--step-mode", mode};
+  args.insert(args.end(), contact.server_args.begin(), contact.server_args.end());
   std::vector<char*> av;
   for (auto& a : args) av.push_back(a.data());
   av.push_back(nullptr);
@@ -396,11 +464,12 @@ int main(int argc, char** argv) {
     const neurosim::common::Percentiles pc = neurosim::common::percentiles(all);
     const double mx = pc.max, p50 = pc.p50, p99 = pc.p99;
     if (o.csv) {
-      std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f,%d,%s\n", o.stations, samples, p50, p99, mx,
-                  static_cast<unsigned long long>(lost), cpu_pct, load, mode.c_str());
+      std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f,%d,%s,%s\n", o.stations, samples, p50, p99, mx,
+                  static_cast<unsigned long long>(lost), cpu_pct, load, mode.c_str(), contact.name.c_str());
     } else {
-      std::printf("latency_bench: %d station(s), %.1f s on %s (server %s, DDS domain %d), %d busy threads, step mode %s\n",
-                  o.stations, o.seconds, o.scene.c_str(), o.server.c_str(), domain, load, mode.c_str());
+      std::printf("latency_bench: %d station(s), %.1f s on %s (server %s, DDS domain %d), %d busy threads, step mode %s, contact %s\n",
+                  o.stations, o.seconds, o.scene.c_str(), o.server.c_str(), domain, load, mode.c_str(),
+                  contact.name.c_str());
       std::printf("  ToolStates sent %llu, answered %zu; latency p50 %.1f us, p99 %.1f us, max %.1f us\n",
                   static_cast<unsigned long long>(sent), samples, p50, p99, mx);
       std::printf("  ContactModels lost %llu; server CPU %.1f %% of one core\n", static_cast<unsigned long long>(lost),

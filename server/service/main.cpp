@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
     neurosim::interaction::SimulationOptions options;
     options.column_worker = true;
     options.compliance_cache_dir = server.cache_dir;
+    server.contact.apply(options);  // --barycentric-contact, --contact-spread, ... (validated)
     return neurosim::interaction::Simulation::build(model, options);
   });
 }

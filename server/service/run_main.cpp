@@ -162,10 +162,29 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
   p->add_option("--rt-cpus", rt_cpus,
                 "CPU sets, ROLE=CPUS,... (CPUS: numbers and ranges joined by '+', e.g. "
                 "step=1,dds=0,field=0-1; default: any CPU)");
+  p->add_flag_function(
+      "--barycentric-contact", [&](std::int64_t) { opt.contact.barycentric = true; },
+      "contact rows without the spread: contact spread 0, no smooth normals, no near field "
+      "(as interaction_bench --barycentric-contact); default: the library's contact options");
+  p->add_option_function<double>(
+       "--contact-spread", [&](const double& v) { opt.contact.spread = v; },
+       "SimulationOptions::contact_spread, [0, 4] (0 needs --contact-near-field off); default: "
+       "the library's")
+      ->check(CLI::Range(0.0, 4.0));
+  p->add_option_function<std::string>(
+       "--contact-smooth-normals", [&](const std::string& v) { opt.contact.smooth_normals = v == "on"; },
+       "SimulationOptions::contact_smooth_normals, on|off; default: the library's")
+      ->check(CLI::IsMember({"on", "off"}));
+  p->add_option_function<std::string>(
+       "--contact-near-field", [&](const std::string& v) { opt.contact.near_field = v == "on"; },
+       "SimulationOptions::contact_near_field, on|off (on needs a contact spread > 0); default: "
+       "the library's")
+      ->check(CLI::IsMember({"on", "off"}));
   p->footer("CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs).");
   if (auto rc = p.parse(argc, argv)) return *rc;
   opt.step_mode = step_mode == "clock" ? StepMode::kClock : StepMode::kEvent;
   try {
+    opt.contact.validate();
     common::apply_priorities(opt.threads, rt_priority, "--rt-priority");
     common::apply_cpus(opt.threads, rt_cpus, "--rt-cpus");
   } catch (const std::invalid_argument& e) {
@@ -234,6 +253,7 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
       model.effects.tier = *fem::parse_tier(tier_text);  // validated by the option's check
       opt.tier_source = "--tier";
     }
+    std::cerr << "neurosim-server: contact options: " << opt.contact.describe() << "\n";
     std::cerr << "neurosim-server: tier " << scene::tier_name(model.effects.tier);
     if (tier_text.empty())
       std::cerr << " (from the scene's effects.tier)\n";

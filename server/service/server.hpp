@@ -19,6 +19,7 @@
 
 #include "common/thread_sched.hpp"
 #include "server/interaction/simulation.hpp"
+#include "server/service/contact_switches.hpp"
 #include "server/service/tool_filter.hpp"
 #include "server/model/model.hpp"
 #include "server/service/step_loop.hpp"
@@ -53,6 +54,10 @@ struct ServerOptions {
   // (SimulationOptions::compliance_cache_dir; a second start of the same scene reads them
   // instead of factoring); empty: none.
   std::string cache_dir{};
+  // --barycentric-contact, --contact-spread, --contact-smooth-normals, --contact-near-field:
+  // the live physics' contact options (the factory applies them to its SimulationOptions);
+  // unset: the library's defaults.
+  ContactSwitches contact{};
   std::string accuracy_table{};
   // The host meshes' measured discretization error against the converged answer
   // (DiscretizationTable, written by accuracy_bench); empty: none (SimStatus
