@@ -26,6 +26,9 @@
 //   lost           ContactModels the server wrote for a station that the station never read
 //                  (gaps in ContactModel.server_step), all stations
 //   server_cpu_pct server process CPU time / wall time over the measurement, % of one core
+//   contact        the --contact configuration
+//   step_p50_us, step_p99_us  the server's own step time (step thread, the step and its
+//                  ContactModel writes) over its last SimStatus period; -1: no SimStatus read
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "common/process_stats.hpp"
@@ -295,7 +298,7 @@ int main(int argc, char** argv) {
   // Loopback only (docs/ARCHITECTURE.md "DDS"): the bench sets it for itself and the server when unset.
   setenv("CYCLONEDDS_URI", NEUROSIM_LOOPBACK_URI, 0);
   int rc = 0;
-  if (o.csv) std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load,mode,contact\n");
+  if (o.csv) std::printf("stations,samples,p50_us,p99_us,max_us,lost,server_cpu_pct,load,mode,contact,step_p50_us,step_p99_us\n");
   struct Run {
     std::string mode;
     const ContactConfig* contact;
@@ -398,6 +401,7 @@ int main(int argc, char** argv) {
     };
     std::vector<Interval> intervals;
     char last_status[256] = "no SimStatus";
+    double step_p50_us = -1, step_p99_us = -1;
     if (report_every_s > 0) {
       const auto every_ns = static_cast<std::int64_t>(report_every_s * 1e9);
       for (std::int64_t t = from + every_ns; t <= to; t += every_ns) {
@@ -406,6 +410,8 @@ int main(int argc, char** argv) {
         for (const auto& rx : status.take())
           if (rx.valid()) {
             p99_step = rx.data.step_time_p99_us;
+            step_p50_us = rx.data.step_time_p50_us;
+            step_p99_us = rx.data.step_time_p99_us;
             std::snprintf(last_status, sizeof last_status,
                           "step p50 %.1f us, p99 %.1f us, max %.1f us, %llu deadline misses",
                           rx.data.step_time_p50_us, rx.data.step_time_p99_us, rx.data.step_time_max_us,
@@ -424,6 +430,8 @@ int main(int argc, char** argv) {
                     st->step_time_p50_us, st->step_time_p99_us, st->step_time_max_us,
                     static_cast<unsigned long long>(st->deadline_misses));
       step_text = buf;
+      step_p50_us = st->step_time_p50_us;
+      step_p99_us = st->step_time_p99_us;
     }
     std::size_t frames = 0;
     if (viewer) frames = viewer->take().size();
@@ -464,8 +472,9 @@ int main(int argc, char** argv) {
     const neurosim::common::Percentiles pc = neurosim::common::percentiles(all);
     const double mx = pc.max, p50 = pc.p50, p99 = pc.p99;
     if (o.csv) {
-      std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f,%d,%s,%s\n", o.stations, samples, p50, p99, mx,
-                  static_cast<unsigned long long>(lost), cpu_pct, load, mode.c_str(), contact.name.c_str());
+      std::printf("%d,%zu,%.1f,%.1f,%.1f,%llu,%.1f,%d,%s,%s,%.1f,%.1f\n", o.stations, samples, p50, p99, mx,
+                  static_cast<unsigned long long>(lost), cpu_pct, load, mode.c_str(), contact.name.c_str(),
+                  step_p50_us, step_p99_us);
     } else {
       std::printf("latency_bench: %d station(s), %.1f s on %s (server %s, DDS domain %d), %d busy threads, step mode %s, contact %s\n",
                   o.stations, o.seconds, o.scene.c_str(), o.server.c_str(), domain, load, mode.c_str(),
