@@ -146,6 +146,11 @@ class SimulationImpl final : public Simulation {
   double tier_update_rate_hz() const override {
     return state_->tier_ ? state_->tier_->rate_hz() : 0.0;
   }
+  TierUpdateTotals tier_update_totals() const override {
+    if (!state_->tier_) return {};
+    const TierWorker::Totals t = state_->tier_->totals();
+    return {t.updates, t.busy_s};
+  }
   std::uint64_t tier_update_failures() const override {
     return state_->tier_ ? state_->tier_->failures() : 0;
   }

@@ -451,6 +451,14 @@ class Simulation {
   // contact compliance is warped by) completed per second over the last second, unit Hz; 0 for
   // LINEAR (nothing to update). Any thread.
   virtual double tier_update_rate_hz() const { return 0.0; }
+  // COROTATIONAL and NONLINEAR: every equilibrium update since build and their summed time, unit
+  // s (TierWorker::totals; a mean rate over any span of updates, e.g. a bench's whole press);
+  // {0, 0} for LINEAR. Any thread.
+  struct TierUpdateTotals {
+    std::uint64_t updates{0};
+    double busy_s{0.0};
+  };
+  virtual TierUpdateTotals tier_update_totals() const { return {}; }
   // Equilibrium updates that failed since build (Newton did not converge, a malformed load): the
   // previous equilibrium stays; and the last failure's message (empty: none). Any thread.
   virtual std::uint64_t tier_update_failures() const { return 0; }

@@ -167,7 +167,13 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
     }
   }
   // Rate: 1 / mean update time over this window's updates (a window lasts a second).
-  window_busy_s_ += common::seconds_since(t0);
+  const double busy_s = common::seconds_since(t0);
+  {
+    std::lock_guard<std::mutex> lock(totals_mutex_);
+    ++totals_.updates;
+    totals_.busy_s += busy_s;
+  }
+  window_busy_s_ += busy_s;
   ++window_updates_;
   if (window_busy_s_ > 0.0)
     rate_hz_.store(window_updates_ / window_busy_s_, std::memory_order_relaxed);
@@ -178,6 +184,11 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
     window_updates_ = 0;
   }
   return true;
+}
+
+TierWorker::Totals TierWorker::totals() const {
+  std::lock_guard<std::mutex> lock(totals_mutex_);
+  return totals_;
 }
 
 bool TierWorker::post(const std::vector<TierLoad>& loads) {

@@ -59,6 +59,14 @@ class TierWorker {
   // point, needs none), unit Hz; 0 before the first.
   // Any thread.
   double rate_hz() const { return rate_hz_.load(std::memory_order_relaxed); }
+  // Every update so far (all bodies each) and their summed time, unit s, read as one pair: the
+  // mean rate over any span of updates is the difference of the counts over that of the times
+  // (a bench's press: its every update, not the last second's few). Any thread.
+  struct Totals {
+    std::uint64_t updates{0};
+    double busy_s{0.0};
+  };
+  Totals totals() const;
   // Updates that did not converge (the previous equilibrium stays) and the last message.
   std::uint64_t failures() const { return failures_.load(std::memory_order_relaxed); }
   std::string last_error() const;
@@ -82,6 +90,8 @@ class TierWorker {
   std::atomic<double> rate_hz_{0.0};
   std::atomic<std::uint64_t> failures_{0};
   mutable std::mutex error_mutex_;
+  mutable std::mutex totals_mutex_;
+  Totals totals_;
   std::string last_error_;
   double window_start_s_{0.0}, window_busy_s_{0.0};
   int window_updates_{0};
