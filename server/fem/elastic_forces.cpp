@@ -153,21 +153,27 @@ void ElasticForces::internal_force(const Eigen::VectorXd& u_m, Eigen::VectorXd& 
     }
   }
   for (std::size_t e = 0; e < tets_.size(); ++e) {
-    const Eigen::Matrix3d f = displacement_gradient(e, u_m);
     LawEvaluation eval;
     Eigen::Matrix3d p;
     if (smoothed_) {
-      // smoothed-tet: the element carries only its average nodal pressure.
+      // smoothed-tet: the element carries only its average nodal pressure (its gradient only
+      // for the report: nodal_state took what the pressure needs).
       p = ws.pressure_pa[e] * ws.element[e].gradient;
-    } else {
-      p = first_piola(tier_, laws_[law_index_[e]], f, &eval);
-      // anp-tet: the deviatoric stress plus the element's average nodal pressure.
-      if (nodal_) p += ws.pressure_pa[e] * ws.element[e].gradient;
-      // A relaxing step (linear-tet): gamma P + F S_h.
-      if (ws.viscous) {
-        p = ws.viscous->gamma * p +
-            (Eigen::Matrix3d::Identity() + f) * ws.viscous->history_stress_pa[e];
-      }
+      if (report) note(report, displacement_gradient(e, u_m), eval);
+      const double v = volume_m3_[e];
+      const auto& t = tets_[e];
+      for (int a = 0; a < 4; ++a)
+        f_n.segment<3>(3 * t[a]).noalias() += v * (p * gradients_[e].row(a).transpose());
+      continue;
+    }
+    const Eigen::Matrix3d f = displacement_gradient(e, u_m);
+    p = first_piola(tier_, laws_[law_index_[e]], f, &eval);
+    // anp-tet: the deviatoric stress plus the element's average nodal pressure.
+    if (nodal_) p += ws.pressure_pa[e] * ws.element[e].gradient;
+    // A relaxing step (linear-tet): gamma P + F S_h.
+    if (ws.viscous) {
+      p = ws.viscous->gamma * p +
+          (Eigen::Matrix3d::Identity() + f) * ws.viscous->history_stress_pa[e];
     }
     note(report, f, eval);
     const auto& t = tets_[e];

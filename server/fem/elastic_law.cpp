@@ -138,15 +138,36 @@ double nh_energy(const LawConstants& c, const Mat3& h) {
   const double i1bar_m3 = 3.0 * am1 + (1.0 + am1) * i1m3;
   return c.c10_pa * i1bar_m3 + jm1 * jm1 / c.d1_per_pa;
 }
+// Cofactor matrix cof F = det(F) F^-T, a polynomial of F (defined for singular and inverted F).
+Mat3 cofactor(const Mat3& f) {
+  Mat3 c;
+  c.col(0) = f.col(1).cross(f.col(2));
+  c.col(1) = f.col(2).cross(f.col(0));
+  c.col(2) = f.col(0).cross(f.col(1));
+  return c;
+}
+
+// J^-2/3 (J = 1 + jm1) as std::pow(J, -2.0 / 3.0) to a few ulp. Near J = 1 (|J - 1| <= 0.1: every element of
+// tissue under a tool) by the series 1 - x/3 + 2 x^2/9 of J^-1/3 (x = J - 1, error < 2e-4) and
+// three Newton steps y <- y (4 - J y^3) / 3 on y^-3 = J (quadratic: < 1e-16), squared: the
+// internal forces evaluate it once per smoothing cell and Newton evaluates them a few times per
+// equilibrium update (glibc's pow was a fifth of their time). Elsewhere pow itself.
+double j_pow_minus_two_thirds(double jm1) {
+  const double j = 1.0 + jm1;
+  if (!(std::abs(jm1) <= 0.1)) return std::pow(j, -2.0 / 3.0);
+  double y = 1.0 + jm1 * (-1.0 / 3.0 + jm1 * (2.0 / 9.0));
+  for (int k = 0; k < 3; ++k) y *= (4.0 - j * (y * y * y)) * (1.0 / 3.0);
+  return y * y;
+}
+// P = 2 C10 J^-2/3 dev(b) F^-T + (2 / D1) (J - 1) J F^-T, with J F^-T = cof F (no inverse).
 Mat3 nh_stress(const LawConstants& c, const Mat3& h) {
-  const Mat3 f = Mat3::Identity() + h;
   const double jm1 = j_minus_one(h);
   const double j = 1.0 + jm1;
-  const double a = std::pow(j, -2.0 / 3.0);
+  const double a = j_pow_minus_two_thirds(jm1);
   const Mat3 bm = h + h.transpose() + h * h.transpose();  // b - I
   const Mat3 dev_b = bm - (bm.trace() / 3.0) * Mat3::Identity();
-  const Mat3 finv_t = f.inverse().transpose();
-  return 2.0 * c.c10_pa * a * dev_b * finv_t + (2.0 / c.d1_per_pa) * jm1 * j * finv_t;
+  const Mat3 cof = cofactor(Mat3::Identity() + h);  // J F^-T
+  return (2.0 * c.c10_pa * a / j) * (dev_b * cof) + ((2.0 / c.d1_per_pa) * jm1) * cof;
 }
 // What dP depends on at one F, computed once per tangent (nine directional derivatives).
 struct NhPoint {
@@ -262,15 +283,6 @@ void check_finite(const Mat3& f) {
   if (!f.allFinite()) {
     throw std::invalid_argument("elastic law: non-finite deformation gradient");
   }
-}
-
-// Cofactor matrix cof F = det(F) F^-T, a polynomial of F (defined for singular and inverted F).
-Mat3 cofactor(const Mat3& f) {
-  Mat3 c;
-  c.col(0) = f.col(1).cross(f.col(2));
-  c.col(1) = f.col(2).cross(f.col(0));
-  c.col(2) = f.col(0).cross(f.col(1));
-  return c;
 }
 
 }  // namespace
