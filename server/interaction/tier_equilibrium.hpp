@@ -160,6 +160,13 @@ class TierEquilibrium {
   // C R^T f* (rotated_ on the load's slots) at every contact slot into compliance_ from the
   // columns; false (nothing changed) when the load's slots do not fit in the capacity.
   bool compliance_from_columns(const TierLoad& load);
+  // Its first part: marks the load's slots as loaded now, evicts to make room and lists in
+  // missing_ the load's slots without columns (not solved yet); false when they do not fit.
+  bool plan_columns(const TierLoad& load);
+  // Phase "Newton" of update(): u (the warm start, u_'s copy) becomes the equilibrium for f_
+  // (the rest state for an elastic body without force); throws std::runtime_error naming the
+  // body when it does not converge.
+  void equilibrium(Eigen::VectorXd& u, int& iterations, bool& converged);
   // The worker's own solve scratch: its linearizations lock nothing the step or the fields use.
   std::unique_ptr<fem::SolveWorkspace> ws_ = std::make_unique<fem::SolveWorkspace>();
   std::vector<Eigen::Matrix3d> rotation_;  // per contact slot
