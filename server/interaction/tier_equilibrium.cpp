@@ -1,5 +1,6 @@
 #include "server/interaction/tier_equilibrium.hpp"
 
+#include "server/fem/cholmod_threads.hpp"
 #include "server/fem/polar_decomposition.hpp"
 
 #include <algorithm>
@@ -202,6 +203,7 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   std::exception_ptr aside_error;
   if (!load.slots.empty() && plan_columns(load) && !missing_.empty()) {
     aside = std::thread([this, &aside_error] {
+      fem::cholmod_threads_follow_omp_num_threads();  // as the worker's thread
       try {
         columns_solved_ += static_cast<std::uint64_t>(columns_->ensure(missing_, *ws_));
       } catch (...) {
