@@ -22,7 +22,9 @@
 // That is the default path, --slide-path normal (the former path of ctest
 // interaction_contact_step.SlideOverTheSurfaceNeverLosesTheTissue, kept for comparisons).
 // --contact-spread, --smooth-normals 0|1 and --near-field 0|1 set the SimulationOptions
-// of the same names (the three options: --contact-spread 1 --smooth-normals 1 --near-field 1).
+// of the same names (the three options: --contact-spread 1 --smooth-normals 1 --near-field 1);
+// --shaft-near-field 0|1 SimulationOptions::contact_shaft_near_field (0: the shaft's rows with
+// the mesh's compliance alone, as before it).
 // --no-shaft: the probe without its shaft (shaft length 0), the tip's own contact: the slide's
 // axis is the touched triangle's normal, and where that turns far from the surface around it (a
 // valley or a steep facet of a finer brain) the shaft leans into the tissue and carries part of
@@ -93,7 +95,7 @@ int main(int argc, char** argv) {
   bool slide = false, csv = false;
   int geometry_iterations = 0;
   double contact_spread = -1.0;
-  int smooth_normals = -1, near_field = -1;  // -1: the library's default
+  int smooth_normals = -1, near_field = -1, shaft_near_field = -1;  // -1: the library's default
   bool cube = false;
   bool no_shaft = false;
   std::string trace_path;
@@ -115,6 +117,8 @@ int main(int argc, char** argv) {
                 "SimulationOptions::contact_smooth_normals, 0 or 1 (default: the library's)");
   p->add_option("--near-field", near_field,
                 "SimulationOptions::contact_near_field, 0 or 1 (default: the library's)");
+  p->add_option("--shaft-near-field", shaft_near_field,
+                "SimulationOptions::contact_shaft_near_field, 0 or 1 (default: the library's)");
   p->add_flag("--cube", cube,
               "with --slide: also the cube's slide (scenes/cube_cylinder.scene, its tier and probe, "
               "40 mm along x across the top face from (30, 50) mm)");
@@ -247,6 +251,7 @@ int main(int argc, char** argv) {
       if (contact_spread >= 0.0) options.contact_spread = contact_spread;
       if (smooth_normals >= 0) options.contact_smooth_normals = smooth_normals != 0;
       if (near_field >= 0) options.contact_near_field = near_field != 0;
+      if (shaft_near_field >= 0) options.contact_shaft_near_field = shaft_near_field != 0;
       auto sim = ni::Simulation::build(model, options);
       const double build_s = neurosim::common::seconds_since(t0);
       const auto& mesh = sim->mesh(0);
@@ -283,6 +288,7 @@ int main(int argc, char** argv) {
       if (contact_spread >= 0.0) options.contact_spread = contact_spread;
       if (smooth_normals >= 0) options.contact_smooth_normals = smooth_normals != 0;
       if (near_field >= 0) options.contact_near_field = near_field != 0;
+      if (shaft_near_field >= 0) options.contact_shaft_near_field = shaft_near_field != 0;
       auto sim = ni::Simulation::build(model, options);
       slide_path(*sim, model.tools.at(0).tip_radius_m, Vec3(0.030, 0.050, 0.0), Vec3::UnitX(), 0.0,
                  scene.string());

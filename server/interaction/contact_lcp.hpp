@@ -59,6 +59,11 @@ class ContactLcp {
   // solve).
   template <class Direction>
   Eigen::Matrix3d contact_stiffness(int first_row, const Direction& direction);
+  // The same between two groups: -sum_{j in left, k in right} (W_AA^-1)_jk n_j n_k^T (the
+  // left group's force per unit force pushed along the right group's rows: contact_step.cpp
+  // near_field_tangent, one part's near field).
+  template <class Left, class Right>
+  Eigen::Matrix3d contact_stiffness(int first_row, const Left& left, const Right& right);
 
  private:
   int capacity_{0};
@@ -91,6 +96,28 @@ Eigen::Matrix3d ContactLcp::contact_stiffness(int first_row, const Direction& di
     for (int k = 0; k < m; ++k)
       stiffness.noalias() -= inv.inverse(group_[j], group_[k]) * *directions_[j] *
                              directions_[k]->transpose();
+  return stiffness;
+}
+
+template <class Left, class Right>
+Eigen::Matrix3d ContactLcp::contact_stiffness(int first_row, const Left& left,
+                                              const Right& right) {
+  const ActiveBlockInverse& inv = active_inverse(first_row);
+  int m = 0;
+  for (int a = 0; a < inv.count; ++a) {
+    const Eigen::Vector3d* n = left(inv.rows[a]);
+    if (n == nullptr) continue;
+    group_[m] = a;
+    directions_[m++] = n;
+  }
+  Eigen::Matrix3d stiffness = Eigen::Matrix3d::Zero();
+  for (int a = 0; a < inv.count; ++a) {
+    const Eigen::Vector3d* nk = right(inv.rows[a]);
+    if (nk == nullptr) continue;
+    Eigen::Vector3d column = Eigen::Vector3d::Zero();  // sum_j (W_AA^-1)_ja n_j
+    for (int j = 0; j < m; ++j) column += inv.inverse(group_[j], a) * *directions_[j];
+    stiffness.noalias() -= column * nk->transpose();
+  }
   return stiffness;
 }
 

@@ -306,6 +306,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   own_rows_.reserve(max_contact);
   own_factor_.setZero(max_contact, max_contact);
   own_y_.setZero(max_contact, 3);
+  own_z_.assign(max_contact, 0.0);
   previous_row_keys_.reserve(max_rows);
   for (auto& l : tier_loads_) {
     l.slots.reserve(3 * max_rows);
@@ -1043,6 +1044,7 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
     merge_features(m, bi, tool, shape);
   }
   near_field_of_tool(m, shape);
+  near_field_of_shaft(m, shape, axis);
   // Rows within the margin enter the LCP inactive (caught if the deformation pushes them in).
   // The deepest first, sorted by index (a Row holds kSpreadNodes nodes: moving the rows through
   // the heap cost more than finding them); `deeper` is a total order on one tool's rows, so the
@@ -1161,37 +1163,126 @@ void State::near_field_of_tool(const Model& m, const ToolShape& shape) {
   }
 }
 
-// SimulationOptions::contact_near_field, the tool's stiffness: the near field's compliance c is
-// a function of the tip's depth d (its deepest row on the body), so the force's tangent is
-// stiffer than -N W_AA^-1 N^T with c held: dF/dx = K + (dF/dc)(dc/dd)(dd/dx) with dF/dc = K F_b
-// (W's change M M^T over the tip rows, whose force is F_b: exact when the tool's active rows are
-// these, the usual case) and dd/dx = -n of the deepest row; symmetrized (the client's K). For one
-// row it is 1/C + c_h/(2 C^2), C the row's compliance, c_h Hertz's secant: on the interaction
-// tests' block (a 15 mm tip 3 mm into 12 mm cells, c_h / C = 0.95) a finite difference of the
-// force was 1.47x the K without it.
-void State::near_field_tangent(int t, int ns, Mat3& k) const {
+// SimulationOptions::contact_shaft_near_field, per body the shaft's rows: as the tip's near field
+// (near_field_of_tool) for the capsule's patch, in series with all of the shaft's rows on the
+// body (their summed force indents the capsule's patch): c = patch_near_field(a, b, rho) with
+// the patch of the deepest shaft row (tool_geometry.hpp shaft_patch: its depth d, the tilt of
+// the axis to its normal), rho its spread radius. Tied to the mesh as the tip's: the spread
+// radius is contact_spread times the local edge, faded out where the edge is below the shaft's
+// radius (merge_features), and c -> 0 as rho shrinks below the patch. The tangent (answer) takes
+// c's change with d (the tilt held), by a central difference of the closed form. Not on a
+// relaxing body (BodyState::near_field_history follows the tip's force only).
+void State::near_field_of_shaft(const Model& m, const ToolShape& shape, const Vec3& axis) {
+  if (!m.options_.contact_near_field || !m.options_.contact_shaft_near_field) return;
+  if (!(shape.shaft_radius_m > 0.0) || !(shape.shaft_length_m > 0.0)) return;
+  for (int body = 0; body < static_cast<int>(m.bodies_.size()); ++body) {
+    if (bodies_[body].near_field_history) continue;
+    Row* deepest = nullptr;
+    for (Row& r : tool_rows_)
+      if (r.shaft && r.body == body && (deepest == nullptr || r.depth_m > deepest->depth_m))
+        deepest = &r;
+    if (deepest == nullptr || !(deepest->depth_m > 0.0)) continue;
+    const fem::Material& mat = m.bodies_[body].host_material;
+    const double e_star =
+        mat.youngs_modulus_pa / (1.0 - mat.poisson_ratio * mat.poisson_ratio);
+    const double sin_tilt = deepest->normal.dot(axis);
+    const double rho = deepest->spread_radius_m;
+    auto compliance = [&](double d) {
+      double a = 0.0, b = 0.0;
+      shaft_patch(d, sin_tilt, shape.shaft_radius_m, shape.shaft_length_m, a, b);
+      return patch_near_field(a, b, rho, e_star);
+    };
+    const double depth = deepest->depth_m;
+    const double c = compliance(depth);
+    if (!(c > 0.0)) continue;
+    for (Row& r : tool_rows_)
+      if (r.shaft && r.body == body) r.near_field_m_per_n = c;
+    if (depth > 1e-4 * shape.shaft_radius_m) {
+      const double h = 1e-4 * depth;
+      deepest->near_field_deepest = true;
+      deepest->near_field_slope_per_n = (compliance(depth + h) - compliance(depth - h)) / (2.0 * h);
+    }
+  }
+}
+
+// SimulationOptions::contact_near_field, the tool's stiffness: a part's near-field compliance c
+// (the tip's, and with contact_shaft_near_field the shaft's) is a function of the part's depth d
+// (its deepest row on the body), so the force's tangent is stiffer than -N W_AA^-1 N^T with c
+// held: dF/dx = K + (dF/dc)(dc/dd)(dd/dx) with dF/dc = K_b F_b, F_b the force of the part's rows
+// on the body and K_b = -N W_AA^-1 N_b^T the tool's force per unit force along those rows
+// (W's change is M M^T over them: exact), and dd/dx = -n of the deepest row; symmetrized (the
+// client's K). K_b is K itself when the part's rows on the body are all the tool's active
+// rows (the usual case); with the shaft's rows also active, K in its place counted the shaft's
+// response to the tip's near field: K 1.62x the force's finite difference (2 mm tip 1.5 mm
+// into 12 mm cells, its shaft 10 degrees off the face; simulation_test). For one row it is
+// 1/C + c_h/(2 C^2), C the row's compliance, c_h Hertz's secant: on the interaction tests'
+// block (a 15 mm tip 3 mm into 12 mm cells, c_h / C = 0.95) a finite difference of the force
+// was 1.47x the K without it.
+void State::near_field_tangent(int t, int ns, int tools, Mat3& k) {
   const int nc = static_cast<int>(rows_.size());
+  const Mat3 k0 = k;
+  if (k0.isZero(0.0)) return;  // no active row, or own_stiffness found W not definite
   for (int r = 0; r < nc; ++r) {
     const Row& d = rows_[r];
     if (d.tool != t || !d.near_field_deepest || d.near_field_slope_per_n == 0.0) continue;
     Vec3 f_b = Vec3::Zero();
+    bool others = false;  // active rows of the tool outside the part's on the body
     for (int s = 0; s < nc; ++s) {
       const Row& q = rows_[s];
       const double l = lambda_[ns + s];
-      if (q.tool == t && !q.shaft && q.body == d.body && l > 0.0) f_b += l * q.normal;
+      if (q.tool != t || !(l > 0.0)) continue;
+      if (q.shaft == d.shaft && q.body == d.body) {
+        f_b += l * q.normal;
+      } else {
+        others = true;
+      }
     }
-    // Relaxing: c multiplies the creep-equivalent force alpha F_b - h (on the tool).
-    double alpha = 1.0;
-    const Vec3 h = near_field_creep(d.body, t, alpha);
-    f_b = alpha * f_b - h;
-    const Mat3 term = -d.near_field_slope_per_n * (k * f_b) * d.normal.transpose();
+    // Relaxing: c multiplies the creep-equivalent force alpha F_b - h (on the tool; the tip's).
+    if (!d.shaft) {
+      double alpha = 1.0;
+      const Vec3 h = near_field_creep(d.body, t, alpha);
+      f_b = alpha * f_b - h;
+    }
+    const Vec3 kf = others ? part_response(t, ns, tools, d, f_b) : Vec3(k0 * f_b);
+    const Mat3 term = -d.near_field_slope_per_n * kf * d.normal.transpose();
     k += 0.5 * (term + term.transpose());
   }
 }
 
+// K_b f: the tool's force per the force f pushed along the rows of part b (d's part and body),
+// -N W_AA^-1 N_b^T f over the tool's active rows (near_field_tangent). One tool: the LCP's
+// active inverse; several: own_stiffness's factor L of this answer (K = -Y^T Y, L Y = N), so
+// -Y^T z with L z = N_b^T f (near_field_tangent skips a K that own_stiffness left zero).
+Vec3 State::part_response(int t, int ns, int tools, const Row& d, const Vec3& f) {
+  if (tools == 1) {
+    const Mat3 kb = lcp_.contact_stiffness(
+        ns,
+        [&](int row) -> const Vec3* {
+          const Row& q = rows_[row - ns];
+          return q.tool == t ? &q.normal : nullptr;
+        },
+        [&](int row) -> const Vec3* {
+          const Row& q = rows_[row - ns];
+          return q.tool == t && q.shaft == d.shaft && q.body == d.body ? &q.normal : nullptr;
+        });
+    return kb * f;
+  }
+  const int n = static_cast<int>(own_rows_.size());
+  Vec3 out = Vec3::Zero();
+  for (int i = 0; i < n; ++i) {
+    const Row& q = rows_[own_rows_[i]];
+    double v = q.shaft == d.shaft && q.body == d.body ? q.normal.dot(f) : 0.0;
+    for (int j = 0; j < i; ++j) v -= own_factor_(i, j) * own_z_[j];
+    own_z_[i] = v / own_factor_(i, i);
+    out -= own_z_[i] * own_y_.row(i).transpose();
+  }
+  return out;
+}
+
 // Phase "near field" (after Delassus): the tip's near-field compliance in series with its rows,
 // W_rs += alpha c n_r . n_s over the tip rows r, s of one tool on one body (positive
-// semidefinite: W stays definite). A relaxing body: the near field is a compliance c in series
+// semidefinite: W stays definite); the shaft's (near_field_of_shaft) likewise over the shaft's
+// rows, elastic (alpha 1, no history). A relaxing body: the near field is a compliance c in series
 // with the mesh's, so it follows the same hereditary law (viscoelastic_history.hpp): its
 // displacement is c times the creep-equivalent force F~ = int J(t - s) dF(s) of the tip's total
 // force F on the body, F~_n = alpha F_n + h_n with the tool's own internal variables
@@ -1203,14 +1294,17 @@ void State::near_field(int ns) {
   const int nc = static_cast<int>(rows_.size());
   for (int r = 0; r < nc; ++r) {
     const Row& a = rows_[r];
-    if (a.shaft || !(a.near_field_m_per_n > 0.0)) continue;
+    if (!(a.near_field_m_per_n > 0.0)) continue;
     double alpha = 1.0;
-    const Vec3 h = near_field_creep(a.body, a.tool, alpha);
-    const double c = alpha * a.near_field_m_per_n;
-    delta_[ns + r] += a.near_field_m_per_n * a.normal.dot(h);
+    double c = a.near_field_m_per_n;  // the shaft's: elastic (near_field_of_shaft)
+    if (!a.shaft) {
+      const Vec3 h = near_field_creep(a.body, a.tool, alpha);
+      c *= alpha;
+      delta_[ns + r] += a.near_field_m_per_n * a.normal.dot(h);
+    }
     for (int s = r; s < nc; ++s) {
       const Row& b = rows_[s];
-      if (b.shaft || b.tool != a.tool || b.body != a.body) continue;
+      if (b.shaft != a.shaft || b.tool != a.tool || b.body != a.body) continue;
       const double v = c * a.normal.dot(b.normal);
       w_(ns + r, ns + s) += v;
       if (s != r) w_(ns + s, ns + r) += v;
@@ -1574,7 +1668,7 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
   } else {
     c.stiffness_n_per_m = own_stiffness(ns, t);
   }
-  near_field_tangent(t, ns, c.stiffness_n_per_m);
+  near_field_tangent(t, ns, tools, c.stiffness_n_per_m);
   c.in_contact = main_body >= 0;
   c.validity_radius_m = 0.0;
   if (c.in_contact) {

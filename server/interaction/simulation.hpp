@@ -195,6 +195,12 @@ struct SimulationOptions {
   // 1 mm deep, 8.3 / 8.8 / 8.7 / 7.2 mN, Sneddon 6.7). On a viscoelastic body it
   // relaxes with the host's kernel, as the mesh's compliance (contact_step.cpp, near_field).
   bool contact_near_field{true};
+  // With contact_near_field: the shaft's near field, in series with the shaft's rows on a body
+  // as the tip's with the tip's (contact_step.cpp near_field_of_shaft): the capsule's patch under
+  // cells wider than it, an elliptic patch across and along the axis (tool_geometry.hpp
+  // shaft_patch, patch_near_field). Elastic; not on a relaxing body (the tip's history slot is
+  // the tip's force), where the shaft keeps the mesh's compliance alone.
+  bool contact_shaft_near_field{true};
   int lcp_max_iterations{200};
   double lcp_tolerance{1e-10};  // relative
   // Disk cache of each body's boundary operator (keyed by meshes, materials, fixed nodes and the

@@ -84,9 +84,10 @@ struct Row {
   Vec3 spread_at_m{Vec3::Zero()};
   Vec3 spread_normal{Vec3::Zero()};
   // SimulationOptions::contact_near_field: the tip's near-field compliance, shared in series by
-  // the tip's rows on this body (contact_step.cpp, near_field), unit m/N.
+  // the tip's rows on this body (contact_step.cpp, near_field), unit m/N; on a shaft row the
+  // shaft's, shared by the shaft's rows (contact_shaft_near_field, near_field_of_shaft).
   double near_field_m_per_n{0.0};
-  // The tip's deepest row on this body (the depth the near field is taken at): d c / d depth
+  // The part's deepest row on this body (the depth the near field is taken at): d c / d depth
   // (unit 1/N; 0 where the near field is constant), for the tangent stiffness (answer).
   bool near_field_deepest{false};
   double near_field_slope_per_n{0.0};
@@ -267,6 +268,7 @@ class State {
   double flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
                        bool at_rest, double at_most_m);
   void near_field_of_tool(const Model& m, const ToolShape& shape);
+  void near_field_of_shaft(const Model& m, const ToolShape& shape, const Vec3& axis);
   bool spread_row(const Model& m, Row& r);
   void near_field(int ns);
   void compliance_columns(StepStats& stats);
@@ -278,7 +280,8 @@ class State {
   void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations, int tools,
               ToolContact& c);
   Mat3 own_stiffness(int ns, int tool);
-  void near_field_tangent(int tool, int ns, Mat3& k) const;
+  void near_field_tangent(int tool, int ns, int tools, Mat3& k);
+  Vec3 part_response(int tool, int ns, int tools, const Row& d, const Vec3& f);
   // The near field's history of `body` when it follows `tool` (else nullptr: elastic).
   const ViscoelasticHistory* near_field_history(int body, int tool) const {
     const BodyState& bs = bodies_[body];
@@ -391,6 +394,7 @@ class State {
   std::vector<int> own_rows_;  // own_stiffness: one tool's active rows, its factor and N
   Eigen::MatrixXd own_factor_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> own_y_;
+  std::vector<double> own_z_;  // near_field_tangent: L z = N_b^T f (part_response)
 };
 
 }  // namespace neurosim::interaction

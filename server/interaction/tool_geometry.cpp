@@ -6,6 +6,40 @@
 
 namespace neurosim::interaction {
 
+namespace {
+// 3 K(e) / (2 pi a) for semi-axes a, b (either order), unit 1/m: K(e) = pi / (2 AGM(1, b / a)).
+double elliptic_approach(double a_m, double b_m) {
+  const double major = std::max(a_m, b_m);
+  double x = 1.0, y = std::min(a_m, b_m) / major;
+  for (int i = 0; i < 40 && std::abs(x - y) > 1e-15 * x; ++i) {
+    const double m = 0.5 * (x + y);
+    y = std::sqrt(x * y);
+    x = m;
+  }
+  return 3.0 / (4.0 * x * major);  // 3 (pi / (2 x)) / (2 pi major)
+}
+}  // namespace
+
+double patch_near_field(double a_m, double b_m, double rho_m, double e_star_pa) {
+  if (!(rho_m > 0.0) || !(a_m > 0.0) || !(b_m > 0.0)) return 0.0;
+  constexpr double kQ = (0.766 / 0.75) * (0.766 / 0.75);
+  const double s2 = rho_m * rho_m / kQ;
+  const double shown = elliptic_approach(std::sqrt(a_m * a_m + s2), std::sqrt(b_m * b_m + s2));
+  return std::max(0.0, (elliptic_approach(a_m, b_m) - shown) / e_star_pa);
+}
+
+void shaft_patch(double depth_m, double sin_tilt, double shaft_radius_m, double shaft_length_m,
+                 double& a_m, double& b_m) {
+  const double d = std::max(depth_m, 1e-4 * shaft_radius_m);
+  b_m = std::sqrt(shaft_radius_m * std::min(d, shaft_radius_m));
+  const double s = std::clamp(std::abs(sin_tilt), 0.0, 1.0);
+  const double c = std::sqrt(1.0 - s * s);
+  // d / (pi tan theta) = d cos / (pi sin), at most l_s / 2 (also as sin -> 0).
+  const double half = 0.5 * std::max(shaft_length_m, 2.0 * b_m);
+  const double along = d * c < M_PI * s * half ? d * c / (M_PI * s) : half;
+  a_m = std::max(b_m, along);
+}
+
 PointGrid::PointGrid(const std::vector<mesh::Vec3>& points_m, double cell_m)
     : count_(static_cast<int>(points_m.size())) {
   if (!(cell_m > 0.0) || !std::isfinite(cell_m))

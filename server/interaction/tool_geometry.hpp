@@ -47,6 +47,31 @@ inline mesh::Vec3 closest_on_segment(const mesh::Vec3& x, const mesh::Vec3& p0,
   return p0 + t * e;
 }
 
+// The near field of a contact patch under a mesh that spreads each row's load over a disk of
+// radius rho (SimulationOptions::contact_near_field; unit m/N): the approach compliance of the
+// true patch less that of the patch as the mesh shows it. A rigid indenter on a half-space with
+// an elliptic patch of semi-axes a, b (Hertz's elliptic contact, Johnson, Contact Mechanics,
+// 4.2: delta = p0 b K(e) / E*, p0 = 3 F / (2 pi a b), a >= b) has the secant compliance
+// 3 K(e) / (2 pi a E*), K the complete elliptic integral of the first kind, e^2 = 1 - b^2 / a^2
+// (the circle: 0.75 / (a E*), Hertz's; a long patch: 3 ln(4 a / b) / (2 pi a E*), the finite
+// line contact). The mesh's rows carry the patch's load spread about each point: mean square
+// radii add, so the patch it shows has semi-axes sqrt(a^2 + rho^2 / q), sqrt(b^2 + rho^2 / q),
+// q = (0.766 / 0.75)^2 as the tip's (contact_step.cpp near_field_of_tool, which this is for
+// a = b: 0.75 / sqrt(a^2 + rho^2 / q) = 0.766 / sqrt(rho^2 + q a^2)). Clamped at 0; 0 without
+// a spread (rho = 0: the rows sample the patch themselves). e_star = E / (1 - nu^2), unit Pa.
+double patch_near_field(double a_m, double b_m, double rho_m, double e_star_pa);
+
+// The shaft's patch (a capsule of radius r_s and length l_s) whose deepest row is d deep
+// (unit m) under a surface whose normal makes sin_tilt = |n . axis| with the axis: across the
+// axis b = sqrt(r_s min(d, r_s)) (Hertz's a = sqrt(R d) with the cylinder's radius, bounded by
+// it); along the axis the capsule's lowest line is tilted by theta to the surface and under it
+// over d / tan(theta) from the deepest point: a wedge, whose contact covers 2 / pi of its
+// geometric reach (Sneddon's cone, a = (2 / pi) delta tan(alpha), the linear profile's as Hertz's
+// 1 / sqrt(2) is the parabola's), a = d / (pi tan(theta)) as a semi-axis, between b (the
+// capsule's round end) and l_s / 2 (a shaft lying on the surface). Sets the semi-axes (unit m).
+void shaft_patch(double depth_m, double sin_tilt, double shaft_radius_m, double shaft_length_m,
+                 double& a_m, double& b_m);
+
 // Uniform grid over points (rest positions of contactable nodes): box queries return point
 // indices in ascending order of cell then insertion (deterministic), into a caller's vector.
 class PointGrid {

@@ -1,6 +1,7 @@
 // The tool's geometry on its own: the candidate grid against a brute-force box search, the
 // penetration depth of a node against the sphere it is measured to, the closest point of a
-// segment.
+// segment, the near field of a contact patch (against the tip's formula and Hertz's elliptic
+// compliance) and the shaft's patch.
 #include "server/interaction/tool_geometry.hpp"
 
 #include <gtest/gtest.h>
@@ -96,6 +97,88 @@ TEST(interaction_tool_geometry, ClosestPointOfASegmentIsClampedToItsEnds) {
   EXPECT_TRUE(closest_on_segment(Vec3(-1, 1, 0), p0, p1).isApprox(p0));
   EXPECT_TRUE(closest_on_segment(Vec3(3, -1, 0), p0, p1).isApprox(p1));
   EXPECT_TRUE(closest_on_segment(Vec3(3, -1, 0), p0, p0).isApprox(p0)) << "a point segment";
+}
+
+// The patch near field (SimulationOptions::contact_near_field) on a circle is the tip's
+// formula (contact_step.cpp near_field_of_tool): (0.75 / a - 0.766 / sqrt(rho^2 + q a^2)) / E*.
+TEST(interaction_tool_geometry, PatchNearFieldOnACircleIsTheTips) {
+  const double e_star = 3000.0 / (1.0 - 0.49 * 0.49);
+  constexpr double kQ = (0.766 / 0.75) * (0.766 / 0.75);
+  for (double a : {0.5e-3, 1e-3, 2e-3, 4e-3})
+    for (double rho : {0.5e-3, 2e-3, 4e-3, 8e-3}) {
+      const double tip =
+          std::max(0.0, (0.75 / a - 0.766 / std::sqrt(rho * rho + kQ * a * a)) / e_star);
+      EXPECT_NEAR(patch_near_field(a, a, rho, e_star), tip, 1e-12 * (0.75 / a / e_star))
+          << "a " << a << " rho " << rho;
+    }
+}
+
+// Against Hertz's elliptic contact (Johnson, Contact Mechanics, 4.2): with a spread far wider
+// than the patch the near field is the patch's own secant compliance 3 K(e) / (2 pi a E*), K
+// here by quadrature of its integral (not the AGM of the source), e^2 = 1 - b^2 / a^2, either
+// order of the semi-axes; and a long patch's is the finite line contact's 3 ln(4 a / b) /
+// (2 pi a E*).
+TEST(interaction_tool_geometry, PatchNearFieldIsHertzsEllipticCompliance) {
+  const double e_star = 4000.0;
+  auto k_quadrature = [](double k) {  // composite Simpson over [0, pi / 2]
+    const int n = 200000;
+    const double h = 0.5 * M_PI / n;
+    double sum = 0.0;
+    for (int i = 0; i <= n; ++i) {
+      const double s = std::sin(i * h);
+      const double f = 1.0 / std::sqrt(1.0 - k * k * s * s);
+      sum += (i == 0 || i == n ? 1.0 : (i % 2 ? 4.0 : 2.0)) * f;
+    }
+    return sum * h / 3.0;
+  };
+  const double a = 3e-3;
+  for (double ratio : {1.0, 0.7, 0.3, 0.1, 0.02}) {
+    const double b = ratio * a;
+    const double k = std::sqrt(1.0 - ratio * ratio);
+    const double hertz = 3.0 * k_quadrature(k) / (2.0 * M_PI * a * e_star);
+    EXPECT_NEAR(patch_near_field(a, b, 1e6, e_star), hertz, 1e-7 * hertz) << "b / a " << ratio;
+    EXPECT_NEAR(patch_near_field(b, a, 1e6, e_star), hertz, 1e-7 * hertz) << "b / a " << ratio;
+  }
+  const double b = 1e-4 * a;
+  const double line = 3.0 * std::log(4.0 * a / b) / (2.0 * M_PI * a * e_star);
+  EXPECT_NEAR(patch_near_field(a, b, 1e6, e_star), line, 1e-6 * line);
+}
+
+// The mesh resolves a patch wider than its spread: the near field vanishes as rho -> 0 (none
+// at rho = 0) and grows with the spread.
+TEST(interaction_tool_geometry, PatchNearFieldVanishesAsTheSpreadShrinks) {
+  const double e_star = 4000.0, a = 3e-3, b = 1.5e-3;
+  EXPECT_EQ(patch_near_field(a, b, 0.0, e_star), 0.0);
+  const double at_a = patch_near_field(a, b, a, e_star);
+  EXPECT_GT(at_a, 0.0);
+  EXPECT_LT(patch_near_field(a, b, 1e-3 * a, e_star), 1e-5 * at_a);
+  double last = 0.0;
+  for (double rho = 0.1e-3; rho < 20e-3; rho *= 1.5) {
+    const double c = patch_near_field(a, b, rho, e_star);
+    EXPECT_GT(c, last) << "rho " << rho;
+    last = c;
+  }
+}
+
+// The shaft's patch (tool_geometry.hpp shaft_patch): across the axis Hertz's sqrt(R d) with the
+// capsule's radius, at most the radius; along it the wedge d / (pi tan theta), between the
+// across semi-axis and half the shaft's length.
+TEST(interaction_tool_geometry, ShaftPatchIsTheCapsulesWedge) {
+  const double rs = 1.5e-3, ls = 0.05;
+  double a = 0.0, b = 0.0;
+  shaft_patch(1e-3, 0.1, rs, ls, a, b);
+  EXPECT_NEAR(b, std::sqrt(rs * 1e-3), 1e-15);
+  EXPECT_NEAR(a, 1e-3 * std::sqrt(1.0 - 0.1 * 0.1) / (M_PI * 0.1), 1e-15);
+  shaft_patch(1e-3, 0.5, rs, ls, a, b);
+  EXPECT_NEAR(a, b, 1e-15) << "a wedge shorter than the capsule is wide: its round end";
+  shaft_patch(3e-3, 0.256, rs, ls, a, b);
+  EXPECT_NEAR(b, rs, 1e-15) << "deeper than the radius";
+  shaft_patch(1e-3, 0.0, rs, ls, a, b);
+  EXPECT_NEAR(a, 0.5 * ls, 1e-15) << "lying on the surface";
+  shaft_patch(1e-3, 1e-9, rs, ls, a, b);
+  EXPECT_NEAR(a, 0.5 * ls, 1e-15);
+  shaft_patch(1e-3, 1.0, rs, ls, a, b);
+  EXPECT_NEAR(a, b, 1e-15) << "along the normal: the round end";
 }
 
 }  // namespace
