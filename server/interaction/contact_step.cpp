@@ -94,6 +94,14 @@ bool may_touch_face(const Vec3& x0, const Vec3& n, const Vec3& centre, double rh
   return lateral2 <= lateral_reach * lateral_reach;
 }
 
+// Whether the segment p0-p1 comes within `bound` of the point c (a prefilter of may_touch_face
+// over a triangle and its vertices: bound = triangle radius + reach + behind, widened by 1e-6
+// relative, far more than the rounding of either test, so it never rejects what they take).
+bool may_reach_triangle(const Vec3& c, double bound, const Vec3& p0, const Vec3& p1) {
+  bound *= 1.0 + 1e-6;
+  return !((c - closest_on_segment(c, p0, p1)).squaredNorm() > bound * bound);
+}
+
 // The shaft's points inside the tip sphere are the tip's: its own rows hold them, deeper (with
 // SimulationOptions::contact_smooth_normals the two would differ in normal and weights, and the
 // shaft, starting at the tip's centre, took most of a 2 mm press's force at a flat face's normal).
@@ -582,6 +590,12 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
       const Vec3& q1 = part == 1 ? p1 : p0;
       const double reach = (part == 1 ? shape.shaft_radius_m : shape.tip_radius_m) + margin + w;
       const double back = std::max(reach, behind + w);
+      // Sphere against capsule first (most of the boxes' triangles are far from the part): a
+      // face or edge hit needs a point c of the axis within reach laterally and reach or back in
+      // height of the triangle's plane (|c - centroid| <= radius + reach + back), a node hit c
+      // within reach or back of the vertex (the same bound): beyond it every test below fails.
+      if (!may_reach_triangle(b.surface.centroid(t), b.surface.radius_m(t) + reach + back, p0, q1))
+        continue;
       bool may = may_touch_face(x[0], b.surface.rest_normal(t), b.surface.centroid(t),
                                 b.surface.radius_m(t), p0, q1, reach, back);
       for (int k = 0; k < 3 && !may; ++k)
