@@ -749,9 +749,11 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
     hits_.push_back(h);
   }
   // Most candidates are far from the part (the box reaches behind_reach behind the surface):
-  // their face or edge point is skipped by a plane test before the closest-point search.
-  if (!may_touch_face(x[0], n, centre, rho, p0, shaft ? p1 : p0, reach,
-                      std::max(reach, max_penetration_m)))
+  // their face or edge point is skipped by a plane test before the closest-point search, and
+  // that test by a sphere-capsule one (may_reach_triangle: the same rejections, cheaper).
+  const double behind = std::max(reach, max_penetration_m);
+  if (!may_reach_triangle(centre, rho + reach + behind, p0, shaft ? p1 : p0) ||
+      !may_touch_face(x[0], n, centre, rho, p0, shaft ? p1 : p0, reach, behind))
     return;
   // SimulationOptions::contact_smooth_normals, the tip: the centre projected along the normals
   // interpolated from the nodes' (project_along_normals), one face row per triangle that holds
@@ -821,15 +823,22 @@ double State::flat_distance(const Model& m, int body, int tool, const Vec3& c, c
   const StepCandidates& sc = step_candidates_[tool * bodies_.size() + body];
   const double moved = at_rest ? 0.0 : sc.moved_m;
   double best2 = at_most_m * at_most_m;
+  double best = std::sqrt(best2);
   for (int t : sc.triangles) {
-    if ((b.surface.centroid(t) - c).norm() > b.surface.radius_m(t) + moved + std::sqrt(best2))
+    // |centroid - c| > radius + moved + best (norm_at_most: the norm's decision, its root only
+    // near the bound).
+    if (!norm_at_most((b.surface.centroid(t) - c).squaredNorm(), b.surface.radius_m(t) + moved + best))
       continue;
     const SurfaceTriangle& tri = tris[t];
     std::array<Vec3, 3> x;
     for (int k = 0; k < 3; ++k)
       x[k] = !at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
     if (!((x[1] - x[0]).cross(x[2] - x[0]).dot(facing) > 0.0)) continue;
-    best2 = std::min(best2, (c - closest_on_triangle(c, x).point_m).squaredNorm());
+    const double d2 = (c - closest_on_triangle(c, x).point_m).squaredNorm();
+    if (d2 < best2) {
+      best2 = d2;
+      best = std::sqrt(best2);
+    }
   }
   return std::sqrt(best2);
 }
