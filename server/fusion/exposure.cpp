@@ -19,6 +19,7 @@ Exposure embedded_outside_host(const mesh::TetMesh& host, const mesh::TetMesh& e
   Exposure out;
   const auto& nodes = embedded.surface_vertices();
   out.surface_nodes = static_cast<int>(nodes.size());
+  out.outside.assign(embedded.num_vertices(), 0);
   // Nodes within the tolerance of A's surface are inside by definition (and the parity test is
   // undefined on it); the others are classified exactly.
   std::vector<int> far_nodes;
@@ -35,6 +36,7 @@ Exposure embedded_outside_host(const mesh::TetMesh& host, const mesh::TetMesh& e
   const std::vector<char> outside = outside_closed_surface(far_points_m, a);
   for (std::size_t k = 0; k < far_nodes.size(); ++k) {
     if (!outside[k]) continue;
+    out.outside[far_nodes[k]] = 1;
     ++out.nodes_outside;
     if (far_distance_m[k] > out.max_distance_m) {
       out.max_distance_m = far_distance_m[k];

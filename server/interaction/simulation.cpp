@@ -263,43 +263,51 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     } catch (const std::exception& ex) {
       throw std::runtime_error(what + ": " + ex.what());
     }
-    // Only the host's surface is contactable: an embedded surface outside the host would be
-    // neither carved around nor touched by a tool (no contact rows over it), so a scene with
-    // tools is refused rather than letting the tool pass through it without force. Nodes
-    // within a fraction of the host's mean edge of its surface count as inside (two meshes
-    // meshed separately never share a boundary exactly).
-    if (model.effects.tool_contact && !model.tools.empty()) {
-      fusion::ExposureOptions eo;
-      eo.tolerance_m = kExposureToleranceEdges * host.mesh.mean_edge_length();
-      const fusion::Exposure ex = fusion::embedded_outside_host(host.mesh, emb.mesh, eo);
-      if (ex.nodes_outside > 0) {
-        char buf[320];
-        std::snprintf(buf, sizeof buf,
-                      "%d of its %d surface nodes lie outside host %s (farthest: node %d, "
-                      "%.2f mm outside; tolerance %.2f mm = %.2f x the host's mean edge)",
-                      ex.nodes_outside, ex.surface_nodes, host.id.c_str(), ex.farthest_node,
-                      1e3 * ex.max_distance_m, 1e3 * eo.tolerance_m, kExposureToleranceEdges);
-        throw std::runtime_error(
-            source_ + ": embedded mesh " + emb.id + ": " + buf +
-            "; tool contact with an exposed embedded mesh is not implemented (only the host's "
-            "surface has contact rows): place the embedded mesh inside its host, or remove the "
-            "tools or effects.tool_contact");
-      }
+    // B's surface nodes outside A (nodes within a fraction of the host's mean edge of its
+    // surface count as inside: two meshes meshed separately never share a boundary exactly).
+    // Only the nodes inside are tied: an exposed node's closest point of S' may lie far away
+    // (at the rim where B leaves A), so it stays free and follows B's interior.
+    fusion::ExposureOptions eo;
+    eo.tolerance_m = kExposureToleranceEdges * host.mesh.mean_edge_length();
+    fusion::Exposure ex;
+    try {
+      ex = fusion::embedded_outside_host(host.mesh, emb.mesh, eo);
+    } catch (const std::exception& e) {
+      throw std::runtime_error(what + ": " + e.what());
+    }
+    // Only the host's surface is contactable: an exposed part of B would have no contact rows,
+    // so a scene with tools is refused rather than letting the tool pass through it without
+    // force.
+    if (ex.nodes_outside > 0 && model.effects.tool_contact && !model.tools.empty()) {
+      char buf[320];
+      std::snprintf(buf, sizeof buf,
+                    "%d of its %d surface nodes lie outside host %s (farthest: node %d, "
+                    "%.2f mm outside; tolerance %.2f mm = %.2f x the host's mean edge)",
+                    ex.nodes_outside, ex.surface_nodes, host.id.c_str(), ex.farthest_node,
+                    1e3 * ex.max_distance_m, 1e3 * eo.tolerance_m, kExposureToleranceEdges);
+      throw std::runtime_error(
+          source_ + ": embedded mesh " + emb.id + ": " + buf +
+          "; tool contact with an exposed embedded mesh is not implemented (only the host's "
+          "surface has contact rows): place the embedded mesh inside its host, or remove the "
+          "tools or effects.tool_contact");
     }
     setup_.fusion_s += seconds_since(t0);
     PendingTie& p = pending[m];
-    p.embedded_nodes = map.embedded_nodes;
-    p.tris.resize(map.embedded_nodes.size());
-    p.weights.resize(map.embedded_nodes.size());
-    p.points_m.resize(map.embedded_nodes.size());
     for (std::size_t k = 0; k < map.embedded_nodes.size(); ++k) {
+      const int v = map.embedded_nodes[k];
+      if (ex.outside.at(v)) continue;
       const auto& sp = map.embedded_on_boundary[k];
       const auto& tri = boundary.triangles.at(sp.triangle);
-      p.tris[k] = {tri[0], tri[1], tri[2]};
-      p.weights[k] = sp.weights;
-      p.points_m[k] = sp.point_m;
+      p.embedded_nodes.push_back(v);
+      p.tris.push_back({tri[0], tri[1], tri[2]});
+      p.weights.push_back(sp.weights);
+      p.points_m.push_back(sp.point_m);
+      p.max_distance_m = std::max(p.max_distance_m, sp.distance_m);
     }
-    p.max_distance_m = map.embedded_to_boundary.max_m;
+    if (p.embedded_nodes.empty())
+      throw std::runtime_error(what + ": every surface node of " + emb.id +
+                               " lies outside the host: nothing to tie");
+    setup_.exposed_nodes += ex.nodes_outside;
     if (options_.carve_host) {
       const auto inside = fusion::tets_inside(host.mesh, boundary.triangles);
       if (carve[h].empty()) carve[h].assign(host.mesh.num_tets(), 0);

@@ -302,6 +302,7 @@ struct SetupStats {
   double total_s{0.0};
   int boundary_nodes{0};  // host nodes on S' used by the ties (all couplings)
   int tied_nodes{0};      // embedded nodes tied (all couplings)
+  int exposed_nodes{0};   // embedded surface nodes outside their host, left untied
   int carved_tets{0};     // host tetrahedra removed inside S' (carve_host)
   int cache_hits{0};      // bodies whose boundary operator came from compliance_cache_dir
   int factor_cache_hits{0};  // bodies whose host factor came from compliance_cache_dir

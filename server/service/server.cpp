@@ -43,7 +43,8 @@ std::string describe_setup(const interaction::Simulation& sim) {
   else
     os << "inclusion decision + coupling map " << st.fusion_s << " s, condense " << st.condense_s
        << " s, boundary columns " << st.boundary_s << " s, coupling operator " << st.operator_s
-       << " s (" << st.boundary_nodes << " boundary nodes, " << st.tied_nodes << " tied nodes)";
+       << " s (" << st.boundary_nodes << " boundary nodes, " << st.tied_nodes << " tied nodes, " << st.exposed_nodes
+       << " exposed nodes untied)";
   os << ", contact columns " << st.columns_s << " s";
   // The column worker's bound per body (SimulationOptions::column_cache_budget_mb).
   std::vector<int> seen;

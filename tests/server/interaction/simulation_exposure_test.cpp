@@ -1,5 +1,7 @@
 // The simulation's set-up refuses a scene whose embedded mesh sticks out of its host while a
-// tool touches tissue (its exposed part would have no contact rows); the bundled scenes load.
+// tool touches tissue (its exposed part would have no contact rows); without tools it builds and
+// ties only the embedded surface nodes inside the host; the bundled scenes load.
+#include "server/interaction/coupled_body.hpp"
 #include "server/interaction/simulation.hpp"
 #include "server/scene/compile.hpp"
 #include "server/scene/scene.hpp"
@@ -39,10 +41,30 @@ TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefused) {
   EXPECT_NE(what.find("outside host cube"), std::string::npos) << what;
   EXPECT_NE(what.find("not implemented"), std::string::npos) << what;
 
-  // Without tools nothing touches the exposed part: the same geometry builds.
+  // Without tools nothing touches the exposed part: the same geometry builds, and only the
+  // cylinder's surface nodes inside the cube (z <= 0.1 m + the tolerance) are tied.
   s.clear_tools();
   s.mutable_effects()->set_tool_contact(false);
-  EXPECT_EQ(build_error(scene::compile(s, path.string())), "");
+  const scene::Model model = scene::compile(s, path.string());
+  EXPECT_EQ(build_error(model), "");
+  const auto sim = Simulation::build(model);
+  const int cube = scene::find_mesh(s, "cube"), cylinder = scene::find_mesh(s, "cylinder");
+  const auto& st = sim->setup_stats();
+  EXPECT_GT(st.exposed_nodes, 0);
+  EXPECT_GT(st.tied_nodes, 0);
+  const double tolerance_m = 0.1 * model.meshes[cube].mesh.mean_edge_length();
+  const CoupledBody* body = sim->body_of(cylinder);
+  ASSERT_NE(body, nullptr);
+  ASSERT_EQ(body->ties().size(), 1u);
+  const auto& tie = body->ties()[0];
+  EXPECT_EQ(static_cast<int>(tie.tied_nodes().size()), st.tied_nodes);
+  int above = 0;
+  for (int v : tie.tied_nodes()) above += sim->mesh(cylinder).vertices()[v].z() > 0.1 + tolerance_m;
+  EXPECT_EQ(above, 0) << "tied nodes outside the cube";
+  int exposed = 0;
+  for (int v : sim->mesh(cylinder).surface_vertices())
+    exposed += sim->mesh(cylinder).vertices()[v].z() > 0.1 + tolerance_m;
+  EXPECT_EQ(st.exposed_nodes, exposed);
 }
 
 TEST(interaction_simulation_exposure, BundledScenesLoad) {
