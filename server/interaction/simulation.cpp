@@ -309,7 +309,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
                                " lies outside the host: nothing to tie");
     setup_.exposed_nodes += ex.nodes_outside;
     if (options_.carve_host) {
-      const auto inside = fusion::tets_inside(host.mesh, boundary.triangles);
+      const auto inside = fusion::tets_inside(host.mesh, boundary);
       if (carve[h].empty()) carve[h].assign(host.mesh.num_tets(), 0);
       for (std::size_t t = 0; t < inside.size(); ++t)
         if (inside[t]) carve[h][t] = 1;

@@ -19,7 +19,7 @@ IslandReport find_islands(const mesh::TetMesh& host, const std::vector<int>& fix
     const auto surface =
         fusion::TriangleSurface::of(*embedded[k], what + " embedded[" + std::to_string(k) + "]");
     const fusion::NewBoundary boundary = fusion::find_new_boundary(host, surface);
-    const std::vector<char> inside = fusion::tets_inside(host, boundary.triangles);
+    const std::vector<char> inside = fusion::tets_inside(host, boundary);
     for (std::size_t t = 0; t < inside.size(); ++t) carve[t] |= inside[t];
   }
   std::vector<mesh::Tet> kept;

@@ -1,6 +1,7 @@
 // The simulation's set-up refuses a scene whose embedded mesh sticks out of its host while a
 // tool touches tissue (its exposed part would have no contact rows); without tools it builds and
-// ties only the embedded surface nodes inside the host; the bundled scenes load.
+// ties only the embedded surface nodes inside the host and carves the host around them; the
+// bundled scenes load.
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/simulation.hpp"
 #include "server/scene/compile.hpp"
@@ -52,6 +53,8 @@ TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefused) {
   const auto& st = sim->setup_stats();
   EXPECT_GT(st.exposed_nodes, 0);
   EXPECT_GT(st.tied_nodes, 0);
+  // The cube is carved around the part inside it (S' is open at the cube's top).
+  EXPECT_GT(st.carved_tets, 0);
   const double tolerance_m = 0.1 * model.meshes[cube].mesh.mean_edge_length();
   const CoupledBody* body = sim->body_of(cylinder);
   ASSERT_NE(body, nullptr);
@@ -71,7 +74,13 @@ TEST(interaction_simulation_exposure, BundledScenesLoad) {
   for (const char* name : {"cube_cylinder.scene", "brain_artery.scene", "brain_skull.scene",
                            "brain_viscoelastic.scene"}) {
     const auto path = neurosim::testing::source_dir() / "scenes" / name;
-    EXPECT_EQ(build_error(scene::load_model(path)), "") << name;
+    const scene::Model model = scene::load_model(path);
+    EXPECT_EQ(build_error(model), "") << name;
+    const auto sim = Simulation::build(model);
+    const auto& st = sim->setup_stats();
+    std::printf("%s: carved tets %d, tied nodes %d, exposed nodes %d\n", name, st.carved_tets,
+                st.tied_nodes, st.exposed_nodes);
+    EXPECT_EQ(st.exposed_nodes, 0) << name;
   }
 }
 
