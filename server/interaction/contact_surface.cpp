@@ -115,8 +115,16 @@ ContactSurface::ContactSurface(const ContactSurfaceDefinition& def) {
   const auto& slot = *def.contact_slot;
   const auto& fixed = *def.fixed_nodes;
   auto is_fixed = [&](int v) { return std::binary_search(fixed.begin(), fixed.end(), v); };
-  // The host's outer triangles (S' and carved faces have no contact slot: not contactable).
+  // The host's outer triangles, less the covered ones (S' on a carved host); a triangle with a
+  // node that has no slot and is not fixed is not contactable either.
+  auto covered = [&](const mesh::Tri& tri) {
+    if (def.covered_faces == nullptr) return false;
+    std::array<int, 3> f{tri[0], tri[1], tri[2]};
+    std::sort(f.begin(), f.end());
+    return std::binary_search(def.covered_faces->begin(), def.covered_faces->end(), f);
+  };
   for (const auto& tri : host.surface()) {
+    if (covered(tri)) continue;
     SurfaceTriangle t;
     int mobile = 0;
     bool ok = true;

@@ -66,6 +66,9 @@ struct ContactSurfaceDefinition {
   const mesh::TetMesh* host{nullptr};
   const std::vector<int>* contact_slot{nullptr};  // per host node: contact slot or -1
   const std::vector<int>* fixed_nodes{nullptr};   // sorted host node ids
+  // Optional: host faces covered by an embedded mesh (node triples, each sorted, sorted;
+  // CoupledBody::covered_faces): never contactable, whatever their nodes' slots.
+  const std::vector<std::array<int, 3>>* covered_faces{nullptr};
 };
 
 class ContactSurface {

@@ -48,7 +48,6 @@ CoupledBody::CoupledBody(int host_index, const mesh::TetMesh& host, const fem::M
   timing_.factor_s = seconds_since(t0);
   boundary_slot_.assign(host.num_vertices(), -1);
   contact_slot_.assign(host.num_vertices(), -1);
-  sliding_node_.assign(host.num_vertices(), 0);
 }
 
 int CoupledBody::add_sliding_rows(const std::vector<HostSlidingRow>& rows,
@@ -56,21 +55,47 @@ int CoupledBody::add_sliding_rows(const std::vector<HostSlidingRow>& rows,
   if (finalized_) throw std::logic_error("CoupledBody::add_sliding_rows after finalize");
   check_sliding_rows(rows, static_cast<int>(host_->num_vertices()), what);
   const int first = static_cast<int>(sliding_rows_.size());
-  for (const auto& r : rows) {
-    for (int v : r.nodes) sliding_node_[v] = 1;
-    sliding_rows_.push_back(r);
-  }
+  for (const auto& r : rows) sliding_rows_.push_back(r);
   return first;
 }
 
+void CoupledBody::cover_faces(const std::vector<mesh::Tri>& faces) {
+  if (finalized_) throw std::logic_error("CoupledBody::cover_faces after finalize");
+  const int n = static_cast<int>(host_->num_vertices());
+  for (const auto& t : faces) {
+    std::array<int, 3> f{t[0], t[1], t[2]};
+    for (int v : f)
+      if (v < 0 || v >= n)
+        throw std::invalid_argument("CoupledBody::cover_faces: host node " + std::to_string(v) +
+                                    " out of range");
+    std::sort(f.begin(), f.end());
+    covered_faces_.push_back(f);
+  }
+}
+
 void CoupledBody::select_contact_nodes() {
-  const auto normals = surface_vertex_normals(*host_);
-  // Fixed nodes cannot move (a row there could never be satisfied) and S' nodes are covered by
-  // the embedded mesh: neither is contactable.
+  std::sort(covered_faces_.begin(), covered_faces_.end());
+  covered_faces_.erase(std::unique(covered_faces_.begin(), covered_faces_.end()),
+                       covered_faces_.end());
+  // Area-weighted normals over the uncovered surface faces: a node at the rim of a covered
+  // groove points out of the host's surface, not into the embedded mesh.
+  std::vector<mesh::Vec3> normals(host_->num_vertices(), mesh::Vec3::Zero());
+  const auto& x = host_->vertices();
+  for (const auto& t : host_->surface()) {
+    std::array<int, 3> f{t[0], t[1], t[2]};
+    std::sort(f.begin(), f.end());
+    if (std::binary_search(covered_faces_.begin(), covered_faces_.end(), f)) continue;
+    const mesh::Vec3 n = (x[t[1]] - x[t[0]]).cross(x[t[2]] - x[t[0]]);  // 2 area * unit normal
+    for (int v : t) normals[v] += n;
+  }
+  for (auto& n : normals) {
+    const double len = n.norm();
+    if (len > 0.0) n /= len;
+  }
+  // Fixed nodes cannot move (a row there could never be satisfied); a node only on covered faces
+  // (zero normal) is under the embedded mesh: neither is contactable.
   for (int v : host_->surface_vertices()) {
-    if (solver_->is_fixed_node(v) || boundary_slot_[v] >= 0 || sliding_node_[v] ||
-        normals[v].squaredNorm() == 0.0)
-      continue;
+    if (solver_->is_fixed_node(v) || normals[v].squaredNorm() == 0.0) continue;
     contact_slot_[v] = static_cast<int>(contact_nodes_.size());
     contact_nodes_.push_back(v);
     contact_normals_.push_back(normals[v]);

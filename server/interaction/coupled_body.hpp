@@ -47,8 +47,17 @@ class CoupledBody {
   // condensed onto its tied nodes at once (TieCondensation; throws what its constructor throws).
   void add_tie(const TieDefinition& tie);
 
+  // Host faces an embedded mesh covers (before finalize; a coupling's S', any orientation and
+  // order; the calls accumulate): never contactable. On a carved host they are the surface of the
+  // cavity (an enclosed mesh) or the groove under a mesh that leaves the host; the host's faces
+  // around them stay contactable, also where their nodes are on S' (the ring around a vessel's
+  // exit).
+  void cover_faces(const std::vector<mesh::Tri>& faces);
+  // The covered faces' node triples, each sorted, sorted (after finalize).
+  const std::vector<std::array<int, 3>>& covered_faces() const { return covered_faces_; }
+
   // Registers the host side of sliding rows (before finalize; the rows of all calls are stacked,
-  // returns the index of the first one). Their S' nodes are not contactable; finalize builds
+  // returns the index of the first one). Finalize builds
   // the sliding operator over them (sliding()). Throws std::invalid_argument on a bad row
   // (check_sliding_rows; what: for messages).
   int add_sliding_rows(const std::vector<HostSlidingRow>& rows, const std::string& what);
@@ -85,8 +94,9 @@ class CoupledBody {
   const std::vector<TieCondensation>& ties() const { return ties_; }
   const std::vector<int>& boundary_nodes() const { return boundary_nodes_; }  // A ids, sorted
 
-  // Contactable points (after finalize): A's free surface nodes not on S' (A ids ascending)
-  // and their outward unit normals.
+  // Contactable points (after finalize): A's free surface nodes on at least one surface face
+  // that is not covered (A ids ascending) and their outward unit normals (area-weighted over the
+  // uncovered surface faces).
   const std::vector<int>& contact_nodes() const { return contact_nodes_; }
   const std::vector<mesh::Vec3>& contact_normals() const { return contact_normals_; }
   int contact_slot(int host_node) const { return contact_slot_[host_node]; }
@@ -128,7 +138,7 @@ class CoupledBody {
   std::vector<mesh::Vec3> contact_normals_;
   BoundaryOperator op_;  // L_bb, L_cb, K_add, G (boundary_cache.hpp)
   std::vector<HostSlidingRow> sliding_rows_;  // added before finalize, then moved to sliding_
-  std::vector<char> sliding_node_;            // A node -> on a sliding row
+  std::vector<std::array<int, 3>> covered_faces_;  // sorted triples, sorted at finalize
   SlidingOperator sliding_;
   // X = coupled L B for free-dof right-hand sides (ties by Woodbury: two solves).
   void coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x,

@@ -244,6 +244,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     std::vector<std::array<double, 3>> weights;
     std::vector<mesh::Vec3> points_m;  // closest points on S'
     double max_distance_m{0.0};
+    std::vector<mesh::Tri> cut;  // S': covered on the host (never contactable)
   };
   std::vector<PendingTie> pending(meshes_.size());
   std::vector<std::vector<char>> carve(meshes_.size());
@@ -308,6 +309,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       throw std::runtime_error(what + ": every surface node of " + emb.id +
                                " lies outside the host: nothing to tie");
     setup_.exposed_nodes += ex.nodes_outside;
+    p.cut = boundary.triangles;
     if (options_.carve_host) {
       const auto inside = fusion::tets_inside(host.mesh, boundary);
       if (carve[h].empty()) carve[h].assign(host.mesh.num_tets(), 0);
@@ -397,6 +399,8 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     auto& emb = *meshes_[m].loaded;
     const PendingTie& p = pending[m];
     auto& body = bodies_[meshes_[h].body];
+    // S' is under B: the host's faces there (its carved cavity or groove) have no contact rows.
+    body.body->cover_faces(p.cut);
     if (sliding[m]) {
       // Frictionless unilateral pairs: B's surface node, its closest point on S', B's normal.
       const std::string what =
@@ -466,7 +470,8 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     std::vector<int> slot_of(host.num_vertices(), -1), fixed = b.host_fixed_nodes;
     for (std::size_t v = 0; v < slot_of.size(); ++v) slot_of[v] = b.body->contact_slot(static_cast<int>(v));
     std::sort(fixed.begin(), fixed.end());
-    b.surface = ContactSurface(ContactSurfaceDefinition{&host, &slot_of, &fixed});
+    b.surface = ContactSurface(
+        ContactSurfaceDefinition{&host, &slot_of, &fixed, &b.body->covered_faces()});
     Vec3 lo, hi;
     host.bounds(lo, hi);
     b.max_penetration_m =

@@ -1,7 +1,8 @@
 // CoupledBody against the monolithic tied system solved directly (tied_box_fixtures.hpp): the
 // coupled compliance columns at contact slots, the host displacement for a load on several
 // slots and the tied mesh's displacement equal the direct solve; the answer differs from the
-// host alone (the tie matters); contact nodes are the free surface nodes off S'; a body read
+// host alone (the tie matters); contact nodes are the free nodes of the surface faces B does not
+// cover (nodes on S' included where such a face touches them); a body read
 // from the boundary-operator cache gives the same columns.
 #include "server/interaction/coupled_body.hpp"
 
@@ -11,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <filesystem>
 
 namespace neurosim::interaction {
@@ -22,15 +24,26 @@ using tied_box::MonolithicSolver;
 std::unique_ptr<CoupledBody> make_body(const tied_box::TiedBox& c, const std::string& cache = {}) {
   auto body = std::make_unique<CoupledBody>(0, c.host, c.host_material, c.host_fixed);
   body->add_tie(c.def);
+  // B covers the triangles it is tied to (as the simulation covers S').
+  std::vector<mesh::Tri> covered;
+  for (const auto& t : c.def.tri_nodes) covered.push_back({t[0], t[1], t[2]});
+  body->cover_faces(covered);
   if (!cache.empty()) body->set_cache_dir(cache);
   body->finalize();
   return body;
 }
 
-// Every 7th contact slot (spread over the sides of A).
+// Every 7th contact slot (spread over the sides of A) and one on S'.
 std::vector<int> some_slots(const CoupledBody& body) {
   std::vector<int> slots;
   for (int s = 0; s < static_cast<int>(body.contact_nodes().size()); s += 7) slots.push_back(s);
+  // And a node on S' (the top's rim: contactable, tied B pulls on it directly).
+  const auto& b = body.boundary_nodes();
+  for (int s = 0; s < static_cast<int>(body.contact_nodes().size()); ++s)
+    if (std::binary_search(b.begin(), b.end(), body.contact_nodes()[s])) {
+      if (std::find(slots.begin(), slots.end(), s) == slots.end()) slots.push_back(s);
+      break;
+    }
   return slots;
 }
 
@@ -97,26 +110,51 @@ TEST(interaction_coupled_body, HostAndTiedDisplacementEqualTheMonolithicTiedSolv
   EXPECT_THROW(body->host_displacement(slots, {}, u_host), std::invalid_argument);
 }
 
-TEST(interaction_coupled_body, ContactNodesAreTheFreeSurfaceNodesOffTheTie) {
+TEST(interaction_coupled_body, ContactNodesAreTheFreeNodesOfTheUncoveredFaces) {
   const auto owner = make_tied_box();
   const auto& c = *owner;
   const auto body = make_body(c);
   const auto& boundary = body->boundary_nodes();
   ASSERT_TRUE(std::is_sorted(boundary.begin(), boundary.end()));
   std::vector<int> expected_boundary;
-  for (const auto& tri : c.def.tri_nodes)
+  std::vector<std::array<int, 3>> covered;
+  for (const auto& tri : c.def.tri_nodes) {
     expected_boundary.insert(expected_boundary.end(), tri.begin(), tri.end());
+    std::array<int, 3> f = tri;
+    std::sort(f.begin(), f.end());
+    covered.push_back(f);
+  }
   std::sort(expected_boundary.begin(), expected_boundary.end());
   expected_boundary.erase(std::unique(expected_boundary.begin(), expected_boundary.end()),
                           expected_boundary.end());
   EXPECT_EQ(boundary, expected_boundary);
+  std::sort(covered.begin(), covered.end());
+  covered.erase(std::unique(covered.begin(), covered.end()), covered.end());
+  EXPECT_EQ(body->covered_faces(), covered);
+  // A node is contactable when it is free and on a surface face B does not cover.
+  std::vector<char> on_uncovered(c.host.num_vertices(), 0);
+  for (const auto& t : c.host.surface()) {
+    std::array<int, 3> f{t[0], t[1], t[2]};
+    std::sort(f.begin(), f.end());
+    if (std::binary_search(covered.begin(), covered.end(), f)) continue;
+    for (int v : t) on_uncovered[v] = 1;
+  }
   std::vector<int> expected;
+  int boundary_contactable = 0, boundary_covered_only = 0;
   for (int v : c.host.surface_vertices()) {
     if (std::binary_search(c.host_fixed.begin(), c.host_fixed.end(), v)) continue;
-    if (std::binary_search(boundary.begin(), boundary.end(), v)) continue;
+    const bool on_boundary = std::binary_search(boundary.begin(), boundary.end(), v);
+    if (!on_uncovered[v]) {
+      boundary_covered_only += on_boundary;
+      continue;
+    }
+    boundary_contactable += on_boundary;
     expected.push_back(v);
   }
   ASSERT_FALSE(expected.empty());
+  // Both kinds occur: S' nodes under B only (the top's inside) and on the top's rim.
+  EXPECT_GT(boundary_covered_only, 0);
+  EXPECT_GT(boundary_contactable, 0);
   EXPECT_EQ(body->contact_nodes(), expected);
   ASSERT_EQ(body->contact_normals().size(), expected.size());
   for (std::size_t s = 0; s < expected.size(); ++s) {
@@ -126,8 +164,10 @@ TEST(interaction_coupled_body, ContactNodesAreTheFreeSurfaceNodesOffTheTie) {
     const mesh::Vec3 out = c.host.vertices()[expected[s]] - mesh::Vec3(0.02, 0.02, 0.02);
     EXPECT_GT(body->contact_normals()[s].dot(out), 0.0) << "node " << expected[s];
   }
-  for (int v : boundary) EXPECT_EQ(body->contact_slot(v), -1);
+  for (int v : boundary)
+    if (!on_uncovered[v]) EXPECT_EQ(body->contact_slot(v), -1);
   EXPECT_THROW(body->add_tie(c.def), std::logic_error);
+  EXPECT_THROW(body->cover_faces({}), std::logic_error);
 }
 
 TEST(interaction_coupled_body, CachedBoundaryOperatorGivesTheSameColumns) {
