@@ -201,6 +201,18 @@ void CoupledBody::coupled_displacement(const Eigen::VectorXd& forces_n,
   u_host_m = u.col(0);
 }
 
+void CoupledBody::tied_mesh_displacement(int tie, const Eigen::VectorXd& forces_n,
+                                         Eigen::VectorXd& u_host_m,
+                                         Eigen::VectorXd& u_embedded_m) const {
+  if (tie < 0 || tie >= static_cast<int>(ties_.size()))
+    throw std::invalid_argument("CoupledBody::tied_mesh_displacement: no tie " +
+                                std::to_string(tie));
+  Eigen::VectorXd load = Eigen::VectorXd::Zero(3 * static_cast<int>(host_->num_vertices()));
+  ties_[tie].add_equivalent_host_load(forces_n, load);
+  coupled_displacement(load, u_host_m);
+  ties_[tie].displacement(u_host_m, forces_n, u_embedded_m);
+}
+
 void CoupledBody::compute_boundary_operator() {
   auto t0 = std::chrono::steady_clock::now();
   const int m3 = 3 * static_cast<int>(boundary_nodes_.size());

@@ -73,6 +73,13 @@ class CoupledBody {
   void coupled_displacement(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& u_host_m,
                             fem::SolveWorkspace* ws = nullptr) const;
 
+  // Coupled displacement of A (3N_A) and of tied mesh ties()[tie] (3N_B), unit m, for forces on
+  // that mesh's nodes (3N_B, unit N), e.g. a press on its exposed, untied part: the tie's
+  // equivalent load on A (TieCondensation::add_equivalent_host_load), one coupled solve, then
+  // B's interior with the forces. Set-up and offline (the solvers' own, locked workspaces).
+  void tied_mesh_displacement(int tie, const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_host_m,
+                              Eigen::VectorXd& u_embedded_m) const;
+
   // Directory of the disk cache of the boundary operator (L_bb, L_cb, K_add, G), keyed by a
   // hash of both meshes, materials, fixed nodes and the coupling map; empty: no cache.
   void set_cache_dir(std::string dir) { cache_dir_ = std::move(dir); }

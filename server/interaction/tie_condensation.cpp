@@ -150,6 +150,48 @@ void TieCondensation::displacement(const Eigen::VectorXd& u_host_m, Eigen::Vecto
   }
 }
 
+void TieCondensation::add_equivalent_host_load(const Eigen::VectorXd& forces_n,
+                                               Eigen::VectorXd& host_load_n) const {
+  const int nb3 = 3 * static_cast<int>(geometry_->num_vertices());
+  if (forces_n.size() != nb3 || !forces_n.allFinite())
+    throw std::invalid_argument("TieCondensation::add_equivalent_host_load: bad force vector");
+  const int t = static_cast<int>(tied_nodes_.size());
+  Eigen::VectorXd load_s(3 * t);
+  for (int k = 0; k < t; ++k) load_s.segment<3>(3 * k) = forces_n.segment<3>(3 * tied_nodes_[k]);
+  if (interior_ && k_is_.rows() > 0) {
+    const auto& free = interior_->free_dofs();
+    Eigen::MatrixXd f_i(static_cast<int>(free.size()), 1), z;
+    for (std::size_t r = 0; r < free.size(); ++r) f_i(static_cast<int>(r), 0) = forces_n[free[r]];
+    if (f_i.squaredNorm() > 0.0) {
+      interior_->solve_reduced(f_i, z);
+      load_s.noalias() -= k_is_.transpose() * z.col(0);
+    }
+  }
+  for (int k = 0; k < t; ++k)
+    for (int v = 0; v < 3; ++v) {
+      const int h = host_nodes_[k][v];
+      if (3 * h + 2 >= host_load_n.size())
+        throw std::invalid_argument("TieCondensation::add_equivalent_host_load: host load has " +
+                                    std::to_string(host_load_n.size()) + " entries, node " +
+                                    std::to_string(h) + " needs more");
+      host_load_n.segment<3>(3 * h) += weights_[k][v] * load_s.segment<3>(3 * k);
+    }
+}
+
+void TieCondensation::displacement(const Eigen::VectorXd& u_host_m,
+                                   const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m) const {
+  const int nb3 = 3 * static_cast<int>(geometry_->num_vertices());
+  if (forces_n.size() != nb3 || !forces_n.allFinite())
+    throw std::invalid_argument("TieCondensation::displacement: bad force vector");
+  if (!interior_) {
+    displacement(u_host_m, u_m);
+    return;
+  }
+  Eigen::VectorXd u_s;
+  tied_displacement(u_host_m, u_s);
+  u_m = interior_->solve_prescribed(tied_nodes_, u_s, forces_n).displacement_m;
+}
+
 double TieCondensation::residual(const Eigen::VectorXd& u_host_m,
                                  const Eigen::VectorXd& u_embedded_m) const {
   double worst = 0.0;

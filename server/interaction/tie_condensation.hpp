@@ -73,6 +73,16 @@ class TieCondensation {
   // (a State, a field worker); null uses K_ii's own, locked workspace (set-up, offline).
   void displacement(const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m,
                     fem::SolveWorkspace* ws = nullptr) const;
+  // Forces on B's own nodes (3N_B, unit N; those on B's fixed nodes are reactions, ignored):
+  // with z = K_ii^-1 f_i (B's interior, its tied nodes held), the equivalent load the tie puts on
+  // A, host_load_n += J^T (f_s - K_si z) (3N_A, unit N). With it A's coupled displacement is the
+  // tied system's (the load on an exposed, untied node of B reaches A through B's interior).
+  void add_equivalent_host_load(const Eigen::VectorXd& forces_n,
+                                Eigen::VectorXd& host_load_n) const;
+  // B's displacement (3N_B) for A's and the forces on B's nodes (3N_B, unit N): tied nodes
+  // J u_A, the others from K_ii with the forces (one solve_prescribed), fixed nodes zero.
+  void displacement(const Eigen::VectorXd& u_host_m, const Eigen::VectorXd& forces_n,
+                    Eigen::VectorXd& u_m) const;
   // Solves of K_ii on its own (locked) workspace since construction.
   std::uint64_t shared_workspace_uses() const {
     return interior_ ? interior_->shared_workspace_uses() : 0;

@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstdio>
 #include <filesystem>
 
 namespace neurosim::interaction {
@@ -168,6 +169,51 @@ TEST(interaction_coupled_body, ContactNodesAreTheFreeNodesOfTheUncoveredFaces) {
     if (!on_uncovered[v]) EXPECT_EQ(body->contact_slot(v), -1);
   EXPECT_THROW(body->add_tie(c.def), std::logic_error);
   EXPECT_THROW(body->cover_faces({}), std::logic_error);
+}
+
+TEST(interaction_coupled_body, PressOnTheExposedTopOfABottomTiedMeshEqualsTheMonolithicKkt) {
+  // B stands on A tied by its bottom only; a press on B's exposed top (and a pull on one tied
+  // node) reaches A through B's interior: host and B displacement equal the monolithic solve.
+  const auto owner = tied_box::make_bottom_tied_box();
+  const auto& c = *owner;
+  ASSERT_GT(c.def.surface_nodes.size(), 3u);
+  ASSERT_LT(c.def.surface_nodes.size(), c.embedded.surface_vertices().size());
+  const auto body = make_body(c);
+  const MonolithicSolver mono(c);
+  const int nb3 = 3 * static_cast<int>(c.embedded.num_vertices());
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(nb3);
+  int pressed = 0;
+  for (int v : c.embedded.surface_vertices()) {
+    if (c.embedded.vertices()[v].z() < 0.06 - 1e-9) continue;
+    f.segment<3>(3 * v) = mesh::Vec3(0.002 * (pressed % 3), -0.001, -0.01);
+    ++pressed;
+  }
+  ASSERT_GT(pressed, 0);
+  f.segment<3>(3 * c.def.surface_nodes[0]) += mesh::Vec3(0.0, 0.003, 0.001);
+  Eigen::VectorXd u_host, u_emb;
+  body->tied_mesh_displacement(0, f, u_host, u_emb);
+  const auto ref = mono.solve(Eigen::VectorXd::Zero(3 * static_cast<int>(c.host.num_vertices())), f);
+  ASSERT_GT(ref.u_host_m.norm(), 0.0);
+  std::printf("%d tied, %d pressed: relative difference to the KKT solve host %.2e, B %.2e\n",
+              static_cast<int>(c.def.surface_nodes.size()), pressed,
+              (u_host - ref.u_host_m).norm() / ref.u_host_m.norm(),
+              (u_emb - ref.u_embedded_m).norm() / ref.u_embedded_m.norm());
+  EXPECT_LE((u_host - ref.u_host_m).norm(), 1e-8 * ref.u_host_m.norm());
+  EXPECT_LE((u_emb - ref.u_embedded_m).norm(), 1e-8 * ref.u_embedded_m.norm());
+  EXPECT_LE(body->ties()[0].residual(u_host, u_emb), 1e-10 * u_emb.cwiseAbs().maxCoeff());
+  // Not a rigid translation of B: the press compresses it (its top sinks more than its bottom).
+  double top = 0.0, bottom = 0.0;
+  int nt = 0, nbot = 0;
+  for (int v : c.embedded.surface_vertices()) {
+    const double z = c.embedded.vertices()[v].z();
+    if (z > 0.06 - 1e-9) top += u_emb[3 * v + 2], ++nt;
+    if (z < 0.04 + 1e-9) bottom += u_emb[3 * v + 2], ++nbot;
+  }
+  EXPECT_LT(top / nt, 1.2 * (bottom / nbot));
+  EXPECT_LT(bottom / nbot, 0.0);
+  EXPECT_THROW(body->tied_mesh_displacement(1, f, u_host, u_emb), std::invalid_argument);
+  EXPECT_THROW(body->tied_mesh_displacement(0, Eigen::VectorXd::Zero(3), u_host, u_emb),
+               std::invalid_argument);
 }
 
 TEST(interaction_coupled_body, CachedBoundaryOperatorGivesTheSameColumns) {

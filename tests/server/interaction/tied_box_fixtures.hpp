@@ -5,6 +5,7 @@
 #pragma once
 
 #include "server/fem/assembly.hpp"
+#include "server/interaction/contact_surface.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/mesh/generate.hpp"
 
@@ -63,13 +64,58 @@ inline std::unique_ptr<const TiedBox> make_tied_box() {
   return owner;
 }
 
+// The same meshes with B standing on A's top: only B's bottom nodes (z = 0.04 m) are tied, each
+// to its closest point of A's top face (a geometric map); B's sides and top are exposed.
+inline std::unique_ptr<const TiedBox> make_bottom_tied_box() {
+  auto owner = std::make_unique<TiedBox>();
+  TiedBox& c = *owner;
+  const auto all = make_tied_box();
+  c.host = all->host;
+  c.embedded = all->embedded;
+  c.host_fixed = all->host_fixed;
+  c.host_material = all->host_material;
+  c.def = all->def;
+  c.def.embedded = &c.embedded;
+  c.def.surface_nodes.clear();
+  c.def.tri_nodes.clear();
+  c.def.weights.clear();
+  std::vector<mesh::Tri> top;
+  for (const auto& t : c.host.surface()) {
+    bool on_top = true;
+    for (int v : t) on_top = on_top && c.host.vertices()[v].z() > 0.04 - 1e-9;
+    if (on_top) top.push_back(t);
+  }
+  for (int v : c.embedded.surface_vertices()) {
+    const mesh::Vec3& x = c.embedded.vertices()[v];
+    if (x.z() > 0.04 + 1e-9) continue;
+    double best = 1e300;
+    for (const auto& t : top) {
+      const TrianglePoint p = closest_on_triangle(
+          x, {c.host.vertices()[t[0]], c.host.vertices()[t[1]], c.host.vertices()[t[2]]});
+      const double d = (p.point_m - x).norm();
+      if (d >= best) continue;
+      best = d;
+      if (c.def.tri_nodes.size() > c.def.surface_nodes.size()) {
+        c.def.tri_nodes.back() = {t[0], t[1], t[2]};
+        c.def.weights.back() = p.weights;
+      } else {
+        c.def.tri_nodes.push_back({t[0], t[1], t[2]});
+        c.def.weights.push_back(p.weights);
+      }
+    }
+    c.def.surface_nodes.push_back(v);
+    c.def.max_map_distance_m = std::max(c.def.max_map_distance_m, best);
+  }
+  return owner;
+}
+
 struct Monolithic {
   Eigen::VectorXd u_host_m;      // 3 N_A
   Eigen::VectorXd u_embedded_m;  // 3 N_B
 };
 
-// Direct solve of the monolithic tied system for host nodal forces (3 N_A, unit N); B carries
-// no load. One column per load case.
+// Direct solve of the monolithic tied system (KKT, the tie as Lagrange multipliers) for host
+// nodal forces (3 N_A, unit N) and optionally forces on B's nodes.
 class MonolithicSolver {
  public:
   explicit MonolithicSolver(const TiedBox& c) {
@@ -111,10 +157,16 @@ class MonolithicSolver {
     size_ = n + nc;
   }
 
-  Monolithic solve(const Eigen::VectorXd& host_forces_n) const {
+  // embedded_forces_n: B's nodal forces (3 N_B), or empty (none).
+  Monolithic solve(const Eigen::VectorXd& host_forces_n,
+                   const Eigen::VectorXd& embedded_forces_n = Eigen::VectorXd()) const {
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(size_);
-    for (std::size_t r = 0; r < dof_.size(); ++r)
-      if (dof_[r] < 3 * na_) rhs[static_cast<int>(r)] = host_forces_n[dof_[r]];
+    for (std::size_t r = 0; r < dof_.size(); ++r) {
+      if (dof_[r] < 3 * na_)
+        rhs[static_cast<int>(r)] = host_forces_n[dof_[r]];
+      else if (embedded_forces_n.size() > 0)
+        rhs[static_cast<int>(r)] = embedded_forces_n[dof_[r] - 3 * na_];
+    }
     const Eigen::VectorXd x = lu_.solve(rhs);
     Monolithic m;
     m.u_host_m = Eigen::VectorXd::Zero(3 * na_);
