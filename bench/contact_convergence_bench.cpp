@@ -42,7 +42,26 @@
 // checked to 1e-9 m; at d = r the sample's surface point itself; an error if the line has no
 // such point within 30 mm), so the gap depth is d at every sample; |F| / depth then uses that
 // depth.
+// --points N: instead of the one line, the press at N fixed points of the dorsal surface, the same
+// world points on every mesh (seeded --seed, at least --spacing mm apart, taken on the first mesh
+// where its highest surface point faces up, normal z >= 0.8, in the brain's upper 40 %): on each
+// mesh the closest surface point q to the world point, the press axis the surface's normal over
+// a --patch mm ball around q (patch_normal: each triangle weighted by its area inside the ball,
+// the same on any mesh of the same surface), the tip centre at q + (r - d) n for d = 1, 2, 3 mm.
+// Per depth and mesh: |F| mean / sd / min / max over the points, the successive differences
+// (mean, sd, how many share the mean's sign), |F - F_ref| / F_ref (the last mesh the reference),
+// |q - q_ref| and the normal's angle to the reference's (how far the surfaces differ there); the
+// order of the mean force (Richardson on the three-mesh means, negative when the differences
+// grow, with its 2.5 / 50 / 97.5 % over --bootstrap draws of the points), fit A (log |F_h -
+// F_ref| / F_ref = c_k + p log h, least squares over the points), fit B (F_h / F_ref = a_k + b_k h^p,
+// one p), the order per point from the last three meshes, and how |F - F_ref| correlates with
+// the surface's change. --split K (repeat): each --cell-size mesh also split 1 -> 8 K times
+// (tet_split.hpp: the same surface, the cells halved; the brain alone, as --brain-only), so the
+// order of the discretization shows without the mesher's change of surface. --points-csv: every
+// press. --cache-dir: SimulationOptions::compliance_cache_dir (a second run of a mesh reads its
+// factor).
 #include "patient_models.hpp"
+#include "tet_split.hpp"
 #include "common/cli.hpp"
 #include "common/clock.hpp"
 #include "server/fem/element.hpp"
@@ -60,6 +79,8 @@
 #include <filesystem>
 #include <iostream>
 #include <limits>
+#include <numeric>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -86,6 +107,211 @@ double observed_order(double h1, double h2, double h3, double d12, double d23) {
   return 0.5 * (lo + hi);
 }
 
+// The closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision Detection 5.1.5).
+Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return a;
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return a + d1 / (d1 - d3) * ab;
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return a + d2 / (d2 - d6) * ac;
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) return b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b);
+  const double denom = 1.0 / (va + vb + vc);
+  return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+// The surface's normal over a patch: the mean outward normal of the surface within radius_m of
+// q, each triangle weighted by its area inside that ball (each triangle near q cut into
+// sub-triangles of about 0.1 mm, those whose centroid lies within radius_m counted): the same
+// integral on any mesh of the same surface (a split mesh's patch normal is its parent's), and
+// across an edge or a vertex the mean of the faces around it, not one triangle's.
+Vec3 patch_normal(const neurosim::mesh::TetMesh& mesh, const Vec3& q, double radius_m) {
+  Vec3 sum = Vec3::Zero();
+  const auto& x = mesh.vertices();
+  for (const auto& t : mesh.surface()) {
+    const Vec3 &a = x[t[0]], &b = x[t[1]], &c = x[t[2]];
+    if ((closest_on_triangle(q, a, b, c) - q).norm() > radius_m) continue;
+    const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    const int m = std::max(1, static_cast<int>(std::ceil(longest / 1e-4)));
+    const Vec3 e1 = (b - a) / m, e2 = (c - a) / m;
+    int inside = 0;
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; i + j < m; ++j) {
+        inside += (a + (i + 1.0 / 3.0) * e1 + (j + 1.0 / 3.0) * e2 - q).norm() <= radius_m;
+        if (i + j + 2 <= m) inside += (a + (i + 2.0 / 3.0) * e1 + (j + 2.0 / 3.0) * e2 - q).norm() <= radius_m;
+      }
+    sum += 0.5 * (b - a).cross(c - a) * (static_cast<double>(inside) / (static_cast<double>(m) * m));
+  }
+  return sum.normalized();
+}
+
+// --points: the press at many fixed points, the same world points on every mesh.
+struct MeshEntry {
+  double cell_mm{0.0};
+  int split{0};
+  double h_mm() const { return cell_mm / std::pow(2.0, split); }
+  std::string label() const {
+    char s[64];
+    if (split == 0)
+      std::snprintf(s, sizeof s, "%g mm", cell_mm);
+    else
+      std::snprintf(s, sizeof s, "%g mm / %d", cell_mm, 1 << (3 * split));
+    return s;
+  }
+};
+
+struct MeshRun {
+  MeshEntry entry;
+  std::size_t vertices{0}, tets{0};
+  double build_s{0.0}, press_s{0.0};
+  std::vector<Vec3> q, n;                // per point: the closest surface point (m) and its normal
+  std::vector<std::vector<double>> f;    // [point][depth] |F|, mN (nan: the LCP did not converge)
+  std::vector<std::vector<int>> rows;    // [point][depth]
+};
+
+double mean_of(const std::vector<double>& v) {
+  return v.empty() ? std::nan("") : std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
+}
+double sd_of(const std::vector<double>& v) {
+  if (v.size() < 2) return std::nan("");
+  const double m = mean_of(v);
+  double s = 0.0;
+  for (double x : v) s += (x - m) * (x - m);
+  return std::sqrt(s / static_cast<double>(v.size() - 1));
+}
+double quantile_of(std::vector<double> v, double q) {
+  if (v.empty()) return std::nan("");
+  std::sort(v.begin(), v.end());
+  const double at = q * static_cast<double>(v.size() - 1);
+  const std::size_t i = static_cast<std::size_t>(std::floor(at));
+  const double w = at - static_cast<double>(i);
+  return i + 1 < v.size() ? (1.0 - w) * v[i] + w * v[i + 1] : v[i];
+}
+
+// Fit A: log(|F_h - F_ref| / F_ref) = c_k + p log h over the points k (an intercept per point,
+// one slope), the meshes before the reference (the last): the slope and its standard error.
+struct Slope {
+  double p{std::nan("")}, se{std::nan("")};
+};
+Slope fit_log_error(const std::vector<double>& h, const std::vector<std::vector<double>>& f,
+                    const std::vector<std::size_t>& points) {
+  const std::size_t ref = h.size() - 1;
+  double sxy = 0.0, sxx = 0.0, syy = 0.0;
+  std::size_t n_obs = 0, n_pts = 0;
+  for (std::size_t k : points) {
+    std::vector<double> x, y;
+    for (std::size_t m = 0; m < ref; ++m) {
+      const double e = std::abs(f[m][k] - f[ref][k]) / f[ref][k];
+      if (!(e > 0.0) || !std::isfinite(e)) continue;
+      x.push_back(std::log(h[m]));
+      y.push_back(std::log(e));
+    }
+    if (x.size() < 2) continue;
+    const double mx = mean_of(x), my = mean_of(y);
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      sxy += (x[i] - mx) * (y[i] - my);
+      sxx += (x[i] - mx) * (x[i] - mx);
+      syy += (y[i] - my) * (y[i] - my);
+    }
+    n_obs += x.size();
+    ++n_pts;
+  }
+  Slope s;
+  if (sxx <= 0.0) return s;
+  s.p = sxy / sxx;
+  const double ss_res = syy - s.p * sxy;
+  if (n_obs > n_pts + 1) s.se = std::sqrt(std::max(0.0, ss_res) / static_cast<double>(n_obs - n_pts - 1) / sxx);
+  return s;
+}
+
+// Fit B: F_h / F_ref = a_k + b_k h^p per point (the limit a_k and the constant b_k of each point,
+// one order p for all), p on a grid of 0.01 in [0.05, 6] minimizing the summed squared
+// residual; also that residual's RMS (relative to F_ref). p at an end of the grid: no order.
+struct CommonOrder {
+  double p{std::nan("")}, rms{std::nan("")};
+};
+CommonOrder fit_common_order(const std::vector<double>& h, const std::vector<std::vector<double>>& f,
+                             const std::vector<std::size_t>& points) {
+  const std::size_t nm = h.size(), ref = nm - 1;
+  CommonOrder best;
+  double best_ss = std::numeric_limits<double>::infinity();
+  std::size_t n_obs = 0;
+  for (int i = 0; i <= 595; ++i) {
+    const double p = 0.05 + 0.01 * i;
+    double ss = 0.0;
+    n_obs = 0;
+    for (std::size_t k : points) {
+      double sx = 0.0, sy = 0.0, sxx = 0.0, sxy = 0.0, syy = 0.0;
+      for (std::size_t m = 0; m < nm; ++m) {
+        const double x = std::pow(h[m], p), y = f[m][k] / f[ref][k];
+        sx += x, sy += y, sxx += x * x, sxy += x * y, syy += y * y;
+      }
+      const double n = static_cast<double>(nm);
+      const double vxx = sxx - sx * sx / n, vxy = sxy - sx * sy / n, vyy = syy - sy * sy / n;
+      ss += vyy - (vxx > 0.0 ? vxy * vxy / vxx : 0.0);
+      n_obs += nm;
+    }
+    if (ss < best_ss) {
+      best_ss = ss;
+      best.p = p;
+    }
+  }
+  best.rms = std::sqrt(best_ss / static_cast<double>(std::max<std::size_t>(n_obs, 1)));
+  return best;
+}
+
+// The points: seeded (x, y) over the first mesh's bounding box (15 mm in from its sides), kept
+// where the highest surface point on the vertical line faces up (normal z >= 0.8) in the upper
+// 40 % of the brain's height and lies at least spacing_mm from every point kept before.
+std::vector<Vec3> dorsal_points(const neurosim::mesh::TetMesh& mesh, int count, unsigned seed, double spacing_mm) {
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (int v : mesh.surface_vertices()) {
+    lo = lo.cwiseMin(mesh.vertices()[v]);
+    hi = hi.cwiseMax(mesh.vertices()[v]);
+  }
+  std::mt19937 rng(seed);
+  auto u = [&] { return (static_cast<double>(rng()) + 0.5) / 4294967296.0; };
+  std::vector<Vec3> out;
+  for (int tries = 0; tries < 20000 && static_cast<int>(out.size()) < count; ++tries) {
+    const double x = lo.x() + 0.015 + u() * (hi.x() - lo.x() - 0.03);
+    const double y = lo.y() + 0.015 + u() * (hi.y() - lo.y() - 0.03);
+    const auto top = ni::top_of_surface(mesh, x, y);
+    if (!top || top->normal.z() < 0.8 || top->point_m.z() < lo.z() + 0.6 * (hi.z() - lo.z())) continue;
+    bool near = false;
+    for (const Vec3& q : out) near = near || (q - top->point_m).norm() < 1e-3 * spacing_mm;
+    if (!near) out.push_back(top->point_m);
+  }
+  return out;
+}
+
+
+// As observed_order, but p in [-6, 6]: a negative p says the differences grow as the cells shrink
+// (|F(h2) - F(h3)| > |F(h1) - F(h2)| scaled by the sizes); at p = 0 the ratio's limit
+// ln(h1 / h2) / ln(h2 / h3). nan if the differences change sign or the ratio is out of reach.
+double signed_order(double h1, double h2, double h3, double d12, double d23) {
+  if (!(d12 * d23 > 0.0)) return std::nan("");
+  const double ratio = d12 / d23;
+  auto g = [&](double p) {
+    if (std::abs(p) < 1e-9) return std::log(h1 / h2) / std::log(h2 / h3) - ratio;
+    return (std::pow(h1, p) - std::pow(h2, p)) / (std::pow(h2, p) - std::pow(h3, p)) - ratio;
+  };
+  double lo = -6.0, hi = 6.0;
+  if (g(lo) * g(hi) > 0.0) return std::nan("");
+  for (int i = 0; i < 100; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (g(lo) * g(mid) <= 0.0 ? hi : lo) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -101,6 +327,13 @@ int main(int argc, char** argv) {
   std::string trace_path;
   std::string element;
   std::string slide_path_kind = "normal", slide_axis_kind = "start-normal";
+  int points = 0;
+  unsigned seed = 1;
+  double spacing_mm = 10.0, patch_mm = 3.0;
+  std::vector<int> splits;
+  bool brain_only = false;
+  int bootstrap = 2000;
+  std::string points_csv, cache_dir;
   neurosim::cli::Parser p("contact_convergence_bench",
                           "The same press on the brain at several cell sizes: force convergence.");
   p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
@@ -136,8 +369,289 @@ int main(int argc, char** argv) {
   p->add_flag("--no-shaft", no_shaft, "the probe without its shaft (shaft length 0): the tip's own contact");
   p->add_option("--contact-spread", contact_spread,
                 "SimulationOptions::contact_spread (default: the library's)");
+  p->add_option("--points", points,
+                "the press at this many fixed points of the dorsal surface instead of the one line (1, 2, 3 mm "
+                "along each mesh's normal at its closest point to the same world point): per mesh the mean and "
+                "spread of |F| and of the differences, the fitted order")
+      ->capture_default_str();
+  p->add_option("--seed", seed, "with --points: the points' seed")->capture_default_str();
+  p->add_option("--spacing", spacing_mm, "with --points: the least distance between two points, unit mm")
+      ->capture_default_str();
+  p->add_option("--split", splits,
+                "with --points: every mesh also split 1 -> 8 this many times (repeat: 0, 1, 2; the brain alone): "
+                "the same surface, finer cells")
+      ->check(CLI::Range(0, 3));
+  p->add_option("--patch", patch_mm,
+                "with --points: the press axis is the area-weighted normal of the surface triangles within this "
+                "distance of the closest point, unit mm")
+      ->capture_default_str();
+  p->add_flag("--brain-only", brain_only, "the brain without the artery (as --split runs it)");
+  p->add_option("--bootstrap", bootstrap, "with --points: bootstrap draws of the points for the order's spread")
+      ->capture_default_str();
+  p->add_option("--points-csv", points_csv, "with --points: every press as CSV (mesh, point, surface point, normal, depth, |F|, rows)");
+  p->add_option("--cache-dir", cache_dir,
+                "SimulationOptions::compliance_cache_dir (the host's factor and boundary operator on disk: a second "
+                "run of a mesh skips its factorization)");
   if (auto rc = p.parse(argc, argv)) return *rc;
   if (cells.empty()) cells = {7.0, 5.0, 4.0, 3.0};
+  auto prepare = [&](neurosim::scene::Model& model) {
+    model.effects.tier = neurosim::scene::Tier::kLinear;
+    if (no_shaft) model.tools.at(0).shaft_length_m = 0.0;
+    if (!element.empty()) {
+      const auto e = neurosim::fem::parse_element(element);
+      if (!e) throw std::runtime_error("--element " + element + ": expected " + neurosim::fem::element_names());
+      model.set_element(*e);
+    }
+  };
+  auto make_options = [&] {
+    ni::SimulationOptions options;
+    if (geometry_iterations > 0) options.contact_geometry_iterations = geometry_iterations;
+    if (contact_spread >= 0.0) options.contact_spread = contact_spread;
+    if (smooth_normals >= 0) options.contact_smooth_normals = smooth_normals != 0;
+    if (near_field >= 0) options.contact_near_field = near_field != 0;
+    if (shaft_near_field >= 0) options.contact_shaft_near_field = shaft_near_field != 0;
+    options.compliance_cache_dir = cache_dir;
+    return options;
+  };
+  if (points > 0) {
+    // The meshes: every --cell-size, each split --split times (all of them: ascending).
+    if (splits.empty()) splits = {0};
+    std::sort(splits.begin(), splits.end());
+    std::vector<MeshEntry> entries;
+    for (double c : cells)
+      for (int s : splits) entries.push_back({c, s});
+    if (entries.size() < 2) {
+      std::fprintf(stderr, "contact_convergence_bench: --points needs at least 2 meshes\n");
+      return 2;
+    }
+    const std::vector<double> pdepths_mm{1.0, 2.0, 3.0};
+    std::vector<MeshRun> runs;
+    std::vector<Vec3> world;  // the press points, from the first mesh
+    FILE* pcsv = points_csv.empty() ? nullptr : std::fopen(points_csv.c_str(), "w");
+    if (pcsv)
+      std::fprintf(pcsv, "mesh,h_mm,point,px_mm,py_mm,pz_mm,qx_mm,qy_mm,qz_mm,nx,ny,nz,depth_mm,force_mn,rows\n");
+    try {
+      for (const MeshEntry& e : entries) {
+        const fs::path scene = neurosim::bench::scene_at(e.cell_mm, dir, "contact_convergence_bench");
+        neurosim::scene::Model model = neurosim::scene::load_model(scene);
+        prepare(model);
+        if (brain_only || e.split > 0) {
+          // The brain alone (a split host would be carved anew around the artery).
+          model.meshes.resize(1);
+          model.couplings.clear();
+          model.effects.coupling = false;
+          model.loads.clear();
+          model.prescribed.clear();
+        }
+        for (int s = 0; s < e.split; ++s) neurosim::bench::split_loaded_mesh(model.meshes.front());
+        MeshRun run;
+        run.entry = e;
+        const auto t0 = neurosim::common::Clock::now();
+        auto sim = ni::Simulation::build(model, make_options());
+        run.build_s = neurosim::common::seconds_since(t0);
+        const auto& mesh = sim->mesh(0);
+        run.vertices = mesh.num_vertices();
+        run.tets = mesh.num_tets();
+        if (world.empty()) {
+          world = dorsal_points(mesh, points, seed, spacing_mm);
+          if (static_cast<int>(world.size()) < points)
+            std::fprintf(stderr, "contact_convergence_bench: only %zu points at %g mm spacing\n", world.size(),
+                         spacing_mm);
+        }
+        const double r = model.tools.at(0).tip_radius_m;
+        std::vector<ni::ToolPose> poses(1);
+        std::vector<ni::ToolContact> contacts;
+        ni::StepStats stats;
+        const auto t1 = neurosim::common::Clock::now();
+        for (std::size_t k = 0; k < world.size(); ++k) {
+          ni::SurfacePoint at = ni::closest_on_surface(mesh, world[k]);
+          at.normal = patch_normal(mesh, at.point_m, 1e-3 * patch_mm);
+          run.q.push_back(at.point_m);
+          run.n.push_back(at.normal);
+          run.f.emplace_back();
+          run.rows.emplace_back();
+          for (double d : pdepths_mm) {
+            poses[0].tip_m = at.point_m + (r - 1e-3 * d) * at.normal;
+            poses[0].axis = at.normal;
+            sim->step(poses, contacts, stats);
+            const double f = stats.converged ? 1e3 * contacts[0].force_n.norm() : std::nan("");
+            run.f.back().push_back(f);
+            run.rows.back().push_back(stats.contact_rows);
+            if (pcsv)
+              std::fprintf(pcsv, "%s,%g,%zu,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.5f,%.5f,%.5f,%g,%.4f,%d\n",
+                           e.label().c_str(), e.h_mm(), k, 1e3 * world[k].x(), 1e3 * world[k].y(),
+                           1e3 * world[k].z(), 1e3 * at.point_m.x(), 1e3 * at.point_m.y(), 1e3 * at.point_m.z(),
+                           at.normal.x(), at.normal.y(), at.normal.z(), d, f, stats.contact_rows);
+          }
+        }
+        run.press_s = neurosim::common::seconds_since(t1);
+        std::fprintf(stderr, "contact_convergence_bench: %s: %zu vertices, %zu tets, build %.1f s, %zu x %zu presses %.1f s\n",
+                     e.label().c_str(), run.vertices, run.tets, run.build_s, world.size(), pdepths_mm.size(),
+                     run.press_s);
+        if (pcsv) std::fflush(pcsv);
+        runs.push_back(std::move(run));
+      }
+    } catch (const std::exception& ex) {
+      std::fprintf(stderr, "contact_convergence_bench: %s\n", ex.what());
+      return 1;
+    }
+    if (pcsv) std::fclose(pcsv);
+    const std::size_t nm = runs.size(), ref = nm - 1, np = world.size();
+    std::vector<double> h;
+    for (const auto& r : runs) h.push_back(r.entry.h_mm());
+    std::printf("points: %zu (seed %u, spacing %g mm, from the %s mesh); reference: %s\n\n", np, seed, spacing_mm,
+                runs.front().entry.label().c_str(), runs.back().entry.label().c_str());
+    std::printf("| mesh | h mm | vertices / tets | build s | |q - q_ref| mm mean / max | normal to ref deg mean / max |\n"
+                "|---|---|---|---|---|---|\n");
+    for (const auto& r : runs) {
+      std::vector<double> dq, ang;
+      for (std::size_t k = 0; k < np; ++k) {
+        dq.push_back(1e3 * (r.q[k] - runs[ref].q[k]).norm());
+        ang.push_back(180.0 / M_PI * std::acos(std::clamp(r.n[k].dot(runs[ref].n[k]), -1.0, 1.0)));
+      }
+      std::printf("| %s | %g | %zu / %zu | %.1f | %.3f / %.3f | %.2f / %.2f |\n", r.entry.label().c_str(),
+                  r.entry.h_mm(), r.vertices, r.tets, r.build_s, mean_of(dq),
+                  *std::max_element(dq.begin(), dq.end()), mean_of(ang), *std::max_element(ang.begin(), ang.end()));
+    }
+    for (std::size_t di = 0; di < pdepths_mm.size(); ++di) {
+      // f[m][k] at this depth; the points where every mesh converged.
+      std::vector<std::vector<double>> f(nm, std::vector<double>(np));
+      std::vector<std::size_t> ok;
+      for (std::size_t k = 0; k < np; ++k) {
+        bool good = true;
+        for (std::size_t m = 0; m < nm; ++m) {
+          f[m][k] = runs[m].f[k][di];
+          good = good && std::isfinite(f[m][k]) && f[m][k] > 0.0;
+        }
+        if (good) ok.push_back(k);
+      }
+      std::printf("\n### %g mm deep: %zu of %zu points (force > 0 and converged on every mesh)\n\n", pdepths_mm[di],
+                  ok.size(), np);
+      std::printf("| mesh | |F| mN mean / sd / min / max | F - F_next mN mean / sd | |F - F_next| mN mean | same sign as the mean | |F - F_ref| / F_ref mean / median / max |\n"
+                  "|---|---|---|---|---|---|\n");
+      for (std::size_t m = 0; m < nm; ++m) {
+        std::vector<double> fm, dm, adm, rel;
+        for (std::size_t k : ok) {
+          fm.push_back(f[m][k]);
+          if (m + 1 < nm) {
+            dm.push_back(f[m][k] - f[m + 1][k]);
+            adm.push_back(std::abs(dm.back()));
+          }
+          if (m < ref) rel.push_back(std::abs(f[m][k] - f[ref][k]) / f[ref][k]);
+        }
+        const double md = mean_of(dm);
+        int same = 0;
+        for (double d : dm) same += (d > 0.0) == (md > 0.0);
+        std::printf("| %s | %.2f / %.2f / %.2f / %.2f |", runs[m].entry.label().c_str(), mean_of(fm), sd_of(fm),
+                    *std::min_element(fm.begin(), fm.end()), *std::max_element(fm.begin(), fm.end()));
+        if (m + 1 < nm)
+          std::printf(" %+.3f / %.3f | %.3f | %d of %zu |", md, sd_of(dm), mean_of(adm), same, dm.size());
+        else
+          std::printf(" | | |");
+        if (m < ref)
+          std::printf(" %.4f / %.4f / %.4f |\n", mean_of(rel), quantile_of(rel, 0.5),
+                      *std::max_element(rel.begin(), rel.end()));
+        else
+          std::printf(" (reference) |\n");
+      }
+      if (nm < 3) continue;  // an order needs three meshes
+      // The fits and their spread over the points (bootstrap: the points drawn with replacement).
+      const Slope a = fit_log_error(h, f, ok);
+      const CommonOrder b = fit_common_order(h, f, ok);
+      std::mt19937 brng(7);
+      std::vector<double> pa, pb;
+      for (int it = 0; it < bootstrap; ++it) {
+        std::vector<std::size_t> draw;
+        for (std::size_t i = 0; i < ok.size(); ++i) draw.push_back(ok[brng() % ok.size()]);
+        pa.push_back(fit_log_error(h, f, draw).p);
+        pb.push_back(fit_common_order(h, f, draw).p);
+      }
+      // Per point: the order that the last three meshes' two differences imply (nan: they
+      // change sign or imply none).
+      std::vector<double> p3;
+      int undefined = 0;
+      for (std::size_t k : ok) {
+        const double o = observed_order(h[nm - 3], h[nm - 2], h[nm - 1], f[nm - 3][k] - f[nm - 2][k],
+                                        f[nm - 2][k] - f[nm - 1][k]);
+        if (std::isfinite(o))
+          p3.push_back(o);
+        else
+          ++undefined;
+      }
+      // How much of |F - F_ref| the surface's change explains: Pearson r over (point, mesh).
+      std::vector<double> xs_dq, xs_ang, ys;
+      for (std::size_t m = 0; m < ref; ++m)
+        for (std::size_t k : ok) {
+          xs_dq.push_back((runs[m].q[k] - runs[ref].q[k]).norm());
+          xs_ang.push_back(std::acos(std::clamp(runs[m].n[k].dot(runs[ref].n[k]), -1.0, 1.0)));
+          ys.push_back(std::abs(f[m][k] - f[ref][k]) / f[ref][k]);
+        }
+      auto pearson = [](const std::vector<double>& x, const std::vector<double>& y) {
+        const double mx = mean_of(x), my = mean_of(y);
+        double sxy = 0.0, sxx = 0.0, syy = 0.0;
+        for (std::size_t i = 0; i < x.size(); ++i) {
+          sxy += (x[i] - mx) * (y[i] - my);
+          sxx += (x[i] - mx) * (x[i] - mx);
+          syy += (y[i] - my) * (y[i] - my);
+        }
+        return sxx > 0.0 && syy > 0.0 ? sxy / std::sqrt(sxx * syy) : std::nan("");
+      };
+      std::printf("\nOrder, fit A (log |F_h - F_ref| / F_ref = c_k + p log h, reference %s): p = %.2f (standard error %.2f; "
+                  "bootstrap over points 2.5 / 50 / 97.5 %%: %.2f / %.2f / %.2f)\n",
+                  runs[ref].entry.label().c_str(), a.p, a.se, quantile_of(pa, 0.025), quantile_of(pa, 0.5),
+                  quantile_of(pa, 0.975));
+      std::printf("Order, fit B (F_h / F_ref = a_k + b_k h^p, every mesh, one p; grid 0.05..6): p = %.2f (residual RMS "
+                  "%.4f of F_ref; bootstrap 2.5 / 50 / 97.5 %%: %.2f / %.2f / %.2f)\n",
+                  b.p, b.rms, quantile_of(pb, 0.025), quantile_of(pb, 0.5), quantile_of(pb, 0.975));
+      std::printf("Order per point from the last three meshes (%g / %g / %g): defined at %zu of %zu points "
+                  "(median %.2f, quartiles %.2f / %.2f); %d with differences of opposite sign or no order\n",
+                  h[nm - 3], h[nm - 2], h[nm - 1], p3.size(), ok.size(), quantile_of(p3, 0.5),
+                  quantile_of(p3, 0.25), quantile_of(p3, 0.75), undefined);
+      {
+        // The order of the mean force over the points (Richardson on the means), and its spread
+        // over bootstrap draws of the points.
+        auto mean_force = [&](const std::vector<std::size_t>& pts) {
+          std::vector<double> mf(nm, 0.0);
+          for (std::size_t m = 0; m < nm; ++m) {
+            for (std::size_t k : pts) mf[m] += f[m][k];
+            mf[m] /= static_cast<double>(std::max<std::size_t>(pts.size(), 1));
+          }
+          return mf;
+        };
+        const std::vector<double> mf = mean_force(ok);
+        std::printf("Order of the mean force (Richardson on the means; negative: the differences grow; successive "
+                    "differences");
+        for (std::size_t m = 0; m + 1 < nm; ++m) std::printf(" %+.3f", mf[m] - mf[m + 1]);
+        std::printf(" mN):");
+        std::mt19937 mrng(11);
+        for (std::size_t m = 0; m + 2 < nm; ++m) {
+          auto order_of = [&](const std::vector<double>& v) {
+            return signed_order(h[m], h[m + 1], h[m + 2], v[m] - v[m + 1], v[m + 1] - v[m + 2]);
+          };
+          std::vector<double> draws;
+          int no_order = 0;
+          for (int it = 0; it < bootstrap; ++it) {
+            std::vector<std::size_t> draw;
+            for (std::size_t i = 0; i < ok.size(); ++i) draw.push_back(ok[mrng() % ok.size()]);
+            const double o = order_of(mean_force(draw));
+            if (std::isfinite(o))
+              draws.push_back(o);
+            else
+              ++no_order;
+          }
+          std::printf(" %g/%g/%g p = %.2f (bootstrap 2.5 / 50 / 97.5 %%: %.2f / %.2f / %.2f; %d of %d draws "
+                      "without one);",
+                      h[m], h[m + 1], h[m + 2], order_of(mf), quantile_of(draws, 0.025), quantile_of(draws, 0.5),
+                      quantile_of(draws, 0.975), no_order, bootstrap);
+        }
+        std::printf("\n");
+      }
+      std::printf("|F_h - F_ref| / F_ref against the surface's change (Pearson r over points and meshes): "
+                  "|q_h - q_ref| %.2f, normal angle %.2f\n",
+                  pearson(xs_dq, ys), pearson(xs_ang, ys));
+    }
+    return 0;
+  }
   const std::vector<double> depths_mm{0.5, 1.0, 1.5, 2.0, 2.5, 3.0};
   std::vector<std::vector<double>> force_mn(cells.size(), std::vector<double>(depths_mm.size(), 0.0));
   std::vector<std::vector<int>> rows(cells.size(), std::vector<int>(depths_mm.size(), 0));
@@ -238,20 +752,16 @@ int main(int argc, char** argv) {
     for (std::size_t ci = 0; ci < cells.size(); ++ci) {
       const fs::path scene = neurosim::bench::scene_at(cells[ci], dir, "contact_convergence_bench");
       neurosim::scene::Model model = neurosim::scene::load_model(scene);
-      model.effects.tier = neurosim::scene::Tier::kLinear;
-      if (no_shaft) model.tools.at(0).shaft_length_m = 0.0;
-      if (!element.empty()) {
-        const auto e = neurosim::fem::parse_element(element);
-        if (!e) throw std::runtime_error("--element " + element + ": expected " + neurosim::fem::element_names());
-        model.set_element(*e);
+      prepare(model);
+      if (brain_only) {
+        model.meshes.resize(1);
+        model.couplings.clear();
+        model.effects.coupling = false;
+        model.loads.clear();
+        model.prescribed.clear();
       }
       const auto t0 = neurosim::common::Clock::now();
-      ni::SimulationOptions options;
-      if (geometry_iterations > 0) options.contact_geometry_iterations = geometry_iterations;
-      if (contact_spread >= 0.0) options.contact_spread = contact_spread;
-      if (smooth_normals >= 0) options.contact_smooth_normals = smooth_normals != 0;
-      if (near_field >= 0) options.contact_near_field = near_field != 0;
-      if (shaft_near_field >= 0) options.contact_shaft_near_field = shaft_near_field != 0;
+      const ni::SimulationOptions options = make_options();
       auto sim = ni::Simulation::build(model, options);
       const double build_s = neurosim::common::seconds_since(t0);
       const auto& mesh = sim->mesh(0);

@@ -7,6 +7,7 @@
 // Also the tilted probe whose shaft carries force, with and without the shaft's near field.
 #include "server/interaction/simulation.hpp"
 
+#include "bench/tet_split.hpp"
 #include "graded_block_fixtures.hpp"
 #include "server/mesh/io.hpp"
 #include "server/scene/compile.hpp"
@@ -15,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -275,6 +277,62 @@ TEST(interaction_contact_convergence, ShaftNearFieldUnderRefinement) {
         EXPECT_NEAR(force[1][ci][di], force[0][ci][di], 1e-9 * force[0][ci][di]);
       }
     }
+}
+
+// bench/tet_split.hpp (contact_convergence_bench --split, the refinement of the discretization
+// alone): a 1 -> 8 split keeps the volume and the boundary surface exactly (each surface triangle
+// becomes four in its own plane: the new surface vertices are the midpoints of the surface
+// edges), with eight times the tetrahedra, every one of positive volume.
+TEST(interaction_contact_convergence, SplitKeepsTheSurface) {
+  const auto xs = testing::graded_axis_to(0.004, 0.004, 1.5, 0.012, true);
+  const auto zs = testing::graded_axis_to(0.004, 0.004, 1.5, 0.012, false);
+  const mesh::TetMesh block = testing::graded_block(xs, zs);
+  const bench::SplitMesh s = bench::split_tets(block);
+  auto volume = [](const mesh::TetMesh& m, double& least) {
+    double v = 0.0;
+    least = 1.0;
+    for (const auto& t : m.tets()) {
+      const auto& x = m.vertices();
+      const double vt = (x[t[1]] - x[t[0]]).cross(x[t[2]] - x[t[0]]).dot(x[t[3]] - x[t[0]]) / 6.0;
+      v += vt;
+      least = std::min(least, vt);
+    }
+    return v;
+  };
+  auto area = [](const mesh::TetMesh& m) {
+    double a = 0.0;
+    for (const auto& t : m.surface()) {
+      const auto& x = m.vertices();
+      a += 0.5 * (x[t[1]] - x[t[0]]).cross(x[t[2]] - x[t[0]]).norm();
+    }
+    return a;
+  };
+  double least_in = 0.0, least_out = 0.0;
+  const double v_in = volume(block, least_in), v_out = volume(s.mesh, least_out);
+  EXPECT_EQ(s.mesh.num_tets(), 8 * block.num_tets());
+  EXPECT_EQ(s.parent_tet.size(), s.mesh.num_tets());
+  EXPECT_NEAR(v_out, v_in, 1e-12 * v_in);
+  EXPECT_GT(least_out, 0.0);
+  EXPECT_EQ(s.mesh.surface().size(), 4 * block.surface().size());
+  EXPECT_NEAR(area(s.mesh), area(block), 1e-12 * area(block));
+  // Every surface vertex of the split mesh is an old surface vertex or the midpoint of an edge
+  // whose ends are both on the old surface, and lies on the old surface (a face of the block).
+  std::vector<char> on_surface(block.num_vertices(), 0);
+  for (int v : block.surface_vertices()) on_surface[v] = 1;
+  const int n = static_cast<int>(block.num_vertices());
+  for (int v : s.mesh.surface_vertices()) {
+    if (v < n) {
+      EXPECT_TRUE(on_surface[v]) << "vertex " << v;
+      continue;
+    }
+    const auto& e = s.edge_ends[v - n];
+    EXPECT_TRUE(on_surface[e[0]] && on_surface[e[1]]) << "vertex " << v;
+    const Vec3 x = s.mesh.vertices()[v];
+    const double to_face = std::min({std::abs(x.x() - xs.front()), std::abs(x.x() - xs.back()),
+                                      std::abs(x.y() - xs.front()), std::abs(x.y() - xs.back()),
+                                      std::abs(x.z() + zs.back()), std::abs(x.z())});
+    EXPECT_LT(to_face, 1e-15) << "vertex " << v;
+  }
 }
 
 }  // namespace
