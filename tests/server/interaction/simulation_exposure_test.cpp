@@ -173,6 +173,16 @@ TEST(interaction_simulation_exposure, RingAroundAnExitingCylinderStaysContactabl
     EXPECT_FALSE(std::binary_search(covered.begin(), covered.end(), contactable.back()));
   }
   std::sort(contactable.begin(), contactable.end());
+  // No contactable face lies inside the cylinder (axis (0.05, y, 0.105) m for y in [0.02, 0.08]
+  // m, radius 15 mm; 1 mm margin for its coarse polygon): the host is carved where B is, so no
+  // host face coincides with B's.
+  for (const auto& t : surface.triangles()) {
+    mesh::Vec3 c = mesh::Vec3::Zero();
+    for (int v : t.node) c += host.vertices()[v] / 3.0;
+    const double r = std::hypot(c.x() - 0.05, c.z() - 0.105);
+    EXPECT_FALSE(c.y() > 0.021 && c.y() < 0.079 && r < 0.015 - 0.001)
+        << "contactable face inside the cylinder, centroid " << c.transpose();
+  }
   const auto& boundary = body.boundary_nodes();
   int top = 0, ring = 0;
   for (const auto& tri : host.surface()) {
