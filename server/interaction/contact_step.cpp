@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <utility>
 #include <stdexcept>
@@ -263,6 +264,17 @@ void State::reserve_workspace(const Model& m, int tools) {
   delassus_last_row_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
   delassus_row_node_.reserve(max_contact);
   delassus_y_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact) * max_contact);
+  delassus_prev_rows_.clear();  // (the cache's sizes follow max_contact)
+  delassus_prev_rows_.reserve(max_contact);
+  delassus_v_.setZero(max_contact, max_contact);
+  delassus_prev_v_.setZero(max_contact, max_contact);
+  delassus_match_.reserve(max_contact);
+  delassus_last_fresh_row_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  delassus_evicted_.assign(m.bodies_.size(), 0);
+  spread_memo_.clear();
+  spread_memo_.reserve(2 * static_cast<std::size_t>(max_contact));
+  spread_prev_memo_.clear();
+  spread_prev_memo_.reserve(2 * static_cast<std::size_t>(max_contact));
   rows_.reserve(max_contact);
   // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
   for (const auto& b : m.bodies_) {
@@ -1114,8 +1126,40 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
 bool State::spread_row(const Model& m, Row& r) {
   if (!r.spread_pending) return true;
   r.spread_pending = false;
-  if (m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal, r.spread_radius_m,
-                                       spread_triangles_, spread_load_)) {
+  // The same inputs as a spread of the last or of this geometry (bit for bit): its load.
+  auto same_input = [&](const SpreadMemo& e) {
+    return e.body == r.body && e.radius_m == r.spread_radius_m &&
+           std::memcmp(e.at_m.data(), r.spread_at_m.data(), sizeof(double) * 3) == 0 &&
+           std::memcmp(e.normal.data(), r.spread_normal.data(), sizeof(double) * 3) == 0 &&
+           std::signbit(e.radius_m) == std::signbit(r.spread_radius_m);
+  };
+  const SpreadMemo* memo = nullptr;
+  for (const auto* list : {&spread_prev_memo_, &spread_memo_}) {
+    for (const SpreadMemo& e : *list)
+      if (same_input(e)) {
+        memo = &e;
+        break;
+      }
+    if (memo) break;
+  }
+  bool found;
+  if (memo) {
+    found = memo->found;
+    if (found) spread_load_ = memo->load;
+  } else {
+    found = m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal, r.spread_radius_m,
+                                             spread_triangles_, spread_load_);
+    if (spread_memo_.size() < spread_memo_.capacity()) {
+      SpreadMemo& e = spread_memo_.emplace_back();
+      e.body = r.body;
+      e.at_m = r.spread_at_m;
+      e.normal = r.spread_normal;
+      e.radius_m = r.spread_radius_m;
+      e.found = found;
+      if (found) e.load = spread_load_;
+    }
+  }
+  if (found) {
     r.nodes = spread_load_.nodes;
     for (int k = 0; k < r.nodes; ++k) {
       r.slot[k] = spread_load_.slot[k];
@@ -1454,15 +1498,46 @@ void State::delassus(const Model& m, int ns) {
   }
   const int nn = static_cast<int>(delassus_nodes_.size());
   for (const auto& [body, slot] : delassus_nodes_) delassus_node_[body][slot] = -1;
+  // Reuse: the rows equal to a row of the last W (none if a body's columns evicted since).
+  bool reuse = true;
+  for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
+    const std::uint64_t e = bodies_[bi].columns ? bodies_[bi].columns->evicted() : 0;
+    if (e != delassus_evicted_[bi]) reuse = false;
+    delassus_evicted_[bi] = e;
+  }
+  const int np = reuse ? static_cast<int>(delassus_prev_rows_.size()) : 0;
+  delassus_match_.assign(nc, -1);
+  for (int r = 0; r < nc; ++r) {
+    const Row& a = rows_[r];
+    for (int q = 0; q < np; ++q) {
+      const Row& b = delassus_prev_rows_[q];
+      if (b.key != a.key || b.body != a.body || b.nodes != a.nodes) continue;
+      const std::size_t n = static_cast<std::size_t>(a.nodes);
+      if (std::memcmp(a.slot.data(), b.slot.data(), n * sizeof(int)) == 0 &&
+          std::memcmp(a.w.data(), b.w.data(), n * sizeof(double)) == 0 &&
+          std::memcmp(a.m.data(), b.m.data(), n * sizeof(Vec3)) == 0) {
+        delassus_match_[r] = q;
+        break;
+      }
+    }
+  }
+  delassus_last_fresh_row_.assign(nn, -1);
+  for (int s = 0; s < nc; ++s) {
+    if (delassus_match_[s] >= 0) continue;
+    for (int q = 0; q < rows_[s].nodes; ++q)
+      if (delassus_row_node_[s][q] >= 0) delassus_last_fresh_row_[delassus_row_node_[s][q]] = s;
+  }
   // y_rj for the nodes j of the rows s >= r on the row's body, node by node: the blocks L(., j)
   // of node j's column stay in cache while every row reads them (row by row, each row read all
-  // the nodes' columns again: a cache miss per block, 24 % of four probes' step).
+  // the nodes' columns again: a cache miss per block, 24 % of four probes' step). A matched row
+  // needs y_rj only against the unmatched rows.
   for (int j = 0; j < nn; ++j) {
     const auto& [body, slot_q] = delassus_nodes_[j];
     const auto& cols = *bodies_[body].columns;
     for (int r = 0; r <= delassus_last_row_[j]; ++r) {
       const Row& a = rows_[r];
       if (a.body != body) continue;
+      if (delassus_match_[r] >= 0 && r > delassus_last_fresh_row_[j]) continue;
       Vec3 y = Vec3::Zero();  // sum_p w_p L(slot_p, slot_q)^T m_p
       for (int p = 0; p < a.nodes; ++p)
         if (a.slot[p] >= 0) y.noalias() += a.w[p] * (cols.block(a.slot[p], slot_q).transpose() * a.m[p]);
@@ -1484,13 +1559,17 @@ void State::delassus(const Model& m, int ns) {
     for (int s = r; s < nc; ++s) {
       const Row& c = rows_[s];
       double v = 0.0;
-      if (c.body == a.body) {
+      if (delassus_match_[r] >= 0 && delassus_match_[s] >= 0) {
+        v = delassus_prev_v_(delassus_match_[r], delassus_match_[s]);
+      } else if (c.body == a.body) {
         const mesh::Vec3* yr = delassus_y_.data() + static_cast<std::size_t>(r) * nn;
         for (int q = 0; q < c.nodes; ++q) {
           if (c.slot[q] < 0) continue;
           v += c.w[q] * yr[delassus_row_node_[s][q]].dot(c.m[q]);
         }
       }
+      delassus_v_(r, s) = v;
+      delassus_v_(s, r) = v;
       v *= alpha;
       if (s == r) v *= 1.0 + eps;
       w_(i, ns + s) = v;
@@ -1517,6 +1596,8 @@ void State::delassus(const Model& m, int ns) {
     }
     w_.row(i).head(ns) = w_.col(i).head(ns).transpose();
   }
+  delassus_prev_rows_.assign(rows_.begin(), rows_.end());
+  delassus_prev_v_.swap(delassus_v_);
 }
 
 // Phase "forces": the last good contact forces per body and node (a row's force -lambda n on
@@ -1788,6 +1869,8 @@ LcpResult State::solve_geometry(const Model& m, const std::vector<ToolPose>& pos
                                 StepStats& stats) {
   ++geometry_counter_;
   rows_.clear();
+  spread_prev_memo_.swap(spread_memo_);
+  spread_memo_.clear();
   if (!m.tools_.empty()) {
     for (int t = 0; t < static_cast<int>(poses.size()); ++t)
       rows_of_tool(m, t, poses[t], poses[t].axis.normalized());

@@ -367,6 +367,29 @@ class State {
   std::vector<int> delassus_last_row_;
   std::vector<std::array<int, kSpreadNodes>> delassus_row_node_;
   std::vector<mesh::Vec3> delassus_y_;
+  // Phase "Delassus", reuse: the rows of the last W and their block of it before alpha and the
+  // row compliance (v_rs, a function of the two rows and the body's ready columns alone); a row
+  // equal bit for bit (body, nodes, slots, weights, normals) to one of them is matched, and a
+  // pair of matched rows gets its v back. Per node the last unmatched row on it (-1: none), so
+  // y_rj of a matched row r is formed only for the nodes of unmatched rows s >= r. Forgotten when
+  // a body's columns lose slots (eviction) since.
+  std::vector<Row> delassus_prev_rows_;
+  Eigen::MatrixXd delassus_v_, delassus_prev_v_;
+  std::vector<int> delassus_match_;
+  std::vector<int> delassus_last_fresh_row_;
+  std::vector<std::uint64_t> delassus_evicted_;  // per body: its columns' evicted() at the last W
+  // Phase "rows", spread reuse (spread_row): the spreads of the last and of this geometry by their
+  // inputs (body, point, normal, radius); ContactSurface::spread is a function of these and the
+  // constant rest surface, so an equal input (bit for bit) takes the stored load.
+  struct SpreadMemo {
+    int body{-1};
+    Vec3 at_m{Vec3::Zero()};
+    Vec3 normal{Vec3::Zero()};
+    double radius_m{0.0};
+    bool found{false};
+    SpreadLoad load;
+  };
+  std::vector<SpreadMemo> spread_memo_, spread_prev_memo_;
   ContactLcp lcp_;
   bool lcp_constant_block_{false};  // set_constant_block done
   std::vector<ToolContact> last_good_;
