@@ -97,9 +97,31 @@ struct RunTimes {
   long not_ready{0};  // StepStats::columns_not_ready summed over the steps
 };
 
+// --dump FILE: every step's answer of the deterministic paths, the floating point values in %a
+// (bit for bit: two builds give the same file when their answers are identical): the case, the
+// step, contact rows, LCP iterations (geometries, the answer's), whether it converged, and per
+// tool the force, the stiffness K, the validity radius and the loaded nodes.
+FILE* dump_file = nullptr;
+void dump_step(const char* name, std::size_t k, const std::vector<ni::ToolContact>& contacts,
+               const ni::StepStats& stats) {
+  if (dump_file == nullptr) return;
+  std::fprintf(dump_file, "%s %zu rows=%d geo=%d conv=%d", name, k, stats.contact_rows,
+               stats.geometry_iterations, stats.converged ? 1 : 0);
+  for (const auto& c : contacts) {
+    std::fprintf(dump_file, " | it=%d ic=%d F=%a %a %a K=", c.iterations, c.in_contact ? 1 : 0,
+                 c.force_n[0], c.force_n[1], c.force_n[2]);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) std::fprintf(dump_file, "%a ", c.stiffness_n_per_m(i, j));
+    std::fprintf(dump_file, "vr=%a nodes=", c.validity_radius_m);
+    for (int v : c.nodes) std::fprintf(dump_file, "%d,", v);
+  }
+  std::fprintf(dump_file, "\n");
+}
+
 // Steps the poses, timing each step (paced: one step per millisecond of the clock, as the server
 // steps, so that a worker thread beside the step runs in real time).
-RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses, bool paced = false) {
+RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses, bool paced = false,
+                   const char* dump_name = nullptr) {
   RunTimes r;
   std::vector<ni::ToolContact> contacts;
   ni::StepStats stats;
@@ -121,6 +143,7 @@ RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses, 
     r.rows += stats.contact_rows;
     r.columns += stats.columns_computed;
     r.not_ready += stats.columns_not_ready;
+    if (dump_name) dump_step(dump_name, r.us.size() - 1, contacts, stats);
     if (!(contacts[0].force_n.norm() > 0.0)) {
       if (r.zero_force < 8) r.zero_force_at.push_back(r.us.size() - 1);
       ++r.zero_force;
@@ -156,8 +179,8 @@ int brain_contact(int steps, const ni::SimulationOptions& contact) {
     }
     (k < 200 ? warm : press).push_back(pose);
   }
-  run_poses(*sim, warm);
-  const RunTimes tp = run_poses(*sim, press);
+  run_poses(*sim, warm, false, "brain_press_warm");
+  const RunTimes tp = run_poses(*sim, press, false, "brain_press");
   // Slide: 10 s at 20 mm/s (1 mm per 50 steps), 1 mm deep, over surface the press never touched.
   std::vector<ni::ToolPose> slide;
   const double step_m = 0.020 / 1000.0;
@@ -187,7 +210,7 @@ int brain_contact(int steps, const ni::SimulationOptions& contact) {
   RunTimes ts, tw;
   {
     auto fresh = ni::Simulation::build(model, contact);
-    ts = run_poses(*fresh, slide, true);
+    ts = run_poses(*fresh, slide, true, "brain_slide_step_solves");
   }
   {
     ni::SimulationOptions options = contact;
@@ -236,6 +259,7 @@ int main(int argc, char** argv) {
   bool no_sliding_ref = false;
   bool brain = false, smooth_contact = false;
   double contact_spread = -1.0;
+  std::string dump;
   neurosim::cli::Parser cli("interaction_bench",
                             "Per-step contact solve: exact vs iterative coupling, sliding.");
   cli->add_flag("--csv", csv, "print CSV");
@@ -254,7 +278,22 @@ int main(int argc, char** argv) {
                 "contact_spread 0, no smooth normals, no near field (every scenario)");
   cli->add_option("--contact-spread", contact_spread,
                   "with --brain-contact: SimulationOptions::contact_spread (default: the library's)");
+  cli->add_option("--dump", dump,
+                  "write every step's answer of the deterministic paths (%a: force, K, rows, LCP "
+                  "iterations, nodes) to this file, to compare two builds bit for bit");
   if (auto rc = cli.parse(argc, argv)) return *rc;
+  if (!dump.empty()) {
+    dump_file = std::fopen(dump.c_str(), "w");
+    if (dump_file == nullptr) {
+      std::cerr << "interaction_bench: cannot write " << dump << "\n";
+      return 2;
+    }
+  }
+  struct CloseDump {
+    ~CloseDump() {
+      if (dump_file) std::fclose(dump_file);
+    }
+  } close_dump;
   if (brain) {
     ni::SimulationOptions contact;
     if (smooth_contact) {
@@ -342,7 +381,10 @@ int main(int argc, char** argv) {
     std::vector<ni::ToolContact> contacts;
     ni::StepStats stats;
     const auto tw = Clock::now();
-    for (int k = 0; k < 200; ++k) sim->step({pose(k)}, contacts, stats);  // warm-up: columns cached
+    for (int k = 0; k < 200; ++k) {  // warm-up: columns cached
+      sim->step({pose(k)}, contacts, stats);
+      dump_step((sc.name + "_warm").c_str(), k, contacts, stats);
+    }
     std::cerr << sc.name << ": warm-up (first touches, columns computed) "
               << neurosim::common::seconds_since(tw) << " s\n";
     std::vector<double> times;
@@ -355,6 +397,7 @@ int main(int argc, char** argv) {
       const auto ts = Clock::now();
       sim->step(one, contacts, stats);
       times.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
+      dump_step(sc.name.c_str(), k, contacts, stats);
       max_nodes = std::max(max_nodes, static_cast<int>(contacts[0].nodes.size()));
       epivots.push_back(contacts[0].iterations);
       erows += stats.contact_rows;
@@ -485,6 +528,7 @@ int main(int argc, char** argv) {
         const auto ts = Clock::now();
         ssim->step(one, contacts, stats);
         stimes.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
+        dump_step((sc.name + "_" + tag).c_str(), k, contacts, stats);
         smax_nodes = std::max(smax_nodes, static_cast<int>(contacts[0].nodes.size()));
         max_active = std::max(max_active, stats.sliding_active);
         pivots.push_back(contacts[0].iterations);
