@@ -3,7 +3,10 @@
 // 2, 1 and 0.5 mm (a graded grid over the same domain): the force converges as the cells shrink
 // (the rows on the touched triangle in ever smaller steps; with the contact options toward
 // Sneddon's answer, the coarse cells already near it).
-// The brain meshes of 7 / 5 / 4 / 3 mm cells are measured by bench/contact_convergence_bench.
+// The brain meshes of 7 / 5 / 4 / 3 mm cells are measured by bench/contact_convergence_bench
+// (at 24 fixed points, and on brains split 1 -> 8 with the surface fixed: with the default rows no
+// positive order at cells of 3.5 mm and more, the steps grow; bench/RESULTS.md, "The press at 24
+// points"), not here: no measured order to bound a brain's convergence by.
 // Also the tilted probe whose shaft carries force, with and without the shaft's near field.
 #include "server/interaction/simulation.hpp"
 
