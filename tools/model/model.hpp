@@ -26,7 +26,7 @@ struct ModelOptions {
   std::filesystem::path out_dir{"scenes"};
   std::string name{"brain_artery"};  // <out_dir>/<name>.scene and <out_dir>/<name>/*.mesh
   double mask_threshold{20.0};       // T1 intensity (ch2bet is 0..133); voxels >= it are brain
-  double brain_cell_size_mm{7.0};    // Mesh_3 cell/facet size, unit mm (~5.4k vertices)
+  double brain_cell_size_mm{5.0};    // Mesh_3 cell/facet size, unit mm (~13.3k vertices)
   double artery_cell_size_mm{0.9};   // unit mm (~1.5k vertices, ~4.4k tetrahedra)
   double artery_radius_mm{1.5};      // MCA M1 diameter ~3 mm
   // Artery centreline control points in the image's world space (NIfTI sform: MNI mm).

@@ -418,22 +418,23 @@ TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
   EXPECT_GE(touching, 15);  // the comparisons are of contacts, not of empty answers
 }
 
-// The 2 mm probe slid 40 mm over the bundled brain (triangles about 7 mm, four tip radii) 1 mm and
-// 2 mm below its rest surface, and the cube's 3 mm probe over its top face, on the slide above
+// The 2 mm probe slid 40 mm over the bundled brain (5 mm cells: triangles about 5 mm, 2.5 tip
+// radii) 1 mm and 2 mm below its rest surface, and the cube's 3 mm probe over its top face, on the slide above
 // (the axis fixed, the gap depth to the closest surface point exact at every sample), with the
 // default rows (each row's load spread over one local edge length, the tip's rows projected along
 // the interpolated node normals with their depth to the flat surface, the near field in series:
 // SimulationOptions contact_spread 1, contact_smooth_normals, contact_near_field): the force is
 // never zero (node contact: zero in 94 % of such a slide) and |F| / depth varies along the path
-// within bounds the barycentric rows below fail (3.34 / 3.20 on the brain, 1.79 on the cube).
-// Measured (bench/RESULTS.md, "The slide as the contact issue defines it" and "The shaft on the
-// sulcus wall"; `contact_convergence_bench --slide --slide-path closest`): the brain 6.8 .. 7.4
-// N/m at 1 mm (spread 1.09) and 9.2 .. 12.2 N/m at 2 mm (1.33; Hertz for the 2 mm tip in E = 3
-// kPa, nu = 0.49: 7.4 and 10.5 N/m), the cube 1.03 / 1.05; asserted with about 5-10 % margin (the
-// steps are deterministic: the margin is for another compiler's or BLAS's round-off where a row
-// enters, not for noise).
+// within bounds the barycentric rows below fail (7.61 / 4.71 on the brain, 1.79 on the cube), and
+// within the contact issue's bound of 2 on the bundled brain. Measured on the 5 mm brain (this
+// test; bench/RESULTS.md, "The bundled brain is now 5 mm"): 6.3 .. 7.4 N/m at 1 mm (spread 1.16)
+// and 8.3 .. 11.0 N/m at 2 mm (1.33; Hertz for the 2 mm tip in E = 3 kPa, nu = 0.49: 7.4 and
+// 10.5 N/m), the cube 1.03 / 1.05 (on the 7 mm brain: 6.8 .. 7.4, 1.09 and 9.2 .. 12.2, 1.33;
+// "The slide as the contact issue defines it", `contact_convergence_bench --slide --slide-path
+// closest`); asserted with about 5-10 % margin (the steps are deterministic: the margin is for
+// another compiler's or BLAS's round-off where a row enters, not for noise).
 TEST(interaction_contact_step, SlideOverTheSurfaceNeverLosesTheTissue) {
-  slide_cases({{"brain_artery", 1e-3, 1.2}, {"brain_artery", 2e-3, 1.4},
+  slide_cases({{"brain_artery", 1e-3, 1.25}, {"brain_artery", 2e-3, 1.4},
                {"cube_cylinder", 1e-3, 1.1}, {"cube_cylinder", 2e-3, 1.1}},
               SimulationOptions{});
 }
@@ -442,15 +443,17 @@ TEST(interaction_contact_step, SlideOverTheSurfaceNeverLosesTheTissue) {
 // (contact_spread 0, no smooth normals, no near field): never zero either, but the spread is the
 // mesh's, not the tissue's: a face point is stiffer than a node (its row loads three nodes: 1.5x
 // on the flat block), and on the brain the tip crosses creases, where it touches two faces at once.
-// The bundled brain (smoothed-tet, nu = 0.49) gives 7.0 .. 23.4 N/m at 1 mm (spread 3.34) and
-// 8.9 .. 28.5 N/m at 2 mm (3.20); the soft end is the continuum's value (Hertz 7.4 N/m at 1 mm),
-// the stiff end a face point of a 7 mm triangle; the cube 1.79 at both depths.
+// The bundled 5 mm brain (smoothed-tet, nu = 0.49) gives 3.1 .. 23.4 N/m at 1 mm (spread 7.61)
+// and 4.5 .. 21.2 N/m at 2 mm (4.71): the stiff end a face point of a triangle, the soft end a
+// node alone, below the continuum's value (Hertz 7.4 / 10.5 N/m); on the 7 mm brain 7.0 .. 23.4
+// (3.34) and 8.9 .. 28.5 (3.20): the spread follows the mesh. The cube 1.79 at both depths.
+// Asserted with about 5 % margin (deterministic steps, as above).
 TEST(interaction_contact_step, SlideWithBarycentricRowsFollowsTheMesh) {
   SimulationOptions options;
   options.contact_spread = 0.0;
   options.contact_smooth_normals = false;
   options.contact_near_field = false;
-  slide_cases({{"brain_artery", 1e-3, 3.5}, {"brain_artery", 2e-3, 3.4},
+  slide_cases({{"brain_artery", 1e-3, 8.0}, {"brain_artery", 2e-3, 5.0},
                {"cube_cylinder", 1e-3, 1.9}, {"cube_cylinder", 2e-3, 1.9}},
               options);
 }
@@ -461,8 +464,8 @@ TEST(interaction_contact_step, SlideWithBarycentricRowsFollowsTheMesh) {
 namespace neurosim::interaction {
 namespace {
 
-// Two sharp features of the 5 mm brain (neurosim-model --cell-size 5; one model, built once, for
-// both). A tip centred exactly on a crease of the surface: at (60, 112.6) mm the 2 mm tip 2 mm
+// Two sharp features of the bundled 5 mm brain (scenes/brain_artery.scene, neurosim-model's
+// default cell size). A tip centred exactly on a crease of the surface: at (60, 112.6) mm the 2 mm tip 2 mm
 // deep has its centre on the rest surface, on the edge where the surface under the slide turns
 // 17 degrees; round-off put the rows under it 1e-18 m behind the surface, and the step once
 // dropped them all (0 N there, 61 mN 1 nm to either side). The force there must be of the size of
@@ -475,12 +478,8 @@ namespace {
 // standing in for a tip without a projected face row 5.61-8.78 mN, 0.86-1.34 of the window's
 // median (6.56 mN; the radial node row alone gave 0.17-0.36 of it): asserted within 0.6-1.5.
 TEST(interaction_contact_step, TipOnACreaseAndBesideAStepFeelsTheTissue) {
-  const auto dir = neurosim::testing::temp_dir("contact_crease");
-  const std::string cmd = (neurosim::testing::bin_dir() / "neurosim-model").string() +
-                          " --cell-size 5 --out-dir " + dir.string() + " > " + (dir / "model.log").string() +
-                          " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << neurosim::testing::slurp(dir / "model.log");
-  scene::Model model = scene::load_model(dir / "brain_artery.scene");
+  scene::Model model =
+      scene::load_model(neurosim::testing::source_dir() / "scenes" / "brain_artery.scene");
   model.effects.tier = scene::Tier::kLinear;
   auto sim = Simulation::build(model);
   const mesh::TetMesh& mesh = sim->mesh(0);
