@@ -264,18 +264,29 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
   poses.push_back(poses.front());
   std::vector<ToolContact> c, ref;
   StepStats st, ref_st;
+  // The bound must hold any one pose's reach: below it the worker evicts what the pose needs and
+  // never finishes (the first pose's reach alone as the bound did that on the 5 mm brain). An
+  // unbounded cache visits every pose; the growth of its ready count at a pose is at most that
+  // pose's reach (neighbouring reaches may overlap); twice the largest growth (on the 5 mm brain
+  // 371 / 134 / 115 / 165 / 210 new nodes) is the bound, still below the five reaches together.
   std::size_t reach = 0, per_slot = 0;
   {
     auto probe = Simulation::build(model, on);
-    probe->step({poses[0]}, c, st);
-    ASSERT_TRUE(probe->wait_columns_ready(600.0));
-    reach = probe->column_cache(0).ready_slots;
+    std::size_t before = 0;
+    for (std::size_t k = 0; k + 1 < poses.size(); ++k) {
+      probe->step({poses[k]}, c, st);
+      ASSERT_TRUE(probe->wait_columns_ready(600.0)) << "pose " << k;
+      const std::size_t now = probe->column_cache(0).ready_slots;
+      std::printf("pose %zu: %zu new ready nodes\n", k, now - before);
+      reach = std::max(reach, now - before);
+      before = now;
+    }
     per_slot = probe->column_cache(0).bytes_per_slot;
     EXPECT_EQ(probe->column_cache(0).capacity_slots, 0u) << "budget 0: no bound";
   }
   ASSERT_GT(reach, 20u);
   ASSERT_GT(per_slot, 0u);
-  const std::size_t bound = reach + 2 * CoupledBody::kBlockColumns / 3 + 10;
+  const std::size_t bound = 2 * reach + 2 * CoupledBody::kBlockColumns / 3 + 10;
   on.column_cache_budget_mb = static_cast<double>(bound * per_slot) * 1e-6 + 1e-9;
   auto sim = Simulation::build(model, on);
   ASSERT_EQ(sim->column_cache(0).capacity_slots, bound);
