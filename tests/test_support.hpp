@@ -27,6 +27,14 @@ namespace neurosim::testing {
 inline std::filesystem::path source_dir() { return NEUROSIM_SOURCE_DIR; }
 // Where the built programs are (build/bin).
 inline std::filesystem::path bin_dir() { return NEUROSIM_BIN_DIR; }
+#ifdef NEUROSIM_BRAIN7_DIR
+// A scene of the tests' 7 mm brains ("brain_artery", "brain_skull"; neurosim-model --cell-size 7,
+// built at build time: tests/CMakeLists.txt, neurosim_use_brain7) for tests that need a brain,
+// not the bundled 5 mm one.
+inline std::filesystem::path brain7_scene(const std::string& name) {
+  return std::filesystem::path(NEUROSIM_BRAIN7_DIR) / (name + ".scene");
+}
+#endif
 
 // A fresh, empty temporary directory unique to this process and tag.
 inline std::filesystem::path temp_dir(const std::string& tag) {

@@ -35,6 +35,9 @@ ColumnWorker::ColumnWorker(std::vector<ColumnWorkerBody> bodies, const std::vect
   lookahead_m_ = options_.max_tool_speed_m_per_s * options_.horizon_s;
   workspaces_.resize(bodies_.size());
   last_reach_.resize(bodies_.size());
+  reach_slots_.assign(bodies_.size(), 0);
+  raised_ = std::make_unique<std::atomic<std::size_t>[]>(bodies_.size());
+  for (std::size_t b = 0; b < bodies_.size(); ++b) raised_[b].store(0, std::memory_order_relaxed);
   for (std::size_t b = 0; b < bodies_.size(); ++b) last_reach_[b].assign(bodies_[b].rest_m->size(), 0);
   thread_ = std::thread([this] { run(); });
 }
@@ -70,6 +73,7 @@ bool ColumnWorker::wanted(const Poses& poses, int body, std::size_t most, std::v
   near.clear();
   const bool bounded = b.capacity_slots > 0;
   const std::uint64_t scan = ++scan_;
+  std::size_t within = 0;
   for (int s = 0; s < static_cast<int>(rest.size()); ++s) {
     const bool ready = b.columns->has(s);
     if (ready && !bounded) continue;
@@ -81,9 +85,11 @@ bool ColumnWorker::wanted(const Poses& poses, int body, std::size_t most, std::v
     }
     if (best <= lookahead_m_ + options_.idle_slack_m + b.behind_reach_m) {
       last_reach_[body][s] = scan;
+      ++within;
       if (!ready) near.emplace_back(best, s);
     }
   }
+  reach_slots_[static_cast<std::size_t>(body)] = within;
   if (near.empty()) return false;
   const std::size_t n = std::min(most, near.size());
   std::partial_sort(near.begin(), near.begin() + static_cast<std::ptrdiff_t>(n), near.end());
@@ -100,14 +106,22 @@ std::size_t ColumnWorker::room(int body, std::size_t chunk) {
   b.columns->reclaim();
   stuck_ = false;
   if (b.capacity_slots == 0) return chunk;
+  // The bound, raised to the last scan's reach when that is larger: a bound below one pose's
+  // reach would leave the rest of the reach unsolved for as long as the tool stays there.
+  const std::size_t reach = reach_slots_[static_cast<std::size_t>(body)];
+  const std::size_t capacity = std::max(b.capacity_slots, reach);
+  if (capacity > b.capacity_slots) {
+    std::atomic<std::size_t>& raised = raised_[static_cast<std::size_t>(body)];
+    if (capacity > raised.load(std::memory_order_relaxed)) raised.store(capacity, std::memory_order_release);
+  }
   const std::size_t ready = b.columns->size();
-  if (ready + chunk > b.capacity_slots) {
+  if (ready + chunk > capacity) {
     old_.clear();
     const auto& last = last_reach_[body];
     for (int s = 0; s < static_cast<int>(last.size()); ++s)
       if (b.columns->has(s) && last[s] != scan_) old_.emplace_back(last[s], s);
     const std::size_t want = std::min<std::size_t>(
-        {ready + chunk - b.capacity_slots, old_.size(), ContactColumns::kMaxVictims});
+        {ready + chunk - capacity, old_.size(), ContactColumns::kMaxVictims});
     if (want > 0) {
       std::partial_sort(old_.begin(), old_.begin() + static_cast<std::ptrdiff_t>(want), old_.end());
       victims_.clear();
@@ -116,7 +130,7 @@ std::size_t ColumnWorker::room(int body, std::size_t chunk) {
         proposed_.fetch_add(want, std::memory_order_acq_rel);
     }
   }
-  if (ready < b.capacity_slots) return std::min(chunk, b.capacity_slots - ready);
+  if (ready < capacity) return std::min(chunk, capacity - ready);
   // Full: an eviction pending (or just proposed) frees room soon; none possible: stuck.
   stuck_ = old_.empty();
   return 0;

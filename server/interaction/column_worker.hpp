@@ -53,9 +53,11 @@ struct ColumnWorkerBody {
   double behind_reach_m{0.0};  // how far behind the surface a part still pushes it, unit m
   // At most this many slots ready at once (0: no bound). Before a block solve that would pass
   // it, the worker proposes the least recently reached ready slots for eviction (never one
-  // within reach of the newest poses; the step keeps those it holds, contact_columns.hpp); with
-  // nothing left to evict it solves no more (the rest of the reach takes the step's fallback).
-  // The bound may be passed by one block until the step grants.
+  // within reach of the newest poses; the step keeps those it holds, contact_columns.hpp).
+  // The bound may be passed by one block until the step grants. A bound below the reach of the
+  // newest poses (more slots within reach than it) is raised to that reach while the poses need
+  // it: below it, the reach beyond the bound would stay on the step's fallback for as long as the
+  // tool stays (raised_capacity() reports the largest bound used).
   std::size_t capacity_slots{0};
 };
 
@@ -88,6 +90,12 @@ class ColumnWorker {
   // reach (nothing to evict, a wanted slot left unsolved) (any thread).
   std::uint64_t evictions_proposed() const { return proposed_.load(std::memory_order_acquire); }
   std::uint64_t capacity_full() const { return capacity_full_.load(std::memory_order_acquire); }
+  // The largest bound the worker used for a body whose capacity_slots was below the reach of
+  // some poses (the most slots within reach of one post), 0 if the bound never had to be raised
+  // (any thread).
+  std::size_t raised_capacity(int body) const {
+    return raised_[static_cast<std::size_t>(body)].load(std::memory_order_acquire);
+  }
 
  private:
   struct Part {
@@ -123,6 +131,8 @@ class ColumnWorker {
   std::vector<std::pair<double, int>> near_;  // worker: candidates (distance, slot)
   // Worker: per body and slot, the number of the last scan that found the slot within reach.
   std::vector<std::vector<std::uint64_t>> last_reach_;
+  std::vector<std::size_t> reach_slots_;  // worker: per body, slots within reach at its last scan
+  std::unique_ptr<std::atomic<std::size_t>[]> raised_;  // per body, raised_capacity()
   std::uint64_t scan_{0};
   bool stuck_{false};  // room(): full of slots within reach, nothing to evict
   std::vector<std::pair<std::uint64_t, int>> old_;  // worker: eviction candidates (scan, slot)

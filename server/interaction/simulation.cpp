@@ -137,7 +137,8 @@ class SimulationImpl final : public Simulation {
     if (b < 0) return {};
     const BodyState& bs = state_->bodies_[static_cast<std::size_t>(b)];
     return ColumnCacheStats{bs.columns->size(), bs.capacity_slots, bs.columns->bytes_per_slot(),
-                            bs.columns->evicted()};
+                            bs.columns->evicted(),
+                            state_->column_worker_ ? state_->column_worker_->raised_capacity(b) : 0};
   }
   void pause_column_worker(bool paused) override {
     if (state_->column_worker_) state_->column_worker_->set_paused(paused);

@@ -239,7 +239,8 @@ struct SimulationOptions {
   // bytes_per_slot: 3 x (3s + sliding rows) doubles per node of a body with s contact nodes, so
   // the node count follows from the mesh: 0.85 MB per node on the 3 mm brain). Beyond it the
   // worker evicts the nodes least recently within a tool's reach (never one the step holds); at
-  // least the preloaded nodes + two blocks. 0: no bound.
+  // least the preloaded nodes + two blocks, and raised to the reach of the tools' poses while
+  // that is larger (ColumnCacheStats::raised_capacity_slots, logged by the server). 0: no bound.
   double column_cache_budget_mb{1024.0};
   // Keep the full coupled compliance columns of touched nodes (3N x 3 doubles each: 0.4 MB per
   // node on a 25k-tet brain) so displacements() of a host is a sum of columns, not a sparse solve.
@@ -444,6 +445,9 @@ class Simulation {
     std::size_t capacity_slots{0};  // the bound (0: none)
     std::size_t bytes_per_slot{0};  // unit byte
     std::uint64_t evicted{0};       // nodes freed so far
+    // The bound below one post's reach (more contact nodes within the worker's reach of the
+    // tools than capacity_slots): the largest reach the worker raised it to, else 0.
+    std::size_t raised_capacity_slots{0};
   };
   virtual ColumnCacheStats column_cache(int m) const {
     (void)m;

@@ -178,6 +178,25 @@ void StatusPublisher::report_accuracy(neurosim_SimStatus& st) {
                                 : -1.0;
   st.columns_not_ready = sim_.columns_not_ready();
   st.columns_solved_ahead = sim_.columns_solved_ahead();
+  // A column cache bound below one pose's reach: the worker raised it (column_worker.hpp).
+  raised_logged_.resize(static_cast<std::size_t>(std::max(0, sim_.num_meshes())), 0);
+  for (int m = 0; m < sim_.num_meshes(); ++m) {
+    const int body = sim_.body_index(m);
+    bool first = body >= 0;  // a body's meshes share its cache: logged under its first mesh
+    for (int e = 0; first && e < m; ++e) first = sim_.body_index(e) != body;
+    if (!first) continue;
+    const auto c = sim_.column_cache(m);
+    std::size_t& logged = raised_logged_[static_cast<std::size_t>(m)];
+    if (c.raised_capacity_slots <= logged) continue;
+    logged = c.raised_capacity_slots;
+    if (log_)
+      log_("warning: the column cache of '" + sim_.mesh_id(m) + "' is bounded at " +
+           std::to_string(c.capacity_slots) + " nodes (column_cache_budget_mb), below the " +
+           std::to_string(c.raised_capacity_slots) +
+           " nodes within the column worker's reach of the tools: raised to them (" +
+           std::to_string(static_cast<double>(c.raised_capacity_slots * c.bytes_per_slot) / 1e6) +
+           " MB)");
+  }
   const std::uint64_t failures = sim_.tier_update_failures();
   st.tier_update_failures = failures;
   if (failures > tier_failures_logged_) {

@@ -79,6 +79,8 @@ class StatusPublisher {
   std::uint64_t steps_at_last_status_{0};
   bool error_bound_warned_{false}, beyond_table_noted_{false};
   std::uint64_t tier_failures_logged_{0};
+  // Per mesh: the column cache's raised bound last logged (ColumnCacheStats::raised_capacity_slots).
+  std::vector<std::size_t> raised_logged_;
 };
 
 }  // namespace neurosim::service

@@ -1,11 +1,14 @@
-// The step never solves a compliance column (SimulationOptions::column_worker): on the bundled
-// brain, a fast slide over fresh surface paced at 1 kHz with the worker on performs no column
-// solve on the step thread (StepStats::columns_computed, and no heap allocation on the step
-// thread at all: a block solve allocates its columns), every step converges, the steps' counts
-// of columns not ready add up to what the Simulation reports, and every step whose columns were
-// all ready equals the synchronous simulation at the same pose (where both steps' rows settled). The fallback itself, with the
-// worker held: rows whose nodes have no columns are left out (no force, the LCP converges,
-// counted), and once the worker has solved the reach the same pose gives the synchronous force.
+// The step never solves a compliance column (SimulationOptions::column_worker): on a brain (the
+// tests' 7 mm brain_artery and brain_skull, test_support.hpp brain7_scene: the worker's mechanics
+// need a brain, not the bundled 5 mm one, whose cold set-up costs several times more), a fast
+// slide over fresh surface paced at 1 kHz with the worker on performs no column solve on the step
+// thread (StepStats::columns_computed, and no heap allocation on the step thread at all: a block
+// solve allocates its columns), every step converges, the steps' counts of columns not ready add
+// up to what the Simulation reports, and every step whose columns were all ready equals the
+// synchronous simulation at the same pose (where both steps' rows settled). The fallback itself,
+// with the worker held: rows whose nodes have no columns are left out (no force, the LCP
+// converges, counted), and once the worker has solved the reach the same pose gives the
+// synchronous force. A bounded cache: evictions, and a bound below one pose's reach raised to it.
 // Checked by counts, never by time (CI runs under load): how many columns were not ready along
 // the slide depends on the machine and is printed, not asserted.
 #include "server/interaction/coupled_body.hpp"
@@ -38,7 +41,7 @@ struct Brain {
 
 Brain load_brain() {
   Brain b;
-  b.model = scene::load_model(neurosim::testing::source_dir() / "scenes/brain_artery.scene");
+  b.model = scene::load_model(neurosim::testing::brain7_scene("brain_artery"));
   SimulationOptions on;
   on.column_worker = true;
   on.column_preload_budget_mb = 0.0;  // nothing at load: every column by the worker
@@ -207,7 +210,7 @@ TEST(interaction_column_worker, ColumnsOfASmallBodyAndUnderAnOpeningAreReadyAtLo
     EXPECT_TRUE(same_force(c[0].force_n, r[0].force_n));
   }
   const scene::Model skull =
-      scene::load_model(neurosim::testing::source_dir() / "scenes/brain_skull.scene");
+      scene::load_model(neurosim::testing::brain7_scene("brain_skull"));
   ASSERT_FALSE(skull.rigid.empty());
   ASSERT_FALSE(skull.rigid.front().openings.empty());
   const scene::RigidOpening& hole = skull.rigid.front().openings.front();
@@ -244,7 +247,7 @@ TEST(interaction_column_worker, ColumnsOfASmallBodyAndUnderAnOpeningAreReadyAtLo
 // the force equals the synchronous one. Counts only: no timing enters.
 TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForces) {
   const scene::Model model =
-      scene::load_model(neurosim::testing::source_dir() / "scenes/brain_artery.scene");
+      scene::load_model(neurosim::testing::brain7_scene("brain_artery"));
   const double tip = model.tools.at(0).tip_radius_m;
   SimulationOptions on;
   on.column_worker = true;
@@ -264,11 +267,13 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
   poses.push_back(poses.front());
   std::vector<ToolContact> c, ref;
   StepStats st, ref_st;
-  // The bound must hold any one pose's reach: below it the worker evicts what the pose needs and
-  // never finishes (the first pose's reach alone as the bound did that on the 5 mm brain). An
+  // The bound must hold any one pose's reach: below it the worker raises it to the reach
+  // (BoundBelowOnePosesReachIsRaisedToTheReach), and the bound checked here is the configured
+  // one (before that change such a bound left a pose's rows on the fallback). An
   // unbounded cache visits every pose; the growth of its ready count at a pose is at most that
-  // pose's reach (neighbouring reaches may overlap); twice the largest growth (on the 5 mm brain
-  // 371 / 134 / 115 / 165 / 210 new nodes) is the bound, still below the five reaches together.
+  // pose's reach (neighbouring reaches may overlap); twice the largest growth (on the 7 mm brain
+  // 247 / 74 / 69 / 79 / 141 new nodes, bound 546, 128 evicted) is the bound, still below the five
+  // reaches together.
   std::size_t reach = 0, per_slot = 0;
   {
     auto probe = Simulation::build(model, on);
@@ -313,6 +318,80 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
               reach, per_slot, most, static_cast<unsigned long long>(sim->column_cache(0).evicted));
   EXPECT_LE(most, bound + block) << "the bound passed by more than one block";
   EXPECT_GT(sim->column_cache(0).evicted, 0u) << "five reaches 25 mm apart never fit the bound";
+}
+
+
+// A bound below one pose's reach (column_cache_budget_mb at its floor: two blocks, 42 nodes, on a
+// brain where one pose reaches hundreds). Before, the worker filled the bound with the nearest
+// nodes of the first pose; at a second pose 25 mm on, every ready node was still within its
+// reach, so nothing could be evicted, the worker stopped as "full" and the rows under the tip
+// stayed on the fallback for as long as the tool stayed (11 nodes not ready on the 7 mm brain at a
+// bound of 60, the force not the synchronous one). Now the bound is raised to the reach
+// (ColumnCacheStats::raised_capacity_slots; the server logs it): at each pose the columns all
+// become ready, the worker solves no more than the reach (an unbounded probe's count, per pose)
+// plus a block, the force equals the synchronous one, nodes of the first reach are evicted at the
+// second, and the cache stays within one block of the raised bound. Counts only; the solve count
+// is asserted inside the loop, so a worker that solved the reach again and again fails at once.
+TEST(interaction_column_worker, BoundBelowOnePosesReachIsRaisedToTheReach) {
+  const scene::Model model = scene::load_model(neurosim::testing::brain7_scene("brain_artery"));
+  const double tip = model.tools.at(0).tip_radius_m;
+  SimulationOptions on;
+  on.column_worker = true;
+  on.column_preload_budget_mb = 0.0;
+  on.column_cache_budget_mb = 0.0;  // the probe: unbounded
+  auto sync = Simulation::build(model, SimulationOptions{});
+  auto pose_at = [&](double x, double y) {
+    const auto at = top_of_surface(sync->mesh(0), x, y);
+    EXPECT_TRUE(at.has_value());
+    ToolPose p;
+    p.tip_m = at->point_m + (tip - 2e-3) * at->normal;
+    p.axis = at->normal;
+    return p;
+  };
+  const std::vector<ToolPose> poses{pose_at(0.060, 0.060), pose_at(0.060, 0.085)};
+  std::vector<ToolContact> c, ref;
+  StepStats st, ref_st;
+  std::vector<std::size_t> reach;  // each pose's reach alone (an unbounded cache, fresh per pose)
+  for (const ToolPose& p : poses) {
+    auto probe = Simulation::build(model, on);
+    probe->step({p}, c, st);
+    ASSERT_TRUE(probe->wait_columns_ready(600.0));
+    reach.push_back(probe->column_cache(0).ready_slots);
+  }
+  const std::size_t block = CoupledBody::kBlockColumns / 3;
+  on.column_cache_budget_mb = 1e-9;  // the floor: two blocks
+  auto sim = Simulation::build(model, on);
+  ASSERT_EQ(sim->column_cache(0).capacity_slots, 2 * block);
+  EXPECT_EQ(sim->column_cache(0).raised_capacity_slots, 0u) << "nothing raised before a pose";
+  std::printf("reach %zu and %zu nodes, bound %zu\n", reach[0], reach[1], 2 * block);
+  ASSERT_GT(reach[0], 4 * block);
+  ASSERT_GT(reach[1], 4 * block);
+  std::uint64_t solved_before = 0;
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    int rounds = 0;
+    do {
+      sim->step({poses[k]}, c, st);
+      EXPECT_EQ(st.columns_computed, 0);
+      // The reach once, and a block under way: a worker that evicts what the pose needs
+      // solves it again and passes this.
+      ASSERT_LE(sim->columns_solved_ahead() - solved_before, reach[k] + block)
+          << "pose " << k << ": the worker solves the pose's reach again (round " << rounds << ")";
+      ASSERT_LT(++rounds, 100000) << "pose " << k;
+    } while (!sim->wait_columns_ready(0.01));
+    solved_before = sim->columns_solved_ahead();
+    sim->step({poses[k]}, c, st);
+    sync->step({poses[k]}, ref, ref_st);
+    ASSERT_TRUE(ref_st.converged);
+    ASSERT_GT(ref[0].force_n.norm(), 0.0) << "pose " << k;
+    EXPECT_EQ(st.columns_not_ready, 0) << "pose " << k << ": rows left on the fallback";
+    EXPECT_TRUE(same_force(c[0].force_n, ref[0].force_n))
+        << "pose " << k << ": " << c[0].force_n.transpose() << " vs " << ref[0].force_n.transpose();
+    const Simulation::ColumnCacheStats cache = sim->column_cache(0);
+    EXPECT_EQ(cache.capacity_slots, 2 * block) << "the configured bound is reported as it was";
+    EXPECT_GE(cache.raised_capacity_slots, reach[k]) << "pose " << k;
+    EXPECT_LE(cache.ready_slots, cache.raised_capacity_slots + block) << "pose " << k;
+  }
+  EXPECT_GT(sim->column_cache(0).evicted, 0u) << "nodes of the first reach out of the second's";
 }
 
 }  // namespace
