@@ -1,0 +1,99 @@
+// A sub-model of a scene mesh: the tetrahedra whose centroid lies within a radius of a point (the
+// face-connected piece holding the tetrahedron nearest the point), every node of a cut face
+// clamped, the mesh's own surface and material kept. Used by contact_convergence_bench --region
+// (a press's neighbourhood cut once, then split 1 -> 8 by tet_split.hpp as often as the memory
+// allows: the refinement below the whole brain's reach, the surface fixed) and its ctest.
+#pragma once
+
+#include "server/model/model.hpp"
+#include "server/mesh/tet_mesh.hpp"
+
+#include <algorithm>
+#include <cstddef>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace neurosim::bench {
+
+// Cuts m in place to its tetrahedra with centroid within radius_m of centre_m (the
+// face-connected piece of them around the tetrahedron whose centroid is nearest centre_m).
+// Nodes on a cut face (a face whose neighbour across it was dropped) join the fixed nodes; the
+// mesh's fixed nodes that remain stay fixed; the tetrahedra keep their labels and materials.
+// Returns the number of cut-face nodes.
+inline int cut_region(scene::LoadedMesh& m, const mesh::Vec3& centre_m, double radius_m) {
+  const auto& x = m.mesh.vertices();
+  const auto& tets = m.mesh.tets();
+  const auto& nb = m.mesh.neighbours();
+  const std::size_t nt = tets.size();
+  auto centroid = [&](std::size_t t) {
+    return 0.25 * (x[tets[t][0]] + x[tets[t][1]] + x[tets[t][2]] + x[tets[t][3]]);
+  };
+  std::vector<char> inside(nt, 0);
+  std::size_t seed = nt;
+  double best = std::numeric_limits<double>::infinity();
+  for (std::size_t t = 0; t < nt; ++t) {
+    const double d = (centroid(t) - centre_m).norm();
+    inside[t] = d <= radius_m;
+    if (d < best) best = d, seed = t;
+  }
+  if (seed == nt || !inside[seed]) throw std::invalid_argument("cut_region: no tetrahedron within the radius");
+  // The face-connected piece around the seed.
+  std::vector<char> kept(nt, 0);
+  std::vector<std::size_t> stack{seed};
+  kept[seed] = 1;
+  while (!stack.empty()) {
+    const std::size_t t = stack.back();
+    stack.pop_back();
+    for (int k = 0; k < 4; ++k) {
+      const int u = nb[t][k];
+      if (u >= 0 && inside[u] && !kept[u]) kept[u] = 1, stack.push_back(static_cast<std::size_t>(u));
+    }
+  }
+  // New numbering; the cut faces' nodes clamped.
+  std::vector<int> id(x.size(), -1);
+  std::vector<char> fixed(x.size(), 0);
+  for (int v : m.fixed_nodes) fixed[v] = 1;
+  std::vector<char> cut(x.size(), 0);
+  std::vector<mesh::Vec3> nx;
+  std::vector<mesh::Tet> nt_list;
+  std::vector<int> labels, materials;
+  for (std::size_t t = 0; t < nt; ++t) {
+    if (!kept[t]) continue;
+    for (int k = 0; k < 4; ++k) {
+      const int u = nb[t][k];
+      if (u >= 0 && !kept[u])
+        for (int j = 0; j < 4; ++j)
+          if (j != k) cut[tets[t][j]] = 1;
+    }
+    mesh::Tet q{};
+    for (int j = 0; j < 4; ++j) {
+      int& v = id[tets[t][j]];
+      if (v < 0) v = static_cast<int>(nx.size()), nx.push_back(x[tets[t][j]]);
+      q[j] = v;
+    }
+    nt_list.push_back(q);
+    if (!m.mesh.tet_labels().empty()) labels.push_back(m.mesh.tet_labels()[t]);
+    if (!m.materials.tet_material.empty()) materials.push_back(m.materials.tet_material[t]);
+  }
+  std::vector<int> fixed_nodes;
+  int cut_nodes = 0;
+  for (std::size_t v = 0; v < x.size(); ++v) {
+    if (id[v] < 0) continue;
+    cut_nodes += cut[v];
+    if (cut[v] || fixed[v]) fixed_nodes.push_back(id[v]);
+  }
+  std::sort(fixed_nodes.begin(), fixed_nodes.end());
+  mesh::BuildOptions options;
+  options.drop_unused_vertices = false;
+  options.source = "region of " + std::to_string(nt) + " tetrahedra";
+  mesh::TetMesh out = mesh::TetMesh::build(std::move(nx), std::move(nt_list), options);
+  if (!labels.empty()) out.set_tet_labels(std::move(labels));
+  m.mesh = std::move(out);
+  m.fixed_nodes = std::move(fixed_nodes);
+  if (!materials.empty()) m.materials.tet_material = std::move(materials);
+  return cut_nodes;
+}
+
+}  // namespace neurosim::bench
