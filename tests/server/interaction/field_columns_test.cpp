@@ -77,12 +77,12 @@ TEST(interaction_field_columns, SumOfColumnsEqualsTheSolveAndEvictsTheLeastRecen
   EXPECT_EQ(fast.norm(), 0.0);
 }
 
-// The bundled brain with its tied artery: a press's snapshot fields (brain and artery) from the
-// full columns equal those of a sparse solve (field_column_budget_mb = 0), twice (the second
-// from kept columns).
+// A brain with its tied artery (the tests' 7 mm brain_artery, test_support.hpp brain7_scene: the
+// fields need a brain and an artery, not the bundled 5 mm mesh): a press's snapshot fields
+// (brain and artery) from the full columns equal those of a sparse solve
+// (field_column_budget_mb = 0), twice (the second from kept columns).
 TEST(interaction_field_columns, SnapshotFieldsOfAPressEqualTheSolvedFieldsOnTheBrain) {
-  const scene::Model model =
-      scene::load_model(neurosim::testing::source_dir() / "scenes/brain_artery.scene");
+  const scene::Model model = scene::load_model(neurosim::testing::brain7_scene("brain_artery"));
   SimulationOptions solve_only;
   solve_only.field_column_budget_mb = 0.0;
   auto fast = Simulation::build(model, SimulationOptions{});

@@ -6,12 +6,15 @@
 
 #include "rigid_fixtures.hpp"
 #include "server/interaction/simulation.hpp"
+#include "test_support.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdlib>
+#include <memory>
 #include <new>
+#include <stdexcept>
 
 #include "thread_allocation_counter.hpp"
 
@@ -34,8 +37,28 @@ double tool_penetration(const RigidObstacle& o, const ToolPose& pose, const Tool
   return pen;
 }
 
-mesh::Vec3 skull_centre() {
-  const RigidObstacle& o = skull();
+// The tests' 7 mm brain under the skull (test_support.hpp brain7_scene: neurosim-model --skull
+// --cell-size 7, the same skull and opening as the bundled scene) for the tests that step the
+// tissue: they need a brain under a skull, not the bundled 5 mm one.
+struct SkullScene {
+  scene::Model model;
+  std::unique_ptr<const RigidObstacle> skull;
+  ToolShape shape;
+};
+const SkullScene& brain7_skull() {
+  static const SkullScene s = [] {
+    SkullScene out;
+    out.model = scene::load_model(::neurosim::testing::brain7_scene("brain_skull"));
+    out.skull = RigidObstacle::build(out.model.rigid);
+    if (!out.skull) throw std::runtime_error("the 7 mm brain_skull.scene has no rigid surface");
+    const auto& t = out.model.tools.front();
+    out.shape = ToolShape{t.tip_radius_m, t.shaft_radius_m, t.shaft_length_m};
+    return out;
+  }();
+  return s;
+}
+
+mesh::Vec3 skull_centre(const RigidObstacle& o = skull()) {
   mesh::Vec3 lo = o.vertices_m().front(), hi = lo;
   for (const auto& v : o.vertices_m()) {
     lo = lo.cwiseMin(v);
@@ -159,11 +182,11 @@ TEST(interaction_tool_proxy, ConstrainDoesNotAllocate) {
 }
 
 // Through the craniotomy along its axis: never blocked (the physics pose is the device's), and
-// the tissue force equals a State stepped with the raw poses.
+// the tissue force equals a State stepped with the raw poses (the 7 mm brain under the skull).
 TEST(interaction_tool_proxy, ThroughTheOpeningUnblockedToTheCerebellum) {
-  const RigidObstacle& o = skull();
-  const ToolShape shape = probe_shape();
-  const scene::Model& model = testing::brain_skull_model();
+  const RigidObstacle& o = *brain7_skull().skull;
+  const ToolShape shape = brain7_skull().shape;
+  const scene::Model& model = brain7_skull().model;
   const scene::RigidOpening& hole = model.rigid.front().openings.front();
   const auto sim_model = build_model(model);
   StatePtr with_proxy = make_state(*sim_model), raw_state = make_state(*sim_model);
@@ -217,18 +240,19 @@ TEST(interaction_tool_proxy, ThroughTheOpeningUnblockedToTheCerebellum) {
 // stepped together on brain_skull, one driven into the top of the skull past where its raw pose
 // reaches the brain, one through the craniotomy onto the cerebellum, give exactly what the
 // service gave when it held each with its own ToolProxy and stepped the scene without the skull:
-// the same held tips, planes and forces; the top station never touches the brain.
+// the same held tips, planes and forces; the top station never touches the brain (the 7 mm
+// brain under the skull).
 TEST(interaction_tool_proxy, TheStepHoldsEachStationByItsOwnProxy) {
-  const RigidObstacle& o = skull();
-  const ToolShape shape = probe_shape();
-  const scene::Model& model = testing::brain_skull_model();
+  const RigidObstacle& o = *brain7_skull().skull;
+  const ToolShape shape = brain7_skull().shape;
+  const scene::Model& model = brain7_skull().model;
   scene::Model no_skull = model;
   no_skull.rigid.clear();
   const auto with_skull = build_model(model), tissue = build_model(no_skull);
   auto stepped = Simulation::from_model(with_skull);
   StatePtr reference = make_state(*tissue), raw = make_state(*tissue);
   const mesh::Vec3 down(0, 0, -1);
-  const mesh::Vec3 top = testing::first_bone(o, skull_centre() + mesh::Vec3(0, 0, 0.15), down, 0.2);
+  const mesh::Vec3 top = testing::first_bone(o, skull_centre(o) + mesh::Vec3(0, 0, 0.15), down, 0.2);
   const scene::RigidOpening& hole = model.rigid.front().openings.front();
   ToolProxy top_proxy(o), hole_proxy(o);
   std::vector<ToolPose> poses(2), held(2), raw_top(1);
