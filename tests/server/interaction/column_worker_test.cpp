@@ -325,9 +325,9 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
 // brain where one pose reaches hundreds). Before, the worker filled the bound with the nearest
 // nodes of the first pose; at a second pose 25 mm on, every ready node was still within its
 // reach, so nothing could be evicted, the worker stopped as "full" and the rows under the tip
-// stayed on the fallback for as long as the tool stayed (11 nodes not ready on the 7 mm brain at a
-// bound of 60, the force not the synchronous one). Now the bound is raised to the reach
-// (ColumnCacheStats::raised_capacity_slots; the server logs it): at each pose the columns all
+// stayed on the fallback for as long as the tool stayed (this test on that code: 14 nodes not
+// ready at the second pose, the force 43 % low, nothing evicted). Now the bound is raised to the
+// reach (ColumnCacheStats::raised_capacity_slots; the server logs it): at each pose the columns all
 // become ready, the worker solves no more than the reach (an unbounded probe's count, per pose)
 // plus a block, the force equals the synchronous one, nodes of the first reach are evicted at the
 // second, and the cache stays within one block of the raised bound. Counts only; the solve count
