@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -15,7 +16,12 @@ bool write_cache_file(const std::string& file, const std::string& owner, const s
   std::error_code ec;
   const std::filesystem::path folder = std::filesystem::path(file).parent_path();
   if (!folder.empty()) std::filesystem::create_directories(folder, ec);
-  const std::string tmp = file + ".tmp." + std::to_string(::getpid());
+  // The temporary is this call's own: the process id and a per-process count, so neither two
+  // processes nor two threads of one process writing the same key ever share it; each renames
+  // a whole file over the name (the last rename wins; both files hold the same bytes).
+  static std::atomic<unsigned long> calls{0};
+  const std::string tmp = file + ".tmp." + std::to_string(::getpid()) + "." +
+                          std::to_string(calls.fetch_add(1, std::memory_order_relaxed));
   bool ok = false;
   int write_errno = 0;
   {

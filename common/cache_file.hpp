@@ -1,7 +1,8 @@
 // Writing a cache file (a factor, a compliance operator) so that no reader ever sees half of
-// it: the bytes go to a temporary of this process's own ("<file>.tmp.<pid>": two servers filling
-// the same cache never share one), and the temporary is renamed over the file only when every
-// byte was written. A cache that cannot be written (disk full, read-only folder) is said once
+// it: the bytes go to a temporary of this call's own ("<file>.tmp.<pid>.<n>": two servers, or two
+// threads of one, filling the same key never share one), and the temporary is renamed over the
+// file only when every byte was written (rename is atomic: a reader opens the old whole file or
+// the new whole file; two writers of one key both rename, the last one's stays). A cache that cannot be written (disk full, read-only folder) is said once
 // on stderr, naming the owner and the file, and the caller goes on without it: a cache is an
 // optimisation, never a reason to stop a session.
 #pragma once

@@ -5,11 +5,14 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <sstream>
 #include <string>
+#include <thread>
 
 namespace neurosim::common {
 namespace {
@@ -78,6 +81,42 @@ TEST(CacheFile, AFolderThatCannotBeMadeIsSaidNotThrown) {
   const std::string said = testing::internal::GetCapturedStderr();
   EXPECT_NE(said.find("Owner: could not write compliance cache"), std::string::npos) << said;
   EXPECT_FALSE(std::filesystem::exists(file));
+  std::filesystem::remove_all(dir);
+}
+
+// Two writers of one key at once (two tests' servers, or two set-ups in one process, starting
+// the same scene on a shared cache): each has its own temporary and both rename a whole file.
+// Both writers are held inside write() until the other is in it too, so their temporaries
+// exist at the same time (with one temporary per process, as before, the second rename found
+// no temporary and failed).
+TEST(CacheFile, TwoWritersOfOneKeyAtOnceBothStoreAWholeFile) {
+  const auto dir = scratch_dir("concurrent");
+  const auto file = dir / "entry.bin";
+  std::atomic<int> inside{0};
+  const std::string a(1 << 16, 'a'), b(1 << 16, 'b');
+  bool ok_a = false, ok_b = false;
+  auto writer = [&](const std::string& payload, bool& ok) {
+    ok = write_cache_file(file.string(), "Test", "cache", [&](std::ostream& out) {
+      out << payload.substr(0, payload.size() / 2);
+      ++inside;
+      const auto t0 = std::chrono::steady_clock::now();
+      while (inside.load() < 2 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(30))
+        std::this_thread::yield();
+      out << payload.substr(payload.size() / 2);
+    });
+  };
+  std::thread ta(writer, std::cref(a), std::ref(ok_a));
+  std::thread tb(writer, std::cref(b), std::ref(ok_b));
+  ta.join();
+  tb.join();
+  EXPECT_EQ(inside.load(), 2);
+  EXPECT_TRUE(ok_a);
+  EXPECT_TRUE(ok_b);
+  const std::string got = slurp(file);
+  EXPECT_TRUE(got == a || got == b) << "a mixed or partial file of " << got.size() << " bytes";
+  int entries = 0;
+  for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(dir)) ++entries;
+  EXPECT_EQ(entries, 1) << "a temporary was left beside the file";
   std::filesystem::remove_all(dir);
 }
 
