@@ -68,25 +68,25 @@ int ContactColumns::ensure(const std::vector<int>& slots, fem::SolveWorkspace& w
   missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
   if (missing.empty()) return 0;
   const auto& solver = body_->host_solver();
-  const auto& reduced = solver.reduced_index();
   const auto& contact = body_->contact_nodes();
   const int nf = solver.num_free_dofs();
   const int s3 = 3 * static_cast<int>(contact.size());
   const int n3 = 3 * static_cast<int>(body_->host().num_vertices());
   const SlidingOperator& sliding = body_->sliding();
   const std::size_t chunk = static_cast<std::size_t>(CoupledBody::kBlockColumns / 3);
-  Eigen::MatrixXd x;
+  Eigen::MatrixXd x, rows;
   for (std::size_t first = 0; first < missing.size(); first += chunk) {
     const std::size_t n = std::min(chunk, missing.size() - first);
     const std::vector<int> part(missing.begin() + static_cast<std::ptrdiff_t>(first),
                                 missing.begin() + static_cast<std::ptrdiff_t>(first + n));
     body_->solve_contact_columns(part, x, &ws, &iterations_);
+    // Rows at every contact slot (an exposed tie's from its mesh's displacement).
+    body_->contact_rows(part, x, rows, &ws);
     for (std::size_t j = 0; j < n; ++j) {
       const int c = 3 * static_cast<int>(j);
       const int slot = part[j];
       Blocks col(s3, 3);
-      for (int r = 0; r < s3; ++r)
-        for (int a = 0; a < 3; ++a) col(r, a) = x(reduced[3 * contact[r / 3] + r % 3], c + a);
+      col = rows.middleCols(c, 3);
       columns_[slot] = std::move(col);
       if (sliding.size() > 0) sliding_columns_[slot] = sliding.apply(x.middleCols(c, 3));
       if (keep_full_) {

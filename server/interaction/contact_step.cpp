@@ -645,7 +645,7 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
   const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   const auto& tris = b.surface.triangles();
-  const auto& rest = b.body->host().vertices();
+  const auto& rest = b.body->contact_mesh().vertices();
   // The deformed surface, and the rest surface too once the body carries a force: the LCP's
   // depths are taken from rest, so a feature that penetrates at rest is a row even when the last
   // answer moved it out of reach (a tool leaving faster than the margin would otherwise lose the
@@ -831,7 +831,7 @@ double State::flat_distance(const Model& m, int body, int tool, const Vec3& c, c
                             bool at_rest, double at_most_m) {
   const BodyModel& b = m.bodies_[body];
   const auto& tris = b.surface.triangles();
-  const auto& rest = b.body->host().vertices();
+  const auto& rest = b.body->contact_mesh().vertices();
   const StepCandidates& sc = step_candidates_[tool * bodies_.size() + body];
   const double moved = at_rest ? 0.0 : sc.moved_m;
   double best2 = at_most_m * at_most_m;
@@ -860,7 +860,7 @@ double State::flat_distance(const Model& m, int body, int tool, const Vec3& c, c
 void State::merge_features(const Model& m, int body, int tool, const ToolShape& shape) {
   const BodyModel& b = m.bodies_[body];
   const auto& tris = b.surface.triangles();
-  const auto& rest = b.body->host().vertices();
+  const auto& rest = b.body->contact_mesh().vertices();
   const TierLinearization* lin = tier_ ? &tier_->linearization(body) : nullptr;
   const std::size_t first = tool_rows_.size();
   tool_row_centre_.clear();  // per row from `first` on
@@ -1757,11 +1757,37 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
     c.force_n += l * row.normal;
     if (row.body != main_body) continue;
     centre += (l / best) * row.point_m;
-    const auto& nodes = m.bodies_[row.body].body->contact_nodes();
+  }
+  // The main mesh: of the main body's host and its exposed tied meshes, the one whose nodes
+  // carry most of the force (CoupledBody::contact_point: each slot's mesh and node); its nodes.
+  int main_tie = -1;
+  if (main_body >= 0 && m.bodies_[main_body].body->has_exposed_contact()) {
+    const CoupledBody& body = *m.bodies_[main_body].body;
+    double most = -1.0;
+    for (int tie = -1; tie < static_cast<int>(body.ties().size()); ++tie) {
+      double share = 0.0;
+      for (int r = 0; r < nc; ++r) {
+        const Row& row = rows_[r];
+        const double l = lambda_[ns + r];
+        if (row.tool != t || row.body != main_body || !(l > 0.0)) continue;
+        for (int k = 0; k < row.nodes; ++k)
+          if (row.slot[k] >= 0 && body.contact_point(row.slot[k]).tie == tie) share += l * row.w[k];
+      }
+      if (share > most) {
+        most = share;
+        main_tie = tie;
+      }
+    }
+  }
+  for (int r = 0; r < nc; ++r) {
+    const Row& row = rows_[r];
+    if (row.tool != t || !(lambda_[ns + r] > 0.0) || row.body != main_body) continue;
+    const CoupledBody& body = *m.bodies_[row.body].body;
     for (int k = 0; k < row.nodes; ++k) {
       if (row.slot[k] < 0 || row.w[k] == 0.0) continue;
-      const int v = nodes[row.slot[k]];
-      if (std::find(c.nodes.begin(), c.nodes.end(), v) == c.nodes.end()) c.nodes.push_back(v);
+      const CoupledBody::ContactPoint p = body.contact_point(row.slot[k]);
+      if (p.tie != main_tie) continue;
+      if (std::find(c.nodes.begin(), c.nodes.end(), p.node) == c.nodes.end()) c.nodes.push_back(p.node);
     }
   }
   if (tools == 1) {
@@ -1776,7 +1802,8 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
   c.in_contact = main_body >= 0;
   c.validity_radius_m = 0.0;
   if (c.in_contact) {
-    c.mesh = m.bodies_[main_body].body->host_index();
+    const CoupledBody& body = *m.bodies_[main_body].body;
+    c.mesh = main_tie < 0 ? body.host_index() : body.ties()[main_tie].mesh();
     double patch = 0.0;
     for (int r = 0; r < nc; ++r)
       if (rows_[r].tool == t && rows_[r].body == main_body && lambda_[ns + r] > 0.0)

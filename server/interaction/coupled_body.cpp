@@ -73,6 +73,74 @@ void CoupledBody::cover_faces(const std::vector<mesh::Tri>& faces) {
   }
 }
 
+void CoupledBody::expose_tie(int tie, const std::vector<char>& outside) {
+  if (finalized_) throw std::logic_error("CoupledBody::expose_tie after finalize");
+  if (tie < 0 || tie >= static_cast<int>(ties_.size()))
+    throw std::invalid_argument("CoupledBody::expose_tie: no tie " + std::to_string(tie));
+  if (outside.size() != ties_[tie].geometry().num_vertices())
+    throw std::invalid_argument("CoupledBody::expose_tie: " + std::to_string(outside.size()) +
+                                " flags for " +
+                                std::to_string(ties_[tie].geometry().num_vertices()) + " nodes");
+  exposed_.resize(ties_.size());
+  exposed_[tie] = outside;
+}
+
+void CoupledBody::select_exposed_contact_nodes() {
+  std::vector<mesh::Vec3> vertices = host_->vertices();
+  std::vector<mesh::Tet> tets = host_->tets();
+  tie_offset_.assign(ties_.size(), -1);
+  for (std::size_t t = 0; t < ties_.size(); ++t) {
+    if (t >= exposed_.size() || exposed_[t].empty()) continue;
+    const auto& b = ties_[t].geometry();
+    const int offset = static_cast<int>(vertices.size());
+    tie_offset_[t] = offset;
+    vertices.insert(vertices.end(), b.vertices().begin(), b.vertices().end());
+    for (const auto& tet : b.tets())
+      tets.push_back({tet[0] + offset, tet[1] + offset, tet[2] + offset, tet[3] + offset});
+  }
+  mesh::BuildOptions bo;
+  bo.drop_unused_vertices = false;
+  bo.source = host_->source() + " (with the exposed embedded meshes, contact geometry)";
+  contact_mesh_ = std::make_unique<mesh::TetMesh>(mesh::TetMesh::build(vertices, tets, bo));
+  contact_slot_.resize(vertices.size(), -1);
+  contact_excluded_faces_ = covered_faces_;
+  for (std::size_t t = 0; t < ties_.size(); ++t) {
+    if (tie_offset_[t] < 0) continue;
+    const auto& b = ties_[t].geometry();
+    const auto& out = exposed_[t];
+    const int offset = tie_offset_[t];
+    // Faces with a node outside A are contactable (a face across the rim too: no gap between
+    // A's ring and B's exposed part); those wholly inside are under A, never touched.
+    std::vector<mesh::Vec3> normals(b.num_vertices(), mesh::Vec3::Zero());
+    const auto& x = b.vertices();
+    for (const auto& f : b.surface()) {
+      if (!out[f[0]] && !out[f[1]] && !out[f[2]]) {
+        std::array<int, 3> e{f[0] + offset, f[1] + offset, f[2] + offset};
+        std::sort(e.begin(), e.end());
+        contact_excluded_faces_.push_back(e);
+        continue;
+      }
+      const mesh::Vec3 n = (x[f[1]] - x[f[0]]).cross(x[f[2]] - x[f[0]]);
+      for (int v : f) normals[v] += n;
+    }
+    const auto& fixed = ties_[t].fixed_nodes();
+    for (int v : b.surface_vertices()) {
+      if (std::binary_search(fixed.begin(), fixed.end(), v)) {
+        contact_fixed_nodes_.push_back(v + offset);
+        continue;
+      }
+      const double len = normals[v].norm();
+      if (len == 0.0) continue;
+      contact_slot_[v + offset] = static_cast<int>(contact_nodes_.size());
+      contact_nodes_.push_back(v + offset);
+      contact_normals_.push_back(normals[v] / len);
+      contact_tie_.push_back(static_cast<int>(t));
+    }
+  }
+  std::sort(contact_excluded_faces_.begin(), contact_excluded_faces_.end());
+  std::sort(contact_fixed_nodes_.begin(), contact_fixed_nodes_.end());
+}
+
 void CoupledBody::select_contact_nodes() {
   std::sort(covered_faces_.begin(), covered_faces_.end());
   covered_faces_.erase(std::unique(covered_faces_.begin(), covered_faces_.end()),
@@ -100,6 +168,12 @@ void CoupledBody::select_contact_nodes() {
     contact_nodes_.push_back(v);
     contact_normals_.push_back(normals[v]);
   }
+  num_host_contact_ = static_cast<int>(contact_nodes_.size());
+  contact_fixed_nodes_ = solver_->fixed_nodes();
+  std::sort(contact_fixed_nodes_.begin(), contact_fixed_nodes_.end());
+  bool exposed = false;
+  for (const auto& e : exposed_) exposed = exposed || !e.empty();
+  if (exposed) select_exposed_contact_nodes();
 }
 
 void CoupledBody::add_tie(const TieDefinition& def) {
@@ -131,7 +205,7 @@ void CoupledBody::finalize() {
                     static_cast<unsigned long long>(cache_key()));
       cache_file = (std::filesystem::path(cache_dir_) / name).string();
       if (load_boundary_operator(cache_file, cache_key(), 3 * static_cast<int>(boundary_nodes_.size()),
-                                 3 * static_cast<int>(contact_nodes_.size()), op_)) {
+                                 3 * num_host_contact_, op_)) {
         cache_hit_ = true;
         timing_.boundary_s = seconds_since(t0);
       }
@@ -216,7 +290,7 @@ void CoupledBody::tied_mesh_displacement(int tie, const Eigen::VectorXd& forces_
 void CoupledBody::compute_boundary_operator() {
   auto t0 = std::chrono::steady_clock::now();
   const int m3 = 3 * static_cast<int>(boundary_nodes_.size());
-  const int s3 = 3 * static_cast<int>(contact_nodes_.size());
+  const int s3 = 3 * num_host_contact_;  // A's contact slots (a tie's are solved per column)
   // Compliance columns of A at the boundary dofs (paper Eq. 5, L_bb and L_cb), by block solves.
   op_.l_bb.setZero(m3, m3);
   op_.l_sb.setZero(s3, m3);
@@ -291,7 +365,7 @@ std::uint64_t CoupledBody::cache_key() const {
   key.add_mesh(*host_, material_);
   key.add(solver_->fixed_nodes());
   key.add(boundary_nodes_);
-  key.add(contact_nodes_);
+  key.add(std::vector<int>(contact_nodes_.begin(), contact_nodes_.begin() + num_host_contact_));
   for (const auto& tie : ties_) {
     std::vector<std::array<int, 3>> host_slots(tie.host_nodes().size());
     for (std::size_t k = 0; k < host_slots.size(); ++k)
@@ -318,6 +392,15 @@ void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::Ma
                                   std::to_string(s) + " out of range");
     }
   }
+  bool on_tie = false;
+  for (int s : slots) on_tie = on_tie || s >= num_host_contact_;
+  if (on_tie) {
+    // Slots on an exposed tie: their equivalent host loads, one coupled solve (two with ties).
+    Eigen::MatrixXd rhs;
+    tie_slot_loads(slots, rhs, ws);
+    coupled_solve_reduced(rhs, x, ws);
+    return;
+  }
   Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nf, 3 * n), lb, glb;
   for (int j = 0; j < n; ++j)
     for (int a = 0; a < 3; ++a) rhs(reduced[3 * contact_nodes_[slots[j]] + a], 3 * j + a) = 1.0;
@@ -334,6 +417,113 @@ void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::Ma
   }
   if (ws != nullptr) solver_->solve_reduced(rhs, x, *ws);
   else solver_->solve_reduced(rhs, x);
+}
+
+void CoupledBody::tie_slot_loads(const std::vector<int>& slots, Eigen::MatrixXd& rhs,
+                                 fem::SolveWorkspace* ws) const {
+  const auto& reduced = solver_->reduced_index();
+  const auto& free = solver_->free_dofs();
+  const int nf = solver_->num_free_dofs();
+  const int n = static_cast<int>(slots.size());
+  const int n3a = 3 * static_cast<int>(host_->num_vertices());
+  rhs.setZero(nf, 3 * n);
+  for (int j = 0; j < n; ++j) {
+    if (slots[j] >= num_host_contact_) continue;
+    for (int a = 0; a < 3; ++a) rhs(reduced[3 * contact_nodes_[slots[j]] + a], 3 * j + a) = 1.0;
+  }
+  for (std::size_t t = 0; t < ties_.size(); ++t) {
+    if (tie_offset_.empty() || tie_offset_[t] < 0) continue;
+    std::vector<int> cols;
+    for (int j = 0; j < n; ++j)
+      if (slots[j] >= num_host_contact_ && contact_tie_[slots[j] - num_host_contact_] == static_cast<int>(t))
+        cols.push_back(j);
+    if (cols.empty()) continue;
+    const int nb3 = 3 * static_cast<int>(ties_[t].geometry().num_vertices());
+    Eigen::MatrixXd f = Eigen::MatrixXd::Zero(nb3, 3 * static_cast<int>(cols.size()));
+    for (std::size_t c = 0; c < cols.size(); ++c) {
+      const int v = contact_nodes_[slots[cols[c]]] - tie_offset_[t];
+      for (int a = 0; a < 3; ++a) f(3 * v + a, 3 * static_cast<int>(c) + a) = 1.0;
+    }
+    Eigen::MatrixXd load = Eigen::MatrixXd::Zero(n3a, f.cols());
+    ties_[t].add_equivalent_host_loads(f, load, ws);
+    for (std::size_t c = 0; c < cols.size(); ++c)
+      for (int r = 0; r < nf; ++r)
+        rhs.block<1, 3>(r, 3 * cols[c]) = load.block<1, 3>(free[r], 3 * static_cast<int>(c));
+  }
+}
+
+void CoupledBody::contact_rows(const std::vector<int>& slots, const Eigen::MatrixXd& x,
+                               Eigen::MatrixXd& rows, fem::SolveWorkspace* ws) const {
+  const auto& reduced = solver_->reduced_index();
+  const auto& free = solver_->free_dofs();
+  const int s3 = 3 * static_cast<int>(contact_nodes_.size());
+  const int k = static_cast<int>(x.cols());
+  if (k != 3 * static_cast<int>(slots.size()))
+    throw std::invalid_argument("CoupledBody::contact_rows: columns and slots differ");
+  rows.resize(s3, k);
+  for (int r = 0; r < 3 * num_host_contact_; ++r)
+    rows.row(r) = x.row(reduced[3 * contact_nodes_[r / 3] + r % 3]);
+  if (!has_exposed_contact()) return;
+  const int n3a = 3 * static_cast<int>(host_->num_vertices());
+  Eigen::MatrixXd u_a = Eigen::MatrixXd::Zero(n3a, k), u_b;
+  for (int r = 0; r < static_cast<int>(free.size()); ++r) u_a.row(free[r]) = x.row(r);
+  for (std::size_t t = 0; t < ties_.size(); ++t) {
+    if (tie_offset_[t] < 0) continue;
+    const int nb3 = 3 * static_cast<int>(ties_[t].geometry().num_vertices());
+    Eigen::MatrixXd f = Eigen::MatrixXd::Zero(nb3, k);
+    for (std::size_t j = 0; j < slots.size(); ++j) {
+      const int s = slots[j];
+      if (s < num_host_contact_ || contact_tie_[s - num_host_contact_] != static_cast<int>(t)) continue;
+      const int v = contact_nodes_[s] - tie_offset_[t];
+      for (int a = 0; a < 3; ++a) f(3 * v + a, 3 * static_cast<int>(j) + a) = 1.0;
+    }
+    ties_[t].displacements(u_a, f, u_b, ws);
+    for (int s = num_host_contact_; s < static_cast<int>(contact_nodes_.size()); ++s) {
+      if (contact_tie_[s - num_host_contact_] != static_cast<int>(t)) continue;
+      rows.middleRows(3 * s, 3) = u_b.middleRows(3 * (contact_nodes_[s] - tie_offset_[t]), 3);
+    }
+  }
+}
+
+void CoupledBody::add_contact_loads(const std::vector<int>& slots,
+                                    const std::vector<mesh::Vec3>& forces_n,
+                                    Eigen::VectorXd& host_load_n, fem::SolveWorkspace* ws) const {
+  if (slots.size() != forces_n.size())
+    throw std::invalid_argument("CoupledBody::add_contact_loads: sizes differ");
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    const int s = slots[k];
+    if (s < 0 || s >= static_cast<int>(contact_nodes_.size()) || !forces_n[k].allFinite())
+      throw std::invalid_argument("CoupledBody::add_contact_loads: bad slot or force at entry " +
+                                  std::to_string(k));
+    if (s < num_host_contact_) host_load_n.segment<3>(3 * contact_nodes_[s]) += forces_n[k];
+  }
+  if (!has_exposed_contact()) return;
+  Eigen::VectorXd f_b;
+  for (std::size_t t = 0; t < ties_.size(); ++t) {
+    if (tie_offset_[t] < 0 || !tie_contact_forces(static_cast<int>(t), slots, forces_n, f_b)) continue;
+    Eigen::MatrixXd load = Eigen::MatrixXd::Zero(host_load_n.size(), 1);
+    ties_[t].add_equivalent_host_loads(Eigen::MatrixXd(f_b), load, ws);
+    host_load_n += load.col(0);
+  }
+}
+
+bool CoupledBody::tie_contact_forces(int tie, const std::vector<int>& slots,
+                                     const std::vector<mesh::Vec3>& forces_n,
+                                     Eigen::VectorXd& forces_b) const {
+  if (tie < 0 || tie >= static_cast<int>(ties_.size()) || tie_offset_.empty() ||
+      tie_offset_[tie] < 0)
+    return false;
+  bool any = false;
+  forces_b.setZero(3 * static_cast<Eigen::Index>(ties_[tie].geometry().num_vertices()));
+  for (std::size_t k = 0; k < slots.size() && k < forces_n.size(); ++k) {
+    const int s = slots[k];
+    if (s < num_host_contact_ || s >= static_cast<int>(contact_nodes_.size()) ||
+        contact_tie_[s - num_host_contact_] != tie)
+      continue;
+    forces_b.segment<3>(3 * (contact_nodes_[s] - tie_offset_[tie])) += forces_n[k];
+    any = true;
+  }
+  return any;
 }
 
 void CoupledBody::set_iterative(const IterativeOptions& options) {
@@ -362,6 +552,15 @@ void CoupledBody::host_displacement(const std::vector<int>& slots,
     throw std::invalid_argument("CoupledBody::host_displacement: sizes differ");
   const int n3 = 3 * static_cast<int>(host_->num_vertices());
   Eigen::VectorXd f = Eigen::VectorXd::Zero(n3);
+  if (has_exposed_contact()) {
+    for (int s : slots) {
+      if (s < num_host_contact_) continue;
+      // A force on an exposed tie: its equivalent host load, one coupled solve.
+      add_contact_loads(slots, forces_n, f, ws);
+      coupled_displacement(f, u_host_m, ws);
+      return;
+    }
+  }
   const int m3 = static_cast<int>(op_.l_bb.rows());
   Eigen::VectorXd v = Eigen::VectorXd::Zero(m3);
   for (std::size_t k = 0; k < slots.size(); ++k) {

@@ -56,6 +56,13 @@ class CoupledBody {
   // The covered faces' node triples, each sorted, sorted (after finalize).
   const std::vector<std::array<int, 3>>& covered_faces() const { return covered_faces_; }
 
+  // Tool contact on tie `tie`'s exposed part (before finalize; LINEAR tier): outside has one
+  // entry per node of that mesh, 1 for a surface node outside the host (fusion::Exposure). Its
+  // surface faces with a node outside become contactable, and their free nodes contact slots
+  // after the host's (see contact_point); their columns are the tied system's (the unit force on
+  // B reaches A through TieCondensation::add_equivalent_host_loads).
+  void expose_tie(int tie, const std::vector<char>& outside);
+
   // Registers the host side of sliding rows (before finalize; the rows of all calls are stacked,
   // returns the index of the first one). Finalize builds
   // the sliding operator over them (sliding()). Throws std::invalid_argument on a bad row
@@ -103,10 +110,49 @@ class CoupledBody {
 
   // Contactable points (after finalize): A's free surface nodes on at least one surface face
   // that is not covered (A ids ascending) and their outward unit normals (area-weighted over the
-  // uncovered surface faces).
+  // uncovered surface faces); then, with exposed ties (expose_tie), each exposed tie's free
+  // surface nodes on a face with a node outside A (B ids ascending, tie by tie), with normals
+  // area-weighted over those faces. Node ids are contact_mesh()'s: A's own, then B's shifted by
+  // tie_vertex_offset(tie).
   const std::vector<int>& contact_nodes() const { return contact_nodes_; }
   const std::vector<mesh::Vec3>& contact_normals() const { return contact_normals_; }
-  int contact_slot(int host_node) const { return contact_slot_[host_node]; }
+  int contact_slot(int contact_mesh_node) const { return contact_slot_[contact_mesh_node]; }
+  // Slots [0, num_host_contact()) are A's nodes, the rest an exposed tie's.
+  int num_host_contact() const { return num_host_contact_; }
+  // The mesh and node of a slot: tie -1 for A (node: A's id), else the tie index and B's id.
+  struct ContactPoint {
+    int tie{-1};
+    int node{-1};
+  };
+  ContactPoint contact_point(int slot) const {
+    return slot < num_host_contact_ ? ContactPoint{-1, contact_nodes_[slot]}
+                                    : ContactPoint{contact_tie_[slot - num_host_contact_],
+                                                   contact_nodes_[slot] - tie_offset_[contact_tie_[slot - num_host_contact_]]};
+  }
+  bool has_exposed_contact() const { return num_host_contact_ < static_cast<int>(contact_nodes_.size()); }
+  // The mesh the contact geometry lives on: A itself, or with exposed ties A and those ties'
+  // meshes in one vertex numbering (B's vertex v is tie_vertex_offset(tie) + v).
+  const mesh::TetMesh& contact_mesh() const { return contact_mesh_ ? *contact_mesh_ : *host_; }
+  int tie_vertex_offset(int tie) const { return tie_offset_.at(static_cast<std::size_t>(tie)); }
+  // Faces of contact_mesh() never contactable (sorted triples, sorted): covered_faces() and the
+  // exposed ties' surface faces with no node outside A.
+  const std::vector<std::array<int, 3>>& contact_excluded_faces() const {
+    return contact_mesh_ ? contact_excluded_faces_ : covered_faces_;
+  }
+  // Fixed nodes of contact_mesh() (sorted): A's and the exposed ties' own, shifted.
+  const std::vector<int>& contact_fixed_nodes() const { return contact_fixed_nodes_; }
+  // Host load (3N_A, +=) of forces on contact slots (force_n per slot, unit N): on A's nodes
+  // directly, on a tie's through its equivalent load. ws: the caller's solve scratch.
+  void add_contact_loads(const std::vector<int>& slots, const std::vector<mesh::Vec3>& forces_n,
+                         Eigen::VectorXd& host_load_n, fem::SolveWorkspace* ws = nullptr) const;
+  // The forces (3N_B) those slots put on tie `tie`'s own nodes; false if none.
+  bool tie_contact_forces(int tie, const std::vector<int>& slots,
+                          const std::vector<mesh::Vec3>& forces_n, Eigen::VectorXd& forces_b) const;
+  // Displacement rows at every contact slot (3S x 3n, unit m/N) of the columns x (free dofs x 3n)
+  // solve_contact_columns gave for `slots`: A's slots read from x, a tie's slots from B's
+  // displacement (A's field and, for a column of a slot on B, its unit force).
+  void contact_rows(const std::vector<int>& slots, const Eigen::MatrixXd& x,
+                    Eigen::MatrixXd& rows, fem::SolveWorkspace* ws = nullptr) const;
 
   // Coupled compliance columns for unit forces at the given contact slots: X (free dofs x 3n,
   // the reduced index of host_solver()), one block solve (ContactColumns caches them).
@@ -143,6 +189,17 @@ class CoupledBody {
   std::vector<int> contact_nodes_;
   std::vector<int> contact_slot_;  // A node -> contact slot or -1
   std::vector<mesh::Vec3> contact_normals_;
+  int num_host_contact_{0};
+  std::vector<std::vector<char>> exposed_;  // per tie: expose_tie's flags (empty: not exposed)
+  std::vector<int> tie_offset_;             // per tie: its vertex offset in contact_mesh_
+  std::vector<int> contact_tie_;            // per slot beyond the host's: its tie
+  std::unique_ptr<mesh::TetMesh> contact_mesh_;  // A + the exposed ties (null: A alone)
+  std::vector<std::array<int, 3>> contact_excluded_faces_;
+  std::vector<int> contact_fixed_nodes_;
+  void select_exposed_contact_nodes();
+  // Unit right-hand sides (free dofs x 3) of the slots on ties, i.e. their equivalent loads.
+  void tie_slot_loads(const std::vector<int>& slots, Eigen::MatrixXd& rhs,
+                      fem::SolveWorkspace* ws) const;
   BoundaryOperator op_;  // L_bb, L_cb, K_add, G (boundary_cache.hpp)
   std::vector<HostSlidingRow> sliding_rows_;  // added before finalize, then moved to sliding_
   std::vector<std::array<int, 3>> covered_faces_;  // sorted triples, sorted at finalize

@@ -248,6 +248,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     std::vector<mesh::Tri> cut;  // S': covered on the host (never contactable)
   };
   std::vector<PendingTie> pending(meshes_.size());
+  std::vector<std::vector<char>> exposed(meshes_.size());  // per embedded mesh: contactable outside
   std::vector<std::vector<char>> carve(meshes_.size());
   for (std::size_t m = 0; m < meshes_.size(); ++m) {
     if (host_of[m] < 0) continue;
@@ -277,10 +278,22 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     } catch (const std::exception& e) {
       throw std::runtime_error(what + ": " + e.what());
     }
-    // Only the host's surface is contactable: an exposed part of B would have no contact rows,
-    // so a scene with tools is refused rather than letting the tool pass through it without
-    // force.
-    if (ex.nodes_outside > 0 && model.effects.tool_contact && !model.tools.empty()) {
+    // Tool contact with B's exposed part is built for the LINEAR tier with a TIE coupling
+    // (method EXACT, elastic): B's exposed surface gets contact slots (CoupledBody::expose_tie).
+    // Anything else would leave the exposed part without contact rows (the tool would pass
+    // through it without force), so it is refused, naming what is not built.
+    const bool tool_touch = model.effects.tool_contact && !model.tools.empty();
+    std::string not_built;
+    if (tier_ != scene::Tier::kLinear)
+      not_built = std::string("in effects.tier ") + scene::tier_name(tier_) +
+                  " (built in the LINEAR tier only)";
+    else if (sliding[m])
+      not_built = "with a SLIDING coupling (built for TIE only)";
+    else if (iterative_host[h])
+      not_built = "with coupling method ITERATIVE (built for EXACT only)";
+    else if (!host.material.viscoelastic.empty() || !emb.material.viscoelastic.empty())
+      not_built = "with viscoelastic tissue (built for elastic meshes only)";
+    if (ex.nodes_outside > 0 && tool_touch && !not_built.empty()) {
       char buf[320];
       std::snprintf(buf, sizeof buf,
                     "%d of its %d surface nodes lie outside host %s (farthest: node %d, "
@@ -289,10 +302,11 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
                     1e3 * ex.max_distance_m, 1e3 * eo.tolerance_m, kExposureToleranceEdges);
       throw std::runtime_error(
           source_ + ": embedded mesh " + emb.id + ": " + buf +
-          "; tool contact with an exposed embedded mesh is not implemented (only the host's "
-          "surface has contact rows): place the embedded mesh inside its host, or remove the "
-          "tools or effects.tool_contact");
+          "; tool contact with an exposed embedded mesh is not implemented " + not_built +
+          ": use the LINEAR tier with an elastic TIE coupling (method EXACT), place the embedded "
+          "mesh inside its host, or remove the tools or effects.tool_contact");
     }
+    if (ex.nodes_outside > 0 && tool_touch) exposed[m] = ex.outside;
     setup_.fusion_s += seconds_since(t0);
     PendingTie& p = pending[m];
     for (std::size_t k = 0; k < map.embedded_nodes.size(); ++k) {
@@ -451,6 +465,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     }
     meshes_[m].body = meshes_[h].body;
     meshes_[m].tie = static_cast<int>(body.body->ties().size()) - 1;
+    if (!exposed[m].empty()) body.body->expose_tie(meshes_[m].tie, exposed[m]);
   }
   for (auto& b : bodies_) {
     b.body->finalize();
@@ -466,15 +481,16 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     for (const auto& tie : b.body->ties())
       setup_.tied_nodes += static_cast<int>(tie.tied_nodes().size());
     // Contact geometry: the contactable surface triangles on a grid, rest positions per slot.
-    const auto& host = b.body->host();
+    // The host's, and an exposed tied mesh's (CoupledBody::contact_mesh: one vertex numbering).
+    const auto& host = b.body->contact_mesh();
     for (int v : b.body->contact_nodes()) b.rest_m.push_back(host.vertices()[v]);
-    std::vector<int> slot_of(host.num_vertices(), -1), fixed = b.host_fixed_nodes;
+    std::vector<int> slot_of(host.num_vertices(), -1);
     for (std::size_t v = 0; v < slot_of.size(); ++v) slot_of[v] = b.body->contact_slot(static_cast<int>(v));
-    std::sort(fixed.begin(), fixed.end());
-    b.surface = ContactSurface(
-        ContactSurfaceDefinition{&host, &slot_of, &fixed, &b.body->covered_faces()});
+    b.surface = ContactSurface(ContactSurfaceDefinition{&host, &slot_of,
+                                                        &b.body->contact_fixed_nodes(),
+                                                        &b.body->contact_excluded_faces()});
     Vec3 lo, hi;
-    host.bounds(lo, hi);
+    b.body->host().bounds(lo, hi);
     b.max_penetration_m =
         options_.max_penetration_m > 0.0 ? options_.max_penetration_m : 0.45 * (hi - lo).minCoeff();
     b.behind_reach_m = std::min(b.max_penetration_m, 3.0 * b.surface.mean_edge_m());
@@ -517,8 +533,7 @@ void Model::host_field(const BodyModel& b, const std::vector<int>& slots,
   }
   // Contact forces at their nodes, the sliding forces J_A^T lambda on S', other nodal forces.
   Eigen::VectorXd f = nodal_forces_n.size() == n3 ? nodal_forces_n : Eigen::VectorXd::Zero(n3);
-  for (std::size_t k = 0; k < slots.size(); ++k)
-    f.segment<3>(3 * b.body->contact_nodes()[slots[k]]) += forces_n[k];
+  b.body->add_contact_loads(slots, forces_n, f, ws);
   const auto& rows = b.body->sliding().rows();
   for (std::size_t k = 0; k < rows.size() && sliding_force; ++k) {
     const double l = sliding_lambda_n[static_cast<int>(k)];
@@ -531,7 +546,8 @@ void Model::host_field(const BodyModel& b, const std::vector<int>& slots,
 
 void Model::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
                        const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m,
-                       fem::SolveWorkspace* ws) const {
+                       fem::SolveWorkspace* ws, const std::vector<int>* slots,
+                       const std::vector<Vec3>* forces_n) const {
   const BodyModel& b = bodies_[e.body];
   if (e.slide >= 0) {
     const auto& sl = *b.slides[e.slide];
@@ -544,6 +560,13 @@ void Model::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda
   }
   if (e.tie < 0) {
     u_m = u_host_m;
+    return;
+  }
+  // The tool's forces on an exposed tied mesh's own nodes act on its interior too.
+  Eigen::VectorXd f_b;
+  if (slots != nullptr && forces_n != nullptr &&
+      b.body->tie_contact_forces(e.tie, *slots, *forces_n, f_b)) {
+    b.body->ties().at(static_cast<std::size_t>(e.tie)).displacement(u_host_m, f_b, u_m, ws);
     return;
   }
   b.body->ties().at(static_cast<std::size_t>(e.tie)).displacement(u_host_m, u_m, ws);
@@ -588,7 +611,8 @@ void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
   }
   Eigen::VectorXd u_host;
   state_->host_field(*model_, e.body, u_host);
-  model_->mesh_field(e, bs.sliding_lambda, u_host, u_m, state_->field_workspace.get());
+  model_->mesh_field(e, bs.sliding_lambda, u_host, u_m, state_->field_workspace.get(),
+                     &bs.force_slots, &bs.forces_n);
 }
 
 void SimulationImpl::snapshot(FieldSnapshot& s) const {
@@ -651,7 +675,8 @@ void SimulationImpl::displacements(FieldSnapshot& s, int m, Eigen::VectorXd& u_m
     sb.host_done = true;
   }
   if (!sb.workspace) sb.workspace = std::make_shared<fem::SolveWorkspace>();
-  model_->mesh_field(e, sb.sliding_lambda_n, sb.u_host_m, u_m, sb.workspace.get());
+  model_->mesh_field(e, sb.sliding_lambda_n, sb.u_host_m, u_m, sb.workspace.get(), &sb.slots,
+                     &sb.forces_n);
 }
 
 void SimulationImpl::sliding_pairs(int m, std::vector<SlidingPairState>& pairs) const {

@@ -165,10 +165,12 @@ class Model {
                   const Eigen::VectorXd& nodal_forces_n, const ContactColumns* columns,
                   Eigen::VectorXd& u_host_m, fem::SolveWorkspace* ws = nullptr) const;
   // Field of mesh `m` (entry e) from its body's host field; ws as in host_field (the tied
-  // mesh's interior and the sliding mesh's compliance solve on it).
+  // mesh's interior and the sliding mesh's compliance solve on it). slots/forces_n (optional):
+  // the body's contact forces, of which those on an exposed tied mesh's slots load its nodes.
   void mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda_n,
                   const Eigen::VectorXd& u_host_m, Eigen::VectorXd& u_m,
-                  fem::SolveWorkspace* ws = nullptr) const;
+                  fem::SolveWorkspace* ws = nullptr, const std::vector<int>* slots = nullptr,
+                  const std::vector<Vec3>* forces_n = nullptr) const;
   // COROTATIONAL and NONLINEAR: field of mesh entry e from its body's stacked equilibrium
   // (host, then the tied meshes in the order of CoupledBody::ties()).
   void tier_mesh_field(const MeshEntry& e, const Eigen::VectorXd& stacked_u_m,

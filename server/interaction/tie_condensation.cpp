@@ -179,17 +179,77 @@ void TieCondensation::add_equivalent_host_load(const Eigen::VectorXd& forces_n,
 }
 
 void TieCondensation::displacement(const Eigen::VectorXd& u_host_m,
-                                   const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m) const {
+                                   const Eigen::VectorXd& forces_n, Eigen::VectorXd& u_m,
+                                   fem::SolveWorkspace* ws) const {
   const int nb3 = 3 * static_cast<int>(geometry_->num_vertices());
   if (forces_n.size() != nb3 || !forces_n.allFinite())
     throw std::invalid_argument("TieCondensation::displacement: bad force vector");
   if (!interior_) {
-    displacement(u_host_m, u_m);
+    displacement(u_host_m, u_m, ws);
     return;
   }
   Eigen::VectorXd u_s;
   tied_displacement(u_host_m, u_s);
-  u_m = interior_->solve_prescribed(tied_nodes_, u_s, forces_n).displacement_m;
+  u_m = ws != nullptr ? interior_->solve_prescribed(tied_nodes_, u_s, forces_n, *ws).displacement_m
+                      : interior_->solve_prescribed(tied_nodes_, u_s, forces_n).displacement_m;
+}
+
+void TieCondensation::add_equivalent_host_loads(const Eigen::MatrixXd& forces_n,
+                                                Eigen::MatrixXd& host_load_n,
+                                                fem::SolveWorkspace* ws) const {
+  const int nb3 = 3 * static_cast<int>(geometry_->num_vertices());
+  const Eigen::Index k = forces_n.cols();
+  if (forces_n.rows() != nb3 || !forces_n.allFinite() || host_load_n.cols() != k)
+    throw std::invalid_argument("TieCondensation::add_equivalent_host_loads: bad force matrix");
+  const int t = static_cast<int>(tied_nodes_.size());
+  Eigen::MatrixXd load_s(3 * t, k);
+  for (int j = 0; j < t; ++j) load_s.middleRows(3 * j, 3) = forces_n.middleRows(3 * tied_nodes_[j], 3);
+  if (interior_ && k_is_.rows() > 0) {
+    const auto& free = interior_->free_dofs();
+    Eigen::MatrixXd f_i(static_cast<int>(free.size()), k), z;
+    for (std::size_t r = 0; r < free.size(); ++r) f_i.row(static_cast<int>(r)) = forces_n.row(free[r]);
+    if (f_i.squaredNorm() > 0.0) {
+      if (ws != nullptr) interior_->solve_reduced(f_i, z, *ws);
+      else interior_->solve_reduced(f_i, z);
+      load_s.noalias() -= k_is_.transpose() * z;
+    }
+  }
+  for (int j = 0; j < t; ++j)
+    for (int v = 0; v < 3; ++v) {
+      const int h = host_nodes_[j][v];
+      if (3 * h + 2 >= host_load_n.rows())
+        throw std::invalid_argument("TieCondensation::add_equivalent_host_loads: host load has " +
+                                    std::to_string(host_load_n.rows()) + " rows, node " +
+                                    std::to_string(h) + " needs more");
+      host_load_n.middleRows(3 * h, 3) += weights_[j][v] * load_s.middleRows(3 * j, 3);
+    }
+}
+
+void TieCondensation::displacements(const Eigen::MatrixXd& u_host_m, const Eigen::MatrixXd& forces_n,
+                                    Eigen::MatrixXd& u_m, fem::SolveWorkspace* ws) const {
+  const int nb3 = 3 * static_cast<int>(geometry_->num_vertices());
+  const Eigen::Index k = u_host_m.cols();
+  if ((forces_n.cols() != 0 && (forces_n.cols() != k || forces_n.rows() != nb3)) ||
+      !u_host_m.allFinite())
+    throw std::invalid_argument("TieCondensation::displacements: bad displacement or force matrix");
+  const int t = static_cast<int>(tied_nodes_.size());
+  Eigen::MatrixXd u_s(3 * t, k);
+  for (int j = 0; j < t; ++j) {
+    u_s.middleRows(3 * j, 3).setZero();
+    for (int a = 0; a < 3; ++a)
+      u_s.middleRows(3 * j, 3) += weights_[j][a] * u_host_m.middleRows(3 * host_nodes_[j][a], 3);
+  }
+  u_m.setZero(nb3, k);
+  for (int j = 0; j < t; ++j) u_m.middleRows(3 * tied_nodes_[j], 3) = u_s.middleRows(3 * j, 3);
+  if (!interior_) return;
+  // B's free interior (its exposed nodes included): K_ii u_i = f_i - K_is u_s.
+  const auto& free = interior_->free_dofs();
+  Eigen::MatrixXd rhs = -(k_is_ * u_s), z;
+  if (forces_n.cols() != 0)
+    for (std::size_t r = 0; r < free.size(); ++r) rhs.row(static_cast<int>(r)) += forces_n.row(free[r]);
+  if (ws != nullptr) interior_->solve_reduced(rhs, z, *ws);
+  else interior_->solve_reduced(rhs, z);
+  for (std::size_t r = 0; r < free.size(); ++r) u_m.row(free[r]) = z.row(static_cast<int>(r));
 }
 
 double TieCondensation::residual(const Eigen::VectorXd& u_host_m,

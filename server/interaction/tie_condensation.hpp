@@ -81,8 +81,17 @@ class TieCondensation {
                                 Eigen::VectorXd& host_load_n) const;
   // B's displacement (3N_B) for A's and the forces on B's nodes (3N_B, unit N): tied nodes
   // J u_A, the others from K_ii with the forces (one solve_prescribed), fixed nodes zero.
+  // ws as for displacement above.
   void displacement(const Eigen::VectorXd& u_host_m, const Eigen::VectorXd& forces_n,
-                    Eigen::VectorXd& u_m) const;
+                    Eigen::VectorXd& u_m, fem::SolveWorkspace* ws = nullptr) const;
+  // Block forms for k load cases at once (one solve of K_ii with k right-hand sides each), as
+  // the tool's contact columns on an exposed B need them: host_load_n (3N_A x k) +=
+  // J^T (F_s - K_si K_ii^-1 F_i) for forces_n (3N_B x k); and u_m (3N_B x k) = B's displacement
+  // for A's u_host_m (3N_A x k) and the forces on B (3N_B x k, or 0 columns: none).
+  void add_equivalent_host_loads(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd& host_load_n,
+                                 fem::SolveWorkspace* ws = nullptr) const;
+  void displacements(const Eigen::MatrixXd& u_host_m, const Eigen::MatrixXd& forces_n,
+                     Eigen::MatrixXd& u_m, fem::SolveWorkspace* ws = nullptr) const;
   // Solves of K_ii on its own (locked) workspace since construction.
   std::uint64_t shared_workspace_uses() const {
     return interior_ ? interior_->shared_workspace_uses() : 0;

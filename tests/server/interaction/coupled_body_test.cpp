@@ -3,8 +3,11 @@
 // slots and the tied mesh's displacement equal the direct solve; the answer differs from the
 // host alone (the tie matters); contact nodes are the free nodes of the surface faces B does not
 // cover (nodes on S' included where such a face touches them); a body read
-// from the boundary-operator cache gives the same columns.
+// from the boundary-operator cache gives the same columns; a tied mesh's exposed part
+// (expose_tie) gets contact slots whose columns, at every slot, equal the monolithic solve too.
 #include "server/interaction/coupled_body.hpp"
+
+#include "server/interaction/contact_columns.hpp"
 
 #include "test_support.hpp"
 #include "tied_box_fixtures.hpp"
@@ -214,6 +217,100 @@ TEST(interaction_coupled_body, PressOnTheExposedTopOfABottomTiedMeshEqualsTheMon
   EXPECT_THROW(body->tied_mesh_displacement(1, f, u_host, u_emb), std::invalid_argument);
   EXPECT_THROW(body->tied_mesh_displacement(0, Eigen::VectorXd::Zero(3), u_host, u_emb),
                std::invalid_argument);
+}
+
+// B standing on A, tied by its bottom only; its sides and top exposed (expose_tie): slots on B
+// after A's, and the columns of every slot (on A, on B's rim, on B's top) at every slot equal the
+// monolithic KKT solve with a unit force at that slot's node (on A or on B).
+TEST(interaction_coupled_body, ExposedTieContactColumnsEqualTheMonolithicKkt) {
+  const auto owner = tied_box::make_bottom_tied_box();
+  const auto& c = *owner;
+  auto body = std::make_unique<CoupledBody>(0, c.host, c.host_material, c.host_fixed);
+  body->add_tie(c.def);
+  std::vector<char> outside(c.embedded.num_vertices(), 0);
+  for (int v : c.embedded.surface_vertices())
+    outside[v] = c.embedded.vertices()[v].z() > 0.04 + 1e-9;
+  body->expose_tie(0, outside);
+  EXPECT_THROW(body->expose_tie(1, outside), std::invalid_argument);
+  body->finalize();
+  ASSERT_TRUE(body->has_exposed_contact());
+  const int n_slots = static_cast<int>(body->contact_nodes().size());
+  const int host_slots = body->num_host_contact();
+  // B's free surface nodes are all on a face with an exposed node (the bottom's rim included);
+  // its bottom's interior nodes are not.
+  int on_b = 0, rim = 0, top = 0;
+  for (int s = host_slots; s < n_slots; ++s) {
+    const auto p = body->contact_point(s);
+    ASSERT_EQ(p.tie, 0);
+    EXPECT_EQ(body->contact_mesh().vertices()[body->contact_nodes()[s]], c.embedded.vertices()[p.node]);
+    ++on_b;
+    rim += !outside[p.node];
+    top += c.embedded.vertices()[p.node].z() > 0.06 - 1e-9;
+  }
+  EXPECT_GT(on_b, 0);
+  EXPECT_GT(rim, 0);
+  EXPECT_GT(top, 0);
+  std::printf("slots: %d on A, %d on B (%d on the tied rim, %d on the top)\n", host_slots, on_b,
+              rim, top);
+  // Contactable faces of B: none with all three nodes tied (its bottom is under A's top).
+  for (const auto& f : c.embedded.surface()) {
+    std::array<int, 3> e{f[0] + body->tie_vertex_offset(0), f[1] + body->tie_vertex_offset(0),
+                         f[2] + body->tie_vertex_offset(0)};
+    std::sort(e.begin(), e.end());
+    const bool excluded = std::binary_search(body->contact_excluded_faces().begin(),
+                                             body->contact_excluded_faces().end(), e);
+    EXPECT_EQ(excluded, !outside[f[0]] && !outside[f[1]] && !outside[f[2]]);
+  }
+  ContactColumns columns(*body);
+  std::vector<int> all(n_slots);
+  for (int s = 0; s < n_slots; ++s) all[s] = s;
+  columns.ensure(all);
+  const MonolithicSolver mono(c);
+  const int na3 = 3 * static_cast<int>(c.host.num_vertices());
+  const int nb3 = 3 * static_cast<int>(c.embedded.num_vertices());
+  std::vector<int> probe = {0, host_slots / 2, host_slots - 1, host_slots, (host_slots + n_slots) / 2,
+                            n_slots - 1};
+  double worst = 0.0;
+  for (int j : probe) {
+    const auto pj = body->contact_point(j);
+    for (int a = 0; a < 3; ++a) {
+      Eigen::VectorXd fa = Eigen::VectorXd::Zero(na3), fb = Eigen::VectorXd::Zero(nb3);
+      (pj.tie < 0 ? fa : fb)[3 * pj.node + a] = 1.0;
+      const auto ref = mono.solve(fa, fb);
+      const double scale = std::max(ref.u_host_m.cwiseAbs().maxCoeff(), ref.u_embedded_m.cwiseAbs().maxCoeff());
+      for (int i = 0; i < n_slots; ++i) {
+        const auto pi = body->contact_point(i);
+        const Eigen::Vector3d want =
+            (pi.tie < 0 ? ref.u_host_m : ref.u_embedded_m).segment<3>(3 * pi.node);
+        const Eigen::Vector3d got = columns.block(i, j).col(a);
+        worst = std::max(worst, (got - want).norm() / scale);
+      }
+    }
+  }
+  std::printf("columns at all %d slots of %zu probed slots vs the KKT solve: worst %.2e relative\n",
+              n_slots, probe.size(), worst);
+  EXPECT_LE(worst, 1e-8);
+  // The field for forces on slots of A and of B together (host_displacement, add_contact_loads,
+  // B's interior with its forces) equals the KKT solve.
+  const std::vector<int> slots = {host_slots / 3, host_slots, n_slots - 1};
+  const std::vector<mesh::Vec3> forces = {mesh::Vec3(0.001, 0.0, -0.004), mesh::Vec3(0.002, -0.001, 0.0),
+                                          mesh::Vec3(0.0, 0.001, -0.01)};
+  Eigen::VectorXd fa = Eigen::VectorXd::Zero(na3), fb = Eigen::VectorXd::Zero(nb3);
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    const auto p = body->contact_point(slots[k]);
+    (p.tie < 0 ? fa : fb).segment<3>(3 * p.node) += forces[k];
+  }
+  const auto ref = mono.solve(fa, fb);
+  Eigen::VectorXd u_host, u_emb, f_b;
+  body->host_displacement(slots, forces, u_host);
+  ASSERT_TRUE(body->tie_contact_forces(0, slots, forces, f_b));
+  EXPECT_LE((f_b - fb).norm(), 1e-15);
+  body->ties()[0].displacement(u_host, f_b, u_emb);
+  std::printf("field for forces on A and B: host %.2e, B %.2e relative\n",
+              (u_host - ref.u_host_m).norm() / ref.u_host_m.norm(),
+              (u_emb - ref.u_embedded_m).norm() / ref.u_embedded_m.norm());
+  EXPECT_LE((u_host - ref.u_host_m).norm(), 1e-8 * ref.u_host_m.norm());
+  EXPECT_LE((u_emb - ref.u_embedded_m).norm(), 1e-8 * ref.u_embedded_m.norm());
 }
 
 TEST(interaction_coupled_body, CachedBoundaryOperatorGivesTheSameColumns) {

@@ -1,7 +1,9 @@
-// The simulation's set-up refuses a scene whose embedded mesh sticks out of its host while a
-// tool touches tissue (its exposed part would have no contact rows); without tools it builds and
-// ties only the embedded surface nodes inside the host and carves the host around them; the
-// bundled scenes load.
+// An embedded mesh that sticks out of its host: the set-up ties only the embedded surface nodes
+// inside the host and carves the host around them; tool contact with the exposed part is built in
+// the LINEAR tier with a TIE coupling (the tip pressing the raised cylinder's top, across the
+// rim, against an independent monolithic solve) and refused, naming what is missing, otherwise;
+// the bundled scenes load.
+#include "server/fem/assembly.hpp"
 #include "server/interaction/contact_surface.hpp"
 #include "server/interaction/coupled_body.hpp"
 #include "server/interaction/simulation.hpp"
@@ -9,6 +11,8 @@
 #include "server/scene/scene.hpp"
 #include "test_support.hpp"
 
+#include <Eigen/SparseCore>
+#include <Eigen/SparseLU>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -17,6 +21,7 @@
 #include <cstdio>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace neurosim::interaction {
 namespace {
@@ -69,26 +74,44 @@ std::string build_error(const scene::Model& model) {
   return {};
 }
 
-TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefused) {
+TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefusedOutsideLinearTie) {
   const auto path = neurosim::testing::source_dir() / "scenes" / "cube_cylinder.scene";
-  scene::Scene s = scene::read_scene(path);
   // The cylinder (r = 15 mm, axis along y) moved up so that it sticks 20 mm out of the cube's
-  // top face (z = 0.1 m): its axis at z = 0.105 m, its top at z = 0.12 m.
-  auto* cyl =
-      s.mutable_meshes(scene::find_mesh(s, "cylinder"))->mutable_generate()->mutable_cylinder();
-  cyl->mutable_base_center_m()->set_z(0.105);
-  const std::string what = build_error(scene::compile(s, path.string()));
-  ASSERT_FALSE(what.empty()) << "an exposed embedded mesh was accepted with a tool";
-  std::printf("refused as expected: %s\n", what.c_str());
-  EXPECT_NE(what.find(path.string()), std::string::npos) << what;
-  EXPECT_NE(what.find("embedded mesh cylinder"), std::string::npos) << what;
-  EXPECT_NE(what.find("outside host cube"), std::string::npos) << what;
-  EXPECT_NE(what.find("not implemented"), std::string::npos) << what;
+  // top face (z = 0.1 m): its axis at z = 0.105 m, its top at z = 0.12 m. Tool contact with its
+  // exposed part is built for the LINEAR tier with an elastic TIE (EXACT) only: the other tiers
+  // and couplings are refused, naming what is not built.
+  {
+    scene::Scene s = cube_cylinder(0.105, true);
+    s.mutable_effects()->set_tier(scene::Effects::NONLINEAR);
+    const std::string what = build_error(scene::compile(s, path.string()));
+    ASSERT_FALSE(what.empty()) << "an exposed embedded mesh was accepted with a tool (NONLINEAR)";
+    std::printf("refused as expected: %s\n", what.c_str());
+    EXPECT_NE(what.find(path.string()), std::string::npos) << what;
+    EXPECT_NE(what.find("embedded mesh cylinder"), std::string::npos) << what;
+    EXPECT_NE(what.find("outside host cube"), std::string::npos) << what;
+    EXPECT_NE(what.find("not implemented in effects.tier NONLINEAR"), std::string::npos) << what;
+  }
+  {
+    scene::Scene s = cube_cylinder(0.105, true);
+    s.mutable_couplings(0)->set_kind(scene::Coupling::SLIDING);
+    const std::string what = build_error(scene::compile(s, path.string()));
+    ASSERT_FALSE(what.empty()) << "an exposed embedded mesh was accepted with a tool (SLIDING)";
+    EXPECT_NE(what.find("SLIDING coupling"), std::string::npos) << what;
+    EXPECT_NE(what.find("not implemented"), std::string::npos) << what;
+  }
+  {
+    scene::Scene s = cube_cylinder(0.105, true);
+    s.mutable_couplings(0)->set_method(scene::Coupling::ITERATIVE);
+    const std::string what = build_error(scene::compile(s, path.string()));
+    ASSERT_FALSE(what.empty()) << "an exposed embedded mesh was accepted with a tool (ITERATIVE)";
+    EXPECT_NE(what.find("method ITERATIVE"), std::string::npos) << what;
+  }
+  // LINEAR with TIE (the scene's own coupling): builds, with contact slots on the exposed part.
+  EXPECT_EQ(build_error(scene::compile(cube_cylinder(0.105, true), path.string())), "");
 
   // Without tools nothing touches the exposed part: the same geometry builds, and only the
   // cylinder's surface nodes inside the cube (z <= 0.1 m + the tolerance) are tied.
-  s.clear_tools();
-  s.mutable_effects()->set_tool_contact(false);
+  scene::Scene s = cube_cylinder(0.105, false);
   const scene::Model model = scene::compile(s, path.string());
   EXPECT_EQ(build_error(model), "");
   const auto sim = Simulation::build(model);
@@ -102,6 +125,7 @@ TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefused) {
   const CoupledBody* body = sim->body_of(cylinder);
   ASSERT_NE(body, nullptr);
   ASSERT_EQ(body->ties().size(), 1u);
+  EXPECT_FALSE(body->has_exposed_contact());  // no tool: no slots on the cylinder
   const auto& tie = body->ties()[0];
   EXPECT_EQ(static_cast<int>(tie.tied_nodes().size()), st.tied_nodes);
   int above = 0;
@@ -208,6 +232,235 @@ TEST(interaction_simulation_exposure, RingAroundAnExitingCylinderStaysContactabl
         x.y() < 0.1 - 1e-9)
       EXPECT_GT(body.contact_normals()[k].z(), 1.0 - 1e-12) << "node " << body.contact_nodes()[k];
   }
+}
+
+// The raised cylinder (axis at z = 0.105 m: its top 20 mm above the cube's top) with the scene's
+// tool, LINEAR tier, TIE: the simulation and the highest surface node of the cylinder's top near
+// y = 50 mm (the tip is placed over it).
+struct RaisedPress {
+  scene::Scene scene;
+  scene::Model model;
+  std::unique_ptr<Simulation> sim;
+  int cube{-1}, cylinder{-1};
+  int top_node{-1};
+  mesh::Vec3 top_m{mesh::Vec3::Zero()};
+  double tip_radius_m{0.0};
+};
+
+std::unique_ptr<RaisedPress> raised_press() {
+  auto p = std::make_unique<RaisedPress>();
+  const auto path = neurosim::testing::source_dir() / "scenes" / "cube_cylinder.scene";
+  p->scene = cube_cylinder(0.105, true);
+  p->model = scene::compile(p->scene, path.string());
+  p->sim = Simulation::build(p->model);
+  p->cube = scene::find_mesh(p->scene, "cube");
+  p->cylinder = scene::find_mesh(p->scene, "cylinder");
+  p->tip_radius_m = p->model.tools.at(0).tip_radius_m;
+  const auto& cyl = p->sim->mesh(p->cylinder);
+  for (int v : cyl.surface_vertices()) {
+    const mesh::Vec3& x = cyl.vertices()[v];
+    if (std::abs(x.y() - 0.05) > 0.008) continue;
+    if (p->top_node < 0 || x.z() > p->top_m.z()) {
+      p->top_node = v;
+      p->top_m = x;
+    }
+  }
+  return p;
+}
+
+// Force of the last step on each mesh of the body: sum of the slot forces on the host's nodes
+// and on the tied mesh's nodes (CoupledBody::contact_point), unit N.
+void forces_by_mesh(const Simulation& sim, int host, mesh::Vec3& on_host, mesh::Vec3& on_tied) {
+  std::vector<int> slots;
+  std::vector<Vec3> forces;
+  sim.last_contact_forces(host, slots, forces);
+  on_host.setZero();
+  on_tied.setZero();
+  const CoupledBody& body = *sim.body_of(host);
+  for (std::size_t k = 0; k < slots.size(); ++k)
+    (body.contact_point(slots[k]).tie < 0 ? on_host : on_tied) += forces[k];
+}
+
+// (a) The tip pressing the exposed top of the raised cylinder: no force above it, a force from
+// the first touch (20 um) on, growing with the depth; the answer names the cylinder and its node
+// under the tip; the cylinder's field (for the viewers) closes the gap there.
+TEST(interaction_simulation_exposure, TipPressingTheRaisedCylindersTopFeelsIt) {
+  const auto p = raised_press();
+  ASSERT_GE(p->top_node, 0);
+  ASSERT_GT(p->top_m.z(), 0.119);  // the cylinder's top, 20 mm above the cube's
+  const CoupledBody& body = *p->sim->body_of(p->cylinder);
+  ASSERT_TRUE(body.has_exposed_contact());
+  std::printf("contact slots: %d on the cube, %zu on the cylinder\n", body.num_host_contact(),
+              body.contact_nodes().size() - static_cast<std::size_t>(body.num_host_contact()));
+  std::vector<ToolContact> c;
+  StepStats st;
+  double last = 0.0;
+  for (double d : {-0.0002, 0.00002, 0.00025, 0.0005, 0.001}) {
+    ToolPose pose;
+    pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
+    pose.axis = Vec3::UnitZ();
+    p->sim->step({pose}, c, st);
+    ASSERT_TRUE(st.converged) << "depth " << d;
+    Vec3 on_host, on_tied;
+    forces_by_mesh(*p->sim, p->cube, on_host, on_tied);
+    std::printf("d %+.3f mm: F (%.5f, %.5f, %.5f) N, rows %d, on the cylinder's nodes %.5f N, "
+                "on the cube's %.5f N\n",
+                d * 1e3, c[0].force_n.x(), c[0].force_n.y(), c[0].force_n.z(), st.contact_rows,
+                -on_tied.z(), -on_host.z());
+    if (d < 0.0) {
+      EXPECT_FALSE(c[0].in_contact);
+      EXPECT_EQ(c[0].force_n.norm(), 0.0);
+      continue;
+    }
+    ASSERT_TRUE(c[0].in_contact) << "depth " << d;
+    EXPECT_GT(c[0].force_n.z(), last) << "depth " << d;
+    EXPECT_LT(std::abs(c[0].force_n.x()) + std::abs(c[0].force_n.y()), 0.05 * c[0].force_n.z());
+    last = c[0].force_n.z();
+    EXPECT_EQ(c[0].mesh, p->cylinder);
+    EXPECT_NE(std::find(c[0].nodes.begin(), c[0].nodes.end(), p->top_node), c[0].nodes.end());
+    // The force on the tissue is on the cylinder's nodes (the cube under it carries none).
+    EXPECT_NEAR(-on_tied.z(), c[0].force_n.z(), 1e-9 * c[0].force_n.z());
+    if (d == 0.001) {
+      Eigen::VectorXd u;
+      p->sim->displacements(p->cylinder, u);
+      const double uz = u[3 * p->top_node + 2];
+      std::printf("d 1 mm: the top node moved %.4f mm; tie residual %.2e m\n", uz * 1e3,
+                  p->sim->tie_residual_m());
+      EXPECT_LT(uz, -0.5 * d);
+      EXPECT_GT(uz, -1.5 * d);
+      EXPECT_LT(p->sim->tie_residual_m(), 1e-12);
+    }
+  }
+}
+
+// (b) Against an independent solve: the monolithic tied system (cube + cylinder, the tie as
+// constraints, assembled and solved directly here) with the displacements the simulation gives
+// at the loaded nodes prescribed. Its reactions there are the forces the tool must put on the
+// tissue, and equal the step's slot forces (and their sum the tool's force) at three depths.
+TEST(interaction_simulation_exposure, PressOnTheRaisedCylinderEqualsTheMonolithicTiedSolve) {
+  const auto p = raised_press();
+  const CoupledBody& body = *p->sim->body_of(p->cylinder);
+  const auto& tie = body.ties().at(0);
+  const mesh::TetMesh& host = body.host();
+  const mesh::TetMesh& emb = tie.geometry();
+  const int na3 = 3 * static_cast<int>(host.num_vertices());
+  const int nb3 = 3 * static_cast<int>(emb.num_vertices());
+  const int n = na3 + nb3;
+  const auto ka = fem::assemble_stiffness(host, fem::MaterialMap::uniform(p->model.meshes[p->cube].material));
+  const auto kb = fem::assemble_stiffness(emb, fem::MaterialMap::uniform(tie.material()));
+  const double scale = 1e-3 * ka.diagonal().maxCoeff();
+  for (double d : {0.00025, 0.0005, 0.001}) {
+    ToolPose pose;
+    pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
+    pose.axis = Vec3::UnitZ();
+    std::vector<ToolContact> c;
+    StepStats st;
+    p->sim->step({pose}, c, st);
+    ASSERT_TRUE(st.converged);
+    std::vector<int> slots;
+    std::vector<Vec3> forces;
+    p->sim->last_contact_forces(p->cube, slots, forces);
+    ASSERT_FALSE(slots.empty());
+    Eigen::VectorXd ua, ub;
+    p->sim->displacements(p->cube, ua);
+    p->sim->displacements(p->cylinder, ub);
+    // Unknowns: A's and B's dofs, then the multipliers: A's fixed dofs, B's fixed dofs, the tie
+    // (u_B,k - sum w u_A = 0) and the loaded nodes (u = the simulation's).
+    std::vector<Eigen::Triplet<double>> t;
+    for (int k = 0; k < ka.outerSize(); ++k)
+      for (fem::SparseMatrix::InnerIterator it(ka, k); it; ++it)
+        t.emplace_back(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
+    for (int k = 0; k < kb.outerSize(); ++k)
+      for (fem::SparseMatrix::InnerIterator it(kb, k); it; ++it)
+        t.emplace_back(na3 + static_cast<int>(it.row()), na3 + static_cast<int>(it.col()), it.value());
+    std::vector<double> g;  // constraint right-hand sides
+    int row = n;
+    auto constrain = [&](const std::vector<std::pair<int, double>>& terms, double rhs) {
+      for (const auto& [dof, w] : terms) {
+        t.emplace_back(row, dof, scale * w);
+        t.emplace_back(dof, row, scale * w);
+      }
+      g.push_back(scale * rhs);
+      ++row;
+    };
+    for (int v : body.host_solver().fixed_nodes())
+      for (int a = 0; a < 3; ++a) constrain({{3 * v + a, 1.0}}, 0.0);
+    for (int v : tie.fixed_nodes())
+      for (int a = 0; a < 3; ++a) constrain({{na3 + 3 * v + a, 1.0}}, 0.0);
+    for (std::size_t k = 0; k < tie.tied_nodes().size(); ++k)
+      for (int a = 0; a < 3; ++a) {
+        std::vector<std::pair<int, double>> terms{{na3 + 3 * tie.tied_nodes()[k] + a, 1.0}};
+        for (int j = 0; j < 3; ++j) terms.push_back({3 * tie.host_nodes()[k][j] + a, -tie.weights()[k][j]});
+        constrain(terms, 0.0);
+      }
+    std::vector<int> loaded_row;
+    for (int s : slots) {
+      const auto cp = body.contact_point(s);
+      loaded_row.push_back(row);
+      for (int a = 0; a < 3; ++a) {
+        const int dof = (cp.tie < 0 ? 0 : na3) + 3 * cp.node + a;
+        constrain({{dof, 1.0}}, (cp.tie < 0 ? ua : ub)[3 * cp.node + a]);
+      }
+    }
+    Eigen::SparseMatrix<double> kkt(row, row);
+    kkt.setFromTriplets(t.begin(), t.end());
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(row);
+    for (std::size_t k = 0; k < g.size(); ++k) rhs[n + static_cast<int>(k)] = g[k];
+    Eigen::SparseLU<Eigen::SparseMatrix<double>> lu;
+    lu.compute(kkt);
+    ASSERT_EQ(lu.info(), Eigen::Success);
+    const Eigen::VectorXd x = lu.solve(rhs);
+    // K u + scale C^T mu = 0: the force the prescription puts on a loaded node is -scale mu.
+    Vec3 total_ref = Vec3::Zero(), total = Vec3::Zero();
+    double worst = 0.0, largest = 0.0;
+    for (std::size_t k = 0; k < slots.size(); ++k) {
+      const Vec3 ref = -scale * x.segment<3>(loaded_row[k]);
+      total_ref += ref;
+      total += forces[k];
+      worst = std::max(worst, (ref - forces[k]).norm());
+      largest = std::max(largest, forces[k].norm());
+    }
+    std::printf("d %.2f mm: %zu loaded nodes, tool F %.6f N, slot forces %.6f N, monolithic "
+                "reactions %.6f N, worst node difference %.2e of the largest node force\n",
+                d * 1e3, slots.size(), c[0].force_n.z(), -total.z(), -total_ref.z(), worst / largest);
+    EXPECT_LE(worst, 1e-6 * largest) << "depth " << d;
+    EXPECT_NEAR(-total_ref.z(), c[0].force_n.z(), 1e-6 * c[0].force_n.z()) << "depth " << d;
+  }
+}
+
+// (c) No gap across the rim: the tip pressed where the cube's top meets the cylinder's wall
+// (0.5 mm into each) is pushed back by both, the force shared by the cube's and the cylinder's
+// nodes.
+TEST(interaction_simulation_exposure, PressAcrossTheRimFeelsTheCubeAndTheCylinder) {
+  const auto p = raised_press();
+  // The wall leaves the cube's top (z = 0.1 m) at x = 0.05 + sqrt(15^2 - 5^2) mm; a tip centre
+  // at 3 + 15 - 0.5 mm from the cylinder's axis and 3 - 0.5 mm above the cube's top.
+  const double r = p->tip_radius_m;
+  const double dz = 0.1 + r - 0.0005 - 0.105;
+  const double dx = std::sqrt(std::pow(0.015 + r - 0.0005, 2) - dz * dz);
+  ToolPose pose;
+  pose.tip_m = Vec3(0.05 + dx, 0.05, 0.105 + dz);
+  pose.axis = Vec3(1.0, 0.0, 1.0).normalized();  // the shaft away from the wall
+  std::vector<ToolContact> c;
+  StepStats st;
+  p->sim->step({pose}, c, st);
+  ASSERT_TRUE(st.converged);
+  ASSERT_TRUE(c[0].in_contact);
+  Vec3 on_host, on_tied;
+  forces_by_mesh(*p->sim, p->cube, on_host, on_tied);
+  std::printf("rim press at x %.2f mm: F (%.5f, %.5f, %.5f) N, rows %d; on the cube's nodes "
+              "(%.5f, %.5f, %.5f) N, on the cylinder's (%.5f, %.5f, %.5f) N\n",
+              pose.tip_m.x() * 1e3, c[0].force_n.x(), c[0].force_n.y(), c[0].force_n.z(),
+              st.contact_rows, -on_host.x(), -on_host.y(), -on_host.z(), -on_tied.x(),
+              -on_tied.y(), -on_tied.z());
+  const double f = c[0].force_n.norm();
+  ASSERT_GT(f, 0.0);
+  // Both push: the cube's top up, the cylinder's wall outwards (+x) and up.
+  EXPECT_GT(on_host.norm(), 0.1 * f);
+  EXPECT_GT(on_tied.norm(), 0.1 * f);
+  EXPECT_GT(c[0].force_n.x(), 0.1 * f);
+  EXPECT_GT(c[0].force_n.z(), 0.1 * f);
+  EXPECT_NEAR((-(on_host + on_tied) - c[0].force_n).norm(), 0.0, 1e-9 * f);
 }
 
 }  // namespace
