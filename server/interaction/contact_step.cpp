@@ -1134,18 +1134,25 @@ bool State::spread_row(const Model& m, Row& r) {
            std::signbit(e.radius_m) == std::signbit(r.spread_radius_m);
   };
   const SpreadMemo* memo = nullptr;
-  for (const auto* list : {&spread_prev_memo_, &spread_memo_}) {
+  bool from_last = false;
+  for (const auto* list : {&spread_memo_, &spread_prev_memo_}) {
     for (const SpreadMemo& e : *list)
       if (same_input(e)) {
         memo = &e;
         break;
       }
-    if (memo) break;
+    if (memo) {
+      from_last = list == &spread_prev_memo_;
+      break;
+    }
   }
   bool found;
   if (memo) {
     found = memo->found;
     if (found) spread_load_ = memo->load;
+    // Carried into this geometry's memo, so the next geometry finds it too (a held tool's rows
+    // repeat for many steps: else spread again every second step).
+    if (from_last && spread_memo_.size() < spread_memo_.capacity()) spread_memo_.push_back(*memo);
   } else {
     found = m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal, r.spread_radius_m,
                                              spread_triangles_, spread_load_);
@@ -1660,7 +1667,13 @@ void State::store_forces(const Model& m, int ns) {
     near_field_creep(row.body, row.tool, alpha);
     bs.near_field_forces_n[at - bs.near_field_tools.begin()] -= (alpha * l) * row.normal;
   }
-  // Largest displacement at the loaded nodes: how far the next step's candidates may have moved.
+}
+
+// Phase "forces", after store_forces when another geometry follows (LINEAR, iterating) or the
+// next step starts from this answer (the tiers): the largest displacement at the loaded nodes,
+// how far that geometry's candidates may have moved. A LINEAR step's last geometry skips it
+// (O(loaded nodes^2) blocks: the next step starts from rest, restore_forces(true)).
+void State::largest_displacement(const Model& m) {
   for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
     auto& bs = bodies_[bi];
     double most = 0.0;
@@ -2067,8 +2080,11 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
     for (int k = 0; k < ns; ++k) sliding_active_[k] = lambda_[k] > 0.0 ? 1 : 0;
     store_forces(m, ns);
     if (!iterate || rows_.empty() || same_rows_as_before() ||
-        it + 1 >= m.options_.contact_geometry_iterations)
+        it + 1 >= m.options_.contact_geometry_iterations) {
+      if (!iterate) largest_displacement(m);
       break;
+    }
+    largest_displacement(m);
   }
   stats.columns_computed = columns;
   stats.columns_not_ready = not_ready;  // the most of one geometry (the same nodes recur)

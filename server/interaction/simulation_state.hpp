@@ -122,7 +122,9 @@ struct BodyState {
   std::vector<long long> node_test_stamp;
   std::vector<char> node_test_in;
   std::vector<int> node_hit;  // per slot and (rest, shaft): its hit in State::hits_ (tested in)
-  double max_displacement_m{0.0};  // largest displacement at the loaded slots, last good step
+  // Largest displacement at the loaded slots of the last geometry followed by another (LINEAR:
+  // within one step; 0 at a step's start) or of the last good step (the tiers), unit m.
+  double max_displacement_m{0.0};
   // Last good step's contact forces on the body, per slot (unit N), and sliding row forces.
   std::vector<int> force_slots;
   std::vector<mesh::Vec3> forces_n;
@@ -279,6 +281,7 @@ class State {
   void preload_columns(const Model& m);
   void delassus(const Model& m, int ns);
   void store_forces(const Model& m, int ns);
+  void largest_displacement(const Model& m);
   void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations, int tools,
               ToolContact& c);
   Mat3 own_stiffness(int ns, int tool);
@@ -380,9 +383,10 @@ class State {
   std::vector<int> delassus_match_;
   std::vector<int> delassus_last_fresh_row_;
   std::vector<std::uint64_t> delassus_evicted_;  // per body: its columns' evicted() at the last W
-  // Phase "rows", spread reuse (spread_row): the spreads of the last and of this geometry by their
-  // inputs (body, point, normal, radius); ContactSurface::spread is a function of these and the
-  // constant rest surface, so an equal input (bit for bit) takes the stored load.
+  // Phase "rows", spread reuse (spread_row): the spreads of the last and of this geometry (made
+  // or taken from the memo) by their inputs (body, point, normal, radius); ContactSurface::spread
+  // is a function of these and the constant rest surface, so an equal input (bit for bit) takes
+  // the stored load.
   struct SpreadMemo {
     int body{-1};
     Vec3 at_m{Vec3::Zero()};
