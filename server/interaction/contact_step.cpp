@@ -264,6 +264,23 @@ void State::reserve_workspace(const Model& m, int tools) {
   delassus_last_row_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
   delassus_row_node_.reserve(max_contact);
   delassus_y_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact) * max_contact);
+  delassus_cache_rows_ = 2 * max_contact;
+  delassus_cache_.assign(delassus_cache_rows_, DelassusCacheEntry{});
+  delassus_cache_content_.assign(delassus_cache_rows_, Row{});
+  delassus_cache_node_.resize(m.bodies_.size());
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi)
+    delassus_cache_node_[bi].assign(m.bodies_[bi].rest_m.size(), -1);
+  delassus_cache_nodes_.clear();
+  delassus_cache_nodes_.reserve(kDelassusCacheNodes);
+  delassus_cache_y_.assign(static_cast<std::size_t>(delassus_cache_rows_) * kDelassusCacheNodes,
+                           Vec3::Zero());
+  delassus_cache_stamp_.assign(delassus_cache_y_.size(), -2);  // no generation
+  delassus_row_entry_.reserve(max_contact);
+  delassus_node_entry_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  delassus_prev_entry_.clear();
+  delassus_prev_entry_.reserve(max_contact);
+  delassus_prev_generation_.clear();
+  delassus_prev_generation_.reserve(max_contact);
   delassus_prev_rows_.clear();  // (the cache's sizes follow max_contact)
   delassus_prev_rows_.reserve(max_contact);
   delassus_v_.setZero(max_contact, max_contact);
@@ -1534,21 +1551,37 @@ void State::delassus(const Model& m, int ns) {
     for (int q = 0; q < rows_[s].nodes; ++q)
       if (delassus_row_node_[s][q] >= 0) delassus_last_fresh_row_[delassus_row_node_[s][q]] = s;
   }
+  delassus_cache_lookup(reuse);
   // y_rj for the nodes j of the rows s >= r on the row's body, node by node: the blocks L(., j)
   // of node j's column stay in cache while every row reads them (row by row, each row read all
   // the nodes' columns again: a cache miss per block, 24 % of four probes' step). A matched row
-  // needs y_rj only against the unmatched rows.
+  // needs y_rj only against the unmatched rows. From the y cache where it holds the row's
+  // content and the node, else formed and kept there.
   for (int j = 0; j < nn; ++j) {
     const auto& [body, slot_q] = delassus_nodes_[j];
     const auto& cols = *bodies_[body].columns;
+    const int cj = delassus_node_entry_[j];
     for (int r = 0; r <= delassus_last_row_[j]; ++r) {
       const Row& a = rows_[r];
       if (a.body != body) continue;
       if (delassus_match_[r] >= 0 && r > delassus_last_fresh_row_[j]) continue;
+      const int e = delassus_row_entry_[r];
+      std::size_t at = 0;
+      if (e >= 0 && cj >= 0) {
+        at = static_cast<std::size_t>(e) * kDelassusCacheNodes + cj;
+        if (delassus_cache_stamp_[at] == delassus_cache_[e].generation) {
+          delassus_y_[static_cast<std::size_t>(r) * nn + j] = delassus_cache_y_[at];
+          continue;
+        }
+      }
       Vec3 y = Vec3::Zero();  // sum_p w_p L(slot_p, slot_q)^T m_p
       for (int p = 0; p < a.nodes; ++p)
         if (a.slot[p] >= 0) y.noalias() += a.w[p] * (cols.block(a.slot[p], slot_q).transpose() * a.m[p]);
       delassus_y_[static_cast<std::size_t>(r) * nn + j] = y;
+      if (e >= 0 && cj >= 0) {
+        delassus_cache_y_[at] = y;
+        delassus_cache_stamp_[at] = delassus_cache_[e].generation;
+      }
     }
   }
   for (int r = 0; r < nc; ++r) {
@@ -1605,6 +1638,85 @@ void State::delassus(const Model& m, int ns) {
   }
   delassus_prev_rows_.assign(rows_.begin(), rows_.end());
   delassus_prev_v_.swap(delassus_v_);
+  delassus_prev_entry_.assign(delassus_row_entry_.begin(), delassus_row_entry_.end());
+  delassus_prev_generation_.clear();
+  for (int e : delassus_prev_entry_)
+    delassus_prev_generation_.push_back(e >= 0 ? delassus_cache_[e].generation : -1);
+}
+
+// Phase "Delassus", the y cache's entries of this W's rows and indices of its nodes (after the
+// match with the last W's rows). reuse false (a body's columns evicted slots since the last W):
+// every entry's values are given up. Allocates nothing (reserved).
+void State::delassus_cache_lookup(bool reuse) {
+  const int nc = static_cast<int>(rows_.size());
+  const int nn = static_cast<int>(delassus_nodes_.size());
+  const long long now = ++delassus_counter_;
+  auto flush_values = [&] {
+    for (auto& e : delassus_cache_) e.generation = ++delassus_generation_;
+  };
+  if (!reuse) flush_values();
+  // Nodes: every node of this W gets an index unless this W alone has more than the cache holds;
+  // a full cache gives up all its nodes and values first.
+  int fresh = 0;
+  for (const auto& [body, slot] : delassus_nodes_)
+    if (delassus_cache_node_[body][slot] < 0) ++fresh;
+  if (fresh > 0 && static_cast<int>(delassus_cache_nodes_.size()) + fresh > kDelassusCacheNodes) {
+    for (const auto& [body, slot] : delassus_cache_nodes_) delassus_cache_node_[body][slot] = -1;
+    delassus_cache_nodes_.clear();
+    flush_values();
+  }
+  delassus_node_entry_.resize(nn);
+  for (int j = 0; j < nn; ++j) {
+    const auto& [body, slot] = delassus_nodes_[j];
+    int& index = delassus_cache_node_[body][slot];
+    if (index < 0 && static_cast<int>(delassus_cache_nodes_.size()) < kDelassusCacheNodes) {
+      index = static_cast<int>(delassus_cache_nodes_.size());
+      delassus_cache_nodes_.emplace_back(body, slot);
+    }
+    delassus_node_entry_[j] = index;
+  }
+  // Rows: a matched row takes its last row's entry; any other row the entry with its content, or
+  // the least recently used entry not read by this W (a new generation).
+  auto same_content = [](const Row& a, const Row& b) {
+    const std::size_t n = static_cast<std::size_t>(a.nodes);
+    return a.body == b.body && a.nodes == b.nodes &&
+           std::memcmp(a.slot.data(), b.slot.data(), n * sizeof(int)) == 0 &&
+           std::memcmp(a.w.data(), b.w.data(), n * sizeof(double)) == 0 &&
+           std::memcmp(a.m.data(), b.m.data(), n * sizeof(Vec3)) == 0;
+  };
+  delassus_row_entry_.resize(nc);
+  for (int r = 0; r < nc; ++r) {
+    const Row& a = rows_[r];
+    int entry = -1;
+    const int q = delassus_match_[r];
+    if (q >= 0 && delassus_prev_entry_[q] >= 0 &&
+        delassus_cache_[delassus_prev_entry_[q]].generation == delassus_prev_generation_[q])
+      entry = delassus_prev_entry_[q];  // (its content unchanged since)
+    for (int e = 0; e < delassus_cache_rows_ && entry < 0; ++e) {
+      const DelassusCacheEntry& c = delassus_cache_[e];
+      if (c.key == a.key && c.body == a.body && c.nodes == a.nodes &&
+          same_content(a, delassus_cache_content_[e]))
+        entry = e;
+    }
+    if (entry < 0) {
+      long long oldest = now;
+      for (int e = 0; e < delassus_cache_rows_; ++e)
+        if (delassus_cache_[e].used < oldest) {
+          oldest = delassus_cache_[e].used;
+          entry = e;
+        }
+      if (entry >= 0) {
+        DelassusCacheEntry& c = delassus_cache_[entry];
+        c.key = a.key;
+        c.body = a.body;
+        c.nodes = a.nodes;
+        c.generation = ++delassus_generation_;
+        delassus_cache_content_[entry] = a;
+      }
+    }
+    if (entry >= 0) delassus_cache_[entry].used = now;
+    delassus_row_entry_[r] = entry;
+  }
 }
 
 // Phase "forces": the last good contact forces per body and node (a row's force -lambda n on

@@ -280,6 +280,7 @@ class State {
   void grant_evictions();
   void preload_columns(const Model& m);
   void delassus(const Model& m, int ns);
+  void delassus_cache_lookup(bool reuse);
   void store_forces(const Model& m, int ns);
   void largest_displacement(const Model& m);
   void answer(const Model& m, int tool, const ToolPose& pose, int ns, int iterations, int tools,
@@ -383,6 +384,34 @@ class State {
   std::vector<int> delassus_match_;
   std::vector<int> delassus_last_fresh_row_;
   std::vector<std::uint64_t> delassus_evicted_;  // per body: its columns' evicted() at the last W
+  // Phase "Delassus", y cache: y_rj is a function of row r's content (body, nodes, slots, weights,
+  // normals m) and node j's ready column alone, so it is kept across steps by content and node:
+  // rows by entry (at most delassus_cache_rows_, the least recently used given up), nodes by a
+  // cache index (at most kDelassusCacheNodes, all given up when full), per entry and node the
+  // value and the entry's generation that formed it (a recycled entry, a flush: a new generation).
+  // Four held probes (one station's pose new per step) need y of the held rows against the moving
+  // rows' nodes: the last W's alone had them every fourth step.
+  static constexpr int kDelassusCacheNodes = 512;
+  struct DelassusCacheEntry {
+    std::uint64_t key{0};
+    int body{-1};
+    int nodes{-1};
+    long long used{-1};        // the Delassus (delassus_counter_) that last read it
+    long long generation{-1};  // its values' generation
+  };
+  int delassus_cache_rows_{0};
+  std::vector<DelassusCacheEntry> delassus_cache_;
+  std::vector<Row> delassus_cache_content_;
+  std::vector<std::vector<int>> delassus_cache_node_;  // per body and slot: cache index or -1
+  std::vector<std::pair<int, int>> delassus_cache_nodes_;  // (body, slot) per cache index
+  std::vector<mesh::Vec3> delassus_cache_y_;               // entry-major, kDelassusCacheNodes
+  std::vector<long long> delassus_cache_stamp_;            // the generation that formed it
+  std::vector<int> delassus_row_entry_;   // per row of this W: its entry or -1
+  std::vector<int> delassus_node_entry_;  // per node of this W: its cache index or -1
+  std::vector<int> delassus_prev_entry_;  // per row of the last W: its entry or -1
+  std::vector<long long> delassus_prev_generation_;  // and that entry's generation then
+  long long delassus_counter_{0};
+  long long delassus_generation_{0};
   // Phase "rows", spread reuse (spread_row): the spreads of the last and of this geometry (made
   // or taken from the memo) by their inputs (body, point, normal, radius); ContactSurface::spread
   // is a function of these and the constant rest surface, so an equal input (bit for bit) takes

@@ -5,7 +5,8 @@
 // meet and on an edge gives one row, and a tip just off them (a face row next to a node row:
 // nearly dependent rows) converges to the same force; a tip centred exactly on a crease of a
 // 5 mm brain feels the tissue as 1 nm beside it; a tip pressed into a floor beside a fold is not
-// pushed by the fold's far flank, whose plane it lies behind.
+// pushed by the fold's far flank, whose plane it lies behind; an answer at a pose (one probe, four
+// held probes) is the one a fresh State gives it, to the bit.
 #include "server/interaction/simulation.hpp"
 #include "server/interaction/surface_probe.hpp"
 #include "server/interaction/contact_surface.hpp"
@@ -428,6 +429,63 @@ TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
   }
   EXPECT_EQ(compared, 18);
   EXPECT_GE(touching, 15);  // the comparisons are of contacts, not of empty answers
+}
+
+// Four probes held in the generated block's face x = L with their shafts lying along it, one
+// probe's pose new per step (a server stepping on each station's pose: the other three rows
+// repeat, the moving probe's radial rows change their normals): the Delassus entries and the
+// spreads the step keeps across steps by their inputs (contact_step.cpp, the y cache and the
+// spread memo) give, at every 8th step, what a fresh State gives those four poses: force,
+// stiffness, nodes and validity radius to the bit (default rows: spread, smooth normals, near
+// field). All compliance columns made with the State, as above.
+TEST(interaction_contact_step, FourHeldProbesAnswerAsAFreshState) {
+  Block b;
+  b.generated = true;
+  b.cells = 6;
+  b.tip_radius_m = 0.003;
+  SimulationOptions o;
+  o.precompute_contact_columns = true;
+  const auto model = build_model(block_scene(b), o);
+  auto held = Simulation::from_model(model);
+  std::vector<ToolPose> poses(4);
+  std::vector<int> updates(4, 0);
+  auto place = [&](int k) {
+    const double a = 0.5 * M_PI * k;
+    const double depth = 4e-3 + 5e-4 * std::sin(0.7 * updates[k]);
+    poses[k].tip_m = Vec3(b.edge_m + b.tip_radius_m - depth, 0.03 + 0.012 * std::cos(a),
+                          0.03 + 0.012 * std::sin(a));
+    poses[k].axis = Vec3(0.05, std::cos(a + 1.0), std::sin(a + 1.0)).normalized();
+    poses[k].station = k;
+    ++updates[k];
+  };
+  for (int k = 0; k < 4; ++k) place(k);
+  std::vector<ToolContact> c, fresh_c;
+  StepStats st;
+  int compared = 0, touching = 0;
+  for (int step = 0; step < 80; ++step) {
+    place(step % 4);
+    held->step(poses, c, st);
+    ASSERT_TRUE(st.converged) << "step " << step;
+    if (step % 8 != 7) continue;
+    auto fresh = Simulation::from_model(model);
+    fresh->step(poses, fresh_c, st);
+    ASSERT_TRUE(st.converged) << "step " << step;
+    ++compared;
+    for (int t = 0; t < 4; ++t) {
+      if (c[t].in_contact) ++touching;
+      EXPECT_EQ(c[t].in_contact, fresh_c[t].in_contact) << "step " << step << " probe " << t;
+      for (int i = 0; i < 3; ++i) {
+        EXPECT_EQ(c[t].force_n[i], fresh_c[t].force_n[i]) << "step " << step << " probe " << t;
+        for (int j = 0; j < 3; ++j)
+          EXPECT_EQ(c[t].stiffness_n_per_m(i, j), fresh_c[t].stiffness_n_per_m(i, j))
+              << "step " << step << " probe " << t;
+      }
+      EXPECT_EQ(c[t].nodes, fresh_c[t].nodes) << "step " << step << " probe " << t;
+      EXPECT_EQ(c[t].validity_radius_m, fresh_c[t].validity_radius_m) << "step " << step;
+    }
+  }
+  EXPECT_EQ(compared, 10);
+  EXPECT_EQ(touching, 40);  // every probe in contact at every comparison
 }
 
 // The 2 mm probe slid 40 mm over the bundled brain (5 mm cells: triangles about 5 mm, 2.5 tip
