@@ -460,8 +460,13 @@ int main(int argc, char** argv) {
           model.loads.clear();
           model.prescribed.clear();
         }
-        if (centre) neurosim::bench::cut_region(model.meshes.front(), *centre, 1e-3 * region_mm);
-        for (int s = 0; s < e.split; ++s) neurosim::bench::split_loaded_mesh(model.meshes.front());
+        if (centre) {
+          std::vector<neurosim::mesh::Tri> cut =
+              neurosim::bench::cut_region(model.meshes.front(), *centre, 1e-3 * region_mm);
+          for (int s = 0; s < e.split; ++s) neurosim::bench::split_region(model.meshes.front(), cut);
+        } else {
+          for (int s = 0; s < e.split; ++s) neurosim::bench::split_loaded_mesh(model.meshes.front());
+        }
         return model;
       };
       for (const MeshEntry& e : entries) {

@@ -5,24 +5,30 @@
 // allows: the refinement below the whole brain's reach, the surface fixed) and its ctest.
 #pragma once
 
+#include "tet_split.hpp"
 #include "server/model/model.hpp"
 #include "server/mesh/tet_mesh.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
+#include <utility>
 #include <vector>
 
 namespace neurosim::bench {
 
 // Cuts m in place to its tetrahedra with centroid within radius_m of centre_m (the
 // face-connected piece of them around the tetrahedron whose centroid is nearest centre_m).
-// Nodes on a cut face (a face whose neighbour across it was dropped) join the fixed nodes; the
-// mesh's fixed nodes that remain stay fixed; the tetrahedra keep their labels and materials.
-// Returns the number of cut-face nodes.
-inline int cut_region(scene::LoadedMesh& m, const mesh::Vec3& centre_m, double radius_m) {
+// Nodes on a cut face (a face whose neighbour across it was dropped) are the fixed nodes; a
+// region holding a fixed node of the mesh (the brain's clamped base) is refused; the tetrahedra
+// keep their labels and materials.
+// Returns the cut faces (the clamp: split_region keeps exactly these clamped).
+inline std::vector<mesh::Tri> cut_region(scene::LoadedMesh& m, const mesh::Vec3& centre_m, double radius_m) {
   const auto& x = m.mesh.vertices();
   const auto& tets = m.mesh.tets();
   const auto& nb = m.mesh.neighbours();
@@ -56,6 +62,7 @@ inline int cut_region(scene::LoadedMesh& m, const mesh::Vec3& centre_m, double r
   std::vector<char> fixed(x.size(), 0);
   for (int v : m.fixed_nodes) fixed[v] = 1;
   std::vector<char> cut(x.size(), 0);
+  std::vector<mesh::Tri> cut_faces;
   std::vector<mesh::Vec3> nx;
   std::vector<mesh::Tet> nt_list;
   std::vector<int> labels, materials;
@@ -63,9 +70,13 @@ inline int cut_region(scene::LoadedMesh& m, const mesh::Vec3& centre_m, double r
     if (!kept[t]) continue;
     for (int k = 0; k < 4; ++k) {
       const int u = nb[t][k];
-      if (u >= 0 && !kept[u])
+      if (u >= 0 && !kept[u]) {
+        mesh::Tri f{};
+        int c = 0;
         for (int j = 0; j < 4; ++j)
-          if (j != k) cut[tets[t][j]] = 1;
+          if (j != k) cut[tets[t][j]] = 1, f[c++] = tets[t][j];
+        cut_faces.push_back(f);  // old numbering until below
+      }
     }
     mesh::Tet q{};
     for (int j = 0; j < 4; ++j) {
@@ -78,12 +89,13 @@ inline int cut_region(scene::LoadedMesh& m, const mesh::Vec3& centre_m, double r
     if (!m.materials.tet_material.empty()) materials.push_back(m.materials.tet_material[t]);
   }
   std::vector<int> fixed_nodes;
-  int cut_nodes = 0;
   for (std::size_t v = 0; v < x.size(); ++v) {
-    if (id[v] < 0) continue;
-    cut_nodes += cut[v];
-    if (cut[v] || fixed[v]) fixed_nodes.push_back(id[v]);
+    if (id[v] >= 0 && fixed[v] && !cut[v])
+      throw std::invalid_argument("cut_region: the region holds a clamped node of the mesh");
+    if (id[v] >= 0 && cut[v]) fixed_nodes.push_back(id[v]);
   }
+  for (auto& f : cut_faces)
+    for (int& v : f) v = id[v];
   std::sort(fixed_nodes.begin(), fixed_nodes.end());
   mesh::BuildOptions options;
   options.drop_unused_vertices = false;
@@ -93,7 +105,47 @@ inline int cut_region(scene::LoadedMesh& m, const mesh::Vec3& centre_m, double r
   m.mesh = std::move(out);
   m.fixed_nodes = std::move(fixed_nodes);
   if (!materials.empty()) m.materials.tet_material = std::move(materials);
-  return cut_nodes;
+  return cut_faces;
+}
+
+// A sub-model split 1 -> 8 in place (tet_split.hpp): materials follow their parents, and a new
+// node is fixed exactly when it is the midpoint of an edge of a cut face (each cut face becomes
+// its four children in cut_faces), not of any other edge between two clamped nodes (the rim of
+// the cut on the surface, edges through the inside: split_loaded_mesh would clamp those), so the
+// clamp is the same surface at every split.
+inline void split_region(scene::LoadedMesh& m, std::vector<mesh::Tri>& cut_faces) {
+  SplitMesh s = split_tets(m.mesh);
+  const int n = static_cast<int>(m.mesh.vertices().size());
+  auto key = [](int a, int b) {
+    if (a > b) std::swap(a, b);
+    return (static_cast<std::uint64_t>(a) << 32) | static_cast<std::uint32_t>(b);
+  };
+  std::unordered_map<std::uint64_t, int> mid;
+  for (std::size_t k = 0; k < s.edge_ends.size(); ++k) mid.emplace(key(s.edge_ends[k][0], s.edge_ends[k][1]), n + static_cast<int>(k));
+  std::vector<char> fixed(s.mesh.num_vertices(), 0);
+  for (int v : m.fixed_nodes) fixed[v] = 1;
+  std::vector<mesh::Tri> children;
+  children.reserve(4 * cut_faces.size());
+  for (const auto& f : cut_faces) {
+    const int a = f[0], b = f[1], c = f[2];
+    const int ab = mid.at(key(a, b)), bc = mid.at(key(b, c)), ca = mid.at(key(c, a));
+    fixed[ab] = fixed[bc] = fixed[ca] = 1;
+    children.push_back({a, ab, ca});
+    children.push_back({ab, b, bc});
+    children.push_back({ca, bc, c});
+    children.push_back({ab, bc, ca});
+  }
+  cut_faces = std::move(children);
+  m.fixed_nodes.clear();
+  for (std::size_t v = 0; v < fixed.size(); ++v)
+    if (fixed[v]) m.fixed_nodes.push_back(static_cast<int>(v));
+  if (!m.materials.tet_material.empty()) {
+    std::vector<int> per(s.parent_tet.size());
+    for (std::size_t t = 0; t < per.size(); ++t) per[t] = m.materials.tet_material[s.parent_tet[t]];
+    m.materials.tet_material = std::move(per);
+  }
+  m.mesh = std::move(s.mesh);
+  m.generator_cell_size_m *= 0.5;
 }
 
 }  // namespace neurosim::bench

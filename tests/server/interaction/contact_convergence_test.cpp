@@ -10,6 +10,7 @@
 // Also the tilted probe whose shaft carries force, with and without the shaft's near field.
 #include "server/interaction/simulation.hpp"
 
+#include "bench/sub_model.hpp"
 #include "bench/tet_split.hpp"
 #include "graded_block_fixtures.hpp"
 #include "server/mesh/io.hpp"
@@ -336,6 +337,87 @@ TEST(interaction_contact_convergence, SplitKeepsTheSurface) {
                                       std::abs(x.z() + zs.back()), std::abs(x.z())});
     EXPECT_LT(to_face, 1e-15) << "vertex " << v;
   }
+}
+
+
+// bench/sub_model.hpp (contact_convergence_bench --region: a press's neighbourhood, then split):
+// the cut keeps the tetrahedra with centroid within the radius that are face-connected to the
+// one nearest the centre (here all but one, joined by an edge), its surface is the block's own
+// faces plus the cut faces, and every node of a cut face is clamped and no other (the block's
+// clamped base lies beyond the radius); after a 1 -> 8 split (split_region) the clamp is still
+// exactly the cut faces' nodes (tet_split.hpp's split_loaded_mesh, which fixes every midpoint
+// between two fixed nodes, clamped more here: the rim on the top face and edges through the
+// inside). A region that holds the block's clamped base is refused.
+TEST(interaction_contact_convergence, RegionCutClampsExactlyItsCutFaces) {
+  const auto xs = testing::graded_axis_to(0.004, 0.004, 1.5, 0.012, true);
+  const auto zs = testing::graded_axis_to(0.004, 0.004, 1.5, 0.012, false);
+  scene::LoadedMesh m;
+  m.mesh = testing::graded_block(xs, zs);
+  for (std::size_t v = 0; v < m.mesh.num_vertices(); ++v)
+    if (std::abs(m.mesh.vertices()[v].z() + zs.back()) < 1e-15) m.fixed_nodes.push_back(static_cast<int>(v));
+  ASSERT_FALSE(m.fixed_nodes.empty());
+  const Vec3 centre(0.001, 0.0005, 0.0);
+  const double radius = 0.008;
+  auto centroid = [](const mesh::TetMesh& mesh, const mesh::Tet& t) {
+    const auto& x = mesh.vertices();
+    return Vec3(0.25 * (x[t[0]] + x[t[1]] + x[t[2]] + x[t[3]]));
+  };
+  std::size_t inside = 0;
+  double v_inside = 0.0;
+  for (std::size_t t = 0; t < m.mesh.num_tets(); ++t)
+    if ((centroid(m.mesh, m.mesh.tets()[t]) - centre).norm() <= radius) ++inside, v_inside += m.mesh.tet_volume(static_cast<int>(t));
+  const std::size_t tets_before = m.mesh.num_tets();
+  std::vector<mesh::Tri> cut_faces = bench::cut_region(m, centre, radius);
+  ASSERT_FALSE(cut_faces.empty());
+  // The face-connected piece: the ball's tetrahedra but those joined to it by an edge or a vertex.
+  EXPECT_LE(m.mesh.num_tets(), inside);
+  EXPECT_GE(m.mesh.num_tets() + 2, inside);
+  EXPECT_LT(m.mesh.num_tets(), tets_before);
+  double v_cut = 0.0;
+  for (std::size_t t = 0; t < m.mesh.num_tets(); ++t) {
+    EXPECT_LE((centroid(m.mesh, m.mesh.tets()[t]) - centre).norm(), radius);
+    v_cut += m.mesh.tet_volume(static_cast<int>(t));
+  }
+  EXPECT_LE(v_cut, v_inside * (1.0 + 1e-12));
+  EXPECT_GT(v_cut, 0.9 * v_inside);
+  // A surface triangle lies in one face of the block or is a cut face.
+  auto check = [&](const scene::LoadedMesh& mm, const char* what) {
+    const auto& x = mm.mesh.vertices();
+    auto on_face = [&](const Vec3& p, int axis, double at) { return std::abs(p[axis] - at) < 1e-15; };
+    std::vector<char> fixed(x.size(), 0), cut(x.size(), 0);
+    for (int v : mm.fixed_nodes) fixed[v] = 1;
+    int own = 0, cut_faces = 0;
+    for (const auto& t : mm.mesh.surface()) {
+      bool block_face = false;
+      for (int axis = 0; axis < 3; ++axis)
+        for (double at : {axis == 2 ? -zs.back() : xs.front(), axis == 2 ? 0.0 : xs.back()})
+          block_face = block_face || (on_face(x[t[0]], axis, at) && on_face(x[t[1]], axis, at) && on_face(x[t[2]], axis, at));
+      if (block_face) {
+        ++own;
+        continue;
+      }
+      ++cut_faces;
+      for (int v : t) {
+        cut[v] = 1;
+        EXPECT_TRUE(fixed[v]) << what << ": node " << v << " of a cut face is free";
+      }
+    }
+    for (int v : mm.fixed_nodes) EXPECT_TRUE(cut[v]) << what << ": node " << v << " clamped off the cut";
+    EXPECT_GT(own, 0) << what;
+    EXPECT_GT(cut_faces, 0) << what;
+  };
+  check(m, "cut");
+  const std::size_t cut_tets = m.mesh.num_tets(), cut_faces_before = cut_faces.size();
+  bench::split_region(m, cut_faces);
+  EXPECT_EQ(cut_faces.size(), 4 * cut_faces_before);
+  EXPECT_EQ(m.mesh.num_tets(), 8 * cut_tets);
+  check(m, "cut and split");
+  bench::split_region(m, cut_faces);
+  check(m, "cut and split twice");
+  scene::LoadedMesh whole;
+  whole.mesh = testing::graded_block(xs, zs);
+  whole.fixed_nodes = {0};
+  EXPECT_THROW(bench::cut_region(whole, whole.mesh.vertices()[0], radius), std::invalid_argument);
 }
 
 }  // namespace
