@@ -333,6 +333,33 @@ TEST(interaction_simulation_exposure, TipPressingTheRaisedCylindersTopFeelsIt) {
   }
 }
 
+// The shaft lying across the cylinder's top (the tip off to the side, above the cube, touching
+// nothing): the exposed part's triangles are the shaft's candidates too.
+TEST(interaction_simulation_exposure, ShaftAcrossTheRaisedCylindersTopFeelsIt) {
+  const auto p = raised_press();
+  const double shaft_r = p->model.tools.at(0).shaft_radius_m;
+  std::vector<ToolContact> c;
+  StepStats st;
+  double last = 0.0;
+  for (double d : {-0.0002, 0.0002, 0.0005}) {
+    ToolPose pose;
+    pose.tip_m = Vec3(0.02, p->top_m.y(), p->top_m.z() + shaft_r - d);
+    pose.axis = Vec3::UnitX();  // the shaft over the cylinder's top (x = 35..65 mm)
+    p->sim->step({pose}, c, st);
+    ASSERT_TRUE(st.converged);
+    std::printf("shaft d %+.2f mm: F (%.5f, %.5f, %.5f) N, rows %d\n", d * 1e3, c[0].force_n.x(),
+                c[0].force_n.y(), c[0].force_n.z(), st.contact_rows);
+    if (d < 0.0) {
+      EXPECT_FALSE(c[0].in_contact);
+      continue;
+    }
+    ASSERT_TRUE(c[0].in_contact);
+    EXPECT_EQ(c[0].mesh, p->cylinder);
+    EXPECT_GT(c[0].force_n.z(), last);
+    last = c[0].force_n.z();
+  }
+}
+
 // (b) Against an independent solve: the monolithic tied system (cube + cylinder, the tie as
 // constraints, assembled and solved directly here) with the displacements the simulation gives
 // at the loaded nodes prescribed. Its reactions there are the forces the tool must put on the
