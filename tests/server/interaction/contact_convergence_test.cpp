@@ -6,7 +6,8 @@
 // The brain meshes of 7 / 5 / 4 / 3 mm cells are measured by bench/contact_convergence_bench
 // (at 24 fixed points, and on brains split 1 -> 8 with the surface fixed: with the default rows no
 // positive order at cells of 3.5 mm and more, the steps grow; bench/RESULTS.md, "The press at 24
-// points"), not here: no measured order to bound a brain's convergence by.
+// points"; nor on sub-models of the 7 mm brain split to 0.44 mm, "The press below 3.5 mm cells"),
+// not here: no measured order to bound a brain's convergence by.
 // Also the tilted probe whose shaft carries force, with and without the shaft's near field.
 #include "server/interaction/simulation.hpp"
 
