@@ -139,13 +139,7 @@ inline void split_region(scene::LoadedMesh& m, std::vector<mesh::Tri>& cut_faces
   m.fixed_nodes.clear();
   for (std::size_t v = 0; v < fixed.size(); ++v)
     if (fixed[v]) m.fixed_nodes.push_back(static_cast<int>(v));
-  if (!m.materials.tet_material.empty()) {
-    std::vector<int> per(s.parent_tet.size());
-    for (std::size_t t = 0; t < per.size(); ++t) per[t] = m.materials.tet_material[s.parent_tet[t]];
-    m.materials.tet_material = std::move(per);
-  }
-  m.mesh = std::move(s.mesh);
-  m.generator_cell_size_m *= 0.5;
+  adopt_split(m, std::move(s));
 }
 
 }  // namespace neurosim::bench

@@ -83,6 +83,18 @@ inline SplitMesh split_tets(const mesh::TetMesh& in) {
   return out;
 }
 
+// A scene mesh takes its split: each tetrahedron's material follows its parent, the generator's
+// cell size halves (the caller sets the fixed nodes).
+inline void adopt_split(scene::LoadedMesh& m, SplitMesh s) {
+  if (!m.materials.tet_material.empty()) {
+    std::vector<int> per(s.parent_tet.size());
+    for (std::size_t t = 0; t < per.size(); ++t) per[t] = m.materials.tet_material[s.parent_tet[t]];
+    m.materials.tet_material = std::move(per);
+  }
+  m.mesh = std::move(s.mesh);
+  m.generator_cell_size_m *= 0.5;
+}
+
 // A scene mesh split 1 -> 8 in place: its tetrahedra's materials follow their parents, a new
 // node is fixed when both ends of its edge are (the clamped faces stay clamped, nothing more),
 // the generator's cell size halves.
@@ -94,13 +106,7 @@ inline void split_loaded_mesh(scene::LoadedMesh& m) {
   for (std::size_t k = 0; k < s.edge_ends.size(); ++k)
     if (fixed[s.edge_ends[k][0]] && fixed[s.edge_ends[k][1]]) m.fixed_nodes.push_back(n + static_cast<int>(k));
   std::sort(m.fixed_nodes.begin(), m.fixed_nodes.end());
-  if (!m.materials.tet_material.empty()) {
-    std::vector<int> per(s.parent_tet.size());
-    for (std::size_t t = 0; t < per.size(); ++t) per[t] = m.materials.tet_material[s.parent_tet[t]];
-    m.materials.tet_material = std::move(per);
-  }
-  m.mesh = std::move(s.mesh);
-  m.generator_cell_size_m *= 0.5;
+  adopt_split(m, std::move(s));
 }
 
 }  // namespace neurosim::bench
