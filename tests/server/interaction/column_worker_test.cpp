@@ -51,17 +51,21 @@ Brain load_brain() {
   return b;
 }
 
-// The tip depth_m below the top surface at (x, y), along its normal.
-ToolPose pose_at(const Brain& b, double x, double y, double depth_m) {
-  const auto on = top_of_surface(b.sync->mesh(0), x, y);
+// A tip of radius tip_radius_m depth_m below the top surface of m at (x, y), along its normal.
+ToolPose pose_at(const mesh::TetMesh& m, double tip_radius_m, double x, double y, double depth_m) {
+  const auto on = top_of_surface(m, x, y);
   if (!on) {
     ADD_FAILURE() << "no surface above (" << x << ", " << y << ")";
     return {};
   }
   ToolPose pose;
-  pose.tip_m = on->point_m + (b.tip_radius_m - depth_m) * on->normal;
+  pose.tip_m = on->point_m + (tip_radius_m - depth_m) * on->normal;
   pose.axis = on->normal;
   return pose;
+}
+
+ToolPose pose_at(const Brain& b, double x, double y, double depth_m) {
+  return pose_at(b.sync->mesh(0), b.tip_radius_m, x, y, depth_m);
 }
 
 bool same_force(const Vec3& a, const Vec3& b) { return (a - b).norm() <= 1e-9 * std::max(b.norm(), 1e-12); }
@@ -254,16 +258,9 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
   on.column_preload_budget_mb = 0.0;
   on.column_cache_budget_mb = 0.0;  // first unbounded: the size of one pose's reach
   auto sync = Simulation::build(model, SimulationOptions{});
-  auto pose_at = [&](double x, double y) {
-    const auto at = top_of_surface(sync->mesh(0), x, y);
-    EXPECT_TRUE(at.has_value());
-    ToolPose p;
-    p.tip_m = at->point_m + (tip - 2e-3) * at->normal;
-    p.axis = at->normal;
-    return p;
-  };
+  auto press_at = [&](double x, double y) { return pose_at(sync->mesh(0), tip, x, y, 2e-3); };
   std::vector<ToolPose> poses;
-  for (int k = 0; k < 5; ++k) poses.push_back(pose_at(0.060, 0.060 + 0.025 * k));
+  for (int k = 0; k < 5; ++k) poses.push_back(press_at(0.060, 0.060 + 0.025 * k));
   poses.push_back(poses.front());
   std::vector<ToolContact> c, ref;
   StepStats st, ref_st;
@@ -340,15 +337,8 @@ TEST(interaction_column_worker, BoundBelowOnePosesReachIsRaisedToTheReach) {
   on.column_preload_budget_mb = 0.0;
   on.column_cache_budget_mb = 0.0;  // the probe: unbounded
   auto sync = Simulation::build(model, SimulationOptions{});
-  auto pose_at = [&](double x, double y) {
-    const auto at = top_of_surface(sync->mesh(0), x, y);
-    EXPECT_TRUE(at.has_value());
-    ToolPose p;
-    p.tip_m = at->point_m + (tip - 2e-3) * at->normal;
-    p.axis = at->normal;
-    return p;
-  };
-  const std::vector<ToolPose> poses{pose_at(0.060, 0.060), pose_at(0.060, 0.085)};
+  auto press_at = [&](double x, double y) { return pose_at(sync->mesh(0), tip, x, y, 2e-3); };
+  const std::vector<ToolPose> poses{press_at(0.060, 0.060), press_at(0.060, 0.085)};
   std::vector<ToolContact> c, ref;
   StepStats st, ref_st;
   std::vector<std::size_t> reach;  // each pose's reach alone (an unbounded cache, fresh per pose)
