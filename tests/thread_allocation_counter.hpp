@@ -18,5 +18,11 @@ void* operator new(std::size_t size) {
   if (void* p = std::malloc(size ? size : 1)) return p;
   throw std::bad_alloc();
 }
+// GCC 12 inlines these into gtest's `delete` of a `new`ed object and then warns that free() meets
+// a pointer from operator new (-Wmismatched-new-delete): here operator new IS malloc, so the
+// pair matches; the warning is silenced for these two definitions only.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 void operator delete(void* p) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#pragma GCC diagnostic pop

@@ -168,8 +168,11 @@ TEST(interaction_coupled_body, ContactNodesAreTheFreeNodesOfTheUncoveredFaces) {
     const mesh::Vec3 out = c.host.vertices()[expected[s]] - mesh::Vec3(0.02, 0.02, 0.02);
     EXPECT_GT(body->contact_normals()[s].dot(out), 0.0) << "node " << expected[s];
   }
-  for (int v : boundary)
-    if (!on_uncovered[v]) EXPECT_EQ(body->contact_slot(v), -1);
+  for (int v : boundary) {
+    if (!on_uncovered[v]) {
+      EXPECT_EQ(body->contact_slot(v), -1);
+    }
+  }
   EXPECT_THROW(body->add_tie(c.def), std::logic_error);
   EXPECT_THROW(body->cover_faces({}), std::logic_error);
 }

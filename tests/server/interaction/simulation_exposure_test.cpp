@@ -167,7 +167,9 @@ TEST(interaction_simulation_exposure, EnclosedCylinderLeavesOnlyTheCubesOuterFac
     const bool free = !std::binary_search(fixed.begin(), fixed.end(), v);
     if (on_cube_face(host.vertices()[v])) {
       outer += free;
-      if (free) EXPECT_GE(body.contact_slot(v), 0) << "outer node " << v;
+      if (free) {
+        EXPECT_GE(body.contact_slot(v), 0) << "outer node " << v;
+      }
     } else {
       EXPECT_EQ(body.contact_slot(v), -1) << "cavity node " << v;
     }
@@ -229,8 +231,9 @@ TEST(interaction_simulation_exposure, RingAroundAnExitingCylinderStaysContactabl
   for (std::size_t k = 0; k < body.contact_nodes().size(); ++k) {
     const mesh::Vec3& x = host.vertices()[body.contact_nodes()[k]];
     if (std::abs(x.z() - 0.1) < 1e-9 && x.x() > 1e-9 && x.x() < 0.1 - 1e-9 && x.y() > 1e-9 &&
-        x.y() < 0.1 - 1e-9)
+        x.y() < 0.1 - 1e-9) {
       EXPECT_GT(body.contact_normals()[k].z(), 1.0 - 1e-12) << "node " << body.contact_nodes()[k];
+    }
   }
 }
 
