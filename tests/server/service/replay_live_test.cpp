@@ -5,7 +5,9 @@
 // (LINEAR: the answer depends on the pose only, not on which poses the server's clock skipped).
 // On brain_skull the same holds with the skull: two stations at once, one driven into the top of
 // the skull past where its raw pose would reach the brain (held outside by its proxy in the step:
-// no tissue force, live or replayed), one through the craniotomy onto the cerebellum.
+// no tissue force, live or replayed), one through the craniotomy onto the cerebellum. That scene
+// is the tests' 7 mm brain_skull (neurosim-model --cell-size 7: the bundled scene's skull and
+// tool on a coarser brain), which halves the server's and the replay's set-up.
 #include "common/clock.hpp"
 #include "idl/wire/recording_io.hpp"
 #include "server/interaction/surface_probe.hpp"
@@ -158,7 +160,7 @@ struct Replayed {
 }  // namespace
 
 TEST(service_replay, BrainSkullLiveServerAndReplayGiveTheSameForcesWithTheSkullHeld) {
-  const auto scene_path = nt::source_dir() / "scenes/brain_skull.scene";
+  const auto scene_path = nt::brain7_scene("brain_skull");
   const neurosim::scene::Model scene = neurosim::scene::load_model(scene_path);
   ASSERT_FALSE(scene.rigid.empty());
   const auto obstacle = ni::RigidObstacle::build(scene.rigid);
