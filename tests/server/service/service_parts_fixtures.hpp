@@ -123,6 +123,10 @@ class PoisonSimulation : public interaction::Simulation {
   std::uint64_t columns_not_ready() const override { return not_ready; }
   std::uint64_t columns_solved_ahead() const override { return solved_ahead; }
   std::uint64_t not_ready{0}, solved_ahead{0};
+  // The column cache as the Simulation reports it (set by a test); the one mesh is body 0.
+  int body_index(int) const override { return 0; }
+  ColumnCacheStats column_cache(int) const override { return cache; }
+  ColumnCacheStats cache{};
   bool mesh_active(int) const override { return true; }
   double tie_residual_m() const override { return 0.0; }
   const interaction::SetupStats& setup_stats() const override { return setup_; }

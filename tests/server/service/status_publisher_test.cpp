@@ -29,7 +29,8 @@ struct Status {
     StatusPublisherDef def;
     def.status_period_ns = kSecond;
     def.step_times_per_period = 200;
-    status.emplace(def, settings, sim, stations, &*loop, nullptr, std::nullopt, nullptr, nullptr);
+    status.emplace(def, settings, sim, stations, &*loop, nullptr, std::nullopt, nullptr,
+                   [this](const std::string& line) { log.push_back(line); });
     status->begin(0);
   }
   void send(dds_instance_handle_t writer, const std::string& station, const std::string& claim, int participant) {
@@ -44,6 +45,7 @@ struct Status {
   RecordingSink sink;
   std::optional<StepLoop> loop;
   std::optional<StatusPublisher> status;
+  std::vector<std::string> log;  // the publisher's log lines
 };
 
 TEST(service_status_publisher, TheSampleCarriesTheStepsStationsAndStepTimes) {
@@ -115,3 +117,29 @@ TEST(service_status_publisher, ARefusalIsPublishedWithinAFifthOfASecond) {
 }
 
 }  // namespace
+
+// A column cache bound below the tools' reach, which the column worker raised (column_worker.hpp):
+// the server says so once per raise, naming the mesh, the bound, the nodes it was raised to and
+// their memory; the same raise is not repeated every period, a larger one is logged again.
+TEST(service_status_publisher, ARaisedColumnCacheBoundIsLoggedOncePerRaise) {
+  Status t;
+  t.sim.cache.capacity_slots = 100;
+  t.sim.cache.bytes_per_slot = 250000;
+  t.status->publish(kSecond);
+  EXPECT_TRUE(t.log.empty()) << "nothing raised: " << t.log.front();
+  t.sim.cache.raised_capacity_slots = 140;
+  t.status->publish(2 * kSecond);
+  ASSERT_EQ(t.log.size(), 1u);
+  const std::string& w = t.log.front();
+  EXPECT_EQ(w.rfind("warning: ", 0), 0u) << w;
+  EXPECT_NE(w.find("'block'"), std::string::npos) << w;
+  EXPECT_NE(w.find("bounded at 100 nodes"), std::string::npos) << w;
+  EXPECT_NE(w.find("140 nodes within the column worker's reach"), std::string::npos) << w;
+  EXPECT_NE(w.find("(35.0"), std::string::npos) << "140 x 250 kB = 35 MB: " << w;
+  t.status->publish(3 * kSecond);
+  EXPECT_EQ(t.log.size(), 1u) << "the same raise again: " << t.log.back();
+  t.sim.cache.raised_capacity_slots = 180;
+  t.status->publish(4 * kSecond);
+  ASSERT_EQ(t.log.size(), 2u);
+  EXPECT_NE(t.log.back().find("180 nodes"), std::string::npos) << t.log.back();
+}
