@@ -1808,8 +1808,8 @@ void State::largest_displacement(const Model& m) {
     for (int s : bs.force_slots) {
       Vec3 u = Vec3::Zero();
       if (tier_) {
-        const int v = m.bodies_[bi].body->contact_nodes()[s];
-        u = tier_->linearization(static_cast<int>(bi)).u_m.segment<3>(3 * static_cast<Eigen::Index>(v));
+        // The slot's node in the stacked equilibrium (a host node, or an exposed tied mesh's).
+        u = tier_->linearization(static_cast<int>(bi)).displacement_m[static_cast<std::size_t>(s)];
       } else {
         for (std::size_t k = 0; k < bs.force_slots.size(); ++k)
           u.noalias() += bs.columns->block(s, bs.force_slots[k]) * bs.forces_n[k];

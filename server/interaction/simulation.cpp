@@ -278,15 +278,17 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     } catch (const std::exception& e) {
       throw std::runtime_error(what + ": " + e.what());
     }
-    // Tool contact with B's exposed part is built for the LINEAR tier with a TIE coupling
-    // (method EXACT, elastic): B's exposed surface gets contact slots (CoupledBody::expose_tie).
-    // Anything else would leave the exposed part without contact rows (the tool would pass
-    // through it without force), so it is refused, naming what is not built.
+    // Tool contact with B's exposed part is built for the LINEAR and NONLINEAR tiers with a TIE
+    // coupling (method EXACT, elastic): B's exposed surface gets contact slots
+    // (CoupledBody::expose_tie; in NONLINEAR they are B's nodes in the tier's stacked
+    // equilibrium, TierEquilibrium). Anything else would leave the exposed part without contact
+    // rows (the tool would pass through it without force), so it is refused, naming what is not
+    // built.
     const bool tool_touch = model.effects.tool_contact && !model.tools.empty();
     std::string not_built;
-    if (tier_ != scene::Tier::kLinear)
+    if (tier_ != scene::Tier::kLinear && tier_ != scene::Tier::kNonlinear)
       not_built = std::string("in effects.tier ") + scene::tier_name(tier_) +
-                  " (built in the LINEAR tier only)";
+                  " (built in the LINEAR and NONLINEAR tiers only)";
     else if (sliding[m])
       not_built = "with a SLIDING coupling (built for TIE only)";
     else if (iterative_host[h])
@@ -303,7 +305,7 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       throw std::runtime_error(
           source_ + ": embedded mesh " + emb.id + ": " + buf +
           "; tool contact with an exposed embedded mesh is not implemented " + not_built +
-          ": use the LINEAR tier with an elastic TIE coupling (method EXACT), place the embedded "
+          ": use the LINEAR or NONLINEAR tier with an elastic TIE coupling (method EXACT), place the embedded "
           "mesh inside its host, or remove the tools or effects.tool_contact");
     }
     if (ex.nodes_outside > 0 && tool_touch) exposed[m] = ex.outside;

@@ -58,7 +58,18 @@ TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
   }
   solver_ = std::make_unique<fem::EquilibriumSolver>(
       equilibrium_definition(*body_, def.host_material, def.host_fixed_nodes, tier_));
-  slot_node_ = body_->contact_nodes();
+  // Each contact slot's mesh, node and stacked dofs (a slot on an exposed tied mesh is that
+  // mesh's node, CoupledBody::contact_point).
+  const int num_contact = static_cast<int>(body_->contact_nodes().size());
+  slot_mesh_.resize(num_contact);
+  slot_vertex_.resize(num_contact);
+  slot_dof_.resize(num_contact);
+  for (int s = 0; s < num_contact; ++s) {
+    const CoupledBody::ContactPoint cp = body_->contact_point(s);
+    slot_mesh_[s] = cp.tie + 1;
+    slot_vertex_[s] = cp.node;
+    slot_dof_[s] = solver_->body_offset(cp.tie + 1) + 3 * cp.node;
+  }
   // Relaxing meshes: their internal variables, the solver evaluating each update's step.
   std::vector<const fem::Viscoelastic*> kernels{&def.host_material.viscoelastic};
   for (const auto& tie : body_->ties()) kernels.push_back(&tie.material().viscoelastic);
@@ -74,21 +85,20 @@ TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
   u_.setZero(solver_->num_dofs());
   f_.setZero(solver_->num_dofs());
   trial_.setZero(solver_->num_dofs());
-  u_host_.setZero(3 * static_cast<int>(body_->host().num_vertices()));
   u_body_.resize(body_->ties().size() + 1);
   for (std::size_t b = 0; b < u_body_.size(); ++b)
     u_body_[b].setZero(solver_->body_forces(static_cast<int>(b)).num_dofs());
-  rotation_.assign(slot_node_.size(), Eigen::Matrix3d::Identity());
-  compliance_.assign(slot_node_.size(), mesh::Vec3::Zero());
+  rotation_.assign(slot_dof_.size(), Eigen::Matrix3d::Identity());
+  compliance_.assign(slot_dof_.size(), mesh::Vec3::Zero());
   // The linearization's compliance columns, as many slots as the budget holds.
-  if (!slot_node_.empty()) {
+  if (!slot_dof_.empty()) {
     columns_ = std::make_unique<ContactColumns>(*body_);
     column_capacity_ = def.column_budget_bytes / columns_->bytes_per_slot();
     if (column_capacity_ == 0) {
       columns_.reset();
     } else {
-      last_load_.assign(slot_node_.size(), 0);
-      kept_.reserve(std::min(column_capacity_, slot_node_.size()));
+      last_load_.assign(slot_dof_.size(), 0);
+      kept_.reserve(std::min(column_capacity_, slot_dof_.size()));
     }
   }
   // The first update starts at rest: its tangent is factorized now, on another thread, while
@@ -101,9 +111,10 @@ TierEquilibrium::~TierEquilibrium() = default;
 
 
 void TierEquilibrium::rest(TierLinearization& out) const {
-  out.offset_m.assign(slot_node_.size(), mesh::Vec3::Zero());
+  out.offset_m.assign(slot_dof_.size(), mesh::Vec3::Zero());
   out.warped_normal = body_->contact_normals();
-  out.rotation.assign(slot_node_.size(), Eigen::Matrix3d::Identity());
+  out.rotation.assign(slot_dof_.size(), Eigen::Matrix3d::Identity());
+  out.displacement_m.assign(slot_dof_.size(), mesh::Vec3::Zero());
   out.u_m.setZero(solver_->num_dofs());
   out.load.slots.clear();
   out.load.forces_n.clear();
@@ -113,17 +124,25 @@ void TierEquilibrium::rest(TierLinearization& out) const {
   out.count = 0;
 }
 
-void TierEquilibrium::rotations(const Eigen::VectorXd& u_host_m) {
-  const mesh::TetMesh& host = body_->host();
-  const auto& offsets = host.vertex_tet_offsets();
-  const auto& list = host.vertex_tet_list();
-  const fem::ElasticForces& forces = solver_->forces();
-  for (std::size_t s = 0; s < slot_node_.size(); ++s) {
-    const int v = slot_node_[s];
+void TierEquilibrium::rotations() {
+  // The displacement of every mesh with a slot (the host always; an exposed tied mesh's).
+  for (std::size_t b = 0; b < u_body_.size(); ++b) {
+    if (b > 0 && std::find(slot_mesh_.begin(), slot_mesh_.end(), static_cast<int>(b)) == slot_mesh_.end())
+      continue;
+    const int nd = solver_->body_forces(static_cast<int>(b)).num_dofs();
+    u_body_[b] = u_.segment(solver_->body_offset(static_cast<int>(b)), nd);
+  }
+  for (std::size_t s = 0; s < slot_dof_.size(); ++s) {
+    const int b = slot_mesh_[s], v = slot_vertex_[s];
+    const mesh::TetMesh& mesh = b == 0 ? body_->host() : body_->ties()[b - 1].geometry();
+    const auto& offsets = mesh.vertex_tet_offsets();
+    const auto& list = mesh.vertex_tet_list();
+    const fem::ElasticForces& forces = solver_->body_forces(b);
+    const Eigen::VectorXd& u_mesh = u_body_[static_cast<std::size_t>(b)];
     Eigen::Matrix3d f = Eigen::Matrix3d::Zero();
     int n = 0;
     for (int k = offsets[v]; k < offsets[v + 1]; ++k, ++n)
-      f += forces.displacement_gradient(static_cast<std::size_t>(list[k]), u_host_m);
+      f += forces.displacement_gradient(static_cast<std::size_t>(list[k]), u_mesh);
     // Mean gradient of the tetrahedra around the node; its polar rotation (stable for flat and
     // inverted elements: sign-corrected SVD).
     rotation_[s] = n > 0 ? fem::polar_rotation(Eigen::Matrix3d::Identity() + f / n)
@@ -176,7 +195,7 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   check_load(load, "TierEquilibrium");
   f_.setZero();
   for (std::size_t k = 0; k < load.slots.size(); ++k)
-    f_.segment<3>(3 * slot_node_[load.slots[k]]) += load.forces_n[k];
+    f_.segment<3>(slot_dof_[load.slots[k]]) += load.forces_n[k];
   // Relaxing meshes: the step from the last update's time to the load's (0: replaces it).
   if (!qlv_.empty()) {
     if (!std::isfinite(load.time_s)) {
@@ -286,8 +305,7 @@ void TierEquilibrium::linearize(const TierLoad& load, TierLinearization& out) {
   check_load(load, "TierEquilibrium::linearize");
   // Rotations at the contact slots, then u0 = u* - R C R^T f* there (C: the linear coupled
   // compliance, ties included): C R^T f* from the loaded slots' columns, or one coupled solve.
-  u_host_ = u_.head(u_host_.size());
-  rotations(u_host_);
+  rotations();
   rotated_.resize(load.slots.size());
   for (std::size_t k = 0; k < load.slots.size(); ++k)
     rotated_[k] = rotation_[load.slots[k]].transpose() * load.forces_n[k];
@@ -296,16 +314,27 @@ void TierEquilibrium::linearize(const TierLoad& load, TierLinearization& out) {
   } else if (!compliance_from_columns(load)) {
     body_->host_displacement(load.slots, rotated_, u_lin_, ws_.get());
     ++linearization_solves_;
-    for (std::size_t s = 0; s < slot_node_.size(); ++s)
-      compliance_[s] = u_lin_.segment<3>(3 * slot_node_[s]);
+    for (std::size_t s = 0; s < static_cast<std::size_t>(body_->num_host_contact()); ++s)
+      compliance_[s] = u_lin_.segment<3>(3 * slot_vertex_[s]);
+    // Slots on exposed tied meshes: the mesh's field for the host's and the forces on it.
+    for (std::size_t s = body_->num_host_contact(); s < slot_dof_.size();) {
+      const int b = slot_mesh_[s];
+      const auto& tie = body_->ties()[static_cast<std::size_t>(b - 1)];
+      if (!body_->tie_contact_forces(b - 1, load.slots, rotated_, f_tie_))
+        f_tie_.setZero(3 * static_cast<Eigen::Index>(tie.geometry().num_vertices()));
+      tie.displacement(u_lin_, f_tie_, u_tie_, ws_.get());
+      for (; s < slot_dof_.size() && slot_mesh_[s] == b; ++s)
+        compliance_[s] = u_tie_.segment<3>(3 * slot_vertex_[s]);
+    }
   }
   const auto& normals = body_->contact_normals();
-  out.offset_m.resize(slot_node_.size());
-  out.warped_normal.resize(slot_node_.size());
+  out.offset_m.resize(slot_dof_.size());
+  out.warped_normal.resize(slot_dof_.size());
   out.rotation = rotation_;
-  for (std::size_t s = 0; s < slot_node_.size(); ++s) {
-    const int v = slot_node_[s];
-    out.offset_m[s] = u_host_.segment<3>(3 * v) - rotation_[s] * compliance_[s];
+  out.displacement_m.resize(slot_dof_.size());
+  for (std::size_t s = 0; s < slot_dof_.size(); ++s) {
+    out.displacement_m[s] = u_.segment<3>(slot_dof_[s]);
+    out.offset_m[s] = out.displacement_m[s] - rotation_[s] * compliance_[s];
     out.warped_normal[s] = rotation_[s].transpose() * normals[s];
   }
 }

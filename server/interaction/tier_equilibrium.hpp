@@ -15,6 +15,11 @@
 // offset u0_s (depth_r + n_r . sum w_a u0_a). R_s: the polar rotation of
 // the mean deformation gradient of the host tetrahedra around the slot's node.
 //
+// Slots on an exposed tied mesh (CoupledBody::expose_tie) are that mesh's nodes in the stacked
+// equilibrium: their forces load its dofs (the solver's tie elimination carries a force on a tied
+// node to the host), their rotations come from its tetrahedra, and their columns C are the tied
+// system's (the LINEAR tier's, ContactColumns).
+//
 // The contact rows are those of the rest surface, their depth and forces taken in the reference
 // configuration (forces along the rows' normals as dead loads), so the tiers differ only in the
 // elasticity.
@@ -61,6 +66,9 @@ struct TierLinearization {
   std::vector<mesh::Vec3> offset_m;       // per contact slot: u0 at its node, unit m
   std::vector<mesh::Vec3> warped_normal;  // per contact slot: R^T n (unit)
   std::vector<Eigen::Matrix3d> rotation;  // per contact slot: R (a row's normal n -> R^T n)
+  // Per contact slot: u* at its node (the host's, or an exposed tied mesh's: its stacked dofs,
+  // TierEquilibrium::slot_dof), unit m.
+  std::vector<mesh::Vec3> displacement_m;
   // The equilibrium: host (3 N_A) then each tied mesh (TierEquilibrium::body_offset), unit m.
   Eigen::VectorXd u_m;
   TierLoad load;             // the forces u_m is the equilibrium of
@@ -112,7 +120,10 @@ class TierEquilibrium {
   // state, exactly (u* = 0, no Newton iteration). One thread at a time.
   void update(const TierLoad& load, TierLinearization& out);
 
-  int num_slots() const { return static_cast<int>(slot_node_.size()); }  // contact slots
+  int num_slots() const { return static_cast<int>(slot_dof_.size()); }  // contact slots
+  // A contact slot's first dof in the stacked equilibrium (host 3 N_A, then each tied mesh's
+  // 3 N_B): the host's node, or a node of an exposed tied mesh (CoupledBody::contact_point).
+  int slot_dof(int slot) const { return slot_dof_.at(static_cast<std::size_t>(slot)); }
 
   // Phase "linearization" of update() for the equilibrium it holds (u*) under `load` (its forces
   // f*): per contact slot the rotation R, the warped normal and the offset u0 = u* - R C R^T f*
@@ -146,8 +157,11 @@ class TierEquilibrium {
   fem::Tier tier_;
   fem::NewtonOptions newton_;
   std::unique_ptr<fem::EquilibriumSolver> solver_;
-  std::vector<int> slot_node_;                       // per contact slot: host node
-  Eigen::VectorXd u_, f_, trial_, u_host_, u_lin_;   // warm start and scratch
+  // Per contact slot: its mesh in the solver (0: host, k: tied k - 1), its node there and its
+  // first stacked dof (slots on an exposed tied mesh: that mesh's node).
+  std::vector<int> slot_mesh_, slot_vertex_, slot_dof_;
+  Eigen::VectorXd f_tie_, u_tie_;  // linearization by a coupled solve: a tied mesh's loads, field
+  Eigen::VectorXd u_, f_, trial_, u_lin_;  // warm start and scratch
   std::vector<Eigen::VectorXd> u_body_;              // per solver body: its part of u_ (scratch)
   std::vector<mesh::Vec3> rotated_;
   // The linearization's compliance columns (null: column_budget_bytes too small for one slot).
@@ -175,7 +189,8 @@ class TierEquilibrium {
   std::vector<std::unique_ptr<fem::QuasiLinearViscoelastic>> qlv_;
   double time_s_{0.0};
   bool timed_{false};
-  void rotations(const Eigen::VectorXd& u_host_m);
+  // R per contact slot from u_ (each slot's mesh: its tetrahedra around the slot's node).
+  void rotations();
   int inverted_elements();  // in u_, every mesh of the body
 };
 
