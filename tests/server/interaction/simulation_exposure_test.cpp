@@ -22,10 +22,12 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace neurosim::interaction {
@@ -856,6 +858,51 @@ TEST(interaction_simulation_exposure, NonlinearPressOnTheRaisedCylinderThroughAT
   const Vec3 f = hold(*p->sim, -0.0002, steps);
   EXPECT_FALSE(c[0].in_contact);
   EXPECT_EQ(f.norm(), 0.0);
+}
+
+// The server's mode (the tier's updates on the worker thread, refactorizations in the
+// background): a 3 mm press on the raised cylinder's top reaches the synchronous answer (1e-9).
+// Settled: at least one update done and the force still for a second; at most a minute (a
+// bound on the wait, not an assertion on time).
+TEST(interaction_simulation_exposure, NonlinearWorkerThreadReachesTheSynchronousAnswer) {
+  SimulationOptions sync_options;
+  sync_options.tier_worker_thread = false;
+  sync_options.tier_newton_tolerance = 1e-12;
+  SimulationOptions worker_options;
+  worker_options.tier_newton_tolerance = 1e-12;
+  const auto ps = raised_press(scene::Effects::NONLINEAR, sync_options);
+  const auto pw = raised_press(scene::Effects::NONLINEAR, worker_options);
+  ToolPose pose;
+  pose.tip_m = ps->top_m + Vec3(0.0, 0.0, ps->tip_radius_m - 0.003);
+  pose.axis = Vec3::UnitZ();
+  std::vector<ToolContact> c;
+  StepStats st;
+  Vec3 prev = Vec3::Constant(1e300);
+  for (int k = 0; k < 200; ++k) {
+    ps->sim->step({pose}, c, st);
+    if ((c[0].force_n - prev).norm() <= 1e-11 * c[0].force_n.norm()) break;
+    prev = c[0].force_n;
+  }
+  const Vec3 fs = c[0].force_n;
+  ASSERT_GT(fs.z(), 0.0);
+  prev = Vec3::Zero();
+  const auto t0 = std::chrono::steady_clock::now();
+  auto still_since = t0;
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60)) {
+    pw->sim->step({pose}, c, st);
+    const auto now = std::chrono::steady_clock::now();
+    if ((c[0].force_n - prev).norm() > 1e-11 * c[0].force_n.norm() ||
+        pw->sim->tier_update_rate_hz() == 0.0)
+      still_since = now;
+    if (now - still_since > std::chrono::seconds(1)) break;
+    prev = c[0].force_n;
+    std::this_thread::sleep_for(std::chrono::microseconds(1000));
+  }
+  std::printf("3 mm on the raised cylinder, NONLINEAR: worker %.9g N, synchronous %.9g N\n",
+              c[0].force_n.norm(), fs.norm());
+  EXPECT_EQ(c[0].mesh, pw->cylinder);
+  EXPECT_LE((c[0].force_n - fs).norm(), 1e-9 * fs.norm());
+  EXPECT_GT(pw->sim->tier_update_rate_hz(), 0.0);
 }
 }  // namespace
 }  // namespace neurosim::interaction
