@@ -322,6 +322,11 @@ void State::reserve_workspace(const Model& m, int tools) {
   tool_row_centre_.reserve(tool_rows_.capacity());
   tool_row_fallback_.reserve(tool_rows_.capacity());
   spread_triangles_.reserve(triangles);
+  if (tool_rows_memo_.size() < static_cast<std::size_t>(tools)) tool_rows_memo_.resize(tools);
+  for (auto& memo : tool_rows_memo_) {
+    memo.rows.reserve(static_cast<std::size_t>(m.options_.max_contact_nodes_per_tool));
+    memo.spreads.reserve(static_cast<std::size_t>(m.options_.max_contact_nodes_per_tool));
+  }
   for (auto& b : bodies_) {
     b.force_slots.reserve(kSpreadNodes * max_rows);
     b.forces_n.reserve(kSpreadNodes * max_rows);
@@ -1102,6 +1107,19 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
 // Phase "rows" of one tool: per body the candidates, their features, merged; then the deepest
 // rows of the tool (at most max_contact_nodes_per_tool), appended to the step's rows.
 void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis) {
+  // The rest surface and the pose of the last search on it (bit for bit): its kept rows.
+  ToolRowsMemo& memo = tool_rows_memo_[tool];
+  if (rest_geometry_ && memo.valid && memo.tool == pose.tool &&
+      std::memcmp(memo.tip_m.data(), pose.tip_m.data(), sizeof(double) * 3) == 0 &&
+      std::memcmp(memo.axis.data(), pose.axis.data(), sizeof(double) * 3) == 0) {
+    for (const Row& r : memo.rows) merge_tool_row(r);
+    for (const SpreadMemo& e : memo.spreads)
+      if (spread_memo_.size() < spread_memo_.capacity()) spread_memo_.push_back(e);
+    return;
+  }
+  memo.valid = false;
+  memo.rows.clear();
+  memo.spreads.clear();
   const ToolShape& shape = m.tools_[pose.tool];
   const double margin = m.options_.candidate_margin * shape.tip_radius_m;
   tool_rows_.clear();
@@ -1125,30 +1143,46 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
   const std::size_t limit = static_cast<std::size_t>(m.options_.max_contact_nodes_per_tool);
   std::sort(tool_order_.begin(), tool_order_.end(),
             [&](int a, int b) { return deeper(tool_rows_[a], tool_rows_[b]); });
-  // Two tools on one feature, or on nearly the same constraint (the same main node, normals within
-  // 30 degrees): one row (the same constraint twice would leave only the row compliance between
-  // the tools, a stiffness of 1/eps); the deeper tool carries it.
-  auto main_slot = [](const Row& r) {
-    int best = 0;
-    for (int k = 1; k < r.nodes; ++k)
-      if (r.w[k] > r.w[best]) best = k;
-    return r.slot[best];
-  };
   std::size_t kept = 0;
   for (std::size_t k = 0; k < tool_order_.size() && kept < limit; ++k) {
     Row& r = tool_rows_[tool_order_[k]];
+    last_spread_ = nullptr;
     if (!spread_row(m, r)) continue;
     ++kept;
-    auto same = std::find_if(rows_.begin(), rows_.end(), [&](const Row& o) {
-      return o.body == r.body && o.tool != r.tool &&
-             (o.key == r.key ||
-              (main_slot(o) == main_slot(r) && main_slot(r) >= 0 && o.normal.dot(r.normal) > 0.866));
-    });
-    if (same == rows_.end()) {
-      rows_.push_back(r);
-    } else if (r.depth_m > same->depth_m) {
-      *same = r;
+    if (rest_geometry_) {
+      memo.rows.push_back(r);  // (reserved: the limit)
+      if (last_spread_) memo.spreads.push_back(*last_spread_);
     }
+    merge_tool_row(r);
+  }
+  if (rest_geometry_) {
+    memo.valid = true;
+    memo.tool = pose.tool;
+    memo.tip_m = pose.tip_m;
+    memo.axis = pose.axis;
+  }
+}
+
+// Two tools on one feature, or on nearly the same constraint (the same main node, normals within
+// 30 degrees): one row (the same constraint twice would leave only the row compliance between
+// the tools, a stiffness of 1/eps); the deeper tool carries it. A tool's kept row, deepest first.
+void State::merge_tool_row(const Row& r) {
+  auto main_slot = [](const Row& q) {
+    int best = 0;
+    for (int k = 1; k < q.nodes; ++k)
+      if (q.w[k] > q.w[best]) best = k;
+    return q.slot[best];
+  };
+  const int main_r = main_slot(r);
+  auto same = std::find_if(rows_.begin(), rows_.end(), [&](const Row& o) {
+    return o.body == r.body && o.tool != r.tool &&
+           (o.key == r.key ||
+            (main_r >= 0 && main_slot(o) == main_r && o.normal.dot(r.normal) > 0.866));
+  });
+  if (same == rows_.end()) {
+    rows_.push_back(r);
+  } else if (r.depth_m > same->depth_m) {
+    *same = r;
   }
 }
 
@@ -1185,6 +1219,7 @@ bool State::spread_row(const Model& m, Row& r) {
     if (found) spread_load_ = memo->load;
     // Carried into this geometry's memo, so the next geometry finds it too (a held tool's rows
     // repeat for many steps: else spread again every second step).
+    last_spread_ = memo;
     if (from_last && spread_memo_.size() < spread_memo_.capacity()) spread_memo_.push_back(*memo);
   } else {
     found = m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal, r.spread_radius_m,
@@ -1197,6 +1232,7 @@ bool State::spread_row(const Model& m, Row& r) {
       e.radius_m = r.spread_radius_m;
       e.found = found;
       if (found) e.load = spread_load_;
+      last_spread_ = &e;
     }
   }
   if (found) {
@@ -1559,6 +1595,18 @@ void State::delassus(const Model& m, int ns) {
         delassus_match_[r] = q;
         break;
       }
+    }
+  }
+  // v_rs (r < s) is formed from y_r: a kept v of two rows that were in the other order was formed
+  // from y_s (another rounding: a fresh State's W differed at round-off). So the matches keep the
+  // last W's order: a row matched to an earlier row of the last W than a row before it matched is
+  // formed again (tools trading places in the pose list, a tool's rows in a new depth order).
+  for (int r = 0, last = -1; r < nc; ++r) {
+    if (delassus_match_[r] < 0) continue;
+    if (delassus_match_[r] > last) {
+      last = delassus_match_[r];
+    } else {
+      delassus_match_[r] = -1;
     }
   }
   delassus_last_fresh_row_.assign(nn, -1);
@@ -2039,6 +2087,10 @@ LcpResult State::solve_geometry(const Model& m, const std::vector<ToolPose>& pos
   rows_.clear();
   spread_prev_memo_.swap(spread_memo_);
   spread_memo_.clear();
+  // The rest surface: LINEAR (no tier offsets in the rows) with no force on any body.
+  rest_geometry_ = !tier_;
+  for (const BodyState& bs : bodies_)
+    if (!bs.force_slots.empty() || bs.max_displacement_m != 0.0) rest_geometry_ = false;
   if (!m.tools_.empty()) {
     for (int t = 0; t < static_cast<int>(poses.size()); ++t)
       rows_of_tool(m, t, poses[t], poses[t].axis.normalized());

@@ -262,6 +262,7 @@ class State {
   void triangle_features(const Model& m, int body, int tool, const ToolPose& pose,
                          const Vec3& axis);
   void rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis);
+  void merge_tool_row(const Row& r);
   void part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                      const Vec3& n, const Vec3& centre, double rho, bool shaft, bool at_rest,
                      const ToolShape& shape,
@@ -353,6 +354,32 @@ class State {
   // Per row of tool_rows_ appended by merge_features: its part's centre, unit m (the entry rule).
   std::vector<mesh::Vec3> tool_row_centre_;
   std::vector<char> tool_row_fallback_;  // per row from the body's first: a flat fallback row
+  struct SpreadMemo {  // a spread (spread_row) by its inputs: body, point, normal, radius
+    int body{-1};
+    Vec3 at_m{Vec3::Zero()};
+    Vec3 normal{Vec3::Zero()};
+    double radius_m{0.0};
+    bool found{false};
+    SpreadLoad load;
+  };
+  // Phase "rows", reuse (rows_of_tool): per pose index, the rows the tool kept (spread, near field
+  // set; before the merge with the other tools' rows) on the rest surface, and the pose they are
+  // of. LINEAR's rest surface (no force on any body, no tier) is constant, so the kept rows are a
+  // function of the pose's tip, axis and tool shape alone: a pose equal to the last one bit for
+  // bit takes them (a server stepping on each station's pose repeats three of four). valid false
+  // until a search on the rest surface completes.
+  struct ToolRowsMemo {
+    bool valid{false};
+    int tool{-1};  // ToolPose::tool
+    Vec3 tip_m{Vec3::Zero()};
+    Vec3 axis{Vec3::Zero()};  // ToolPose::axis as given
+    std::vector<Row> rows;
+    // The spreads of those rows (spread_row's memo entries): carried into each geometry's memo
+    // that takes the rows, so the tool's next move finds those of its rows that repeat.
+    std::vector<SpreadMemo> spreads;
+  };
+  std::vector<ToolRowsMemo> tool_rows_memo_;
+  bool rest_geometry_{false};  // this geometry is the rest surface (solve_geometry)
   std::vector<int> spread_triangles_;  // ContactSurface::spread's candidates (capacity: triangles)
   SpreadLoad spread_load_;             // one row's spread load
   std::vector<Row> rows_;          // the step's contact rows
@@ -416,15 +443,8 @@ class State {
   // or taken from the memo) by their inputs (body, point, normal, radius); ContactSurface::spread
   // is a function of these and the constant rest surface, so an equal input (bit for bit) takes
   // the stored load.
-  struct SpreadMemo {
-    int body{-1};
-    Vec3 at_m{Vec3::Zero()};
-    Vec3 normal{Vec3::Zero()};
-    double radius_m{0.0};
-    bool found{false};
-    SpreadLoad load;
-  };
   std::vector<SpreadMemo> spread_memo_, spread_prev_memo_;
+  const SpreadMemo* last_spread_{nullptr};  // spread_row: the memo entry of its row's spread
   ContactLcp lcp_;
   bool lcp_constant_block_{false};  // set_constant_block done
   std::vector<ToolContact> last_good_;

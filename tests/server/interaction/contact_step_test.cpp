@@ -7,7 +7,8 @@
 // nearly dependent rows) converges to the same force; a tip centred exactly on a crease of a
 // 5 mm brain feels the tissue as 1 nm beside it; a tip pressed into a floor beside a fold is not
 // pushed by the fold's far flank, whose plane it lies behind; an answer at a pose (one probe, four
-// held probes) is the one a fresh State gives it, to the bit.
+// held probes, held probes changing tools and places in the pose list) is the one a fresh State
+// gives it, to the bit.
 #include "server/interaction/simulation.hpp"
 #include "server/interaction/surface_probe.hpp"
 #include "server/interaction/contact_surface.hpp"
@@ -44,6 +45,7 @@ struct Block {
   scene::Tier tier{scene::Tier::kLinear};
   const char* element{"linear-tet"};
   double poisson{0.45};
+  double second_tip_radius_m{0.0};  // > 0: a second tool (ToolPose::tool 1) with this tip
 };
 
 scene::Model block_scene(const Block& b) {
@@ -68,8 +70,11 @@ scene::Model block_scene(const Block& b) {
     << "  fixed { half_space { point_m { z: 1e-9 } normal { z: 1 } } }\n"
     << "  priority: 0 }\n"
     << "tools { id: \"probe\" tip_radius_m: " << b.tip_radius_m
-    << " shaft_radius_m: 0.0005 shaft_length_m: 0.05 max_speed_m_per_s: 2 }\n"
-    << "effects { tier: LINEAR coupling: false tool_contact: true deformation_output: true }\n";
+    << " shaft_radius_m: 0.0005 shaft_length_m: 0.05 max_speed_m_per_s: 2 }\n";
+  if (b.second_tip_radius_m > 0.0)
+    s << "tools { id: \"probe_2\" tip_radius_m: " << b.second_tip_radius_m
+      << " shaft_radius_m: 0.0005 shaft_length_m: 0.05 max_speed_m_per_s: 2 }\n";
+  s << "effects { tier: LINEAR coupling: false tool_contact: true deformation_output: true }\n";
   const std::string source = (dir / "contact_step.scene").string();
   scene::Model model = scene::compile(scene::parse_scene(s.str(), source), source);
   model.effects.tier = b.tier;
@@ -557,6 +562,88 @@ TEST(interaction_contact_step, FourHeldProbesAnswerAsAFreshState) {
   }
   EXPECT_EQ(compared, 10);
   EXPECT_EQ(touching, 40);  // every probe in contact at every comparison
+}
+
+// The rows a tool kept on the rest surface are taken again for a pose equal to its last one bit
+// for bit (contact_step.cpp, rows_of_tool): their key is the pose's tip, axis and tool shape, and
+// they stand only where a geometry is the rest surface. Four probes as above, two tool shapes (3
+// and 2 mm tips): per step one probe moves, or takes the other tool at the same tip and axis (a
+// key without the tool fails), and every 12th step two probes trade places in the pose list (the
+// Delassus entries kept from the last W were formed from the row that came first then: kept in
+// the other order they fail at round-off); at every 4th step the answer is a fresh State's, to
+// the bit. With contact_geometry_iterations 3, 6 mm deep, a step's second geometry is the
+// deformed surface and finds other rows (a third geometry follows: 48 steps of 48); rows kept
+// from the rest surface and taken there would end every step at its second geometry (held and
+// fresh State alike: counted, not compared).
+TEST(interaction_contact_step, HeldProbesRowsFollowPoseToolAndRestSurface) {
+  for (const int iterations : {1, 3}) {
+    Block b;
+    b.generated = true;
+    b.cells = 6;
+    b.tip_radius_m = 0.003;
+    b.second_tip_radius_m = 0.002;
+    SimulationOptions o;
+    o.precompute_contact_columns = true;
+    o.contact_geometry_iterations = iterations;
+    const auto model = build_model(block_scene(b), o);
+    auto held = Simulation::from_model(model);
+    std::vector<ToolPose> poses(4);
+    std::vector<int> updates(4, 0);
+    auto place = [&](int k) {
+      const double a = 0.5 * M_PI * k;
+      const double depth = (iterations > 1 ? 6e-3 : 3e-3) + 5e-4 * std::sin(0.7 * updates[k]);
+      poses[k].tip_m = Vec3(b.edge_m + b.tip_radius_m - depth, 0.03 + 0.012 * std::cos(a),
+                            0.03 + 0.012 * std::sin(a));
+      poses[k].axis = Vec3(0.05, std::cos(a + 1.0), std::sin(a + 1.0)).normalized();
+      ++updates[k];
+    };
+    for (int k = 0; k < 4; ++k) {
+      place(k);
+      poses[k].station = k;
+    }
+    std::vector<ToolContact> c, fresh_c;
+    StepStats st;
+    int compared = 0, touching = 0, tool_changes = 0, deformed_rows = 0;
+    for (int step = 0; step < 48; ++step) {
+      const int k = step % 4;
+      if (step % 12 == 11) {
+        std::swap(poses[0], poses[2]);
+      } else if ((step / 4) % 2 == 1) {
+        poses[k].tool = 1 - poses[k].tool;  // the same tip and axis, the other tool
+        ++tool_changes;
+      } else {
+        place(k);
+      }
+      held->step(poses, c, st);
+      ASSERT_TRUE(st.converged) << "iterations " << iterations << " step " << step;
+      if (st.geometry_iterations > 2) ++deformed_rows;
+      if (step % 4 != 3) continue;
+      auto fresh = Simulation::from_model(model);
+      fresh->step(poses, fresh_c, st);
+      ASSERT_TRUE(st.converged) << "iterations " << iterations << " step " << step;
+      ++compared;
+      for (int t = 0; t < 4; ++t) {
+        const std::string at = "iterations " + std::to_string(iterations) + " step " +
+                               std::to_string(step) + " probe " + std::to_string(t);
+        if (c[t].in_contact) ++touching;
+        EXPECT_EQ(c[t].in_contact, fresh_c[t].in_contact) << at;
+        for (int i = 0; i < 3; ++i) {
+          EXPECT_EQ(c[t].force_n[i], fresh_c[t].force_n[i]) << at;
+          for (int j = 0; j < 3; ++j)
+            EXPECT_EQ(c[t].stiffness_n_per_m(i, j), fresh_c[t].stiffness_n_per_m(i, j)) << at;
+        }
+        EXPECT_EQ(c[t].nodes, fresh_c[t].nodes) << at;
+        EXPECT_EQ(c[t].validity_radius_m, fresh_c[t].validity_radius_m) << at;
+      }
+    }
+    EXPECT_EQ(compared, 12);
+    EXPECT_EQ(touching, 48) << iterations;  // every probe in contact at every comparison
+    EXPECT_GE(tool_changes, 16);
+    // Iterating: the second geometry's rows (deformed surface) are not the first's (rest).
+    if (iterations > 1) {
+      EXPECT_GE(deformed_rows, 40);  // measured 48 of 48
+    }
+  }
 }
 
 // The 2 mm probe slid 40 mm over the bundled brain (5 mm cells: triangles about 5 mm, 2.5 tip
