@@ -409,6 +409,7 @@ class State {
   std::vector<Row> delassus_prev_rows_;
   Eigen::MatrixXd delassus_v_, delassus_prev_v_;
   std::vector<int> delassus_match_;
+  std::vector<int> delassus_fresh_;  // the rows forming y_rj fresh for one node j
   std::vector<int> delassus_last_fresh_row_;
   std::vector<std::uint64_t> delassus_evicted_;  // per body: its columns' evicted() at the last W
   // Phase "Delassus", y cache: y_rj is a function of row r's content (body, nodes, slots, weights,
@@ -431,7 +432,7 @@ class State {
   std::vector<Row> delassus_cache_content_;
   std::vector<std::vector<int>> delassus_cache_node_;  // per body and slot: cache index or -1
   std::vector<std::pair<int, int>> delassus_cache_nodes_;  // (body, slot) per cache index
-  std::vector<mesh::Vec3> delassus_cache_y_;               // entry-major, kDelassusCacheNodes
+  std::vector<mesh::Vec3> delassus_cache_y_;               // node-major: cache index x entries
   std::vector<long long> delassus_cache_stamp_;            // the generation that formed it
   std::vector<int> delassus_row_entry_;   // per row of this W: its entry or -1
   std::vector<int> delassus_node_entry_;  // per node of this W: its cache index or -1
