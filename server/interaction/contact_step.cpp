@@ -921,40 +921,29 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       // A node or an edge: radial from the part's centre (the point against a rigid sphere or
       // capsule) when the centre is in front of the surface there; else (the centre beside the
       // point, on the surface or behind it) along the mean normal of the triangles that report
-      // it. LINEAR: radial up to 60 degrees from the mean normal, then turning into the mean
-      // normal as the angle goes from 60 to 90 degrees (weight s(x) = x^2 (3 - 2x) of the radial
-      // direction, x = cos(angle) / cos 60: the normal and its first derivative continuous at
-      // both ends; the depth is the part's point on that line, below, so it is continuous too).
-      // Radial all the way to 90 degrees (before) switched every node row of a flat face at
-      // once when the tip's centre crossed the rest surface (press depth d = r): from nearly
-      // tangential to the mean normal, |F| of the 2 mm tip on 1 mm cells 7.87 -> 16.03 mN
-      // (linear-tet) and 3.36 -> 13.19 mN (smoothed-tet) over 0.02 mm at a vertex (and falling
-      // over the 0.2-0.4 mm before: the tangential rows let the rim slide out), +8 .. +141 % on
-      // the brain's sub-models (bench/RESULTS.md, "the row switch at d = r"). A hard switch at 60
-      // degrees with the half-space depth (radius - n.d) once doubled a flat press as it passed
-      // half the tip radius (2 mm tip on 0.5 mm cells: 6.27 mN at 0.9 mm, 12.69 mN at 1.0 mm);
-      // the depth along the line is the sphere's, and a flat press reaches 60 degrees only past
-      // d = r / 2. The multirate tiers keep the hard switch at 60: their depth adds n . u0 of an
-      // equilibrium that may have carried the point far along the surface, which a nearly
-      // tangential normal turns into a depth (measured with 90: a 10 mm vertex press cycle in
-      // NONLINEAR reached 101.6 N against the block's 50.5 N bound, stability_test).
+      // it. LINEAR: radial up to 90 degrees from the mean normal. With 60 a point 60-90 degrees
+      // off the part's axis took the half-space depth (radius - n.d), far more than the
+      // sphere's, and a flat press doubled its force as it passed half the tip radius (2 mm tip
+      // on 0.5 mm cells: 6.27 mN at 0.9 mm, 12.69 mN at 1.0 mm, 2.15x the rigid sphere's answer,
+      // Sneddon). The multirate tiers keep 60: their depth adds n . u0 of an equilibrium that
+      // may have carried the point far along the surface, which a nearly tangential normal
+      // turns into a depth (measured with 90: a 10 mm vertex press cycle in NONLINEAR reached
+      // 101.6 N against the block's 50.5 N bound, stability_test). Known defect: at d = r (the
+      // centre crossing the rest surface) every node row of a flat face switches from radial to
+      // the mean normal at once, a jump of the press (bench/RESULTS.md, "the row switch at d =
+      // r"). A smooth 60-90 degree blend into the mean normal removed the jump but made the
+      // closed haptic loop against the cube oscillate for good (37 mm/s limit cycle,
+      // haptic_server.SimulatedHandAgainstTheCubeSettles), so it was withdrawn.
       const Vec3 mean = normal_sum.normalized();
       const double radial_from = tier_ ? 0.5 * dn : 0.0;  // cos 60 or cos 90 degrees
       radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
                d.dot(mean) > radial_from;
       n = radial ? Vec3(d / dn) : mean;
-      if (radial && !tier_ && d.dot(mean) < 0.5 * dn) {
-        const double x = d.dot(mean) / (0.5 * dn);  // 1 at 60 degrees, 0 at 90
-        const double w = x * x * (3.0 - 2.0 * x);
-        n = (w * (d / dn) + (1.0 - w) * mean).normalized();
-      }
     }
     // A part whose centre lies deeper than behind_reach behind the surface does not push it.
     if (n.dot(d) < -b.behind_reach_m) continue;
     double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
-    // A node or edge row along the mean normal (or LINEAR's blend of the radial direction into
-    // it, 60-90 degrees: radial at one end, perp 0 and the depth r - |d|, the mean normal's at
-    // the other): the part's point on the row's normal line
+    // A node or edge row along the mean normal: the part's point on the feature's normal line
     // (the depth sqrt(r^2 - perp^2) - height, perp the centre's offset from the line), not the
     // half-space's r - height. Where the line misses the part (perp >= r) the feature is beside
     // it: the radial gap r - |d| (not touching), which the radial rows take at height 0 too.

@@ -226,14 +226,12 @@ TEST(interaction_contact_convergence, ContactOptionsConvergeTowardSneddon) {
 // rows with and without the shaft's term. On the 0.5 mm cells there is no spread (its fade,
 // edge < r_s / 2) and so no near field: both are the rows' own answer, the reference (the rows
 // on fine cells follow CalculiX's contact: contact_reference_test). Measured |F| (mN, 4 / 2 /
-// 1 / 0.5 mm cells; 2026-11-29, with the node rows' 60-90 degree blend of contact_step.cpp):
-//   without, 1.5 mm: 29.78 / 16.46 / 14.65 / 12.07   2 mm: 59.93 / 32.01 / 28.28 / 24.94
-//   with,    1.5 mm: 16.61 / 16.46 / 14.64 / 12.07   2 mm: 28.72 / 27.80 / 27.76 / 24.94
-// (radial rows up to 90 degrees: 16.93 / 14.60 / 12.16 and 28.29 / 24.96 in place of the
-// changed numbers), so the 4 mm cells went from 2.40-2.47x the finest to 1.15-1.38x (the tip's
-// own press on these blocks: 1.12x at 1 mm). Asserted: the term never stiffens (with <=
-// without), the finest is the same both ways, and with it every mesh lies within 1.45x of the
-// finest.
+// 1 / 0.5 mm cells; 2026-11-28):
+//   without, 1.5 mm: 29.78 / 16.93 / 14.60 / 12.16   2 mm: 59.93 / 32.01 / 28.29 / 24.96
+//   with,    1.5 mm: 16.61 / 16.93 / 14.59 / 12.16   2 mm: 28.72 / 27.80 / 27.77 / 24.96
+// so the 4 mm cells went from 2.4-2.45x the finest to 1.15-1.37x (the tip's own press on these
+// blocks: 1.12x at 1 mm). Asserted: the term never stiffens (with <= without), the finest is
+// the same both ways, and with it every mesh lies within 1.45x of the finest.
 TEST(interaction_contact_convergence, ShaftNearFieldUnderRefinement) {
   const Press p;
   const double tilt = 10.0 * M_PI / 180.0;
