@@ -78,6 +78,18 @@ scene::Model block_scene(const Block& b) {
   return model;
 }
 
+// The replay contract's comparison: a tool's answer equals another's to the bit (contact,
+// force, stiffness, nodes, validity radius).
+void expect_same_answer(const ToolContact& a, const ToolContact& b, const std::string& at) {
+  EXPECT_EQ(a.in_contact, b.in_contact) << at;
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(a.force_n[i], b.force_n[i]) << at;
+    for (int j = 0; j < 3; ++j) EXPECT_EQ(a.stiffness_n_per_m(i, j), b.stiffness_n_per_m(i, j)) << at;
+  }
+  EXPECT_EQ(a.nodes, b.nodes) << at;
+  EXPECT_EQ(a.validity_radius_m, b.validity_radius_m) << at;
+}
+
 SimulationOptions synchronous() {
   SimulationOptions o;
   o.tier_worker_thread = false;  // deterministic tiers
@@ -423,14 +435,7 @@ TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
     fresh->step({p}, fresh_c, st);
     ++compared;
     if (c[0].in_contact) ++touching;
-    EXPECT_EQ(c[0].in_contact, fresh_c[0].in_contact) << "step " << k;
-    for (int i = 0; i < 3; ++i) {
-      EXPECT_EQ(c[0].force_n[i], fresh_c[0].force_n[i]) << "step " << k;
-      for (int j = 0; j < 3; ++j)
-        EXPECT_EQ(c[0].stiffness_n_per_m(i, j), fresh_c[0].stiffness_n_per_m(i, j)) << "step " << k;
-    }
-    EXPECT_EQ(c[0].nodes, fresh_c[0].nodes) << "step " << k;
-    EXPECT_EQ(c[0].validity_radius_m, fresh_c[0].validity_radius_m) << "step " << k;
+    expect_same_answer(c[0], fresh_c[0], "step " + std::to_string(k));
   }
   EXPECT_EQ(compared, 18);
   EXPECT_GE(touching, 15);  // the comparisons are of contacts, not of empty answers
@@ -478,15 +483,7 @@ TEST(interaction_contact_step, FourHeldProbesAnswerAsAFreshState) {
     ++compared;
     for (int t = 0; t < 4; ++t) {
       if (c[t].in_contact) ++touching;
-      EXPECT_EQ(c[t].in_contact, fresh_c[t].in_contact) << "step " << step << " probe " << t;
-      for (int i = 0; i < 3; ++i) {
-        EXPECT_EQ(c[t].force_n[i], fresh_c[t].force_n[i]) << "step " << step << " probe " << t;
-        for (int j = 0; j < 3; ++j)
-          EXPECT_EQ(c[t].stiffness_n_per_m(i, j), fresh_c[t].stiffness_n_per_m(i, j))
-              << "step " << step << " probe " << t;
-      }
-      EXPECT_EQ(c[t].nodes, fresh_c[t].nodes) << "step " << step << " probe " << t;
-      EXPECT_EQ(c[t].validity_radius_m, fresh_c[t].validity_radius_m) << "step " << step;
+      expect_same_answer(c[t], fresh_c[t], "step " + std::to_string(step) + " probe " + std::to_string(t));
     }
   }
   EXPECT_EQ(compared, 10);
@@ -555,14 +552,7 @@ TEST(interaction_contact_step, HeldProbesRowsFollowPoseToolAndRestSurface) {
         const std::string at = "iterations " + std::to_string(iterations) + " step " +
                                std::to_string(step) + " probe " + std::to_string(t);
         if (c[t].in_contact) ++touching;
-        EXPECT_EQ(c[t].in_contact, fresh_c[t].in_contact) << at;
-        for (int i = 0; i < 3; ++i) {
-          EXPECT_EQ(c[t].force_n[i], fresh_c[t].force_n[i]) << at;
-          for (int j = 0; j < 3; ++j)
-            EXPECT_EQ(c[t].stiffness_n_per_m(i, j), fresh_c[t].stiffness_n_per_m(i, j)) << at;
-        }
-        EXPECT_EQ(c[t].nodes, fresh_c[t].nodes) << at;
-        EXPECT_EQ(c[t].validity_radius_m, fresh_c[t].validity_radius_m) << at;
+        expect_same_answer(c[t], fresh_c[t], at);
       }
     }
     EXPECT_EQ(compared, 12);

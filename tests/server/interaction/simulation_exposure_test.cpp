@@ -14,6 +14,7 @@
 #include "server/fem/equilibrium_solver.hpp"
 #include "server/scene/compile.hpp"
 #include "server/scene/scene.hpp"
+#include "cube_cylinder_fixtures.hpp"
 #include "test_support.hpp"
 
 #include <Eigen/SparseCore>
@@ -33,21 +34,8 @@
 namespace neurosim::interaction {
 namespace {
 
-// The cube/cylinder scene with the cylinder's axis at height z_m (the cube's top at z = 0.1 m).
-scene::Scene cube_cylinder(double z_m, bool tools) {
-  const auto path = neurosim::testing::source_dir() / "scenes" / "cube_cylinder.scene";
-  scene::Scene s = scene::read_scene(path);
-  s.mutable_meshes(scene::find_mesh(s, "cylinder"))
-      ->mutable_generate()
-      ->mutable_cylinder()
-      ->mutable_base_center_m()
-      ->set_z(z_m);
-  if (!tools) {
-    s.clear_tools();
-    s.mutable_effects()->set_tool_contact(false);
-  }
-  return s;
-}
+// The cube/cylinder scene with the cylinder's axis at height z_m (cube_cylinder_fixtures.hpp).
+scene::Scene cube_cylinder(double z_m, bool tools) { return testing::cube_cylinder_at(z_m, tools); }
 
 // The cube's contactable triangles as the simulation builds them (its contact slots, its fixed
 // nodes, the faces the cylinder covers).
@@ -271,6 +259,60 @@ TEST(interaction_simulation_exposure, RingAroundAnExitingCylinderStaysContactabl
   }
 }
 
+// The monolithic tied system of the cube (A) and the cylinder (B) under assembly: unknowns A's
+// 3 N_A dofs, B's 3 N_B, then one Lagrange multiplier per constraint row (scaled to the
+// stiffness): the fixed nodes of both meshes and the tie (u_B,k - sum w_a u_A,a = 0), plus any
+// rows a test prescribes. One sparse LU, written here: independent of the coupled body's path.
+struct TiedKkt {
+  TiedKkt(const CoupledBody& body, const fem::SparseMatrix& ka, const fem::SparseMatrix& kb)
+      : na3(static_cast<int>(ka.rows())), n(na3 + static_cast<int>(kb.rows())), row(n),
+        scale(1e-3 * ka.diagonal().maxCoeff()) {
+    for (int k = 0; k < ka.outerSize(); ++k)
+      for (fem::SparseMatrix::InnerIterator it(ka, k); it; ++it)
+        t.emplace_back(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
+    for (int k = 0; k < kb.outerSize(); ++k)
+      for (fem::SparseMatrix::InnerIterator it(kb, k); it; ++it)
+        t.emplace_back(na3 + static_cast<int>(it.row()), na3 + static_cast<int>(it.col()), it.value());
+    const auto& tie = body.ties().at(0);
+    for (int v : body.host_solver().fixed_nodes())
+      for (int a = 0; a < 3; ++a) constrain({{3 * v + a, 1.0}}, 0.0);
+    for (int v : tie.fixed_nodes())
+      for (int a = 0; a < 3; ++a) constrain({{na3 + 3 * v + a, 1.0}}, 0.0);
+    for (std::size_t k = 0; k < tie.tied_nodes().size(); ++k)
+      for (int a = 0; a < 3; ++a) {
+        std::vector<std::pair<int, double>> terms{{na3 + 3 * tie.tied_nodes()[k] + a, 1.0}};
+        for (int j = 0; j < 3; ++j) terms.push_back({3 * tie.host_nodes()[k][j] + a, -tie.weights()[k][j]});
+        constrain(terms, 0.0);
+      }
+  }
+  // A constraint row sum w u_dof = rhs; returns its row (its multiplier's index).
+  int constrain(const std::vector<std::pair<int, double>>& terms, double rhs) {
+    for (const auto& [dof, w] : terms) {
+      t.emplace_back(row, dof, scale * w);
+      t.emplace_back(dof, row, scale * w);
+    }
+    g.push_back(scale * rhs);
+    return row++;
+  }
+  // All unknowns (dofs, then multipliers) under the nodal loads f (stacked, n entries).
+  Eigen::VectorXd solve(const Eigen::VectorXd& f) const {
+    Eigen::SparseMatrix<double> kkt(row, row);
+    kkt.setFromTriplets(t.begin(), t.end());
+    Eigen::VectorXd rhs(row);
+    rhs.head(n) = f;
+    for (std::size_t k = 0; k < g.size(); ++k) rhs[n + static_cast<int>(k)] = g[k];
+    Eigen::SparseLU<Eigen::SparseMatrix<double>> lu;
+    lu.compute(kkt);
+    if (lu.info() != Eigen::Success) throw std::runtime_error("TiedKkt: LU failed");
+    return lu.solve(rhs);
+  }
+  const int na3, n;
+  int row;
+  const double scale;
+  std::vector<Eigen::Triplet<double>> t;
+  std::vector<double> g;  // constraint right-hand sides (scaled)
+};
+
 // The raised cylinder (axis at z = 0.105 m: its top 20 mm above the cube's top) with the scene's
 // tool, LINEAR tier, TIE: the simulation and the highest surface node of the cylinder's top near
 // y = 50 mm (the tip is placed over it).
@@ -411,11 +453,9 @@ TEST(interaction_simulation_exposure, PressOnTheRaisedCylinderEqualsTheMonolithi
   const mesh::TetMesh& host = body.host();
   const mesh::TetMesh& emb = tie.geometry();
   const int na3 = 3 * static_cast<int>(host.num_vertices());
-  const int nb3 = 3 * static_cast<int>(emb.num_vertices());
-  const int n = na3 + nb3;
+  const int n = na3 + 3 * static_cast<int>(emb.num_vertices());
   const auto ka = fem::assemble_stiffness(host, fem::MaterialMap::uniform(p->model.meshes[p->cube].material));
   const auto kb = fem::assemble_stiffness(emb, fem::MaterialMap::uniform(tie.material()));
-  const double scale = 1e-3 * ka.diagonal().maxCoeff();
   for (double d : {0.00025, 0.0005, 0.001}) {
     ToolPose pose;
     pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
@@ -431,52 +471,18 @@ TEST(interaction_simulation_exposure, PressOnTheRaisedCylinderEqualsTheMonolithi
     Eigen::VectorXd ua, ub;
     p->sim->displacements(p->cube, ua);
     p->sim->displacements(p->cylinder, ub);
-    // Unknowns: A's and B's dofs, then the multipliers: A's fixed dofs, B's fixed dofs, the tie
-    // (u_B,k - sum w u_A = 0) and the loaded nodes (u = the simulation's).
-    std::vector<Eigen::Triplet<double>> t;
-    for (int k = 0; k < ka.outerSize(); ++k)
-      for (fem::SparseMatrix::InnerIterator it(ka, k); it; ++it)
-        t.emplace_back(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
-    for (int k = 0; k < kb.outerSize(); ++k)
-      for (fem::SparseMatrix::InnerIterator it(kb, k); it; ++it)
-        t.emplace_back(na3 + static_cast<int>(it.row()), na3 + static_cast<int>(it.col()), it.value());
-    std::vector<double> g;  // constraint right-hand sides
-    int row = n;
-    auto constrain = [&](const std::vector<std::pair<int, double>>& terms, double rhs) {
-      for (const auto& [dof, w] : terms) {
-        t.emplace_back(row, dof, scale * w);
-        t.emplace_back(dof, row, scale * w);
-      }
-      g.push_back(scale * rhs);
-      ++row;
-    };
-    for (int v : body.host_solver().fixed_nodes())
-      for (int a = 0; a < 3; ++a) constrain({{3 * v + a, 1.0}}, 0.0);
-    for (int v : tie.fixed_nodes())
-      for (int a = 0; a < 3; ++a) constrain({{na3 + 3 * v + a, 1.0}}, 0.0);
-    for (std::size_t k = 0; k < tie.tied_nodes().size(); ++k)
-      for (int a = 0; a < 3; ++a) {
-        std::vector<std::pair<int, double>> terms{{na3 + 3 * tie.tied_nodes()[k] + a, 1.0}};
-        for (int j = 0; j < 3; ++j) terms.push_back({3 * tie.host_nodes()[k][j] + a, -tie.weights()[k][j]});
-        constrain(terms, 0.0);
-      }
+    // The loaded nodes prescribed to the simulation's displacements: their multipliers are the
+    // reactions.
+    TiedKkt kkt(body, ka, kb);
     std::vector<int> loaded_row;
     for (int s : slots) {
       const auto cp = body.contact_point(s);
-      loaded_row.push_back(row);
-      for (int a = 0; a < 3; ++a) {
-        const int dof = (cp.tie < 0 ? 0 : na3) + 3 * cp.node + a;
-        constrain({{dof, 1.0}}, (cp.tie < 0 ? ua : ub)[3 * cp.node + a]);
-      }
+      const int dof = (cp.tie < 0 ? 0 : na3) + 3 * cp.node;
+      loaded_row.push_back(kkt.row);
+      for (int a = 0; a < 3; ++a) kkt.constrain({{dof + a, 1.0}}, (cp.tie < 0 ? ua : ub)[3 * cp.node + a]);
     }
-    Eigen::SparseMatrix<double> kkt(row, row);
-    kkt.setFromTriplets(t.begin(), t.end());
-    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(row);
-    for (std::size_t k = 0; k < g.size(); ++k) rhs[n + static_cast<int>(k)] = g[k];
-    Eigen::SparseLU<Eigen::SparseMatrix<double>> lu;
-    lu.compute(kkt);
-    ASSERT_EQ(lu.info(), Eigen::Success);
-    const Eigen::VectorXd x = lu.solve(rhs);
+    const Eigen::VectorXd x = kkt.solve(Eigen::VectorXd::Zero(n));
+    const double scale = kkt.scale;
     // K u + scale C^T mu = 0: the force the prescription puts on a loaded node is -scale mu.
     Vec3 total_ref = Vec3::Zero(), total = Vec3::Zero();
     double worst = 0.0, largest = 0.0;
@@ -539,42 +545,8 @@ TEST(interaction_simulation_exposure, PressAcrossTheRimFeelsTheCubeAndTheCylinde
 // (Lagrange multipliers), one sparse LU. The tier's stiffness at rest (linear) or its tangent.
 Eigen::VectorXd monolithic_tied_solve(const CoupledBody& body, const fem::SparseMatrix& ka,
                                       const fem::SparseMatrix& kb, const Eigen::VectorXd& f) {
-  const auto& tie = body.ties().at(0);
-  const int na3 = static_cast<int>(ka.rows()), n = na3 + static_cast<int>(kb.rows());
-  const double scale = 1e-3 * ka.diagonal().maxCoeff();
-  std::vector<Eigen::Triplet<double>> t;
-  for (int k = 0; k < ka.outerSize(); ++k)
-    for (fem::SparseMatrix::InnerIterator it(ka, k); it; ++it)
-      t.emplace_back(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
-  for (int k = 0; k < kb.outerSize(); ++k)
-    for (fem::SparseMatrix::InnerIterator it(kb, k); it; ++it)
-      t.emplace_back(na3 + static_cast<int>(it.row()), na3 + static_cast<int>(it.col()), it.value());
-  int row = n;
-  auto constrain = [&](const std::vector<std::pair<int, double>>& terms) {
-    for (const auto& [dof, w] : terms) {
-      t.emplace_back(row, dof, scale * w);
-      t.emplace_back(dof, row, scale * w);
-    }
-    ++row;
-  };
-  for (int v : body.host_solver().fixed_nodes())
-    for (int a = 0; a < 3; ++a) constrain({{3 * v + a, 1.0}});
-  for (int v : tie.fixed_nodes())
-    for (int a = 0; a < 3; ++a) constrain({{na3 + 3 * v + a, 1.0}});
-  for (std::size_t k = 0; k < tie.tied_nodes().size(); ++k)
-    for (int a = 0; a < 3; ++a) {
-      std::vector<std::pair<int, double>> terms{{na3 + 3 * tie.tied_nodes()[k] + a, 1.0}};
-      for (int j = 0; j < 3; ++j) terms.push_back({3 * tie.host_nodes()[k][j] + a, -tie.weights()[k][j]});
-      constrain(terms);
-    }
-  Eigen::SparseMatrix<double> kkt(row, row);
-  kkt.setFromTriplets(t.begin(), t.end());
-  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(row);
-  rhs.head(n) = f;
-  Eigen::SparseLU<Eigen::SparseMatrix<double>> lu;
-  lu.compute(kkt);
-  if (lu.info() != Eigen::Success) throw std::runtime_error("monolithic_tied_solve: LU failed");
-  return lu.solve(rhs).head(n);
+  const TiedKkt kkt(body, ka, kb);
+  return kkt.solve(f).head(kkt.n);
 }
 
 struct RaisedTier {

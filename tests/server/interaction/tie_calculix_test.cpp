@@ -22,6 +22,7 @@
 #include "server/interaction/tier_equilibrium.hpp"
 #include "server/scene/compile.hpp"
 #include "server/scene/scene.hpp"
+#include "cube_cylinder_fixtures.hpp"
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>
@@ -43,16 +44,9 @@ namespace {
 
 using mesh::Vec3;
 
+// The raised or enclosed scene without tools, every material on C3D4's element.
 scene::Scene cube_cylinder(double z_m) {
-  const auto path = neurosim::testing::source_dir() / "scenes" / "cube_cylinder.scene";
-  scene::Scene s = scene::read_scene(path);
-  s.mutable_meshes(scene::find_mesh(s, "cylinder"))
-      ->mutable_generate()
-      ->mutable_cylinder()
-      ->mutable_base_center_m()
-      ->set_z(z_m);
-  s.clear_tools();
-  s.mutable_effects()->set_tool_contact(false);
+  scene::Scene s = testing::cube_cylinder_at(z_m, false);
   for (int m = 0; m < s.meshes_size(); ++m) s.mutable_meshes(m)->mutable_material()->set_element("linear-tet");
   return s;
 }
