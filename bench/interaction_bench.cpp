@@ -4,6 +4,7 @@
 //   interaction_bench [--csv] [--steps N] [--sliding-steps N] [--quick] [--residual-csv FILE]
 //                     [--only SCENARIO] [--no-sliding-ref]
 //   interaction_bench --brain-contact [--steps N] [--smooth-contact] [--contact-spread C]
+//   interaction_bench --four-probes [--steps N]   (see four_probes below)
 // --csv prints only the table; set-up times and notes go to stderr. SLIDING rows: `sliding` (the
 // default LCP path, inverse of the sliding block at load) and `sliding_ref` (the reference path,
 // factor of the active rows), unless --no-sliding-ref.
@@ -247,6 +248,90 @@ int brain_contact(int steps, const ni::SimulationOptions& contact) {
   return 0;
 }
 
+// --four-probes: cube_cylinder.scene as it is (its 3 mm probe), four probes pressing 1.5-2.5 mm
+// into the cube's +x face at latency_bench's four station points (axis +x), one probe's pose new
+// per step (a server stepping on each station's pose; each probe at 0.5 Hz, 1 kHz per station),
+// twice side by side: `lcp_warm` (SimulationOptions::lcp_warm_start, the default) and `lcp_cold`
+// (false), stepped alternately after 2000 warm-up steps each. Per step: thread CPU time p50 /
+// p99 / mean (us), wall p50, rows, LCP pivots and LCPs that took the warm start; and the steps
+// whose answers (force, K, nodes of every probe) differ between the two (0: bit for bit).
+int four_probes(int steps) {
+  const std::string path = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/cube_cylinder.scene";
+  const neurosim::scene::Model model = neurosim::scene::load_model(path);
+  ni::SimulationOptions warm_options, cold_options;
+  cold_options.lcp_warm_start = false;
+  auto warm = ni::Simulation::build(model, warm_options);
+  auto cold = ni::Simulation::build(model, cold_options);
+  const double r = model.tools.at(0).tip_radius_m;
+  std::vector<ni::ToolPose> poses(4);
+  auto place = [&](long step) {
+    const int k = static_cast<int>(step % 4);
+    const double a = 2.0 * M_PI * k / 4.0, t = 1e-3 * static_cast<double>(step / 4);
+    ni::ToolPose& p = poses[static_cast<std::size_t>(k)];
+    p.tip_m = Eigen::Vector3d(0.1 + r - 0.002 - 0.0005 * std::sin(2.0 * M_PI * 0.5 * t),
+                              0.05 + 0.025 * std::cos(a), 0.05 + 0.025 * std::sin(a));
+    p.axis = Eigen::Vector3d::UnitX();
+    p.station = k;
+  };
+  for (long s = 0; s < 4; ++s) place(s);
+  std::vector<ni::ToolContact> cw, cc;
+  ni::StepStats sw, sc;
+  struct Side {
+    std::vector<double> cpu_us, us;
+    double rows{0.0}, pivots{0.0}, lcps{0.0}, taken{0.0};
+  } w, c;
+  auto one = [](ni::Simulation& sim, const std::vector<ni::ToolPose>& p,
+                std::vector<ni::ToolContact>& out, ni::StepStats& st, Side* side) {
+    const auto ts = Clock::now();
+    const double c0 = thread_cpu_us();
+    sim.step(p, out, st);
+    const double c1 = thread_cpu_us();
+    if (side == nullptr) return;
+    side->us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - ts).count());
+    side->cpu_us.push_back(c1 - c0);
+    side->rows += st.contact_rows;
+    side->pivots += st.lcp_pivots;
+    side->lcps += st.geometry_iterations;
+    side->taken += st.lcp_warm_taken;
+  };
+  int differ = 0, unconverged = 0;
+  for (long s = 0; s < 2000 + steps; ++s) {
+    place(s);
+    const bool timed = s >= 2000;
+    // Alternate which goes first (caches, preemption).
+    if (s % 2 == 0) {
+      one(*warm, poses, cw, sw, timed ? &w : nullptr);
+      one(*cold, poses, cc, sc, timed ? &c : nullptr);
+    } else {
+      one(*cold, poses, cc, sc, timed ? &c : nullptr);
+      one(*warm, poses, cw, sw, timed ? &w : nullptr);
+    }
+    if (!sw.converged || !sc.converged) ++unconverged;
+    bool same = cw.size() == cc.size();
+    for (std::size_t t = 0; same && t < cw.size(); ++t)
+      same = cw[t].force_n == cc[t].force_n && cw[t].stiffness_n_per_m == cc[t].stiffness_n_per_m &&
+             cw[t].nodes == cc[t].nodes && cw[t].in_contact == cc[t].in_contact;
+    if (!same) ++differ;
+    if (timed) dump_step("four_probes", static_cast<std::size_t>(s - 2000), cw, sw);
+  }
+  std::cout << "case,steps,cpu_p50_us,cpu_p99_us,cpu_mean_us,p50_us,rows_per_step,"
+               "pivots_per_step,lcps_per_step,warm_taken_per_step,steps_differing,unconverged\n";
+  auto print = [&](const char* name, const Side& x) {
+    const double n = static_cast<double>(std::max<std::size_t>(1, x.cpu_us.size()));
+    double sum = 0.0;
+    for (double v : x.cpu_us) sum += v;
+    char line[320];
+    std::snprintf(line, sizeof line, "%s,%zu,%.1f,%.1f,%.1f,%.1f,%.2f,%.2f,%.2f,%.2f,%d,%d\n", name,
+                  x.cpu_us.size(), percentile(x.cpu_us, 0.5), percentile(x.cpu_us, 0.99), sum / n,
+                  percentile(x.us, 0.5), x.rows / n, x.pivots / n, x.lcps / n, x.taken / n, differ,
+                  unconverged);
+    std::cout << line;
+  };
+  print("lcp_warm", w);
+  print("lcp_cold", c);
+  return differ == 0 && unconverged == 0 ? 0 : 1;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -270,6 +355,9 @@ int main(int argc, char** argv) {
   cli->add_option("--only", only, "one scenario by name");
   cli->add_flag("--no-sliding-ref", no_sliding_ref, "no sliding reference solve");
   cli->add_flag("--brain-contact", brain, "brain_artery press and 10 s slide (contact rows)");
+  bool four = false;
+  cli->add_flag("--four-probes", four,
+                "cube_cylinder, four probes in the +x face: LCP warm start against cold start");
   cli->add_flag("--smooth-contact", smooth_contact,
                 "with --brain-contact: SimulationOptions contact_spread 1 (or --contact-spread), "
                 "contact_smooth_normals, contact_near_field");
@@ -294,6 +382,7 @@ int main(int argc, char** argv) {
       if (dump_file) std::fclose(dump_file);
     }
   } close_dump;
+  if (four) return four_probes(steps);
   if (brain) {
     ni::SimulationOptions contact;
     if (smooth_contact) {

@@ -65,15 +65,59 @@ void ActiveSetLcp::back_solve() {
 
 LcpResult ActiveSetLcp::solve(const LcpProblem& problem, const LcpOptions& options,
                               Eigen::VectorXd& lambda) {
-  const Eigen::MatrixXd& w = *problem.compliance;
   const Eigen::VectorXd& delta = *problem.depth;
-  const int n = problem.rows, stable_rows = problem.stable_rows;
-  const std::vector<char>* initial_active = problem.initial_active;
-  const double tolerance = options.tolerance;
-  LcpResult result;
+  const int n = problem.rows;
   lambda.head(n).setZero();
   double delta_scale = 0.0;  // max |delta|, unit m: the scale of the slack tolerance
   for (int i = 0; i < n; ++i) delta_scale = std::max(delta_scale, std::abs(delta[i]));
+  LcpResult result;
+  if (delta_scale == 0.0) {
+    // Nothing pushes: no row active (the kept stable rows' factor is emptied too).
+    const bool reuse = problem.stable_rows > 0 && factor_valid_ &&
+                       factored_rows_ >= problem.stable_rows && solves_since_factor_ < 1000;
+    solves_since_factor_ = reuse ? solves_since_factor_ + 1 : 0;
+    for (int i = 0; i < n; ++i) in_set_[i] = 0;
+    num_active_ = 0;
+    factor_valid_ = true;
+    factored_rows_ = n;
+    result.converged = true;
+    return result;
+  }
+  // The canonical answer (no stable rows: nothing is kept from the solve before).
+  const bool canonical = problem.stable_rows == 0;
+  int warm_iterations = 0;
+  if (canonical && problem.warm_active != nullptr) {
+    result = pivot(problem, options, problem.warm_active, delta_scale, lambda);
+    if (result.converged && !result.dependent_rows &&
+        settle(problem, options, delta_scale, options.warm_margin, result.iterations > 1,
+               lambda)) {
+      result.warm_taken = true;
+      finish(problem, options, delta_scale, lambda, result);
+      return result;
+    }
+    warm_iterations = result.iterations;
+  }
+  result = pivot(problem, options, problem.initial_active, delta_scale, lambda);
+  if (canonical && result.converged &&
+      !settle(problem, options, delta_scale, -1.0, result.iterations > 1, lambda)) {
+    // At the tolerance's edge the set's own answer is not complementary: the pivots' answer
+    // (the same from the same start).
+    result = pivot(problem, options, problem.initial_active, delta_scale, lambda);
+  }
+  result.iterations += warm_iterations;
+  finish(problem, options, delta_scale, lambda, result);
+  return result;
+}
+
+LcpResult ActiveSetLcp::pivot(const LcpProblem& problem, const LcpOptions& options,
+                              const std::vector<char>* start_active, double delta_scale,
+                              Eigen::VectorXd& lambda) {
+  const Eigen::MatrixXd& w = *problem.compliance;
+  const Eigen::VectorXd& delta = *problem.depth;
+  const int n = problem.rows, stable_rows = problem.stable_rows;
+  const double tolerance = options.tolerance;
+  LcpResult result;
+  lambda.head(n).setZero();
   // Warm start: keep the previous factor's rows below stable_rows (refactored from scratch now
   // and then, so round-off of the updates cannot pile up).
   const bool reuse = stable_rows > 0 && factor_valid_ && factored_rows_ >= stable_rows &&
@@ -93,14 +137,9 @@ LcpResult ActiveSetLcp::solve(const LcpProblem& problem, const LcpOptions& optio
   }
   factor_valid_ = true;
   factored_rows_ = n;
-  if (delta_scale == 0.0) {
-    num_active_ = 0;
-    result.converged = true;
-    return result;
-  }
   // 0: inactive, 1: active, 2: blocked (dependent or immovable row, never active).
   for (int i = reuse ? stable_rows : 0; i < n; ++i) {
-    const bool start = initial_active ? (*initial_active)[i] != 0 : delta[i] > 0.0;
+    const bool start = start_active ? (*start_active)[i] != 0 : delta[i] > 0.0;
     if (!(w(i, i) > 0.0)) {
       in_set_[i] = 2;
     } else if (start) {
@@ -154,24 +193,70 @@ LcpResult ActiveSetLcp::solve(const LcpProblem& problem, const LcpOptions& optio
       result.dependent_rows = true;
     }
   }
+  return result;
+}
+
+bool ActiveSetLcp::settle(const LcpProblem& problem, const LcpOptions& options,
+                          double delta_scale, double margin, bool refactor,
+                          Eigen::VectorXd& lambda) {
+  const Eigen::MatrixXd& w = *problem.compliance;
+  const Eigen::VectorXd& delta = *problem.depth;
+  const int n = problem.rows;
+  // The set's factor from scratch with its rows in index order (unless the pivoting built it
+  // so and never pivoted: then it is this factor already, bit for bit), and its answer.
+  if (refactor) {
+    num_active_ = 0;
+    for (int i = 0; i < n; ++i) {
+      if (in_set_[i] == 1 && !append_row(w, i)) {
+        factor_valid_ = false;
+        return false;
+      }
+    }
+    forward_from(delta, 0);
+    back_solve();
+    lambda.head(n).setZero();
+    for (int j = 0; j < num_active_; ++j) lambda[active_rows_[j]] = sol_[j];
+  }
+  double lambda_scale = 0.0;
+  for (int j = 0; j < num_active_; ++j) lambda_scale = std::max(lambda_scale, std::abs(sol_[j]));
+  // Complementary: within the tolerance as the pivoting (margin < 0), or strictly, above
+  // margin x the scales.
+  const bool strict = margin >= 0.0;
+  const double bound_l =
+      strict ? margin * lambda_scale : -options.tolerance * std::max(lambda_scale, 1e-300);
+  const double bound_w = strict ? margin * delta_scale : -options.tolerance * delta_scale;
+  auto holds = [strict](double v, double bound) { return strict ? v > bound : v >= bound; };
+  for (int i = 0; i < n; ++i) {
+    if (in_set_[i] == 1 && !holds(lambda[i], bound_l)) return false;
+    if (in_set_[i] == 0 && !holds(w.col(i).head(n).dot(lambda.head(n)) - delta[i], bound_w))
+      return false;
+  }
+  return true;
+}
+
+void ActiveSetLcp::finish(const LcpProblem& problem, const LcpOptions& options,
+                          double delta_scale, Eigen::VectorXd& lambda, LcpResult& result) {
+  const Eigen::MatrixXd& w = *problem.compliance;
+  const Eigen::VectorXd& delta = *problem.depth;
+  const int n = problem.rows;
   // Report the remaining violation whatever happened (blocked rows included).
   double violation = 0.0;
   double lambda_scale = 1e-300;
   for (int i = 0; i < n; ++i) lambda_scale = std::max(lambda_scale, std::abs(lambda[i]));
   w_.head(n).noalias() = w.topLeftCorner(n, n) * lambda.head(n);
   w_.head(n) -= delta.head(n);
+  result.active = 0;
   for (int i = 0; i < n; ++i) {
     violation = std::max(violation, -w_[i] / delta_scale);
     violation = std::max(violation, -lambda[i] / lambda_scale);
     if (in_set_[i] == 1 && std::abs(lambda[i]) > 0.0) ++result.active;
   }
   result.max_violation = violation;
-  if (result.converged && violation > 1e3 * tolerance) result.converged = false;
+  if (result.converged && violation > 1e3 * options.tolerance) result.converged = false;
   if (!lambda.head(n).allFinite()) {
     result.converged = false;
     factor_valid_ = false;
   }
-  return result;
 }
 
 void ActiveSetLcp::invert_active(int first_row, ActiveBlockInverse& out) {

@@ -4,6 +4,15 @@
 // for k active rows, and kept from one solve to the next for the rows the problem declares
 // stable (refactored from scratch every 1000 solves, so round-off of the updates cannot pile
 // up). No allocation once reserve() has sized the workspace.
+// The canonical answer (problems without stable rows): the pivoting only decides which rows are
+// active; lambda (and the factor invert_active reads) is then computed once more from scratch
+// from that set alone, its rows factored in index order, and checked for complementarity. So
+// the answer is a function of W, delta and the active set, whatever the pivots' order: a warm
+// start from history (LcpProblem::warm_active) gives the cold start's bits whenever the two end
+// with the same set, which they do for a nondegenerate solution (unique set, W SPD). The warm
+// set is taken only if its answer is complementary with a margin (LcpOptions::warm_margin, no
+// dependent row); otherwise, as when the set's own answer misses the tolerance at its edge, the
+// cold start decides (and at that edge its pivots' own answer stands).
 #pragma once
 
 #include "server/interaction/lcp_problem.hpp"
@@ -51,6 +60,19 @@ class ActiveSetLcp {
   int factored_rows_{0};      // rows of that solve
   int solves_since_factor_{0};
 
+  // Murty's pivoting from start_active (nullptr: the rows with delta > 0) into in_set_, the
+  // factor and lambda; the result's converged, iterations and dependent_rows.
+  LcpResult pivot(const LcpProblem& problem, const LcpOptions& options,
+                  const std::vector<char>* start_active, double delta_scale,
+                  Eigen::VectorXd& lambda);
+  // The canonical answer of the active set in_set_: its factor from scratch in row order
+  // (refactor false: the pivoting's first factor, which is that), lambda from it, and whether
+  // it is complementary: within the tolerance (margin < 0) or by margin x the scales.
+  bool settle(const LcpProblem& problem, const LcpOptions& options, double delta_scale,
+              double margin, bool refactor, Eigen::VectorXd& lambda);
+  // The result's active count and max_violation, from W itself.
+  void finish(const LcpProblem& problem, const LcpOptions& options, double delta_scale,
+              Eigen::VectorXd& lambda, LcpResult& result);
   // Appends `row` to the active block and its factor (one forward solve); false (nothing
   // changed) if the row is numerically dependent on the active ones.
   bool append_row(const Eigen::MatrixXd& w, int row);

@@ -32,6 +32,8 @@ LcpResult ContactLcp::solve(const LcpProblem& problem, const LcpOptions& options
   const int n = problem.rows, stable_rows = problem.stable_rows;
   const std::vector<char>* initial_active = problem.initial_active;
   if (initial_active && static_cast<int>(initial_active->size()) < n)
+    throw std::invalid_argument("ContactLcp::solve: start shorter than the rows");
+  if (problem.warm_active && static_cast<int>(problem.warm_active->size()) < problem.rows)
     throw std::invalid_argument("ContactLcp::solve: warm start shorter than the rows");
   if (n < 0 || n > capacity_ || w.rows() < n || w.cols() < n || delta.size() < n ||
       lambda.size() < n || stable_rows < 0 || stable_rows > n) {

@@ -144,6 +144,12 @@ bool deeper(const Row& a, const Row& b) {
   return a.key < b.key;
 }
 
+// A row's feature, tool and body as one key (rows of two geometries or steps compared).
+std::uint64_t row_key(const Row& r) {
+  return (static_cast<std::uint64_t>(r.tool) << 48) ^ r.key ^
+         (static_cast<std::uint64_t>(r.body) << 56);
+}
+
 }  // namespace
 
 State::State(const Model& m) {
@@ -256,6 +262,8 @@ void State::reserve_workspace(const Model& m, int tools) {
   delta_.setZero(max_rows);
   lambda_.setZero(max_rows);
   warm_.assign(max_rows, 0);
+  warm_active_.assign(max_rows, 0);
+  active_keys_.reserve(max_rows);
   column_terms_.assign(kSpreadNodes * static_cast<std::size_t>(max_contact), LcpColumnTerm{});
   delassus_node_.resize(m.bodies_.size());
   for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi)
@@ -2120,7 +2128,23 @@ LcpResult State::solve_geometry(const Model& m, const std::vector<ToolPose>& pos
     problem.column_terms = &column_terms_;
     problem.terms_per_row = kSpreadNodes;
   }
-  return lcp_.solve(problem, lcp_options, lambda_);
+  // The warm start (no sliding rows): the rows active in the last converged LCP, by key. Only
+  // the pivots depend on it, not the answer (SimulationOptions::lcp_warm_start).
+  const bool warm = m.options_.lcp_warm_start && ns == 0;
+  if (warm) {
+    for (int r = 0; r < nc; ++r)
+      warm_active_[r] =
+          std::binary_search(active_keys_.begin(), active_keys_.end(), row_key(rows_[r])) ? 1 : 0;
+    problem.warm_active = &warm_active_;
+  }
+  const LcpResult result = lcp_.solve(problem, lcp_options, lambda_);
+  if (warm && result.converged) {
+    active_keys_.clear();
+    for (int r = 0; r < nc; ++r)
+      if (lambda_[r] > 0.0) active_keys_.push_back(row_key(rows_[r]));
+    std::sort(active_keys_.begin(), active_keys_.end());
+  }
+  return result;
 }
 
 // The last good forces of every body, kept while the step iterates (no allocation: reserved).
@@ -2160,9 +2184,7 @@ void State::restore_forces(bool to_rest) {
 // The rows of this geometry as sorted (tool, feature) keys; true if they equal the last ones.
 bool State::same_rows_as_before() {
   row_keys_.clear();
-  for (const Row& r : rows_)
-    row_keys_.push_back((static_cast<std::uint64_t>(r.tool) << 48) ^ r.key ^
-                        (static_cast<std::uint64_t>(r.body) << 56));
+  for (const Row& r : rows_) row_keys_.push_back(row_key(r));
   std::sort(row_keys_.begin(), row_keys_.end());
   const bool same = row_keys_ == previous_row_keys_;
   previous_row_keys_.swap(row_keys_);
@@ -2255,10 +2277,14 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
   stats.columns_computed = 0;
   stats.columns_not_ready = 0;
   stats.geometry_iterations = 0;
+  stats.lcp_pivots = 0;
+  stats.lcp_warm_taken = 0;
   LcpResult lcp;
   int columns = 0, not_ready = 0;
   for (int it = 0;; ++it) {
     lcp = solve_geometry(m, poses, stats);
+    stats.lcp_pivots += lcp.iterations;
+    stats.lcp_warm_taken += lcp.warm_taken ? 1 : 0;
     columns += stats.columns_computed;
     not_ready = std::max(not_ready, stats.columns_not_ready);
     ++stats.geometry_iterations;

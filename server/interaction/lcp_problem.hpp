@@ -41,9 +41,15 @@ struct LcpProblem {
   // its factor are taken over from the previous solve; initial_active then applies to the other
   // rows only.
   int stable_rows{0};
-  // Warm start (optional, first rows entries, nonzero: active): e.g. the last step's active set,
-  // instead of the rows with delta > 0. The pivoting is finite from any start.
+  // Start (optional, first rows entries, nonzero: active), part of the problem: e.g. the rows
+  // that penetrate, instead of the rows with delta > 0. The pivoting is finite from any start.
   const std::vector<char>* initial_active{nullptr};
+  // Warm start from history (optional, first rows entries, nonzero: active; problems with
+  // stable_rows == 0 only, ignored otherwise): e.g. the last step's active set. The answer does
+  // not depend on it (active_set_lcp.hpp, the canonical answer): the pivoting from it only
+  // proposes an active set, which is taken when its canonical answer is complementary with a
+  // margin (LcpOptions::warm_margin); otherwise the solve starts again from initial_active.
+  const std::vector<char>* warm_active{nullptr};
   // Optional: the trailing rows' columns against the constant leading rows as terms over fixed
   // blocks, terms_per_row per trailing row (row r: entries [r * terms_per_row, (r + 1) *
   // terms_per_row)). The inactive-set path then keeps G = W_ss^-1 times each block (one O(n_s^2)
@@ -66,6 +72,11 @@ struct LcpOptions {
   // Relative: to max |delta| for the slack w, to max lambda for the forces.
   double tolerance{1e-12};
   int max_iterations{200};  // pivots (inactive-set path: block-pivoting passes)
+  // LcpProblem::warm_active: the active set the warm pivoting ends with is taken only if its
+  // canonical answer has every active force above this x max lambda and every inactive slack
+  // above this x max |delta| (a nondegenerate solution: the cold start ends with the same set,
+  // since the two answers differ by at most about cond(W) x tolerance); else the cold start.
+  double warm_margin{1e-6};
   LcpPath path{LcpPath::automatic};
 };
 
@@ -76,6 +87,9 @@ struct LcpResult {
   int active{0};               // rows with lambda > 0
   double max_violation{0.0};   // max(-w, -lambda, 0) relative to max |delta|
   bool dependent_rows{false};  // a row of the active block was (numerically) dependent
+  // LcpProblem::warm_active given: the warm pivoting's set was taken (else the cold start ran
+  // after it; iterations counts both).
+  bool warm_taken{false};
 };
 
 // A block of the inverse of the active block W_AA (unit N/m) between chosen active rows: entry

@@ -93,6 +93,10 @@ struct StepStats {
   int columns_not_ready{0};
   // LINEAR: LCPs of this step (rows found again on the surface each answer deformed, from rest).
   int geometry_iterations{0};
+  // The LCPs' pivots over this step's geometries (warm and cold starts counted), and how many
+  // of its LCPs took the warm start's active set (SimulationOptions::lcp_warm_start).
+  int lcp_pivots{0};
+  int lcp_warm_taken{0};
   int sliding_rows{0};    // unilateral rows of SLIDING couplings in this step's LCP
   int sliding_active{0};  // of which carry a force
   // COROTATIONAL and NONLINEAR with SimulationOptions::tier_worker_thread = false: the tier's
@@ -203,6 +207,12 @@ struct SimulationOptions {
   bool contact_shaft_near_field{true};
   int lcp_max_iterations{200};
   double lcp_tolerance{1e-10};  // relative
+  // The contact LCP (without sliding rows) pivots first from the rows active in the last LCP
+  // (matched by body, tool and feature); the answer does not depend on it: the active set it
+  // ends with is solved again from scratch in row order and taken only if complementary with a
+  // margin, else the cold start (the rows that penetrate) decides (active_set_lcp.hpp). false:
+  // the cold start only (the same answers, more pivots).
+  bool lcp_warm_start{true};
   // Disk cache of each body's boundary operator (keyed by meshes, materials, fixed nodes and the
   // coupling map) and of its host's factor (keyed by the factored stiffness, fem/factor_cache),
   // so a second start skips the factorization and the boundary compliance solves: the same

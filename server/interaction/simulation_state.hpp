@@ -388,7 +388,11 @@ class State {
   Eigen::MatrixXd w_;
   Eigen::VectorXd delta_, lambda_;
   std::vector<char> sliding_active_;  // per sliding row: carried a force in the last good step
-  std::vector<char> warm_;            // LCP warm start
+  std::vector<char> warm_;            // LCP start (the problem's: the rows that penetrate)
+  // SimulationOptions::lcp_warm_start: per row, active in the last converged LCP (its key in
+  // active_keys_: row_key, sorted).
+  std::vector<char> warm_active_;
+  std::vector<std::uint64_t> active_keys_;
   // Per contact row, kSpreadNodes terms: its column against the sliding rows by node (the LCP keeps
   // W_ss^-1 times each node's sliding block, so a row whose weights change costs O(sliding rows)).
   std::vector<LcpColumnTerm> column_terms_;

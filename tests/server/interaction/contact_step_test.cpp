@@ -490,6 +490,74 @@ TEST(interaction_contact_step, FourHeldProbesAnswerAsAFreshState) {
   EXPECT_EQ(touching, 40);  // every probe in contact at every comparison
 }
 
+// The LCP's warm start (SimulationOptions::lcp_warm_start: the last LCP's active rows by key)
+// changes the pivots, not the answer: four probes as above, one moved per step, every 10th step
+// two probes trading places in the pose list (their rows' keys name the pose index: the warm set
+// is wrong for them) and every 15th a probe lifted out and pushed back deeper (an old set); at
+// every step the answers equal those of a State that starts cold, to the bit, with fewer pivots.
+TEST(interaction_contact_step, LcpWarmStartGivesTheColdStartsAnswer) {
+  Block b;
+  b.generated = true;
+  b.cells = 6;
+  b.tip_radius_m = 0.003;
+  SimulationOptions o;
+  o.precompute_contact_columns = true;
+  auto warm_model = build_model(block_scene(b), o);
+  o.lcp_warm_start = false;
+  auto cold_model = build_model(block_scene(b), o);
+  auto warm = Simulation::from_model(warm_model);
+  auto cold = Simulation::from_model(cold_model);
+  std::vector<ToolPose> poses(4);
+  std::vector<int> updates(4, 0);
+  auto place = [&](int k, double extra) {
+    const double a = 0.5 * M_PI * k;
+    const double depth = 4e-3 + extra + 5e-4 * std::sin(0.7 * updates[k]);
+    poses[k].tip_m = Vec3(b.edge_m + b.tip_radius_m - depth, 0.03 + 0.012 * std::cos(a),
+                          0.03 + 0.012 * std::sin(a));
+    poses[k].axis = Vec3(0.05, std::cos(a + 1.0), std::sin(a + 1.0)).normalized();
+    ++updates[k];
+  };
+  for (int k = 0; k < 4; ++k) {
+    place(k, 0.0);
+    poses[k].station = k;
+  }
+  std::vector<ToolContact> cw, cc;
+  StepStats sw, sc;
+  long long warm_pivots = 0, cold_pivots = 0;
+  int taken = 0, lcps = 0;
+  for (int step = 0; step < 60; ++step) {
+    if (step % 10 == 9)
+      std::swap(poses[0], poses[2]);
+    else if (step % 15 == 14)
+      poses[step % 4].tip_m.x() += 0.02;  // out of the block: its rows leave
+    else
+      place(step % 4, step % 15 == 0 ? 1e-3 : 0.0);
+    warm->step(poses, cw, sw);
+    cold->step(poses, cc, sc);
+    ASSERT_TRUE(sw.converged && sc.converged) << "step " << step;
+    warm_pivots += sw.lcp_pivots;
+    cold_pivots += sc.lcp_pivots;
+    taken += sw.lcp_warm_taken;
+    lcps += sw.geometry_iterations;
+    EXPECT_EQ(sc.lcp_warm_taken, 0);
+    for (int t = 0; t < 4; ++t) {
+      EXPECT_EQ(cw[t].in_contact, cc[t].in_contact) << "step " << step << " probe " << t;
+      for (int i = 0; i < 3; ++i) {
+        EXPECT_EQ(cw[t].force_n[i], cc[t].force_n[i]) << "step " << step << " probe " << t;
+        for (int j = 0; j < 3; ++j)
+          EXPECT_EQ(cw[t].stiffness_n_per_m(i, j), cc[t].stiffness_n_per_m(i, j))
+              << "step " << step << " probe " << t;
+      }
+      EXPECT_EQ(cw[t].nodes, cc[t].nodes) << "step " << step << " probe " << t;
+      EXPECT_EQ(cw[t].validity_radius_m, cc[t].validity_radius_m) << "step " << step;
+    }
+  }
+  std::printf("warm start: %d of %d LCPs took it; pivots %lld warm, %lld cold\n", taken, lcps,
+              warm_pivots, cold_pivots);
+  EXPECT_GE(taken, lcps / 2);
+  EXPECT_LT(warm_pivots, cold_pivots);
+}
+
 // The rows a tool kept on the rest surface are taken again for a pose equal to its last one bit
 // for bit (contact_step.cpp, rows_of_tool): their key is the pose's tip, axis and tool shape, and
 // they stand only where a geometry is the rest surface. Four probes as above, two tool shapes (3
