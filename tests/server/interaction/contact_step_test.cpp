@@ -540,17 +540,8 @@ TEST(interaction_contact_step, LcpWarmStartGivesTheColdStartsAnswer) {
     taken += sw.lcp_warm_taken;
     lcps += sw.geometry_iterations;
     EXPECT_EQ(sc.lcp_warm_taken, 0);
-    for (int t = 0; t < 4; ++t) {
-      EXPECT_EQ(cw[t].in_contact, cc[t].in_contact) << "step " << step << " probe " << t;
-      for (int i = 0; i < 3; ++i) {
-        EXPECT_EQ(cw[t].force_n[i], cc[t].force_n[i]) << "step " << step << " probe " << t;
-        for (int j = 0; j < 3; ++j)
-          EXPECT_EQ(cw[t].stiffness_n_per_m(i, j), cc[t].stiffness_n_per_m(i, j))
-              << "step " << step << " probe " << t;
-      }
-      EXPECT_EQ(cw[t].nodes, cc[t].nodes) << "step " << step << " probe " << t;
-      EXPECT_EQ(cw[t].validity_radius_m, cc[t].validity_radius_m) << "step " << step;
-    }
+    for (int t = 0; t < 4; ++t)
+      expect_same_answer(cw[t], cc[t], "step " + std::to_string(step) + " probe " + std::to_string(t));
   }
   std::printf("warm start: %d of %d LCPs took it; pivots %lld warm, %lld cold\n", taken, lcps,
               warm_pivots, cold_pivots);
