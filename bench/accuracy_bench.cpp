@@ -40,6 +40,10 @@
 // element, with the element and the host's nu) and the discretization error (--disc-table,
 // default DIR/discretization_error.csv: every element and mesh, keyed by the host's element, nu,
 // vertex and tetrahedron counts). The committed ones are in share/accuracy/.
+//
+// --finest-only: only the finest mesh of each scene (the bundled one for the brain), no C3D10
+// patch press (no discretization rows, those columns nan) and no CalculiX comparison: the runs
+// the tier table takes (its rows are the finest mesh's), at a fraction of the time.
 #include "common/cli.hpp"
 #include "common/stats.hpp"
 #include "idl/wire/recording_io.hpp"
@@ -510,6 +514,7 @@ bool have_program(const char* name) {
 int main(int argc, char** argv) {
   bool csv = false;
   bool exact_only = false;
+  bool finest_only = false;
   std::string out_dir, table_path, disc_table_path;
   std::vector<std::string> elements, press_filter;
   std::vector<std::string> scenes{"cube_cylinder", "brain_artery"};
@@ -529,6 +534,8 @@ int main(int argc, char** argv) {
   cli->add_option("--press", press_filter, "presses to run: 5, 10, 20, L10 (default all)")
       ->check(CLI::IsMember({"5", "10", "20", "L10"}));
   cli->add_flag("--exact-only", exact_only, "leave out the ITERATIVE coupling runs");
+  cli->add_flag("--finest-only", finest_only,
+                "only the finest mesh, no C3D10 and no CalculiX: the tier table's runs");
   cli->add_option("--table", table_path,
                   "measured force-error table for the server (default DIR/force_error.csv)");
   cli->add_option("--disc-table", disc_table_path,
@@ -561,7 +568,8 @@ int main(int argc, char** argv) {
         sc.tip_radius_m = 0.010;
         sc.patch_radius_m = 0.020;  // 3 or more face nodes on the coarse mesh
         sc.flat_face = true;
-        for (double f : {0.5, 1.0, 2.0}) sc.resolutions.push_back({"", cube_at(path, f), 0});
+        for (double f : {0.5, 1.0, 2.0})
+          if (!finest_only || f == 2.0) sc.resolutions.push_back({"", cube_at(path, f), 0});
       } else if (name == "brain_artery") {
         // The demo's press point on the right lateral surface, a 6 mm probe.
         sc.origin = Vec3(0.1605, 0.1125, 0.0787);
@@ -570,8 +578,10 @@ int main(int argc, char** argv) {
         sc.tip_radius_m = 0.006;
         sc.patch_radius_m = 0.012;
         const fs::path models = out / "models";
-        sc.resolutions.push_back({"", brain_at(11.0, models), 0});
-        sc.resolutions.push_back({"", brain_at(9.0, models), 0});
+        if (!finest_only) {
+          sc.resolutions.push_back({"", brain_at(11.0, models), 0});
+          sc.resolutions.push_back({"", brain_at(9.0, models), 0});
+        }
         sc.resolutions.push_back({"", neurosim::scene::load_model(src + "/scenes/brain_artery.scene"), 0});
       } else {
         throw std::runtime_error("--scene " + name + ": unknown (cube_cylinder, brain_artery)");
@@ -602,8 +612,11 @@ int main(int argc, char** argv) {
       double disc_err, model_err, total_err;
       double nu;  // the host's Poisson ratio
     };
-    const bool ccx = have_program("ccx");
-    if (!ccx)
+    const bool ccx = !finest_only && have_program("ccx");
+    if (finest_only)
+      std::fprintf(stderr, "accuracy_bench: --finest-only: no C3D10 and no CalculiX: "
+                           "discretization_error and total_error print nan\n");
+    else if (!ccx)
       std::fprintf(stderr, "accuracy_bench: note: ccx (calculix-ccx) not installed: "
                            "discretization_error and total_error print nan\n");
     std::ofstream conv_csv(out / "converged.csv");
@@ -801,7 +814,7 @@ int main(int argc, char** argv) {
     }
 
     // CalculiX on the cube.
-    if (have_program("ccx")) {
+    if (ccx) {
       std::ofstream c(out / "calculix.csv");
       c << "scene,tier,resolution,press_mm,disp_rel_error_ccx,force_rel_error_ccx,ccx_s\n";
       for (const auto& sc : cases) {
@@ -815,7 +828,7 @@ int main(int argc, char** argv) {
           if (!csv) std::printf("# calculix: %s\n", line);
         }
       }
-    } else {
+    } else if (!finest_only) {
       std::fprintf(stderr, "accuracy_bench: note: ccx (calculix-ccx) not installed: no CalculiX "
                            "comparison\n");
     }
