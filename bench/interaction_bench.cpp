@@ -249,7 +249,8 @@ int brain_contact(int steps, const ni::SimulationOptions& contact) {
 }
 
 // --four-probes: cube_cylinder.scene as it is (its 3 mm probe), four probes pressing 1.5-2.5 mm
-// into the cube's +x face at latency_bench's four station points (axis +x), one probe's pose new
+// into the cube's +x face at latency_bench's four station points (axis +z, the stations' identity
+// orientation: the shaft lies in the face), one probe's pose new
 // per step (a server stepping on each station's pose; each probe at 0.5 Hz, 1 kHz per station),
 // twice side by side: `lcp_warm` (SimulationOptions::lcp_warm_start, the default) and `lcp_cold`
 // (false), stepped alternately after 2000 warm-up steps each. Per step: thread CPU time p50 /
@@ -270,7 +271,7 @@ int four_probes(int steps) {
     ni::ToolPose& p = poses[static_cast<std::size_t>(k)];
     p.tip_m = Eigen::Vector3d(0.1 + r - 0.002 - 0.0005 * std::sin(2.0 * M_PI * 0.5 * t),
                               0.05 + 0.025 * std::cos(a), 0.05 + 0.025 * std::sin(a));
-    p.axis = Eigen::Vector3d::UnitX();
+    p.axis = Eigen::Vector3d::UnitZ();  // latency_bench's stations: identity orientation
     p.station = k;
   };
   for (long s = 0; s < 4; ++s) place(s);
