@@ -7,6 +7,7 @@
 #include "server/interaction/simulation.hpp"
 #include "tests/server/service/service_test_util.hpp"
 
+#include <algorithm>
 #include <map>
 #include <memory>
 #include <set>
@@ -91,6 +92,7 @@ inline void scripted_path_and_late_joiner(const Setup& setup) {
     std::vector<interaction::ToolContact> contacts(1);
     interaction::StepStats stats;
     std::size_t compared = 0, in_contact = 0;
+    double worst_k_rel = 0.0;
     std::uint64_t last_seq = 0;
     for (const auto& r : recs) {
       if (r.station != "path-1") continue;
@@ -116,9 +118,15 @@ inline void scripted_path_and_late_joiner(const Setup& setup) {
       // K goes through the inverse of the active rows' W, where a face row and the node rows of
       // its vertices are nearly dependent (kept definite by the 1e-8 row compliance): the
       // columns' last bits (the server's column worker groups its block solves otherwise than
-      // the in-process solver, 1e-16 relative) come out up to 1/eps larger in K. Measured at
-      // the first touch of this path: 1.4e-8 relative (the force agrees to 1e-9); 1e-6 leaves 70x.
-      EXPECT_LE((K - c.stiffness_n_per_m).norm(), 1e-6 * c.stiffness_n_per_m.norm()) << "seq " << r.tool_sequence;
+      // the in-process solver, 1e-16 relative) come out up to 1/eps larger in K. How many bits a
+      // block's width changes depends on the BLAS kernels: measured 1.4e-8 relative with AVX2
+      // kernels, 1.1e-6 (seq ~700, 3 mm in) with OpenBLAS's AVX-512 kernels on an AMD EPYC (the
+      // same machine with OPENBLAS_CORETYPE=Haswell: within 1e-6). The force agrees to 1e-9 on
+      // both; 1e-4 leaves 90x over the worst measured, and a wrong row or active set is off by
+      // O(1).
+      const double k_rel = (K - c.stiffness_n_per_m).norm() / c.stiffness_n_per_m.norm();
+      worst_k_rel = std::max(worst_k_rel, k_rel);
+      EXPECT_LE(k_rel, 1e-4) << "seq " << r.tool_sequence;
       const interaction::Vec3 nrm(r.normal[0], r.normal[1], r.normal[2]);
       EXPECT_LE((nrm - c.normal).norm(), 1e-9) << "seq " << r.tool_sequence;
       const interaction::Vec3 x0(r.x0[0], r.x0[1], r.x0[2]);
@@ -128,8 +136,9 @@ inline void scripted_path_and_late_joiner(const Setup& setup) {
     }
     EXPECT_GT(compared, 200u);
     EXPECT_GT(in_contact, 50u) << "the path should press into the face";
-    std::printf("scripted path: %zu ContactModels compared, %zu in contact, %llu poses sent\n", compared,
-                in_contact, static_cast<unsigned long long>(station.sent_count()));
+    std::printf("scripted path: %zu ContactModels compared, %zu in contact, %llu poses sent, K within "
+                "%.2e relative\n", compared, in_contact,
+                static_cast<unsigned long long>(station.sent_count()), worst_k_rel);
   }
 
   // Late joiner, while a station holds the tool pressed in (deterministic displacements).
