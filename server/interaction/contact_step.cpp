@@ -329,6 +329,8 @@ void State::reserve_workspace(const Model& m, int tools) {
   tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
   tool_order_.reserve(tool_rows_.capacity());
   tool_row_centre_.reserve(tool_rows_.capacity());
+  tool_row_plane_.reserve(tool_rows_.capacity());
+  tool_row_plane_h_.reserve(tool_rows_.capacity());
   tool_row_fallback_.reserve(tool_rows_.capacity());
   spread_triangles_.reserve(triangles);
   if (tool_rows_memo_.size() < static_cast<std::size_t>(tools)) tool_rows_memo_.resize(tools);
@@ -768,6 +770,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
       if (!bs.node_test_in[i]) continue;
       FeatureHit& seen = hits_[static_cast<std::size_t>(bs.node_hit[i])];
       seen.face_normal += n;
+      ++seen.normals;
       if (t < seen.triangle) {
         seen.triangle = t;
         seen.at.weights = {0.0, 0.0, 0.0};
@@ -895,6 +898,8 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   const TierLinearization* lin = tier_ ? &tier_->linearization(body) : nullptr;
   const std::size_t first = tool_rows_.size();
   tool_row_centre_.clear();  // per row from `first` on
+  tool_row_plane_.clear();
+  tool_row_plane_h_.clear();
   tool_row_fallback_.clear();
   bool projected_face = false;  // the tip has a projected face row on the body (smooth_tip)
   const bool smooth_tip = m.options_.contact_smooth_normals;
@@ -915,6 +920,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       ++reports;
     }
     const FeatureHit& h = hits_[i];
+    const std::size_t i0 = i;
     i = j;
     const SurfaceTriangle& tri = tris[h.triangle];
     const TriangleFeature f = key_feature(h.key);
@@ -923,42 +929,63 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     const double dn = d.norm();
     Vec3 n;
     bool radial = false;
+    bool exit_row = false;
+    int normals = 0;
+    for (std::size_t k = i0; k < j; ++k)
+      if (hits_[k].at_rest == h.at_rest) normals += hits_[k].normals;
+    Vec3 plane_n = Vec3::Zero();  // exit_row: the surface's plane for the entry rule
+    double plane_h = 0.0;
     if (f == TriangleFeature::kFace) {
       n = h.face_normal;
     } else {
-      // A node or an edge: radial from the part's centre (the point against a rigid sphere or
-      // capsule) when the centre is in front of the surface there; else (the centre beside the
-      // point, on the surface or behind it) along the mean normal of the triangles that report
-      // it. LINEAR: radial up to 90 degrees from the mean normal. With 60 a point 60-90 degrees
-      // off the part's axis took the half-space depth (radius - n.d), far more than the
-      // sphere's, and a flat press doubled its force as it passed half the tip radius (2 mm tip
-      // on 0.5 mm cells: 6.27 mN at 0.9 mm, 12.69 mN at 1.0 mm, 2.15x the rigid sphere's answer,
-      // Sneddon). The multirate tiers keep 60: their depth adds n . u0 of an equilibrium that
-      // may have carried the point far along the surface, which a nearly tangential normal
-      // turns into a depth (measured with 90: a 10 mm vertex press cycle in NONLINEAR reached
-      // 101.6 N against the block's 50.5 N bound, stability_test). Known defect: at d = r (the
-      // centre crossing the rest surface) every node row of a flat face switches from radial to
-      // the mean normal at once, a jump of the press (bench/RESULTS.md, "the row switch at d =
-      // r"). A smooth 60-90 degree blend into the mean normal removed the jump but made the
-      // closed haptic loop against the cube oscillate for good (37 mm/s limit cycle,
-      // haptic_server.SimulatedHandAgainstTheCubeSettles), so it was withdrawn.
+      // A node or an edge. The multirate tiers and the shaft: radial from the part's centre
+      // (the point against a rigid sphere or capsule) when the centre is in front of the surface
+      // there (the tiers: within 60 degrees of the mean normal), else along the mean normal of
+      // the triangles that report it (its depth the part's point on that line, below). The
+      // tiers keep 60: their depth adds n . u0 of an equilibrium that may have carried the point
+      // far along the surface, which a nearly tangential normal turns into a depth (measured
+      // with 90: a 10 mm vertex press cycle in NONLINEAR reached 101.6 N against the block's
+      // 50.5 N bound, stability_test).
+      // LINEAR, the tip: the sphere's normal where the point, pushed along its line (radial
+      // while the centre is within the feature's normal cone, else turning into the mean
+      // normal; tool_geometry.hpp exit_normal), leaves the sphere; the depth r - n . d, the
+      // sphere's tangent plane there. Over a flat surface the line is the mean normal whatever
+      // the centre's height, so nothing switches when the centre crosses the rest surface
+      // (d = r) and n does not turn as the tip moves along it: K = -N W^-1 N^T is the press's
+      // derivative. Radial up to 90 degrees and the mean normal past it (before) switched every
+      // node row of a flat face at once at d = r: |F| of the 2 mm tip on 1 mm cells 7.87 ->
+      // 16.03 mN (linear-tet) and 3.36 -> 13.19 mN (smoothed-tet) over 0.02 mm at a vertex, and
+      // a radial row under the tip pushed it off its node sideways (d / |d| turns by dx / |d|:
+      // +62 kN/m across the 3 mm tip 2.9 mm into the cube's node, which K leaves out). A 60-90
+      // degree blend of the radial direction into the mean normal made the press continuous but
+      // its normal turned with the tip's position far faster still (across the blend: the
+      // force's derivative 26 kN/m against K's 2.4) and the closed haptic loop against the cube
+      // oscillated for good (bench/RESULTS.md, "The 60-90 degree blend withdrawn").
       const Vec3 mean = normal_sum.normalized();
-      const double radial_from = tier_ ? 0.5 * dn : 0.0;  // cos 60 or cos 90 degrees
-      radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
-               d.dot(mean) > radial_from;
-      n = radial ? Vec3(d / dn) : mean;
+      if (!tier_ && !h.shaft) {
+        exit_row = true;
+        plane_n = mean;
+        plane_h = d.dot(mean);
+        radial = dn > 1e-9 * shape.tip_radius_m && plane_h > 0.0;  // not an entry (below)
+        n = exit_normal(d, mean, normal_sum.norm() / std::max(normals, 1), shape.tip_radius_m);
+      } else {
+        const double radial_from = tier_ ? 0.5 * dn : 0.0;  // cos 60 or cos 90 degrees
+        radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
+                 d.dot(mean) > radial_from;
+        n = radial ? Vec3(d / dn) : mean;
+      }
     }
     // A part whose centre lies deeper than behind_reach behind the surface does not push it.
-    if (n.dot(d) < -b.behind_reach_m) continue;
+    if ((exit_row ? plane_h : n.dot(d)) < -b.behind_reach_m) continue;
     double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
-    // A node or edge row along the mean normal: the part's point on the feature's normal line
-    // (the depth sqrt(r^2 - perp^2) - height, perp the centre's offset from the line), not the
-    // half-space's r - height. Where the line misses the part (perp >= r) the feature is beside
-    // it: the radial gap r - |d| (not touching), which the radial rows take at height 0 too.
-    // The half-space depth gave a node 2.12 mm from the 2 mm tip's centre, the centre 0.02 mm
-    // behind its tangent plane, a depth of 2.02 mm for one step of the brain slide (|F| 11 ->
-    // 18.6 -> 10.8 mN over 0.2 mm of tip motion).
-    if (!tier_ && f != TriangleFeature::kFace && n.dot(d) < dn * (1.0 - 1e-12)) {
+    // A node or edge row along the mean normal (the shaft's; the tiers'): the part's point on
+    // the feature's normal line (the depth sqrt(r^2 - perp^2) - height, perp the centre's offset
+    // from the line), not the half-space's r - height. Where the line misses the part (perp >= r)
+    // the feature is beside it: the radial gap r - |d| (not touching), which the radial rows take
+    // at height 0 too. The half-space depth gave a node 2.12 mm from the 2 mm tip's centre, the
+    // centre 0.02 mm behind its tangent plane, a depth of 2.02 mm for one step of the brain slide
+    // (|F| 11 -> 18.6 -> 10.8 mN over 0.2 mm of tip motion). LINEAR's tip rows take r - n . d.
+    if (!tier_ && !exit_row && f != TriangleFeature::kFace && n.dot(d) < dn * (1.0 - 1e-12)) {
       const double height = n.dot(d);
       const double perp2 = std::max(0.0, dn * dn - height * height);
       radius = perp2 < radius * radius ? std::sqrt(radius * radius - perp2) : radius - dn + height;
@@ -1026,6 +1053,8 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     if (!r.spread_pending) r.rest_depth_m += n.dot(offset);
     tool_rows_.push_back(r);
     tool_row_centre_.push_back(h.centre_m);
+    tool_row_plane_.push_back(exit_row ? plane_n : r.normal);
+    tool_row_plane_h_.push_back(exit_row ? plane_h : r.height_m);
     tool_row_fallback_.push_back(h.flat_fallback ? 1 : 0);
     if (smooth_tip && f == TriangleFeature::kFace && !h.shaft && !h.flat_fallback) projected_face = true;
   }
@@ -1037,11 +1066,15 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       if (kept != k) {
         tool_rows_[kept] = tool_rows_[k];
         tool_row_centre_[kept - first] = tool_row_centre_[k - first];
+        tool_row_plane_[kept - first] = tool_row_plane_[k - first];
+        tool_row_plane_h_[kept - first] = tool_row_plane_h_[k - first];
       }
       ++kept;
     }
     tool_rows_.resize(kept);
     tool_row_centre_.resize(kept - first);
+    tool_row_plane_.resize(kept - first);
+    tool_row_plane_h_.resize(kept - first);
   }
   // The tool pushes the surface it entered; a row behind the surface (the part's centre behind
   // its feature's plane) is kept only if the part can have reached its tissue through that
@@ -1077,23 +1110,25 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   std::size_t entry = tool_rows_.size();
   for (std::size_t k = first; k < tool_rows_.size(); ++k) {
     if (tool_rows_[k].depth_m < 0.0 || tool_rows_[k].radial) continue;
-    if (entry == tool_rows_.size() || tool_rows_[k].height_m > tool_rows_[entry].height_m) entry = k;
+    if (entry == tool_rows_.size() ||
+        tool_row_plane_h_[k - first] > tool_row_plane_h_[entry - first])
+      entry = k;
   }
   if (entry == tool_rows_.size()) return;  // nothing touched: no row is behind a surface
-  const Vec3 n_entry = tool_rows_[entry].normal;
+  const Vec3 n_entry = tool_row_plane_[entry - first];
   const Vec3 p_entry = tool_rows_[entry].point_m;
   std::size_t kept = first;
   for (std::size_t k = first; k < tool_rows_.size(); ++k) {
     const Row& r = tool_rows_[k];
     bool drop = false;
-    if (r.height_m < -kOnSurfaceM) {
+    if (tool_row_plane_h_[k - first] < -kOnSurfaceM) {
       const Vec3& c = tool_row_centre_[k - first];
       const double part_r = r.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
       const double front = n_entry.dot(r.point_m - p_entry);  // in front of the entry's plane
       const double below = n_entry.dot(c - r.point_m);        // below the part's centre
       const bool held = (r.point_m - c).squaredNorm() <= part_r * part_r;
       const bool swept = front <= part_r && below <= part_r;
-      drop = r.normal.dot(n_entry) < 0.5 || (!held && !swept);
+      drop = tool_row_plane_[k - first].dot(n_entry) < 0.5 || (!held && !swept);
     }
     if (drop) continue;
     if (kept != k) tool_rows_[kept] = r;

@@ -107,6 +107,7 @@ struct FeatureHit {
   Vec3 centre_m{Vec3::Zero()};  // the tool part's centre for this feature
   // The triangle's outward unit normal; a node hit: the sum over the node's reporting triangles.
   Vec3 face_normal{Vec3::Zero()};
+  int normals{1};  // unit normals summed in face_normal
 };
 
 // What a step changes on a body.
@@ -353,6 +354,11 @@ class State {
   std::vector<int> tool_order_;    // indices of tool_rows_ within the margin, deepest first
   // Per row of tool_rows_ appended by merge_features: its part's centre, unit m (the entry rule).
   std::vector<mesh::Vec3> tool_row_centre_;
+  // Per row as tool_row_centre_: the surface's plane at its point (normal, the centre's height
+  // above it) for the entry rule; the row's own normal and height but for LINEAR's tip node and
+  // edge rows (their normal the tip's at the point's exit along the surface normal).
+  std::vector<mesh::Vec3> tool_row_plane_;
+  std::vector<double> tool_row_plane_h_;
   std::vector<char> tool_row_fallback_;  // per row from the body's first: a flat fallback row
   struct SpreadMemo {  // a spread (spread_row) by its inputs: body, point, normal, radius
     int body{-1};

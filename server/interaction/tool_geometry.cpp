@@ -20,6 +20,33 @@ double elliptic_approach(double a_m, double b_m) {
 }
 }  // namespace
 
+mesh::Vec3 exit_normal(const mesh::Vec3& d, const mesh::Vec3& m, double cos_alpha, double r) {
+  const double dn = d.norm();
+  mesh::Vec3 a = m;
+  if (dn > 1e-9 * r) {
+    const double ca = std::clamp(cos_alpha, -1.0, 1.0);
+    const double alpha = std::acos(ca);
+    const double theta = std::acos(std::clamp(d.dot(m) / dn, -1.0, 1.0));
+    if (theta <= alpha) {
+      a = d / dn;
+    } else {
+      const mesh::Vec3 side = d - d.dot(m) * m;
+      const double sn = side.norm();
+      const double phi = alpha * (M_PI - theta) / (M_PI - alpha);
+      if (sn > 1e-12 * dn) a = std::cos(phi) * m + std::sin(phi) * (side / sn);
+    }
+  }
+  const double along = a.dot(d);
+  const double perp2 = std::max(0.0, d.squaredNorm() - along * along);
+  if (perp2 < r * r) {
+    const mesh::Vec3 v = d + (std::sqrt(r * r - perp2) - along) * a;
+    const double vn = v.norm();
+    if (vn > 0.0) return v / vn;
+    return a;
+  }
+  return (d - along * a) / std::sqrt(perp2);
+}
+
 double patch_near_field(double a_m, double b_m, double rho_m, double e_star_pa) {
   if (!(rho_m > 0.0) || !(a_m > 0.0) || !(b_m > 0.0)) return 0.0;
   constexpr double kQ = (0.766 / 0.75) * (0.766 / 0.75);

