@@ -281,12 +281,12 @@ TEST(interaction_contact_step, PressThroughTheTipCentreOnTheSurfaceIsContinuous)
 // in the tip position (h = 0.1 um), through d = r: the press of the test above at 1.5, 1.99,
 // 2.01 and 2.5 mm (linear-tet), and the 3 mm tip of scenes/cube_cylinder.scene on the node at
 // the centre of the cube's +x face 2.73 mm deep (where the simulated hand of
-// haptic_server.SimulatedHandAgainstTheCubeSettles comes to rest) and 0.5 mm beside it. Along
+// haptic_server.SimulatedHandAgainstTheCubeSettles comes to rest) and 0.7 mm beside it. Along
 // the press the rows' normals do not turn (contact_step.cpp merge_features: the sphere's normal
 // where the point leaves it along the mean normal), so K e_x is the press's derivative: asserted
 // within 1 % of it. Across the press a node row's normal still turns with the tip (by dx / r),
 // which K leaves out: on the cube's node the force's derivative across it is 4149 / 2075 N/m,
-// K's 0 (measured; the force along the press, no lateral force on the node and none 0.5 mm
+// K's 0 (measured; the force along the press, no lateral force on the node and none 0.7 mm
 // beside it, where the face row alone holds the tip: K within 1 % of the whole derivative
 // there). Before, with radial rows up to 90 degrees, the node row's turn was dx / |d| (d the
 // centre's distance to the node, 0.27 mm here): +62 kN/m across at 2.9 mm; the withdrawn 60-90
