@@ -211,6 +211,24 @@ TEST_P(ContactStepTier, WideTipInAFaceCellIsStopped) {
   EXPECT_GT(centre_u, 1e-3);
 }
 
+// The 16 mm block of 1 mm cells the d = r tests press (its face x = 0 under a 2 mm tip), and the
+// three points of that face they press: a vertex, an edge midpoint, a face centre.
+struct FineFace {
+  Block b;
+  SimulationOptions o;
+  std::vector<std::pair<std::string, Vec3>> at;
+};
+FineFace fine_face() {
+  FineFace f;
+  f.b.edge_m = 0.016;
+  f.b.cells = 16;
+  f.o.max_contact_nodes_per_tool = 1200;
+  f.at = {{"vertex", Vec3(0, 0.008, 0.008)},
+          {"edge", Vec3(0, 0.0085, 0.008)},
+          {"face", Vec3(0, 0.008 + 2e-3 / 3, 0.008 + 1e-3 / 3)}};
+  return f;
+}
+
 // The press through d = r (the tip's centre crossing the rest surface), LINEAR: the 2 mm tip
 // along the normal of a 16 mm block of 1 mm Kuhn cells (cells smaller than the tip) at a vertex,
 // an axis edge's midpoint and a triangle's centroid, 0.9 to 3 mm deep, on linear-tet (nu 0.45)
@@ -229,18 +247,12 @@ TEST_P(ContactStepTier, WideTipInAFaceCellIsStopped) {
 // half-space depth once doubled a flat press at 0.9 -> 1.0 mm).
 TEST(interaction_contact_step, PressThroughTheTipCentreOnTheSurfaceIsContinuous) {
   for (const char* element : {"linear-tet", "smoothed-tet"}) {
-    Block b;
-    b.edge_m = 0.016;
-    b.cells = 16;
+    FineFace face = fine_face();
+    Block& b = face.b;
     b.element = element;
     b.poisson = std::string(element) == "smoothed-tet" ? 0.49 : 0.45;
-    SimulationOptions o;
-    o.max_contact_nodes_per_tool = 1200;
-    const auto model = build_model(block_scene(b), o);
-    const std::vector<std::pair<std::string, Vec3>> at{
-        {"vertex", Vec3(0, 0.008, 0.008)},
-        {"edge", Vec3(0, 0.0085, 0.008)},
-        {"face", Vec3(0, 0.008 + 2e-3 / 3, 0.008 + 1e-3 / 3)}};
+    const auto model = build_model(block_scene(b), face.o);
+    const auto& at = face.at;
     const double r = b.tip_radius_m, eps = 1e-5;
     std::vector<double> depths;
     for (int k = 9; k <= 30; ++k) depths.push_back(1e-4 * k);
@@ -319,16 +331,10 @@ TEST(interaction_contact_step, StiffnessIsThePressDerivativeThroughDEqualsR) {
       EXPECT_LE((k - fd).norm(), 0.01 * fd.norm()) << what;
     }
   };
-  Block b;
-  b.edge_m = 0.016;
-  b.cells = 16;
-  SimulationOptions o;
-  o.max_contact_nodes_per_tool = 1200;
-  const auto model = build_model(block_scene(b), o);
-  const std::vector<std::pair<std::string, Vec3>> at{
-      {"vertex", Vec3(0, 0.008, 0.008)},
-      {"edge", Vec3(0, 0.0085, 0.008)},
-      {"face", Vec3(0, 0.008 + 2e-3 / 3, 0.008 + 1e-3 / 3)}};
+  const FineFace face = fine_face();
+  const Block& b = face.b;
+  const auto model = build_model(block_scene(b), face.o);
+  const auto& at = face.at;
   for (const auto& [name, p] : at) {
     auto sim = Simulation::from_model(model);
     for (double d : {1.5e-3, 1.99e-3, 2.01e-3, 2.5e-3})
