@@ -545,6 +545,22 @@ void slide_cases(const std::vector<SlideCase>& cases, const SimulationOptions& o
   }
 }
 
+// The generated block (irregular vertex valences, 10 mm cells) the replay-contract tests walk
+// and hold their probes on, and options making every compliance column at set-up (the columns a
+// walk solves in blocks may differ from a fresh State's at round-off).
+Block probe_block(double tip_radius_m) {
+  Block b;
+  b.generated = true;
+  b.cells = 6;
+  b.tip_radius_m = tip_radius_m;
+  return b;
+}
+SimulationOptions all_columns() {
+  SimulationOptions o;
+  o.precompute_contact_columns = true;
+  return o;
+}
+
 // The replay contract: the answer at a pose is the pose's, whatever the steps before it did
 // (the step keeps its candidate triangles while the tool moves little, and a node's normal sums
 // its triangles' in the list's order: the kept list must give the fresh search's order). A tip
@@ -555,12 +571,8 @@ void slide_cases(const std::vector<SlideCase>& cases, const SimulationOptions& o
 // block's faces are flat (their triangles' normals sum exactly in any order): this checks which
 // triangles are searched, not their order (checked on the brain's curved surface, RESULTS).
 TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
-  Block b;
-  b.generated = true;
-  b.cells = 6;
-  b.tip_radius_m = 0.004;
-  SimulationOptions o;
-  o.precompute_contact_columns = true;
+  Block b = probe_block(0.004);
+  SimulationOptions o = all_columns();
   const auto model = build_model(block_scene(b), o);
   auto walked = Simulation::from_model(model);
   std::vector<ToolContact> c, fresh_c;
@@ -595,12 +607,8 @@ TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
 // stiffness, nodes and validity radius to the bit (default rows: spread, smooth normals, near
 // field). All compliance columns made with the State, as above.
 TEST(interaction_contact_step, FourHeldProbesAnswerAsAFreshState) {
-  Block b;
-  b.generated = true;
-  b.cells = 6;
-  b.tip_radius_m = 0.003;
-  SimulationOptions o;
-  o.precompute_contact_columns = true;
+  Block b = probe_block(0.003);
+  SimulationOptions o = all_columns();
   const auto model = build_model(block_scene(b), o);
   auto held = Simulation::from_model(model);
   std::vector<ToolPose> poses(4);
@@ -642,12 +650,8 @@ TEST(interaction_contact_step, FourHeldProbesAnswerAsAFreshState) {
 // is wrong for them) and every 15th a probe lifted out and pushed back deeper (an old set); at
 // every step the answers equal those of a State that starts cold, to the bit, with fewer pivots.
 TEST(interaction_contact_step, LcpWarmStartGivesTheColdStartsAnswer) {
-  Block b;
-  b.generated = true;
-  b.cells = 6;
-  b.tip_radius_m = 0.003;
-  SimulationOptions o;
-  o.precompute_contact_columns = true;
+  Block b = probe_block(0.003);
+  SimulationOptions o = all_columns();
   auto warm_model = build_model(block_scene(b), o);
   o.lcp_warm_start = false;
   auto cold_model = build_model(block_scene(b), o);
@@ -708,13 +712,9 @@ TEST(interaction_contact_step, LcpWarmStartGivesTheColdStartsAnswer) {
 // fresh State alike: counted, not compared).
 TEST(interaction_contact_step, HeldProbesRowsFollowPoseToolAndRestSurface) {
   for (const int iterations : {1, 3}) {
-    Block b;
-    b.generated = true;
-    b.cells = 6;
-    b.tip_radius_m = 0.003;
+    Block b = probe_block(0.003);
     b.second_tip_radius_m = 0.002;
-    SimulationOptions o;
-    o.precompute_contact_columns = true;
+    SimulationOptions o = all_columns();
     o.contact_geometry_iterations = iterations;
     const auto model = build_model(block_scene(b), o);
     auto held = Simulation::from_model(model);
