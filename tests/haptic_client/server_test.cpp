@@ -308,7 +308,10 @@ TEST(haptic_server, SimulatedHandAgainstTheCubeSettles) {
   // face (E = 1 MPa, far stiffer than the Omni may render) for 10 s; the motion must die out.
   // Stability is only judged on a run where the server answered in time throughout (no
   // watchdog timeout: a stalled server fades the force out, and the hand then falls in, which
-  // is the safety rule working, not an oscillation); up to 3 runs on a loaded machine.
+  // is the safety rule working, not an oscillation); up to 3 runs on a loaded machine. When
+  // none of them is timely (seen at load ~13 on 2 cores: the server's threads starved past the
+  // 50 ms watchdog), the test gives no verdict (skipped, with the counts) rather than fail on
+  // load alone; server latency itself is measured by latency_bench, not judged here.
   if (!fs::exists(server_binary())) GTEST_SKIP() << "no neurosim-server at " << server_binary();
   const fs::path dir = neurosim::testing::temp_dir("haptic_server_hand");
   const std::string prefix = "hhand" + std::to_string(::getpid()) + "_";
@@ -335,7 +338,13 @@ TEST(haptic_server, SimulatedHandAgainstTheCubeSettles) {
         static_cast<unsigned long long>(cnt.timeouts),
         static_cast<unsigned long long>(cnt.models_accepted), sum.max_force_step_n);
     if (cnt.timeouts > 0) {
-      if (attempt == 3) FAIL() << "the server never answered in time for 10 s (3 runs)";
+      if (attempt == 3) {
+        fs::remove_all(dir);
+        GTEST_SKIP() << "no verdict: the server missed the 50 ms watchdog in each of 3 runs of "
+                        "10 s (last run: "
+                     << cnt.timeouts << " timeouts, model age p99 " << sum.model_age_p99_ms
+                     << " ms); the machine is too loaded to judge closed-loop stability";
+      }
       continue;
     }
     // Per second: largest speed (from positions); and the last second's speed RMS.
