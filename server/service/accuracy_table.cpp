@@ -1,6 +1,7 @@
 #include "server/service/accuracy_table.hpp"
 
 #include "server/fem/element.hpp"
+#include "server/fem/served_tiers.hpp"
 #include "server/service/csv_fields.hpp"
 
 #include <algorithm>
@@ -28,6 +29,9 @@ AccuracyTable AccuracyTable::read(const std::filesystem::path& file) {
     r.scene = in.text(0);
     const auto tier = fem::parse_tier(in.text(1));
     if (!tier) in.fail("unknown tier '" + in.text(1) + "'");
+    // A withdrawn tier's rows would never be read (no scene runs it): a stale table.
+    if (!fem::tier_served(*tier))
+      in.fail("tier '" + in.text(1) + "' is withdrawn (no scene runs it): remove its rows");
     r.tier = *tier;
     r.max_strain = in.number(2, "max_strain");
     r.force_rel_error = in.number(3, "force_rel_error");

@@ -35,7 +35,8 @@ class AccuracyTable {
   // CSV with '#' comment lines and the header
   // "scene,tier,max_strain,force_rel_error,element,poisson_ratio" (or the old
   // "scene,tier,max_strain,force_rel_error"). Throws std::runtime_error naming the file and line
-  // on a missing file, a bad header, an unknown tier or element, or a value that is not a finite
+  // on a missing file, a bad header, an unknown tier or element, a row of a withdrawn tier
+  // (fem::tier_served: COROTATIONAL, which no scene runs), or a value that is not a finite
   // number >= 0.
   static AccuracyTable read(const std::filesystem::path& file);
   explicit AccuracyTable(std::vector<Row> rows);

@@ -2,6 +2,8 @@
 // error at a strain (upper envelope of the measured errors, linear in strain, from 0 at zero
 // strain; the scene's rows first, else every scene's; beyond the table the largest error).
 #include "server/service/accuracy_table.hpp"
+
+#include "server/fem/served_tiers.hpp"
 #include "test_support.hpp"
 
 #include <gtest/gtest.h>
@@ -86,6 +88,9 @@ TEST(AccuracyTable, MalformedTablesNameFileAndLine) {
   const std::string now = "scene,tier,max_strain,force_rel_error,element,poisson_ratio\n";
   EXPECT_PRED2(contains, error_of(old + "cube,QUADRATIC,0.1,0.2\n"),
                "bad.csv:2: unknown tier 'QUADRATIC'");
+  EXPECT_PRED2(contains, error_of(now + "cube,COROTATIONAL,0.1,0.2,linear-tet,0.4\n"),
+               "bad.csv:2: tier 'COROTATIONAL' is withdrawn")
+      << "a withdrawn tier's rows are never read";
   EXPECT_PRED2(contains, error_of(now + "#\ncube,LINEAR,0.1,0.2,quadratic-tet,0.4\n"),
                "bad.csv:3: unknown element 'quadratic-tet'");
   EXPECT_PRED2(contains, error_of(old + "cube,LINEAR,0.1,0.2,linear-tet,0.4\n"),
@@ -95,10 +100,13 @@ TEST(AccuracyTable, MalformedTablesNameFileAndLine) {
                "bad.csv:2 poisson_ratio: 'nan'");
 }
 
+// The committed table reads (no rows of the withdrawn COROTATIONAL tier) and has the served
+// tiers' rows of both scenes.
 TEST(AccuracyTable, TheCommittedTableReads) {
   const AccuracyTable t =
       AccuracyTable::read(neurosim::testing::source_dir() / "share/accuracy/force_error.csv");
-  for (auto tier : {fem::Tier::kLinear, fem::Tier::kCorotational, fem::Tier::kNonlinear}) {
+  for (const auto& r : t.rows()) EXPECT_TRUE(fem::tier_served(r.tier)) << r.scene;
+  for (auto tier : {fem::Tier::kLinear, fem::Tier::kNonlinear}) {
     for (const char* scene : {"cube_cylinder", "brain_artery"}) {
       const ExpectedError e = t.expected(tier, 0.1, scene);
       EXPECT_TRUE(e.known) << fem::tier_name(tier) << " " << scene;
