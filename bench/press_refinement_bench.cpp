@@ -1,0 +1,373 @@
+// press_refinement_bench: the coarse brain's patch press (FemBrainPress's problem: the Colin27
+// brain of `neurosim-model --cell-size C`, the surface nodes within 12 mm of the topmost node
+// held and pressed straight down) solved by CalculiX C3D10 (a node at the middle of every edge)
+// and by smoothed-tet and linear-tet on the same mesh, in NONLINEAR (neo-Hookean as
+// fem::write_calculix_input: C10 = E / (4 (1 + nu)), D1 = 6 (1 - 2 nu) / E; ccx NLGEOM, equal
+// increments, *CONTROLS 1e-9; ours fem::EquilibriumSolver) and LINEAR (ccx *ELASTIC; ours
+// fem::StaticSolver), on the mesh and on its 1 -> 8 splits (tet_split.hpp: the same geometry,
+// clamp and patch: a new node is held when both ends of its edge are). The question: how much of
+// an element's ratio to C3D10 on the coarse mesh is C3D10's own error there (C3D10 is
+// conforming: with the patch held its force is above the continuum's and falls under refinement).
+//
+// --region R: the press's neighbourhood only (sub_model.hpp: the tetrahedra with centroid within
+// R of the topmost node, the cut faces clamped, each split keeping exactly that clamp), so that
+// C3D10 NLGEOM on the split mesh runs in minutes; a different problem from the whole brain's
+// (a nearer clamp), the same for every element and split. --region 0: the whole brain, its base
+// fixed as in the scene.
+//
+// Prints per mesh, nu and model: each element's patch force and its ratio to C3D10 on the same
+// mesh and on the finest mesh C3D10 ran on; writes DIR/press_refinement.csv.
+// `press_refinement_bench --out DIR --region 40 --splits 1 --depth 10 --nu 0.49`.
+#include "common/cli.hpp"
+#include "server/fem/calculix.hpp"
+#include "server/fem/equilibrium_solver.hpp"
+#include "server/fem/static_solver.hpp"
+#include "server/scene/compile.hpp"
+#include "sub_model.hpp"
+#include "tet_split.hpp"
+
+#include <Eigen/Core>
+
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace fs = std::filesystem;
+namespace fem = neurosim::fem;
+using Vec3 = Eigen::Vector3d;
+
+namespace {
+
+constexpr double kPatchRadiusM = 0.012;  // FemBrainPress's patch: within 12 mm of the top node
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// The patch force along +z (the tissue pushing back up) from reactions, unit N.
+double patch_force(const Eigen::VectorXd& reaction_n, const std::vector<int>& nodes) {
+  double f = 0.0;
+  for (int v : nodes) f -= reaction_n[3 * v + 2];
+  return f;
+}
+
+// The mesh with a node at the middle of every edge, CalculiX's C3D10 order (corners, then the
+// mid-nodes of edges 12 23 31 14 24 34).
+struct Quadratic {
+  std::vector<Vec3> nodes;
+  std::vector<std::array<int, 10>> elements;
+  std::map<std::pair<int, int>, int> mid;
+  // The corners and the mid-nodes of every edge between two of them.
+  std::vector<int> with_mid(const std::vector<int>& corners) const {
+    std::vector<char> in(nodes.size(), 0);
+    for (int v : corners) in[static_cast<std::size_t>(v)] = 1;
+    std::vector<int> out = corners;
+    for (const auto& [edge, id] : mid)
+      if (in[static_cast<std::size_t>(edge.first)] && in[static_cast<std::size_t>(edge.second)])
+        out.push_back(id);
+    return out;
+  }
+};
+
+Quadratic quadratic(const neurosim::mesh::TetMesh& m) {
+  Quadratic q;
+  q.nodes = m.vertices();
+  auto mid_node = [&](int a, int b) {
+    const auto key = std::minmax(a, b);
+    const auto it = q.mid.find(key);
+    if (it != q.mid.end()) return it->second;
+    const int id = static_cast<int>(q.nodes.size());
+    q.nodes.push_back(0.5 * (m.vertices()[static_cast<std::size_t>(a)] +
+                             m.vertices()[static_cast<std::size_t>(b)]));
+    q.mid.emplace(key, id);
+    return id;
+  };
+  for (const auto& t : m.tets())
+    q.elements.push_back({t[0], t[1], t[2], t[3], mid_node(t[0], t[1]), mid_node(t[1], t[2]),
+                          mid_node(t[2], t[0]), mid_node(t[0], t[3]), mid_node(t[1], t[3]),
+                          mid_node(t[2], t[3])});
+  return q;
+}
+
+// C3D10 by ccx (one thread): the patch force, unit N.
+double c3d10_force(const Quadratic& q, const fem::Material& mat, const std::vector<int>& fixed_q,
+                   const std::vector<int>& patch_q, double depth_m, bool nlgeom, int increments,
+                   const fs::path& dir, const std::string& job) {
+  fs::create_directories(dir);
+  {
+    std::ofstream out(dir / (job + ".inp"));
+    out.precision(13);  // ccx reads at most 20 characters per number
+    auto node_set = [&](const char* name, const std::vector<int>& set) {
+      out << "*NSET, NSET=" << name << "\n";
+      for (std::size_t i = 0; i < set.size(); ++i)
+        out << set[i] + 1 << (i + 1 == set.size() || i % 10 == 9 ? "\n" : ", ");
+    };
+    out << "** press_refinement_bench " << job << "\n*NODE, NSET=NALL\n";
+    for (std::size_t v = 0; v < q.nodes.size(); ++v)
+      out << v + 1 << ", " << q.nodes[v].x() << ", " << q.nodes[v].y() << ", " << q.nodes[v].z()
+          << "\n";
+    out << "*ELEMENT, TYPE=C3D10, ELSET=EALL\n";
+    for (std::size_t e = 0; e < q.elements.size(); ++e) {
+      out << e + 1;
+      for (int n : q.elements[e]) out << ", " << n + 1;
+      out << "\n";
+    }
+    const double e = mat.youngs_modulus_pa, nu = mat.poisson_ratio;
+    out << "*MATERIAL, NAME=M\n";
+    if (nlgeom)
+      out << "*HYPERELASTIC, NEO HOOKE\n" << e / (4.0 * (1.0 + nu)) << ", "
+          << 6.0 * (1.0 - 2.0 * nu) / e << "\n";
+    else
+      out << "*ELASTIC\n" << e << ", " << nu << "\n";
+    out << "*SOLID SECTION, ELSET=EALL, MATERIAL=M\n";
+    node_set("NFIX", fixed_q);
+    node_set("NPRESS", patch_q);
+    if (nlgeom) {
+      const double inc = 1.0 / increments;
+      out << "*STEP, NLGEOM, INC=" << 100 * increments << "\n*STATIC\n"
+          << inc << ", 1.0, " << inc * 1e-4 << ", " << inc << "\n"
+          << "*CONTROLS, PARAMETERS=FIELD\n1e-9, 1e-9\n";
+    } else {
+      out << "*STEP\n*STATIC\n";
+    }
+    out << "*BOUNDARY\nNFIX, 1, 3\nNPRESS, 1, 1, 0\nNPRESS, 2, 2, 0\nNPRESS, 3, 3, " << -depth_m
+        << "\n*NODE PRINT, NSET=NALL\nU\n*NODE PRINT, NSET=NPRESS, TOTALS=NO\nRF\n*END STEP\n";
+  }
+  fs::remove(dir / (job + ".dat"));
+  const std::string cmd = "cd '" + dir.string() +
+                          "' && OMP_NUM_THREADS=1 CCX_NPROC_EQUATION_SOLVER=1 timeout -k 5 7200 "
+                          "ccx -i " + job + " > " + job + ".log 2>&1";
+  const int status = std::system(cmd.c_str());
+  const int code = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : -1;
+  if (code != 0)
+    throw std::runtime_error("ccx failed on " + (dir / (job + ".inp")).string() + " (exit " +
+                             std::to_string(code) + ", log " + (dir / (job + ".log")).string() + ")");
+  const auto r = fem::read_calculix_dat(dir / (job + ".dat"), q.nodes.size());
+  if (nlgeom && r.time < 1.0 - 1e-9)
+    throw std::runtime_error((dir / (job + ".dat")).string() + ": NLGEOM step ended at time " +
+                             std::to_string(r.time));
+  for (int v : patch_q)
+    if (!r.has_reaction[static_cast<std::size_t>(v)])
+      throw std::runtime_error((dir / (job + ".dat")).string() + ": no RF for node " +
+                               std::to_string(v + 1));
+  return patch_force(r.reaction_n, patch_q);
+}
+
+// Our element on the corner mesh: NONLINEAR (EquilibriumSolver) or LINEAR (StaticSolver).
+double element_force(const neurosim::mesh::TetMesh& m, fem::Material mat, fem::Element element,
+                     const std::vector<int>& fixed, const std::vector<int>& patch, double depth_m,
+                     bool nonlinear) {
+  mat.element = element;
+  const fem::MaterialMap mats = fem::MaterialMap::uniform(mat);
+  if (nonlinear) {
+    fem::PrescribedDofs pressed;
+    pressed.nodes = patch;
+    pressed.displacement_m = Vec3(0.0, 0.0, -depth_m);
+    fem::EquilibriumSolver solver({&m, mats, fem::Tier::kNonlinear, fixed, {pressed}, {}});
+    fem::NewtonOptions o;
+    o.tangent_predictor = true;
+    const auto s = solver.solve(Eigen::VectorXd(), o);
+    return patch_force(s.reaction_n, patch);
+  }
+  Eigen::VectorXd values(3 * static_cast<Eigen::Index>(patch.size()));
+  for (std::size_t i = 0; i < patch.size(); ++i)
+    values.segment<3>(3 * static_cast<Eigen::Index>(i)) = Vec3(0.0, 0.0, -depth_m);
+  const auto s = fem::StaticSolver(m, mats, fixed).solve_prescribed(patch, values);
+  return patch_force(s.reaction_n, patch);
+}
+
+struct Level {
+  int split{0};
+  std::size_t nodes{0}, tets{0}, patch_nodes{0}, c3d10_nodes{0};
+};
+
+struct Result {
+  int split;
+  double nu;
+  std::string model, element;  // model: NONLINEAR / LINEAR; element: C3D10, smoothed-tet, ...
+  double force_n, seconds;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string out_dir;
+  double cell_mm = 10.0, depth_mm = 10.0, region_mm = 0.0;
+  int splits = 1, c3d10_splits = -1, increments = 10;
+  std::vector<double> nus;
+  bool skip_linear = false;
+  neurosim::cli::Parser cli("press_refinement_bench",
+                            "The coarse brain's patch press in C3D10 (ccx), smoothed-tet and "
+                            "linear-tet, NONLINEAR and LINEAR, on the mesh and its 1 -> 8 splits.");
+  cli->add_option("--out", out_dir, "output folder (models, ccx decks, press_refinement.csv)")
+      ->required();
+  cli->add_option("--cell-size", cell_mm, "neurosim-model --cell-size, unit mm")->capture_default_str();
+  cli->add_option("--depth", depth_mm, "press depth, unit mm")->capture_default_str();
+  cli->add_option("--region", region_mm,
+                  "sub-model radius around the top node, unit mm (0: the whole brain)")
+      ->capture_default_str();
+  cli->add_option("--splits", splits, "1 -> 8 splits: meshes 0..N")->check(CLI::Range(0, 3))
+      ->capture_default_str();
+  cli->add_option("--c3d10-splits", c3d10_splits, "C3D10 on meshes 0..N only (default: all)");
+  cli->add_option("--increments", increments, "ccx NLGEOM equal increments")->capture_default_str();
+  cli->add_option("--nu", nus, "Poisson ratio, repeatable (default 0.49)");
+  cli->add_flag("--no-linear", skip_linear, "NONLINEAR only");
+  if (auto rc = cli.parse(argc, argv)) return *rc;
+  if (nus.empty()) nus.push_back(0.49);
+  if (c3d10_splits < 0) c3d10_splits = splits;
+  try {
+    const fs::path out(out_dir);
+    const fs::path models = out / "models";
+    fs::create_directories(models);
+    const std::string name = "brain_press_c" + std::to_string(static_cast<int>(std::lround(cell_mm * 10)));
+    if (!fs::exists(models / (name + ".scene"))) {
+      const std::string cmd = std::string(NEUROSIM_BIN_DIR) + "/neurosim-model --cell-size " +
+                              std::to_string(cell_mm) + " --name " + name + " --out-dir '" +
+                              models.string() + "' > '" + (models / (name + ".log")).string() +
+                              "' 2>&1";
+      if (std::system(cmd.c_str()) != 0)
+        throw std::runtime_error("neurosim-model failed (log " + (models / (name + ".log")).string() + ")");
+    }
+    neurosim::scene::Model model = neurosim::scene::load_model(models / (name + ".scene"));
+    neurosim::scene::LoadedMesh brain = model.meshes.front();
+    const double depth_m = depth_mm * 1e-3;
+
+    // The top node of the whole brain; the region around it.
+    auto top_of = [](const neurosim::mesh::TetMesh& m) {
+      int top = m.surface_vertices().front();
+      for (int v : m.surface_vertices())
+        if (m.vertices()[static_cast<std::size_t>(v)].z() > m.vertices()[static_cast<std::size_t>(top)].z()) top = v;
+      return top;
+    };
+    const Vec3 top_x = brain.mesh.vertices()[static_cast<std::size_t>(top_of(brain.mesh))];
+    std::vector<neurosim::mesh::Tri> cut_faces;
+    const bool region = region_mm > 0.0;
+    if (region) cut_faces = neurosim::bench::cut_region(brain, top_x, region_mm * 1e-3);
+    // The patch on the first mesh: FemBrainPress's (surface nodes within 12 mm of the top).
+    std::vector<char> in_patch(brain.mesh.num_vertices(), 0);
+    {
+      const int top = top_of(brain.mesh);
+      const Vec3 t = brain.mesh.vertices()[static_cast<std::size_t>(top)];
+      for (int v : brain.mesh.surface_vertices())
+        if ((brain.mesh.vertices()[static_cast<std::size_t>(v)] - t).norm() < kPatchRadiusM)
+          in_patch[static_cast<std::size_t>(v)] = 1;
+      for (int v : brain.fixed_nodes)
+        if (in_patch[static_cast<std::size_t>(v)])
+          throw std::runtime_error("the patch holds a clamped node: a larger --region");
+    }
+
+    std::ofstream csv(out / "press_refinement.csv");
+    csv << "split,nodes,tets,patch_nodes,nu,model,element,force_n,solve_s\n";
+    std::vector<Level> levels;
+    std::vector<Result> results;
+    for (int s = 0; s <= splits; ++s) {
+      if (s > 0) {
+        // The patch follows the split: a midpoint is in it when both ends of its edge are.
+        const neurosim::bench::SplitMesh probe = neurosim::bench::split_tets(brain.mesh);
+        std::vector<char> next(probe.mesh.num_vertices(), 0);
+        std::copy(in_patch.begin(), in_patch.end(), next.begin());
+        const std::size_t n = brain.mesh.num_vertices();
+        for (std::size_t k = 0; k < probe.edge_ends.size(); ++k)
+          next[n + k] = in_patch[static_cast<std::size_t>(probe.edge_ends[k][0])] &&
+                        in_patch[static_cast<std::size_t>(probe.edge_ends[k][1])];
+        in_patch = std::move(next);
+        if (region) neurosim::bench::split_region(brain, cut_faces);
+        else neurosim::bench::split_loaded_mesh(brain);
+      }
+      const auto& m = brain.mesh;
+      std::vector<int> patch;
+      for (std::size_t v = 0; v < in_patch.size(); ++v)
+        if (in_patch[v]) patch.push_back(static_cast<int>(v));
+      Level lv{s, m.num_vertices(), m.num_tets(), patch.size(), 0};
+      const bool ccx = s <= c3d10_splits;
+      Quadratic q;
+      std::vector<int> fixed_q, patch_q;
+      if (ccx) {
+        q = quadratic(m);
+        lv.c3d10_nodes = q.nodes.size();
+        patch_q = q.with_mid(patch);
+        if (region) {  // exactly the cut faces clamped (their edges' mid-nodes, no other edge)
+          std::vector<char> f(q.nodes.size(), 0);
+          for (int v : brain.fixed_nodes) f[static_cast<std::size_t>(v)] = 1;
+          for (const auto& tri : cut_faces)
+            for (int k = 0; k < 3; ++k)
+              f[static_cast<std::size_t>(q.mid.at(std::minmax(tri[k], tri[(k + 1) % 3])))] = 1;
+          for (std::size_t v = 0; v < f.size(); ++v)
+            if (f[v]) fixed_q.push_back(static_cast<int>(v));
+        } else {
+          fixed_q = q.with_mid(brain.fixed_nodes);
+        }
+      }
+      levels.push_back(lv);
+      std::fprintf(stderr,
+                   "mesh split %d: %zu nodes, %zu tetrahedra, %zu fixed, %zu pressed (C3D10: %zu "
+                   "nodes%s)\n",
+                   s, lv.nodes, lv.tets, brain.fixed_nodes.size(), lv.patch_nodes, lv.c3d10_nodes,
+                   ccx ? "" : ", not run");
+      for (double nu : nus) {
+        fem::Material mat = brain.material;
+        mat.poisson_ratio = nu;
+        for (bool nonlinear : {true, false}) {
+          if (!nonlinear && skip_linear) continue;
+          const std::string mname = nonlinear ? "NONLINEAR" : "LINEAR";
+          auto add = [&](const std::string& el, double f, double sec) {
+            results.push_back({s, nu, mname, el, f, sec});
+            char line[256];
+            std::snprintf(line, sizeof line, "%d,%zu,%zu,%zu,%.2f,%s,%s,%.6g,%.1f", s, lv.nodes,
+                          lv.tets, lv.patch_nodes, nu, mname.c_str(), el.c_str(), f, sec);
+            csv << line << '\n';
+            csv.flush();
+            std::fprintf(stderr, "  %s\n", line);
+          };
+          for (auto el : {fem::Element::kSmoothedTet, fem::Element::kLinearTet}) {
+            const auto t0 = std::chrono::steady_clock::now();
+            const double f = element_force(m, mat, el, brain.fixed_nodes, patch, depth_m, nonlinear);
+            add(fem::element_name(el), f, seconds_since(t0));
+          }
+          if (ccx) {
+            char job[64];
+            std::snprintf(job, sizeof job, "s%d_nu%03d_%s", s, static_cast<int>(std::lround(nu * 100)),
+                          nonlinear ? "nl" : "lin");
+            const auto t0 = std::chrono::steady_clock::now();
+            const double f = c3d10_force(q, mat, fixed_q, patch_q, depth_m, nonlinear, increments,
+                                         out / "ccx", job);
+            add("C3D10", f, seconds_since(t0));
+          }
+        }
+      }
+    }
+    // The table: each element against C3D10 on the same mesh and on the finest C3D10 mesh.
+    auto find = [&](int s, double nu, const std::string& mname, const std::string& el) {
+      for (const auto& r : results)
+        if (r.split == s && r.nu == nu && r.model == mname && r.element == el) return r.force_n;
+      return std::nan("");
+    };
+    const int finest_c3d10 = std::min(c3d10_splits, splits);
+    std::printf("# press %.3g mm on the %.3g mm brain%s, patch within 12 mm of the top node\n",
+                depth_mm, cell_mm,
+                region ? (", sub-model within " + std::to_string(region_mm) + " mm, cut clamped").c_str() : "");
+    std::printf("split,nu,model,element,force_n,over_c3d10_same_mesh,over_c3d10_split_%d\n", finest_c3d10);
+    for (const auto& r : results) {
+      const double same = find(r.split, r.nu, r.model, "C3D10");
+      const double fine = find(finest_c3d10, r.nu, r.model, "C3D10");
+      std::printf("%d,%.2f,%s,%s,%.6g,%.4f,%.4f\n", r.split, r.nu, r.model.c_str(),
+                  r.element.c_str(), r.force_n, r.force_n / same, r.force_n / fine);
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "press_refinement_bench: error: %s\n", e.what());
+    return 1;
+  }
+}
