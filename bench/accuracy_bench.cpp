@@ -44,7 +44,8 @@
 // A run's force has settled when it moved at most 0.1 % (kSettledSpread) over the last 20 steps
 // (kSettleSteps); the tier table takes only rows whose run and NONLINEAR reference settled.
 // --max-hold S holds the tool at its last pose up to S seconds longer (one step per sample
-// period) until it settles; --trace writes every run's per-step force (DIR/traces/).
+// period) until it settles; --trace writes every run's per-step force (DIR/traces/);
+// --tier-update-steps N: Newton steps per equilibrium update (0: each update converges).
 //
 // --finest-only: only the finest mesh of each scene (the bundled one for the brain), no C3D10
 // patch press (no discretization rows, those columns nan) and no CalculiX comparison: the runs
@@ -566,6 +567,7 @@ int main(int argc, char** argv) {
   bool finest_only = false;
   bool trace = false;
   double max_hold_s = 0.0;
+  int tier_update_steps = -1;
   std::string out_dir, table_path, disc_table_path;
   std::vector<std::string> elements, press_filter;
   std::vector<std::string> scenes{"cube_cylinder", "brain_artery"};
@@ -591,6 +593,10 @@ int main(int argc, char** argv) {
                   "hold the tool at its last pose up to S seconds longer until the force has "
                   "settled (moved at most 0.1 % over 20 steps; default 0: the recording's 0.3 s)")
       ->check(CLI::Range(0.0, 600.0));
+  cli->add_option("--tier-update-steps", tier_update_steps,
+                  "Newton steps per NONLINEAR equilibrium update (SimulationOptions::"
+                  "tier_update_steps; 0: each update converges; default: the server's)")
+      ->check(CLI::Range(0, 1000));
   cli->add_flag("--trace", trace, "per-step tool force of every run in DIR/traces/*.csv");
   cli->add_option("--table", table_path,
                   "measured force-error table for the server (default DIR/force_error.csv)");
@@ -766,6 +772,7 @@ int main(int argc, char** argv) {
           sm.effects.tier = cfg.tier;
           ni::SimulationOptions opt;
           opt.tier_worker_thread = false;
+          if (tier_update_steps >= 0) opt.tier_update_steps = tier_update_steps;
           if (cfg.iterations > 0) {
             for (auto& c : sm.couplings) c.method = neurosim::scene::CouplingMethod::kIterative;
             // Exactly `iterations` iterations (the smallest tolerance the option takes).
