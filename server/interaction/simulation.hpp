@@ -420,7 +420,8 @@ class Simulation {
   // afresh (free if outside the bone). Default: nothing to forget.
   virtual void reset_station(int station) { (void)station; }
   // The body (host + tied meshes) `mesh` belongs to, or nullptr if inert; and the last good
-  // step's contact forces on it (contact slots, unit N). For benchmarks and the baseline.
+  // step's contact forces on it (contact slots, unit N; on a relaxing body the creep-equivalent
+  // forces, the elastic forces that give its displacement). For benchmarks and the baseline.
   virtual const CoupledBody* body_of(int mesh) const = 0;
   virtual void last_contact_forces(int mesh, std::vector<int>& slots,
                                    std::vector<Vec3>& forces_n) const = 0;
