@@ -185,7 +185,9 @@ void press_and_hold(const Press& press, const char* tier) {
         status_total = s.total_error_estimate;
         return std::abs(s.max_strain - strain) <= 1e-6 * strain;
       },
-      8);
+      // A bound on a wait, not a speed claim (it returns at the first matching status): the
+      // viewer's first field on the brain was not out after 8 s once at load ~7.
+      60);
   std::printf("%s %s: max strain %.6g (server) vs %.6g (in process), expected force error %.6g, "
               "vs converged C3D10: discretization %.6g, total %.6g\n",
               press.scene, tier, status_strain, strain, status_error, status_disc, status_total);
