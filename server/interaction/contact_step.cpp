@@ -360,6 +360,8 @@ void State::reserve_workspace(const Model& m, int tools) {
   own_factor_.setZero(max_contact, max_contact);
   own_y_.setZero(max_contact, 3);
   own_z_.assign(max_contact, 0.0);
+  turn_v_.assign(max_contact, Vec3::Zero());
+  turn_z_.setZero(max_contact, 3);
   previous_row_keys_.reserve(max_rows);
   for (auto& l : tier_loads_) {
     l.slots.reserve(3 * max_rows);
@@ -891,7 +893,8 @@ double State::flat_distance(const Model& m, int body, int tool, const Vec3& c, c
 
 // Phase "rows", merge: one row per feature (an edge only where all its triangles report it),
 // normals, depths on the deformed and the rest surface.
-void State::merge_features(const Model& m, int body, int tool, const ToolShape& shape) {
+void State::merge_features(const Model& m, int body, int tool, const ToolShape& shape,
+                           const Vec3& axis) {
   const BodyModel& b = m.bodies_[body];
   const auto& tris = b.surface.triangles();
   const auto& rest = b.body->contact_mesh().vertices();
@@ -928,6 +931,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     const Vec3 d = h.centre_m - h.at.point_m;
     const double dn = d.norm();
     Vec3 n;
+    Mat3 turn = Mat3::Zero();  // d n / d x (Row::turn)
     bool radial = false;
     bool exit_row = false;
     int normals = 0;
@@ -967,13 +971,51 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
         plane_n = mean;
         plane_h = d.dot(mean);
         radial = dn > 1e-9 * shape.tip_radius_m && plane_h > 0.0;  // not an entry (below)
-        n = exit_normal(d, mean, normal_sum.norm() / std::max(normals, 1), shape.tip_radius_m);
+        const double cos_alpha = normal_sum.norm() / std::max(normals, 1);
+        n = exit_normal(d, mean, cos_alpha, shape.tip_radius_m);
+        turn = exit_normal_turn(d, mean, cos_alpha, shape.tip_radius_m);
       } else {
         const double radial_from = tier_ ? 0.5 * dn : 0.0;  // cos 60 or cos 90 degrees
         radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
                  d.dot(mean) > radial_from;
         n = radial ? Vec3(d / dn) : mean;
+        // A radial row's normal d / |d| turns by (I - n n^T) / |d| per unit change of d. The
+        // shaft's centre is the axis point nearest the feature: against a node it slides along
+        // the axis (d changes by the move across the axis, where the point is inside the
+        // segment); against an edge the common normal of the two lines keeps its direction
+        // (no turn while they are not parallel).
+        if (radial) {
+          turn = (Mat3::Identity() - n * n.transpose()) / dn;
+          if (h.shaft) {
+            if (f == TriangleFeature::kEdge) {
+              turn.setZero();
+            } else if (std::abs(d.dot(axis)) < 1e-9 * dn) {
+              turn = turn * (Mat3::Identity() - axis * axis.transpose());
+            }
+          }
+        }
       }
+      // An edge's closest point slides along the edge as the tool moves: d changes by the move
+      // across it (the tip's rows; the shaft's edge rows have no turn).
+      if (f == TriangleFeature::kEdge && !h.shaft && !turn.isZero(0.0)) {
+        const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
+        auto at = [&](int k) {
+          return !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
+        };
+        const Vec3 e = (at(k1) - at(k0)).normalized();
+        turn = turn * (Mat3::Identity() - e * e.transpose());
+      }
+    }
+    // The turn as the haptic model can use it: the station extrapolates over the validity radius,
+    // at least a quarter of the tip's radius (answer), so a normal turning faster than 1 rad per
+    // quarter radius of the part (a radial row with the centre by the feature, |d| -> 0; an exit
+    // row's line at its tangent to the sphere, where dn/dd grows as 1 / sqrt(r^2 - perp^2)) is
+    // not linear over it: there the turn is scaled to that rate (the secant over the reach, not
+    // the tangent). Unscaled, a press cycle on the stability suite's blocks sent |K| = 1.2e9 N/m.
+    if (!turn.isZero(0.0)) {
+      const double most = 4.0 / (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m);
+      const double jn = turn.norm();
+      if (jn > most) turn *= most / jn;
     }
     // A part whose centre lies deeper than behind_reach behind the surface does not push it.
     if ((exit_row ? plane_h : n.dot(d)) < -b.behind_reach_m) continue;
@@ -996,6 +1038,8 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     r.shaft = h.shaft;
     r.key = h.key;
     r.normal = n;
+    r.turn = turn;
+    r.turn_depth = turn.transpose() * d;
     r.radial = radial;
     r.point_m = h.at.point_m;
     // The row's nodes: its triangle's, by the point's barycentric weights, or the load spread
@@ -1160,7 +1204,7 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
     if (m.bodies_[bi].surface.triangles().empty()) continue;
     candidate_triangles(m, bi, tool, pose, axis);
     triangle_features(m, bi, tool, pose, axis);
-    merge_features(m, bi, tool, shape);
+    merge_features(m, bi, tool, shape, axis);
   }
   near_field_of_tool(m, shape);
   near_field_of_shaft(m, shape, axis);
@@ -2106,6 +2150,93 @@ void State::relaxation(const Model& m, int t, int ns, ToolContact& c) {
   if (one_alpha) c.stiffness_n_per_m *= hist.alpha();
 }
 
+// Phase "answer", the rows' turn (after the relaxation: the force turns as it is, not scaled
+// by alpha). F = sum_i lambda_i n_i and, on the active rows, W lambda = delta with
+// delta_i = r - n_i . d_i (d_i the centre less the row's point at rest) and W_ij = n_i^T B_ij n_j
+// (B_ij: the displacement at row i's point per force at row j's, the mesh's columns and the near
+// field's c I in series). With J_i = d n_i / d x (Row::turn) and x the tool's translation:
+//   dF/dx = sum_i lambda_i J_i - N^T W^-1 (N + V),
+//   v_i = J_i^T (d_i + u_i) + sum_j lambda_j J_j^T B_ji n_i,
+// u_i = sum_j B_ij n_j lambda_j the point's displacement (d_i + u_i the centre less the deformed
+// point: the depth's change as n_i turns) and the second sum W's change as the other rows'
+// forces turn (the displacement along n_i they cause). K (the LCP's -N W^-1 N^T with the near
+// field's term) is the part with the normals held; this adds the rest. V is formed where W is
+// that (LINEAR on the rest surface, elastic bodies, no sliding rows); elsewhere (the multirate
+// tiers, whose rows add an equilibrium's offset; a relaxing body) the first sum alone.
+void State::normal_turn(int t, int ns, int tools, ToolContact& c) {
+  const int nc = static_cast<int>(rows_.size());
+  Mat3 g = Mat3::Zero();
+  bool turns = false;
+  for (int r = 0; r < nc; ++r) {
+    const double l = lambda_[ns + r];
+    if (rows_[r].tool != t || !(l > 0.0) || rows_[r].turn.isZero(0.0)) continue;
+    g += l * rows_[r].turn;
+    turns = true;
+  }
+  if (!turns) return;
+  c.stiffness_n_per_m += g;
+  if (tier_ || !rest_geometry_ || ns > 0) return;
+  for (int r = 0; r < nc; ++r)
+    if (rows_[r].tool == t && lambda_[ns + r] > 0.0 && bodies_[rows_[r].body].history) return;
+  // B_ij between two rows (their nodes' columns by the weights; the near field's c on a part).
+  auto between = [&](const Row& a, const Row& b) {
+    Mat3 out = Mat3::Zero();
+    if (a.body != b.body) return out;
+    const ContactColumns& cols = *bodies_[a.body].columns;
+    for (int k = 0; k < a.nodes; ++k) {
+      if (a.slot[k] < 0 || a.w[k] == 0.0) continue;
+      for (int q = 0; q < b.nodes; ++q) {
+        if (b.slot[q] < 0 || b.w[q] == 0.0) continue;
+        out.noalias() += (a.w[k] * b.w[q]) * cols.block(a.slot[k], b.slot[q]);
+      }
+    }
+    if (a.shaft == b.shaft && a.tool == b.tool && a.near_field_m_per_n > 0.0)
+      out.diagonal().array() += a.near_field_m_per_n;
+    return out;
+  };
+  for (int i = 0; i < nc; ++i) turn_v_[i].setZero();
+  for (int j = 0; j < nc; ++j) {
+    const Row& rj = rows_[j];
+    const double lj = lambda_[ns + j];
+    if (rj.tool != t || !(lj > 0.0) || rj.turn.isZero(0.0)) continue;
+    // The depth's change: J_j^T (c - the deformed point), the centre being the part's.
+    Vec3 u = Vec3::Zero();
+    for (int i = 0; i < nc; ++i) {
+      const double li = lambda_[ns + i];
+      if (!(li > 0.0) || rows_[i].body != rj.body) continue;
+      const Mat3 b = between(rj, rows_[i]);
+      u.noalias() += li * (b * rows_[i].normal);
+      // Row i's displacement along n_i as row j's force turns: lambda_j J_j^T B_ji n_i.
+      if (rows_[i].tool == t) turn_v_[i].noalias() += lj * (rj.turn.transpose() * (b * rows_[i].normal));
+    }
+    turn_v_[j].noalias() += rj.turn_depth + rj.turn.transpose() * u;
+  }
+  Mat3 extra = Mat3::Zero();
+  if (tools == 1) {
+    extra = lcp_.contact_stiffness(
+        ns,
+        [&](int row) -> const Vec3* {
+          const Row& q = rows_[row - ns];
+          return q.tool == t ? &q.normal : nullptr;
+        },
+        [&](int row) -> const Vec3* {
+          const Row& q = rows_[row - ns];
+          return q.tool == t ? &turn_v_[row - ns] : nullptr;
+        });
+  } else {
+    // own_stiffness's factor of this answer (K = -Y^T Y, L Y = N): -Y^T Z with L Z = V.
+    const int n = static_cast<int>(own_rows_.size());
+    if (n == 0 || c.stiffness_n_per_m.isZero(0.0)) return;
+    for (int i = 0; i < n; ++i) {
+      Vec3 z = turn_v_[own_rows_[i]];
+      for (int q = 0; q < i; ++q) z -= own_factor_(i, q) * turn_z_.row(q).transpose();
+      turn_z_.row(i) = (z / own_factor_(i, i)).transpose();
+      extra.noalias() -= own_y_.row(i).transpose() * turn_z_.row(i);
+    }
+  }
+  c.stiffness_n_per_m += extra;
+}
+
 // Phase "tier post": the tier's equilibrium follows these forces (worker thread; or now,
 // deterministic).
 void State::tier_post(StepStats& stats) {
@@ -2363,6 +2494,7 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
   commit_history();
   for (int t = 0; t < nt; ++t) {
     relaxation(m, t, ns, contacts[t]);
+    normal_turn(t, ns, nt, contacts[t]);
     last_good_[t] = contacts[t];
   }
   tier_post(stats);

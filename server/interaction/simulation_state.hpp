@@ -91,6 +91,11 @@ struct Row {
   // (unit 1/N; 0 where the near field is constant), for the tangent stiffness (answer).
   bool near_field_deepest{false};
   double near_field_slope_per_n{0.0};
+  // d normal / d x of the tool's translation x (unit 1/m): a node or edge row against the part's
+  // sphere or capsule turns as the tool moves (contact_step.cpp merge_features); zero for a face
+  // row and a row along a surface's mean normal. The answer adds lambda * turn to K.
+  Mat3 turn{Mat3::Zero()};
+  Vec3 turn_depth{Vec3::Zero()};  // turn^T d, d the part's centre less the point at rest
 };
 
 // A candidate feature of one tool part on one triangle, before merging (contact_step.cpp).
@@ -270,7 +275,8 @@ class State {
                      const Vec3& p0, const Vec3& p1, double margin, double max_penetration_m,
                      const std::vector<Vec3>& node_normals, BodyState& bs, long long memo,
                      const std::array<Vec3, 3>* smooth_normals);
-  void merge_features(const Model& m, int body, int tool, const ToolShape& shape);
+  void merge_features(const Model& m, int body, int tool, const ToolShape& shape,
+                      const Vec3& axis);
   double flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
                        bool at_rest, double at_most_m);
   void near_field_of_tool(const Model& m, const ToolShape& shape);
@@ -289,6 +295,7 @@ class State {
               ToolContact& c);
   Mat3 own_stiffness(int ns, int tool);
   void near_field_tangent(int tool, int ns, int tools, Mat3& k);
+  void normal_turn(int tool, int ns, int tools, ToolContact& c);
   Vec3 part_response(int tool, int ns, int tools, const Row& d, const Vec3& f);
   // The near field's history of `body` when it follows `tool` (else nullptr: elastic).
   const ViscoelasticHistory* near_field_history(int body, int tool) const {
@@ -484,6 +491,8 @@ class State {
   Eigen::MatrixXd own_factor_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> own_y_;
   std::vector<double> own_z_;  // near_field_tangent: L z = N_b^T f (part_response)
+  std::vector<Vec3> turn_v_;   // normal_turn: per contact row, v_i (the depth's and W's turn)
+  Eigen::Matrix<double, Eigen::Dynamic, 3> turn_z_;  // normal_turn, several tools: L Z = V
 };
 
 }  // namespace neurosim::interaction

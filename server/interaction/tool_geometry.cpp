@@ -47,6 +47,58 @@ mesh::Vec3 exit_normal(const mesh::Vec3& d, const mesh::Vec3& m, double cos_alph
   return (d - along * a) / std::sqrt(perp2);
 }
 
+Eigen::Matrix3d exit_normal_turn(const mesh::Vec3& d, const mesh::Vec3& m, double cos_alpha,
+                                 double r) {
+  using Mat3 = Eigen::Matrix3d;
+  const Mat3 id = Mat3::Identity();
+  const double dn = d.norm();
+  mesh::Vec3 a = m;
+  Mat3 da = Mat3::Zero();  // d a / d d
+  if (dn > 1e-9 * r) {
+    const double ca = std::clamp(cos_alpha, -1.0, 1.0);
+    const double alpha = std::acos(ca);
+    const double c = std::clamp(d.dot(m) / dn, -1.0, 1.0);
+    const double theta = std::acos(c);
+    if (theta <= alpha && alpha > 0.0) {
+      a = d / dn;
+      da = (id - a * a.transpose()) / dn;
+    } else if (theta > alpha) {
+      const mesh::Vec3 side = d - d.dot(m) * m;
+      const double sn = side.norm();
+      const double phi = alpha * (M_PI - theta) / (M_PI - alpha);
+      if (sn > 1e-12 * dn) {
+        const mesh::Vec3 s = side / sn;
+        a = std::cos(phi) * m + std::sin(phi) * s;
+        if (alpha > 0.0) {
+          // theta = acos(d . m / |d|): d theta / d d = -(m - c d / |d|) / |side| (sin theta = sn / dn).
+          const mesh::Vec3 dtheta = -(m - c * d / dn) / sn;
+          const mesh::Vec3 dphi = (-alpha / (M_PI - alpha)) * dtheta;
+          const Mat3 ds = (id - s * s.transpose()) * (id - m * m.transpose()) / sn;
+          da = (-std::sin(phi) * m + std::cos(phi) * s) * dphi.transpose() + std::sin(phi) * ds;
+        }
+      }
+    }
+  }
+  const double along = a.dot(d);
+  const mesh::Vec3 dalong = a + da.transpose() * d;  // gradient of a . d
+  const double perp2 = std::max(0.0, d.squaredNorm() - along * along);
+  if (perp2 < r * r) {
+    const double q = std::sqrt(r * r - perp2);
+    const mesh::Vec3 dq = -(d - along * dalong) / q;  // gradient of sqrt(r^2 - perp^2)
+    const mesh::Vec3 v = d + (q - along) * a;
+    const double vn = v.norm();
+    if (!(vn > 0.0)) return Mat3::Zero();
+    const mesh::Vec3 n = v / vn;
+    const Mat3 dv = id + a * (dq - dalong).transpose() + (q - along) * da;
+    return (id - n * n.transpose()) * dv / vn;
+  }
+  const mesh::Vec3 w = d - along * a;
+  const double wn = std::sqrt(perp2);
+  const mesh::Vec3 n = w / wn;
+  const Mat3 dw = id - a * dalong.transpose() - along * da;
+  return (id - n * n.transpose()) * dw / wn;
+}
+
 double patch_near_field(double a_m, double b_m, double rho_m, double e_star_pa) {
   if (!(rho_m > 0.0) || !(a_m > 0.0) || !(b_m > 0.0)) return 0.0;
   constexpr double kQ = (0.766 / 0.75) * (0.766 / 0.75);

@@ -53,6 +53,16 @@ inline double height_above(const mesh::Vec3& x, const mesh::Vec3& n, const mesh:
 // the tip moves along m, so the flat-contact stiffness -N W^-1 N^T is the force's derivative.
 mesh::Vec3 exit_normal(const mesh::Vec3& d, const mesh::Vec3& m, double cos_alpha, double r);
 
+// The derivative of exit_normal in d (unit 1/m; the row's normal turn, d n = J d d): the same
+// branches, differentiated in closed form. Radial (a = d / |d|): (I - n n^T) / |d|; along a fixed
+// line a (a flat surface: a = m): n = (d + t a) / r, t = sqrt(r^2 - perp^2) - a . d, so
+// J = (I - n n^T)(I + a (dt/dd)^T) / r, with the turn of a itself outside the cone (a's angle
+// phi and side direction follow d's). A degenerate cone (cos alpha = 1) takes the fixed line
+// also for d on m: the radial branch has no neighbourhood there. Zero where d is straight
+// behind or on the feature (a = m held).
+Eigen::Matrix3d exit_normal_turn(const mesh::Vec3& d, const mesh::Vec3& m, double cos_alpha,
+                                 double r);
+
 // Closest point of segment [p0, p1] to x.
 inline mesh::Vec3 closest_on_segment(const mesh::Vec3& x, const mesh::Vec3& p0,
                                      const mesh::Vec3& p1) {

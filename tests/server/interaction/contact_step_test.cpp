@@ -19,6 +19,7 @@
 #include "server/scene/scene.hpp"
 #include "test_support.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -296,13 +297,16 @@ TEST(interaction_contact_step, PressThroughTheTipCentreOnTheSurfaceIsContinuous)
 // haptic_server.SimulatedHandAgainstTheCubeSettles comes to rest) and 0.7 mm beside it. Along
 // the press the rows' normals do not turn (contact_step.cpp merge_features: the sphere's normal
 // where the point leaves it along the mean normal), so K e_x is the press's derivative: asserted
-// within 1 % of it. Across the press a node row's normal still turns with the tip (by dx / r),
-// which K leaves out: on the cube's node the force's derivative across it is 4149 / 2075 N/m,
-// K's 0 (measured; the force along the press, no lateral force on the node and none 0.7 mm
-// beside it, where the face row alone holds the tip: K within 1 % of the whole derivative
-// there). Before, with radial rows up to 90 degrees, the node row's turn was dx / |d| (d the
-// centre's distance to the node, 0.27 mm here): +62 kN/m across at 2.9 mm; the withdrawn 60-90
-// degree blend: 26 kN/m against K's 2.4 at the pose the hand circled.
+// within 1 % of it. Across the press a node row's normal turns with the tip (by dx / r), which K
+// now takes (StiffnessIncludesTheNormalsTurnOfNodeAndEdgeRows): on the cube's node +519.5 N/m
+// across (lambda_node / r, the node row carrying 1.56 of the 12.47 N there), while the force's
+// central difference across it is 4156 / 2078 N/m, i.e. 0.1 um to either side the node row
+// carries 12.47 / 6.2 N on average (difference x r; it and the face rows at the node are nearly
+// dependent, their split the row compliance's), and 0.05 mm beside it none (K and the difference
+// 0 across): the pose has no lateral derivative to assert. 0.7 mm beside it K is
+// within 1 % of the whole derivative. Before, with radial rows up to 90 degrees, the node row's
+// turn was dx / |d| (d the centre's distance to the node, 0.27 mm here): +62 kN/m across at
+// 2.9 mm; the withdrawn 60-90 degree blend: 26 kN/m against K's 2.4 at the pose the hand circled.
 TEST(interaction_contact_step, StiffnessIsThePressDerivativeThroughDEqualsR) {
   const double h = 1e-7;
   auto check = [&](Simulation& sim, const ToolPose& p, bool across, const std::string& what) {
@@ -351,6 +355,73 @@ TEST(interaction_contact_step, StiffnessIsThePressDerivativeThroughDEqualsR) {
   check(*sim, p, false, "cube node");
   p.tip_m += Vec3(0.0, -0.5e-3, 0.5e-3);
   check(*sim, p, true, "cube beside the node");
+}
+
+// K includes the turn of the rows' normals (contact_step.cpp normal_turn): F = sum_i lambda_i n_i,
+// and a node or edge row's normal (radial d / |d|, or the exit point's, tool_geometry.hpp
+// exit_normal_turn) turns as the tool moves, which changes the force's direction, the row's depth
+// (J^T d) and W's coupling of the rows (the displacement along n_i as the other rows' forces
+// turn). Against central differences of the step's force (h = 0.1 um), with the flat face rows
+// (contact_smooth_normals off: the projected face rows' normals turn too, which K does not take):
+// the 3 mm tip of scenes/cube_cylinder.scene on the cube's top corner along its diagonal 0.5 and
+// 1 mm deep (one radial node row) and on a vertical edge 1 mm deep at 45 and 27 degrees from the
+// +x face (one radial edge row): whole K within 1 % (measured 1e-5 .. 5e-3; with the normals held
+// 19 / 45 / 32 / 33 % off, with lambda J alone 2.3 / 7.2 / 0.2 / 5.9 %); the 2 mm tip on the fine
+// block's vertex 1 mm deep (its node rows the flat face's exit rows, beside face rows): within
+// 5 % (measured 2.1 %, held 37 %); on the edge point 2.01 mm deep within 20 % (measured 11.5 %,
+// held 41 %: the rest is the face rows' points sliding over their triangles, W's change with the
+// weights, which K leaves out). The turn is not symmetric (the corner 1 mm deep: K_yz -1393,
+// K_zy -1578 N/m, both the differences' to 0.1 %) and K's symmetric part not negative
+// semidefinite there (a convex sphere on a point: the node pushes the tip off it sideways).
+TEST(interaction_contact_step, StiffnessIncludesTheNormalsTurnOfNodeAndEdgeRows) {
+  const double h = 1e-7;
+  auto check = [&](Simulation& sim, const Vec3& tip, double tolerance, const std::string& what) {
+    ToolPose p;
+    p.tip_m = tip;
+    p.axis = Vec3::UnitX();
+    std::vector<ToolContact> c;
+    StepStats st;
+    sim.step({p}, c, st);
+    ASSERT_TRUE(st.converged) << what;
+    ASSERT_TRUE(c[0].in_contact) << what;
+    const Mat3 k = c[0].stiffness_n_per_m;
+    Mat3 fd;
+    for (int a = 0; a < 3; ++a) {
+      ToolPose q = p;
+      q.tip_m[a] += h;
+      sim.step({q}, c, st);
+      const Vec3 plus = c[0].force_n;
+      q.tip_m[a] -= 2.0 * h;
+      sim.step({q}, c, st);
+      fd.col(a) = (plus - c[0].force_n) / (2.0 * h);
+    }
+    const Eigen::SelfAdjointEigenSolver<Mat3> sym(0.5 * (k + k.transpose()));
+    std::printf("%s: whole K %.2e off; K_yy %.1f K_yz %.1f K_zy %.1f K_zz %.1f, dF/dx %.1f %.1f %.1f "
+                "%.1f N/m; sym(K) eigenvalues %.1f %.1f %.1f\n",
+                what.c_str(), (k - fd).norm() / fd.norm(), k(1, 1), k(1, 2), k(2, 1), k(2, 2),
+                fd(1, 1), fd(1, 2), fd(2, 1), fd(2, 2), sym.eigenvalues()[0], sym.eigenvalues()[1],
+                sym.eigenvalues()[2]);
+    EXPECT_LE((k - fd).norm(), tolerance * fd.norm()) << what << "\nK\n" << k << "\ndF/dx\n" << fd;
+  };
+  const scene::Model cube =
+      scene::load_model(neurosim::testing::source_dir() / "scenes/cube_cylinder.scene");
+  SimulationOptions o;
+  o.contact_smooth_normals = false;
+  auto sim = Simulation::build(cube, o);
+  const double r = cube.tools.at(0).tip_radius_m;
+  const Vec3 corner(0.1, 0.1, 0.1), edge(0.1, 0.1, 0.05);
+  check(*sim, corner + (r - 0.5e-3) * Vec3(1, 1, 1).normalized(), 0.01, "cube corner 0.5 mm");
+  check(*sim, corner + (r - 1e-3) * Vec3(1, 1, 1).normalized(), 0.01, "cube corner 1 mm");
+  check(*sim, edge + (r - 1e-3) * Vec3(1, 1, 0).normalized(), 0.01, "cube edge 45 degrees");
+  check(*sim, edge + (r - 1e-3) * Vec3(1, 0.5, 0).normalized(), 0.01, "cube edge 27 degrees");
+  FineFace face = fine_face();
+  face.o.contact_smooth_normals = false;
+  const auto model = build_model(block_scene(face.b), face.o);
+  auto block = Simulation::from_model(model);
+  const Vec3 vertex = face.at[0].second, edge_point = face.at[1].second;
+  check(*block, press(face.b, 1e-3, vertex.y(), vertex.z()).tip_m, 0.05, "block vertex 1 mm");
+  check(*block, press(face.b, 2.01e-3, edge_point.y(), edge_point.z()).tip_m, 0.2,
+        "block edge 2.01 mm");
 }
 
 INSTANTIATE_TEST_SUITE_P(contact_step, ContactStepTier,
@@ -967,3 +1038,4 @@ TEST(interaction_contact_step, ToolBesideAFoldIsNotPushedByItsFarFlank) {
 
 }  // namespace
 }  // namespace neurosim::interaction
+

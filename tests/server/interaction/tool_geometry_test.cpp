@@ -125,6 +125,42 @@ TEST(interaction_tool_geometry, ExitNormalIsTheSpheresWhereThePointLeavesIt) {
   EXPECT_TRUE(exit_normal(Vec3(0, 0, -0.0005), m, std::cos(0.52), r).isApprox(m, 1e-12));
 }
 
+// exit_normal_turn against central differences of exit_normal (h = 1 nm on a 2 mm sphere: the
+// truncation ~h^2 / r^3, the rounding ~1e-16 / h against |J| ~ 1 / r, both under 1e-6 of |J|):
+// in a ridge's cone (radial), outside it (the line turning into m), on a flat surface (the line
+// m, also with the centre on m, where the degenerate cone has no radial neighbourhood), in front
+// of and behind the surface, and where the line misses the sphere. Asserted within 1e-5 of |J|.
+TEST(interaction_tool_geometry, ExitNormalTurnIsItsDerivative) {
+  const double r = 0.002, h = 1e-9;
+  const Vec3 m(0, 0, 1);
+  struct Case {
+    const char* what;
+    Vec3 d;
+    double cos_alpha;
+  };
+  const std::vector<Case> cases = {
+      {"ridge, in the cone", 0.0015 * Vec3(std::sin(0.35), 0.1, std::cos(0.35)), std::cos(0.52)},
+      {"ridge, outside", 0.0015 * Vec3(std::sin(1.0), 0.3, std::cos(1.0)), std::cos(0.52)},
+      {"ridge, outside, behind", Vec3(0.0012, -0.0003, -0.0004), std::cos(0.3)},
+      {"flat, beside", Vec3(-0.0012, 0.0004, 0.0005), 1.0},
+      {"flat, behind", Vec3(0.0007, 0.0002, -0.0009), 1.0},
+      {"flat, on m", Vec3(0, 0, 0.00027), 1.0},
+      {"flat, line misses", Vec3(-0.0025, 0.0004, 0.0005), 1.0},
+  };
+  for (const auto& c : cases) {
+    const Eigen::Matrix3d j = exit_normal_turn(c.d, m, c.cos_alpha, r);
+    Eigen::Matrix3d fd;
+    for (int a = 0; a < 3; ++a) {
+      Vec3 e = Vec3::Zero();
+      e[a] = h;
+      fd.col(a) = (exit_normal(c.d + e, m, c.cos_alpha, r) - exit_normal(c.d - e, m, c.cos_alpha, r)) /
+                  (2.0 * h);
+    }
+    EXPECT_GT(fd.norm(), 0.1 / r) << c.what;
+    EXPECT_LE((j - fd).norm(), 1e-5 * fd.norm()) << c.what << "\nJ\n" << j << "\nfd\n" << fd;
+  }
+}
+
 TEST(interaction_tool_geometry, ClosestPointOfASegmentIsClampedToItsEnds) {
   const Vec3 p0(0, 0, 0), p1(1, 0, 0);
   EXPECT_TRUE(closest_on_segment(Vec3(0.3, 2, 0), p0, p1).isApprox(Vec3(0.3, 0, 0)));
