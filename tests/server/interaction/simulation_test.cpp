@@ -306,13 +306,16 @@ TEST(interaction_simulation, IterativeBaselineMatchesExact) {
 // rho ~ the tip radius): across the push that adds up to sum(lambda) h / rho, and along it the
 // turn of the planes through the rows' displacement u (u_t / rho relative), and the rows' points
 // and weights move as the surface is found again from rest in each step: 10 % here, a 15 mm tip
-// 3 mm into 12 mm elements. K leaves these out (the turn would make K indefinite for the haptic
-// client).
+// 3 mm into 12 mm elements. K takes the node and edge rows' turn (contact_step.cpp normal_turn),
+// not the projected face rows' nor the points sliding over their triangles.
 //
 // The check: the tool held 3 mm into the cube's face until the geometry settles, then moved by h = 0.1 um
 // further in: the finite difference of the force against K, within 15 % along the push and, across
-// it, the rows' turn (1.5 sum(lambda) / (0.9 r)); K pushes back (negative along the push) and is
-// negative semidefinite.
+// it, the rows' turn (1.5 sum(lambda) / (0.9 r)); K pushes back (negative along the push), and its
+// symmetric part is negative semidefinite but for the turn, which is destabilising across a node
+// (a sphere on a point is pushed off it sideways): its positive eigenvalues at most
+// 1.5 |F| / (0.9 r) as above (measured 279 / 279 / 287 N/m against 3252 / 3252 / 3677).
+// Before the turn was in K the largest eigenvalue was 0 to 1e-9 of the smallest.
 void expect_stiffness_matches_finite_difference(const SceneSpec& spec,
                                                 const SimulationOptions& options,
                                                 const ToolPose& p = push_right(0.003)) {
@@ -337,7 +340,10 @@ void expect_stiffness_matches_finite_difference(const SceneSpec& spec,
   EXPECT_LT(c0[0].stiffness_n_per_m(0, 0), 0.0);
   const Eigen::SelfAdjointEigenSolver<Mat3> eig(
       0.5 * (c0[0].stiffness_n_per_m + c0[0].stiffness_n_per_m.transpose()));
-  EXPECT_LE(eig.eigenvalues().maxCoeff(), 1e-9 * std::abs(eig.eigenvalues().minCoeff()));
+  const double turn = 1.5 * c0[0].force_n.norm() / (0.9 * spec.tip_radius_m);
+  std::printf("sym(K) eigenvalues %.1f %.1f %.1f N/m, 1.5 |F| / (0.9 r) %.1f N/m\n",
+              eig.eigenvalues()[0], eig.eigenvalues()[1], eig.eigenvalues()[2], turn);
+  EXPECT_LE(eig.eigenvalues().maxCoeff(), turn);
 }
 
 TEST(interaction_simulation, StiffnessMatchesFiniteDifference) {
