@@ -2015,7 +2015,8 @@ int State::main_body_of(const Model& m, int t, int ns, double& sum_n) const {
 }
 
 // Phase "answer" of one tool: force, stiffness K = -N (W_AA^-1)_cc N^T over its active rows
-// (flat-contact linearization: a row's depth changes by -n . dx), normal, main mesh and nodes,
+// (each row's normal held: its depth changes by -n . dx; the normals' turn is added after the
+// relaxation, normal_turn), normal, main mesh and nodes,
 // validity radius (the contact patch: the active rows' points around their force-weighted
 // centre, at least a quarter of the tip radius).
 void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iterations,
