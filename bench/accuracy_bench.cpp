@@ -50,6 +50,7 @@
 // --finest-only: only the finest mesh of each scene (the bundled one for the brain), no C3D10
 // patch press (no discretization rows, those columns nan) and no CalculiX comparison: the runs
 // the tier table takes (its rows are the finest mesh's), at a fraction of the time.
+#include "c3d10_press.hpp"
 #include "common/cli.hpp"
 #include "common/stats.hpp"
 #include "idl/wire/recording_io.hpp"
@@ -65,8 +66,6 @@
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
-
-#include <sys/wait.h>
 
 #include <algorithm>
 #include <chrono>
@@ -480,78 +479,13 @@ double c3d10_patch_force(const SceneCase& sc, const neurosim::scene::LoadedMesh&
   if (host.tissue_with_other_material() != nullptr)
     throw std::runtime_error(sc.name + ": host tissue '" + host.tissue_with_other_material()->name +
                              "' has its own material: the C3D10 check takes one material");
-  const auto& m = host.mesh;
-  std::vector<Vec3> nodes = m.vertices();
-  std::map<std::pair<int, int>, int> mid;
-  std::vector<std::array<int, 10>> elements;
-  auto mid_node = [&](int a, int b) {
-    const auto key = std::minmax(a, b);
-    const auto it = mid.find(key);
-    if (it != mid.end()) return it->second;
-    const int id = static_cast<int>(nodes.size());
-    nodes.push_back(0.5 * (m.vertices()[static_cast<std::size_t>(a)] +
-                           m.vertices()[static_cast<std::size_t>(b)]));
-    mid.emplace(key, id);
-    return id;
-  };
-  for (const auto& t : m.tets())  // CalculiX's order: corners, then edges 12 23 31 14 24 34
-    elements.push_back({t[0], t[1], t[2], t[3], mid_node(t[0], t[1]), mid_node(t[1], t[2]),
-                        mid_node(t[2], t[0]), mid_node(t[0], t[3]), mid_node(t[1], t[3]),
-                        mid_node(t[2], t[3])});
-  auto with_mid = [&](const std::vector<int>& corners) {
-    std::vector<char> in(nodes.size(), 0);
-    for (int v : corners) in[static_cast<std::size_t>(v)] = 1;
-    std::vector<int> out = corners;
-    for (const auto& [edge, id] : mid)
-      if (in[static_cast<std::size_t>(edge.first)] && in[static_cast<std::size_t>(edge.second)])
-        out.push_back(id);
-    return out;
-  };
-  const std::vector<int> fixed_q = with_mid(host.fixed_nodes), patch_q = with_mid(patch);
-  fs::create_directories(dir);
-  {
-    std::ofstream out(dir / (job + ".inp"));
-    out.precision(13);  // ccx reads at most 20 characters per number
-    auto node_set = [&](const char* name, const std::vector<int>& set) {
-      out << "*NSET, NSET=" << name << "\n";
-      for (std::size_t i = 0; i < set.size(); ++i)
-        out << set[i] + 1 << (i + 1 == set.size() || i % 10 == 9 ? "\n" : ", ");
-    };
-    out << "** accuracy_bench patch press " << job << "\n*NODE, NSET=NALL\n";
-    for (std::size_t v = 0; v < nodes.size(); ++v)
-      out << v + 1 << ", " << nodes[v].x() << ", " << nodes[v].y() << ", " << nodes[v].z() << "\n";
-    out << "*ELEMENT, TYPE=C3D10, ELSET=EALL\n";
-    for (std::size_t e = 0; e < elements.size(); ++e) {
-      out << e + 1;
-      for (int n : elements[e]) out << ", " << n + 1;
-      out << "\n";
-    }
-    out << "*MATERIAL, NAME=M\n*ELASTIC\n" << host.material.youngs_modulus_pa << ", "
-        << host.material.poisson_ratio << "\n*SOLID SECTION, ELSET=EALL, MATERIAL=M\n";
-    node_set("NFIX", fixed_q);
-    node_set("NPRESS", patch_q);
-    out << "*STEP\n*STATIC\n*BOUNDARY\nNFIX, 1, 3\n";
-    const Vec3 d = -kPatchPressM * sc.up;
-    for (int a = 0; a < 3; ++a) out << "NPRESS, " << a + 1 << ", " << a + 1 << ", " << d[a] << "\n";
-    out << "*NODE PRINT, NSET=NALL\nU\n*NODE PRINT, NSET=NPRESS, TOTALS=NO\nRF\n*END STEP\n";
-  }
-  fs::remove(dir / (job + ".dat"));
-  const std::string cmd = "cd '" + dir.string() +
-                          "' && OMP_NUM_THREADS=1 CCX_NPROC_EQUATION_SOLVER=1 timeout -k 5 1200 "
-                          "ccx -i " + job + " > " + job + ".log 2>&1";
-  const int status = std::system(cmd.c_str());
-  const int code = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : -1;
-  if (code != 0)
-    throw std::runtime_error("ccx failed on " + (dir / (job + ".inp")).string() + " (exit " +
-                             std::to_string(code) + ", log " + (dir / (job + ".log")).string() + ")");
-  const auto r = neurosim::fem::read_calculix_dat(dir / (job + ".dat"), nodes.size());
+  const auto q = neurosim::bench::quadratic_tets(host.mesh);
+  const std::vector<int> fixed_q = q.with_mid(host.fixed_nodes), patch_q = q.with_mid(patch);
+  const auto r = neurosim::bench::run_c3d10_press(dir, job, "accuracy_bench patch press", q,
+                                                  host.material, fixed_q, patch_q,
+                                                  -kPatchPressM * sc.up);
   double f = 0.0;
-  for (int v : patch_q) {
-    if (!r.has_reaction[static_cast<std::size_t>(v)])
-      throw std::runtime_error((dir / (job + ".dat")).string() + ": no RF for node " +
-                               std::to_string(v + 1));
-    f -= r.reaction_n.segment<3>(3 * v).dot(sc.up);
-  }
+  for (int v : patch_q) f -= r.reaction_n.segment<3>(3 * v).dot(sc.up);
   return f;
 }
 

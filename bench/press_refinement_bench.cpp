@@ -18,6 +18,7 @@
 // Prints per mesh, nu and model: each element's patch force and its ratio to C3D10 on the same
 // mesh and on the finest mesh C3D10 ran on; writes DIR/press_refinement.csv.
 // `press_refinement_bench --out DIR --region 40 --splits 1 --depth 10 --nu 0.49`.
+#include "c3d10_press.hpp"
 #include "common/cli.hpp"
 #include "server/fem/calculix.hpp"
 #include "server/fem/equilibrium_solver.hpp"
@@ -28,8 +29,6 @@
 
 #include <Eigen/Core>
 
-#include <sys/wait.h>
-
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -38,7 +37,6 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <map>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -63,105 +61,19 @@ double patch_force(const Eigen::VectorXd& reaction_n, const std::vector<int>& no
   return f;
 }
 
-// The mesh with a node at the middle of every edge, CalculiX's C3D10 order (corners, then the
-// mid-nodes of edges 12 23 31 14 24 34).
-struct Quadratic {
-  std::vector<Vec3> nodes;
-  std::vector<std::array<int, 10>> elements;
-  std::map<std::pair<int, int>, int> mid;
-  // The corners and the mid-nodes of every edge between two of them.
-  std::vector<int> with_mid(const std::vector<int>& corners) const {
-    std::vector<char> in(nodes.size(), 0);
-    for (int v : corners) in[static_cast<std::size_t>(v)] = 1;
-    std::vector<int> out = corners;
-    for (const auto& [edge, id] : mid)
-      if (in[static_cast<std::size_t>(edge.first)] && in[static_cast<std::size_t>(edge.second)])
-        out.push_back(id);
-    return out;
-  }
-};
+using Quadratic = neurosim::bench::QuadraticTets;
 
-Quadratic quadratic(const neurosim::mesh::TetMesh& m) {
-  Quadratic q;
-  q.nodes = m.vertices();
-  auto mid_node = [&](int a, int b) {
-    const auto key = std::minmax(a, b);
-    const auto it = q.mid.find(key);
-    if (it != q.mid.end()) return it->second;
-    const int id = static_cast<int>(q.nodes.size());
-    q.nodes.push_back(0.5 * (m.vertices()[static_cast<std::size_t>(a)] +
-                             m.vertices()[static_cast<std::size_t>(b)]));
-    q.mid.emplace(key, id);
-    return id;
-  };
-  for (const auto& t : m.tets())
-    q.elements.push_back({t[0], t[1], t[2], t[3], mid_node(t[0], t[1]), mid_node(t[1], t[2]),
-                          mid_node(t[2], t[0]), mid_node(t[0], t[3]), mid_node(t[1], t[3]),
-                          mid_node(t[2], t[3])});
-  return q;
-}
-
-// C3D10 by ccx (one thread): the patch force, unit N.
+// C3D10 by ccx (one thread; c3d10_press.hpp): the patch force, unit N.
 double c3d10_force(const Quadratic& q, const fem::Material& mat, const std::vector<int>& fixed_q,
                    const std::vector<int>& patch_q, double depth_m, bool nlgeom, int increments,
                    const fs::path& dir, const std::string& job) {
-  fs::create_directories(dir);
-  {
-    std::ofstream out(dir / (job + ".inp"));
-    out.precision(13);  // ccx reads at most 20 characters per number
-    auto node_set = [&](const char* name, const std::vector<int>& set) {
-      out << "*NSET, NSET=" << name << "\n";
-      for (std::size_t i = 0; i < set.size(); ++i)
-        out << set[i] + 1 << (i + 1 == set.size() || i % 10 == 9 ? "\n" : ", ");
-    };
-    out << "** press_refinement_bench " << job << "\n*NODE, NSET=NALL\n";
-    for (std::size_t v = 0; v < q.nodes.size(); ++v)
-      out << v + 1 << ", " << q.nodes[v].x() << ", " << q.nodes[v].y() << ", " << q.nodes[v].z()
-          << "\n";
-    out << "*ELEMENT, TYPE=C3D10, ELSET=EALL\n";
-    for (std::size_t e = 0; e < q.elements.size(); ++e) {
-      out << e + 1;
-      for (int n : q.elements[e]) out << ", " << n + 1;
-      out << "\n";
-    }
-    const double e = mat.youngs_modulus_pa, nu = mat.poisson_ratio;
-    out << "*MATERIAL, NAME=M\n";
-    if (nlgeom)
-      out << "*HYPERELASTIC, NEO HOOKE\n" << e / (4.0 * (1.0 + nu)) << ", "
-          << 6.0 * (1.0 - 2.0 * nu) / e << "\n";
-    else
-      out << "*ELASTIC\n" << e << ", " << nu << "\n";
-    out << "*SOLID SECTION, ELSET=EALL, MATERIAL=M\n";
-    node_set("NFIX", fixed_q);
-    node_set("NPRESS", patch_q);
-    if (nlgeom) {
-      const double inc = 1.0 / increments;
-      out << "*STEP, NLGEOM, INC=" << 100 * increments << "\n*STATIC\n"
-          << inc << ", 1.0, " << inc * 1e-4 << ", " << inc << "\n"
-          << "*CONTROLS, PARAMETERS=FIELD\n1e-9, 1e-9\n";
-    } else {
-      out << "*STEP\n*STATIC\n";
-    }
-    out << "*BOUNDARY\nNFIX, 1, 3\nNPRESS, 1, 1, 0\nNPRESS, 2, 2, 0\nNPRESS, 3, 3, " << -depth_m
-        << "\n*NODE PRINT, NSET=NALL\nU\n*NODE PRINT, NSET=NPRESS, TOTALS=NO\nRF\n*END STEP\n";
-  }
-  fs::remove(dir / (job + ".dat"));
-  const std::string cmd = "cd '" + dir.string() +
-                          "' && OMP_NUM_THREADS=1 CCX_NPROC_EQUATION_SOLVER=1 timeout -k 5 7200 "
-                          "ccx -i " + job + " > " + job + ".log 2>&1";
-  const int status = std::system(cmd.c_str());
-  const int code = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : -1;
-  if (code != 0)
-    throw std::runtime_error("ccx failed on " + (dir / (job + ".inp")).string() + " (exit " +
-                             std::to_string(code) + ", log " + (dir / (job + ".log")).string() + ")");
-  const auto r = fem::read_calculix_dat(dir / (job + ".dat"), q.nodes.size());
-  if (nlgeom && r.time < 1.0 - 1e-9)
-    throw std::runtime_error((dir / (job + ".dat")).string() + ": NLGEOM step ended at time " +
-                             std::to_string(r.time));
-  for (int v : patch_q)
-    if (!r.has_reaction[static_cast<std::size_t>(v)])
-      throw std::runtime_error((dir / (job + ".dat")).string() + ": no RF for node " +
-                               std::to_string(v + 1));
+  neurosim::bench::C3d10Press press;
+  press.nlgeom = nlgeom;
+  press.increments = increments;
+  press.timeout_s = 7200.0;
+  const auto r = neurosim::bench::run_c3d10_press(dir, job, "press_refinement_bench", q, mat,
+                                                  fixed_q, patch_q, Vec3(0.0, 0.0, -depth_m),
+                                                  press);
   return patch_force(r.reaction_n, patch_q);
 }
 
@@ -295,7 +207,7 @@ int main(int argc, char** argv) {
       Quadratic q;
       std::vector<int> fixed_q, patch_q;
       if (ccx) {
-        q = quadratic(m);
+        q = neurosim::bench::quadratic_tets(m);
         lv.c3d10_nodes = q.nodes.size();
         patch_q = q.with_mid(patch);
         if (region) {  // exactly the cut faces clamped (their edges' mid-nodes, no other edge)

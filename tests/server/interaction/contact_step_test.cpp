@@ -290,6 +290,24 @@ TEST(interaction_contact_step, PressThroughTheTipCentreOnTheSurfaceIsContinuous)
   }
 }
 
+// dF/dx of the step's force by central differences of the tip's position (h along each axis,
+// unit m): column a is (F(x + h e_a) - F(x - h e_a)) / 2h, unit N/m.
+Mat3 force_central_differences(Simulation& sim, const ToolPose& p, double h) {
+  std::vector<ToolContact> c;
+  StepStats st;
+  Mat3 fd;
+  for (int a = 0; a < 3; ++a) {
+    ToolPose q = p;
+    q.tip_m[a] += h;
+    sim.step({q}, c, st);
+    const Vec3 plus = c[0].force_n;
+    q.tip_m[a] -= 2.0 * h;
+    sim.step({q}, c, st);
+    fd.col(a) = (plus - c[0].force_n) / (2.0 * h);
+  }
+  return fd;
+}
+
 // K (the stiffness sent to the haptic station) against central differences of the step's force
 // in the tip position (h = 0.1 um), through d = r: the press of the test above at 1.5, 1.99,
 // 2.01 and 2.5 mm (linear-tet), and the 3 mm tip of scenes/cube_cylinder.scene on the node at
@@ -316,16 +334,7 @@ TEST(interaction_contact_step, StiffnessIsThePressDerivativeThroughDEqualsR) {
     ASSERT_TRUE(st.converged);
     ASSERT_TRUE(c[0].in_contact);
     const Mat3 k = c[0].stiffness_n_per_m;
-    Mat3 fd;
-    for (int a = 0; a < 3; ++a) {
-      ToolPose q = p;
-      q.tip_m[a] += h;
-      sim.step({q}, c, st);
-      const Vec3 plus = c[0].force_n;
-      q.tip_m[a] -= 2.0 * h;
-      sim.step({q}, c, st);
-      fd.col(a) = (plus - c[0].force_n) / (2.0 * h);
-    }
+    const Mat3 fd = force_central_differences(sim, p, h);
     std::printf("%s: K e_x (%.1f %.1f %.1f), dF/dx (%.1f %.1f %.1f) N/m, off %.2e; whole K %.3f off\n",
                 what.c_str(), k(0, 0), k(1, 0), k(2, 0), fd(0, 0), fd(1, 0), fd(2, 0),
                 (k.col(0) - fd.col(0)).norm() / fd.col(0).norm(), (k - fd).norm() / fd.norm());
@@ -385,16 +394,7 @@ TEST(interaction_contact_step, StiffnessIncludesTheNormalsTurnOfNodeAndEdgeRows)
     ASSERT_TRUE(st.converged) << what;
     ASSERT_TRUE(c[0].in_contact) << what;
     const Mat3 k = c[0].stiffness_n_per_m;
-    Mat3 fd;
-    for (int a = 0; a < 3; ++a) {
-      ToolPose q = p;
-      q.tip_m[a] += h;
-      sim.step({q}, c, st);
-      const Vec3 plus = c[0].force_n;
-      q.tip_m[a] -= 2.0 * h;
-      sim.step({q}, c, st);
-      fd.col(a) = (plus - c[0].force_n) / (2.0 * h);
-    }
+    const Mat3 fd = force_central_differences(sim, p, h);
     const Eigen::SelfAdjointEigenSolver<Mat3> sym(0.5 * (k + k.transpose()));
     std::printf("%s: whole K %.2e off; K_yy %.1f K_yz %.1f K_zy %.1f K_zz %.1f, dF/dx %.1f %.1f %.1f "
                 "%.1f N/m; sym(K) eigenvalues %.1f %.1f %.1f\n",
