@@ -55,8 +55,8 @@ TEST(FemBrainPress, SmoothedTetWithinTenPercentOfC3d10) {
   for (std::size_t i = 0; i < patch.size(); ++i) values.segment<3>(3 * static_cast<Eigen::Index>(i)) = press;
 
   const testing::QuadraticMesh q = testing::quadratic(m);
-  const std::vector<int> fixed_q = q.with_mid_nodes(brain.fixed_nodes);
-  const std::vector<int> patch_q = q.with_mid_nodes(patch);
+  const std::vector<int> fixed_q = q.with_mid(brain.fixed_nodes);
+  const std::vector<int> patch_q = q.with_mid(patch);
   std::printf("coarse brain: %zu nodes, %zu tetrahedra, %zu fixed, %zu pressed (C3D10: %zu nodes)\n",
               m.num_vertices(), m.num_tets(), brain.fixed_nodes.size(), patch.size(), q.nodes.size());
 

@@ -5,6 +5,7 @@
 // brain_press_test (a coarse Colin27 brain).
 #pragma once
 
+#include "bench/c3d10_press.hpp"
 #include "server/fem/calculix.hpp"
 #include "server/fem/material.hpp"
 #include "server/mesh/tet_mesh.hpp"
@@ -27,45 +28,10 @@
 
 namespace neurosim::fem::testing {
 
-// The mesh with a node at the middle of every edge: C3D10 connectivity in CalculiX's order
-// (corners 1-4, then the mid-nodes of edges 1-2, 2-3, 3-1, 1-4, 2-4, 3-4), 0-based.
-struct QuadraticMesh {
-  std::vector<mesh::Vec3> nodes;  // the corners first (same ids), then the mid-edge nodes
-  std::vector<std::array<int, 10>> elements;
-  std::map<std::pair<int, int>, int> mid;  // sorted edge -> its mid node
-
-  // The corner nodes `corners` and the mid-nodes of every edge between two of them (a fixed
-  // or pressed face stays flat).
-  std::vector<int> with_mid_nodes(const std::vector<int>& corners) const {
-    std::vector<char> in(nodes.size(), 0);
-    for (int v : corners) in[static_cast<std::size_t>(v)] = 1;
-    std::vector<int> out = corners;
-    for (const auto& [edge, m] : mid)
-      if (in[static_cast<std::size_t>(edge.first)] && in[static_cast<std::size_t>(edge.second)])
-        out.push_back(m);
-    return out;
-  }
-};
-
-inline QuadraticMesh quadratic(const mesh::TetMesh& m) {
-  QuadraticMesh q;
-  q.nodes = m.vertices();
-  auto mid_node = [&](int a, int b) {
-    const auto key = std::minmax(a, b);
-    const auto it = q.mid.find(key);
-    if (it != q.mid.end()) return it->second;
-    const int id = static_cast<int>(q.nodes.size());
-    q.nodes.push_back(0.5 * (m.vertices()[a] + m.vertices()[b]));
-    q.mid.emplace(key, id);
-    return id;
-  };
-  for (const mesh::Tet& t : m.tets()) {
-    q.elements.push_back({t[0], t[1], t[2], t[3], mid_node(t[0], t[1]), mid_node(t[1], t[2]),
-                          mid_node(t[2], t[0]), mid_node(t[0], t[3]), mid_node(t[1], t[3]),
-                          mid_node(t[2], t[3])});
-  }
-  return q;
-}
+// The mesh with a node at the middle of every edge, C3D10 connectivity in CalculiX's order
+// (bench/c3d10_press.hpp, the benches' outside reference too).
+using QuadraticMesh = neurosim::bench::QuadraticTets;
+inline QuadraticMesh quadratic(const mesh::TetMesh& m) { return neurosim::bench::quadratic_tets(m); }
 
 // A node set held at one displacement (all three components), unit m.
 struct C3d10Press {
