@@ -19,6 +19,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <ostream>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -65,6 +66,26 @@ inline QuadraticTets quadratic_tets(const mesh::TetMesh& m) {
   return q;
 }
 
+// The deck's *NODE (NSET NALL) and *ELEMENT (C3D10, ELSET EALL) blocks, 1-based ids; and a node
+// set (ten ids a line).
+inline void write_c3d10_mesh(std::ostream& out, const QuadraticTets& q) {
+  out << "*NODE, NSET=NALL\n";
+  for (std::size_t v = 0; v < q.nodes.size(); ++v)
+    out << v + 1 << ", " << q.nodes[v].x() << ", " << q.nodes[v].y() << ", " << q.nodes[v].z()
+        << "\n";
+  out << "*ELEMENT, TYPE=C3D10, ELSET=EALL\n";
+  for (std::size_t e = 0; e < q.elements.size(); ++e) {
+    out << e + 1;
+    for (int n : q.elements[e]) out << ", " << n + 1;
+    out << "\n";
+  }
+}
+inline void write_node_set(std::ostream& out, const char* name, const std::vector<int>& set) {
+  out << "*NSET, NSET=" << name << "\n";
+  for (std::size_t i = 0; i < set.size(); ++i)
+    out << set[i] + 1 << (i + 1 == set.size() || i % 10 == 9 ? "\n" : ", ");
+}
+
 // The press's analysis: linear elastic (*ELASTIC), or NLGEOM neo-Hookean as
 // fem::write_calculix_input (C10 = E / (4 (1 + nu)), D1 = 6 (1 - 2 nu) / E) in `increments`
 // equal initial increments with *CONTROLS 1e-9.
@@ -89,21 +110,8 @@ inline fem::CalculixResult run_c3d10_press(const std::filesystem::path& dir,
   {
     std::ofstream out(dir / (job + ".inp"));
     out.precision(13);  // ccx reads at most 20 characters per number
-    auto node_set = [&](const char* name, const std::vector<int>& set) {
-      out << "*NSET, NSET=" << name << "\n";
-      for (std::size_t i = 0; i < set.size(); ++i)
-        out << set[i] + 1 << (i + 1 == set.size() || i % 10 == 9 ? "\n" : ", ");
-    };
-    out << "** " << title << " " << job << "\n*NODE, NSET=NALL\n";
-    for (std::size_t v = 0; v < q.nodes.size(); ++v)
-      out << v + 1 << ", " << q.nodes[v].x() << ", " << q.nodes[v].y() << ", " << q.nodes[v].z()
-          << "\n";
-    out << "*ELEMENT, TYPE=C3D10, ELSET=EALL\n";
-    for (std::size_t e = 0; e < q.elements.size(); ++e) {
-      out << e + 1;
-      for (int n : q.elements[e]) out << ", " << n + 1;
-      out << "\n";
-    }
+    out << "** " << title << " " << job << "\n";
+    write_c3d10_mesh(out, q);
     const double e = mat.youngs_modulus_pa, nu = mat.poisson_ratio;
     out << "*MATERIAL, NAME=M\n";
     if (press.nlgeom)
@@ -112,8 +120,8 @@ inline fem::CalculixResult run_c3d10_press(const std::filesystem::path& dir,
     else
       out << "*ELASTIC\n" << e << ", " << nu << "\n";
     out << "*SOLID SECTION, ELSET=EALL, MATERIAL=M\n";
-    node_set("NFIX", fixed_q);
-    node_set("NPRESS", patch_q);
+    write_node_set(out, "NFIX", fixed_q);
+    write_node_set(out, "NPRESS", patch_q);
     if (press.nlgeom) {
       const double inc = 1.0 / press.increments;
       out << "*STEP, NLGEOM, INC=" << 100 * press.increments << "\n*STATIC\n"

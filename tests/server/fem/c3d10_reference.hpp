@@ -46,34 +46,22 @@ inline CalculixResult solve_c3d10(const std::string& tag, const QuadraticMesh& q
                                   const Material& mat, const std::vector<int>& fixed,
                                   const Eigen::VectorXd& loads, const C3d10Press& press = {}) {
   const auto dir = neurosim::testing::temp_dir(tag);
-  auto node_set = [](std::ofstream& out, const char* name, const std::vector<int>& nodes) {
-    out << "*NSET, NSET=" << name << "\n";
-    for (std::size_t i = 0; i < nodes.size(); ++i)
-      out << nodes[i] + 1 << (i + 1 == nodes.size() || i % 10 == 9 ? "\n" : ", ");
-  };
+
   {
     std::ofstream out(dir / "job.inp");
     out.precision(13);  // ccx reads at most 20 characters per number
-    out << "** neurosim element test: " << tag << "\n*NODE, NSET=NALL\n";
-    for (std::size_t v = 0; v < q.nodes.size(); ++v)
-      out << v + 1 << ", " << q.nodes[v].x() << ", " << q.nodes[v].y() << ", " << q.nodes[v].z()
-          << "\n";
-    out << "*ELEMENT, TYPE=C3D10, ELSET=EALL\n";
-    for (std::size_t e = 0; e < q.elements.size(); ++e) {
-      out << e + 1;
-      for (int n : q.elements[e]) out << ", " << n + 1;
-      out << "\n";
-    }
+    out << "** neurosim element test: " << tag << "\n";
+    neurosim::bench::write_c3d10_mesh(out, q);
     out << "*MATERIAL, NAME=M\n*ELASTIC\n"
         << mat.youngs_modulus_pa << ", " << mat.poisson_ratio
         << "\n*SOLID SECTION, ELSET=EALL, MATERIAL=M\n";
-    node_set(out, "NFIX", fixed);
+    neurosim::bench::write_node_set(out, "NFIX", fixed);
     std::vector<int> rf = fixed;
     if (!press.nodes.empty()) {
-      node_set(out, "NPRESS", press.nodes);
+      neurosim::bench::write_node_set(out, "NPRESS", press.nodes);
       rf.insert(rf.end(), press.nodes.begin(), press.nodes.end());
     }
-    node_set(out, "NRF", rf);
+    neurosim::bench::write_node_set(out, "NRF", rf);
     out << "*STEP\n*STATIC\n*BOUNDARY\nNFIX, 1, 3\n";
     for (int a = 0; a < 3 && !press.nodes.empty(); ++a)
       out << "NPRESS, " << a + 1 << ", " << a + 1 << ", " << press.displacement_m[a] << "\n";
