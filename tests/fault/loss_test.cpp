@@ -61,15 +61,17 @@ void hold_under_loss(int per_mille) {
       first_answered = t.model_sequence;
   }
   // The server's count for this station once its last pose is in: two statuses with the same
-  // last sequence. The station sends nothing after join(), so the server may reclaim its idle
-  // slot before a second status arrives (SimStatus is lossy here too, and a loaded machine is
-  // slow to read it); then the last status that held it is used. Each status is one snapshot,
+  // last sequence. The station sends nothing after join(), so its slot may go before a second
+  // status arrives (SimStatus is lossy here too, and a loaded machine is slow to read it): the
+  // server reclaims it when idle, or drops it when the station's writer loses liveliness (its
+  // lease renewals lost at 30 %, seen once under stress-ng with no station and 0 reclaimed in
+  // the last status); then the last status that held it is used. Each status is one snapshot,
   // so its accepted and rejected counts always match its own last sequence.
   std::uint64_t accepted = 0, rejected = 0, last_sequence = 0;
   ASSERT_TRUE(status.wait_for(
       [&](const neurosim_SimStatus& st) {
         const auto* sa = neurosim::service::testing::find_station(st, "a");
-        if (sa == nullptr) return last_sequence > 0 && st.stations_reclaimed > 0;
+        if (sa == nullptr) return last_sequence > 0;  // gone after a status that held it
         const bool settled = sa->last_sequence == last_sequence && sa->last_sequence > 0;
         accepted = sa->samples_accepted;
         rejected = sa->samples_rejected_nonfinite + sa->samples_rejected_jump +
