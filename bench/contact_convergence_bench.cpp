@@ -62,6 +62,11 @@
 // factor). --region R: each point pressed on its own sub-model (sub_model.hpp: the tetrahedra
 // with centroid within R of the point, the cut faces clamped), cut on the unsplit mesh, then
 // split: cells down to 0.44 mm under the tip (the 7 mm brain split 4 times) within 8 GB.
+// --refine-cell H (repeat, fine to finer; the line's press only): the series is one brain (the
+// one --cell-size, default 7 mm) meshed again by neurosim-model with cells of H within
+// --refine-radius of the press point (its top on the line on the unrefined mesh), growing by
+// --refine-grading mm per mm beyond: the mesher's surface and cells refined under the tip alone,
+// down to 0.1 mm cells at a few ten thousand vertices. The table's "cells" are then H.
 #include "patient_models.hpp"
 #include "sub_model.hpp"
 #include "tet_split.hpp"
@@ -340,6 +345,8 @@ int main(int argc, char** argv) {
   std::string points_csv, cache_dir;
   double region_mm = 0.0;
   int max_rows = 0;
+  std::vector<double> refine_cells;
+  double refine_radius_mm = 3.0, refine_grading = 0.25;
   neurosim::cli::Parser p("contact_convergence_bench",
                           "The same press on the brain at several cell sizes: force convergence.");
   p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
@@ -404,11 +411,49 @@ int main(int argc, char** argv) {
   p->add_option("--bootstrap", bootstrap, "with --points: bootstrap draws of the points for the order's spread")
       ->capture_default_str();
   p->add_option("--points-csv", points_csv, "with --points: every press as CSV (mesh, point, surface point, normal, depth, |F|, rows)");
+  p->add_option("--refine-cell", refine_cells,
+                "the line's press on one brain (--cell-size, default 7) refined to this cell size around the press "
+                "point, unit mm (repeat; coarse to fine)")
+      ->check(neurosim::cli::finite());
+  p->add_option("--refine-radius", refine_radius_mm, "with --refine-cell: radius of the finest cells, unit mm")
+      ->check(neurosim::cli::finite())
+      ->capture_default_str();
+  p->add_option("--refine-grading", refine_grading,
+                "with --refine-cell: growth of the cells beyond --refine-radius, mm per mm")
+      ->check(neurosim::cli::finite())
+      ->capture_default_str();
   p->add_option("--cache-dir", cache_dir,
                 "SimulationOptions::compliance_cache_dir (the host's factor and boundary operator on disk: a second "
                 "run of a mesh skips its factorization)");
   if (auto rc = p.parse(argc, argv)) return *rc;
+  double far_cell_mm = 0.0;      // with --refine-cell: the brain's cell size away from the press
+  double refine_centre_mm[3]{};  // the press point on the unrefined brain, image mm
+  if (!refine_cells.empty()) {
+    if (cells.size() > 1 || points > 0 || slide || region_mm > 0.0 || !splits.empty()) {
+      std::fprintf(stderr, "contact_convergence_bench: --refine-cell takes one --cell-size and the line's press "
+                           "(not --points, --slide, --region or --split)\n");
+      return 2;
+    }
+    far_cell_mm = cells.empty() ? 7.0 : cells.front();
+    try {
+      const fs::path scene = neurosim::bench::scene_at(far_cell_mm, dir, "contact_convergence_bench");
+      const neurosim::scene::Model model = neurosim::scene::load_model(scene);
+      const auto top = ni::top_of_surface(model.meshes.front().mesh, 1e-3 * x_mm, 1e-3 * y_mm);
+      if (!top) throw std::runtime_error(scene.string() + ": the press line misses the brain's surface");
+      for (int k = 0; k < 3; ++k) refine_centre_mm[k] = std::round(1e5 * top->point_m[k]) / 1e2;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "contact_convergence_bench: %s\n", e.what());
+      return 1;
+    }
+    cells = refine_cells;
+  }
   if (cells.empty()) cells = {7.0, 5.0, 4.0, 3.0};
+  // The scene of the line's press at cells[ci] (the refined brain's with --refine-cell).
+  auto line_scene = [&](std::size_t ci) {
+    if (refine_cells.empty()) return neurosim::bench::scene_at(cells[ci], dir, "contact_convergence_bench");
+    return neurosim::bench::refined_scene_at(far_cell_mm, cells[ci], refine_centre_mm, refine_radius_mm,
+                                             refine_grading, dir, "contact_convergence_bench");
+  };
   auto prepare = [&](neurosim::scene::Model& model) {
     model.effects.tier = neurosim::scene::Tier::kLinear;
     if (no_shaft) model.tools.at(0).shaft_length_m = 0.0;
@@ -790,7 +835,7 @@ int main(int argc, char** argv) {
   };
   try {
     for (std::size_t ci = 0; ci < cells.size(); ++ci) {
-      const fs::path scene = neurosim::bench::scene_at(cells[ci], dir, "contact_convergence_bench");
+      const fs::path scene = line_scene(ci);
       neurosim::scene::Model model = neurosim::scene::load_model(scene);
       prepare(model);
       if (brain_only) {

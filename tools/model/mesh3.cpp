@@ -14,6 +14,7 @@
 
 #include <vtkImageData.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <map>
@@ -44,6 +45,17 @@ Criteria make_criteria(double s, double facet_distance) {
                   params::cell_size = s);
 }
 
+// The labeled image's criteria with a LocalRefinement: facet and cell size the refinement's field,
+// the surface distance a quarter of it (as the uniform mesh's).
+struct SizeField {
+  LocalRefinement refine;
+  double far_mm{0.0};
+  double scale{1.0};
+  double operator()(const K::Point_3& p, const int, const Domain::Index&) const {
+    return scale * refine.size_at(Vec3(p.x(), p.y(), p.z()), far_mm);
+  }
+};
+
 // Refinement, sliver perturbation, then sliver exudation. Without an explicit time limit
 // make_mesh_3 bounds both by the refinement's wall time, which makes the mesh depend on machine
 // load; time_limit = 0 means no limit (both stop when they cannot improve any more).
@@ -63,8 +75,27 @@ Mesh3Output run(const Domain& domain, const Criteria& criteria) {
 
 }  // namespace
 
-Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::uint32_t seed) {
+double LocalRefinement::size_at(const Vec3& p_mm, double far_mm) const {
+  if (!on()) return far_mm;
+  const double beyond = std::max(0.0, (p_mm - centre_mm).norm() - radius_mm);
+  return std::min(far_mm, cell_size_mm + grading * beyond);
+}
+
+void LocalRefinement::check(double far_mm) const {
+  if (!on()) return;
+  auto bad = [](const std::string& what) { throw std::invalid_argument("local refinement: " + what); };
+  if (!centre_mm.allFinite()) bad("the centre (--refine-at) is not finite");
+  if (!(cell_size_mm > 0.0 && cell_size_mm < far_mm) || !std::isfinite(cell_size_mm))
+    bad("the cell size (--refine-cell-size) must be finite and below the mesh's cell size " +
+        std::to_string(far_mm) + " mm");
+  if (!(radius_mm >= 0.0) || !std::isfinite(radius_mm)) bad("the radius (--refine-radius) must be finite and >= 0 mm");
+  if (!(grading > 0.0 && grading <= 1.0)) bad("the grading (--refine-grading) must be in (0, 1] mm per mm");
+}
+
+Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::uint32_t seed,
+                               const LocalRefinement& refine) {
   check_size(cell_size_mm, "brain cell size");
+  refine.check(cell_size_mm);
   if (labels == nullptr || labels->GetScalarType() != VTK_UNSIGNED_CHAR) {
     throw std::invalid_argument("mesh3: label image must be unsigned char");
   }
@@ -75,7 +106,11 @@ Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::u
   const Domain domain = Domain::create_labeled_image_mesh_domain(
       image, params::relative_error_bound = 1e-6, params::p_rng = &rng);
   // Surface within a quarter cell of the mask boundary (a voxel is 1 mm).
-  return run(domain, make_criteria(cell_size_mm, 0.25 * cell_size_mm));
+  if (!refine.on()) return run(domain, make_criteria(cell_size_mm, 0.25 * cell_size_mm));
+  const SizeField size{refine, cell_size_mm, 1.0}, distance{refine, cell_size_mm, 0.25};
+  return run(domain, Criteria(params::facet_angle = 30.0, params::facet_size = size,
+                              params::facet_distance = distance,
+                              params::cell_radius_edge_ratio = 3.0, params::cell_size = size));
 }
 
 Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm, double cell_size_mm,

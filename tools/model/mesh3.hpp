@@ -20,9 +20,28 @@ struct Mesh3Output {
   std::size_t cells{0};
 };
 
+// Finer cells around one point (a press, a contact patch): the mesh's cell and facet size is
+// cell_size_mm within radius_mm of centre_mm, growing by `grading` mm per mm beyond it up to the
+// mesh's own size (a Lipschitz sizing field, as Mesh_3's refinement wants); the surface distance
+// bound scales with it (a quarter of the local size). Off when cell_size_mm is 0. Units mm, in
+// the image's coordinates (the mesh files' coordinates).
+struct LocalRefinement {
+  Vec3 centre_mm{Vec3::Zero()};
+  double cell_size_mm{0.0};
+  double radius_mm{2.5};
+  double grading{0.25};
+  bool on() const { return cell_size_mm != 0.0; }
+  // The local size at p, unit mm, for a mesh whose size is far_mm elsewhere.
+  double size_at(const Vec3& p_mm, double far_mm) const;
+  // Throws std::invalid_argument naming the option when a value is not finite or out of range
+  // (cell size in (0, far_mm), radius >= 0, grading in (0, 1]).
+  void check(double far_mm) const;
+};
+
 // Mesh_3 on a labeled image (0 = outside), cell/facet size in mm, sliver exudation on.
 // CGAL's random generator is seeded with `seed` first, so the result is reproducible.
-Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::uint32_t seed);
+Mesh3Output mesh_labeled_image(vtkImageData* labels, double cell_size_mm, std::uint32_t seed,
+                               const LocalRefinement& refine = {});
 
 // Solid tube of radius_mm around the polyline `centreline_mm` (rounded ends), implicit domain.
 Mesh3Output mesh_tube(const std::vector<Vec3>& centreline_mm, double radius_mm, double cell_size_mm,

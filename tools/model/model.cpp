@@ -200,6 +200,23 @@ void write_skull(const std::filesystem::path& file, const SurfaceOutput& surface
   summary.enclosed_volume_ml = mesh::check_closed(back.vertices_m, back.triangles).volume_m3 * 1e6;
 }
 
+// The refinement as neurosim-model's flags and in words (empty when off), for the scene's text.
+std::string refinement_flags(const LocalRefinement& r) {
+  if (!r.on()) return "";
+  std::ostringstream s;
+  s << " --refine-at " << r.centre_mm.x() << " " << r.centre_mm.y() << " " << r.centre_mm.z()
+    << " --refine-cell-size " << r.cell_size_mm << " --refine-radius " << r.radius_mm
+    << " --refine-grading " << r.grading;
+  return s.str();
+}
+std::string refinement_words(const LocalRefinement& r) {
+  if (!r.on()) return "";
+  std::ostringstream s;
+  s << " (" << r.cell_size_mm << " mm within " << r.radius_mm << " mm of image point "
+    << fmt(r.centre_mm) << " mm, growing " << r.grading << " mm per mm beyond)";
+  return s.str();
+}
+
 }  // namespace
 
 OpeningMni default_suboccipital_opening() {
@@ -226,6 +243,7 @@ std::vector<Vec3> default_mca_course_mni_mm() {
 ModelResult build_model(const ModelOptions& o) {
   const auto t_start = Clock::now();
   check_positive(o.brain_cell_size_mm, "--cell-size (mm)");
+  o.brain_refinement.check(o.brain_cell_size_mm);
   check_positive(o.artery_cell_size_mm, "artery cell size (mm)");
   check_positive(o.artery_radius_mm, "artery radius (mm)");
   check_positive(o.fixed_margin_mm, "fixed margin (mm)");
@@ -270,7 +288,7 @@ ModelResult build_model(const ModelOptions& o) {
   const std::filesystem::path mesh_dir = o.out_dir / o.name;
   std::filesystem::create_directories(mesh_dir);
   t0 = Clock::now();
-  const Mesh3Output brain3 = mesh_labeled_image(mask.labels, o.brain_cell_size_mm, o.seed);
+  const Mesh3Output brain3 = mesh_labeled_image(mask.labels, o.brain_cell_size_mm, o.seed, o.brain_refinement);
   r.brain.seconds = seconds_since(t0);
   mesh::TetMesh brain = write_and_load(mesh_dir / "brain.mesh", brain3, r.brain);
   if (o.skull) {
@@ -332,7 +350,8 @@ ModelResult build_model(const ModelOptions& o) {
   const Eigen::Vector3d world0 = (mask.image_to_world * Eigen::Vector4d(0, 0, 0, 1)).head<3>();
   desc << "Patient model: brain from the Colin27 MRI (" << o.mri_path
        << ") with a generated right middle cerebral artery; built by neurosim-model --seed "
-       << o.seed << " --cell-size " << o.brain_cell_size_mm << " --material "
+       << o.seed << " --cell-size " << o.brain_cell_size_mm << refinement_flags(o.brain_refinement)
+       << " --material "
        << (o.material == MaterialSet::Paper ? "paper" : "literature")
        << ". Mesh coordinates are the image's VTK coordinates (voxel index x spacing, mm); "
           "NIfTI world (MNI) = image + "
@@ -356,7 +375,7 @@ ModelResult build_model(const ModelOptions& o) {
     std::ostringstream prov;
     prov << "Colin27 ch2bet (mricron-data), T1 >= " << o.mask_threshold
          << " mask, largest component, cavities filled; CGAL Mesh_3 labeled image, cell size "
-         << o.brain_cell_size_mm << " mm, seed " << o.seed
+         << o.brain_cell_size_mm << " mm" << refinement_words(o.brain_refinement) << ", seed " << o.seed
          << ", sliver perturbation and exudation; fixed: brain resting on the skull base (nodes "
             "within "
          << o.fixed_margin_mm << " mm above a plane fitted to the lowest surface points)";

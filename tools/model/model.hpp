@@ -4,6 +4,7 @@
 
 #include "server/mesh/quality.hpp"
 #include "server/mesh/tet_mesh.hpp"
+#include "tools/model/mesh3.hpp"
 #include "tools/model/regions.hpp"
 #include "tools/model/skull.hpp"
 
@@ -27,6 +28,9 @@ struct ModelOptions {
   std::string name{"brain_artery"};  // <out_dir>/<name>.scene and <out_dir>/<name>/*.mesh
   double mask_threshold{20.0};       // T1 intensity (ch2bet is 0..133); voxels >= it are brain
   double brain_cell_size_mm{5.0};    // Mesh_3 cell/facet size, unit mm (~13.3k vertices)
+  // Finer brain cells around one point (image mm; off by default): a press's neighbourhood
+  // resolved without refining the whole brain (contact_convergence_bench --refine-cell).
+  LocalRefinement brain_refinement{};
   double artery_cell_size_mm{0.9};   // unit mm (~1.5k vertices, ~4.4k tetrahedra)
   double artery_radius_mm{1.5};      // MCA M1 diameter ~3 mm
   // Artery centreline control points in the image's world space (NIfTI sform: MNI mm).

@@ -24,6 +24,24 @@ int main(int argc, char** argv) {
   p->add_option("--artery-cell-size", o.artery_cell_size_mm, "artery cell size, unit mm")
       ->check(cli::finite())
       ->capture_default_str();
+  std::vector<double> refine_at;
+  auto& refine = o.brain_refinement;
+  p->add_option("--refine-at", refine_at,
+                "finer brain cells around this point X Y Z, image mm (the mesh files' "
+                "coordinates; the scene's, in m, times 1000); needs --refine-cell-size")
+      ->expected(3)
+      ->check(cli::finite());
+  p->add_option("--refine-cell-size", refine.cell_size_mm,
+                "brain cell size at --refine-at, unit mm (below --cell-size)")
+      ->check(cli::finite());
+  p->add_option("--refine-radius", refine.radius_mm,
+                "radius of the finest cells around --refine-at, unit mm")
+      ->check(cli::finite())
+      ->capture_default_str();
+  p->add_option("--refine-grading", refine.grading,
+                "growth of the cell size beyond --refine-radius, mm per mm, in (0, 1]")
+      ->check(cli::finite())
+      ->capture_default_str();
   p->add_option("--seed", seed, "mesher seed, an integer in [0, 2^32)")
       ->check(CLI::Validator(
           [](std::string& v) {
@@ -84,6 +102,11 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  if (refine_at.empty() != (refine.cell_size_mm == 0.0)) {
+    std::cerr << "neurosim-model: --refine-at and --refine-cell-size go together\n";
+    return 2;
+  }
+  if (!refine_at.empty()) refine.centre_mm = neurosim::model::Vec3(refine_at[0], refine_at[1], refine_at[2]);
   o.seed = static_cast<std::uint32_t>(seed);
   o.material = material == "paper" ? neurosim::model::MaterialSet::Paper
                                    : neurosim::model::MaterialSet::Literature;

@@ -8,10 +8,12 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <sstream>
+#include <utility>
 
 namespace {
 
@@ -195,6 +197,118 @@ TEST(model_options, ArteryCourseOutsideTheBrainAndBadInputsAreRefused) {
   o.brain_cell_size_mm = 12.0;
   o.mri_path = (dir / "missing.nii.gz").string();
   EXPECT_THROW(model::build_model(o), std::runtime_error);
+  std::filesystem::remove_all(dir);
+}
+
+// Mean length of the edges whose midpoint lies within radius_mm of centre_mm (image mm), and
+// how many there are.
+std::pair<double, int> mean_edge_near(const TetMesh& mesh, const Vec3& centre_mm, double radius_mm) {
+  double sum = 0.0;
+  int n = 0;
+  for (const auto& t : mesh.tets())
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b) {
+        const Vec3 p = 1e3 * mesh.vertices()[t[a]], q = 1e3 * mesh.vertices()[t[b]];
+        if ((0.5 * (p + q) - centre_mm).norm() > radius_mm) continue;
+        sum += (p - q).norm();  // each interior edge counted once per tetrahedron: a weighted mean
+        ++n;
+      }
+  return {n > 0 ? sum / n : 0.0, n};
+}
+
+TEST(model_refinement, SizeFieldGradesFromTheCentreToTheMeshSize) {
+  model::LocalRefinement r;
+  EXPECT_FALSE(r.on());
+  EXPECT_EQ(r.size_at(Vec3(1, 2, 3), 7.0), 7.0);
+  r.centre_mm = Vec3(10, 0, 0);
+  r.cell_size_mm = 0.5;
+  r.radius_mm = 3.0;
+  r.grading = 0.25;
+  EXPECT_TRUE(r.on());
+  EXPECT_DOUBLE_EQ(r.size_at(Vec3(10, 0, 0), 7.0), 0.5);
+  EXPECT_DOUBLE_EQ(r.size_at(Vec3(10, 3, 0), 7.0), 0.5);
+  EXPECT_DOUBLE_EQ(r.size_at(Vec3(10, 0, 7), 7.0), 0.5 + 0.25 * 4.0);
+  EXPECT_DOUBLE_EQ(r.size_at(Vec3(100, 0, 0), 7.0), 7.0);  // capped at the mesh's own size
+  EXPECT_NO_THROW(r.check(7.0));
+}
+
+TEST(model_refinement, BadValuesAreRefusedNamingTheOption) {
+  auto refused = [](model::LocalRefinement r, const char* option) {
+    try {
+      r.check(7.0);
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(option), std::string::npos) << e.what();
+      return;
+    }
+    ADD_FAILURE() << "not refused: " << option;
+  };
+  model::LocalRefinement ok;
+  ok.cell_size_mm = 1.0;
+  auto r = ok;
+  r.cell_size_mm = 7.0;  // not below the mesh's size
+  refused(r, "--refine-cell-size");
+  r.cell_size_mm = -1.0;
+  refused(r, "--refine-cell-size");
+  r = ok;
+  r.radius_mm = -1.0;
+  refused(r, "--refine-radius");
+  r = ok;
+  r.grading = 0.0;
+  refused(r, "--refine-grading");
+  r = ok;
+  r.centre_mm.x() = std::nan("");
+  refused(r, "--refine-at");
+  if (!std::filesystem::exists(kMri)) GTEST_SKIP() << kMri << " missing";
+  const auto dir = neurosim::testing::temp_dir("model_refine_bad");
+  auto o = coarse_options(dir);
+  o.brain_refinement.cell_size_mm = 20.0;  // coarser than the 12 mm brain
+  EXPECT_THROW(model::build_model(o), std::invalid_argument);
+  std::filesystem::remove_all(dir);
+}
+
+// The coarse brain meshed again with 3 mm cells within 4 mm of its highest vertex: the cells
+// there shrink (mean edge near the point well below the unrefined mesh's), the mesh stays valid,
+// and away from the point it is the coarse brain's size (the vertex count grows by a local
+// amount only).
+TEST_F(model_builder, LocalRefinementShrinksTheCellsAroundItsPointOnly) {
+  const TetMesh coarse = neurosim::mesh::load_tet_mesh(result_->brain.file.string(), 1e-3);
+  Vec3 top = coarse.vertices().front();
+  for (const Vec3& x : coarse.vertices())
+    if (x.z() > top.z()) top = x;
+  const Vec3 centre_mm = 1e3 * top;
+  const auto dir = neurosim::testing::temp_dir("model_refine");
+  auto o = coarse_options(dir);
+  o.brain_refinement.centre_mm = centre_mm;
+  o.brain_refinement.cell_size_mm = 3.0;
+  o.brain_refinement.radius_mm = 4.0;
+  o.brain_refinement.grading = 0.5;
+  const model::ModelResult refined = model::build_model(o);
+  const TetMesh fine = neurosim::mesh::load_tet_mesh(refined.brain.file.string(), 1e-3);
+  EXPECT_EQ(neurosim::mesh::quality(fine).inverted, 0);
+  const auto [coarse_edge, coarse_n] = mean_edge_near(coarse, centre_mm, 6.0);
+  const auto [fine_edge, fine_n] = mean_edge_near(fine, centre_mm, 6.0);
+  EXPECT_LT(fine_edge, 0.6 * coarse_edge) << coarse_n << " / " << fine_n << " edges";
+  EXPECT_LT(fine_edge, 2.0 * o.brain_refinement.cell_size_mm);
+  EXPECT_GT(fine.num_vertices(), coarse.num_vertices());
+  EXPECT_LT(fine.num_vertices(), coarse.num_vertices() + 2000);
+  // Away from the point (beyond radius + (12 - 3) / grading = 22 mm) the cells are the coarse
+  // brain's: the same mean edge within 15 % far from the point.
+  auto far_edge = [&](const TetMesh& m) {
+    double sum = 0.0;
+    int n = 0;
+    for (const auto& t : m.tets())
+      for (int a = 0; a < 4; ++a)
+        for (int b = a + 1; b < 4; ++b) {
+          const Vec3 p = 1e3 * m.vertices()[t[a]], q = 1e3 * m.vertices()[t[b]];
+          if ((0.5 * (p + q) - centre_mm).norm() < 40.0) continue;
+          sum += (p - q).norm();
+          ++n;
+        }
+    return sum / n;
+  };
+  EXPECT_NEAR(far_edge(fine) / far_edge(coarse), 1.0, 0.15);
+  const std::string text = slurp(refined.scene);
+  EXPECT_NE(text.find("--refine-cell-size 3"), std::string::npos) << "the scene's text names the refinement";
   std::filesystem::remove_all(dir);
 }
 
