@@ -352,6 +352,9 @@ int main(int argc, char** argv) {
   p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
   p->add_option("--models", dir, "folder of the built scenes (as scale_bench)")->capture_default_str();
   p->add_option("--x", x_mm, "press line x, unit mm")->capture_default_str();
+  std::vector<double> line_depths_mm;
+  p->add_option("--depth", line_depths_mm, "the line's press depths, unit mm (repeat; default 0.5 to 3 by 0.5)")
+      ->check(neurosim::cli::finite());
   p->add_option("--y", y_mm, "press line y, unit mm")->capture_default_str();
   p->add_option("--element", element, "every mesh's element (default: the scene's)");
   p->add_flag("--slide", slide, "also the 40 mm slide at 1 and 2 mm (|F| / depth spread)");
@@ -737,7 +740,8 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
-  const std::vector<double> depths_mm{0.5, 1.0, 1.5, 2.0, 2.5, 3.0};
+  if (line_depths_mm.empty()) line_depths_mm = {0.5, 1.0, 1.5, 2.0, 2.5, 3.0};
+  const std::vector<double> depths_mm = line_depths_mm;
   std::vector<std::vector<double>> force_mn(cells.size(), std::vector<double>(depths_mm.size(), 0.0));
   std::vector<std::vector<int>> rows(cells.size(), std::vector<int>(depths_mm.size(), 0));
   std::vector<std::string> mesh_rows;  // cell size, vertices / tets, surface point, build time

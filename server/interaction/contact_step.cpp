@@ -1151,13 +1151,23 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   // (Seen with a curved contact surface: a face row 0.1 mm behind it at a 2 mm press, a node row
   // beside the tip with a radial normal 70 degrees from it the highest, and the face row
   // dropped: 0.4 mN.)
+  // The entry faces the tool's shaft side where any touched row does: a probe goes into tissue
+  // tip first, so the surface it went through faces back along its axis (plane normal . axis >
+  // 0). A touched row facing away is the underside of a lip beside the tip (a fold over a
+  // sulcus, which a brain meshed finely under the press resolves): the centre is far in front of
+  // it, so it was the entry, and every row of the surface pressed (its normal more than 60
+  // degrees from the lip's, the centre just behind it) was dropped: the 2 mm tip pressed 2.05 mm
+  // into the 7 mm brain refined to 0.5 mm cells under it kept 37 of 87 rows, 2.9 mN where 1.8 mm
+  // gave 9.6 mN.
   std::size_t entry = tool_rows_.size();
-  for (std::size_t k = first; k < tool_rows_.size(); ++k) {
-    if (tool_rows_[k].depth_m < 0.0 || tool_rows_[k].radial) continue;
-    if (entry == tool_rows_.size() ||
-        tool_row_plane_h_[k - first] > tool_row_plane_h_[entry - first])
-      entry = k;
-  }
+  for (int facing = 1; facing >= 0 && entry == tool_rows_.size(); --facing)
+    for (std::size_t k = first; k < tool_rows_.size(); ++k) {
+      if (tool_rows_[k].depth_m < 0.0 || tool_rows_[k].radial) continue;
+      if (facing && !(tool_row_plane_[k - first].dot(axis) > 0.0)) continue;
+      if (entry == tool_rows_.size() ||
+          tool_row_plane_h_[k - first] > tool_row_plane_h_[entry - first])
+        entry = k;
+    }
   if (entry == tool_rows_.size()) return;  // nothing touched: no row is behind a surface
   const Vec3 n_entry = tool_row_plane_[entry - first];
   const Vec3 p_entry = tool_rows_[entry].point_m;
