@@ -46,6 +46,8 @@
 // --max-hold S holds the tool at its last pose up to S seconds longer (one step per sample
 // period) until it settles; --trace writes every run's per-step force (DIR/traces/);
 // --tier-update-steps N: Newton steps per equilibrium update (0: each update converges).
+// --brain-scene PATH: the brain's finest mesh is that scene's (a neurosim-model brain_artery of
+// another cell size) instead of the bundled one.
 //
 // --finest-only: only the finest mesh of each scene (the bundled one for the brain), no C3D10
 // patch press (no discretization rows, those columns nan) and no CalculiX comparison: the runs
@@ -502,7 +504,7 @@ int main(int argc, char** argv) {
   bool trace = false;
   double max_hold_s = 0.0;
   int tier_update_steps = -1;
-  std::string out_dir, table_path, disc_table_path;
+  std::string out_dir, table_path, disc_table_path, brain_scene;
   std::vector<std::string> elements, press_filter;
   std::vector<std::string> scenes{"cube_cylinder", "brain_artery"};
   neurosim::cli::Parser cli("accuracy_bench",
@@ -532,6 +534,9 @@ int main(int argc, char** argv) {
                   "tier_update_steps; 0: each update converges; default: the server's)")
       ->check(CLI::Range(0, 1000));
   cli->add_flag("--trace", trace, "per-step tool force of every run in DIR/traces/*.csv");
+  cli->add_option("--brain-scene", brain_scene,
+                  "the brain's finest mesh: this scene (a neurosim-model brain_artery of another "
+                  "cell size; default scenes/brain_artery.scene)");
   cli->add_option("--table", table_path,
                   "measured force-error table for the server (default DIR/force_error.csv)");
   cli->add_option("--disc-table", disc_table_path,
@@ -578,7 +583,10 @@ int main(int argc, char** argv) {
           sc.resolutions.push_back({"", brain_at(11.0, models), 0});
           sc.resolutions.push_back({"", brain_at(9.0, models), 0});
         }
-        sc.resolutions.push_back({"", neurosim::scene::load_model(src + "/scenes/brain_artery.scene"), 0});
+        sc.resolutions.push_back(
+            {"", neurosim::scene::load_model(brain_scene.empty() ? src + "/scenes/brain_artery.scene"
+                                                                 : brain_scene),
+             0});
       } else {
         throw std::runtime_error("--scene " + name + ": unknown (cube_cylinder, brain_artery)");
       }

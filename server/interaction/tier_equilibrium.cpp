@@ -121,6 +121,7 @@ void TierEquilibrium::rest(TierLinearization& out) const {
   out.iterations = 0;
   out.inverted_elements = 0;
   out.converged = true;
+  out.residual_n = 0.0;
   out.count = 0;
 }
 
@@ -214,6 +215,7 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   u = u_;
   int iterations = 0;
   bool converged = true;
+  double residual_n = 0.0;
   // The compliance columns of the load's slots that the linearization lacks (slots newly
   // loaded: one block solve with the host's linear factor, ~0.1-0.3 s at 5 mm) are solved on
   // another thread while Newton runs (they depend on the load's slots only); joined before the
@@ -238,7 +240,7 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
     missing_.clear();
   };
   try {
-    equilibrium(u, iterations, converged);
+    equilibrium(u, iterations, converged, residual_n);
   } catch (...) {
     if (aside.joinable()) aside.join();
     if (!aside_error) {
@@ -270,11 +272,13 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   out.load = load;
   out.iterations = iterations;
   out.converged = converged;
+  out.residual_n = residual_n;
   out.inverted_elements = inverted_elements();
   out.count = ++count_;
 }
 
-void TierEquilibrium::equilibrium(Eigen::VectorXd& u, int& iterations, bool& converged) {
+void TierEquilibrium::equilibrium(Eigen::VectorXd& u, int& iterations, bool& converged,
+                                  double& residual_n) {
   if (qlv_.empty() && f_.isZero(0.0)) {
     // No force on an elastic body (every tool has left it): its equilibrium is the rest state,
     // exactly (the body carries no other load and nothing is prescribed). Newton from the last
@@ -287,12 +291,15 @@ void TierEquilibrium::equilibrium(Eigen::VectorXd& u, int& iterations, bool& con
       const fem::NewtonIncrement inc = solver_->solve_from(f_, u, newton_);
       iterations = static_cast<int>(inc.residual_n.size()) - 1;
       converged = inc.converged;
+      residual_n = inc.residual_n.empty() ? 0.0 : inc.residual_n.back();
     } catch (const std::runtime_error&) {
       try {
         const fem::EquilibriumResult r = solver_->solve(f_, newton_);
         u = r.displacement_m;
         for (const auto& inc : r.increments)
           iterations += static_cast<int>(inc.residual_n.size()) - 1;
+        if (!r.increments.empty() && !r.increments.back().residual_n.empty())
+          residual_n = r.increments.back().residual_n.back();
       } catch (const std::runtime_error& e) {
         throw std::runtime_error("TierEquilibrium: " + body_name(*body_) + " in tier " +
                                  fem::tier_name(tier_) + ": " + e.what());

@@ -77,6 +77,10 @@ struct TierLinearization {
   // The update met the Newton tolerance (false: cut short by NewtonOptions::step_limit; the
   // worker continues it even when the forces no longer change).
   bool converged{true};
+  // The equilibrium's own residual at u_m: max |f_ext - f_int| over the free dofs after the
+  // update's last Newton step (0 at rest), unit N. Below NewtonOptions::tolerance x the force
+  // scale when converged; the worker compares it with the contact forces' change (TierWorker).
+  double residual_n{0.0};
   std::uint64_t count{0};  // updates of this body so far
 };
 
@@ -180,7 +184,7 @@ class TierEquilibrium {
   // Phase "Newton" of update(): u (the warm start, u_'s copy) becomes the equilibrium for f_
   // (the rest state for an elastic body without force); throws std::runtime_error naming the
   // body when it does not converge.
-  void equilibrium(Eigen::VectorXd& u, int& iterations, bool& converged);
+  void equilibrium(Eigen::VectorXd& u, int& iterations, bool& converged, double& residual_n);
   // The worker's own solve scratch: its linearizations lock nothing the step or the fields use.
   std::unique_ptr<fem::SolveWorkspace> ws_ = std::make_unique<fem::SolveWorkspace>();
   std::vector<Eigen::Matrix3d> rotation_;  // per contact slot

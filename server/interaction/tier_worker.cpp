@@ -127,6 +127,14 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
       rx.f.setZero();
       rx.has_previous = false;
       rx.omega = 1.0;
+    } else if (moved && !current_[b].converged &&
+               current_[b].residual_n > kNewtonForcing * rx.residual.cwiseAbs().maxCoeff()) {
+      // The equilibrium of the current forces is further from converged than a fraction of
+      // the step's change of them: its linearization is not yet the model's at f, so the
+      // step's lambda - f is mostly the update's own error, not the fixed point's residual.
+      // Newton goes on for the same f (the Aitken history kept: its next secant is taken
+      // between two linearizations that were equilibria to within that fraction).
+      held_.fetch_add(1, std::memory_order_relaxed);
     } else if (moved) {
       if (rx.has_previous) {  // Aitken: omega <- -omega r_prev . (r - r_prev) / |r - r_prev|^2
         rx.previous = rx.residual - rx.previous;

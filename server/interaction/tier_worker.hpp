@@ -20,6 +20,18 @@
 // A step whose forces on an elastic body are all zero (the tools left it) sets f' = 0 at once and restarts
 // the relaxation: the body is then at rest in one update (TierEquilibrium::update), instead of
 // relaxing towards rest while the step finds its rows on a surface no tool holds any more.
+//
+// Updates cut short (NewtonOptions::step_limit, the server's 2 Newton steps) are inexact: the
+// linearization is then taken at an iterate u that is not the equilibrium of f, and the step's
+// lambda - f carries that error as well as the fixed point's residual. Where Newton needs many
+// steps (the bundled brain pressed 10 mm: strain ~3, the update's residual after its 2 steps
+// often larger than the forces' change) moving f at every update by that lambda made the two
+// iterations chase each other: the held force circled (0.31-0.36 N) instead of settling. So, as
+// the forcing term of an inexact Newton method (Eisenstat & Walker 1996) bounds the inner error by
+// a fraction of the outer residual, f moves only when the last update's Newton residual is at
+// most kNewtonForcing x max |lambda - f| (or it converged); otherwise the next update goes on
+// for the same f from the last iterate (each update still at most step_limit steps: the rate is
+// unchanged). The fixed point is the same.
 #pragma once
 
 #include "common/triple_buffer.hpp"
@@ -37,6 +49,10 @@ namespace neurosim::interaction {
 
 class TierWorker {
  public:
+  // The forcing term of the inexact updates: the relaxed forces move only once the current
+  // update's Newton residual (TierLinearization::residual_n) is at most this fraction of the
+  // step's change of them, max |lambda - f| (or the update converged); dimensionless.
+  static constexpr double kNewtonForcing = 0.1;
   // One equilibrium per body (none null). threaded: the updates run on a thread started here
   // and joined by the destructor; else post() runs them. max_forces_per_body: the hand-over
   // buffers are sized for that many contact forces per body (more: they grow once).
@@ -67,6 +83,10 @@ class TierWorker {
     double busy_s{0.0};
   };
   Totals totals() const;
+  // Updates that went on for the same forces although the step's had changed, because the
+  // last update was cut short further from its equilibrium than kNewtonForcing of that change.
+  // Any thread.
+  std::uint64_t held_updates() const { return held_.load(std::memory_order_relaxed); }
   // Updates that did not converge (the previous equilibrium stays) and the last message.
   std::uint64_t failures() const { return failures_.load(std::memory_order_relaxed); }
   std::string last_error() const;
@@ -86,6 +106,7 @@ class TierWorker {
     bool has_previous{false};
   };
   std::vector<Relaxation> relax_;
+  std::atomic<std::uint64_t> held_{0};
   std::atomic<bool> stop_{false};
   std::atomic<double> rate_hz_{0.0};
   std::atomic<std::uint64_t> failures_{0};

@@ -4,7 +4,8 @@
 // one rate) and stay there; constant forces, once reached, are not updated again; the
 // equilibrium handed out is the one a fresh TierEquilibrium finds for those forces; stale and
 // malformed loads are skipped or refused naming the body and the slot; the threaded worker
-// starts no CHOLMOD thread under OMP_NUM_THREADS=1.
+// starts no CHOLMOD thread under OMP_NUM_THREADS=1; an update cut short far from its
+// equilibrium is continued for the same forces before they move (inexact updates).
 #include "server/interaction/tier_worker.hpp"
 
 #include "server/fem/cholmod_threads.hpp"
@@ -14,7 +15,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
@@ -34,17 +38,19 @@ struct Case {
     body->add_tie(box->def);
     body->finalize();
   }
-  std::unique_ptr<TierEquilibrium> equilibrium() const {
+  // step_limit: Newton steps per update (fem::NewtonOptions::step_limit; 0: converged).
+  std::unique_ptr<TierEquilibrium> equilibrium(int step_limit = 0) const {
     TierEquilibriumDefinition d;
     d.body = body.get();
     d.host_material = box->host_material;
     d.host_fixed_nodes = box->host_fixed;
     d.tier = fem::Tier::kNonlinear;
+    d.newton.step_limit = step_limit;
     return std::make_unique<TierEquilibrium>(d);
   }
-  TierWorker worker() const {
+  TierWorker worker(int step_limit = 0) const {
     std::vector<std::unique_ptr<TierEquilibrium>> bodies;
-    bodies.push_back(equilibrium());
+    bodies.push_back(equilibrium(step_limit));
     return TierWorker(std::move(bodies), /*threaded=*/false, 8);
   }
 };
@@ -111,6 +117,54 @@ TEST(interaction_tier_worker, AitkenReachesTheFixedPointOfADivergingMap) {
   ASSERT_EQ(u.size(), ref.u_m.size());
   ASSERT_GT(ref.u_m.norm(), 0.0);
   EXPECT_LE((u - ref.u_m).norm(), 1e-9 * ref.u_m.norm());
+}
+
+// Inexact updates (one Newton step each, as the server's step-limited ones): forces large
+// enough to be nonlinear on the 3 kPa box (50 mN on three slots, strains of tens of percent), so
+// that one step from rest leaves a residual. While an update is further from its equilibrium
+// than kNewtonForcing x the step's change of the forces, the next update goes on for the same
+// forces (they are not relaxed towards the step's: its lambda - f is then mostly the update's
+// own error); once the residual is below that, they move. A held step whose forces change by
+// less than the residual therefore ends at the equilibrium of its forces, the same one a
+// converged solve finds. (Before this rule the forces moved at every update.)
+TEST(interaction_tier_worker, CutShortUpdateGoesOnForTheSameForcesUntilItsResidualIsSmall) {
+  const Case c;
+  TierWorker w = c.worker(/*step_limit=*/1);
+  TierLoad a = applied(*c.body);
+  for (auto& f : a.forces_n) f *= 500.0;  // 50 mN each
+  ASSERT_TRUE(w.post({step(a, 0.0, w.linearization(0))}));
+  const TierLinearization& first = w.linearization(0);
+  ASSERT_FALSE(first.converged);
+  ASSERT_EQ(first.iterations, 1);
+  const double r1 = first.residual_n;
+  ASSERT_GT(r1, 0.0);
+  ASSERT_TRUE(std::isfinite(r1));
+  // The step's forces now differ from f = a by r1 (max component): r1 > kNewtonForcing x r1.
+  TierLoad moved = a;
+  double amax = 0.0;
+  for (const auto& f : a.forces_n) amax = std::max(amax, f.cwiseAbs().maxCoeff());
+  for (auto& f : moved.forces_n) f *= 1.0 + r1 / amax;
+  ASSERT_TRUE(w.post({step(moved, 0.0, w.linearization(0))}));
+  EXPECT_LE(distance(w.linearization(0).load, a.forces_n), 0.0)
+      << "the forces moved although the update was " << r1 << " N from its equilibrium";
+  EXPECT_EQ(w.held_updates(), 1u);
+  EXPECT_LT(w.linearization(0).residual_n, r1);  // Newton went on
+  // Held on: the forces reach the step's and the equilibrium converges for them.
+  int updates = 2;
+  while (w.post({step(moved, 0.0, w.linearization(0))})) ASSERT_LT(++updates, 200);
+  EXPECT_LE(distance(w.linearization(0).load, moved.forces_n), 1e-15);
+  EXPECT_TRUE(w.linearization(0).converged);
+  EXPECT_EQ(w.failures(), 0u);
+  std::printf("tier_worker | cut-short updates: first residual %.3e N, %d updates, %llu held\n",
+              r1, updates, static_cast<unsigned long long>(w.held_updates()));
+  // The same equilibrium as a converged solve for the step's forces.
+  auto fresh = c.equilibrium();
+  TierLinearization ref;
+  fresh->update(moved, ref);
+  ASSERT_TRUE(ref.converged);
+  const Eigen::VectorXd& u = w.linearization(0).u_m;
+  ASSERT_GT(ref.u_m.norm(), 0.0);
+  EXPECT_LE((u - ref.u_m).norm(), 1e-8 * ref.u_m.norm());
 }
 
 // The tools leave the body (the step's forces all 0, on the same slots or on none): the next
