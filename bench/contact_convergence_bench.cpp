@@ -345,6 +345,7 @@ int main(int argc, char** argv) {
   std::string points_csv, cache_dir;
   double region_mm = 0.0;
   int max_rows = 0;
+  int lcp_iterations = 0;
   std::vector<double> refine_cells;
   double refine_radius_mm = 3.0, refine_grading = 0.25;
   neurosim::cli::Parser p("contact_convergence_bench",
@@ -414,6 +415,8 @@ int main(int argc, char** argv) {
   p->add_option("--bootstrap", bootstrap, "with --points: bootstrap draws of the points for the order's spread")
       ->capture_default_str();
   p->add_option("--points-csv", points_csv, "with --points: every press as CSV (mesh, point, surface point, normal, depth, |F|, rows)");
+  p->add_option("--lcp-iterations", lcp_iterations,
+                "SimulationOptions::lcp_max_iterations (default: the library's; a patch of 1000 rows needs more pivots)");
   p->add_option("--refine-cell", refine_cells,
                 "the line's press on one brain (--cell-size, default 7) refined to this cell size around the press "
                 "point, unit mm (repeat; coarse to fine)")
@@ -474,6 +477,7 @@ int main(int argc, char** argv) {
     if (near_field >= 0) options.contact_near_field = near_field != 0;
     if (shaft_near_field >= 0) options.contact_shaft_near_field = shaft_near_field != 0;
     if (max_rows > 0) options.max_contact_nodes_per_tool = max_rows;
+    if (lcp_iterations > 0) options.lcp_max_iterations = lcp_iterations;
     options.compliance_cache_dir = cache_dir;
     return options;
   };
