@@ -200,16 +200,17 @@ TEST(model_options, ArteryCourseOutsideTheBrainAndBadInputsAreRefused) {
   std::filesystem::remove_all(dir);
 }
 
-// Mean length of the edges whose midpoint lies within radius_mm of centre_mm (image mm), and
-// how many there are.
-std::pair<double, int> mean_edge_near(const TetMesh& mesh, const Vec3& centre_mm, double radius_mm) {
+// Mean length of the edges whose midpoint lies between from_mm and to_mm of centre_mm (image
+// mm), and how many there are.
+std::pair<double, int> mean_edge(const TetMesh& mesh, const Vec3& centre_mm, double from_mm, double to_mm) {
   double sum = 0.0;
   int n = 0;
   for (const auto& t : mesh.tets())
     for (int a = 0; a < 4; ++a)
       for (int b = a + 1; b < 4; ++b) {
         const Vec3 p = 1e3 * mesh.vertices()[t[a]], q = 1e3 * mesh.vertices()[t[b]];
-        if ((0.5 * (p + q) - centre_mm).norm() > radius_mm) continue;
+        const double r = (0.5 * (p + q) - centre_mm).norm();
+        if (r < from_mm || r > to_mm) continue;
         sum += (p - q).norm();  // each interior edge counted once per tetrahedron: a weighted mean
         ++n;
       }
@@ -285,28 +286,18 @@ TEST_F(model_builder, LocalRefinementShrinksTheCellsAroundItsPointOnly) {
   const model::ModelResult refined = model::build_model(o);
   const TetMesh fine = neurosim::mesh::load_tet_mesh(refined.brain.file.string(), 1e-3);
   EXPECT_EQ(neurosim::mesh::quality(fine).inverted, 0);
-  const auto [coarse_edge, coarse_n] = mean_edge_near(coarse, centre_mm, 6.0);
-  const auto [fine_edge, fine_n] = mean_edge_near(fine, centre_mm, 6.0);
+  const auto [coarse_edge, coarse_n] = mean_edge(coarse, centre_mm, 0.0, 6.0);
+  const auto [fine_edge, fine_n] = mean_edge(fine, centre_mm, 0.0, 6.0);
   EXPECT_LT(fine_edge, 0.6 * coarse_edge) << coarse_n << " / " << fine_n << " edges";
   EXPECT_LT(fine_edge, 2.0 * o.brain_refinement.cell_size_mm);
   EXPECT_GT(fine.num_vertices(), coarse.num_vertices());
   EXPECT_LT(fine.num_vertices(), coarse.num_vertices() + 2000);
   // Away from the point (beyond radius + (12 - 3) / grading = 22 mm) the cells are the coarse
   // brain's: the same mean edge within 15 % far from the point.
-  auto far_edge = [&](const TetMesh& m) {
-    double sum = 0.0;
-    int n = 0;
-    for (const auto& t : m.tets())
-      for (int a = 0; a < 4; ++a)
-        for (int b = a + 1; b < 4; ++b) {
-          const Vec3 p = 1e3 * m.vertices()[t[a]], q = 1e3 * m.vertices()[t[b]];
-          if ((0.5 * (p + q) - centre_mm).norm() < 40.0) continue;
-          sum += (p - q).norm();
-          ++n;
-        }
-    return sum / n;
-  };
-  EXPECT_NEAR(far_edge(fine) / far_edge(coarse), 1.0, 0.15);
+  const double far_mm = 40.0, everywhere_mm = 1e6;
+  EXPECT_NEAR(mean_edge(fine, centre_mm, far_mm, everywhere_mm).first /
+                  mean_edge(coarse, centre_mm, far_mm, everywhere_mm).first,
+              1.0, 0.15);
   const std::string text = slurp(refined.scene);
   EXPECT_NE(text.find("--refine-cell-size 3"), std::string::npos) << "the scene's text names the refinement";
   std::filesystem::remove_all(dir);
