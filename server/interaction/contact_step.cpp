@@ -4,9 +4,12 @@
 // Rows: a tool part (the tip sphere, the shaft capsule) against the contactable triangles of each
 // body, on the surface deformed by the last good answer (rest + latest displacement at the
 // triangle's nodes). Each triangle near the part gives its closest point; the rows are
-//   - a node row for every triangle vertex inside the part (+ margin): normal radial from the
-//     part's centre, the node against a rigid sphere (CalculiX's node-to-surface contact with the
-//     tool as master), so a tip wider than the triangles feels a patch;
+//   - a node row for every triangle vertex inside the part (+ margin): the node against a rigid
+//     sphere or capsule (CalculiX's node-to-surface contact with the tool as master), so a tip
+//     wider than the triangles feels a patch; its normal the part's where the node, moved along
+//     its surface's normal line, leaves the part (merge_features: radial while the centre is in
+//     the node's normal cone, turning into the mean normal outside it; the multirate tiers:
+//     radial within 60 degrees of the mean normal, else the mean normal);
 //   - a face row where a triangle's closest point is inside it (normal: the triangle's);
 //   - an edge row where every contactable triangle of the edge reports that edge (the distance
 //     has a local minimum there; otherwise a neighbouring face row already holds it);
@@ -894,7 +897,7 @@ double State::flat_distance(const Model& m, int body, int tool, const Vec3& c, c
 // Phase "rows", merge: one row per feature (an edge only where all its triangles report it),
 // normals, depths on the deformed and the rest surface.
 void State::merge_features(const Model& m, int body, int tool, const ToolShape& shape,
-                           const Vec3& axis) {
+                           const Vec3& tip, const Vec3& axis) {
   const BodyModel& b = m.bodies_[body];
   const auto& tris = b.surface.triangles();
   const auto& rest = b.body->contact_mesh().vertices();
@@ -930,6 +933,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     if (f == TriangleFeature::kEdge && reports != tri.edge_triangles[h.at.a]) continue;
     const Vec3 d = h.centre_m - h.at.point_m;
     const double dn = d.norm();
+    Vec3 depth_centre = h.centre_m;  // the depth is r - n . (depth_centre - point)
     Vec3 n;
     Mat3 turn = Mat3::Zero();  // d n / d x (Row::turn)
     bool radial = false;
@@ -942,14 +946,13 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     if (f == TriangleFeature::kFace) {
       n = h.face_normal;
     } else {
-      // A node or an edge. The multirate tiers and the shaft: radial from the part's centre
-      // (the point against a rigid sphere or capsule) when the centre is in front of the surface
-      // there (the tiers: within 60 degrees of the mean normal), else along the mean normal of
-      // the triangles that report it (its depth the part's point on that line, below). The
-      // tiers keep 60: their depth adds n . u0 of an equilibrium that may have carried the point
-      // far along the surface, which a nearly tangential normal turns into a depth (measured
-      // with 90: a 10 mm vertex press cycle in NONLINEAR reached 101.6 N against the block's
-      // 50.5 N bound, stability_test).
+      // A node or an edge. The multirate tiers: radial from the part's centre (the point against
+      // a rigid sphere or capsule) when the centre is within 60 degrees of the mean normal of the
+      // triangles that report it, else along that mean normal (the depth r - n . d). The tiers
+      // keep 60: their depth adds n . u0 of an equilibrium that may have carried the point far
+      // along the surface, which a nearly tangential normal turns into a depth (measured with 90:
+      // a 10 mm vertex press cycle in NONLINEAR reached 101.6 N against the block's 50.5 N
+      // bound, stability_test).
       // LINEAR, the tip: the sphere's normal where the point, pushed along its line (radial
       // while the centre is within the feature's normal cone, else turning into the mean
       // normal; tool_geometry.hpp exit_normal), leaves the sphere; the depth r - n . d, the
@@ -965,19 +968,56 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       // its normal turned with the tip's position far faster still (across the blend: the
       // force's derivative 26 kN/m against K's 2.4) and the closed haptic loop against the cube
       // oscillated for good (bench/RESULTS.md, "The 60-90 degree blend withdrawn").
+      // LINEAR, the shaft: the same line against the capsule's cross-section through the point
+      // (the sphere of its radius about the axis point closest to the point; tool_geometry.hpp
+      // capsule_exit), the depth that sphere's tangent plane's where the point leaves it.
+      // Radial up to 90 degrees and the mean normal past it (before) switched the row's direction
+      // by up to 90 degrees where the axis crossed the feature's tangent plane: a shaft tilted 6
+      // degrees, swept into a face of 1 mm cells in 5 um steps, had a step 4.83 times the median
+      // (the force falling 6.05 -> 5.70 mN), and a shaft lying in the face 0.45 mm deep was
+      // pushed sideways by 15 % of |F| (bench/RESULTS.md, "The shaft's exit point").
       const Vec3 mean = normal_sum.normalized();
-      if (!tier_ && !h.shaft) {
+      const double cos_alpha = normal_sum.norm() / std::max(normals, 1);
+      if (!tier_) {
         exit_row = true;
         plane_n = mean;
         plane_h = d.dot(mean);
-        radial = dn > 1e-9 * shape.tip_radius_m && plane_h > 0.0;  // not an entry (below)
-        const double cos_alpha = normal_sum.norm() / std::max(normals, 1);
-        n = exit_normal(d, mean, cos_alpha, shape.tip_radius_m);
-        turn = exit_normal_turn(d, mean, cos_alpha, shape.tip_radius_m);
+        const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+        radial = dn > 1e-9 * part_r && plane_h > 0.0;  // not an entry (below)
+        if (!h.shaft) {
+          n = exit_normal(d, mean, cos_alpha, shape.tip_radius_m);
+          turn = exit_normal_turn(d, mean, cos_alpha, shape.tip_radius_m);
+        } else {
+          Mat3 dn_dx;
+          const CapsuleExit ex = capsule_exit(h.at.point_m, tip, tip + shape.shaft_length_m * axis,
+                                              mean, cos_alpha, shape.shaft_radius_m, &dn_dx);
+          n = ex.normal;
+          depth_centre = ex.centre;
+          // The tool's translation t moves the point relative to the capsule by (dx/dt - I) t:
+          // a node stays (dx/dt = 0); an edge's point closest to the axis slides along the edge
+          // e by (t . e - b t . u) / (1 - b^2), b = e . u (the two lines' common normal), or by
+          // t . e where the axis point is an end of the shaft (a sphere's centre) or the lines
+          // are nearly parallel.
+          Mat3 slide = Mat3::Zero();
+          if (f == TriangleFeature::kEdge) {
+            const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
+            auto at = [&](int k) {
+              return !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k])
+                                                   : rest[tri.node[k]];
+            };
+            const Vec3 e = (at(k1) - at(k0)).normalized();
+            const double eu = e.dot(axis);
+            const double s_c = (h.at.point_m - tip).dot(axis);
+            if (s_c > 0.0 && s_c < shape.shaft_length_m && 1.0 - eu * eu > 1e-6)
+              slide = e * (e - eu * axis).transpose() / (1.0 - eu * eu);
+            else
+              slide = e * e.transpose();
+          }
+          turn = dn_dx * (slide - Mat3::Identity());
+        }
       } else {
-        const double radial_from = tier_ ? 0.5 * dn : 0.0;  // cos 60 or cos 90 degrees
         radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
-                 d.dot(mean) > radial_from;
+                 d.dot(mean) > 0.5 * dn;  // cos 60 degrees
         n = radial ? Vec3(d / dn) : mean;
         // A radial row's normal d / |d| turns by (I - n n^T) / |d| per unit change of d. The
         // shaft's centre is the axis point nearest the feature: against a node it slides along
@@ -1019,19 +1059,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     }
     // A part whose centre lies deeper than behind_reach behind the surface does not push it.
     if ((exit_row ? plane_h : n.dot(d)) < -b.behind_reach_m) continue;
-    double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
-    // A node or edge row along the mean normal (the shaft's; the tiers'): the part's point on
-    // the feature's normal line (the depth sqrt(r^2 - perp^2) - height, perp the centre's offset
-    // from the line), not the half-space's r - height. Where the line misses the part (perp >= r)
-    // the feature is beside it: the radial gap r - |d| (not touching), which the radial rows take
-    // at height 0 too. The half-space depth gave a node 2.12 mm from the 2 mm tip's centre, the
-    // centre 0.02 mm behind its tangent plane, a depth of 2.02 mm for one step of the brain slide
-    // (|F| 11 -> 18.6 -> 10.8 mN over 0.2 mm of tip motion). LINEAR's tip rows take r - n . d.
-    if (!tier_ && !exit_row && f != TriangleFeature::kFace && n.dot(d) < dn * (1.0 - 1e-12)) {
-      const double height = n.dot(d);
-      const double perp2 = std::max(0.0, dn * dn - height * height);
-      radius = perp2 < radius * radius ? std::sqrt(radius * radius - perp2) : radius - dn + height;
-    }
+    const double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
     Row r;
     r.body = body;
     r.tool = tool;
@@ -1039,7 +1067,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     r.key = h.key;
     r.normal = n;
     r.turn = turn;
-    r.turn_depth = turn.transpose() * d;
+    r.turn_depth = turn.transpose() * (depth_centre - h.at.point_m);
     r.radial = radial;
     r.point_m = h.at.point_m;
     // The row's nodes: its triangle's, by the point's barycentric weights, or the load spread
@@ -1073,7 +1101,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     }
     Vec3 offset = Vec3::Zero();
     if (!r.spread_pending && !row_node_normals(r, lin, offset)) continue;  // all on fixed nodes
-    r.height_m = n.dot(d);
+    r.height_m = n.dot(depth_centre - h.at.point_m);
     // SimulationOptions::contact_smooth_normals, a tip face row: the point and the normal are the
     // projection's along the interpolated normals, the height the centre's distance to the
     // closest point of the flat surface (signed as the projection's height). Along a tilted
@@ -1093,7 +1121,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     r.depth_m = radius - r.height_m;
     // LINEAR: the LCP's W lambda is the whole displacement, so its depth is the rest one; the
     // other tiers add the offset u0 of the latest equilibrium (tier_equilibrium.hpp).
-    r.rest_depth_m = radius - n.dot(h.centre_m - rest_point) + lift;
+    r.rest_depth_m = radius - n.dot(depth_centre - rest_point) + lift;
     if (!r.spread_pending) r.rest_depth_m += n.dot(offset);
     tool_rows_.push_back(r);
     tool_row_centre_.push_back(h.centre_m);
@@ -1214,7 +1242,7 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
     if (m.bodies_[bi].surface.triangles().empty()) continue;
     candidate_triangles(m, bi, tool, pose, axis);
     triangle_features(m, bi, tool, pose, axis);
-    merge_features(m, bi, tool, shape, axis);
+    merge_features(m, bi, tool, shape, pose.tip_m, axis);
   }
   near_field_of_tool(m, shape);
   near_field_of_shaft(m, shape, axis);

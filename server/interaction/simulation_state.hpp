@@ -276,7 +276,7 @@ class State {
                      const std::vector<Vec3>& node_normals, BodyState& bs, long long memo,
                      const std::array<Vec3, 3>* smooth_normals);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape,
-                      const Vec3& axis);
+                      const Vec3& tip, const Vec3& axis);
   double flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
                        bool at_rest, double at_most_m);
   void near_field_of_tool(const Model& m, const ToolShape& shape);

@@ -20,22 +20,50 @@ double elliptic_approach(double a_m, double b_m) {
 }
 }  // namespace
 
-mesh::Vec3 exit_normal(const mesh::Vec3& d, const mesh::Vec3& m, double cos_alpha, double r) {
+namespace {
+// The line of the exit-point construction (exit_normal): its direction a for the centre at d
+// from the feature's point, and d a / d d. Radial (a = d / |d|) while d lies within the cone of
+// half-angle alpha about m; outside it a at angle alpha (pi - theta) / (pi - alpha) from m
+// towards d (theta the angle of d from m); m itself on a flat surface (alpha = 0), for d on m
+// or at the point, and for a centre straight behind the feature.
+void exit_line(const mesh::Vec3& d, const mesh::Vec3& m, double cos_alpha, double r,
+               mesh::Vec3& a, Eigen::Matrix3d& da) {
+  using Mat3 = Eigen::Matrix3d;
+  const Mat3 id = Mat3::Identity();
   const double dn = d.norm();
-  mesh::Vec3 a = m;
-  if (dn > 1e-9 * r) {
-    const double ca = std::clamp(cos_alpha, -1.0, 1.0);
-    const double alpha = std::acos(ca);
-    const double theta = std::acos(std::clamp(d.dot(m) / dn, -1.0, 1.0));
-    if (theta <= alpha) {
-      a = d / dn;
-    } else {
-      const mesh::Vec3 side = d - d.dot(m) * m;
-      const double sn = side.norm();
-      const double phi = alpha * (M_PI - theta) / (M_PI - alpha);
-      if (sn > 1e-12 * dn) a = std::cos(phi) * m + std::sin(phi) * (side / sn);
+  a = m;
+  da.setZero();
+  if (!(dn > 1e-9 * r)) return;
+  const double ca = std::clamp(cos_alpha, -1.0, 1.0);
+  const double alpha = std::acos(ca);
+  const double c = std::clamp(d.dot(m) / dn, -1.0, 1.0);
+  const double theta = std::acos(c);
+  if (theta <= alpha && alpha > 0.0) {
+    a = d / dn;
+    da = (id - a * a.transpose()) / dn;
+  } else if (theta > alpha) {
+    const mesh::Vec3 side = d - d.dot(m) * m;
+    const double sn = side.norm();
+    const double phi = alpha * (M_PI - theta) / (M_PI - alpha);
+    if (sn > 1e-12 * dn) {
+      const mesh::Vec3 s = side / sn;
+      a = std::cos(phi) * m + std::sin(phi) * s;
+      if (alpha > 0.0) {
+        // theta = acos(d . m / |d|): d theta / d d = -(m - c d / |d|) / |side| (sin theta = sn / dn).
+        const mesh::Vec3 dtheta = -(m - c * d / dn) / sn;
+        const mesh::Vec3 dphi = (-alpha / (M_PI - alpha)) * dtheta;
+        const Mat3 ds = (id - s * s.transpose()) * (id - m * m.transpose()) / sn;
+        da = (-std::sin(phi) * m + std::cos(phi) * s) * dphi.transpose() + std::sin(phi) * ds;
+      }
     }
   }
+}
+}  // namespace
+
+mesh::Vec3 exit_normal(const mesh::Vec3& d, const mesh::Vec3& m, double cos_alpha, double r) {
+  mesh::Vec3 a;
+  Eigen::Matrix3d da;
+  exit_line(d, m, cos_alpha, r, a, da);
   const double along = a.dot(d);
   const double perp2 = std::max(0.0, d.squaredNorm() - along * along);
   if (perp2 < r * r) {
@@ -51,34 +79,9 @@ Eigen::Matrix3d exit_normal_turn(const mesh::Vec3& d, const mesh::Vec3& m, doubl
                                  double r) {
   using Mat3 = Eigen::Matrix3d;
   const Mat3 id = Mat3::Identity();
-  const double dn = d.norm();
-  mesh::Vec3 a = m;
-  Mat3 da = Mat3::Zero();  // d a / d d
-  if (dn > 1e-9 * r) {
-    const double ca = std::clamp(cos_alpha, -1.0, 1.0);
-    const double alpha = std::acos(ca);
-    const double c = std::clamp(d.dot(m) / dn, -1.0, 1.0);
-    const double theta = std::acos(c);
-    if (theta <= alpha && alpha > 0.0) {
-      a = d / dn;
-      da = (id - a * a.transpose()) / dn;
-    } else if (theta > alpha) {
-      const mesh::Vec3 side = d - d.dot(m) * m;
-      const double sn = side.norm();
-      const double phi = alpha * (M_PI - theta) / (M_PI - alpha);
-      if (sn > 1e-12 * dn) {
-        const mesh::Vec3 s = side / sn;
-        a = std::cos(phi) * m + std::sin(phi) * s;
-        if (alpha > 0.0) {
-          // theta = acos(d . m / |d|): d theta / d d = -(m - c d / |d|) / |side| (sin theta = sn / dn).
-          const mesh::Vec3 dtheta = -(m - c * d / dn) / sn;
-          const mesh::Vec3 dphi = (-alpha / (M_PI - alpha)) * dtheta;
-          const Mat3 ds = (id - s * s.transpose()) * (id - m * m.transpose()) / sn;
-          da = (-std::sin(phi) * m + std::cos(phi) * s) * dphi.transpose() + std::sin(phi) * ds;
-        }
-      }
-    }
-  }
+  mesh::Vec3 a;
+  Mat3 da;  // d a / d d
+  exit_line(d, m, cos_alpha, r, a, da);
   const double along = a.dot(d);
   const mesh::Vec3 dalong = a + da.transpose() * d;  // gradient of a . d
   const double perp2 = std::max(0.0, d.squaredNorm() - along * along);
@@ -97,6 +100,29 @@ Eigen::Matrix3d exit_normal_turn(const mesh::Vec3& d, const mesh::Vec3& m, doubl
   const mesh::Vec3 n = w / wn;
   const Mat3 dw = id - a * dalong.transpose() - along * da;
   return (id - n * n.transpose()) * dw / wn;
+}
+
+CapsuleExit capsule_exit(const mesh::Vec3& x, const mesh::Vec3& p0, const mesh::Vec3& p1,
+                         const mesh::Vec3& m, double cos_alpha, double r,
+                         Eigen::Matrix3d* dn_dx) {
+  using Mat3 = Eigen::Matrix3d;
+  const mesh::Vec3 axis = p1 - p0;
+  const double len = axis.norm();
+  CapsuleExit out;
+  out.centre = closest_on_segment(x, p0, p1);
+  const mesh::Vec3 d = out.centre - x;
+  out.normal = exit_normal(d, m, cos_alpha, r);
+  if (dn_dx) {
+    // d d / d x = (u u^T inside the segment: the centre slides along the axis; else 0) - I.
+    Mat3 slide = Mat3::Zero();
+    if (len > 0.0) {
+      const mesh::Vec3 u = axis / len;
+      const double s = (x - p0).dot(u);
+      if (s > 0.0 && s < len) slide = u * u.transpose();
+    }
+    *dn_dx = exit_normal_turn(d, m, cos_alpha, r) * (slide - Mat3::Identity());
+  }
+  return out;
 }
 
 double patch_near_field(double a_m, double b_m, double rho_m, double e_star_pa) {

@@ -161,6 +161,107 @@ TEST(interaction_tool_geometry, ExitNormalTurnIsItsDerivative) {
   }
 }
 
+// capsule_exit (the shaft's exit point): in the feature's cone radial (n = d / |d|, the depth
+// r - |d|: the point against a rigid capsule); over a flat surface with the shaft lying on it the
+// capsule's normal where the normal line through the point enters it, at every height of the
+// axis (in front, on, behind the surface: no switch where the axis crosses the tangent plane);
+// past the shaft's end its end sphere's; the line missing the capsule (the direction across,
+// depth r - distance) agreeing with the exit at the tangent; a shaft piercing the surface (the
+// line along the axis) held to its cross-section's sphere, the depth within 2 r. Against the
+// geometry by hand (the exit point on the capsule's surface, on the line).
+TEST(interaction_tool_geometry, CapsuleExitIsTheCapsulesWhereThePointLeavesIt) {
+  const double r = 0.0005, len = 0.05;
+  const Vec3 p0(0, 0, 0), p1(0, len, 0), m(0, 0, 1);
+  // In a ridge's cone (30 degrees): radial from the axis point closest to the point.
+  const Vec3 x_cone(0.0001, 0.01, -0.0003);
+  const CapsuleExit in = capsule_exit(x_cone, p0, p1, m, std::cos(0.52), r);
+  const Vec3 d_cone = Vec3(0, 0.01, 0) - x_cone;
+  EXPECT_TRUE(in.normal.isApprox(d_cone.normalized(), 1e-12));
+  EXPECT_NEAR(r - in.normal.dot(in.centre - x_cone), r - d_cone.norm(), 1e-15);
+  // Flat: the point 0.3 mm beside the axis, the line along m enters the cylinder 0.4 mm below
+  // the axis: n = (-0.3, 0, 0.4) / 0.5 at every height h of the axis above the point.
+  for (double h : {0.0004, 1e-9, 0.0, -1e-9, -0.0003}) {
+    const Vec3 x(0.0003, 0.02, -h);
+    const CapsuleExit e = capsule_exit(x, p0, p1, m, 1.0, r);
+    EXPECT_TRUE(e.normal.isApprox(Vec3(-0.3, 0, 0.4) / 0.5, 1e-12)) << "height " << h;
+    EXPECT_TRUE(e.centre.isApprox(Vec3(0, 0.02, 0), 1e-12)) << "height " << h;
+    // The depth r - n . (centre - x): the point moved along -m by depth / n . m (into the
+    // tissue) is on the capsule.
+    const double depth = r - e.normal.dot(e.centre - x);
+    const Vec3 on = x - depth / e.normal.dot(m) * m;
+    EXPECT_NEAR((on - closest_on_segment(on, p0, p1)).norm(), r, 1e-15) << "height " << h;
+  }
+  // Beyond the end p1: the line along m enters the end sphere.
+  const Vec3 x_end(0.0001, len + 0.0002, -0.0001);
+  const CapsuleExit end = capsule_exit(x_end, p0, p1, m, 1.0, r);
+  EXPECT_TRUE(end.centre.isApprox(p1, 1e-15));
+  EXPECT_NEAR((x_end - (r - end.normal.dot(end.centre - x_end)) / end.normal.dot(m) * m - p1).norm(),
+              r, 1e-15);
+  // Missing: the line along m 0.7 mm beside the axis; across to it, the depth -0.2 mm; at the
+  // tangent both ways agree.
+  const CapsuleExit miss = capsule_exit(Vec3(0.0007, 0.02, 0.0001), p0, p1, m, 1.0, r);
+  EXPECT_TRUE(miss.normal.isApprox(Vec3(-1, 0, 0), 1e-12));
+  EXPECT_NEAR(r - miss.normal.dot(miss.centre - Vec3(0.0007, 0.02, 0.0001)), -0.0002, 1e-15);
+  const Vec3 t_in(r * (1 - 1e-9), 0.02, 0.0001), t_out(r * (1 + 1e-9), 0.02, 0.0001);
+  EXPECT_LT((capsule_exit(t_in, p0, p1, m, 1.0, r).normal - capsule_exit(t_out, p0, p1, m, 1.0, r).normal)
+                .norm(),
+            1e-4);
+  // Piercing: the axis along the surface's normal y, the point 0.3 mm off the axis 20 mm up it:
+  // the cross-section's sphere, n = (-0.3, 0.4, 0) / 0.5 where the point moved 0.4 mm down the
+  // line leaves it, depth n . m 0.4 mm = 0.32 mm (the ray along the axis would leave the capsule
+  // only past p0, 20 mm down).
+  const Vec3 x_pierce(0.0003, 0.02, 0.0);
+  const CapsuleExit pierce = capsule_exit(x_pierce, p0, p1, Vec3(0, 1, 0), 1.0, r);
+  EXPECT_TRUE(pierce.normal.isApprox(Vec3(-0.3, 0.4, 0) / 0.5, 1e-12));
+  EXPECT_NEAR(r - pierce.normal.dot(pierce.centre - x_pierce), 0.00032, 1e-15);
+}
+
+// capsule_exit's dn_dx against central differences of its normal in the point x (h = 0.1 nm on
+// a 0.5 mm capsule: truncation ~h^2 / r^3, rounding ~1e-16 / h against |J| ~ 1 / r): radial in a
+// ridge's cone (the axis point sliding with x), outside it, on a flat surface beside the axis in
+// front of and behind it, past the shaft's end (its end sphere, the centre fixed), a tilted
+// surface, and the line missing the capsule beside it and past its end. Asserted within 1e-5 of
+// |J|.
+TEST(interaction_tool_geometry, CapsuleExitTurnIsItsDerivative) {
+  const double r = 0.0005, len = 0.05, h = 1e-10;
+  const Vec3 p0(0, 0, 0), p1(0, len, 0);
+  struct Case {
+    const char* what;
+    Vec3 x;
+    Vec3 m;
+    double cos_alpha;
+  };
+  const Vec3 z(0, 0, 1);
+  const std::vector<Case> cases = {
+      {"ridge, in the cone", Vec3(0.0001, 0.01, -0.0003), z, std::cos(0.52)},
+      {"ridge, outside", Vec3(0.0003, 0.01, -0.0001), z, std::cos(0.52)},
+      {"ridge, outside, behind", Vec3(0.0002, 0.01, 0.0001), z, std::cos(0.3)},
+      {"flat, in front", Vec3(0.0003, 0.02, -0.0002), z, 1.0},
+      {"flat, behind", Vec3(0.0002, 0.02, 0.0001), z, 1.0},
+      {"flat, end sphere", Vec3(0.0001, len + 0.0002, -0.0001), z, 1.0},
+      {"tilted surface", Vec3(0.0002, 0.03, -0.0002), Vec3(0.3, 0.4, 1).normalized(), 1.0},
+      {"ridge, tilted, end", Vec3(0.0001, len + 0.0001, -0.0002), Vec3(0.2, 0.5, 1).normalized(),
+       std::cos(0.4)},
+      {"missing beside", Vec3(0.0007, 0.02, 0.0001), z, std::cos(0.3)},
+      {"missing past the end", Vec3(0.0003, len + 0.0007, 0.0001), z, 1.0},
+  };
+  for (const auto& c : cases) {
+    Eigen::Matrix3d j;
+    capsule_exit(c.x, p0, p1, c.m, c.cos_alpha, r, &j);
+    Eigen::Matrix3d fd;
+    for (int a = 0; a < 3; ++a) {
+      Vec3 e = Vec3::Zero();
+      e[a] = h;
+      fd.col(a) = (capsule_exit(c.x + e, p0, p1, c.m, c.cos_alpha, r).normal -
+                   capsule_exit(c.x - e, p0, p1, c.m, c.cos_alpha, r).normal) /
+                  (2.0 * h);
+    }
+    EXPECT_GT(fd.norm(), 0.05 / r) << c.what;
+    EXPECT_LE((j - fd).norm(), 1e-5 * fd.norm()) << c.what << "\nJ\n" << j << "\nfd\n" << fd;
+    std::printf("%s: |J| %.1f 1/m, off %.1e\n", c.what, fd.norm(), (j - fd).norm() / fd.norm());
+  }
+}
+
 TEST(interaction_tool_geometry, ClosestPointOfASegmentIsClampedToItsEnds) {
   const Vec3 p0(0, 0, 0), p1(1, 0, 0);
   EXPECT_TRUE(closest_on_segment(Vec3(0.3, 2, 0), p0, p1).isApprox(Vec3(0.3, 0, 0)));
