@@ -284,9 +284,9 @@ void State::reserve_workspace(const Model& m, int tools) {
   delassus_cache_nodes_.clear();
   delassus_cache_nodes_.reserve(kDelassusCacheNodes);
   delassus_cache_y_.assign(static_cast<std::size_t>(delassus_cache_rows_) * kDelassusCacheNodes,
-                           Vec3::Zero());
-  delassus_cache_stamp_.assign(delassus_cache_y_.size(), -2);  // no generation
+                           DelassusY{});
   delassus_row_entry_.reserve(max_contact);
+  delassus_row_generation_.reserve(max_contact);
   delassus_node_entry_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
   delassus_prev_entry_.clear();
   delassus_prev_entry_.reserve(max_contact);
@@ -305,6 +305,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   spread_prev_memo_.clear();
   spread_prev_memo_.reserve(2 * static_cast<std::size_t>(max_contact));
   rows_.reserve(max_contact);
+  row_main_slot_.reserve(max_contact);
   // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
   for (const auto& b : m.bodies_) {
     const int o = b.sliding_offset, ns = b.body->sliding().size();
@@ -467,6 +468,7 @@ void State::begin_step(const Model& m, int tools, StepStats& stats) {
       stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
   }
   rows_.clear();
+  row_main_slot_.clear();
 }
 
 // Position of a contact slot's node on the surface deformed by this step's answer so far
@@ -833,16 +835,22 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   }
   // The part's centre for this triangle: the tip centre, or the shaft axis point closest to the
   // triangle (alternating projections between the two convex sets).
+  // Four rounds; once a round gives back its own centre bit for bit, the rounds left repeat it
+  // (the same inputs), so they are skipped: the same point as four rounds (a shaft beside a
+  // face parallel to it stops after the first).
   Vec3 c = p0;
   TrianglePoint at;
+  bool fixed = false;
   if (shaft) {
     c = closest_on_segment((x[0] + x[1] + x[2]) / 3.0, p0, p1);
-    for (int it = 0; it < 4; ++it) {
+    for (int it = 0; it < 4 && !fixed; ++it) {
       at = closest_on_triangle(c, x);
-      c = closest_on_segment(at.point_m, p0, p1);
+      const Vec3 next = closest_on_segment(at.point_m, p0, p1);
+      fixed = std::memcmp(next.data(), c.data(), sizeof(Vec3)) == 0;
+      c = next;
     }
   }
-  at = closest_on_triangle(c, x);
+  if (!fixed) at = closest_on_triangle(c, x);
   // An edge by its distance only (behind a ridge the far flank's edge is not the surface the
   // tool went through); a face also from behind.
   if (at.feature == TriangleFeature::kVertex) return;
@@ -1288,16 +1296,25 @@ void State::merge_tool_row(const Row& r) {
       if (q.w[k] > q.w[best]) best = k;
     return q.slot[best];
   };
+  // The merged rows' main slots, each formed once (rows_ grows only here while rows merge).
+  if (row_main_slot_.size() > rows_.size()) row_main_slot_.clear();
+  while (row_main_slot_.size() < rows_.size())
+    row_main_slot_.push_back(main_slot(rows_[row_main_slot_.size()]));
   const int main_r = main_slot(r);
-  auto same = std::find_if(rows_.begin(), rows_.end(), [&](const Row& o) {
-    return o.body == r.body && o.tool != r.tool &&
-           (o.key == r.key ||
-            (main_r >= 0 && main_slot(o) == main_r && o.normal.dot(r.normal) > 0.866));
-  });
-  if (same == rows_.end()) {
+  std::size_t same = 0;
+  for (; same < rows_.size(); ++same) {
+    const Row& o = rows_[same];
+    if (o.body == r.body && o.tool != r.tool &&
+        (o.key == r.key ||
+         (main_r >= 0 && row_main_slot_[same] == main_r && o.normal.dot(r.normal) > 0.866)))
+      break;
+  }
+  if (same == rows_.size()) {
     rows_.push_back(r);
-  } else if (r.depth_m > same->depth_m) {
-    *same = r;
+    row_main_slot_.push_back(main_r);
+  } else if (r.depth_m > rows_[same].depth_m) {
+    rows_[same] = r;
+    row_main_slot_[same] = main_r;
   }
 }
 
@@ -1744,18 +1761,18 @@ void State::delassus(const Model& m, int ns) {
     const auto& [body, slot_q] = delassus_nodes_[j];
     const auto& cols = *bodies_[body].columns;
     const int cj = delassus_node_entry_[j];
+    DelassusY* const kept = cj >= 0 ? delassus_cache_y_.data() +
+                                          static_cast<std::size_t>(cj) * delassus_cache_rows_
+                                    : nullptr;
     delassus_fresh_.clear();
     for (int r = 0; r <= delassus_last_row_[j]; ++r) {
       const Row& a = rows_[r];
       if (a.body != body) continue;
       if (delassus_match_[r] >= 0 && r > delassus_last_fresh_row_[j]) continue;
-      const int e = delassus_row_entry_[r];
-      if (e >= 0 && cj >= 0) {
-        const std::size_t at = static_cast<std::size_t>(cj) * delassus_cache_rows_ + e;
-        if (delassus_cache_stamp_[at] == delassus_cache_[e].generation) {
-          delassus_y_[static_cast<std::size_t>(r) * nn + j] = delassus_cache_y_[at];
-          continue;
-        }
+      const long long g = delassus_row_generation_[r];
+      if (kept && g >= 0 && kept[delassus_row_entry_[r]].stamp == g) {
+        delassus_y_[static_cast<std::size_t>(r) * nn + j] = kept[delassus_row_entry_[r]].y;
+        continue;
       }
       delassus_fresh_.push_back(r);
       for (int p = 0; p < a.nodes; ++p) {
@@ -1772,11 +1789,7 @@ void State::delassus(const Model& m, int ns) {
         if (a.slot[p] >= 0) y.noalias() += a.w[p] * (cols.block(a.slot[p], slot_q).transpose() * a.m[p]);
       delassus_y_[static_cast<std::size_t>(r) * nn + j] = y;
       const int e = delassus_row_entry_[r];
-      if (e >= 0 && cj >= 0) {
-        const std::size_t at = static_cast<std::size_t>(cj) * delassus_cache_rows_ + e;
-        delassus_cache_y_[at] = y;
-        delassus_cache_stamp_[at] = delassus_cache_[e].generation;
-      }
+      if (e >= 0 && kept) kept[e] = DelassusY{y, delassus_cache_[e].generation};
     }
   }
   for (int r = 0; r < nc; ++r) {
@@ -1846,6 +1859,7 @@ void State::delassus_cache_lookup(bool reuse) {
   const int nc = static_cast<int>(rows_.size());
   const int nn = static_cast<int>(delassus_nodes_.size());
   const long long now = ++delassus_counter_;
+  const long long held = delassus_generation_;  // every kept value's generation is at most this
   auto flush_values = [&] {
     for (auto& e : delassus_cache_) e.generation = ++delassus_generation_;
   };
@@ -1874,10 +1888,11 @@ void State::delassus_cache_lookup(bool reuse) {
   // the least recently used entry not read by this W (a new generation).
   auto same_content = [](const Row& a, const Row& b) {
     const std::size_t n = static_cast<std::size_t>(a.nodes);
+    // (the normals first: a node or edge row's turn with the tool while its nodes stay)
     return a.body == b.body && a.nodes == b.nodes &&
+           std::memcmp(a.m.data(), b.m.data(), n * sizeof(Vec3)) == 0 &&
            std::memcmp(a.slot.data(), b.slot.data(), n * sizeof(int)) == 0 &&
-           std::memcmp(a.w.data(), b.w.data(), n * sizeof(double)) == 0 &&
-           std::memcmp(a.m.data(), b.m.data(), n * sizeof(Vec3)) == 0;
+           std::memcmp(a.w.data(), b.w.data(), n * sizeof(double)) == 0;
   };
   delassus_row_entry_.resize(nc);
   for (int r = 0; r < nc; ++r) {
@@ -1911,6 +1926,13 @@ void State::delassus_cache_lookup(bool reuse) {
     }
     if (entry >= 0) delassus_cache_[entry].used = now;
     delassus_row_entry_[r] = entry;
+  }
+  // After every row's entry (a later row may take an entry an earlier one found: a new generation).
+  delassus_row_generation_.resize(nc);
+  for (int r = 0; r < nc; ++r) {
+    const int e = delassus_row_entry_[r];
+    delassus_row_generation_[r] =
+        e >= 0 && delassus_cache_[e].generation <= held ? delassus_cache_[e].generation : -1;
   }
 }
 
@@ -2304,6 +2326,7 @@ LcpResult State::solve_geometry(const Model& m, const std::vector<ToolPose>& pos
                                 StepStats& stats) {
   ++geometry_counter_;
   rows_.clear();
+  row_main_slot_.clear();
   spread_prev_memo_.swap(spread_memo_);
   spread_memo_.clear();
   // The rest surface: LINEAR (no tier offsets in the rows) with no force on any body.

@@ -396,6 +396,8 @@ class State {
   std::vector<int> spread_triangles_;  // ContactSurface::spread's candidates (capacity: triangles)
   SpreadLoad spread_load_;             // one row's spread load
   std::vector<Row> rows_;          // the step's contact rows
+  // While the tools' rows merge (merge_tool_row): per row of rows_ its main slot, formed once.
+  std::vector<int> row_main_slot_;
   std::vector<std::vector<int>> missing_;
   std::vector<std::vector<long long>> not_ready_stamp_;  // per body and slot: geometry counted
   Eigen::MatrixXd w_;
@@ -449,9 +451,17 @@ class State {
   std::vector<Row> delassus_cache_content_;
   std::vector<std::vector<int>> delassus_cache_node_;  // per body and slot: cache index or -1
   std::vector<std::pair<int, int>> delassus_cache_nodes_;  // (body, slot) per cache index
-  std::vector<mesh::Vec3> delassus_cache_y_;               // node-major: cache index x entries
-  std::vector<long long> delassus_cache_stamp_;            // the generation that formed it
+  // Node-major (cache index x entries), each value beside the generation that formed it (one
+  // cache line per lookup: the lookups are mostly misses of a few MB).
+  struct DelassusY {
+    mesh::Vec3 y{mesh::Vec3::Zero()};
+    long long stamp{-2};  // -2: no generation
+  };
+  std::vector<DelassusY> delassus_cache_y_;
   std::vector<int> delassus_row_entry_;   // per row of this W: its entry or -1
+  // per row of this W: its entry's generation where the entry may hold values (-1: no entry, or
+  // an entry given a new generation by this W's lookup, which no value has yet)
+  std::vector<long long> delassus_row_generation_;
   std::vector<int> delassus_node_entry_;  // per node of this W: its cache index or -1
   std::vector<int> delassus_prev_entry_;  // per row of the last W: its entry or -1
   std::vector<long long> delassus_prev_generation_;  // and that entry's generation then
