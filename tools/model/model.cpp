@@ -291,6 +291,18 @@ ModelResult build_model(const ModelOptions& o) {
   const Mesh3Output brain3 = mesh_labeled_image(mask.labels, o.brain_cell_size_mm, o.seed, o.brain_refinement);
   r.brain.seconds = seconds_since(t0);
   mesh::TetMesh brain = write_and_load(mesh_dir / "brain.mesh", brain3, r.brain);
+  if (o.brain_refinement.on()) {
+    // A point away from the brain refines nothing: refused rather than a mesh that looks refined.
+    double nearest_mm = std::numeric_limits<double>::infinity();
+    for (const Vec3& x : brain.vertices())
+      nearest_mm = std::min(nearest_mm, (x / kMmToM - o.brain_refinement.centre_mm).norm());
+    if (nearest_mm > o.brain_refinement.radius_mm + o.brain_cell_size_mm) {
+      throw std::invalid_argument(
+          "--refine-at " + fmt(o.brain_refinement.centre_mm) + " (image mm) lies " +
+          std::to_string(nearest_mm) + " mm from the nearest brain vertex, beyond --refine-radius + " +
+          "--cell-size: no cell there to refine (the mesh files' coordinates are image mm)");
+    }
+  }
   if (o.skull) {
     // AAL regions per tetrahedron, written as the Medit tetrahedron reference.
     std::vector<int> labels = label_regions(brain, mask, o.atlas);

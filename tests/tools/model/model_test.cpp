@@ -264,6 +264,15 @@ TEST(model_refinement, BadValuesAreRefusedNamingTheOption) {
   auto o = coarse_options(dir);
   o.brain_refinement.cell_size_mm = 20.0;  // coarser than the 12 mm brain
   EXPECT_THROW(model::build_model(o), std::invalid_argument);
+  // A point far outside the brain refines nothing: refused after meshing, naming the option.
+  o.brain_refinement.cell_size_mm = 3.0;
+  o.brain_refinement.centre_mm = Vec3(-500.0, -500.0, -500.0);
+  try {
+    model::build_model(o);
+    ADD_FAILURE() << "a refinement point 500 mm outside the brain was not refused";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("--refine-at"), std::string::npos) << e.what();
+  }
   std::filesystem::remove_all(dir);
 }
 
