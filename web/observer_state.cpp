@@ -301,6 +301,8 @@ bool ObserverState::ingest_status(const neurosim_SimStatus& st) {
                     std::isfinite(st.total_error_estimate) ? st.total_error_estimate : -1.0},
                    {"tier_update_failures", st.tier_update_failures},
                    {"columns_not_ready", st.columns_not_ready},
+                   {"steps_with_rows_dropped", st.steps_with_rows_dropped},
+                   {"steps_not_converged", st.steps_not_converged},
                    {"stations", std::move(stations)}}
           .dump();
   status_received_ = true;

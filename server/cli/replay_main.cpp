@@ -52,6 +52,8 @@ struct Options {
   int every{10};
   double max_rate_hz{0.0};  // 0: every sample time
   bool skip_rejected{false};  // replay without the samples the live server would reject
+  int max_rows{0};            // --contact-max-rows (0: the library's), as neurosim-server's
+  int lcp_max_iterations{0};  // --lcp-max-iterations (0: the library's), as neurosim-server's
 };
 
 std::string g17(double v) {
@@ -88,6 +90,8 @@ int run(const Options& opt) {
   // Compliance columns solved inside the step on first touch, never by the live server's column
   // worker: the replay's answer is the poses' alone (docs/ARCHITECTURE.md, "compliance").
   sim_options.column_worker = false;
+  if (opt.max_rows > 0) sim_options.max_contact_nodes_per_tool = opt.max_rows;
+  if (opt.lcp_max_iterations > 0) sim_options.lcp_max_iterations = opt.lcp_max_iterations;
   std::unique_ptr<neurosim::interaction::Simulation> sim =
       neurosim::interaction::Simulation::build(model, sim_options);
   // The live server's filter on every sample (its code, server/service/tool_filter.hpp): a
@@ -145,10 +149,11 @@ int run(const Options& opt) {
   int frame_index = 0;
 
   Eigen::VectorXd u;
-  int contact_rows = 0, unconverged = 0;
+  int contact_rows = 0, unconverged = 0, rows_dropped_steps = 0;
   double max_force = 0.0;
   neurosim::replay::run(*sim, stations, [&](const neurosim::replay::StepView& v) {
     if (!v.stats->converged) ++unconverged;
+    if (v.stats->contact_rows_dropped > 0) ++rows_dropped_steps;
     for (std::size_t p = 0; p < v.poses->size(); ++p) {
       const auto& c = (*v.contacts)[p];
       const auto& st = stations[static_cast<std::size_t>((*v.station_of_pose)[p])];
@@ -199,6 +204,12 @@ int run(const Options& opt) {
             << max_force << " N" << (unconverged ? ", " + std::to_string(unconverged) +
                                                        " steps whose contact LCP did not converge"
                                                  : std::string())
+            << (rows_dropped_steps
+                    ? ", " + std::to_string(rows_dropped_steps) +
+                          " steps that left touching contact rows out (more than " +
+                          std::to_string(sim_options.max_contact_nodes_per_tool) +
+                          " per tool: --contact-max-rows)"
+                    : std::string())
             << "; " << frame_index << " frames x " << active_meshes.size() << " mesh(es)\n"
             << "results in " << fs::absolute(out).string() << "\n";
   return 0;
@@ -227,6 +238,13 @@ int main(int argc, char** argv) {
                 "replay without the samples the live server's filter would reject (NaN, tip "
                 "outside the scene's workspace, jumps faster than the tool, ...; counted on "
                 "stderr); without it such a sample is an error (exit 1)");
+  cli->add_option("--contact-max-rows", opt.max_rows,
+                  "a tool's deepest contact rows kept, as neurosim-server's (default: the "
+                  "library's, 32; a patch of cells much finer than the tip has more)")
+      ->check(CLI::Range(1, 100000));
+  cli->add_option("--lcp-max-iterations", opt.lcp_max_iterations,
+                  "the contact LCP's pivots, as neurosim-server's (default: the library's, 200)")
+      ->check(CLI::Range(1, 1000000));
   cli.check([&] {
     if (!opt.tier.empty() && !neurosim::fem::parse_tier(opt.tier)) {
       throw neurosim::cli::UsageError("--tier " + opt.tier +

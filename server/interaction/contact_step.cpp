@@ -1211,11 +1211,13 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
     for (const Row& r : memo.rows) merge_tool_row(r);
     for (const SpreadMemo& e : memo.spreads)
       if (spread_memo_.size() < spread_memo_.capacity()) spread_memo_.push_back(e);
+    geometry_rows_dropped_ += memo.dropped;
     return;
   }
   memo.valid = false;
   memo.rows.clear();
   memo.spreads.clear();
+  memo.dropped = 0;
   const ToolShape& shape = m.tools_[pose.tool];
   const double margin = m.options_.candidate_margin * shape.tip_radius_m;
   tool_rows_.clear();
@@ -1239,8 +1241,8 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
   const std::size_t limit = static_cast<std::size_t>(m.options_.max_contact_nodes_per_tool);
   std::sort(tool_order_.begin(), tool_order_.end(),
             [&](int a, int b) { return deeper(tool_rows_[a], tool_rows_[b]); });
-  std::size_t kept = 0;
-  for (std::size_t k = 0; k < tool_order_.size() && kept < limit; ++k) {
+  std::size_t kept = 0, k = 0;
+  for (; k < tool_order_.size() && kept < limit; ++k) {
     Row& r = tool_rows_[tool_order_[k]];
     last_spread_ = nullptr;
     if (!spread_row(m, r)) continue;
@@ -1251,7 +1253,14 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
     }
     merge_tool_row(r);
   }
+  // Touching rows past the limit are left out: counted (StepStats::contact_rows_dropped), never
+  // silently. Rows within the margin only (inactive candidates) are not.
+  int dropped = 0;
+  for (; k < tool_order_.size(); ++k)
+    if (tool_rows_[tool_order_[k]].depth_m > 0.0) ++dropped;
+  geometry_rows_dropped_ += dropped;
   if (rest_geometry_) {
+    memo.dropped = dropped;
     memo.valid = true;
     memo.tool = pose.tool;
     memo.tip_m = pose.tip_m;
@@ -2300,6 +2309,7 @@ LcpResult State::solve_geometry(const Model& m, const std::vector<ToolPose>& pos
   ++geometry_counter_;
   rows_.clear();
   row_main_slot_.clear();
+  geometry_rows_dropped_ = 0;
   spread_prev_memo_.swap(spread_memo_);
   spread_memo_.clear();
   // The rest surface: LINEAR (no tier offsets in the rows) with no force on any body.
@@ -2503,8 +2513,11 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
   stats.columns_not_ready = not_ready;  // the most of one geometry (the same nodes recur)
   columns_not_ready_ += static_cast<std::uint64_t>(not_ready);
   stats.contact_rows = static_cast<int>(rows_.size());
+  stats.contact_rows_dropped = geometry_rows_dropped_;  // of the geometry answered
+  if (geometry_rows_dropped_ > 0) ++steps_with_rows_dropped_;
   stats.sliding_rows = ns;
   stats.converged = lcp.converged;
+  if (!lcp.converged) ++steps_not_converged_;
   if (!lcp.converged) {
     // Keep the last good answer (contact and sliding forces), say that this step did not
     // converge.

@@ -126,6 +126,8 @@ class SimulationImpl final : public Simulation {
     return state_->bodies_[static_cast<std::size_t>(b)].columns->iterative_report();
   }
   std::uint64_t columns_not_ready() const override { return state_->columns_not_ready_; }
+  std::uint64_t steps_with_rows_dropped() const override { return state_->steps_with_rows_dropped_; }
+  std::uint64_t steps_not_converged() const override { return state_->steps_not_converged_; }
   std::uint64_t columns_solved_ahead() const override {
     return state_->column_worker_ ? state_->column_worker_->columns_solved() : 0;
   }

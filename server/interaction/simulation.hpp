@@ -82,6 +82,10 @@ struct ToolContact {
 struct StepStats {
   double solve_us{0.0};  // wall time of the step, unit us
   int contact_rows{0};
+  // Rows in contact (depth > 0) beyond SimulationOptions::max_contact_nodes_per_tool of a tool,
+  // left out of this step's LCP (the deepest are kept), summed over the tools; 0 when every
+  // touching row fits. A patch of cells much finer than the tip needs the limit raised.
+  int contact_rows_dropped{0};
   bool converged{true};
   // Contact nodes touched for the first time in this step: their coupled compliance columns were
   // computed (block solves, milliseconds) inside the step, on the step's thread. Always 0 with
@@ -445,6 +449,11 @@ class Simulation {
   // within reach of the last step's poses is ready (false: timeout, or no worker). Stepping
   // thread, except columns_solved_ahead (any thread).
   virtual std::uint64_t columns_not_ready() const { return 0; }
+  // Steps since build that left touching contact rows out (StepStats::contact_rows_dropped > 0)
+  // and steps whose contact LCP did not converge within SimulationOptions::lcp_max_iterations
+  // (StepStats::converged false: the last good answer was kept). Stepping thread.
+  virtual std::uint64_t steps_with_rows_dropped() const { return 0; }
+  virtual std::uint64_t steps_not_converged() const { return 0; }
   virtual std::uint64_t columns_solved_ahead() const { return 0; }
   virtual bool wait_columns_ready(double timeout_s) const {
     (void)timeout_s;

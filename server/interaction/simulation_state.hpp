@@ -244,6 +244,9 @@ class State {
   // bodies_: stopped before the caches it fills are destroyed); null otherwise.
   std::unique_ptr<ColumnWorker> column_worker_;
   std::uint64_t columns_not_ready_{0};  // StepStats::columns_not_ready summed over the steps
+  std::uint64_t steps_with_rows_dropped_{0};  // steps with StepStats::contact_rows_dropped > 0
+  std::uint64_t steps_not_converged_{0};      // steps whose contact LCP did not converge
+  int geometry_rows_dropped_{0};  // this geometry's touching rows beyond the per-tool limit
   double columns_s_{0.0};  // compliance columns computed at construction, unit s
   double sliding_s_{0.0};  // step workspace and constant sliding block at construction, unit s
   // COROTATIONAL and NONLINEAR: every body's equilibrium, following the contact forces
@@ -390,6 +393,7 @@ class State {
     // The spreads of those rows (spread_row's memo entries): carried into each geometry's memo
     // that takes the rows, so the tool's next move finds those of its rows that repeat.
     std::vector<SpreadMemo> spreads;
+    int dropped{0};  // touching rows beyond the per-tool limit
   };
   std::vector<ToolRowsMemo> tool_rows_memo_;
   bool rest_geometry_{false};  // this geometry is the rest surface (solve_geometry)

@@ -16,6 +16,16 @@ void ContactSwitches::validate() const {
     os << "--contact-spread " << *spread << " is outside [0, 4]";
     throw std::invalid_argument(os.str());
   }
+  if (max_rows && !(*max_rows >= 1 && *max_rows <= 100000)) {
+    std::ostringstream os;
+    os << "--contact-max-rows " << *max_rows << " is outside [1, 100000]";
+    throw std::invalid_argument(os.str());
+  }
+  if (lcp_max_iterations && !(*lcp_max_iterations >= 1 && *lcp_max_iterations <= 1000000)) {
+    std::ostringstream os;
+    os << "--lcp-max-iterations " << *lcp_max_iterations << " is outside [1, 1000000]";
+    throw std::invalid_argument(os.str());
+  }
   if (barycentric) {
     if (spread && *spread != 0.0) {
       std::ostringstream os;
@@ -50,6 +60,8 @@ void ContactSwitches::apply(interaction::SimulationOptions& o) const {
   if (spread) o.contact_spread = *spread;
   if (smooth_normals) o.contact_smooth_normals = *smooth_normals;
   if (near_field) o.contact_near_field = *near_field;
+  if (max_rows) o.max_contact_nodes_per_tool = *max_rows;
+  if (lcp_max_iterations) o.lcp_max_iterations = *lcp_max_iterations;
 }
 
 std::string ContactSwitches::describe() const {
@@ -57,7 +69,9 @@ std::string ContactSwitches::describe() const {
   apply(o);
   std::ostringstream os;
   os << "contact spread " << o.contact_spread << ", smooth normals " << on_off(o.contact_smooth_normals)
-     << ", near field " << on_off(o.contact_near_field);
+     << ", near field " << on_off(o.contact_near_field) << ", at most "
+     << o.max_contact_nodes_per_tool << " rows per tool, LCP at most " << o.lcp_max_iterations
+     << " pivots";
   if (!any()) {
     os << " (the library's defaults)";
   } else {
@@ -75,7 +89,15 @@ std::string ContactSwitches::describe() const {
       os << sep << "--contact-smooth-normals " << on_off(*smooth_normals);
       sep = " ";
     }
-    if (near_field) os << sep << "--contact-near-field " << on_off(*near_field);
+    if (near_field) {
+      os << sep << "--contact-near-field " << on_off(*near_field);
+      sep = " ";
+    }
+    if (max_rows) {
+      os << sep << "--contact-max-rows " << *max_rows;
+      sep = " ";
+    }
+    if (lcp_max_iterations) os << sep << "--lcp-max-iterations " << *lcp_max_iterations;
     os << ")";
   }
   return os.str();

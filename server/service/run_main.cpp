@@ -180,6 +180,18 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
        "SimulationOptions::contact_near_field, on|off (on needs a contact spread > 0); default: "
        "the library's")
       ->check(CLI::IsMember({"on", "off"}));
+  p->add_option_function<int>(
+       "--contact-max-rows", [&](const int& v) { opt.contact.max_rows = v; },
+       "SimulationOptions::max_contact_nodes_per_tool, [1, 100000]: a tool's deepest rows kept "
+       "(a patch of cells much finer than the tip needs more; the rest are counted in "
+       "SimStatus.steps_with_rows_dropped); default: the library's")
+      ->check(CLI::Range(1, 100000));
+  p->add_option_function<int>(
+       "--lcp-max-iterations", [&](const int& v) { opt.contact.lcp_max_iterations = v; },
+       "SimulationOptions::lcp_max_iterations, [1, 1000000]: the contact LCP's pivots (about one "
+       "per active row; a step that runs out keeps the last good answer, counted in "
+       "SimStatus.steps_not_converged); default: the library's")
+      ->check(CLI::Range(1, 1000000));
   p->footer("CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs).");
   if (auto rc = p.parse(argc, argv)) return *rc;
   opt.step_mode = step_mode == "clock" ? StepMode::kClock : StepMode::kEvent;

@@ -197,6 +197,24 @@ void StatusPublisher::report_accuracy(neurosim_SimStatus& st) {
            std::to_string(static_cast<double>(c.raised_capacity_slots * c.bytes_per_slot) / 1e6) +
            " MB)");
   }
+  // Steps that did not solve the whole contact: said once per status period in which they rose.
+  st.steps_with_rows_dropped = sim_.steps_with_rows_dropped();
+  st.steps_not_converged = sim_.steps_not_converged();
+  if (st.steps_with_rows_dropped > rows_dropped_logged_) {
+    if (log_)
+      log_("warning: " + std::to_string(st.steps_with_rows_dropped - rows_dropped_logged_) +
+           " step(s) since the last status left touching contact rows out: a tool's patch has more "
+           "rows than the per-tool limit (the deepest are kept; cells much finer than the tip; "
+           "raise --contact-max-rows)");
+    rows_dropped_logged_ = st.steps_with_rows_dropped;
+  }
+  if (st.steps_not_converged > not_converged_logged_) {
+    if (log_)
+      log_("warning: " + std::to_string(st.steps_not_converged - not_converged_logged_) +
+           " step(s) since the last status did not converge the contact LCP (each kept the last "
+           "good answer; raise --lcp-max-iterations for patches of many rows)");
+    not_converged_logged_ = st.steps_not_converged;
+  }
   const std::uint64_t failures = sim_.tier_update_failures();
   st.tier_update_failures = failures;
   if (failures > tier_failures_logged_) {

@@ -79,6 +79,8 @@ class StatusPublisher {
   std::uint64_t steps_at_last_status_{0};
   bool error_bound_warned_{false}, beyond_table_noted_{false};
   std::uint64_t tier_failures_logged_{0};
+  std::uint64_t rows_dropped_logged_{0};   // Simulation::steps_with_rows_dropped logged so far
+  std::uint64_t not_converged_logged_{0};  // Simulation::steps_not_converged logged so far
   // Per mesh: the column cache's raised bound last logged (ColumnCacheStats::raised_capacity_slots).
   std::vector<std::size_t> raised_logged_;
 };

@@ -135,6 +135,12 @@ TEST(WebPage, ShowsTheCubeDeformingUnderAScriptedStationAndSurvivesTheServer) {
                 "columns not ready\n" + std::to_string(s["server"]["columns_not_ready"].get<long long>())),
             std::string::npos)
       << page_text;
+  // And the steps that did not solve the whole contact (0 here: the cube's patch fits).
+  ASSERT_TRUE(s["server"]["steps_with_rows_dropped"].is_number()) << s["server"];
+  EXPECT_NE(page_text.get<std::string>().find("contact rows dropped\n" +
+                std::to_string(s["server"]["steps_with_rows_dropped"].get<long long>()) + " steps"),
+            std::string::npos)
+      << page_text;
   const int frames_at_rest = s["framesDecoded"];
   const int generation = s["generation"];
 

@@ -290,6 +290,54 @@ TEST(interaction_contact_step, PressThroughTheTipCentreOnTheSurfaceIsContinuous)
   }
 }
 
+// A patch with more touching rows than SimulationOptions::max_contact_nodes_per_tool: the 2 mm
+// tip 2.5 mm into the block of 1 mm cells. With room for the whole patch no row is left out; with
+// 4 the deepest 4 are kept and every other touching row is counted in StepStats (also when the
+// same pose is answered again from the rest surface's memo) and in the Simulation's count of
+// steps, never dropped without a word. An LCP allowed one pivot does not converge on this patch:
+// counted in steps_not_converged (the step keeps the last good answer).
+TEST(interaction_contact_step, RowsBeyondThePerToolLimitAreCounted) {
+  FineFace face = fine_face();
+  const Vec3 at = face.at[0].second;  // the vertex
+  const ToolPose pose = press(face.b, 2.5e-3, at.y(), at.z());
+  std::vector<ToolContact> c;
+  StepStats all;
+  {
+    auto sim = Simulation::build(block_scene(face.b), face.o);
+    sim->step({pose}, c, all);
+    ASSERT_TRUE(all.converged);
+    EXPECT_EQ(all.contact_rows_dropped, 0);
+    EXPECT_EQ(sim->steps_with_rows_dropped(), 0u);
+    EXPECT_EQ(sim->steps_not_converged(), 0u);
+  }
+  ASSERT_GT(all.contact_rows, 8) << "the patch has to be wider than the limit below";
+  SimulationOptions few = face.o;
+  few.max_contact_nodes_per_tool = 4;
+  auto sim = Simulation::build(block_scene(face.b), few);
+  StepStats st;
+  sim->step({pose}, c, st);
+  ASSERT_TRUE(st.converged);
+  EXPECT_EQ(st.contact_rows, 4);
+  EXPECT_GT(st.contact_rows_dropped, 0);
+  // Touching rows only: those within the margin (inactive candidates) are not counted.
+  EXPECT_LE(st.contact_rows_dropped, all.contact_rows - 4);
+  const int dropped = st.contact_rows_dropped;
+  sim->step({pose}, c, st);  // the same pose: the rows from the memo
+  EXPECT_EQ(st.contact_rows_dropped, dropped);
+  EXPECT_EQ(sim->steps_with_rows_dropped(), 2u);
+  std::printf("2.5 mm at the vertex: %d rows with room for 1200, %d touching rows left out of 4\n",
+              all.contact_rows, dropped);
+
+  SimulationOptions one_pivot = face.o;
+  one_pivot.lcp_max_iterations = 1;
+  one_pivot.lcp_warm_start = false;
+  auto short_lcp = Simulation::build(block_scene(face.b), one_pivot);
+  short_lcp->step({pose}, c, st);
+  EXPECT_FALSE(st.converged);
+  EXPECT_EQ(short_lcp->steps_not_converged(), 1u);
+  EXPECT_EQ(short_lcp->steps_with_rows_dropped(), 0u);
+}
+
 // dF/dx of the step's force by central differences of the tip's position (h along each axis,
 // unit m): column a is (F(x + h e_a) - F(x - h e_a)) / 2h, unit N/m.
 Mat3 force_central_differences(Simulation& sim, const ToolPose& p, double h) {

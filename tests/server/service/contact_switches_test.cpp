@@ -113,3 +113,35 @@ TEST(service_contact_switches, SpreadOutOfRangeIsRefused) {
     EXPECT_NE(refusal(c).find("outside [0, 4]"), std::string::npos) << s << ": " << refusal(c);
   }
 }
+
+// --contact-max-rows and --lcp-max-iterations: each reaches its field and the start-up line;
+// outside its range it is refused naming the switch; unset keeps the library's limits.
+TEST(service_contact_switches, RowAndPivotLimitsReachTheirFields) {
+  const SimulationOptions defaults;
+  SimulationOptions o;
+  ContactSwitches none;
+  none.apply(o);
+  EXPECT_EQ(o.max_contact_nodes_per_tool, defaults.max_contact_nodes_per_tool);
+  EXPECT_EQ(o.lcp_max_iterations, defaults.lcp_max_iterations);
+
+  ContactSwitches c;
+  c.max_rows = 1200;
+  c.lcp_max_iterations = 4000;
+  EXPECT_TRUE(c.any());
+  EXPECT_NO_THROW(c.validate());
+  c.apply(o);
+  EXPECT_EQ(o.max_contact_nodes_per_tool, 1200);
+  EXPECT_EQ(o.lcp_max_iterations, 4000);
+  const std::string line = c.describe();
+  EXPECT_NE(line.find("at most 1200 rows per tool"), std::string::npos) << line;
+  EXPECT_NE(line.find("--contact-max-rows 1200 --lcp-max-iterations 4000"), std::string::npos) << line;
+
+  for (int bad : {0, -3, 100001}) {
+    ContactSwitches r;
+    r.max_rows = bad;
+    EXPECT_NE(refusal(r).find("--contact-max-rows"), std::string::npos) << bad << ": " << refusal(r);
+    ContactSwitches l;
+    l.lcp_max_iterations = bad == 100001 ? 1000001 : bad;
+    EXPECT_NE(refusal(l).find("--lcp-max-iterations"), std::string::npos) << bad << ": " << refusal(l);
+  }
+}

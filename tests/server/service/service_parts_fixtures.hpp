@@ -122,7 +122,9 @@ class PoisonSimulation : public interaction::Simulation {
   // The column worker's counts as the Simulation reports them (set by a test).
   std::uint64_t columns_not_ready() const override { return not_ready; }
   std::uint64_t columns_solved_ahead() const override { return solved_ahead; }
-  std::uint64_t not_ready{0}, solved_ahead{0};
+  std::uint64_t steps_with_rows_dropped() const override { return rows_dropped; }
+  std::uint64_t steps_not_converged() const override { return not_converged; }
+  std::uint64_t not_ready{0}, solved_ahead{0}, rows_dropped{0}, not_converged{0};
   // The column cache as the Simulation reports it (set by a test); the one mesh is body 0.
   int body_index(int) const override { return 0; }
   ColumnCacheStats column_cache(int) const override { return cache; }

@@ -74,6 +74,33 @@ TEST(service_status_publisher, TheSampleCarriesTheStepsStationsAndStepTimes) {
   EXPECT_EQ(st.refused._length, 0u);
 }
 
+// Steps that left touching contact rows out (beyond the per-tool limit) and steps whose contact
+// LCP did not converge: published as the Simulation counts them, and logged once per status
+// period in which they rose (naming the switch to raise), not again while they stay.
+TEST(service_status_publisher, IncompleteContactStepsArePublishedAndLogged) {
+  Status t;
+  const neurosim_SimStatus& quiet = t.status->publish(kSecond);
+  EXPECT_EQ(quiet.steps_with_rows_dropped, 0u);
+  EXPECT_EQ(quiet.steps_not_converged, 0u);
+  EXPECT_TRUE(t.log.empty());
+  t.sim.rows_dropped = 3;
+  t.sim.not_converged = 2;
+  const neurosim_SimStatus& st = t.status->publish(2 * kSecond);
+  EXPECT_EQ(st.steps_with_rows_dropped, 3u);
+  EXPECT_EQ(st.steps_not_converged, 2u);
+  ASSERT_EQ(t.log.size(), 2u);
+  EXPECT_NE(t.log[0].find("3 step(s)"), std::string::npos) << t.log[0];
+  EXPECT_NE(t.log[0].find("--contact-max-rows"), std::string::npos) << t.log[0];
+  EXPECT_NE(t.log[1].find("2 step(s)"), std::string::npos) << t.log[1];
+  EXPECT_NE(t.log[1].find("--lcp-max-iterations"), std::string::npos) << t.log[1];
+  t.status->publish(3 * kSecond);
+  EXPECT_EQ(t.log.size(), 2u) << "nothing new: nothing logged";
+  t.sim.rows_dropped = 4;
+  t.status->publish(4 * kSecond);
+  ASSERT_EQ(t.log.size(), 3u);
+  EXPECT_NE(t.log[2].find("1 step(s)"), std::string::npos) << t.log[2];
+}
+
 // The host's discretization error (looked up at set-up) is published as it is; the total needs
 // the tier's part too: without a measured strain it stays unknown (-1), not the discretization
 // part alone passed off as the total.

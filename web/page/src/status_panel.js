@@ -59,6 +59,16 @@ export class StatusPanel {
       // Contact nodes a step needed before the column worker had solved them (each took the
       // step's fallback), summed since the server started: 0 while the worker keeps ahead.
       if (s.columns_not_ready !== undefined) rows.push(['columns not ready', String(s.columns_not_ready)]);
+      // Steps that did not solve the whole contact (rows beyond the per-tool limit left out; the
+      // LCP not converged, the last good answer kept), since the server started: 0 normally.
+      if (s.steps_with_rows_dropped !== undefined) {
+        rows.push(['contact rows dropped', `${s.steps_with_rows_dropped} steps`,
+          s.steps_with_rows_dropped > 0 ? 'bad' : 'ok']);
+      }
+      if (s.steps_not_converged !== undefined) {
+        rows.push(['contact not converged', `${s.steps_not_converged} steps`,
+          s.steps_not_converged > 0 ? 'bad' : 'ok']);
+      }
     }
     if (status) rows.push(['observers', `${status.bridge.clients} of ${status.bridge.max_clients}`]);
     this.server.replaceChildren(...rows.flatMap(([k, v, cls]) => [element('dt', k), element('dd', v, cls)]));
