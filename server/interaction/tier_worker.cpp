@@ -140,8 +140,14 @@ bool TierWorker::update_all(const std::vector<TierLoad>& loads) {
         rx.previous = rx.residual - rx.previous;
         const double den = rx.previous.squaredNorm();
         const double num = (rx.residual - rx.previous).dot(rx.previous);  // r_prev . dr
-        if (den > 0.0 && std::isfinite(num / den)) {
-          rx.omega = std::clamp(-rx.omega * num / den, kMinRelaxation, kMaxRelaxation);
+        const double estimate = -rx.omega * num / den;
+        // A negative estimate (the residual grew along itself) is a lag, not an overshoot: f
+        // behind a moving lambda (a press: the tool moves between updates), or behind an
+        // update's own progress. A smaller factor only makes f lag further, which keeps the
+        // estimate negative: the factor would sit at its floor for the whole press. The factor
+        // stays as it was; an overshoot (the residual turning back) still lowers it.
+        if (den > 0.0 && std::isfinite(estimate) && estimate > 0.0) {
+          rx.omega = std::clamp(estimate, kMinRelaxation, kMaxRelaxation);
         }
       }
       rx.f += rx.omega * rx.residual;

@@ -16,7 +16,10 @@
 // can soften more than that in the corotational tier and the forces then oscillate with growing
 // amplitude. So f' = f + omega (lambda - f) with Aitken's dynamic relaxation factor (as in
 // partitioned fluid-structure coupling, Kuettler & Wall 2008), per body, clamped to
-// [kMinRelaxation, kMaxRelaxation]: the fixed point is the same, it is reached in both cases.
+// [kMinRelaxation, kMaxRelaxation]: the fixed point is the same, it is reached in both cases. A
+// negative estimate (the residual grew along itself: f lagging a lambda that moves with the tool,
+// not overshooting it) leaves the factor unchanged: clamped to the floor it made f lag further
+// and kept the factor there through a whole press.
 // A step whose forces on an elastic body are all zero (the tools left it) sets f' = 0 at once and restarts
 // the relaxation: the body is then at rest in one update (TierEquilibrium::update), instead of
 // relaxing towards rest while the step finds its rows on a surface no tool holds any more.
