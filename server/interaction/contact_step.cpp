@@ -105,6 +105,25 @@ bool may_reach_triangle(const Vec3& c, double bound, const Vec3& p0, const Vec3&
   return !((c - closest_on_segment(c, p0, p1)).squaredNorm() > bound * bound);
 }
 
+// Whether the triangle x (unit normal n) lies wholly to one side of the axis p0-p1, farther than
+// reach along s = n x axis (unit): then no point c of the axis has an edge or face hit on it. A
+// hit needs |c - p| <= reach (an edge) or the offset of c - p across n within reach (a face, also
+// from behind: within), and both are at least |s . (c - p)| = |s . (p0 - p)| (s is normal to the
+// axis and to n), linear in p, so over the triangle at least its vertices' least. Exact as a
+// rejection (reach widened by 1e-6 relative, far above the rounding of either side); no test
+// where the axis is within 1e-6 rad of n. It spares the shaft's alternating projections of the
+// triangles beside it that the bounding circle of may_touch_face keeps.
+bool beside_axis(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0, const Vec3& p1,
+                 double reach) {
+  Vec3 s = n.cross(p1 - p0);
+  const double s2 = s.squaredNorm();
+  if (!(s2 > 1e-12 * (p1 - p0).squaredNorm())) return false;
+  s /= std::sqrt(s2);
+  const double bound = reach * (1.0 + 1e-6);
+  const double a0 = s.dot(x[0] - p0), a1 = s.dot(x[1] - p0), a2 = s.dot(x[2] - p0);
+  return (a0 > bound && a1 > bound && a2 > bound) || (a0 < -bound && a1 < -bound && a2 < -bound);
+}
+
 // The shaft's points inside the tip sphere are the tip's: its own rows hold them, deeper (with
 // SimulationOptions::contact_smooth_normals the two would differ in normal and weights, and the
 // shaft, starting at the tip's centre, took most of a 2 mm press's force at a flat face's normal).
@@ -164,9 +183,7 @@ State::State(const Model& m) {
     bs.position_stamp.assign(b.rest_m.size(), -1);
     bs.position_m.assign(b.rest_m.size(), Vec3::Zero());
     bs.force_index.assign(b.rest_m.size(), -1);
-    bs.node_test_stamp.assign(4 * b.rest_m.size(), -1);
-    bs.node_test_in.assign(4 * b.rest_m.size(), 0);
-    bs.node_hit.assign(4 * b.rest_m.size(), -1);
+    bs.node_tests.assign(4 * b.rest_m.size(), BodyState::NodeTest{});
     bs.sliding_lambda.setZero(b.body->sliding().size());
     if (!b.creep.terms.empty()) {
       bs.history = std::make_unique<ViscoelasticHistory>(b.host_material.viscoelastic, b.creep,
@@ -297,6 +314,8 @@ void State::reserve_workspace(const Model& m, int tools) {
   delassus_prev_v_.setZero(max_contact, max_contact);
   delassus_match_.reserve(max_contact);
   delassus_fresh_.reserve(max_contact);
+  delassus_unmatched_.reserve(max_contact);
+  delassus_row_body_.reserve(max_contact);
   delassus_last_fresh_row_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
   delassus_evicted_.assign(m.bodies_.size(), 0);
   spread_memo_.clear();
@@ -540,13 +559,14 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
                                           p0.cwiseMax(p1) + Vec3::Constant(reach));
     }
     for (const auto& c : sc.reusable)
-      if (b.surface.listed(tip_cells, c.triangle)) {
+      if (ContactSurface::listed_cell(tip_cells, c.cell)) {
         list.push_back(c.triangle);
         sc.parts.push_back(c.parts);
       }
     if (has_shaft)
       for (const auto& c : sc.reusable)
-        if (!b.surface.listed(tip_cells, c.triangle) && b.surface.listed(shaft_cells, c.triangle)) {
+        if (!ContactSurface::listed_cell(tip_cells, c.cell) &&
+            ContactSurface::listed_cell(shaft_cells, c.cell)) {
           list.push_back(c.triangle);
           sc.parts.push_back(c.parts);
         }
@@ -661,7 +681,8 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
                           (b.surface.radius_m(t) + back) * (1.0 + 1e-9));
     }
     if (parts != 0 || flat)
-      sc.reusable.push_back({t, b.surface.query_rank(t), static_cast<std::uint8_t>(parts)});
+      sc.reusable.push_back({t, b.surface.query_rank(t), static_cast<std::uint8_t>(parts),
+                             b.surface.query_cell(t)});
   }
   std::sort(sc.reusable.begin(), sc.reusable.end(),
             [](const StepCandidates::Reusable& a, const StepCandidates::Reusable& c) {
@@ -772,9 +793,10 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   for (int k = 0; k < 3; ++k) {
     if (tri.slot[k] < 0) continue;
     const std::size_t i = 4 * static_cast<std::size_t>(tri.slot[k]) + (at_rest ? 2 : 0) + shaft;
-    if (bs.node_test_stamp[i] == memo) {
-      if (!bs.node_test_in[i]) continue;
-      FeatureHit& seen = hits_[static_cast<std::size_t>(bs.node_hit[i])];
+    BodyState::NodeTest& test = bs.node_tests[i];
+    if (test.stamp == memo) {
+      if (!test.in) continue;
+      FeatureHit& seen = hits_[static_cast<std::size_t>(test.hit)];
       seen.face_normal += n;
       ++seen.normals;
       if (t < seen.triangle) {
@@ -786,11 +808,11 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
       continue;
     }
     const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
-    bs.node_test_stamp[i] = memo;
-    bs.node_test_in[i] = !(shaft && inside_tip(x[k], p0, shape)) &&
-                         within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m);
-    if (!bs.node_test_in[i]) continue;
-    bs.node_hit[i] = static_cast<int>(hits_.size());
+    test.stamp = memo;
+    test.in = within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m) &&
+              !(shaft && inside_tip(x[k], p0, shape));
+    if (!test.in) continue;
+    test.hit = static_cast<int>(hits_.size());
     h.key = feature_key(shaft, TriangleFeature::kVertex, 0, tri.node[k]);
     h.at.point_m = x[k];
     h.at.weights = {0.0, 0.0, 0.0};
@@ -805,7 +827,8 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   // that test by a sphere-capsule one (may_reach_triangle: the same rejections, cheaper).
   const double behind = std::max(reach, max_penetration_m);
   if (!may_reach_triangle(centre, rho + reach + behind, p0, shaft ? p1 : p0) ||
-      !may_touch_face(x[0], n, centre, rho, p0, shaft ? p1 : p0, reach, behind))
+      !may_touch_face(x[0], n, centre, rho, p0, shaft ? p1 : p0, reach, behind) ||
+      (shaft && beside_axis(x, n, p0, p1, reach)))
     return;
   // SimulationOptions::contact_smooth_normals, the tip: the centre projected along the normals
   // interpolated from the nodes' (project_along_normals), one face row per triangle that holds
@@ -841,10 +864,16 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   TrianglePoint at;
   bool fixed = false;
   if (shaft) {
-    c = closest_on_segment((x[0] + x[1] + x[2]) / 3.0, p0, p1);
+    // (closest_on_segment's axis and its squared length formed once: the same values)
+    const Vec3 e = p1 - p0;
+    const double len2 = e.squaredNorm();
+    auto on_axis = [&](const Vec3& q) {
+      return len2 == 0.0 ? p0 : Vec3(p0 + std::clamp((q - p0).dot(e) / len2, 0.0, 1.0) * e);
+    };
+    c = on_axis((x[0] + x[1] + x[2]) / 3.0);
     for (int it = 0; it < 4 && !fixed; ++it) {
       at = closest_on_triangle(c, x);
-      const Vec3 next = closest_on_segment(at.point_m, p0, p1);
+      const Vec3 next = on_axis(at.point_m);
       fixed = std::memcmp(next.data(), c.data(), sizeof(Vec3)) == 0;
       c = next;
     }
@@ -1724,8 +1753,12 @@ void State::delassus(const Model& m, int ns) {
     }
   }
   delassus_last_fresh_row_.assign(nn, -1);
+  delassus_unmatched_.clear();
+  delassus_row_body_.clear();
   for (int s = 0; s < nc; ++s) {
+    delassus_row_body_.push_back(rows_[s].body);
     if (delassus_match_[s] >= 0) continue;
+    delassus_unmatched_.push_back(s);
     for (int q = 0; q < rows_[s].nodes; ++q)
       if (delassus_row_node_[s][q] >= 0) delassus_last_fresh_row_[delassus_row_node_[s][q]] = s;
   }
@@ -1747,22 +1780,30 @@ void State::delassus(const Model& m, int ns) {
                                           static_cast<std::size_t>(cj) * delassus_cache_rows_
                                     : nullptr;
     delassus_fresh_.clear();
-    for (int r = 0; r <= delassus_last_row_[j]; ++r) {
-      const Row& a = rows_[r];
-      if (a.body != body) continue;
-      if (delassus_match_[r] >= 0 && r > delassus_last_fresh_row_[j]) continue;
+    // The rows r <= last_row[j] on the body, a matched one only up to the node's last unmatched
+    // row: every row up to that, then the unmatched rows after it (ascending r).
+    auto visit = [&](int r) {
+      if (delassus_row_body_[r] != body) return;
       const long long g = delassus_row_generation_[r];
       if (kept && g >= 0 && kept[delassus_row_entry_[r]].stamp == g) {
         delassus_y_[static_cast<std::size_t>(r) * nn + j] = kept[delassus_row_entry_[r]].y;
-        continue;
+        return;
       }
       delassus_fresh_.push_back(r);
+      const Row& a = rows_[r];
       for (int p = 0; p < a.nodes; ++p) {
         if (a.slot[p] < 0) continue;
         const double* b = cols.block(a.slot[p], slot_q).data();
         __builtin_prefetch(b);
         __builtin_prefetch(b + 8);
       }
+    };
+    const int last = delassus_last_row_[j];
+    const int all_up_to = std::min(last, delassus_last_fresh_row_[j]);
+    for (int r = 0; r <= all_up_to; ++r) visit(r);
+    for (const int r : delassus_unmatched_) {
+      if (r > last) break;
+      if (r > all_up_to) visit(r);
     }
     for (const int r : delassus_fresh_) {
       const Row& a = rows_[r];

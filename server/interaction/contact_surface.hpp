@@ -24,7 +24,53 @@ struct TrianglePoint {
   TriangleFeature feature{TriangleFeature::kFace};
   int a{0};
 };
-TrianglePoint closest_on_triangle(const mesh::Vec3& x, const std::array<mesh::Vec3, 3>& p);
+// Inline: the step calls it for every candidate feature (its answer kept in registers).
+inline TrianglePoint closest_on_triangle(const mesh::Vec3& x, const std::array<mesh::Vec3, 3>& p) {
+  // Voronoi regions of the vertices, then of the edges, else the face.
+  TrianglePoint r;
+  const mesh::Vec3 ab = p[1] - p[0], ac = p[2] - p[0], ap = x - p[0];
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  auto vertex = [&](int a) {
+    r.point_m = p[a];
+    r.weights = {0.0, 0.0, 0.0};
+    r.weights[a] = 1.0;
+    r.feature = TriangleFeature::kVertex;
+    r.a = a;
+    return r;
+  };
+  auto edge = [&](int a, double t) {  // from local vertex a to a + 1, parameter t
+    const int b = (a + 1) % 3;
+    r.point_m = p[a] + t * (p[b] - p[a]);
+    r.weights = {0.0, 0.0, 0.0};
+    r.weights[a] = 1.0 - t;
+    r.weights[b] = t;
+    r.feature = TriangleFeature::kEdge;
+    r.a = a;
+    return r;
+  };
+  if (d1 <= 0.0 && d2 <= 0.0) return vertex(0);
+  const mesh::Vec3 bp = x - p[1];
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return vertex(1);
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return edge(0, d1 / (d1 - d3));
+  const mesh::Vec3 cp = x - p[2];
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return vertex(2);
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return edge(2, 1.0 - d2 / (d2 - d6));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0)
+    return edge(1, (d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  const double denom = va + vb + vc;
+  if (!(denom > 0.0)) return vertex(0);  // degenerate triangle
+  const double v = vb / denom, w = vc / denom;
+  r.weights = {1.0 - v - w, v, w};
+  r.point_m = p[0] + v * ab + w * ac;
+  r.feature = TriangleFeature::kFace;
+  r.a = 0;
+  return r;
+}
 
 // Projection of x onto the triangle p along the normal field interpolated from its nodes' normals
 // nn (N(u, v) = sum b_k nn_k, b the barycentric weights): the point y = sum b_k p_k with x - y
@@ -84,6 +130,11 @@ class ContactSurface {
   PointGrid::CellRange query_cells(const mesh::Vec3& lo, const mesh::Vec3& hi) const;
   bool listed(const PointGrid::CellRange& r, int t) const { return grid_.contains(r, t); }
   int query_rank(int t) const { return grid_.rank(t); }
+  // Triangle t's grid cell (listed_cell: `listed` with it, the cell kept in the caller's list).
+  const std::array<int, 3>& query_cell(int t) const { return grid_.cell(t); }
+  static bool listed_cell(const PointGrid::CellRange& r, const std::array<int, 3>& cell) {
+    return PointGrid::contains(r, cell);
+  }
   // Rest centroid and the largest centroid-vertex distance over all triangles, unit m.
   const mesh::Vec3& centroid(int t) const { return centroid_[t]; }
   // Largest centroid-vertex distance of triangle t (rest), unit m.

@@ -125,9 +125,13 @@ struct BodyState {
   std::vector<int> force_index;             // per contact slot: index in force_slots or -1
   // Per contact slot and (rest surface, shaft): the node test of the last triangle search that
   // made it (its stamp) and whether the node was inside the part (each node tested once).
-  std::vector<long long> node_test_stamp;
-  std::vector<char> node_test_in;
-  std::vector<int> node_hit;  // per slot and (rest, shaft): its hit in State::hits_ (tested in)
+  // (one entry per slot and (rest, shaft), the four of a slot in one cache line)
+  struct NodeTest {
+    long long stamp{-1};
+    int hit{-1};  // its hit in State::hits_ (tested in)
+    bool in{false};
+  };
+  std::vector<NodeTest> node_tests;
   // Largest displacement at the loaded slots of the last geometry followed by another (LINEAR:
   // within one step; 0 at a step's start) or of the last good step (the tiers), unit m.
   double max_displacement_m{0.0};
@@ -349,6 +353,7 @@ class State {
       int triangle{-1};
       int rank{0};
       std::uint8_t parts{0};
+      std::array<int, 3> cell{};  // its grid cell (ContactSurface::query_cell): scanned per pose
     };
     std::vector<Reusable> reusable;
     bool reuse_valid{false};
@@ -434,6 +439,8 @@ class State {
   std::vector<int> delassus_match_;
   std::vector<int> delassus_fresh_;  // the rows forming y_rj fresh for one node j
   std::vector<int> delassus_last_fresh_row_;
+  std::vector<int> delassus_unmatched_;  // the rows of this W matched to none, ascending
+  std::vector<int> delassus_row_body_;   // per row of this W: its body (the node loop's test)
   std::vector<std::uint64_t> delassus_evicted_;  // per body: its columns' evicted() at the last W
   // Phase "Delassus", y cache: y_rj is a function of row r's content (body, nodes, slots, weights,
   // normals m) and node j's ready column alone, so it is kept across steps by content and node:

@@ -136,11 +136,14 @@ class PointGrid {
     int hi[3]{-1, -1, -1};
   };
   CellRange cells(const mesh::Vec3& lo, const mesh::Vec3& hi) const;
-  bool contains(const CellRange& r, int i) const {
-    const auto& c = cell_of_[i];
-    return c[0] >= r.lo[0] && c[0] <= r.hi[0] && c[1] >= r.lo[1] && c[1] <= r.hi[1] &&
-           c[2] >= r.lo[2] && c[2] <= r.hi[2];
+  bool contains(const CellRange& r, int i) const { return contains(r, cell_of_[i]); }
+  // The same with point i's cell (cell(i)) kept by the caller (a list scanned per step).
+  static bool contains(const CellRange& r, const std::array<int, 3>& c) {
+    // (without branches: a scanned list's cells are in and out of the range in no pattern)
+    return (c[0] >= r.lo[0]) & (c[0] <= r.hi[0]) & (c[1] >= r.lo[1]) & (c[1] <= r.hi[1]) &
+           (c[2] >= r.lo[2]) & (c[2] <= r.hi[2]);
   }
+  const std::array<int, 3>& cell(int i) const { return cell_of_[i]; }
   int rank(int i) const { return rank_[i]; }
 
  private:
