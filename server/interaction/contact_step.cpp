@@ -8,7 +8,8 @@
 //     sphere or capsule (CalculiX's node-to-surface contact with the tool as master), so a tip
 //     wider than the triangles feels a patch; its normal the part's where the node, moved along
 //     its surface's normal line, leaves the part (merge_features: radial while the centre is in
-//     the node's normal cone, turning into the mean normal outside it; every tier);
+//     the node's normal cone, turning into the mean normal outside it; the multirate tiers:
+//     radial within 60 degrees of the mean normal, else the mean normal);
 //   - a face row where a triangle's closest point is inside it (normal: the triangle's);
 //   - an edge row where every contactable triangle of the edge reports that edge (the distance
 //     has a local minimum there; otherwise a neighbouring face row already holds it);
@@ -982,9 +983,14 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     if (f == TriangleFeature::kFace) {
       n = h.face_normal;
     } else {
-      // A node or an edge, every tier (the multirate tiers' rows rotated by their equilibrium in
-      // row_node_normals, as a face row's).
-      // The tip: the sphere's normal where the point, pushed along its line (radial
+      // A node or an edge. The multirate tiers: radial from the part's centre (the point against
+      // a rigid sphere or capsule) when the centre is within 60 degrees of the mean normal of the
+      // triangles that report it, else along that mean normal (the depth r - n . d). The tiers
+      // keep 60: their depth adds n . u0 of an equilibrium that may have carried the point far
+      // along the surface, which a nearly tangential normal turns into a depth (measured with 90:
+      // a 10 mm vertex press cycle in NONLINEAR reached 101.6 N against the block's 50.5 N
+      // bound, stability_test).
+      // LINEAR, the tip: the sphere's normal where the point, pushed along its line (radial
       // while the centre is within the feature's normal cone, else turning into the mean
       // normal; tool_geometry.hpp exit_normal), leaves the sphere; the depth r - n . d, the
       // sphere's tangent plane there. Over a flat surface the line is the mean normal whatever
@@ -999,7 +1005,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       // its normal turned with the tip's position far faster still (across the blend: the
       // force's derivative 26 kN/m against K's 2.4) and the closed haptic loop against the cube
       // oscillated for good (bench/RESULTS.md, "The 60-90 degree blend withdrawn").
-      // The shaft: the same line against the capsule's cross-section through the point
+      // LINEAR, the shaft: the same line against the capsule's cross-section through the point
       // (the sphere of its radius about the axis point closest to the point; tool_geometry.hpp
       // capsule_exit), the depth that sphere's tangent plane's where the point leaves it.
       // Radial up to 90 degrees and the mean normal past it (before) switched the row's direction
@@ -1009,44 +1015,65 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       // pushed sideways by 15 % of |F| (bench/RESULTS.md, "The shaft's exit point").
       const Vec3 mean = normal_sum.normalized();
       const double cos_alpha = normal_sum.norm() / std::max(normals, 1);
-      exit_row = true;
-      plane_n = mean;
-      plane_h = d.dot(mean);
-      const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
-      radial = dn > 1e-9 * part_r && plane_h > 0.0;  // not an entry (below)
-      if (!h.shaft) {
-        n = exit_normal(d, mean, cos_alpha, shape.tip_radius_m);
-        turn = exit_normal_turn(d, mean, cos_alpha, shape.tip_radius_m);
-      } else {
-        Mat3 dn_dx;
-        const CapsuleExit ex = capsule_exit(h.at.point_m, tip, tip + shape.shaft_length_m * axis,
-                                            mean, cos_alpha, shape.shaft_radius_m, &dn_dx);
-        n = ex.normal;
-        depth_centre = ex.centre;
-        // The tool's translation t moves the point relative to the capsule by (dx/dt - I) t:
-        // a node stays (dx/dt = 0); an edge's point closest to the axis slides along the edge
-        // e by (t . e - b t . u) / (1 - b^2), b = e . u (the two lines' common normal), or by
-        // t . e where the axis point is an end of the shaft (a sphere's centre) or the lines
-        // are nearly parallel.
-        Mat3 slide = Mat3::Zero();
-        if (f == TriangleFeature::kEdge) {
-          const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
-          auto at = [&](int k) {
-            return !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k])
-                                                 : rest[tri.node[k]];
-          };
-          const Vec3 e = (at(k1) - at(k0)).normalized();
-          const double eu = e.dot(axis);
-          const double s_c = (h.at.point_m - tip).dot(axis);
-          if (s_c > 0.0 && s_c < shape.shaft_length_m && 1.0 - eu * eu > 1e-6)
-            slide = e * (e - eu * axis).transpose() / (1.0 - eu * eu);
-          else
-            slide = e * e.transpose();
+      if (!tier_) {
+        exit_row = true;
+        plane_n = mean;
+        plane_h = d.dot(mean);
+        const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+        radial = dn > 1e-9 * part_r && plane_h > 0.0;  // not an entry (below)
+        if (!h.shaft) {
+          n = exit_normal(d, mean, cos_alpha, shape.tip_radius_m);
+          turn = exit_normal_turn(d, mean, cos_alpha, shape.tip_radius_m);
+        } else {
+          Mat3 dn_dx;
+          const CapsuleExit ex = capsule_exit(h.at.point_m, tip, tip + shape.shaft_length_m * axis,
+                                              mean, cos_alpha, shape.shaft_radius_m, &dn_dx);
+          n = ex.normal;
+          depth_centre = ex.centre;
+          // The tool's translation t moves the point relative to the capsule by (dx/dt - I) t:
+          // a node stays (dx/dt = 0); an edge's point closest to the axis slides along the edge
+          // e by (t . e - b t . u) / (1 - b^2), b = e . u (the two lines' common normal), or by
+          // t . e where the axis point is an end of the shaft (a sphere's centre) or the lines
+          // are nearly parallel.
+          Mat3 slide = Mat3::Zero();
+          if (f == TriangleFeature::kEdge) {
+            const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
+            auto at = [&](int k) {
+              return !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k])
+                                                   : rest[tri.node[k]];
+            };
+            const Vec3 e = (at(k1) - at(k0)).normalized();
+            const double eu = e.dot(axis);
+            const double s_c = (h.at.point_m - tip).dot(axis);
+            if (s_c > 0.0 && s_c < shape.shaft_length_m && 1.0 - eu * eu > 1e-6)
+              slide = e * (e - eu * axis).transpose() / (1.0 - eu * eu);
+            else
+              slide = e * e.transpose();
+          }
+          turn = dn_dx * (slide - Mat3::Identity());
         }
-        turn = dn_dx * (slide - Mat3::Identity());
+      } else {
+        radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
+                 d.dot(mean) > 0.5 * dn;  // cos 60 degrees
+        n = radial ? Vec3(d / dn) : mean;
+        // A radial row's normal d / |d| turns by (I - n n^T) / |d| per unit change of d. The
+        // shaft's centre is the axis point nearest the feature: against a node it slides along
+        // the axis (d changes by the move across the axis, where the point is inside the
+        // segment); against an edge the common normal of the two lines keeps its direction
+        // (no turn while they are not parallel).
+        if (radial) {
+          turn = (Mat3::Identity() - n * n.transpose()) / dn;
+          if (h.shaft) {
+            if (f == TriangleFeature::kEdge) {
+              turn.setZero();
+            } else if (std::abs(d.dot(axis)) < 1e-9 * dn) {
+              turn = turn * (Mat3::Identity() - axis * axis.transpose());
+            }
+          }
+        }
       }
       // An edge's closest point slides along the edge as the tool moves: d changes by the move
-      // across it (the tip's rows; the shaft's edge rows took their slide above).
+      // across it (the tip's rows; the shaft's edge rows have no turn).
       if (f == TriangleFeature::kEdge && !h.shaft && !turn.isZero(0.0)) {
         const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
         auto at = [&](int k) {
