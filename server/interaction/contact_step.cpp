@@ -487,7 +487,6 @@ void State::begin_step(const Model& m, int tools, StepStats& stats) {
       stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
   }
   rows_.clear();
-  row_main_slot_.clear();
 }
 
 // Position of a contact slot's node on the surface deformed by this step's answer so far
@@ -1334,10 +1333,8 @@ void State::merge_tool_row(const Row& r) {
       if (q.w[k] > q.w[best]) best = k;
     return q.slot[best];
   };
-  // The merged rows' main slots, each formed once (rows_ grows only here while rows merge).
-  if (row_main_slot_.size() > rows_.size()) row_main_slot_.clear();
-  while (row_main_slot_.size() < rows_.size())
-    row_main_slot_.push_back(main_slot(rows_[row_main_slot_.size()]));
+  // row_main_slot_: the merged rows' main slots, each formed once, kept beside rows_ (both
+  // cleared by solve_geometry, the only caller's caller; rows_ grows only here while rows merge).
   const int main_r = main_slot(r);
   std::size_t same = 0;
   for (; same < rows_.size(); ++same) {
@@ -2585,10 +2582,10 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
   if (geometry_rows_dropped_ > 0) ++steps_with_rows_dropped_;
   stats.sliding_rows = ns;
   stats.converged = lcp.converged;
-  if (!lcp.converged) ++steps_not_converged_;
   if (!lcp.converged) {
     // Keep the last good answer (contact and sliding forces), say that this step did not
     // converge.
+    ++steps_not_converged_;
     restore_forces(false);
     for (int t = 0; t < nt; ++t) {
       contacts[t] = last_good_[t];
