@@ -863,20 +863,48 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   Vec3 c = p0;
   TrianglePoint at;
   bool fixed = false;
+  // The shaft: the centre's derivative in the tool's translation t, dc/dt = (I - u u^T) + u w^T
+  // (u the unit axis), carried through the rounds as w (FeatureHit::centre_slide; K's rows,
+  // merge_features): the rounds stop short of the closest pair where the axis is tilted against
+  // the triangle (each round leaves u . P u of the centre's distance to it, P the projection onto
+  // the feature reached: 1 - (n . u)^2 on a face, (e . u)^2 on an edge), so the centre and the
+  // point depend on t through the rounds made, not through the closest pair's formula.
   if (shaft) {
     // (closest_on_segment's axis and its squared length formed once: the same values)
     const Vec3 e = p1 - p0;
     const double len2 = e.squaredNorm();
-    auto on_axis = [&](const Vec3& q) {
-      return len2 == 0.0 ? p0 : Vec3(p0 + std::clamp((q - p0).dot(e) / len2, 0.0, 1.0) * e);
+    const Vec3 u = len2 > 0.0 ? Vec3(e / std::sqrt(len2)) : Vec3::Zero();
+    Vec3 w = Vec3::Zero();
+    // The axis point of q (clamped to the segment: there dc/dt = I, w = u); dq/dt = P dc/dt with
+    // P u = pu gives dnext/dt = (I - u u^T) + u ((I - u u^T) pu + (u . pu) w)^T inside it.
+    auto on_axis = [&](const Vec3& q, const Vec3& pu) {
+      if (len2 == 0.0) return p0;
+      const double s = (q - p0).dot(e) / len2;
+      if (!(s > 0.0 && s < 1.0)) {
+        w = u;
+        return Vec3(p0 + std::clamp(s, 0.0, 1.0) * e);
+      }
+      const double along = u.dot(pu);
+      w = pu - along * u + along * w;
+      return Vec3(p0 + s * e);
     };
-    c = on_axis((x[0] + x[1] + x[2]) / 3.0);
+    // P u of the point's feature: the face's plane, the edge's line, a vertex (fixed).
+    auto projected_axis = [&](const TrianglePoint& q) -> Vec3 {
+      if (q.feature == TriangleFeature::kFace) return u - n.dot(u) * n;
+      if (q.feature == TriangleFeature::kVertex) return Vec3::Zero();
+      const Vec3 d = (x[(q.a + 1) % 3] - x[q.a]).normalized();
+      return d.dot(u) * d;
+    };
+    c = on_axis((x[0] + x[1] + x[2]) / 3.0, Vec3::Zero());
     for (int it = 0; it < 4 && !fixed; ++it) {
       at = closest_on_triangle(c, x);
-      const Vec3 next = on_axis(at.point_m);
+      // (A round that gives its own centre back leaves w as it was: on a vertex pu = 0 and w = 0
+      // before and after, on a face parallel to the axis pu = u, at an end w = u.)
+      const Vec3 next = on_axis(at.point_m, projected_axis(at));
       fixed = std::memcmp(next.data(), c.data(), sizeof(Vec3)) == 0;
       c = next;
     }
+    h.centre_slide = w;
   }
   if (!fixed) at = closest_on_triangle(c, x);
   // An edge by its distance only (behind a ridge the far flank's edge is not the surface the
@@ -972,6 +1000,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     Vec3 depth_centre = h.centre_m;  // the depth is r - n . (depth_centre - point)
     Vec3 n;
     Mat3 turn = Mat3::Zero();  // d n / d x (Row::turn)
+    Vec3 depth_slide = Vec3::Zero();  // Row::depth_slide
     bool radial = false;
     bool exit_row = false;
     int normals = 0;
@@ -981,6 +1010,9 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     double plane_h = 0.0;
     if (f == TriangleFeature::kFace) {
       n = h.face_normal;
+      // A shaft face row's depth is its centre's height over the plane, the centre moving by
+      // (I - u u^T) + u w^T (part_features): n^T G = n^T - (n . u)(u - w)^T.
+      if (h.shaft && !tier_) depth_slide = n.dot(axis) * (h.centre_slide - axis);
     } else {
       // A node or an edge. The multirate tiers: radial from the part's centre (the point against
       // a rigid sphere or capsule) when the centre is within 60 degrees of the mean normal of the
@@ -1030,10 +1062,13 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
           n = ex.normal;
           depth_centre = ex.centre;
           // The tool's translation t moves the point relative to the capsule by (dx/dt - I) t:
-          // a node stays (dx/dt = 0); an edge's point closest to the axis slides along the edge
-          // e by (t . e - b t . u) / (1 - b^2), b = e . u (the two lines' common normal), or by
-          // t . e where the axis point is an end of the shaft (a sphere's centre) or the lines
-          // are nearly parallel.
+          // a node stays (dx/dt = 0); an edge's point is the edge's point closest to the hit's
+          // centre, which part_features' rounds found (d centre / dt = (I - u u^T) + u w^T, w the
+          // hit's centre_slide), so dx/dt = e e^T ((I - u u^T) + u w^T). The rounds stop short of
+          // the two lines' common normal where the edge runs near the axis ((e . u)^2 per round:
+          // 0.88 for the fine block's z edges under the 20-degree shaft), so the common normal's
+          // slide (t . e - b t . u) / (1 - b^2), b = e . u (before), was not the point's
+          // (bench/RESULTS.md, "The tilted shaft's K against central differences").
           Mat3 slide = Mat3::Zero();
           if (f == TriangleFeature::kEdge) {
             const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
@@ -1043,13 +1078,17 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
             };
             const Vec3 e = (at(k1) - at(k0)).normalized();
             const double eu = e.dot(axis);
-            const double s_c = (h.at.point_m - tip).dot(axis);
-            if (s_c > 0.0 && s_c < shape.shaft_length_m && 1.0 - eu * eu > 1e-6)
-              slide = e * (e - eu * axis).transpose() / (1.0 - eu * eu);
-            else
-              slide = e * e.transpose();
+            slide = e * (e - eu * axis + eu * h.centre_slide).transpose();
           }
           turn = dn_dx * (slide - Mat3::Identity());
+          // The depth r - n . (centre - point) changes by -n^T G t with the normal held, G =
+          // d (centre - point) / dt = (I - u u^T)(I - dx/dt) where the point's axis point is
+          // inside the segment (the centre slides along the axis), I - dx/dt at an end; K's
+          // -N W^-1 N^T takes G = I (the tip's rows), normal_turn adds the difference.
+          const double s_c = (h.at.point_m - tip).dot(axis);
+          Vec3 g = n - slide.transpose() * n;
+          if (s_c > 0.0 && s_c < shape.shaft_length_m) g -= axis * axis.dot(g);
+          depth_slide = g - n;
         }
       } else {
         radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
@@ -1104,6 +1143,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     r.normal = n;
     r.turn = turn;
     r.turn_depth = turn.transpose() * (depth_centre - h.at.point_m);
+    r.depth_slide = depth_slide;
     r.radial = radial;
     r.point_m = h.at.point_m;
     // The row's nodes: its triangle's, by the point's barycentric weights, or the load spread
@@ -1511,6 +1551,25 @@ void State::near_field_of_shaft(const Model& m, const ToolShape& shape, const Ve
       const double h = 1e-4 * depth;
       deepest->near_field_deepest = true;
       deepest->near_field_slope_per_n = (compliance(depth + h) - compliance(depth - h)) / (2.0 * h);
+      // LINEAR: c's whole gradient in the tool's translation. The deepest row's depth changes by
+      // -(n + depth_slide + turn^T d) . x (its centre slides along the axis, an edge's point
+      // along the edge, its normal turns: merge_features), not -n . x, and the tilt sin = n . u
+      // by (turn^T u) . x. With -n alone, K along the tilted shaft's own axis read -0.6 to -1.8
+      // N/m where moving the tool along it leaves the force unchanged (the fine block, shaft
+      // 6-20 degrees; bench/RESULTS.md, "The tilted shaft's K against central differences").
+      if (!tier_) {
+        const double hs = 1e-4;
+        auto tilted = [&](double s) {
+          double a = 0.0, b = 0.0;
+          shaft_patch(depth, s, shape.shaft_radius_m, shape.shaft_length_m, a, b);
+          return patch_near_field(a, b, rho, e_star);
+        };
+        const double tilt_slope = (tilted(sin_tilt + hs) - tilted(sin_tilt - hs)) / (2.0 * hs);
+        const Row& d = *deepest;
+        deepest->near_field_gradient =
+            -d.near_field_slope_per_n * (d.normal + d.depth_slide + d.turn_depth) +
+            tilt_slope * (d.turn.transpose() * axis);
+      }
     }
   }
 }
@@ -1554,6 +1613,14 @@ void State::near_field_tangent(int t, int ns, int tools, Mat3& k) {
       f_b = alpha * f_b - h;
     }
     const Vec3 kf = others ? part_response(t, ns, tools, d, f_b) : Vec3(k0 * f_b);
+    // LINEAR's shaft: c's whole gradient (near_field_of_shaft), not symmetrized: the symmetric
+    // part put -(dc/dd) n (kf . u) along the tilted shaft's axis u, where the force does not
+    // change (with -n as the gradient, symmetrized: the fine block's shaft at 45 degrees K u
+    // -0.9 N/m; bench/RESULTS.md, "The tilted shaft's K against central differences").
+    if (d.shaft && !d.near_field_gradient.isZero(0.0)) {
+      k.noalias() += kf * d.near_field_gradient.transpose();
+      continue;
+    }
     const Mat3 term = -d.near_field_slope_per_n * kf * d.normal.transpose();
     k += 0.5 * (term + term.transpose());
   }
@@ -2274,14 +2341,16 @@ void State::relaxation(const Model& m, int t, int ns, ToolContact& c) {
 void State::normal_turn(int t, int ns, int tools, ToolContact& c) {
   const int nc = static_cast<int>(rows_.size());
   Mat3 g = Mat3::Zero();
-  bool turns = false;
+  bool turns = false, slides = false;
   for (int r = 0; r < nc; ++r) {
     const double l = lambda_[ns + r];
-    if (rows_[r].tool != t || !(l > 0.0) || rows_[r].turn.isZero(0.0)) continue;
+    if (rows_[r].tool != t || !(l > 0.0)) continue;
+    if (!rows_[r].depth_slide.isZero(0.0)) slides = true;
+    if (rows_[r].turn.isZero(0.0)) continue;
     g += l * rows_[r].turn;
     turns = true;
   }
-  if (!turns) return;
+  if (!turns && !slides) return;
   c.stiffness_n_per_m += g;
   if (tier_ || !rest_geometry_ || ns > 0) return;
   for (int r = 0; r < nc; ++r)
@@ -2319,6 +2388,11 @@ void State::normal_turn(int t, int ns, int tools, ToolContact& c) {
     }
     turn_v_[j].noalias() += rj.turn_depth + rj.turn.transpose() * u;
   }
+  // The depth's change as the shaft's centre slides along the axis and an edge's point along
+  // the edge (Row::depth_slide): delta_i changes by -(n_i + s_i) . x, not -n_i . x.
+  for (int i = 0; i < nc; ++i)
+    if (rows_[i].tool == t && lambda_[ns + i] > 0.0 && !rows_[i].depth_slide.isZero(0.0))
+      turn_v_[i] += rows_[i].depth_slide;
   Mat3 extra = Mat3::Zero();
   if (tools == 1) {
     extra = lcp_.contact_stiffness(

@@ -91,11 +91,20 @@ struct Row {
   // (unit 1/N; 0 where the near field is constant), for the tangent stiffness (answer).
   bool near_field_deepest{false};
   double near_field_slope_per_n{0.0};
+  // LINEAR, the shaft's deepest row: d c / d x of the tool's translation x (unit 1/N), the depth's
+  // whole gradient (the centre's and the point's slide, the normal's turn) and the tilt's
+  // (contact_step.cpp near_field_of_shaft); zero elsewhere (there d c / d x = -slope n).
+  Vec3 near_field_gradient{Vec3::Zero()};
   // d normal / d x of the tool's translation x (unit 1/m): a node or edge row against the part's
   // sphere or capsule turns as the tool moves (contact_step.cpp merge_features); zero for a face
   // row and a row along a surface's mean normal. The answer adds lambda * turn to K.
   Mat3 turn{Mat3::Zero()};
   Vec3 turn_depth{Vec3::Zero()};  // turn^T d, d the part's centre less the point at rest
+  // G^T n - n, G = d (centre - point) / d x: where the depth's gradient in x is not -n with the
+  // normal held (a shaft row: its centre slides along the axis, an edge's point along the edge;
+  // contact_step.cpp merge_features); zero for the tip's rows. The answer takes it as W's
+  // right-hand side changes (normal_turn).
+  Vec3 depth_slide{Vec3::Zero()};
 };
 
 // A candidate feature of one tool part on one triangle, before merging (contact_step.cpp).
@@ -110,6 +119,9 @@ struct FeatureHit {
   bool flat_fallback{false};
   TrianglePoint at;             // closest point of the deformed triangle, its weights
   Vec3 centre_m{Vec3::Zero()};  // the tool part's centre for this feature
+  // The shaft: the centre's derivative in the tool's translation t, d centre / dt =
+  // (I - u u^T) + u centre_slide^T (u the unit axis; contact_step.cpp part_features).
+  Vec3 centre_slide{Vec3::Zero()};
   // The triangle's outward unit normal; a node hit: the sum over the node's reporting triangles.
   Vec3 face_normal{Vec3::Zero()};
   int normals{1};  // unit normals summed in face_normal

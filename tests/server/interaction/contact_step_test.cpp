@@ -559,6 +559,80 @@ TEST(interaction_contact_step, ShaftAcrossNodesAndEdgesIsContinuous) {
   }
 }
 
+
+// The shaft over the fine block's face x = L as shaft_over_face (the axis 20 degrees from z in
+// the face's plane, rising out of it by `tilt`), its axis height_m above the face's plane under
+// the face point `at` (negative: below), the tip 2.5 mm beyond the block's side z = 0 (clear of
+// it: its reach 2.2 mm).
+ToolPose shaft_under(const Block& b, double tilt, double height_m, const Vec3& at) {
+  ToolPose p;
+  p.axis = Vec3(std::sin(tilt), std::cos(tilt) * std::sin(0.35), std::cos(tilt) * std::cos(0.35));
+  const Vec3 a(b.edge_m + height_m, at.y(), at.z());
+  p.tip_m = a - ((at.z() + 2.5e-3) / p.axis.z()) * p.axis;
+  return p;
+}
+
+// K of a tilted shaft (LINEAR, the default contact options) against central differences of the
+// step's force (h = 0.1 um; the force of a pose is a function of the pose alone: rest surface),
+// the shaft 6, 20 and 45 degrees out of the face's plane, its axis 0.2 mm above and 0.2 and
+// 0.6 mm below the face under a vertex, an edge midpoint and a triangle's centroid (27 poses).
+// Moving the tool along its axis u leaves the force unchanged (dF/du 0 to the printed digit at
+// every pose). Errors against s = max(largest |dF/dx| entry, |F| / r_shaft) (|F| / r the scale of
+// the rows' turn; at 45 degrees under the face and the edge the force's derivative is 0.0-0.1 N/m,
+// the face rows' centres nearly at the axis's crossing of the plane, where the depth is r).
+// Asserted: K u within 2 % of s (measured under 0.005 N/m at all 27; before |K u| 1.8-4.3 N/m,
+// 5.6-107 % of s: a shaft row's centre slides along the axis with the tool, so its depth follows
+// (I - u u^T) n . x, the face rows' centres after part_features' four rounds and the edges'
+// points along the rounds' path, and the shaft near field's tangent took the deepest row's depth
+// as -n . x, symmetrized); every column within 10 % of s (measured at most 3.9 %, before 13-148 %
+// of s), but at the 6-degree poses 0.2 mm above and below the face under the edge and the
+// centroid and 0.2 mm above the vertex within 20 % (measured 11.4-14.3 % of s, 26.9-31.4 % of the
+// largest |dF/dx| entry; the vertex 9.2 / 15.5 %): the press column, K -20.1 to -21.0 N/m
+// against the force's -15.8 to -16.0 (the force's differences the same to the printed digit with
+// h = 1 um and 10 nm). Not traced; the candidate is W's change with the spread weights as the
+// face and edge rows' points slide over the surface, which K leaves out (as in
+// ShaftAcrossNodesAndEdgesIsContinuous): without the shaft's near field in series
+// (contact_shaft_near_field off) these poses are 88-104 % of the largest |dF/dx| off.
+TEST(interaction_contact_step, TiltedShaftStiffnessIsTheForceDerivative) {
+  const FineFace face = fine_face();
+  const auto model = build_model(block_scene(face.b), face.o);
+  auto sim = Simulation::from_model(model);
+  std::vector<ToolContact> c;
+  StepStats st;
+  const double shaft_r = 0.0005;
+  for (double tilt_deg : {6.0, 20.0, 45.0}) {
+    for (const auto& [name, at] : face.at) {
+      for (double height : {0.2e-3, -0.2e-3, -0.6e-3}) {
+        const std::string what = std::to_string(static_cast<int>(tilt_deg)) + " deg " + name +
+                                 " " + std::to_string(height * 1e3).substr(0, 4) + " mm";
+        const ToolPose p = shaft_under(face.b, tilt_deg * M_PI / 180.0, height, at);
+        sim->step({p}, c, st);
+        ASSERT_TRUE(st.converged) << what;
+        ASSERT_TRUE(c[0].in_contact) << what;
+        const Vec3 f = c[0].force_n;
+        const Mat3 k = c[0].stiffness_n_per_m;
+        const Mat3 fd = force_central_differences(*sim, p, 1e-7);
+        const double scale = std::max(fd.cwiseAbs().maxCoeff(), f.norm() / shaft_r);
+        const Vec3 u = p.axis;
+        double worst = 0.0;
+        for (int a = 0; a < 3; ++a) worst = std::max(worst, (k.col(a) - fd.col(a)).norm() / scale);
+        const double axial = (k * u - fd * u).norm() / scale;
+        std::printf("%s: |F| %.3f mN, s %.2f N/m; K u (%.2f %.2f %.2f), dF/du (%.2f %.2f %.2f) N/m; "
+                    "columns off %.1f %.1f %.1f %% of s\n",
+                    what.c_str(), f.norm() * 1e3, scale, (k * u).x(), (k * u).y(), (k * u).z(),
+                    (fd * u).x(), (fd * u).y(), (fd * u).z(),
+                    100 * (k.col(0) - fd.col(0)).norm() / scale,
+                    100 * (k.col(1) - fd.col(1)).norm() / scale,
+                    100 * (k.col(2) - fd.col(2)).norm() / scale);
+        EXPECT_LE(axial, 0.02) << what << "\nK\n" << k << "\ndF/dx\n" << fd;
+        const bool sliding_weights = tilt_deg == 6.0 && height > -0.3e-3 &&
+                                     (name != "vertex" || height > 0.0);
+        EXPECT_LE(worst, sliding_weights ? 0.20 : 0.10) << what << "\nK\n" << k << "\ndF/dx\n" << fd;
+      }
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(contact_step, ContactStepTier,
                          ::testing::Values(scene::Tier::kLinear, scene::Tier::kCorotational,
                                            scene::Tier::kNonlinear),
