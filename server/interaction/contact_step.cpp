@@ -135,6 +135,10 @@ bool inside_tip(const Vec3& point, const Vec3& tip_centre, const ToolShape& shap
 // The reusable candidate list (State::reusable_candidates) holds for a tool moved by up to this
 // many mean surface edges (tip and shaft end): a hand moves the tool by far less per step.
 constexpr double kCandidateReuse = 0.25;
+// The reusable list's search verdicts (State::search_verdicts) hold for a tool moved by up to
+// this many tip radii (tip and shaft end): small against the parts' reach, so they reject nearly
+// what the plane tests at the pose itself reject.
+constexpr double kSearchReuse = 0.05;
 
 // A row's normal per node as its compliance sees it (m = R^T n in the tiers, n in LINEAR), its
 // fixed or weightless nodes marked (slot -1), and sum_k w_k u0_k (the tiers' offset) in offset;
@@ -536,17 +540,23 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
   std::vector<int>& list = sc.triangles;
-  list.clear();
-  sc.parts.clear();
   // The rest surface (no force on the body): flat rows, and the smooth tip's (its flat_distance
   // reads the list: reusable_candidates keeps every triangle nearer the tip than its row's height).
   sc.rest_only = sc.moved_m == 0.0 && bs.force_slots.empty();
   if (sc.rest_only) {
     const double reuse_m = kCandidateReuse * b.surface.mean_edge_m();
+    bool keep = sc.list_valid;  // the last list of the reusable candidates and verdicts
     if (!sc.reuse_valid || sc.reuse_tool != pose.tool || sc.reuse_slack_m != slack ||
-        (p0 - sc.reuse_p0).norm() > reuse_m || (p1 - sc.reuse_p1).norm() > reuse_m)
+        (p0 - sc.reuse_p0).norm() > reuse_m || (p1 - sc.reuse_p1).norm() > reuse_m) {
       reusable_candidates(m, body, pose.tool, p0, p1, slack, reuse_m, sc);
-    list.clear();
+      keep = false;
+    }
+    const double search_m = kSearchReuse * shape.tip_radius_m;
+    if (!sc.search_valid || sc.search_m != search_m || (p0 - sc.search_p0).norm() > search_m ||
+        (p1 - sc.search_p1).norm() > search_m) {
+      search_verdicts(m, body, p0, p1, search_m, sc);
+      keep = false;
+    }
     // This pose's list: the reusable candidates its grid query lists, in the query's order (the
     // tip's box, then the shaft's), so a node's hit sums its triangles' normals in the same
     // order as the full search's list (the answer does not depend on where the list was found).
@@ -558,20 +568,39 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
       shaft_cells = b.surface.query_cells(p0.cwiseMin(p1) - Vec3::Constant(reach),
                                           p0.cwiseMax(p1) + Vec3::Constant(reach));
     }
+    // The same cells list the same candidates (a tool moved by a few micrometres per step).
+    auto same = [](const PointGrid::CellRange& a, const PointGrid::CellRange& c) {
+      for (int k = 0; k < 3; ++k)
+        if (a.lo[k] != c.lo[k] || a.hi[k] != c.hi[k]) return false;
+      return true;
+    };
+    if (keep && same(tip_cells, sc.list_tip_cells) && same(shaft_cells, sc.list_shaft_cells))
+      return;
+    list.clear();
+    sc.parts.clear();
+    sc.list_valid = true;
+    sc.list_tip_cells = tip_cells;
+    sc.list_shaft_cells = shaft_cells;
+    auto parts = [](const StepCandidates::Reusable& c) {
+      return static_cast<std::uint8_t>(c.parts | (c.search << 2) | StepCandidates::kSearchKnown);
+    };
     for (const auto& c : sc.reusable)
       if (ContactSurface::listed_cell(tip_cells, c.cell)) {
         list.push_back(c.triangle);
-        sc.parts.push_back(c.parts);
+        sc.parts.push_back(parts(c));
       }
     if (has_shaft)
       for (const auto& c : sc.reusable)
         if (!ContactSurface::listed_cell(tip_cells, c.cell) &&
             ContactSurface::listed_cell(shaft_cells, c.cell)) {
           list.push_back(c.triangle);
-          sc.parts.push_back(c.parts);
+          sc.parts.push_back(parts(c));
         }
     return;
   }
+  sc.list_valid = false;
+  list.clear();
+  sc.parts.clear();
   auto bound = [&](double radius) {
     const double reach = radius + m.options_.candidate_margin * shape.tip_radius_m;
     const double behind = std::max(reach, b.behind_reach_m);
@@ -693,6 +722,79 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
   sc.reuse_slack_m = slack;
   sc.reuse_p0 = p0;
   sc.reuse_p1 = p1;
+  sc.search_valid = false;
+  sc.list_valid = false;  // (its triangles were the scratch above)
+}
+
+// Phase "candidate triangles" on the rest surface, the reusable list's search verdicts: per
+// listed triangle and part, whether the part's edge or face search can find a hit on it while
+// the tip and shaft end stay within search_m of p0 / p1 (Reusable::search). These are
+// part_features' plane tests (may_reach_triangle, may_touch_face, beside_axis) with reach and
+// behind widened by search_m: a point c' of the moved axis is within search_m of the point c of
+// this axis at the same place along it, so a hit at c' (|c' - p| <= reach, or a height in
+// [-behind, reach] with the lateral offset within reach) has c within the widened bounds, and
+// |s . (c - p)| <= reach + search_m for beside_axis's s (normal to this axis and the
+// triangle's). Exact as rejections, as the tests at the pose are; a part without a search
+// verdict skips its edge and face search, a part with one skips the tests at the pose (the
+// search finds no hit where they would have rejected). Node tests are not affected.
+// The smooth tip (SimulationOptions::contact_smooth_normals) also: kNoProjection where its
+// projection along the interpolated normals (project_along_normals) can give no hit, so the
+// flat fallback follows at once. A hit there is a point y of the triangle with the centre
+// x = y + d, d along N(y) = sum b_k n_k (up to Newton's residual, at most 1e-9 of the
+// triangle's size) and |d| <= sqrt(reach^2 + behind^2) (within); the in-plane part of d is at
+// most |d| T with T = max_k |n_k in-plane| / min_k (n_k . n) (N's in-plane part at most the
+// largest node's, N . n at least the least), so x's foot on the plane is within |d| T of the
+// triangle, and the moved x's within |d| T + search_m. Farther: no projection hit (not tested
+// where some n_k . n <= 0).
+void State::search_verdicts(const Model& m, int body, const Vec3& p0, const Vec3& p1,
+                            double search_m, StepCandidates& sc) {
+  const BodyModel& b = m.bodies_[body];
+  const ToolShape& shape = m.tools_[sc.reuse_tool];
+  const double w = search_m * (1.0 + 1e-6);  // the moved pose, with room for rounding
+  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
+  const bool smooth = m.options_.contact_smooth_normals;
+  for (auto& c : sc.reusable) {
+    c.search = 0;
+    const int t = c.triangle;
+    const Vec3& n = b.surface.rest_normal(t);
+    if (n.isZero(0.0)) continue;  // degenerate: never searched (triangle_features)
+    for (int part = 0; part < 2; ++part) {
+      if (!(c.parts & (1 << part))) continue;
+      const bool shaft = part == 1;
+      const Vec3& q1 = shaft ? p1 : p0;
+      // part_features' reach and behind, widened
+      const double reach = (shaft ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
+      const double behind = std::max(reach, b.behind_reach_m);
+      const Vec3& centre = b.surface.centroid(t);
+      const double rho = b.surface.radius_m(t);
+      if (!may_reach_triangle(centre, rho + reach + behind + 2.0 * w, p0, q1) ||
+          !may_touch_face(b.surface.rest_vertices(t)[0], n, centre, rho, p0, q1, reach + w,
+                          behind + w) ||
+          (shaft && beside_axis(b.surface.rest_vertices(t), n, p0, p1, reach + w)))
+        continue;
+      c.search |= static_cast<std::uint8_t>(1 << part);
+      if (!shaft && smooth) {
+        const auto& x = b.surface.rest_vertices(t);
+        const auto& nn = b.surface.node_normals(t);
+        double tilt = 0.0, least = std::numeric_limits<double>::infinity();
+        for (int k = 0; k < 3; ++k) {
+          const double a = nn[k].dot(n);
+          least = std::min(least, a);
+          tilt = std::max(tilt, (nn[k] - a * n).norm());
+        }
+        if (!(least > 0.0)) continue;
+        const double d = std::sqrt(reach * reach + behind * behind);
+        const double bound = (d * tilt / least + w) * (1.0 + 1e-6) + 1e-6 * rho;
+        const Vec3 foot = p0 - n.dot(p0 - x[0]) * n;
+        if ((closest_on_triangle(foot, x).point_m - foot).squaredNorm() > bound * bound)
+          c.search |= StepCandidates::Reusable::kNoProjection;
+      }
+    }
+  }
+  sc.search_valid = true;
+  sc.search_m = search_m;
+  sc.search_p0 = p0;
+  sc.search_p1 = p1;
 }
 
 // Phase "rows", geometry: the closest features of the deformed candidate triangles to the tip
@@ -734,6 +836,15 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
     const int t = sc.triangles[i];
     const int parts = sc.parts[i] & (has_shaft ? 3 : 1);
     if (parts == 0) continue;
+    // Per part: 1 its plane tests at this pose decide the edge and face search; with the
+    // reusable list's verdict (search_verdicts) 2 search, 0 no search.
+    const bool known = (sc.parts[i] & StepCandidates::kSearchKnown) != 0;
+    // 3: search, the smooth tip's projection has no hit (Reusable::kNoProjection).
+    auto search = [&](int part) {
+      if (!known) return 1;
+      if (!((sc.parts[i] >> (2 + part)) & 1)) return 0;
+      return part == 0 && (sc.parts[i] >> 2) & StepCandidates::Reusable::kNoProjection ? 3 : 2;
+    };
     const SurfaceTriangle& tri = tris[t];
     for (int g = g_first; g <= g_last; ++g) {
       std::array<Vec3, 3> moved;
@@ -762,7 +873,8 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
       for (int part = 0; part < 2; ++part)
         if (parts & (1 << part))
           part_features(t, tri, *x, n, centre, rho, part == 1, g == 1, shape, p0, p1, margin,
-                        b.behind_reach_m, b.body->contact_normals(), bs, memo, smooth);
+                        b.behind_reach_m, b.body->contact_normals(), bs, memo, smooth,
+                        search(part));
     }
   }
   if (first_is_rest) {
@@ -779,7 +891,8 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
                           bool at_rest, const ToolShape& shape,
                           const Vec3& p0, const Vec3& p1, double margin,
                           double max_penetration_m, const std::vector<Vec3>& node_normals,
-                          BodyState& bs, long long memo, const std::array<Vec3, 3>* smooth_normals) {
+                          BodyState& bs, long long memo, const std::array<Vec3, 3>* smooth_normals,
+                          int search) {
   const double reach = (shaft ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
   FeatureHit h;
   h.triangle = t;
@@ -824,11 +937,15 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   }
   // Most candidates are far from the part (the box reaches behind_reach behind the surface):
   // their face or edge point is skipped by a plane test before the closest-point search, and
-  // that test by a sphere-capsule one (may_reach_triangle: the same rejections, cheaper).
+  // that test by a sphere-capsule one (may_reach_triangle: the same rejections, cheaper). On the
+  // reusable list the tests were made for the poses near this one (search: 0 none can hit, 2 it
+  // may, 3 it may but not by the smooth tip's projection; search_verdicts), 1 here.
+  if (search == 0) return;
   const double behind = std::max(reach, max_penetration_m);
-  if (!may_reach_triangle(centre, rho + reach + behind, p0, shaft ? p1 : p0) ||
-      !may_touch_face(x[0], n, centre, rho, p0, shaft ? p1 : p0, reach, behind) ||
-      (shaft && beside_axis(x, n, p0, p1, reach)))
+  if (search == 1 &&
+      (!may_reach_triangle(centre, rho + reach + behind, p0, shaft ? p1 : p0) ||
+       !may_touch_face(x[0], n, centre, rho, p0, shaft ? p1 : p0, reach, behind) ||
+       (shaft && beside_axis(x, n, p0, p1, reach))))
     return;
   // SimulationOptions::contact_smooth_normals, the tip: the centre projected along the normals
   // interpolated from the nodes' (project_along_normals), one face row per triangle that holds
@@ -838,7 +955,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
     TrianglePoint at;
     Vec3 smooth_n;
     double height = 0.0;
-    if (project_along_normals(p0, x, *smooth_normals, at, smooth_n, height) &&
+    if (search != 3 && project_along_normals(p0, x, *smooth_normals, at, smooth_n, height) &&
         within(p0 - at.point_m, smooth_n, reach, max_penetration_m)) {
       h.key = feature_key(false, TriangleFeature::kFace, 0, static_cast<std::uint64_t>(t));
       h.at = at;

@@ -284,6 +284,8 @@ class State {
   struct StepCandidates;
   void reusable_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
                            const Vec3& p1, double slack, double reuse_m, StepCandidates& sc);
+  void search_verdicts(const Model& m, int body, const Vec3& p0, const Vec3& p1, double search_m,
+                       StepCandidates& sc);
   void triangle_features(const Model& m, int body, int tool, const ToolPose& pose,
                          const Vec3& axis);
   void rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis);
@@ -293,7 +295,7 @@ class State {
                      const ToolShape& shape,
                      const Vec3& p0, const Vec3& p1, double margin, double max_penetration_m,
                      const std::vector<Vec3>& node_normals, BodyState& bs, long long memo,
-                     const std::array<Vec3, 3>* smooth_normals);
+                     const std::array<Vec3, 3>* smooth_normals, int search);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape,
                       const Vec3& tip, const Vec3& axis);
   double flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
@@ -352,8 +354,15 @@ class State {
     double moved_m{0.0};  // the surface displacement the list allows for, unit m
     std::vector<int> triangles;
     // Per listed triangle, the parts whose bound its rest bounding sphere meets (1 the tip, 2 the
-    // shaft): the other part cannot have a hit on it and is not searched.
+    // shaft): the other part cannot have a hit on it and is not searched. On a list made from
+    // `reusable` also kSearchKnown and, shifted by 2, the parts whose edge or face search can
+    // find a hit (Reusable::search).
     std::vector<std::uint8_t> parts;
+    static constexpr std::uint8_t kSearchKnown = 128;
+    // A list made from `reusable` for these query cells (candidate_triangles), valid until
+    // `reusable` or its search verdicts change: the next pose with the same cells keeps it.
+    bool list_valid{false};
+    PointGrid::CellRange list_tip_cells, list_shaft_cells;
     bool rest_hits_valid{false};
     std::vector<FeatureHit> rest_hits;
     // The list is the rest surface's (no force on the body, flat rows): made from `reusable`.
@@ -366,12 +375,21 @@ class State {
       int rank{0};
       std::uint8_t parts{0};
       std::array<int, 3> cell{};  // its grid cell (ContactSurface::query_cell): scanned per pose
+      // The parts (bits as `parts`) whose edge or face search on this triangle can find a hit
+      // while the tip and shaft end stay within search_m of search_p0 / search_p1 (contact_step.cpp,
+      // search_verdicts): the plane tests of part_features, made once for those poses; and
+      // kNoProjection: the smooth tip's projection along the node normals has no hit here.
+      std::uint8_t search{0};
+      static constexpr std::uint8_t kNoProjection = 4;
     };
     std::vector<Reusable> reusable;
     bool reuse_valid{false};
     int reuse_tool{-1};
     double reuse_slack_m{0.0};
     Vec3 reuse_p0{Vec3::Zero()}, reuse_p1{Vec3::Zero()};
+    bool search_valid{false};  // Reusable::search holds for search_p0 / search_p1
+    double search_m{0.0};
+    Vec3 search_p0{Vec3::Zero()}, search_p1{Vec3::Zero()};
   };
   std::vector<StepCandidates> step_candidates_;
   long long step_counter_{0};
