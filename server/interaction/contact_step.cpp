@@ -350,6 +350,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   for (auto& sc : step_candidates_) {
     sc.triangles.reserve(2 * triangles);
     sc.parts.reserve(2 * triangles);
+    sc.nodes.reserve(2 * triangles);
     sc.rest_hits.reserve(hits_.capacity());
     sc.reusable.reserve(triangles);
   }
@@ -578,16 +579,23 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
       return;
     list.clear();
     sc.parts.clear();
+    sc.nodes.clear();
     sc.list_valid = true;
     sc.list_tip_cells = tip_cells;
     sc.list_shaft_cells = shaft_cells;
+    // (a part with neither a search nor a node that can be hit is not searched at all)
     auto parts = [](const StepCandidates::Reusable& c) {
-      return static_cast<std::uint8_t>(c.parts | (c.search << 2) | StepCandidates::kSearchKnown);
+      int searched = 0;
+      for (int part = 0; part < 2; ++part)
+        if ((c.search & (1 << part)) || ((c.nodes >> (3 * part)) & 7)) searched |= 1 << part;
+      return static_cast<std::uint8_t>((c.parts & searched) | (c.search << 2) |
+                                       StepCandidates::kSearchKnown);
     };
     for (const auto& c : sc.reusable)
       if (ContactSurface::listed_cell(tip_cells, c.cell)) {
         list.push_back(c.triangle);
         sc.parts.push_back(parts(c));
+        sc.nodes.push_back(c.nodes);
       }
     if (has_shaft)
       for (const auto& c : sc.reusable)
@@ -595,12 +603,14 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
             ContactSurface::listed_cell(shaft_cells, c.cell)) {
           list.push_back(c.triangle);
           sc.parts.push_back(parts(c));
+          sc.nodes.push_back(c.nodes);
         }
     return;
   }
   sc.list_valid = false;
   list.clear();
   sc.parts.clear();
+  sc.nodes.clear();
   auto bound = [&](double radius) {
     const double reach = radius + m.options_.candidate_margin * shape.tip_radius_m;
     const double behind = std::max(reach, b.behind_reach_m);
@@ -746,6 +756,10 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
 // largest node's, N . n at least the least), so x's foot on the plane is within |d| T of the
 // triangle, and the moved x's within |d| T + search_m. Farther: no projection hit (not tested
 // where some n_k . n <= 0).
+// And per part and vertex (Reusable::nodes) whether the vertex can be the part's node hit: the
+// node test's may_touch_face (reach and behind widened by search_m, a node is its own circle),
+// as reusable_candidates makes it; a function of the node alone, so every triangle of a node
+// that can be hit still tests it and adds its normal to the hit.
 void State::search_verdicts(const Model& m, int body, const Vec3& p0, const Vec3& p1,
                             double search_m, StepCandidates& sc) {
   const BodyModel& b = m.bodies_[body];
@@ -753,9 +767,23 @@ void State::search_verdicts(const Model& m, int body, const Vec3& p0, const Vec3
   const double w = search_m * (1.0 + 1e-6);  // the moved pose, with room for rounding
   const double margin = m.options_.candidate_margin * shape.tip_radius_m;
   const bool smooth = m.options_.contact_smooth_normals;
+  const std::vector<Vec3>& normals = b.body->contact_normals();
   for (auto& c : sc.reusable) {
     c.search = 0;
+    c.nodes = 0;
     const int t = c.triangle;
+    const auto& slots = b.surface.triangles()[t].slot;
+    for (int part = 0; part < 2; ++part) {
+      if (!(c.parts & (1 << part))) continue;
+      const Vec3& q1 = part == 1 ? p1 : p0;
+      const double reach = (part == 1 ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
+      const double behind = std::max(reach, b.behind_reach_m);
+      const auto& x = b.surface.rest_vertices(t);
+      for (int k = 0; k < 3; ++k)
+        if (slots[k] >= 0 &&
+            may_touch_face(x[k], normals[slots[k]], x[k], 0.0, p0, q1, reach + w, behind + w))
+          c.nodes |= static_cast<std::uint8_t>(1 << (3 * part + k));
+    }
     const Vec3& n = b.surface.rest_normal(t);
     if (n.isZero(0.0)) continue;  // degenerate: never searched (triangle_features)
     for (int part = 0; part < 2; ++part) {
@@ -839,6 +867,7 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
     // Per part: 1 its plane tests at this pose decide the edge and face search; with the
     // reusable list's verdict (search_verdicts) 2 search, 0 no search.
     const bool known = (sc.parts[i] & StepCandidates::kSearchKnown) != 0;
+    const int nodes = known ? sc.nodes[i] : 63;
     // 3: search, the smooth tip's projection has no hit (Reusable::kNoProjection).
     auto search = [&](int part) {
       if (!known) return 1;
@@ -874,7 +903,7 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
         if (parts & (1 << part))
           part_features(t, tri, *x, n, centre, rho, part == 1, g == 1, shape, p0, p1, margin,
                         b.behind_reach_m, b.body->contact_normals(), bs, memo, smooth,
-                        search(part));
+                        search(part), (nodes >> (3 * part)) & 7);
     }
   }
   if (first_is_rest) {
@@ -892,7 +921,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
                           const Vec3& p0, const Vec3& p1, double margin,
                           double max_penetration_m, const std::vector<Vec3>& node_normals,
                           BodyState& bs, long long memo, const std::array<Vec3, 3>* smooth_normals,
-                          int search) {
+                          int search, int node_mask) {
   const double reach = (shaft ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
   FeatureHit h;
   h.triangle = t;
@@ -903,8 +932,9 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   // per node, geometry and part: a node seen again from another of its triangles adds that
   // triangle's normal to the hit's sum (the mean normal of the merge) and the hit keeps the
   // lowest triangle (the merge's choice), so the merge sorts nodes, not node-triangle pairs.
+  // (node_mask: the vertices that can be hit, search_verdicts; the others are not tested)
   for (int k = 0; k < 3; ++k) {
-    if (tri.slot[k] < 0) continue;
+    if (tri.slot[k] < 0 || !(node_mask & (1 << k))) continue;
     const std::size_t i = 4 * static_cast<std::size_t>(tri.slot[k]) + (at_rest ? 2 : 0) + shaft;
     BodyState::NodeTest& test = bs.node_tests[i];
     if (test.stamp == memo) {

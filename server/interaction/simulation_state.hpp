@@ -295,7 +295,7 @@ class State {
                      const ToolShape& shape,
                      const Vec3& p0, const Vec3& p1, double margin, double max_penetration_m,
                      const std::vector<Vec3>& node_normals, BodyState& bs, long long memo,
-                     const std::array<Vec3, 3>* smooth_normals, int search);
+                     const std::array<Vec3, 3>* smooth_normals, int search, int node_mask);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape,
                       const Vec3& tip, const Vec3& axis);
   double flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
@@ -359,6 +359,7 @@ class State {
     // find a hit (Reusable::search).
     std::vector<std::uint8_t> parts;
     static constexpr std::uint8_t kSearchKnown = 128;
+    std::vector<std::uint8_t> nodes;  // with kSearchKnown: Reusable::nodes
     // A list made from `reusable` for these query cells (candidate_triangles), valid until
     // `reusable` or its search verdicts change: the next pose with the same cells keeps it.
     bool list_valid{false};
@@ -381,6 +382,9 @@ class State {
       // kNoProjection: the smooth tip's projection along the node normals has no hit here.
       std::uint8_t search{0};
       static constexpr std::uint8_t kNoProjection = 4;
+      // Per part (bits 3 part + k) whether vertex k can be the part's node hit for those poses
+      // (search_verdicts): the others' node tests are skipped.
+      std::uint8_t nodes{0};
     };
     std::vector<Reusable> reusable;
     bool reuse_valid{false};
