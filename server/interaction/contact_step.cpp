@@ -389,6 +389,8 @@ void State::reserve_workspace(const Model& m, int tools) {
   own_y_.setZero(max_contact, 3);
   own_z_.assign(max_contact, 0.0);
   turn_v_.assign(max_contact, Vec3::Zero());
+  weight_slide_.resize(max_contact);
+  weight_slides_.assign(max_contact, 0);
   turn_z_.setZero(max_contact, 3);
   previous_row_keys_.reserve(max_rows);
   for (auto& l : tier_loads_) {
@@ -1148,6 +1150,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     Vec3 n;
     Mat3 turn = Mat3::Zero();  // d n / d x (Row::turn)
     Vec3 depth_slide = Vec3::Zero();  // Row::depth_slide
+    Mat3 point_slide = Mat3::Zero();  // Row::point_slide
     bool radial = false;
     bool exit_row = false;
     int normals = 0;
@@ -1159,7 +1162,12 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       n = h.face_normal;
       // A shaft face row's depth is its centre's height over the plane, the centre moving by
       // (I - u u^T) + u w^T (part_features): n^T G = n^T - (n . u)(u - w)^T.
-      if (h.shaft && !tier_) depth_slide = n.dot(axis) * (h.centre_slide - axis);
+      if (h.shaft && !tier_) {
+        depth_slide = n.dot(axis) * (h.centre_slide - axis);
+        point_slide = (Mat3::Identity() - n * n.transpose()) *
+                      (Mat3::Identity() - axis * axis.transpose() +
+                       axis * h.centre_slide.transpose());
+      }
     } else {
       // A node or an edge. The multirate tiers: radial from the part's centre (the point against
       // a rigid sphere or capsule) when the centre is within 60 degrees of the mean normal of the
@@ -1236,6 +1244,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
           Vec3 g = n - slide.transpose() * n;
           if (s_c > 0.0 && s_c < shape.shaft_length_m) g -= axis * axis.dot(g);
           depth_slide = g - n;
+          point_slide = slide;
         }
       } else {
         radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
@@ -1291,6 +1300,7 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     r.turn = turn;
     r.turn_depth = turn.transpose() * (depth_centre - h.at.point_m);
     r.depth_slide = depth_slide;
+    r.point_slide = point_slide;
     r.radial = radial;
     r.point_m = h.at.point_m;
     // The row's nodes: its triangle's, by the point's barycentric weights, or the load spread
@@ -2485,14 +2495,14 @@ void State::relaxation(const Model& m, int t, int ns, ToolContact& c) {
 // field's term) is the part with the normals held; this adds the rest. V is formed where W is
 // that (LINEAR on the rest surface, elastic bodies, no sliding rows); elsewhere (the multirate
 // tiers, whose rows add an equilibrium's offset; a relaxing body) the first sum alone.
-void State::normal_turn(int t, int ns, int tools, ToolContact& c) {
+void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c) {
   const int nc = static_cast<int>(rows_.size());
   Mat3 g = Mat3::Zero();
   bool turns = false, slides = false;
   for (int r = 0; r < nc; ++r) {
     const double l = lambda_[ns + r];
     if (rows_[r].tool != t || !(l > 0.0)) continue;
-    if (!rows_[r].depth_slide.isZero(0.0)) slides = true;
+    if (!rows_[r].depth_slide.isZero(0.0) || !rows_[r].point_slide.isZero(0.0)) slides = true;
     if (rows_[r].turn.isZero(0.0)) continue;
     g += l * rows_[r].turn;
     turns = true;
@@ -2540,6 +2550,60 @@ void State::normal_turn(int t, int ns, int tools, ToolContact& c) {
   for (int i = 0; i < nc; ++i)
     if (rows_[i].tool == t && lambda_[ns + i] > 0.0 && !rows_[i].depth_slide.isZero(0.0))
       turn_v_[i] += rows_[i].depth_slide;
+  // W's change as the shaft's face and edge rows' points slide over the surface (Row::
+  // point_slide): a spread row's weights w_k follow its point (ContactSurface::spread's gradient,
+  // rho and the node set held), so (W lambda)_i = n_i^T sum_k w_ik U_k (U_k the displacement at
+  // node k) changes by sum_k (n_i . U_k) dw_ik (row i's point sliding over the displaced
+  // surface) plus sum_j lambda_j sum_kq w_ik (n_i^T C_kq n_j) dw_jq (row j's load moving under
+  // row i). Without it the shaft 6 degrees against the fine block, 0.2 mm either side of its
+  // face, had K's press column 25-31 % stiffer than the force's central difference
+  // (bench/RESULTS.md, "The tilted shaft's K against central differences").
+  bool weights_move = false;
+  for (int i = 0; i < nc; ++i) {
+    weight_slides_[i] = 0;
+    const Row& r = rows_[i];
+    if (r.tool != t || !(lambda_[ns + i] > 0.0) || r.point_slide.isZero(0.0) ||
+        !(r.spread_radius_m > 0.0))
+      continue;
+    std::array<Vec3, kSpreadNodes> dw;
+    if (!m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal, r.spread_radius_m,
+                                           spread_triangles_, spread_load_, &dw) ||
+        spread_load_.nodes != r.nodes)
+      continue;
+    bool same = true;  // the row's own load (not moved by the column worker's fallback)
+    for (int k = 0; k < r.nodes && same; ++k)
+      same = spread_load_.slot[k] == r.slot[k] && spread_load_.weight[k] == r.w[k];
+    if (!same) continue;
+    for (int k = 0; k < r.nodes; ++k) weight_slide_[i][k] = r.point_slide.transpose() * dw[k];
+    weight_slides_[i] = 1;
+    weights_move = true;
+  }
+  if (weights_move) {
+    for (int i = 0; i < nc; ++i) {
+      const Row& ri = rows_[i];
+      if (ri.tool != t || !(lambda_[ns + i] > 0.0)) continue;
+      const ContactColumns& cols = *bodies_[ri.body].columns;
+      Vec3 v = Vec3::Zero();
+      for (int j = 0; j < nc; ++j) {
+        const Row& rj = rows_[j];
+        const double lj = lambda_[ns + j];
+        if (!(lj > 0.0) || rj.body != ri.body) continue;
+        const bool i_moves = weight_slides_[i] != 0, j_moves = weight_slides_[j] != 0;
+        if (!i_moves && !j_moves) continue;
+        for (int k = 0; k < ri.nodes; ++k) {
+          if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
+          for (int q = 0; q < rj.nodes; ++q) {
+            if (rj.slot[q] < 0 || rj.w[q] == 0.0) continue;
+            const double a = ri.normal.dot(cols.block(ri.slot[k], rj.slot[q]) * rj.normal);
+            // Row i's point slides over U_k's part from row j; row j's load moves under row i.
+            if (i_moves) v.noalias() += (lj * rj.w[q] * a) * weight_slide_[i][k];
+            if (j_moves) v.noalias() += (lj * ri.w[k] * a) * weight_slide_[j][q];
+          }
+        }
+      }
+      turn_v_[i] += v;
+    }
+  }
   Mat3 extra = Mat3::Zero();
   if (tools == 1) {
     extra = lcp_.contact_stiffness(
@@ -2828,7 +2892,7 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
   commit_history();
   for (int t = 0; t < nt; ++t) {
     relaxation(m, t, ns, contacts[t]);
-    normal_turn(t, ns, nt, contacts[t]);
+    normal_turn(m, t, ns, nt, contacts[t]);
     last_good_[t] = contacts[t];
   }
   tier_post(stats);

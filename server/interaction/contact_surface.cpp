@@ -195,7 +195,8 @@ double ContactSurface::edge_at_m(int t, const std::array<double, 3>& bary) const
 }
 
 bool ContactSurface::spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho_m,
-                            std::vector<int>& scratch, SpreadLoad& out) const {
+                            std::vector<int>& scratch, SpreadLoad& out,
+                            std::array<mesh::Vec3, kSpreadNodes>* gradient) const {
   if (!(rho_m > 0.0)) return false;
   scratch.clear();
   const mesh::Vec3 r = mesh::Vec3::Constant(rho_m);
@@ -205,6 +206,7 @@ bool ContactSurface::spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho
   std::array<int, kMost> node{};
   std::array<int, kMost> slot{};
   std::array<double, kMost> weight{};
+  std::array<mesh::Vec3, kMost> slope;  // with `gradient`: d weight / d p before normalizing
   int count = 0, lost = 0;
   double total = 0.0;
   const double inv_rho2 = 1.0 / (rho_m * rho_m);
@@ -224,6 +226,8 @@ bool ContactSurface::spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho
     const int sub = std::clamp(static_cast<int>(std::ceil(3.0 * longest / rho_m)), 1, 8);
     const double da = area / (sub * sub);
     std::array<double, 3> acc{0.0, 0.0, 0.0};
+    std::array<mesh::Vec3, 3> acc_slope{mesh::Vec3::Zero(), mesh::Vec3::Zero(),
+                                        mesh::Vec3::Zero()};
     auto sample = [&](double u, double w) {
       const mesh::Vec3 y = x[0] + u * e1 + w * e2;
       const double s2 = (y - p).squaredNorm() * inv_rho2;
@@ -232,6 +236,13 @@ bool ContactSurface::spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho
       acc[0] += k * (1.0 - u - w);
       acc[1] += k * u;
       acc[2] += k * w;
+      if (gradient != nullptr) {
+        // d k / d p = 4 (1 - s^2) (y - p) / rho^2 da
+        const mesh::Vec3 dk = (4.0 * (1.0 - s2) * inv_rho2 * da) * (y - p);
+        acc_slope[0] += (1.0 - u - w) * dk;
+        acc_slope[1] += u * dk;
+        acc_slope[2] += w * dk;
+      }
     };
     const double inv = 1.0 / sub;
     for (int i = 0; i < sub; ++i)
@@ -253,9 +264,11 @@ bool ContactSurface::spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho
         node[count] = id;
         slot[count] = triangles_[t].slot[k];
         weight[count] = 0.0;
+        slope[count].setZero();
         ++count;
       }
       weight[at] += acc[k];
+      if (gradient != nullptr) slope[at] += acc_slope[k];
     }
   }
   if (count == 0 || !(total > 0.0)) return false;
@@ -273,6 +286,13 @@ bool ContactSurface::spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho
     out.node[k] = node[order[k]];
     out.slot[k] = slot[order[k]];
     out.weight[k] = weight[order[k]] / kept;
+  }
+  if (gradient != nullptr) {
+    // w_k = W_k / sum W over the kept nodes: dw_k = (dW_k - w_k sum dW) / sum W.
+    mesh::Vec3 total_slope = mesh::Vec3::Zero();
+    for (int k = 0; k < out.nodes; ++k) total_slope += slope[order[k]];
+    for (int k = 0; k < out.nodes; ++k)
+      (*gradient)[k] = (slope[order[k]] - out.weight[k] * total_slope) / kept;
   }
   return true;
 }

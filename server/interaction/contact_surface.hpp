@@ -159,9 +159,11 @@ class ContactSurface {
   // kernel is C1 and vanishes at rho, so the weights change continuously with p. Fills `out`
   // (the largest kSpreadNodes weights, renormalized); `scratch` holds candidate triangles (its
   // capacity should be the triangle count: no allocation). False when no facing triangle lies
-  // within rho (out unchanged).
+  // within rho (out unchanged). With `gradient`: per node of `out` d weight / d p (unit 1/m),
+  // the node set and rho held (the kernel's derivative on the same samples, renormalized).
   bool spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho_m, std::vector<int>& scratch,
-              SpreadLoad& out) const;
+              SpreadLoad& out,
+              std::array<mesh::Vec3, kSpreadNodes>* gradient = nullptr) const;
 
  private:
   std::vector<SurfaceTriangle> triangles_;

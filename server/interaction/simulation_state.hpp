@@ -105,6 +105,9 @@ struct Row {
   // contact_step.cpp merge_features); zero for the tip's rows. The answer takes it as W's
   // right-hand side changes (normal_turn).
   Vec3 depth_slide{Vec3::Zero()};
+  // d point / d x (LINEAR, a shaft face or edge row: the point slides over the surface as the
+  // tool moves; zero elsewhere): a spread row's weights follow it, and W with them (normal_turn).
+  Mat3 point_slide{Mat3::Zero()};
 };
 
 // A candidate feature of one tool part on one triangle, before merging (contact_step.cpp).
@@ -316,7 +319,7 @@ class State {
               ToolContact& c);
   Mat3 own_stiffness(int ns, int tool);
   void near_field_tangent(int tool, int ns, int tools, Mat3& k);
-  void normal_turn(int tool, int ns, int tools, ToolContact& c);
+  void normal_turn(const Model& m, int tool, int ns, int tools, ToolContact& c);
   Vec3 part_response(int tool, int ns, int tools, const Row& d, const Vec3& f);
   // The near field's history of `body` when it follows `tool` (else nullptr: elastic).
   const ViscoelasticHistory* near_field_history(int body, int tool) const {
@@ -547,6 +550,9 @@ class State {
   Eigen::Matrix<double, Eigen::Dynamic, 3> own_y_;
   std::vector<double> own_z_;  // near_field_tangent: L z = N_b^T f (part_response)
   std::vector<Vec3> turn_v_;   // normal_turn: per contact row, v_i (the depth's and W's turn)
+  // normal_turn: per contact row, d w_k / d x of its spread weights (Row::point_slide)
+  std::vector<std::array<Vec3, kSpreadNodes>> weight_slide_;
+  std::vector<char> weight_slides_;  // per contact row: weight_slide_ holds its gradients
   Eigen::Matrix<double, Eigen::Dynamic, 3> turn_z_;  // normal_turn, several tools: L Z = V
 };
 
