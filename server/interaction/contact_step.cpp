@@ -1550,6 +1550,21 @@ void State::merge_tool_row(const Row& r) {
   }
 }
 
+// A spread memo entry with the row's inputs (bit for bit): this geometry's, else the last's
+// (*from_last then true).
+const State::SpreadMemo* State::find_spread(const Row& r, bool* from_last) const {
+  for (const auto* list : {&spread_memo_, &spread_prev_memo_})
+    for (const SpreadMemo& e : *list)
+      if (e.body == r.body && e.radius_m == r.spread_radius_m &&
+          std::memcmp(e.at_m.data(), r.spread_at_m.data(), sizeof(double) * 3) == 0 &&
+          std::memcmp(e.normal.data(), r.spread_normal.data(), sizeof(double) * 3) == 0 &&
+          std::signbit(e.radius_m) == std::signbit(r.spread_radius_m)) {
+        if (from_last) *from_last = list == &spread_prev_memo_;
+        return &e;
+      }
+  return nullptr;
+}
+
 // Phase "rows", a kept row's spread (SimulationOptions::contact_spread): the unit load spread
 // about its point at rest (ContactSurface::spread; its triangle's nodes if the spread finds none),
 // its nodes' normals, and the tiers' offset along them added to its rest depth. False if the row
@@ -1558,27 +1573,12 @@ bool State::spread_row(const Model& m, Row& r) {
   if (!r.spread_pending) return true;
   r.spread_pending = false;
   // The same inputs as a spread of the last or of this geometry (bit for bit): its load.
-  auto same_input = [&](const SpreadMemo& e) {
-    return e.body == r.body && e.radius_m == r.spread_radius_m &&
-           std::memcmp(e.at_m.data(), r.spread_at_m.data(), sizeof(double) * 3) == 0 &&
-           std::memcmp(e.normal.data(), r.spread_normal.data(), sizeof(double) * 3) == 0 &&
-           std::signbit(e.radius_m) == std::signbit(r.spread_radius_m);
-  };
-  const SpreadMemo* memo = nullptr;
   bool from_last = false;
-  for (const auto* list : {&spread_memo_, &spread_prev_memo_}) {
-    for (const SpreadMemo& e : *list)
-      if (same_input(e)) {
-        memo = &e;
-        break;
-      }
-    if (memo) {
-      from_last = list == &spread_prev_memo_;
-      break;
-    }
-  }
+  const SpreadMemo* memo = find_spread(r, &from_last);
+  // A sliding row's weight gradient is made with its load (normal_turn reads it from the memo).
+  const bool slides = !tier_ && !r.point_slide.isZero(0.0);
   bool found;
-  if (memo) {
+  if (memo && (memo->has_gradient || !slides)) {
     found = memo->found;
     if (found) spread_load_ = memo->load;
     // Carried into this geometry's memo, so the next geometry finds it too (a held tool's rows
@@ -1587,7 +1587,8 @@ bool State::spread_row(const Model& m, Row& r) {
     if (from_last && spread_memo_.size() < spread_memo_.capacity()) spread_memo_.push_back(*memo);
   } else {
     found = m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal, r.spread_radius_m,
-                                             spread_triangles_, spread_load_);
+                                             spread_triangles_, spread_load_,
+                                             slides ? &spread_gradient_ : nullptr);
     if (spread_memo_.size() < spread_memo_.capacity()) {
       SpreadMemo& e = spread_memo_.emplace_back();
       e.body = r.body;
@@ -1596,6 +1597,8 @@ bool State::spread_row(const Model& m, Row& r) {
       e.radius_m = r.spread_radius_m;
       e.found = found;
       if (found) e.load = spread_load_;
+      e.has_gradient = found && slides;
+      if (e.has_gradient) e.gradient = spread_gradient_;
       last_spread_ = &e;
     }
   }
@@ -2565,16 +2568,24 @@ void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c
     if (r.tool != t || !(lambda_[ns + i] > 0.0) || r.point_slide.isZero(0.0) ||
         !(r.spread_radius_m > 0.0))
       continue;
-    std::array<Vec3, kSpreadNodes> dw;
-    if (!m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal, r.spread_radius_m,
-                                           spread_triangles_, spread_load_, &dw) ||
-        spread_load_.nodes != r.nodes)
+    // The gradient spread_row made with the row's load (the memo), else spread again.
+    const SpreadMemo* e = find_spread(r, nullptr);
+    const SpreadLoad* load = &spread_load_;
+    const std::array<Vec3, kSpreadNodes>* dw = &spread_gradient_;
+    if (e != nullptr && e->has_gradient) {
+      load = &e->load;
+      dw = &e->gradient;
+    } else if (!m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal,
+                                                  r.spread_radius_m, spread_triangles_,
+                                                  spread_load_, &spread_gradient_)) {
       continue;
+    }
+    if (load->nodes != r.nodes) continue;
     bool same = true;  // the row's own load (not moved by the column worker's fallback)
     for (int k = 0; k < r.nodes && same; ++k)
-      same = spread_load_.slot[k] == r.slot[k] && spread_load_.weight[k] == r.w[k];
+      same = load->slot[k] == r.slot[k] && load->weight[k] == r.w[k];
     if (!same) continue;
-    for (int k = 0; k < r.nodes; ++k) weight_slide_[i][k] = r.point_slide.transpose() * dw[k];
+    for (int k = 0; k < r.nodes; ++k) weight_slide_[i][k] = r.point_slide.transpose() * (*dw)[k];
     weight_slides_[i] = 1;
     weights_move = true;
   }

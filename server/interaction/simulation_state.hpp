@@ -419,6 +419,10 @@ class State {
     double radius_m{0.0};
     bool found{false};
     SpreadLoad load;
+    // A LINEAR shaft face or edge row's spread (Row::point_slide): d weight / d point per node
+    // of `load` (ContactSurface::spread's gradient), for normal_turn; false: not computed.
+    bool has_gradient{false};
+    std::array<Vec3, kSpreadNodes> gradient;
   };
   // Phase "rows", reuse (rows_of_tool): per pose index, the rows the tool kept (spread, near field
   // set; before the merge with the other tools' rows) on the rest surface, and the pose they are
@@ -441,6 +445,7 @@ class State {
   bool rest_geometry_{false};  // this geometry is the rest surface (solve_geometry)
   std::vector<int> spread_triangles_;  // ContactSurface::spread's candidates (capacity: triangles)
   SpreadLoad spread_load_;             // one row's spread load
+  std::array<Vec3, kSpreadNodes> spread_gradient_;  // its weights' gradient (sliding rows)
   std::vector<Row> rows_;          // the step's contact rows
   // While the tools' rows merge (merge_tool_row): per row of rows_ its main slot, formed once.
   std::vector<int> row_main_slot_;
@@ -521,6 +526,8 @@ class State {
   // the stored load.
   std::vector<SpreadMemo> spread_memo_, spread_prev_memo_;
   const SpreadMemo* last_spread_{nullptr};  // spread_row: the memo entry of its row's spread
+  // The memo entry of a spread with the row's inputs (bit for bit), this geometry's or the last's.
+  const SpreadMemo* find_spread(const Row& r, bool* from_last) const;
   ContactLcp lcp_;
   bool lcp_constant_block_{false};  // set_constant_block done
   std::vector<ToolContact> last_good_;
