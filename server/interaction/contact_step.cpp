@@ -391,6 +391,13 @@ void State::reserve_workspace(const Model& m, int tools) {
   turn_v_.assign(max_contact, Vec3::Zero());
   weight_slide_.resize(max_contact);
   weight_slides_.assign(max_contact, 0);
+  turn_nodes_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  turn_u_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  turn_needs_u_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  turn_y_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  turn_node_.resize(m.bodies_.size());
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi)
+    turn_node_[bi].assign(m.bodies_[bi].rest_m.size(), -1);
   turn_z_.setZero(max_contact, 3);
   previous_row_keys_.reserve(max_rows);
   for (auto& l : tier_loads_) {
@@ -2589,30 +2596,63 @@ void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c
     weight_slides_[i] = 1;
     weights_move = true;
   }
+  // Summed node by node, not row pair by row pair (the same sums in another order: K as before
+  // up to round-off): per body, U_k = -sum_s C_ks f_s over the body's stored forces (f_s on the
+  // tissue, -sum_j lambda_j w_jq n_j: every active row of every tool on it, no history here) and
+  // Y_k (turn_y_), then per row i: sum_k (n_i . U_k) dw_ik (i sliding) + w_ik Y_k^T n_i.
   if (weights_move) {
-    for (int i = 0; i < nc; ++i) {
-      const Row& ri = rows_[i];
-      if (ri.tool != t || !(lambda_[ns + i] > 0.0)) continue;
-      const ContactColumns& cols = *bodies_[ri.body].columns;
-      Vec3 v = Vec3::Zero();
-      for (int j = 0; j < nc; ++j) {
-        const Row& rj = rows_[j];
-        const double lj = lambda_[ns + j];
-        if (!(lj > 0.0) || rj.body != ri.body) continue;
-        const bool i_moves = weight_slides_[i] != 0, j_moves = weight_slides_[j] != 0;
-        if (!i_moves && !j_moves) continue;
+    for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) {
+      turn_nodes_.clear();
+      std::vector<int>& index = turn_node_[b];
+      for (int i = 0; i < nc; ++i) {
+        const Row& ri = rows_[i];
+        if (ri.tool != t || ri.body != b || !(lambda_[ns + i] > 0.0)) continue;
         for (int k = 0; k < ri.nodes; ++k) {
           if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
-          for (int q = 0; q < rj.nodes; ++q) {
-            if (rj.slot[q] < 0 || rj.w[q] == 0.0) continue;
-            const double a = ri.normal.dot(cols.block(ri.slot[k], rj.slot[q]) * rj.normal);
-            // Row i's point slides over U_k's part from row j; row j's load moves under row i.
-            if (i_moves) v.noalias() += (lj * rj.w[q] * a) * weight_slide_[i][k];
-            if (j_moves) v.noalias() += (lj * ri.w[k] * a) * weight_slide_[j][q];
+          int& at = index[ri.slot[k]];
+          if (at < 0) {
+            at = static_cast<int>(turn_nodes_.size());
+            turn_nodes_.push_back(ri.slot[k]);
+            turn_u_[at].setZero();
+            turn_needs_u_[at] = 0;
+            turn_y_[at].setZero();
           }
+          if (weight_slides_[i]) turn_needs_u_[at] = 1;
         }
       }
-      turn_v_[i] += v;
+      if (turn_nodes_.empty()) continue;
+      const int nk = static_cast<int>(turn_nodes_.size());
+      const BodyState& bs = bodies_[b];
+      const ContactColumns& cols = *bs.columns;
+      for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
+        const int s = bs.force_slots[f];
+        for (int a = 0; a < nk; ++a)
+          if (turn_needs_u_[a]) turn_u_[a].noalias() -= cols.block(turn_nodes_[a], s) * bs.forces_n[f];
+      }
+      for (int j = 0; j < nc; ++j) {
+        const Row& rj = rows_[j];
+        if (!weight_slides_[j] || rj.body != b) continue;
+        const double lj = lambda_[ns + j];
+        for (int q = 0; q < rj.nodes; ++q) {
+          if (rj.slot[q] < 0 || rj.w[q] == 0.0) continue;
+          const Vec3 dw = lj * weight_slide_[j][q];
+          for (int a = 0; a < nk; ++a)
+            turn_y_[a].noalias() += (cols.block(turn_nodes_[a], rj.slot[q]) * rj.normal) * dw.transpose();
+        }
+      }
+      for (int i = 0; i < nc; ++i) {
+        const Row& ri = rows_[i];
+        if (ri.tool != t || ri.body != b || !(lambda_[ns + i] > 0.0)) continue;
+        Vec3 v = Vec3::Zero();
+        for (int k = 0; k < ri.nodes; ++k) {
+          if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
+          const int a = index[ri.slot[k]];
+          if (weight_slides_[i]) v.noalias() += ri.normal.dot(turn_u_[a]) * weight_slide_[i][k];
+          v.noalias() += ri.w[k] * (turn_y_[a].transpose() * ri.normal);
+        }
+        turn_v_[i] += v;
+      }
+      for (int slot : turn_nodes_) index[slot] = -1;
     }
   }
   Mat3 extra = Mat3::Zero();

@@ -560,6 +560,15 @@ class State {
   // normal_turn: per contact row, d w_k / d x of its spread weights (Row::point_slide)
   std::vector<std::array<Vec3, kSpreadNodes>> weight_slide_;
   std::vector<char> weight_slides_;  // per contact row: weight_slide_ holds its gradients
+  // normal_turn, W's change as the points slide, per distinct node k of one tool's active rows on
+  // a body: its slot, U_k (the displacement by the step's forces; rows that slide only) and
+  // Y_k = sum_{j sliding} lambda_j sum_q (C_kq n_j) (d w_jq / d x)^T; turn_node_[body][slot]: the
+  // node's index there, else -1 (restored after each use).
+  std::vector<int> turn_nodes_;
+  std::vector<Vec3> turn_u_;
+  std::vector<char> turn_needs_u_;
+  std::vector<Mat3> turn_y_;
+  std::vector<std::vector<int>> turn_node_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> turn_z_;  // normal_turn, several tools: L Z = V
 };
 
