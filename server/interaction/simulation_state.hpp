@@ -301,6 +301,7 @@ class State {
                      const std::array<Vec3, 3>* smooth_normals, int search, int node_mask);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape,
                       const Vec3& tip, const Vec3& axis);
+  void drop_shared_projections(double tip_radius_m);
   double flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
                        bool at_rest, double at_most_m);
   void near_field_of_tool(const Model& m, const ToolShape& shape);
