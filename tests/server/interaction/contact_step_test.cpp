@@ -641,9 +641,9 @@ INSTANTIATE_TEST_SUITE_P(contact_step, ContactStepTier,
 // options off) one row where centred (the feature's triangles merged; a face row beside the node
 // row just off it, nearly dependent: the row compliance keeps W definite; the force has a kink
 // at a node, where the row goes from one node to three: 2 % in 0.05 mm seen). With the default
-// rows (SimulationOptions{}; with the contact options one smooth face row per triangle holding
-// the projection and the node row: 5 to 9 at a vertex, measured 6.6-7.1 mN at 1 mm against
-// 29-45 mN barycentric) the force alone is checked.
+// rows (SimulationOptions{}; with the contact options the smooth face row holding the projection,
+// one however many triangles meet at the vertex, and the node row: as many rows as just off it,
+// measured 6.6-7.1 mN at 1 mm against 29-45 mN barycentric) the force and the row count.
 TEST(interaction_contact_step, TipOnVerticesOfEveryValenceAndOnAnEdge) {
   Block b;
   b.generated = true;
@@ -697,6 +697,11 @@ TEST(interaction_contact_step, TipOnVerticesOfEveryValenceAndOnAnEdge) {
         const ToolContact moved = run(p + off, so);
         EXPECT_NEAR(moved.force_n.x(), centred.force_n.x(), 0.05 * centred.force_n.x())
             << "valence " << n << " rows " << so.contact_rows;
+        // The default rows: the projection on the vertex, held by each of its triangles, is one
+        // row, as just off it (State::drop_shared_projections; before: one row per triangle).
+        if (!merged) {
+          EXPECT_EQ(st.contact_rows, so.contact_rows) << "valence " << n;
+        }
       }
       std::printf("%s, valence %d: %.3f mN at %.1f mm, %d rows\n",
                   merged ? "barycentric" : "default", n, centred.force_n.x() * 1e3, depth * 1e3,
