@@ -246,23 +246,31 @@ TEST(haptic_server, KillingServerMidContactFadesForceToZeroInTime) {
   const auto& tr = loop.trace();
   std::uint64_t last_seq = 0;
   std::int64_t last_ref = 0;
-  double zero_ms = -1;
+  // The first tick without force and the last one still pushing (the tick before it), in ms
+  // after the newest model. A loop starved by the machine's load (no tick for 10-20 ms) puts its
+  // last push anywhere before the watchdog and its first zero anywhere after it, so each bound is
+  // on its own side: the force stays until the watchdog (the first zero at 50 ms or later) and
+  // is gone soon after it (the last push before 70 ms). (The last push asserted >= 50 ms failed
+  // once at 39 ms with a 2-core machine's load at 16.)
+  double zero_ms = -1, push_ms = -1;
   for (std::size_t i = kill_tick > 200 ? kill_tick - 200 : 0; i < tr.size(); ++i) {
     if (tr[i].model_sequence > last_seq && tr[i].force_n.norm() > 0) {
       last_seq = tr[i].model_sequence;
       last_ref = tr[i].now_ns - static_cast<std::int64_t>(std::llround(tr[i].model_age_s * 1e9));
     }
-    if (i > kill_tick && tr[i].force_n.norm() == 0) {  // the last tick still pushing: i - 1
-      zero_ms = 1e-6 * static_cast<double>(tr[i - 1].now_ns - last_ref);
+    if (i > kill_tick && tr[i].force_n.norm() == 0) {
+      zero_ms = 1e-6 * static_cast<double>(tr[i].now_ns - last_ref);
+      push_ms = 1e-6 * static_cast<double>(tr[i - 1].now_ns - last_ref);
       break;
     }
   }
   std::printf(
-      "contact force %.3f N; last force %.1f ms after the newest model; server seen gone after "
-      "%.2f s\n",
-      f_contact, zero_ms, gone_after_s);
+      "contact force %.3f N; last force %.1f ms and first tick without it %.1f ms after the newest "
+      "model; server seen gone after %.2f s\n",
+      f_contact, push_ms, zero_ms, gone_after_s);
   EXPECT_GE(zero_ms, 50) << "kill -9 is only seen by the 50 ms watchdog (liveliness takes ~0.5 s)";
-  EXPECT_LT(zero_ms, 50 + 20) << "no force 70 ms after the newest model";
+  EXPECT_GE(push_ms, 0) << "no tick pushed after the newest model";
+  EXPECT_LT(push_ms, 50 + 20) << "no force 70 ms after the newest model";
   double max_step = 0;
   for (std::size_t i = 1; i < tr.size(); ++i) {
     // The bound is per nominal 1 ms period: a late tick may move as far as the ticks it replaced.
