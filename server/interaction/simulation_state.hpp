@@ -569,6 +569,7 @@ class State {
   std::vector<Vec3> turn_u_;
   std::vector<char> turn_needs_u_;
   std::vector<Mat3> turn_y_;
+  std::vector<Mat3> turn_a_;  // normal_turn, the rows' turn: per node A_k (contact_step.cpp)
   std::vector<std::vector<int>> turn_node_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> turn_z_;  // normal_turn, several tools: L Z = V
 };
