@@ -1086,9 +1086,10 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
 // candidate triangles of (tool, body) that face the side of `facing` (n_t . facing > 0: not the
 // far wall of a fold), on the rest surface or the deformed one, at most at_most_m (the caller's
 // own triangle is within it: only triangles whose rest bounding sphere, widened by the surface's
-// allowed displacement, comes nearer are tested).
+// allowed displacement, comes nearer are tested). With `closest`: the closest point, where one
+// nearer than at_most_m was found (else left as it was).
 double State::flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
-                            bool at_rest, double at_most_m) {
+                            bool at_rest, double at_most_m, Vec3* closest) {
   const BodyModel& b = m.bodies_[body];
   const auto& tris = b.surface.triangles();
   const auto& rest = b.body->contact_mesh().vertices();
@@ -1106,10 +1107,12 @@ double State::flat_distance(const Model& m, int body, int tool, const Vec3& c, c
     for (int k = 0; k < 3; ++k)
       x[k] = !at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
     if (!((x[1] - x[0]).cross(x[2] - x[0]).dot(facing) > 0.0)) continue;
-    const double d2 = (c - closest_on_triangle(c, x).point_m).squaredNorm();
+    const Vec3 q = closest_on_triangle(c, x).point_m;
+    const double d2 = (c - q).squaredNorm();
     if (d2 < best2) {
       best2 = d2;
       best = std::sqrt(best2);
+      if (closest) *closest = q;
     }
   }
   return std::sqrt(best2);
@@ -1200,6 +1203,11 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     Mat3 turn = Mat3::Zero();  // d n / d x (Row::turn)
     Vec3 depth_slide = Vec3::Zero();  // Row::depth_slide
     Mat3 point_slide = Mat3::Zero();  // Row::point_slide
+    // The smooth tip's projected face row: J^-1 and the height parameter s (below), for the depth.
+    bool smooth_row = false;
+    Mat3 smooth_inverse = Mat3::Zero();
+    double smooth_scale = 0.0;
+    bool weights_kink = false;  // the barycentric weights have no derivative (a flat edge)
     bool radial = false;
     bool exit_row = false;
     int normals = 0;
@@ -1216,6 +1224,38 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
         point_slide = (Mat3::Identity() - n * n.transpose()) *
                       (Mat3::Identity() - axis * axis.transpose() +
                        axis * h.centre_slide.transpose());
+      } else if (!tier_ && smooth_tip && !h.flat_fallback) {
+        // The smooth tip's projected face row (part_features: project_along_normals): the centre
+        // c = p0 + u e1 + v e2 + s N(u, v), N = nn0 + u (nn1 - nn0) + v (nn2 - nn0), so
+        // d(u, v, s) = J^-1 dc with J = [e1 + s dN/du, e2 + s dN/dv, N]: the point slides by
+        // [e1 e2 0] J^-1 and the normal N / |N| turns by (I - n n^T) / |N| [dN/du dN/dv 0] J^-1.
+        // (The depth, the centre's distance to the flat surface: below, with the lift.)
+        const std::array<Vec3, 3>& nn = b.surface.node_normals(h.triangle);
+        std::array<Vec3, 3> x;
+        for (int k = 0; k < 3; ++k)
+          x[k] = !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
+        const Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0], n1 = nn[1] - nn[0], n2 = nn[2] - nn[0];
+        const Vec3 big_n = nn[0] + h.at.weights[1] * n1 + h.at.weights[2] * n2;
+        const double s_along = d.dot(big_n) / big_n.squaredNorm();
+        Mat3 jac;
+        jac.col(0) = e1 + s_along * n1;
+        jac.col(1) = e2 + s_along * n2;
+        jac.col(2) = big_n;
+        if (std::abs(jac.determinant()) > 1e-300) {
+          const Mat3 ji = jac.inverse();
+          point_slide = e1 * ji.row(0) + e2 * ji.row(1);
+          // (Node normals equal to round-off, a flat face's: no turn, and normal_turn's sums
+          // for turning rows are not formed for it.)
+          if (n1.squaredNorm() + n2.squaredNorm() > 1e-24)
+            turn = (Mat3::Identity() - n * n.transpose()) / big_n.norm() *
+                   (n1 * ji.row(0) + n2 * ji.row(1));
+          smooth_inverse = ji;
+          smooth_scale = s_along;
+          smooth_row = true;
+        }
+      } else if (!tier_ && !h.shaft) {
+        // The tip's flat face row: the point is the centre's projection on the plane.
+        point_slide = Mat3::Identity() - n * n.transpose();
       }
     } else {
       // A node or an edge. The multirate tiers: radial from the part's centre (the point against
@@ -1315,6 +1355,27 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
           }
         }
       }
+      // LINEAR, the tip's edge row: its point (the edge point closest to the centre) slides along
+      // the edge by e e^T (Row::point_slide) while the centre is inside the edge's wedge of
+      // normals. Between coplanar triangles the wedge is their plane: the centre leaves it as the
+      // tool moves across, and the point goes on into a triangle's face, so it slides by
+      // I - n n^T and the normal (the plane's) does not turn; the triangle it enters depends on the side, so the barycentric weights have a
+      // kink there (no weight_slide: held) and only a spread's weights (smooth in the point)
+      // follow it.
+      if (f == TriangleFeature::kEdge && !h.shaft && !tier_) {
+        if (cos_alpha > 1.0 - 1e-12) {
+          point_slide = Mat3::Identity() - mean * mean.transpose();
+          turn.setZero();  // the face row it becomes has the plane's normal
+          weights_kink = true;
+        } else {
+          const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
+          auto at = [&](int k) {
+            return !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
+          };
+          const Vec3 e = (at(k1) - at(k0)).normalized();
+          point_slide = e * e.transpose();
+        }
+      }
       // An edge's closest point slides along the edge as the tool moves: d changes by the move
       // across it (the tip's rows; the shaft's edge rows have no turn).
       if (f == TriangleFeature::kEdge && !h.shaft && !turn.isZero(0.0)) {
@@ -1350,6 +1411,22 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     r.turn_depth = turn.transpose() * (depth_centre - h.at.point_m);
     r.depth_slide = depth_slide;
     r.point_slide = point_slide;
+    // The triangle's barycentric weights' gradient along the point's slide (in the triangle's
+    // plane: a face row's point stays in it, an edge row's on the edge, where the third weight's
+    // gradient is across it): grad w1 = e2 x f / |f|^2, grad w2 = f x e1 / |f|^2, f = e1 x e2.
+    if (!point_slide.isZero(0.0) && !weights_kink) {
+      std::array<Vec3, 3> x;
+      for (int k = 0; k < 3; ++k)
+        x[k] = !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
+      const Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0], flat = e1.cross(e2);
+      const double area2 = flat.squaredNorm();
+      if (area2 > 0.0) {
+        const Vec3 g1 = e2.cross(flat) / area2, g2 = flat.cross(e1) / area2;
+        r.weight_slide.col(1) = point_slide.transpose() * g1;
+        r.weight_slide.col(2) = point_slide.transpose() * g2;
+        r.weight_slide.col(0) = -(r.weight_slide.col(1) + r.weight_slide.col(2));
+      }
+    }
     r.radial = radial;
     r.point_m = h.at.point_m;
     // The row's nodes: its triangle's, by the point's barycentric weights, or the load spread
@@ -1395,10 +1472,30 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     double lift = 0.0;  // along-normal height less the flat one, unit m
     if (smooth_tip && f == TriangleFeature::kFace && !h.shaft && !h.flat_fallback) {
       const double along = r.height_m;
+      Vec3 q = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
       const double flat =
-          flat_distance(m, body, tool, h.centre_m, n, h.at_rest, std::abs(along));
+          flat_distance(m, body, tool, h.centre_m, n, h.at_rest, std::abs(along), &q);
       lift = along - std::copysign(flat, along);
       r.height_m -= lift;
+      // LINEAR: the depth r - height follows -g . x, g the height's gradient: the direction from
+      // the flat surface's closest point q, or where no triangle came nearer than the height
+      // along N (the flat one), that height's: d(s |N|) = |N| ds + s n^T dN. depth_slide is g
+      // less what the answer takes already (n and the turn's J^T d: normal_turn).
+      if (smooth_row) {
+        Vec3 g;
+        const Vec3 cq = h.centre_m - q;
+        if (q.allFinite() && cq.norm() > 0.0) {
+          g = std::copysign(1.0, along) * cq / cq.norm();
+        } else {
+          const Mat3& ji = smooth_inverse;
+          const std::array<Vec3, 3>& nn = b.surface.node_normals(h.triangle);
+          const Vec3 big_n = nn[0] + h.at.weights[1] * (nn[1] - nn[0]) + h.at.weights[2] * (nn[2] - nn[0]);
+          g = big_n.norm() * ji.row(2).transpose() +
+              smooth_scale * (n.dot(nn[1] - nn[0]) * ji.row(0).transpose() +
+                              n.dot(nn[2] - nn[0]) * ji.row(1).transpose());
+        }
+        r.depth_slide = g - n - r.turn_depth;
+      }
     }
     r.depth_m = radius - r.height_m;
     // LINEAR: the LCP's W lambda is the whole displacement, so its depth is the rest one; the
@@ -1718,6 +1815,17 @@ void State::near_field_of_tool(const Model& m, const ToolShape& shape) {
       deepest->near_field_deepest = true;
       deepest->near_field_slope_per_n =
           (-kHertz / a + kSpread * kQ * a * a / (patch * patch * patch)) / (2.0 * depth * e_star);
+      // LINEAR: c's whole gradient in the tool's translation, the deepest row's depth changing by
+      // -(n + depth_slide + turn^T d) . x (a node or edge row's normal turns, the smooth row's
+      // depth is to the flat surface), unsymmetrized as the shaft's (near_field_of_shaft). The
+      // symmetrized -n put the antisymmetric part of (K_b F_b) n^T into K: the 1 mm tip 0.75 mm
+      // into the fine block by a vertex, K_xz -0.393 / K_zx -0.316 N/m against the force's
+      // -0.322 / -0.387 (bench/RESULTS.md, "The tip's K against central differences").
+      if (!tier_) {
+        const Row& d = *deepest;
+        deepest->near_field_gradient =
+            -d.near_field_slope_per_n * (d.normal + d.depth_slide + d.turn_depth);
+      }
     }
   }
 }
@@ -1822,11 +1930,11 @@ void State::near_field_tangent(int t, int ns, int tools, Mat3& k) {
       f_b = alpha * f_b - h;
     }
     const Vec3 kf = others ? part_response(t, ns, tools, d, f_b) : Vec3(k0 * f_b);
-    // LINEAR's shaft: c's whole gradient (near_field_of_shaft), not symmetrized: the symmetric
-    // part put -(dc/dd) n (kf . u) along the tilted shaft's axis u, where the force does not
+    // LINEAR: c's whole gradient (near_field_of_tool, near_field_of_shaft), not symmetrized: the
+    // symmetric part put -(dc/dd) n (kf . u) along the tilted shaft's axis u, where the force does not
     // change (with -n as the gradient, symmetrized: the fine block's shaft at 45 degrees K u
     // -0.9 N/m; bench/RESULTS.md, "The tilted shaft's K against central differences").
-    if (d.shaft && !d.near_field_gradient.isZero(0.0)) {
+    if (!d.near_field_gradient.isZero(0.0)) {
       k.noalias() += kf * d.near_field_gradient.transpose();
       continue;
     }
@@ -2662,9 +2770,15 @@ void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c
   for (int i = 0; i < nc; ++i) {
     weight_slides_[i] = 0;
     const Row& r = rows_[i];
-    if (r.tool != t || !(lambda_[ns + i] > 0.0) || r.point_slide.isZero(0.0) ||
-        !(r.spread_radius_m > 0.0))
+    if (r.tool != t || !(lambda_[ns + i] > 0.0) || r.point_slide.isZero(0.0)) continue;
+    if (!(r.spread_radius_m > 0.0)) {
+      // Its triangle's nodes by the point's barycentric weights (merge_features: weight_slide).
+      if (r.nodes != 3 || r.weight_slide.isZero(0.0)) continue;
+      for (int k = 0; k < 3; ++k) weight_slide_[i][k] = r.weight_slide.col(k);
+      weight_slides_[i] = 1;
+      weights_move = true;
       continue;
+    }
     // The gradient spread_row made with the row's load (the memo), else spread again.
     const SpreadMemo* e = find_spread(r, nullptr);
     const SpreadLoad* load = &spread_load_;

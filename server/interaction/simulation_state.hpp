@@ -96,18 +96,24 @@ struct Row {
   // (contact_step.cpp near_field_of_shaft); zero elsewhere (there d c / d x = -slope n).
   Vec3 near_field_gradient{Vec3::Zero()};
   // d normal / d x of the tool's translation x (unit 1/m): a node or edge row against the part's
-  // sphere or capsule turns as the tool moves (contact_step.cpp merge_features); zero for a face
-  // row and a row along a surface's mean normal. The answer adds lambda * turn to K.
+  // sphere or capsule turns as the tool moves (contact_step.cpp merge_features), and LINEAR's
+  // smooth tip's projected face row (the interpolated normal at the sliding point); zero for a
+  // flat face row and a row along a surface's mean normal. The answer adds lambda * turn to K.
   Mat3 turn{Mat3::Zero()};
   Vec3 turn_depth{Vec3::Zero()};  // turn^T d, d the part's centre less the point at rest
   // G^T n - n, G = d (centre - point) / d x: where the depth's gradient in x is not -n with the
   // normal held (a shaft row: its centre slides along the axis, an edge's point along the edge;
-  // contact_step.cpp merge_features); zero for the tip's rows. The answer takes it as W's
-  // right-hand side changes (normal_turn).
+  // contact_step.cpp merge_features; the smooth tip's projected face row, whose depth is the
+  // centre's distance to the flat surface and whose normal turns); zero for the tip's other rows.
+  // The answer takes it as W's right-hand side changes (normal_turn).
   Vec3 depth_slide{Vec3::Zero()};
-  // d point / d x (LINEAR, a shaft face or edge row: the point slides over the surface as the
-  // tool moves; zero elsewhere): a spread row's weights follow it, and W with them (normal_turn).
+  // d point / d x (LINEAR, a face or edge row of the shaft or the tip: the point slides over the
+  // surface as the tool moves; zero for a node row and in the tiers): a row's weights follow it
+  // (the spread's or the triangle's), and W with them (normal_turn).
   Mat3 point_slide{Mat3::Zero()};
+  // A row on its triangle's nodes (barycentric weights: no spread, or the spread found none) with
+  // a point_slide: column k (k < 3) is d w_k / d x, the weights' gradient (normal_turn).
+  Mat3 weight_slide{Mat3::Zero()};
 };
 
 // A candidate feature of one tool part on one triangle, before merging (contact_step.cpp).
@@ -303,7 +309,7 @@ class State {
                       const Vec3& tip, const Vec3& axis);
   void drop_shared_projections(double tip_radius_m);
   double flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
-                       bool at_rest, double at_most_m);
+                       bool at_rest, double at_most_m, Vec3* closest = nullptr);
   void near_field_of_tool(const Model& m, const ToolShape& shape);
   void near_field_of_shaft(const Model& m, const ToolShape& shape, const Vec3& axis);
   bool spread_row(const Model& m, Row& r);

@@ -628,6 +628,77 @@ TEST(interaction_contact_step, TiltedShaftStiffnessIsTheForceDerivative) {
   }
 }
 
+// K of the tip against central differences of the step's force (h = 0.1 um; as
+// TiltedShaftStiffnessIsTheForceDerivative), LINEAR, the tip pressed along -x into the fine
+// block's face x = L (the shaft clear of it: depth < r) at a vertex, an axis edge's midpoint, a
+// triangle's centroid, a point 1/4 of the way from that centroid toward its vertex (9, 8) mm and
+// an axis edge's point 1/4 along it, 1/4, 1/2 and 3/4 of the tip's radius deep; the 2 mm tip (the
+// spread faded out on 1 mm cells: barycentric rows) and the 1 mm tip (spread rows), with and
+// without contact_smooth_normals (on the flat face the projection along the node normals is the
+// flat one). Errors against s = max(largest |dF/dx| entry, |F| / r_tip). A tip face row's point
+// is the centre's projection on its triangle and an edge row's the edge point closest to the
+// centre: both slide as the tool moves, and their weights (barycentric or the spread's) with
+// them, so W changes (normal_turn's point_slide terms, as the shaft's); the smooth tip's row's
+// normal turns and its depth (to the flat surface) has its own gradient; an edge row between
+// coplanar triangles becomes a face row as the tool moves across (its point slides by I - n n^T,
+// its normal does not turn); the near field's change is taken with the deepest row's whole depth
+// gradient, unsymmetrized. Asserted: every column within 1 % of s (measured at most 2.1e-7, the
+// differences' truncation), but exactly at the vertex, where the rows change with the pose (a
+// face row appears beside the node row, which took half the lateral force's change off it:
+// K_yy lambda / r = 1.86 N/m against the force's 0.93 for the 1 mm tip 0.5 mm deep) and K is not
+// the force's derivative: printed only (measured 1-17 %, and 102 % at 3/4 r deep, where the
+// force's differences read 218-272 N/m: not smooth there). Before (a283d23: the tip's rows' weights
+// and normals held, the near field's -n symmetrized): up to 54 % of s off (the 1 mm tip across an
+// edge: the edge row's sphere turn lambda / r where the face it becomes does not turn), 26-33 %
+// beside the face centroid (W's change with the barycentric weights), 1-2 % on the face with
+// the spread (the near field's term).
+void tip_stiffness_cases(double tip_r, bool smooth, double& worst_seen) {
+  FineFace face = fine_face();
+  face.b.tip_radius_m = tip_r;
+  face.o.contact_smooth_normals = smooth;
+  face.at.push_back({"face 1/4", Vec3(0, 0.008 + 2e-3 / 3 + 0.25 * (1e-3 / 3),
+                                         0.008 + 1e-3 / 3 - 0.25 * (1e-3 / 3))});
+  face.at.push_back({"edge 1/4", Vec3(0, 0.00825, 0.008)});
+  face.at.push_back({"by the vertex", Vec3(0, 0.00805, 0.00802)});
+  const auto model = build_model(block_scene(face.b), face.o);
+  auto sim = Simulation::from_model(model);
+  std::vector<ToolContact> c;
+  StepStats st;
+  for (const auto& [name, at] : face.at) {
+    for (double depth : {0.25 * tip_r, 0.5 * tip_r, 0.75 * tip_r}) {
+      const std::string what = std::string(smooth ? "smooth " : "flat ") + "r " +
+                               std::to_string(tip_r * 1e3).substr(0, 3) + " mm " + name + " " +
+                               std::to_string(depth * 1e3).substr(0, 4) + " mm";
+      const ToolPose p = press(face.b, depth, at.y(), at.z());
+      sim->step({p}, c, st);
+      ASSERT_TRUE(st.converged) << what;
+      ASSERT_TRUE(c[0].in_contact) << what;
+      const Vec3 f = c[0].force_n;
+      const Mat3 k = c[0].stiffness_n_per_m;
+      const Mat3 fd = force_central_differences(*sim, p, 1e-7);
+      const double scale = std::max(fd.cwiseAbs().maxCoeff(), f.norm() / tip_r);
+      double worst = 0.0;
+      for (int a = 0; a < 3; ++a) worst = std::max(worst, (k.col(a) - fd.col(a)).norm() / scale);
+      const bool at_vertex = name == "vertex";
+      if (!at_vertex) worst_seen = std::max(worst_seen, worst);
+      std::printf("%s: |F| %.3f mN, s %.2f N/m, %d rows; columns off %.2e %.2e %.2e of s%s\n",
+                  what.c_str(), f.norm() * 1e3, scale, st.contact_rows,
+                  (k.col(0) - fd.col(0)).norm() / scale, (k.col(1) - fd.col(1)).norm() / scale,
+                  (k.col(2) - fd.col(2)).norm() / scale, at_vertex ? " (not asserted)" : "");
+      if (!at_vertex) {
+        EXPECT_LE(worst, 0.01) << what << "\nK\n" << k << "\ndF/dx\n" << fd;
+      }
+    }
+  }
+}
+
+TEST(interaction_contact_step, TipStiffnessIsTheForceDerivative) {
+  double worst = 0.0;
+  for (double tip_r : {0.002, 0.001})
+    for (bool smooth : {true, false}) tip_stiffness_cases(tip_r, smooth, worst);
+  std::printf("worst column off: %.2e of s\n", worst);
+}
+
 INSTANTIATE_TEST_SUITE_P(contact_step, ContactStepTier,
                          ::testing::Values(scene::Tier::kLinear, scene::Tier::kCorotational,
                                            scene::Tier::kNonlinear),
@@ -1168,6 +1239,48 @@ TEST(interaction_contact_step, TipOnACreaseAndBesideAStepFeelsTheTissue) {
 
 namespace neurosim::interaction {
 namespace {
+
+// The tip's K on the bundled 5 mm brain (curved, creased; the default rows: spread, smooth
+// normals, near field; LINEAR) against central differences of the step's force (h = 0.1 um), the
+// 2 mm tip 1 mm deep along the surface normal at 8 points along x = 60 mm (1-2 rows each).
+// Errors against s (as TipStiffnessIsTheForceDerivative). Asserted: the worst column within 1 %
+// of s (measured 2.4e-5 .. 3.2e-3, median 1.2e-3; before the tip's rows' slide, the smooth row's
+// turn and depth gradient and the near field's whole gradient (a283d23): 23-88 %, median 62 %).
+// Not exact: the spread's radius follows the local edge length at the point
+// (ContactSurface::edge_at_m), which K holds.
+TEST(interaction_contact_step, TipStiffnessOnTheBrainAgainstTheForceDerivative) {
+  scene::Model model =
+      scene::load_model(neurosim::testing::source_dir() / "scenes" / "brain_artery.scene");
+  model.effects.tier = scene::Tier::kLinear;
+  auto sim = Simulation::build(model);
+  const mesh::TetMesh& mesh = sim->mesh(0);
+  const double r = model.tools.at(0).tip_radius_m;
+  std::vector<ToolContact> c;
+  StepStats st;
+  std::vector<double> errors;
+  for (int k = 0; k < 8; ++k) {
+    const double y = 0.080 + 2.3e-3 * k;
+    const auto on = top_of_surface(mesh, 0.060, y);
+    ASSERT_TRUE(on.has_value());
+    ToolPose p;
+    p.tip_m = on->point_m + (r - 1e-3) * on->normal;
+    p.axis = on->normal;
+    sim->step({p}, c, st);
+    ASSERT_TRUE(st.converged);
+    ASSERT_TRUE(c[0].in_contact);
+    const Mat3 kk = c[0].stiffness_n_per_m;
+    const Mat3 fd = force_central_differences(*sim, p, 1e-7);
+    const double scale = std::max(fd.cwiseAbs().maxCoeff(), c[0].force_n.norm() / r);
+    double worst = 0.0;
+    for (int a = 0; a < 3; ++a) worst = std::max(worst, (kk.col(a) - fd.col(a)).norm() / scale);
+    errors.push_back(worst);
+    std::printf("brain y %.1f mm: |F| %.3f mN, s %.2f N/m, %d rows; worst column off %.2e of s\n",
+                y * 1e3, c[0].force_n.norm() * 1e3, scale, st.contact_rows, worst);
+  }
+  std::sort(errors.begin(), errors.end());
+  std::printf("median %.2e, worst %.2e of s\n", errors[errors.size() / 2], errors.back());
+  EXPECT_LE(errors.back(), 0.01);
+}
 
 // The 7 mm brain refined to 0.5 mm cells under the press (neurosim-model --refine-at), the 2 mm
 // tip pressed straight down (axis +z) at the top of the surface on the line x = 45, y = 100 mm,
