@@ -2828,8 +2828,18 @@ void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c
       const int nk = static_cast<int>(turn_nodes_.size());
       const BodyState& bs = bodies_[b];
       const ContactColumns& cols = *bs.columns;
-      for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
+      // (the next force slot's blocks fetched ahead: each is a cache miss, the loads of one block
+      // after another waited on memory)
+      const std::size_t nf = bs.force_slots.size();
+      for (std::size_t f = 0; f < nf; ++f) {
         const int s = bs.force_slots[f];
+        if (f + 1 < nf)
+          for (int a = 0; a < nk; ++a)
+            if (turn_needs_u_[a]) {
+              const double* ahead = cols.block(turn_nodes_[a], bs.force_slots[f + 1]).data();
+              __builtin_prefetch(ahead);
+              __builtin_prefetch(ahead + 8);
+            }
         for (int a = 0; a < nk; ++a)
           if (turn_needs_u_[a]) turn_u_[a].noalias() -= cols.block(turn_nodes_[a], s) * bs.forces_n[f];
       }
