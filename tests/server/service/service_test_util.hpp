@@ -332,7 +332,10 @@ inline const neurosim_StationStatus* find_station(const neurosim_SimStatus& s, c
 }
 
 // Writes ToolState for one station at 1 kHz (absolute deadlines) on its own thread; pose(t_s)
-// gives the position. Remembers every position sent, by sequence number.
+// gives the position, t_s counted from the first sample. Remembers every position sent, by
+// sequence number. The first sample waits for the server's reader to be matched (at most 30 s):
+// a sample written before that reaches nobody, and a server slow to load on a loaded machine
+// would otherwise see little or none of a short run (a 4 s run once saw no model at all).
 class StationThread {
  public:
   // hold_every = k > 0: every k-th sample is held back and written right after the next one, as a
@@ -366,6 +369,8 @@ class StationThread {
   void loop() {
     wire::Sample<neurosim_ToolState> s, held;
     bool holding = false;
+    for (int i = 0; i < 300 && run_ && !writer_.wait_for_readers(1, DDS_MSECS(100)); ++i) {
+    }
     std::int64_t next = neurosim::common::monotonic_ns();
     const auto t0 = Clock::now();
     std::uint64_t seq = 0;
