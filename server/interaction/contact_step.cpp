@@ -1159,13 +1159,15 @@ void State::drop_shared_projections(double tip_radius_m) {
 }
 
 // Phase "rows", merge: one row per feature (an edge only where all its triangles report it),
-// normals, depths on the deformed and the rest surface.
+// normals, depths on the deformed and the rest surface. In named steps: the feature's hits
+// (feature_hits), its triangle's nodes (feature_nodes), the row's normal and slides (a face:
+// face_row_geometry; a node or edge: exit_row_geometry, LINEAR, or radial_row_geometry, the
+// tiers; the tip's edge: edge_slide), the row itself (feature_row), then the flat fallback rows
+// (drop_fallback_rows) and the rows behind the surface (drop_behind_rows) left out.
 void State::merge_features(const Model& m, int body, int tool, const ToolShape& shape,
                            const Vec3& tip, const Vec3& axis) {
   const BodyModel& b = m.bodies_[body];
   const auto& tris = b.surface.triangles();
-  const auto& rest = b.body->contact_mesh().vertices();
-  const TierLinearization* lin = tier_ ? &tier_->linearization(body) : nullptr;
   const std::size_t first = tool_rows_.size();
   tool_row_centre_.clear();  // per row from `first` on
   tool_row_plane_.clear();
@@ -1182,390 +1184,445 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     return a.triangle < c.triangle;
   });
   for (std::size_t i = 0; i < hits_.size();) {
-    std::size_t j = i;
-    Vec3 normal_sum = Vec3::Zero();
-    int reports = 0;
-    for (; j < hits_.size() && hits_[j].key == hits_[i].key; ++j) {
-      if (hits_[j].at_rest != hits_[i].at_rest) continue;
-      normal_sum += hits_[j].face_normal;
-      ++reports;
-    }
-    const FeatureHit& h = hits_[i];
     const std::size_t i0 = i;
-    i = j;
+    FeatureRow fr;
+    i = feature_hits(i0, fr);
+    const FeatureHit& h = hits_[i0];
     const SurfaceTriangle& tri = tris[h.triangle];
     const TriangleFeature f = key_feature(h.key);
-    if (f == TriangleFeature::kEdge && reports != tri.edge_triangles[h.at.a]) continue;
-    const Vec3 d = h.centre_m - h.at.point_m;
-    const double dn = d.norm();
-    Vec3 depth_centre = h.centre_m;  // the depth is r - n . (depth_centre - point)
-    Vec3 n;
-    Mat3 turn = Mat3::Zero();  // d n / d x (Row::turn)
-    Vec3 depth_slide = Vec3::Zero();  // Row::depth_slide
-    Mat3 point_slide = Mat3::Zero();  // Row::point_slide
-    // The smooth tip's projected face row: J^-1 and the height parameter s (below), for the depth.
-    bool smooth_row = false;
-    Mat3 smooth_inverse = Mat3::Zero();
-    double smooth_scale = 0.0;
-    bool weights_kink = false;  // the barycentric weights have no derivative (a flat edge)
-    bool radial = false;
-    bool exit_row = false;
-    int normals = 0;
-    for (std::size_t k = i0; k < j; ++k)
-      if (hits_[k].at_rest == h.at_rest) normals += hits_[k].normals;
-    Vec3 plane_n = Vec3::Zero();  // exit_row: the surface's plane for the entry rule
-    double plane_h = 0.0;
+    if (f == TriangleFeature::kEdge && fr.reports != tri.edge_triangles[h.at.a]) continue;
+    fr.d = h.centre_m - h.at.point_m;
+    fr.dn = fr.d.norm();
+    fr.depth_centre = h.centre_m;
+    if (f != TriangleFeature::kVertex) feature_nodes(m, body, h, fr);
     if (f == TriangleFeature::kFace) {
-      n = h.face_normal;
-      // A shaft face row's depth is its centre's height over the plane, the centre moving by
-      // (I - u u^T) + u w^T (part_features): n^T G = n^T - (n . u)(u - w)^T.
-      if (h.shaft && !tier_) {
-        depth_slide = n.dot(axis) * (h.centre_slide - axis);
-        point_slide = (Mat3::Identity() - n * n.transpose()) *
-                      (Mat3::Identity() - axis * axis.transpose() +
-                       axis * h.centre_slide.transpose());
-      } else if (!tier_ && smooth_tip && !h.flat_fallback) {
-        // The smooth tip's projected face row (part_features: project_along_normals): the centre
-        // c = p0 + u e1 + v e2 + s N(u, v), N = nn0 + u (nn1 - nn0) + v (nn2 - nn0), so
-        // d(u, v, s) = J^-1 dc with J = [e1 + s dN/du, e2 + s dN/dv, N]: the point slides by
-        // [e1 e2 0] J^-1 and the normal N / |N| turns by (I - n n^T) / |N| [dN/du dN/dv 0] J^-1.
-        // (The depth, the centre's distance to the flat surface: below, with the lift.)
-        const std::array<Vec3, 3>& nn = b.surface.node_normals(h.triangle);
-        std::array<Vec3, 3> x;
-        for (int k = 0; k < 3; ++k)
-          x[k] = !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
-        const Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0], n1 = nn[1] - nn[0], n2 = nn[2] - nn[0];
-        const Vec3 big_n = nn[0] + h.at.weights[1] * n1 + h.at.weights[2] * n2;
-        const double s_along = d.dot(big_n) / big_n.squaredNorm();
-        Mat3 jac;
-        jac.col(0) = e1 + s_along * n1;
-        jac.col(1) = e2 + s_along * n2;
-        jac.col(2) = big_n;
-        if (std::abs(jac.determinant()) > 1e-300) {
-          const Mat3 ji = jac.inverse();
-          point_slide = e1 * ji.row(0) + e2 * ji.row(1);
-          // (Node normals equal to round-off, a flat face's: no turn, and normal_turn's sums
-          // for turning rows are not formed for it.)
-          if (n1.squaredNorm() + n2.squaredNorm() > 1e-24)
-            turn = (Mat3::Identity() - n * n.transpose()) / big_n.norm() *
-                   (n1 * ji.row(0) + n2 * ji.row(1));
-          smooth_inverse = ji;
-          smooth_scale = s_along;
-          smooth_row = true;
-        }
-      } else if (!tier_ && !h.shaft) {
-        // The tip's flat face row: the point is the centre's projection on the plane.
-        point_slide = Mat3::Identity() - n * n.transpose();
-      }
+      face_row_geometry(b, h, axis, smooth_tip, fr);
+    } else if (!tier_) {
+      exit_row_geometry(shape, h, tip, axis, fr);
     } else {
-      // A node or an edge. The multirate tiers: radial from the part's centre (the point against
-      // a rigid sphere or capsule) when the centre is within 60 degrees of the mean normal of the
-      // triangles that report it, else along that mean normal (the depth r - n . d). The tiers
-      // keep 60: their depth adds n . u0 of an equilibrium that may have carried the point far
-      // along the surface, which a nearly tangential normal turns into a depth (measured with 90:
-      // a 10 mm vertex press cycle in NONLINEAR reached 101.6 N against the block's 50.5 N
-      // bound, stability_test).
-      // LINEAR, the tip: the sphere's normal where the point, pushed along its line (radial
-      // while the centre is within the feature's normal cone, else turning into the mean
-      // normal; tool_geometry.hpp exit_normal), leaves the sphere; the depth r - n . d, the
-      // sphere's tangent plane there. Over a flat surface the line is the mean normal whatever
-      // the centre's height, so nothing switches when the centre crosses the rest surface
-      // (d = r) and n does not turn as the tip moves along it: K = -N W^-1 N^T is the press's
-      // derivative. Radial up to 90 degrees and the mean normal past it (before) switched every
-      // node row of a flat face at once at d = r: |F| of the 2 mm tip on 1 mm cells 7.87 ->
-      // 16.03 mN (linear-tet) and 3.36 -> 13.19 mN (smoothed-tet) over 0.02 mm at a vertex, and
-      // a radial row under the tip pushed it off its node sideways (d / |d| turns by dx / |d|:
-      // +62 kN/m across the 3 mm tip 2.9 mm into the cube's node, which K leaves out). A 60-90
-      // degree blend of the radial direction into the mean normal made the press continuous but
-      // its normal turned with the tip's position far faster still (across the blend: the
-      // force's derivative 26 kN/m against K's 2.4) and the closed haptic loop against the cube
-      // oscillated for good (bench/RESULTS.md, "The 60-90 degree blend withdrawn").
-      // LINEAR, the shaft: the same line against the capsule's cross-section through the point
-      // (the sphere of its radius about the axis point closest to the point; tool_geometry.hpp
-      // capsule_exit), the depth that sphere's tangent plane's where the point leaves it.
-      // Radial up to 90 degrees and the mean normal past it (before) switched the row's direction
-      // by up to 90 degrees where the axis crossed the feature's tangent plane: a shaft tilted 6
-      // degrees, swept into a face of 1 mm cells in 5 um steps, had a step 4.83 times the median
-      // (the force falling 6.05 -> 5.70 mN), and a shaft lying in the face 0.45 mm deep was
-      // pushed sideways by 15 % of |F| (bench/RESULTS.md, "The shaft's exit point").
-      const Vec3 mean = normal_sum.normalized();
-      const double cos_alpha = normal_sum.norm() / std::max(normals, 1);
-      if (!tier_) {
-        exit_row = true;
-        plane_n = mean;
-        plane_h = d.dot(mean);
-        const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
-        radial = dn > 1e-9 * part_r && plane_h > 0.0;  // not an entry (below)
-        if (!h.shaft) {
-          n = exit_normal(d, mean, cos_alpha, shape.tip_radius_m);
-          turn = exit_normal_turn(d, mean, cos_alpha, shape.tip_radius_m);
-        } else {
-          Mat3 dn_dx;
-          const CapsuleExit ex = capsule_exit(h.at.point_m, tip, tip + shape.shaft_length_m * axis,
-                                              mean, cos_alpha, shape.shaft_radius_m, &dn_dx);
-          n = ex.normal;
-          depth_centre = ex.centre;
-          // The tool's translation t moves the point relative to the capsule by (dx/dt - I) t:
-          // a node stays (dx/dt = 0); an edge's point is the edge's point closest to the hit's
-          // centre, which part_features' rounds found (d centre / dt = (I - u u^T) + u w^T, w the
-          // hit's centre_slide), so dx/dt = e e^T ((I - u u^T) + u w^T). The rounds stop short of
-          // the two lines' common normal where the edge runs near the axis ((e . u)^2 per round:
-          // 0.88 for the fine block's z edges under the 20-degree shaft), so the common normal's
-          // slide (t . e - b t . u) / (1 - b^2), b = e . u (before), was not the point's
-          // (bench/RESULTS.md, "The tilted shaft's K against central differences").
-          Mat3 slide = Mat3::Zero();
-          if (f == TriangleFeature::kEdge) {
-            const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
-            auto at = [&](int k) {
-              return !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k])
-                                                   : rest[tri.node[k]];
-            };
-            const Vec3 e = (at(k1) - at(k0)).normalized();
-            const double eu = e.dot(axis);
-            slide = e * (e - eu * axis + eu * h.centre_slide).transpose();
-          }
-          turn = dn_dx * (slide - Mat3::Identity());
-          // The depth r - n . (centre - point) changes by -n^T G t with the normal held, G =
-          // d (centre - point) / dt = (I - u u^T)(I - dx/dt) where the point's axis point is
-          // inside the segment (the centre slides along the axis), I - dx/dt at an end; K's
-          // -N W^-1 N^T takes G = I (the tip's rows), normal_turn adds the difference.
-          const double s_c = (h.at.point_m - tip).dot(axis);
-          Vec3 g = n - slide.transpose() * n;
-          if (s_c > 0.0 && s_c < shape.shaft_length_m) g -= axis * axis.dot(g);
-          depth_slide = g - n;
-          point_slide = slide;
-        }
-      } else {
-        radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
-                 d.dot(mean) > 0.5 * dn;  // cos 60 degrees
-        n = radial ? Vec3(d / dn) : mean;
-        // A radial row's normal d / |d| turns by (I - n n^T) / |d| per unit change of d. The
-        // shaft's centre is the axis point nearest the feature: against a node it slides along
-        // the axis (d changes by the move across the axis, where the point is inside the
-        // segment); against an edge the common normal of the two lines keeps its direction
-        // (no turn while they are not parallel).
-        if (radial) {
-          turn = (Mat3::Identity() - n * n.transpose()) / dn;
-          if (h.shaft) {
-            if (f == TriangleFeature::kEdge) {
-              turn.setZero();
-            } else if (std::abs(d.dot(axis)) < 1e-9 * dn) {
-              turn = turn * (Mat3::Identity() - axis * axis.transpose());
-            }
-          }
-        }
-      }
-      // LINEAR, the tip's edge row: its point (the edge point closest to the centre) slides along
-      // the edge by e e^T (Row::point_slide) while the centre is inside the edge's wedge of
-      // normals. Between coplanar triangles the wedge is their plane: the centre leaves it as the
-      // tool moves across, and the point goes on into a triangle's face, so it slides by
-      // I - n n^T and the normal (the plane's) does not turn; the triangle it enters depends on the side, so the barycentric weights have a
-      // kink there (no weight_slide: held) and only a spread's weights (smooth in the point)
-      // follow it.
-      if (f == TriangleFeature::kEdge && !h.shaft && !tier_) {
-        if (cos_alpha > 1.0 - 1e-12) {
-          point_slide = Mat3::Identity() - mean * mean.transpose();
-          turn.setZero();  // the face row it becomes has the plane's normal
-          weights_kink = true;
-        } else {
-          const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
-          auto at = [&](int k) {
-            return !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
-          };
-          const Vec3 e = (at(k1) - at(k0)).normalized();
-          point_slide = e * e.transpose();
-        }
-      }
-      // An edge's closest point slides along the edge as the tool moves: d changes by the move
-      // across it (the tip's rows; the shaft's edge rows have no turn).
-      if (f == TriangleFeature::kEdge && !h.shaft && !turn.isZero(0.0)) {
-        const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
-        auto at = [&](int k) {
-          return !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
-        };
-        const Vec3 e = (at(k1) - at(k0)).normalized();
-        turn = turn * (Mat3::Identity() - e * e.transpose());
-      }
+      radial_row_geometry(shape, h, axis, fr);
     }
+    if (f == TriangleFeature::kEdge && !h.shaft) edge_slide(fr);
     // The turn as the haptic model can use it: the station extrapolates over the validity radius,
     // at least a quarter of the tip's radius (answer), so a normal turning faster than 1 rad per
     // quarter radius of the part (a radial row with the centre by the feature, |d| -> 0; an exit
     // row's line at its tangent to the sphere, where dn/dd grows as 1 / sqrt(r^2 - perp^2)) is
     // not linear over it: there the turn is scaled to that rate (the secant over the reach, not
     // the tangent). Unscaled, a press cycle on the stability suite's blocks sent |K| = 1.2e9 N/m.
-    if (!turn.isZero(0.0)) {
+    if (!fr.turn.isZero(0.0)) {
       const double most = 4.0 / (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m);
-      const double jn = turn.norm();
-      if (jn > most) turn *= most / jn;
+      const double jn = fr.turn.norm();
+      if (jn > most) fr.turn *= most / jn;
     }
     // A part whose centre lies deeper than behind_reach behind the surface does not push it.
-    if ((exit_row ? plane_h : n.dot(d)) < -b.behind_reach_m) continue;
-    const double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+    if ((fr.exit_row ? fr.plane_h : fr.n.dot(fr.d)) < -b.behind_reach_m) continue;
     Row r;
-    r.body = body;
-    r.tool = tool;
-    r.shaft = h.shaft;
-    r.key = h.key;
-    r.normal = n;
-    r.turn = turn;
-    r.turn_depth = turn.transpose() * (depth_centre - h.at.point_m);
-    r.depth_slide = depth_slide;
-    r.point_slide = point_slide;
-    // The triangle's barycentric weights' gradient along the point's slide (in the triangle's
-    // plane: a face row's point stays in it, an edge row's on the edge, where the third weight's
-    // gradient is across it): grad w1 = e2 x f / |f|^2, grad w2 = f x e1 / |f|^2, f = e1 x e2.
-    if (!point_slide.isZero(0.0) && !weights_kink) {
-      std::array<Vec3, 3> x;
-      for (int k = 0; k < 3; ++k)
-        x[k] = !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
-      const Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0], flat = e1.cross(e2);
-      const double area2 = flat.squaredNorm();
-      if (area2 > 0.0) {
-        const Vec3 g1 = e2.cross(flat) / area2, g2 = flat.cross(e1) / area2;
-        r.weight_slide.col(1) = point_slide.transpose() * g1;
-        r.weight_slide.col(2) = point_slide.transpose() * g2;
-        r.weight_slide.col(0) = -(r.weight_slide.col(1) + r.weight_slide.col(2));
-      }
-    }
-    r.radial = radial;
-    r.point_m = h.at.point_m;
-    // The row's nodes: its triangle's, by the point's barycentric weights, or the load spread
-    // around the point (SimulationOptions::contact_spread). The gap is the point's either way.
-    Vec3 rest_point = Vec3::Zero();
-    r.nodes = 3;
-    for (int k = 0; k < 3; ++k) {
-      rest_point += h.at.weights[k] * rest[tri.node[k]];
-      r.slot[k] = tri.slot[k];
-      r.w[k] = h.at.weights[k];
-    }
-    // With the spread, the row is spread once the step keeps it (spread_row; 43 % of the rows
-    // merged here are dropped later: behind the surface, beyond the margin, the same constraint).
-    if (m.options_.contact_spread > 0.0) {
-      const Vec3 surface_n = f == TriangleFeature::kFace ? h.face_normal : normal_sum.normalized();
-      // The spread fades where the cells resolve the tool part (radius R): full for a local edge
-      // of R and more, none (the triangle's own barycentric rows) at R / 2 and less, linear in
-      // between. A spread over cells finer than the part smears a load the rows already sample
-      // and stiffens the press (the 2 mm tip 1 mm into 0.5 mm cells: 8.06 mN with it, 7.20
-      // without, Sneddon 6.74). Fixed per mesh and part, so the force stays continuous in time.
-      const double edge = b.surface.edge_at_m(h.triangle, h.at.weights);
-      const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
-      const double fade = std::clamp((edge - 0.5 * part_r) / (0.5 * part_r), 0.0, 1.0);
-      const double rho = m.options_.contact_spread * edge * fade;
-      if (rho > 0.0) {
-        r.spread_pending = true;
-        r.spread_radius_m = rho;
-        r.spread_at_m = rest_point;
-        r.spread_normal = surface_n;
-      }
-    }
-    Vec3 offset = Vec3::Zero();
-    if (!r.spread_pending && !row_node_normals(r, lin, offset)) continue;  // all on fixed nodes
-    r.height_m = n.dot(depth_centre - h.at.point_m);
-    // SimulationOptions::contact_smooth_normals, a tip face row: the point and the normal are the
-    // projection's along the interpolated normals, the height the centre's distance to the
-    // closest point of the flat surface (signed as the projection's height). Along a tilted
-    // normal the height above a flat triangle is longer than the distance (h / cos of the tilt):
-    // over a convex ridge of the 7 mm brain a tip 1 mm below the flat triangles was 0.6 mm below
-    // along the normal, and the near field's F ~ d^1.5 cut its force to a third. The distance
-    // to the flat surface is continuous as the centre moves (the minimum over the triangles of
-    // continuous distances), as the projection's point and normal are.
-    double lift = 0.0;  // along-normal height less the flat one, unit m
-    if (smooth_tip && f == TriangleFeature::kFace && !h.shaft && !h.flat_fallback) {
-      const double along = r.height_m;
-      Vec3 q = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
-      const double flat =
-          flat_distance(m, body, tool, h.centre_m, n, h.at_rest, std::abs(along), &q);
-      lift = along - std::copysign(flat, along);
-      r.height_m -= lift;
-      // LINEAR: the depth r - height follows -g . x, g the height's gradient: the direction from
-      // the flat surface's closest point q, or where no triangle came nearer than the height
-      // along N (the flat one), that height's: d(s |N|) = |N| ds + s n^T dN. depth_slide is g
-      // less what the answer takes already (n and the turn's J^T d: normal_turn).
-      if (smooth_row) {
-        Vec3 g;
-        const Vec3 cq = h.centre_m - q;
-        if (q.allFinite() && cq.norm() > 0.0) {
-          g = std::copysign(1.0, along) * cq / cq.norm();
-        } else {
-          const Mat3& ji = smooth_inverse;
-          const std::array<Vec3, 3>& nn = b.surface.node_normals(h.triangle);
-          const Vec3 big_n = nn[0] + h.at.weights[1] * (nn[1] - nn[0]) + h.at.weights[2] * (nn[2] - nn[0]);
-          g = big_n.norm() * ji.row(2).transpose() +
-              smooth_scale * (n.dot(nn[1] - nn[0]) * ji.row(0).transpose() +
-                              n.dot(nn[2] - nn[0]) * ji.row(1).transpose());
-        }
-        r.depth_slide = g - n - r.turn_depth;
-      }
-    }
-    r.depth_m = radius - r.height_m;
-    // LINEAR: the LCP's W lambda is the whole displacement, so its depth is the rest one; the
-    // other tiers add the offset u0 of the latest equilibrium (tier_equilibrium.hpp).
-    r.rest_depth_m = radius - n.dot(depth_centre - rest_point) + lift;
-    if (!r.spread_pending) r.rest_depth_m += n.dot(offset);
+    if (!feature_row(m, body, tool, shape, h, fr, r)) continue;  // all on fixed nodes
     tool_rows_.push_back(r);
     tool_row_centre_.push_back(h.centre_m);
-    tool_row_plane_.push_back(exit_row ? plane_n : r.normal);
-    tool_row_plane_h_.push_back(exit_row ? plane_h : r.height_m);
+    tool_row_plane_.push_back(fr.exit_row ? fr.plane_n : r.normal);
+    tool_row_plane_h_.push_back(fr.exit_row ? fr.plane_h : r.height_m);
     tool_row_fallback_.push_back(h.flat_fallback ? 1 : 0);
     if (smooth_tip && f == TriangleFeature::kFace && !h.shaft && !h.flat_fallback) projected_face = true;
   }
   // The flat fallback rows only where no triangle holds the tip's projection.
-  if (projected_face) {
-    std::size_t kept = first;
-    for (std::size_t k = first; k < tool_rows_.size(); ++k) {
-      if (tool_row_fallback_[k - first]) continue;
-      if (kept != k) {
-        tool_rows_[kept] = tool_rows_[k];
-        tool_row_centre_[kept - first] = tool_row_centre_[k - first];
-        tool_row_plane_[kept - first] = tool_row_plane_[k - first];
-        tool_row_plane_h_[kept - first] = tool_row_plane_h_[k - first];
-      }
-      ++kept;
-    }
-    tool_rows_.resize(kept);
-    tool_row_centre_.resize(kept - first);
-    tool_row_plane_.resize(kept - first);
-    tool_row_plane_h_.resize(kept - first);
+  if (projected_face) drop_fallback_rows(first);
+  drop_behind_rows(first, shape, axis);
+}
+
+// Phase "rows", merge (merge_features): the hits of the feature of hits_[i0] (sorted: they
+// follow it) on i0's geometry: their face normals summed (unit normals: fr.normals), how many
+// report it; returns the index after the feature's hits.
+std::size_t State::feature_hits(std::size_t i0, FeatureRow& fr) const {
+  const FeatureHit& h = hits_[i0];
+  std::size_t j = i0;
+  for (; j < hits_.size() && hits_[j].key == h.key; ++j) {
+    if (hits_[j].at_rest != h.at_rest) continue;
+    fr.normal_sum += hits_[j].face_normal;
+    ++fr.reports;
+    fr.normals += hits_[j].normals;
   }
-  // The tool pushes the surface it entered; a row behind the surface (the part's centre behind
-  // its feature's plane) is kept only if the part can have reached its tissue through that
-  // surface. The entry is the row the centre is least deep under. A behind-row is dropped
-  // (a) when its normal turns more than 60 degrees from the entry's: another side of the body
-  // (a ridge's far flank, the far face of a thin part); or
-  // (b) when the part does not hold its feature point (the point farther than the part's radius
-  // r from the part's centre) and the point lies outside the layer the part has swept from the
-  // entry surface to where it is: more than r in front of the entry's plane (the part crossed
-  // that plane spanning r either side of it, and went on behind it) or more than r below the
-  // part's centre along the entry's normal (deeper than any point of the part). Such a point is
-  // on a surface the part never went through: the tissue behind it is not what the tool pushes.
-  // Seen on the 4 mm brain's slide at 2 mm deep (y 85.4 mm): a shaft face row on the far flank
-  // of the gyrus beside the tip, its normal 44 degrees from the entry's (a shaft row 0.05 mm in
-  // front of the near wall), the tip centre 5.24 mm behind its plane (6.74 mm deep), its point
-  // 3.0 mm in front of the entry's plane: 62.4 of the step's 69.7 mN. A row the part holds
-  // (|p - c| <= r) is a real intersection whatever its side, and a tool pushed deep through the
-  // surface keeps the rows of the surface it entered (their points lie in the layer: behind the
-  // entry's plane, not below the part).
-  // The entry is chosen
-  // among the rows the part touches (depth >= 0): a feature the part is clear of (in front by
-  // more than its radius) says nothing about where it entered. A centre on the surface (the
-  // height zero up to round-off, kOnSurfaceM) is not behind it. Seen on a 5 mm brain: the tip
-  // centre exactly on a crease edge (heights -1e-18 m), a far flank's untouched row the highest,
-  // and every row under the tool dropped: 0 N at 2 mm deep.
+  return j;
+}
+
+// Phase "rows", merge: the hit's triangle's nodes, deformed where the hit was found, else at rest
+// (unit m), and an edge hit's unit direction: formed once per row (the smooth face row's
+// Jacobian, the edge's slide, the barycentric weights' gradient).
+void State::feature_nodes(const Model& m, int body, const FeatureHit& h, FeatureRow& fr) {
+  const SurfaceTriangle& tri = m.bodies_[body].surface.triangles()[h.triangle];
+  const auto& rest = m.bodies_[body].body->contact_mesh().vertices();
+  for (int k = 0; k < 3; ++k)
+    fr.x[k] = !h.at_rest && tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
+  if (key_feature(h.key) == TriangleFeature::kEdge)
+    fr.edge = (fr.x[(h.at.a + 1) % 3] - fr.x[h.at.a]).normalized();
+}
+
+// Phase "rows", merge: a face row's normal (the triangle's, or the smooth tip's interpolated
+// one) and, LINEAR, its slides: the shaft's depth (its centre slides along the axis), the smooth
+// tip's projected point and turning normal (J^-1, below), the flat tip's projected point.
+void State::face_row_geometry(const BodyModel& b, const FeatureHit& h, const Vec3& axis,
+                              bool smooth_tip, FeatureRow& fr) {
+  const Vec3& n = h.face_normal;
+  fr.n = n;
+  // A shaft face row's depth is its centre's height over the plane, the centre moving by
+  // (I - u u^T) + u w^T (part_features): n^T G = n^T - (n . u)(u - w)^T.
+  if (h.shaft && !tier_) {
+    fr.depth_slide = n.dot(axis) * (h.centre_slide - axis);
+    fr.point_slide = (Mat3::Identity() - n * n.transpose()) *
+                     (Mat3::Identity() - axis * axis.transpose() +
+                      axis * h.centre_slide.transpose());
+  } else if (!tier_ && smooth_tip && !h.flat_fallback) {
+    // The smooth tip's projected face row (part_features: project_along_normals): the centre
+    // c = p0 + u e1 + v e2 + s N(u, v), N = nn0 + u (nn1 - nn0) + v (nn2 - nn0), so
+    // d(u, v, s) = J^-1 dc with J = [e1 + s dN/du, e2 + s dN/dv, N]: the point slides by
+    // [e1 e2 0] J^-1 and the normal N / |N| turns by (I - n n^T) / |N| [dN/du dN/dv 0] J^-1.
+    // (The depth, the centre's distance to the flat surface: feature_row, with the lift.)
+    const std::array<Vec3, 3>& nn = b.surface.node_normals(h.triangle);
+    const std::array<Vec3, 3>& x = fr.x;
+    const Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0];
+    fr.smooth_dn[0] = nn[1] - nn[0];
+    fr.smooth_dn[1] = nn[2] - nn[0];
+    const Vec3& n1 = fr.smooth_dn[0];
+    const Vec3& n2 = fr.smooth_dn[1];
+    fr.smooth_n = nn[0] + h.at.weights[1] * n1 + h.at.weights[2] * n2;
+    const Vec3& big_n = fr.smooth_n;
+    const double s_along = fr.d.dot(big_n) / big_n.squaredNorm();
+    Mat3 jac;
+    jac.col(0) = e1 + s_along * n1;
+    jac.col(1) = e2 + s_along * n2;
+    jac.col(2) = big_n;
+    if (std::abs(jac.determinant()) > 1e-300) {
+      const Mat3 ji = jac.inverse();
+      fr.point_slide = e1 * ji.row(0) + e2 * ji.row(1);
+      // (Node normals equal to round-off, a flat face's: no turn, and normal_turn's sums
+      // for turning rows are not formed for it.)
+      if (n1.squaredNorm() + n2.squaredNorm() > 1e-24)
+        fr.turn = (Mat3::Identity() - n * n.transpose()) / big_n.norm() *
+                  (n1 * ji.row(0) + n2 * ji.row(1));
+      fr.smooth_inverse = ji;
+      fr.smooth_scale = s_along;
+      fr.smooth_row = true;
+    }
+  } else if (!tier_ && !h.shaft) {
+    // The tip's flat face row: the point is the centre's projection on the plane.
+    fr.point_slide = Mat3::Identity() - n * n.transpose();
+  }
+}
+
+// Phase "rows", merge, LINEAR: a node or an edge row's normal, turn (unit 1/m) and slides.
+// The tip: the sphere's normal where the point, pushed along its line (radial while the centre
+// is within the feature's normal cone, else turning into the mean normal; tool_geometry.hpp
+// exit_normal), leaves the sphere; the depth r - n . d, the sphere's tangent plane there. Over a
+// flat surface the line is the mean normal whatever the centre's height, so nothing switches
+// when the centre crosses the rest surface (d = r) and n does not turn as the tip moves along it:
+// K = -N W^-1 N^T is the press's derivative. Radial up to 90 degrees and the mean normal past it
+// (before) switched every node row of a flat face at once at d = r: |F| of the 2 mm tip on 1 mm
+// cells 7.87 -> 16.03 mN (linear-tet) and 3.36 -> 13.19 mN (smoothed-tet) over 0.02 mm at a
+// vertex, and a radial row under the tip pushed it off its node sideways (d / |d| turns by
+// dx / |d|: +62 kN/m across the 3 mm tip 2.9 mm into the cube's node, which K leaves out). A
+// 60-90 degree blend of the radial direction into the mean normal made the press continuous but
+// its normal turned with the tip's position far faster still (across the blend: the force's
+// derivative 26 kN/m against K's 2.4) and the closed haptic loop against the cube oscillated for
+// good (bench/RESULTS.md, "The 60-90 degree blend withdrawn").
+// The shaft: the same line against the capsule's cross-section through the point (the sphere of
+// its radius about the axis point closest to the point; tool_geometry.hpp capsule_exit), the
+// depth that sphere's tangent plane's where the point leaves it. Radial up to 90 degrees and the
+// mean normal past it (before) switched the row's direction by up to 90 degrees where the axis
+// crossed the feature's tangent plane: a shaft tilted 6 degrees, swept into a face of 1 mm cells
+// in 5 um steps, had a step 4.83 times the median (the force falling 6.05 -> 5.70 mN), and a
+// shaft lying in the face 0.45 mm deep was pushed sideways by 15 % of |F| (bench/RESULTS.md,
+// "The shaft's exit point").
+void State::exit_row_geometry(const ToolShape& shape, const FeatureHit& h, const Vec3& tip,
+                              const Vec3& axis, FeatureRow& fr) {
+  const Vec3 mean = fr.normal_sum.normalized();
+  const double cos_alpha = fr.normal_sum.norm() / std::max(fr.normals, 1);
+  const Vec3& d = fr.d;
+  fr.exit_row = true;
+  fr.plane_n = mean;
+  fr.plane_h = d.dot(mean);
+  const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+  fr.radial = fr.dn > 1e-9 * part_r && fr.plane_h > 0.0;  // not an entry (drop_behind_rows)
+  fr.cos_alpha = cos_alpha;
+  if (!h.shaft) {
+    fr.n = exit_normal(d, mean, cos_alpha, shape.tip_radius_m);
+    fr.turn = exit_normal_turn(d, mean, cos_alpha, shape.tip_radius_m);
+    return;
+  }
+  Mat3 dn_dx;
+  const CapsuleExit ex = capsule_exit(h.at.point_m, tip, tip + shape.shaft_length_m * axis, mean,
+                                      cos_alpha, shape.shaft_radius_m, &dn_dx);
+  const Vec3 n = ex.normal;
+  fr.n = n;
+  fr.depth_centre = ex.centre;
+  // The tool's translation t moves the point relative to the capsule by (dx/dt - I) t: a node
+  // stays (dx/dt = 0); an edge's point is the edge's point closest to the hit's centre, which
+  // part_features' rounds found (d centre / dt = (I - u u^T) + u w^T, w the hit's
+  // centre_slide), so dx/dt = e e^T ((I - u u^T) + u w^T). The rounds stop short of the two
+  // lines' common normal where the edge runs near the axis ((e . u)^2 per round: 0.88 for the
+  // fine block's z edges under the 20-degree shaft), so the common normal's slide
+  // (t . e - b t . u) / (1 - b^2), b = e . u (before), was not the point's (bench/RESULTS.md,
+  // "The tilted shaft's K against central differences").
+  Mat3 slide = Mat3::Zero();
+  if (key_feature(h.key) == TriangleFeature::kEdge) {
+    const Vec3& e = fr.edge;
+    const double eu = e.dot(axis);
+    slide = e * (e - eu * axis + eu * h.centre_slide).transpose();
+  }
+  fr.turn = dn_dx * (slide - Mat3::Identity());
+  // The depth r - n . (centre - point) changes by -n^T G t with the normal held, G =
+  // d (centre - point) / dt = (I - u u^T)(I - dx/dt) where the point's axis point is inside the
+  // segment (the centre slides along the axis), I - dx/dt at an end; K's -N W^-1 N^T takes G = I
+  // (the tip's rows), normal_turn adds the difference.
+  const double s_c = (h.at.point_m - tip).dot(axis);
+  Vec3 g = n - slide.transpose() * n;
+  if (s_c > 0.0 && s_c < shape.shaft_length_m) g -= axis * axis.dot(g);
+  fr.depth_slide = g - n;
+  fr.point_slide = slide;
+}
+
+// Phase "rows", merge, the multirate tiers: a node or an edge row radial from the part's centre
+// (the point against a rigid sphere or capsule) when the centre is within 60 degrees of the mean
+// normal of the triangles that report it, else along that mean normal (the depth r - n . d), and
+// its turn (unit 1/m). The tiers keep 60: their depth adds n . u0 of an equilibrium that may have
+// carried the point far along the surface, which a nearly tangential normal turns into a depth
+// (measured with 90: a 10 mm vertex press cycle in NONLINEAR reached 101.6 N against the block's
+// 50.5 N bound, stability_test).
+void State::radial_row_geometry(const ToolShape& shape, const FeatureHit& h, const Vec3& axis,
+                                FeatureRow& fr) {
+  const Vec3 mean = fr.normal_sum.normalized();
+  fr.cos_alpha = fr.normal_sum.norm() / std::max(fr.normals, 1);
+  const Vec3& d = fr.d;
+  const double dn = fr.dn;
+  fr.radial = dn > 1e-9 * (h.shaft ? shape.shaft_radius_m : shape.tip_radius_m) &&
+              d.dot(mean) > 0.5 * dn;  // cos 60 degrees
+  fr.n = fr.radial ? Vec3(d / dn) : mean;
+  // A radial row's normal d / |d| turns by (I - n n^T) / |d| per unit change of d. The shaft's
+  // centre is the axis point nearest the feature: against a node it slides along the axis (d
+  // changes by the move across the axis, where the point is inside the segment); against an
+  // edge the common normal of the two lines keeps its direction (no turn while they are not
+  // parallel).
+  if (fr.radial) {
+    fr.turn = (Mat3::Identity() - fr.n * fr.n.transpose()) / dn;
+    if (h.shaft) {
+      if (key_feature(h.key) == TriangleFeature::kEdge) {
+        fr.turn.setZero();
+      } else if (std::abs(d.dot(axis)) < 1e-9 * dn) {
+        fr.turn = fr.turn * (Mat3::Identity() - axis * axis.transpose());
+      }
+    }
+  }
+}
+
+// Phase "rows", merge: the tip's edge row. LINEAR: its point (the edge point closest to the
+// centre) slides along the edge by e e^T (Row::point_slide) while the centre is inside the edge's
+// wedge of normals. Between coplanar triangles the wedge is their plane: the centre leaves it as
+// the tool moves across, and the point goes on into a triangle's face, so it slides by I - n n^T
+// and the normal (the plane's) does not turn; the triangle it enters depends on the side, so the
+// barycentric weights have a kink there (no weight_slide: held) and only a spread's weights
+// (smooth in the point) follow it. Every tier: the edge's closest point slides along the edge as
+// the tool moves, so d changes by the move across it (the turn; the shaft's edge rows have none).
+void State::edge_slide(FeatureRow& fr) const {
+  const Vec3& e = fr.edge;
+  if (!tier_) {
+    if (fr.cos_alpha > 1.0 - 1e-12) {
+      const Vec3 mean = fr.normal_sum.normalized();
+      fr.point_slide = Mat3::Identity() - mean * mean.transpose();
+      fr.turn.setZero();  // the face row it becomes has the plane's normal
+      fr.weights_kink = true;
+    } else {
+      fr.point_slide = e * e.transpose();
+    }
+  }
+  if (!fr.turn.isZero(0.0)) fr.turn = fr.turn * (Mat3::Identity() - e * e.transpose());
+}
+
+// Phase "rows", merge: the row of a feature from its first hit and its geometry (fr): the
+// weights' gradient (row_weight_slide), its triangle's nodes by the point's barycentric weights
+// or the spread pending (row_spread_inputs), its height, depth and rest depth (unit m; the smooth
+// tip's projected face row measured to the flat surface: smooth_lift). False if the row rests on
+// fixed nodes only.
+bool State::feature_row(const Model& m, int body, int tool, const ToolShape& shape,
+                        const FeatureHit& h, const FeatureRow& fr, Row& r) {
+  const BodyModel& b = m.bodies_[body];
+  const SurfaceTriangle& tri = b.surface.triangles()[h.triangle];
+  const auto& rest = b.body->contact_mesh().vertices();
+  const TierLinearization* lin = tier_ ? &tier_->linearization(body) : nullptr;
+  const TriangleFeature f = key_feature(h.key);
+  const Vec3& n = fr.n;
+  const double radius = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+  r.body = body;
+  r.tool = tool;
+  r.shaft = h.shaft;
+  r.key = h.key;
+  r.normal = n;
+  r.turn = fr.turn;
+  r.turn_depth = fr.turn.transpose() * (fr.depth_centre - h.at.point_m);
+  r.depth_slide = fr.depth_slide;
+  r.point_slide = fr.point_slide;
+  if (!fr.point_slide.isZero(0.0) && !fr.weights_kink) row_weight_slide(fr, r);
+  r.radial = fr.radial;
+  r.point_m = h.at.point_m;
+  // The row's nodes: its triangle's, by the point's barycentric weights, or the load spread
+  // around the point (SimulationOptions::contact_spread). The gap is the point's either way.
+  Vec3 rest_point = Vec3::Zero();
+  r.nodes = 3;
+  for (int k = 0; k < 3; ++k) {
+    rest_point += h.at.weights[k] * rest[tri.node[k]];
+    r.slot[k] = tri.slot[k];
+    r.w[k] = h.at.weights[k];
+  }
+  if (m.options_.contact_spread > 0.0) row_spread_inputs(m, b, shape, h, fr, rest_point, r);
+  Vec3 offset = Vec3::Zero();
+  if (!r.spread_pending && !row_node_normals(r, lin, offset)) return false;
+  r.height_m = n.dot(fr.depth_centre - h.at.point_m);
+  double lift = 0.0;  // along-normal height less the flat one, unit m
+  if (m.options_.contact_smooth_normals && f == TriangleFeature::kFace && !h.shaft &&
+      !h.flat_fallback)
+    lift = smooth_lift(m, body, tool, h, fr, r);
+  r.depth_m = radius - r.height_m;
+  // LINEAR: the LCP's W lambda is the whole displacement, so its depth is the rest one; the
+  // other tiers add the offset u0 of the latest equilibrium (tier_equilibrium.hpp).
+  r.rest_depth_m = radius - n.dot(fr.depth_centre - rest_point) + lift;
+  if (!r.spread_pending) r.rest_depth_m += n.dot(offset);
+  return true;
+}
+
+// Phase "rows", merge: the triangle's barycentric weights' gradient along the point's slide
+// (Row::weight_slide, unit 1/m; in the triangle's plane: a face row's point stays in it, an edge
+// row's on the edge, where the third weight's gradient is across it): grad w1 = e2 x f / |f|^2,
+// grad w2 = f x e1 / |f|^2, f = e1 x e2, of the nodes fr.x.
+void State::row_weight_slide(const FeatureRow& fr, Row& r) {
+  const std::array<Vec3, 3>& x = fr.x;
+  const Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0], flat = e1.cross(e2);
+  const double area2 = flat.squaredNorm();
+  if (!(area2 > 0.0)) return;
+  const Vec3 g1 = e2.cross(flat) / area2, g2 = flat.cross(e1) / area2;
+  r.weight_slide.col(1) = r.point_slide.transpose() * g1;
+  r.weight_slide.col(2) = r.point_slide.transpose() * g2;
+  r.weight_slide.col(0) = -(r.weight_slide.col(1) + r.weight_slide.col(2));
+}
+
+// Phase "rows", merge (SimulationOptions::contact_spread): the spread's inputs (radius, the point
+// at rest, the surface normal; unit m), the row spread once the step keeps it (spread_row; 43 %
+// of the rows merged are dropped later: behind the surface, beyond the margin, the same
+// constraint). The spread fades where the cells resolve the tool part (radius R): full for a
+// local edge of R and more, none (the triangle's own barycentric rows) at R / 2 and less, linear
+// in between. A spread over cells finer than the part smears a load the rows already sample and
+// stiffens the press (the 2 mm tip 1 mm into 0.5 mm cells: 8.06 mN with it, 7.20 without,
+// Sneddon 6.74). Fixed per mesh and part, so the force stays continuous in time.
+void State::row_spread_inputs(const Model& m, const BodyModel& b, const ToolShape& shape,
+                              const FeatureHit& h, const FeatureRow& fr, const Vec3& rest_point,
+                              Row& r) {
+  const Vec3 surface_n =
+      key_feature(h.key) == TriangleFeature::kFace ? h.face_normal : fr.normal_sum.normalized();
+  const double edge = b.surface.edge_at_m(h.triangle, h.at.weights);
+  const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
+  const double fade = std::clamp((edge - 0.5 * part_r) / (0.5 * part_r), 0.0, 1.0);
+  const double rho = m.options_.contact_spread * edge * fade;
+  if (rho > 0.0) {
+    r.spread_pending = true;
+    r.spread_radius_m = rho;
+    r.spread_at_m = rest_point;
+    r.spread_normal = surface_n;
+  }
+}
+
+// Phase "rows", merge (SimulationOptions::contact_smooth_normals, a tip face row): the point and
+// the normal are the projection's along the interpolated normals, the height the centre's
+// distance to the closest point of the flat surface (signed as the projection's height). Along a
+// tilted normal the height above a flat triangle is longer than the distance (h / cos of the
+// tilt): over a convex ridge of the 7 mm brain a tip 1 mm below the flat triangles was 0.6 mm
+// below along the normal, and the near field's F ~ d^1.5 cut its force to a third. The distance
+// to the flat surface is continuous as the centre moves (the minimum over the triangles of
+// continuous distances), as the projection's point and normal are. r.height_m lowered by the lift
+// (the along-normal height less the flat one, unit m, returned); LINEAR, r.depth_slide.
+double State::smooth_lift(const Model& m, int body, int tool, const FeatureHit& h,
+                          const FeatureRow& fr, Row& r) {
+  const Vec3& n = fr.n;
+  const double along = r.height_m;
+  Vec3 q = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+  const double flat = flat_distance(m, body, tool, h.centre_m, n, h.at_rest, std::abs(along), &q);
+  const double lift = along - std::copysign(flat, along);
+  r.height_m -= lift;
+  // LINEAR: the depth r - height follows -g . x, g the height's gradient: the direction from
+  // the flat surface's closest point q, or where no triangle came nearer than the height
+  // along N (the flat one), that height's: d(s |N|) = |N| ds + s n^T dN. depth_slide is g
+  // less what the answer takes already (n and the turn's J^T d: normal_turn).
+  if (fr.smooth_row) {
+    Vec3 g;
+    const Vec3 cq = h.centre_m - q;
+    if (q.allFinite() && cq.norm() > 0.0) {
+      g = std::copysign(1.0, along) * cq / cq.norm();
+    } else {
+      const Mat3& ji = fr.smooth_inverse;
+      g = fr.smooth_n.norm() * ji.row(2).transpose() +
+          fr.smooth_scale * (n.dot(fr.smooth_dn[0]) * ji.row(0).transpose() +
+                             n.dot(fr.smooth_dn[1]) * ji.row(1).transpose());
+    }
+    r.depth_slide = g - n - r.turn_depth;
+  }
+  return lift;
+}
+
+// Phase "rows", merge: the tool's rows on the body (from `first` on) without its flat fallback
+// rows (the smooth tip has a projected face row on the body).
+void State::drop_fallback_rows(std::size_t first) {
+  std::size_t kept = first;
+  for (std::size_t k = first; k < tool_rows_.size(); ++k) {
+    if (tool_row_fallback_[k - first]) continue;
+    if (kept != k) {
+      tool_rows_[kept] = tool_rows_[k];
+      tool_row_centre_[kept - first] = tool_row_centre_[k - first];
+      tool_row_plane_[kept - first] = tool_row_plane_[k - first];
+      tool_row_plane_h_[kept - first] = tool_row_plane_h_[k - first];
+    }
+    ++kept;
+  }
+  tool_rows_.resize(kept);
+  tool_row_centre_.resize(kept - first);
+  tool_row_plane_.resize(kept - first);
+  tool_row_plane_h_.resize(kept - first);
+}
+
+// Phase "rows", merge: the tool pushes the surface it entered; a row behind the surface (the
+// part's centre behind its feature's plane) is kept only if the part can have reached its tissue
+// through that surface. The entry is the row the centre is least deep under. A behind-row is
+// dropped (a) when its normal turns more than 60 degrees from the entry's: another side of the
+// body (a ridge's far flank, the far face of a thin part); or
+// (b) when the part does not hold its feature point (the point farther than the part's radius
+// r from the part's centre) and the point lies outside the layer the part has swept from the
+// entry surface to where it is: more than r in front of the entry's plane (the part crossed
+// that plane spanning r either side of it, and went on behind it) or more than r below the
+// part's centre along the entry's normal (deeper than any point of the part). Such a point is
+// on a surface the part never went through: the tissue behind it is not what the tool pushes.
+// Seen on the 4 mm brain's slide at 2 mm deep (y 85.4 mm): a shaft face row on the far flank
+// of the gyrus beside the tip, its normal 44 degrees from the entry's (a shaft row 0.05 mm in
+// front of the near wall), the tip centre 5.24 mm behind its plane (6.74 mm deep), its point
+// 3.0 mm in front of the entry's plane: 62.4 of the step's 69.7 mN. A row the part holds
+// (|p - c| <= r) is a real intersection whatever its side, and a tool pushed deep through the
+// surface keeps the rows of the surface it entered (their points lie in the layer: behind the
+// entry's plane, not below the part).
+// The entry is chosen among the rows the part touches (depth >= 0): a feature the part is clear
+// of (in front by more than its radius) says nothing about where it entered. A centre on the
+// surface (the height zero up to round-off, kOnSurfaceM) is not behind it. Seen on a 5 mm brain:
+// the tip centre exactly on a crease edge (heights -1e-18 m), a far flank's untouched row the
+// highest, and every row under the tool dropped: 0 N at 2 mm deep.
+// A radial row (a node or edge against the part's sphere, the centre in front of it) is never
+// behind the surface and its normal is the sphere's, not a side of the body: not an entry.
+// (Seen with a curved contact surface: a face row 0.1 mm behind it at a 2 mm press, a node row
+// beside the tip with a radial normal 70 degrees from it the highest, and the face row
+// dropped: 0.4 mN.)
+// The entry faces the tool's shaft side where any touched row does: a probe goes into tissue
+// tip first, so the surface it went through faces back along its axis (plane normal . axis >
+// 0). A touched row facing away is the underside of a lip beside the tip (a fold over a
+// sulcus, which a brain meshed finely under the press resolves): the centre is far in front of
+// it, so it was the entry, and every row of the surface pressed (its normal more than 60
+// degrees from the lip's, the centre just behind it) was dropped: the 2 mm tip pressed 2.05 mm
+// into the 7 mm brain refined to 0.5 mm cells under it kept 37 of 87 rows, 2.9 mN where 1.8 mm
+// gave 9.6 mN.
+void State::drop_behind_rows(std::size_t first, const ToolShape& shape, const Vec3& axis) {
   constexpr double kOnSurfaceM = 1e-12;
   if (tool_rows_.size() <= first) return;
-  // A radial row (a node or edge against the part's sphere, the centre in front of it) is never
-  // behind the surface and its normal is the sphere's, not a side of the body: not an entry.
-  // (Seen with a curved contact surface: a face row 0.1 mm behind it at a 2 mm press, a node row
-  // beside the tip with a radial normal 70 degrees from it the highest, and the face row
-  // dropped: 0.4 mN.)
-  // The entry faces the tool's shaft side where any touched row does: a probe goes into tissue
-  // tip first, so the surface it went through faces back along its axis (plane normal . axis >
-  // 0). A touched row facing away is the underside of a lip beside the tip (a fold over a
-  // sulcus, which a brain meshed finely under the press resolves): the centre is far in front of
-  // it, so it was the entry, and every row of the surface pressed (its normal more than 60
-  // degrees from the lip's, the centre just behind it) was dropped: the 2 mm tip pressed 2.05 mm
-  // into the 7 mm brain refined to 0.5 mm cells under it kept 37 of 87 rows, 2.9 mN where 1.8 mm
-  // gave 9.6 mN.
   std::size_t entry = tool_rows_.size();
   for (int facing = 1; facing >= 0 && entry == tool_rows_.size(); --facing)
     for (std::size_t k = first; k < tool_rows_.size(); ++k) {

@@ -307,6 +307,55 @@ class State {
                      const std::array<Vec3, 3>* smooth_normals, int search, int node_mask);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape,
                       const Vec3& tip, const Vec3& axis);
+  // merge_features' steps: one feature's row as they form it (contact_step.cpp).
+  struct FeatureRow {
+    Vec3 normal_sum{Vec3::Zero()};  // the reporting hits' face normals, summed
+    int reports{0};                 // hits reporting the feature (on the first hit's geometry)
+    int normals{0};                 // unit normals summed in normal_sum
+    double cos_alpha{0.0};          // a node or edge: |normal_sum| / normals
+    // The triangle's nodes, deformed where the hit was found, else at rest (unit m; an edge or
+    // face hit), and an edge hit's unit direction.
+    std::array<Vec3, 3> x{};
+    Vec3 edge{Vec3::Zero()};
+    Vec3 d{Vec3::Zero()};  // the part's centre less the point, unit m
+    double dn{0.0};        // |d|, unit m
+    Vec3 depth_centre{Vec3::Zero()};  // the depth is r - n . (depth_centre - point), unit m
+    Vec3 n{Vec3::Zero()};             // the row's normal
+    Mat3 turn{Mat3::Zero()};          // Row::turn, unit 1/m
+    Vec3 depth_slide{Vec3::Zero()};   // Row::depth_slide
+    Mat3 point_slide{Mat3::Zero()};   // Row::point_slide
+    // The smooth tip's projected face row: J^-1, the height parameter s, N(u, v) and its
+    // derivatives dN/du, dN/dv (face_row_geometry), for the depth's gradient (smooth_lift).
+    bool smooth_row{false};
+    Mat3 smooth_inverse{Mat3::Zero()};
+    double smooth_scale{0.0};
+    Vec3 smooth_n{Vec3::Zero()};
+    std::array<Vec3, 2> smooth_dn{};
+    bool weights_kink{false};  // the barycentric weights have no derivative (a flat edge)
+    bool radial{false};
+    bool exit_row{false};          // LINEAR's node or edge row (exit_row_geometry)
+    Vec3 plane_n{Vec3::Zero()};    // exit_row: the surface's plane for the entry rule
+    double plane_h{0.0};           // and the centre's height above it, unit m
+  };
+  std::size_t feature_hits(std::size_t i0, FeatureRow& fr) const;
+  void feature_nodes(const Model& m, int body, const FeatureHit& h, FeatureRow& fr);
+  void face_row_geometry(const BodyModel& b, const FeatureHit& h, const Vec3& axis,
+                         bool smooth_tip, FeatureRow& fr);
+  void exit_row_geometry(const ToolShape& shape, const FeatureHit& h, const Vec3& tip,
+                         const Vec3& axis, FeatureRow& fr);
+  void radial_row_geometry(const ToolShape& shape, const FeatureHit& h, const Vec3& axis,
+                           FeatureRow& fr);
+  void edge_slide(FeatureRow& fr) const;
+  bool feature_row(const Model& m, int body, int tool, const ToolShape& shape,
+                   const FeatureHit& h, const FeatureRow& fr, Row& r);
+  static void row_weight_slide(const FeatureRow& fr, Row& r);
+  static void row_spread_inputs(const Model& m, const BodyModel& b, const ToolShape& shape,
+                                const FeatureHit& h, const FeatureRow& fr,
+                                const Vec3& rest_point, Row& r);
+  double smooth_lift(const Model& m, int body, int tool, const FeatureHit& h,
+                     const FeatureRow& fr, Row& r);
+  void drop_fallback_rows(std::size_t first);
+  void drop_behind_rows(std::size_t first, const ToolShape& shape, const Vec3& axis);
   void drop_shared_projections(double tip_radius_m);
   double flat_distance(const Model& m, int body, int tool, const Vec3& c, const Vec3& facing,
                        bool at_rest, double at_most_m, Vec3* closest = nullptr);
