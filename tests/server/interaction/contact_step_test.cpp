@@ -1187,6 +1187,24 @@ TEST(interaction_contact_step, SlideWithBarycentricRowsFollowsTheMesh) {
 namespace neurosim::interaction {
 namespace {
 
+// The bundled 5 mm brain (scenes/brain_artery.scene) in the LINEAR tier with the default
+// options: its simulation, its host mesh and the tool's tip radius (unit m).
+struct LinearBrain {
+  std::unique_ptr<Simulation> sim;
+  const mesh::TetMesh* mesh{nullptr};
+  double tip_radius_m{0.0};
+};
+LinearBrain linear_brain() {
+  scene::Model model =
+      scene::load_model(neurosim::testing::source_dir() / "scenes" / "brain_artery.scene");
+  model.effects.tier = scene::Tier::kLinear;
+  LinearBrain b;
+  b.sim = Simulation::build(model);
+  b.mesh = &b.sim->mesh(0);
+  b.tip_radius_m = model.tools.at(0).tip_radius_m;
+  return b;
+}
+
 // Two sharp features of the bundled 5 mm brain (scenes/brain_artery.scene, neurosim-model's
 // default cell size). A tip centred exactly on a crease of the surface: at (60, 112.6) mm the 2 mm tip 2 mm
 // deep has its centre on the rest surface, on the edge where the surface under the slide turns
@@ -1202,12 +1220,10 @@ namespace {
 // median (6.56 mN; 8.78 mN, 1.34 with radial node rows up to 90 degrees; the radial node row
 // alone gave 0.17-0.36 of it): asserted within 0.6-1.5.
 TEST(interaction_contact_step, TipOnACreaseAndBesideAStepFeelsTheTissue) {
-  scene::Model model =
-      scene::load_model(neurosim::testing::source_dir() / "scenes" / "brain_artery.scene");
-  model.effects.tier = scene::Tier::kLinear;
-  auto sim = Simulation::build(model);
-  const mesh::TetMesh& mesh = sim->mesh(0);
-  const double r = model.tools.at(0).tip_radius_m;
+  const LinearBrain brain = linear_brain();
+  Simulation* const sim = brain.sim.get();
+  const mesh::TetMesh& mesh = *brain.mesh;
+  const double r = brain.tip_radius_m;
   std::vector<ToolContact> c;
   StepStats st;
   std::vector<double> force_n;
@@ -1265,12 +1281,10 @@ namespace {
 // Not exact: the spread's radius follows the local edge length at the point
 // (ContactSurface::edge_at_m), which K holds.
 TEST(interaction_contact_step, TipStiffnessOnTheBrainAgainstTheForceDerivative) {
-  scene::Model model =
-      scene::load_model(neurosim::testing::source_dir() / "scenes" / "brain_artery.scene");
-  model.effects.tier = scene::Tier::kLinear;
-  auto sim = Simulation::build(model);
-  const mesh::TetMesh& mesh = sim->mesh(0);
-  const double r = model.tools.at(0).tip_radius_m;
+  const LinearBrain brain = linear_brain();
+  Simulation* const sim = brain.sim.get();
+  const mesh::TetMesh& mesh = *brain.mesh;
+  const double r = brain.tip_radius_m;
   std::vector<ToolContact> c;
   StepStats st;
   std::vector<double> errors;
