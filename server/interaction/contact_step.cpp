@@ -2157,9 +2157,24 @@ void State::columns_fallback(StepStats& stats) {
 // rows' depths. The rows of a patch share nodes: sum_p w_rp L(slot_rp, b)^T m_rp is formed once
 // per row and node b (not once per row pair), the same sums in the same order as per pair.
 void State::delassus(const Model& m, int ns) {
+  delassus_nodes();
+  const bool reuse = delassus_match();
+  delassus_cache_lookup(reuse);
+  delassus_y();
+  delassus_fill(m, ns);
+  // This W's rows, their v and y cache entries: the next W's match (delassus_match).
+  delassus_prev_rows_.assign(rows_.begin(), rows_.end());
+  delassus_prev_v_.swap(delassus_v_);
+  delassus_prev_entry_.assign(delassus_row_entry_.begin(), delassus_row_entry_.end());
+  delassus_prev_generation_.clear();
+  for (int e : delassus_prev_entry_)
+    delassus_prev_generation_.push_back(e >= 0 ? delassus_cache_[e].generation : -1);
+}
+
+// Phase "Delassus", the rows' distinct nodes (rows of one patch share them): per row node its
+// index (delassus_row_node_), per node its (body, slot) and the last row on it.
+void State::delassus_nodes() {
   const int nc = static_cast<int>(rows_.size());
-  const double eps = m.options_.contact_row_compliance;
-  // The rows' distinct nodes (rows of one patch share them).
   delassus_nodes_.clear();
   delassus_last_row_.clear();
   delassus_row_node_.resize(nc);
@@ -2180,9 +2195,16 @@ void State::delassus(const Model& m, int ns) {
       delassus_row_node_[r][p] = j;
     }
   }
-  const int nn = static_cast<int>(delassus_nodes_.size());
   for (const auto& [body, slot] : delassus_nodes_) delassus_node_[body][slot] = -1;
-  // Reuse: the rows equal to a row of the last W (none if a body's columns evicted since).
+}
+
+// Phase "Delassus", reuse: each row matched to a row of the last W equal to it bit for bit
+// (delassus_match_, -1: none), in the last W's order; the unmatched rows and per node the last
+// unmatched row on it. False if a body's columns evicted slots since the last W (no match).
+bool State::delassus_match() {
+  const int nc = static_cast<int>(rows_.size());
+  const int nn = static_cast<int>(delassus_nodes_.size());
+  // The rows equal to a row of the last W (none if a body's columns evicted since).
   bool reuse = true;
   for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
     const std::uint64_t e = bodies_[bi].columns ? bodies_[bi].columns->evicted() : 0;
@@ -2227,7 +2249,12 @@ void State::delassus(const Model& m, int ns) {
     for (int q = 0; q < rows_[s].nodes; ++q)
       if (delassus_row_node_[s][q] >= 0) delassus_last_fresh_row_[delassus_row_node_[s][q]] = s;
   }
-  delassus_cache_lookup(reuse);
+  return reuse;
+}
+
+// Phase "Delassus", y_rj per row r and node j (delassus_y_, row-major by node).
+void State::delassus_y() {
+  const int nn = static_cast<int>(delassus_nodes_.size());
   // y_rj for the nodes j of the rows s >= r on the row's body, node by node: the blocks L(., j)
   // of node j's column stay in cache while every row reads them (row by row, each row read all
   // the nodes' columns again: a cache miss per block, 24 % of four probes' step). A matched row
@@ -2280,6 +2307,15 @@ void State::delassus(const Model& m, int ns) {
       if (e >= 0 && kept) kept[e] = DelassusY{y, delassus_cache_[e].generation};
     }
   }
+}
+
+// Phase "Delassus", W and delta: per row its depth (with a relaxing body's history displacement)
+// and v_rs against the rows s >= r (the last W's where both rows matched, else from y), times
+// alpha, with the row compliance on the diagonal; then its column against the sliding rows.
+void State::delassus_fill(const Model& m, int ns) {
+  const int nc = static_cast<int>(rows_.size());
+  const int nn = static_cast<int>(delassus_nodes_.size());
+  const double eps = m.options_.contact_row_compliance;
   for (int r = 0; r < nc; ++r) {
     const Row& a = rows_[r];
     const int i = ns + r;
@@ -2311,33 +2347,35 @@ void State::delassus(const Model& m, int ns) {
       w_(i, ns + s) = v;
       w_(ns + s, i) = v;
     }
-    if (ns == 0) continue;
-    w_.col(i).head(ns).setZero();
-    const int rows_a = m.bodies_[a.body].body->sliding().size();
-    for (int p = 0; p < kSpreadNodes; ++p)
-      column_terms_[kSpreadNodes * static_cast<std::size_t>(r) + p] = LcpColumnTerm{};
-    if (rows_a > 0) {
-      const int o = m.bodies_[a.body].sliding_offset;
-      for (int p = 0; p < a.nodes; ++p) {
-        if (a.slot[p] < 0) continue;
-        const ContactColumns::Columns& sb = cols.sliding_block(a.slot[p]);
-        w_.col(i).segment(o, rows_a).noalias() -= a.w[p] * (sb * a.m[p]);
-        LcpColumnTerm& term = column_terms_[kSpreadNodes * static_cast<std::size_t>(r) + p];
-        term.block = sb.data();
-        term.key = (static_cast<std::uint64_t>(a.body) << 32) | static_cast<std::uint32_t>(a.slot[p]);
-        term.offset = o;
-        term.length = rows_a;
-        term.coef = -a.w[p] * a.m[p];
-      }
-    }
-    w_.row(i).head(ns) = w_.col(i).head(ns).transpose();
+    if (ns > 0) delassus_sliding(m, ns, r);
   }
-  delassus_prev_rows_.assign(rows_.begin(), rows_.end());
-  delassus_prev_v_.swap(delassus_v_);
-  delassus_prev_entry_.assign(delassus_row_entry_.begin(), delassus_row_entry_.end());
-  delassus_prev_generation_.clear();
-  for (int e : delassus_prev_entry_)
-    delassus_prev_generation_.push_back(e >= 0 ? delassus_cache_[e].generation : -1);
+}
+
+// Phase "Delassus", row r's column against the sliding rows of its body, W_kr = -sum_a w_ra
+// J_A,k L[:, a] m_ra, and its terms per node for the LCP (column_terms_).
+void State::delassus_sliding(const Model& m, int ns, int r) {
+  const Row& a = rows_[r];
+  const int i = ns + r;
+  const auto& cols = *bodies_[a.body].columns;
+  w_.col(i).head(ns).setZero();
+  const int rows_a = m.bodies_[a.body].body->sliding().size();
+  for (int p = 0; p < kSpreadNodes; ++p)
+    column_terms_[kSpreadNodes * static_cast<std::size_t>(r) + p] = LcpColumnTerm{};
+  if (rows_a > 0) {
+    const int o = m.bodies_[a.body].sliding_offset;
+    for (int p = 0; p < a.nodes; ++p) {
+      if (a.slot[p] < 0) continue;
+      const ContactColumns::Columns& sb = cols.sliding_block(a.slot[p]);
+      w_.col(i).segment(o, rows_a).noalias() -= a.w[p] * (sb * a.m[p]);
+      LcpColumnTerm& term = column_terms_[kSpreadNodes * static_cast<std::size_t>(r) + p];
+      term.block = sb.data();
+      term.key = (static_cast<std::uint64_t>(a.body) << 32) | static_cast<std::uint32_t>(a.slot[p]);
+      term.offset = o;
+      term.length = rows_a;
+      term.coef = -a.w[p] * a.m[p];
+    }
+  }
+  w_.row(i).head(ns) = w_.col(i).head(ns).transpose();
 }
 
 // Phase "Delassus", the y cache's entries of this W's rows and indices of its nodes (after the
@@ -2729,100 +2767,114 @@ void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c
   if (tier_ || !rest_geometry_ || ns > 0) return;
   for (int r = 0; r < nc; ++r)
     if (rows_[r].tool == t && lambda_[ns + r] > 0.0 && bodies_[rows_[r].body].history) return;
-  // B_ij between two rows: their nodes' columns by the weights, sum_kq w_ik w_jq C_kq, and the
-  // near field's c_i I on one part of one tool. Summed node by node, not row pair by row pair
-  // (at a vertex 64 rows of 16 nodes: 40 % of the step was these pairs' 16 x 16 blocks): with U_k
-  // = -sum_s C_ks f_s the displacement at node k by the body's stored forces (every active row
-  // of every tool, no history here),
-  //   u_j = sum_i lambda_i B_ji n_i = sum_k w_jk U_k + c_j sum_{i on j's part} lambda_i n_i,
-  //   sum_j lambda_j J_j^T B_ji n_i = sum_q w_iq M_q n_i + sum_{j on i's part} lambda_j c_j J_j^T n_i,
-  // M_q = sum_k A_k C_kq, A_k = sum_j lambda_j w_jk J_j^T (turn_a_): the same sums in another
-  // order (K as before up to round-off).
   for (int i = 0; i < nc; ++i) turn_v_[i].setZero();
-  for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) {
-    bool any = false;
-    for (int j = 0; j < nc && !any; ++j)
-      any = rows_[j].tool == t && rows_[j].body == b && lambda_[ns + j] > 0.0 &&
-            !rows_[j].turn.isZero(0.0);
-    if (!any) continue;
-    std::vector<int>& index = turn_node_[b];
-    turn_nodes_.clear();
-    auto node = [&](int slot) {
-      int& at = index[slot];
-      if (at < 0) {
-        at = static_cast<int>(turn_nodes_.size());
-        turn_nodes_.push_back(slot);
-        turn_u_[at].setZero();
-        turn_needs_u_[at] = 0;
-        turn_y_[at].setZero();
-        turn_a_[at].setZero();
-      }
-      return at;
-    };
-    // Per part of the tool (tip, shaft): sum lambda_i n_i and sum lambda_j c_j J_j^T.
-    Vec3 part_force[2] = {Vec3::Zero(), Vec3::Zero()};
-    Mat3 part_turn[2] = {Mat3::Zero(), Mat3::Zero()};
-    for (int i = 0; i < nc; ++i) {
-      const Row& ri = rows_[i];
-      const double li = lambda_[ns + i];
-      if (ri.tool != t || ri.body != b || !(li > 0.0)) continue;
-      part_force[ri.shaft ? 1 : 0].noalias() += li * ri.normal;
-      const bool turning = !ri.turn.isZero(0.0);
-      if (turning && ri.near_field_m_per_n > 0.0)
-        part_turn[ri.shaft ? 1 : 0].noalias() += (li * ri.near_field_m_per_n) * ri.turn.transpose();
-      for (int k = 0; k < ri.nodes; ++k) {
-        if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
-        const int at = node(ri.slot[k]);
-        if (!turning) continue;
-        turn_needs_u_[at] = 1;
-        turn_a_[at].noalias() += (li * ri.w[k]) * ri.turn.transpose();
-      }
-    }
-    const int nk = static_cast<int>(turn_nodes_.size());
-    const BodyState& bs = bodies_[b];
-    const ContactColumns& cols = *bs.columns;
-    for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
-      const int s = bs.force_slots[f];
-      for (int k = 0; k < nk; ++k)
-        if (turn_needs_u_[k]) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * bs.forces_n[f];
-    }
-    for (int k = 0; k < nk; ++k) {
-      if (!turn_needs_u_[k]) continue;
-      for (int q = 0; q < nk; ++q) turn_y_[q].noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
-    }
-    for (int i = 0; i < nc; ++i) {
-      const Row& ri = rows_[i];
-      const double li = lambda_[ns + i];
-      if (ri.tool != t || ri.body != b || !(li > 0.0)) continue;
-      Vec3 u = Vec3::Zero(), v = part_turn[ri.shaft ? 1 : 0] * ri.normal;
-      const bool turning = !ri.turn.isZero(0.0);
-      for (int k = 0; k < ri.nodes; ++k) {
-        if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
-        const int at = index[ri.slot[k]];
-        if (turning) u.noalias() += ri.w[k] * turn_u_[at];
-        v.noalias() += ri.w[k] * (turn_y_[at] * ri.normal);
-      }
-      turn_v_[i] += v;
-      if (!turning) continue;
-      // The depth's change: J_i^T (c - the deformed point), the centre being the part's.
-      if (ri.near_field_m_per_n > 0.0) u.noalias() += ri.near_field_m_per_n * part_force[ri.shaft ? 1 : 0];
-      turn_v_[i].noalias() += ri.turn_depth + ri.turn.transpose() * u;
-    }
-    for (int slot : turn_nodes_) index[slot] = -1;
-  }
+  for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) turn_rows(t, ns, b);
   // The depth's change as the shaft's centre slides along the axis and an edge's point along
   // the edge (Row::depth_slide): delta_i changes by -(n_i + s_i) . x, not -n_i . x.
   for (int i = 0; i < nc; ++i)
     if (rows_[i].tool == t && lambda_[ns + i] > 0.0 && !rows_[i].depth_slide.isZero(0.0))
       turn_v_[i] += rows_[i].depth_slide;
-  // W's change as the shaft's face and edge rows' points slide over the surface (Row::
-  // point_slide): a spread row's weights w_k follow its point (ContactSurface::spread's gradient,
-  // rho and the node set held), so (W lambda)_i = n_i^T sum_k w_ik U_k (U_k the displacement at
-  // node k) changes by sum_k (n_i . U_k) dw_ik (row i's point sliding over the displaced
-  // surface) plus sum_j lambda_j sum_kq w_ik (n_i^T C_kq n_j) dw_jq (row j's load moving under
-  // row i). Without it the shaft 6 degrees against the fine block, 0.2 mm either side of its
-  // face, had K's press column 25-31 % stiffer than the force's central difference
-  // (bench/RESULTS.md, "The tilted shaft's K against central differences").
+  if (slide_weights(m, t, ns))
+    for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) slide_rows(t, ns, b);
+  turn_stiffness(t, ns, tools, c);
+}
+
+
+// normal_turn, the rows' turn on body b (nothing when none of tool t's active rows on it turns):
+// v_i's depth term J_i^T (d_i + u_i) and W's term sum_j lambda_j J_j^T B_ji n_i, into turn_v_.
+// B_ij between two rows: their nodes' columns by the weights, sum_kq w_ik w_jq C_kq, and the
+// near field's c_i I on one part of one tool. Summed node by node, not row pair by row pair
+// (at a vertex 64 rows of 16 nodes: 40 % of the step was these pairs' 16 x 16 blocks): with U_k
+// = -sum_s C_ks f_s the displacement at node k by the body's stored forces (every active row
+// of every tool, no history here),
+//   u_j = sum_i lambda_i B_ji n_i = sum_k w_jk U_k + c_j sum_{i on j's part} lambda_i n_i,
+//   sum_j lambda_j J_j^T B_ji n_i = sum_q w_iq M_q n_i + sum_{j on i's part} lambda_j c_j J_j^T n_i,
+// M_q = sum_k A_k C_kq, A_k = sum_j lambda_j w_jk J_j^T (turn_a_): the same sums in another
+// order (K as before up to round-off).
+void State::turn_rows(int t, int ns, int b) {
+  const int nc = static_cast<int>(rows_.size());
+  bool any = false;
+  for (int j = 0; j < nc && !any; ++j)
+    any = rows_[j].tool == t && rows_[j].body == b && lambda_[ns + j] > 0.0 &&
+          !rows_[j].turn.isZero(0.0);
+  if (!any) return;
+  std::vector<int>& index = turn_node_[b];
+  turn_nodes_.clear();
+  auto node = [&](int slot) {
+    int& at = index[slot];
+    if (at < 0) {
+      at = static_cast<int>(turn_nodes_.size());
+      turn_nodes_.push_back(slot);
+      turn_u_[at].setZero();
+      turn_needs_u_[at] = 0;
+      turn_y_[at].setZero();
+      turn_a_[at].setZero();
+    }
+    return at;
+  };
+  // Per part of the tool (tip, shaft): sum lambda_i n_i and sum lambda_j c_j J_j^T.
+  Vec3 part_force[2] = {Vec3::Zero(), Vec3::Zero()};
+  Mat3 part_turn[2] = {Mat3::Zero(), Mat3::Zero()};
+  for (int i = 0; i < nc; ++i) {
+    const Row& ri = rows_[i];
+    const double li = lambda_[ns + i];
+    if (ri.tool != t || ri.body != b || !(li > 0.0)) continue;
+    part_force[ri.shaft ? 1 : 0].noalias() += li * ri.normal;
+    const bool turning = !ri.turn.isZero(0.0);
+    if (turning && ri.near_field_m_per_n > 0.0)
+      part_turn[ri.shaft ? 1 : 0].noalias() += (li * ri.near_field_m_per_n) * ri.turn.transpose();
+    for (int k = 0; k < ri.nodes; ++k) {
+      if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
+      const int at = node(ri.slot[k]);
+      if (!turning) continue;
+      turn_needs_u_[at] = 1;
+      turn_a_[at].noalias() += (li * ri.w[k]) * ri.turn.transpose();
+    }
+  }
+  const int nk = static_cast<int>(turn_nodes_.size());
+  const BodyState& bs = bodies_[b];
+  const ContactColumns& cols = *bs.columns;
+  for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
+    const int s = bs.force_slots[f];
+    for (int k = 0; k < nk; ++k)
+      if (turn_needs_u_[k]) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * bs.forces_n[f];
+  }
+  for (int k = 0; k < nk; ++k) {
+    if (!turn_needs_u_[k]) continue;
+    for (int q = 0; q < nk; ++q) turn_y_[q].noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
+  }
+  for (int i = 0; i < nc; ++i) {
+    const Row& ri = rows_[i];
+    const double li = lambda_[ns + i];
+    if (ri.tool != t || ri.body != b || !(li > 0.0)) continue;
+    Vec3 u = Vec3::Zero(), v = part_turn[ri.shaft ? 1 : 0] * ri.normal;
+    const bool turning = !ri.turn.isZero(0.0);
+    for (int k = 0; k < ri.nodes; ++k) {
+      if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
+      const int at = index[ri.slot[k]];
+      if (turning) u.noalias() += ri.w[k] * turn_u_[at];
+      v.noalias() += ri.w[k] * (turn_y_[at] * ri.normal);
+    }
+    turn_v_[i] += v;
+    if (!turning) continue;
+    // The depth's change: J_i^T (c - the deformed point), the centre being the part's.
+    if (ri.near_field_m_per_n > 0.0) u.noalias() += ri.near_field_m_per_n * part_force[ri.shaft ? 1 : 0];
+    turn_v_[i].noalias() += ri.turn_depth + ri.turn.transpose() * u;
+  }
+  for (int slot : turn_nodes_) index[slot] = -1;
+}
+
+// normal_turn, W's change as the shaft's face and edge rows' points slide over the surface (Row::
+// point_slide): a spread row's weights w_k follow its point (ContactSurface::spread's gradient,
+// rho and the node set held), so (W lambda)_i = n_i^T sum_k w_ik U_k (U_k the displacement at
+// node k) changes by sum_k (n_i . U_k) dw_ik (row i's point sliding over the displaced
+// surface) plus sum_j lambda_j sum_kq w_ik (n_i^T C_kq n_j) dw_jq (row j's load moving under
+// row i). Without it the shaft 6 degrees against the fine block, 0.2 mm either side of its
+// face, had K's press column 25-31 % stiffer than the force's central difference
+// (bench/RESULTS.md, "The tilted shaft's K against central differences"). Here per active row
+// of tool t its dw_k / dx (weight_slide_, weight_slides_); true if some row's weights move.
+bool State::slide_weights(const Model& m, int t, int ns) {
+  const int nc = static_cast<int>(rows_.size());
   bool weights_move = false;
   for (int i = 0; i < nc; ++i) {
     weight_slides_[i] = 0;
@@ -2857,75 +2909,82 @@ void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c
     weight_slides_[i] = 1;
     weights_move = true;
   }
-  // Summed node by node, not row pair by row pair (the same sums in another order: K as before
-  // up to round-off): per body, U_k = -sum_s C_ks f_s over the body's stored forces (f_s on the
-  // tissue, -sum_j lambda_j w_jq n_j: every active row of every tool on it, no history here) and
-  // Y_k (turn_y_), then per row i: sum_k (n_i . U_k) dw_ik (i sliding) + w_ik Y_k^T n_i.
-  if (weights_move) {
-    for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) {
-      turn_nodes_.clear();
-      std::vector<int>& index = turn_node_[b];
-      for (int i = 0; i < nc; ++i) {
-        const Row& ri = rows_[i];
-        if (ri.tool != t || ri.body != b || !(lambda_[ns + i] > 0.0)) continue;
-        for (int k = 0; k < ri.nodes; ++k) {
-          if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
-          int& at = index[ri.slot[k]];
-          if (at < 0) {
-            at = static_cast<int>(turn_nodes_.size());
-            turn_nodes_.push_back(ri.slot[k]);
-            turn_u_[at].setZero();
-            turn_needs_u_[at] = 0;
-            turn_y_[at].setZero();
-          }
-          if (weight_slides_[i]) turn_needs_u_[at] = 1;
-        }
+  return weights_move;
+}
+
+// normal_turn, the sliding weights' terms on body b (slide_weights), summed node by node, not
+// row pair by row pair (the same sums in another order: K as before up to round-off): U_k =
+// -sum_s C_ks f_s over the body's stored forces (f_s on the tissue, -sum_j lambda_j w_jq n_j:
+// every active row of every tool on it, no history here) and Y_k (turn_y_), then per row i:
+// sum_k (n_i . U_k) dw_ik (i sliding) + w_ik Y_k^T n_i, into turn_v_.
+void State::slide_rows(int t, int ns, int b) {
+  const int nc = static_cast<int>(rows_.size());
+  turn_nodes_.clear();
+  std::vector<int>& index = turn_node_[b];
+  for (int i = 0; i < nc; ++i) {
+    const Row& ri = rows_[i];
+    if (ri.tool != t || ri.body != b || !(lambda_[ns + i] > 0.0)) continue;
+    for (int k = 0; k < ri.nodes; ++k) {
+      if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
+      int& at = index[ri.slot[k]];
+      if (at < 0) {
+        at = static_cast<int>(turn_nodes_.size());
+        turn_nodes_.push_back(ri.slot[k]);
+        turn_u_[at].setZero();
+        turn_needs_u_[at] = 0;
+        turn_y_[at].setZero();
       }
-      if (turn_nodes_.empty()) continue;
-      const int nk = static_cast<int>(turn_nodes_.size());
-      const BodyState& bs = bodies_[b];
-      const ContactColumns& cols = *bs.columns;
-      // (the next force slot's blocks fetched ahead: each is a cache miss, the loads of one block
-      // after another waited on memory)
-      const std::size_t nf = bs.force_slots.size();
-      for (std::size_t f = 0; f < nf; ++f) {
-        const int s = bs.force_slots[f];
-        if (f + 1 < nf)
-          for (int a = 0; a < nk; ++a)
-            if (turn_needs_u_[a]) {
-              const double* ahead = cols.block(turn_nodes_[a], bs.force_slots[f + 1]).data();
-              __builtin_prefetch(ahead);
-              __builtin_prefetch(ahead + 8);
-            }
-        for (int a = 0; a < nk; ++a)
-          if (turn_needs_u_[a]) turn_u_[a].noalias() -= cols.block(turn_nodes_[a], s) * bs.forces_n[f];
-      }
-      for (int j = 0; j < nc; ++j) {
-        const Row& rj = rows_[j];
-        if (!weight_slides_[j] || rj.body != b) continue;
-        const double lj = lambda_[ns + j];
-        for (int q = 0; q < rj.nodes; ++q) {
-          if (rj.slot[q] < 0 || rj.w[q] == 0.0) continue;
-          const Vec3 dw = lj * weight_slide_[j][q];
-          for (int a = 0; a < nk; ++a)
-            turn_y_[a].noalias() += (cols.block(turn_nodes_[a], rj.slot[q]) * rj.normal) * dw.transpose();
-        }
-      }
-      for (int i = 0; i < nc; ++i) {
-        const Row& ri = rows_[i];
-        if (ri.tool != t || ri.body != b || !(lambda_[ns + i] > 0.0)) continue;
-        Vec3 v = Vec3::Zero();
-        for (int k = 0; k < ri.nodes; ++k) {
-          if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
-          const int a = index[ri.slot[k]];
-          if (weight_slides_[i]) v.noalias() += ri.normal.dot(turn_u_[a]) * weight_slide_[i][k];
-          v.noalias() += ri.w[k] * (turn_y_[a].transpose() * ri.normal);
-        }
-        turn_v_[i] += v;
-      }
-      for (int slot : turn_nodes_) index[slot] = -1;
+      if (weight_slides_[i]) turn_needs_u_[at] = 1;
     }
   }
+  if (turn_nodes_.empty()) return;
+  const int nk = static_cast<int>(turn_nodes_.size());
+  const BodyState& bs = bodies_[b];
+  const ContactColumns& cols = *bs.columns;
+  // (the next force slot's blocks fetched ahead: each is a cache miss, the loads of one block
+  // after another waited on memory)
+  const std::size_t nf = bs.force_slots.size();
+  for (std::size_t f = 0; f < nf; ++f) {
+    const int s = bs.force_slots[f];
+    if (f + 1 < nf)
+      for (int a = 0; a < nk; ++a)
+        if (turn_needs_u_[a]) {
+          const double* ahead = cols.block(turn_nodes_[a], bs.force_slots[f + 1]).data();
+          __builtin_prefetch(ahead);
+          __builtin_prefetch(ahead + 8);
+        }
+    for (int a = 0; a < nk; ++a)
+      if (turn_needs_u_[a]) turn_u_[a].noalias() -= cols.block(turn_nodes_[a], s) * bs.forces_n[f];
+  }
+  for (int j = 0; j < nc; ++j) {
+    const Row& rj = rows_[j];
+    if (!weight_slides_[j] || rj.body != b) continue;
+    const double lj = lambda_[ns + j];
+    for (int q = 0; q < rj.nodes; ++q) {
+      if (rj.slot[q] < 0 || rj.w[q] == 0.0) continue;
+      const Vec3 dw = lj * weight_slide_[j][q];
+      for (int a = 0; a < nk; ++a)
+        turn_y_[a].noalias() += (cols.block(turn_nodes_[a], rj.slot[q]) * rj.normal) * dw.transpose();
+    }
+  }
+  for (int i = 0; i < nc; ++i) {
+    const Row& ri = rows_[i];
+    if (ri.tool != t || ri.body != b || !(lambda_[ns + i] > 0.0)) continue;
+    Vec3 v = Vec3::Zero();
+    for (int k = 0; k < ri.nodes; ++k) {
+      if (ri.slot[k] < 0 || ri.w[k] == 0.0) continue;
+      const int a = index[ri.slot[k]];
+      if (weight_slides_[i]) v.noalias() += ri.normal.dot(turn_u_[a]) * weight_slide_[i][k];
+      v.noalias() += ri.w[k] * (turn_y_[a].transpose() * ri.normal);
+    }
+    turn_v_[i] += v;
+  }
+  for (int slot : turn_nodes_) index[slot] = -1;
+}
+
+// normal_turn, the last term: -N^T W^-1 V over tool t's active rows (V: turn_v_), added to K.
+// One tool: the LCP's active inverse; several: own_stiffness's factor of this answer.
+void State::turn_stiffness(int t, int ns, int tools, ToolContact& c) {
   Mat3 extra = Mat3::Zero();
   if (tools == 1) {
     extra = lcp_.contact_stiffness(

@@ -368,6 +368,13 @@ class State {
   void grant_evictions();
   void preload_columns(const Model& m);
   void delassus(const Model& m, int ns);
+  // delassus's parts (contact_step.cpp): the rows' nodes, the match with the last W's rows, y per
+  // row and node, W and delta, a row's column against the sliding rows.
+  void delassus_nodes();
+  bool delassus_match();
+  void delassus_y();
+  void delassus_fill(const Model& m, int ns);
+  void delassus_sliding(const Model& m, int ns, int r);
   void delassus_cache_lookup(bool reuse);
   void store_forces(const Model& m, int ns);
   void largest_displacement(const Model& m);
@@ -376,6 +383,12 @@ class State {
   Mat3 own_stiffness(int ns, int tool);
   void near_field_tangent(int tool, int ns, int tools, Mat3& k);
   void normal_turn(const Model& m, int tool, int ns, int tools, ToolContact& c);
+  // normal_turn's parts (contact_step.cpp): the rows' turn on a body (the depth's and W's terms
+  // of V), the rows' sliding weights, W's change as they slide on a body, and -N^T W^-1 V.
+  void turn_rows(int tool, int ns, int body);
+  bool slide_weights(const Model& m, int tool, int ns);
+  void slide_rows(int tool, int ns, int body);
+  void turn_stiffness(int tool, int ns, int tools, ToolContact& c);
   Vec3 part_response(int tool, int ns, int tools, const Row& d, const Vec3& f);
   // The near field's history of `body` when it follows `tool` (else nullptr: elastic).
   const ViscoelasticHistory* near_field_history(int body, int tool) const {
