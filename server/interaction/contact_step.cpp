@@ -2696,6 +2696,7 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
 // stiffness at dt = 0, when every active row of the tool has that alpha (else the step's).
 void State::relaxation(const Model& m, int t, int ns, ToolContact& c) {
   c.num_relaxing = 0;
+  turn_scale_ = 1.0;
   if (!m.viscoelastic_ || !c.in_contact) return;
   double sum_n = 0.0;
   const int b = main_body_of(m, t, ns, sum_n);
@@ -2734,7 +2735,10 @@ void State::relaxation(const Model& m, int t, int ns, ToolContact& c) {
     for (int i = 0; i < nk; ++i) c.relaxing[i].force_n -= share * hist.relaxing(s, i);  // on the tool
   }
   c.num_relaxing = nk;
-  if (one_alpha) c.stiffness_n_per_m *= hist.alpha();
+  if (one_alpha) {
+    c.stiffness_n_per_m *= hist.alpha();
+    turn_scale_ = hist.alpha();
+  }
 }
 
 // Phase "answer", the rows' turn (after the relaxation: the force turns as it is, not scaled
@@ -2748,8 +2752,9 @@ void State::relaxation(const Model& m, int t, int ns, ToolContact& c) {
 // point: the depth's change as n_i turns) and the second sum W's change as the other rows'
 // forces turn (the displacement along n_i they cause). K (the LCP's -N W^-1 N^T with the near
 // field's term) is the part with the normals held; this adds the rest. V is formed where W is
-// that (LINEAR on the rest surface, elastic bodies, no sliding rows); elsewhere (the multirate
-// tiers, whose rows add an equilibrium's offset; a relaxing body) the first sum alone.
+// that (LINEAR on the rest surface, no sliding rows; a relaxing body's W and displacement as its
+// step has them: turn_coupling); elsewhere (the multirate tiers, whose rows add an equilibrium's
+// offset) the first sum alone.
 void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c) {
   const int nc = static_cast<int>(rows_.size());
   Mat3 g = Mat3::Zero();
@@ -2765,8 +2770,6 @@ void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c
   if (!turns && !slides) return;
   c.stiffness_n_per_m += g;
   if (tier_ || !rest_geometry_ || ns > 0) return;
-  for (int r = 0; r < nc; ++r)
-    if (rows_[r].tool == t && lambda_[ns + r] > 0.0 && bodies_[rows_[r].body].history) return;
   for (int i = 0; i < nc; ++i) turn_v_[i].setZero();
   for (int b = 0; b < static_cast<int>(bodies_.size()); ++b) turn_rows(t, ns, b);
   // The depth's change as the shaft's centre slides along the axis and an edge's point along
@@ -2779,6 +2782,19 @@ void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c
   turn_stiffness(t, ns, tools, c);
 }
 
+// normal_turn on a relaxing body (its history): the step's compliance is alpha W and its nodes'
+// displacement C f~, f~ = alpha f + h the stored creep-equivalent forces (the history's
+// displacement plus the step's; store_forces), so U_k above is that displacement as it is, and
+// W's terms (B: the forces' turn and slide under the other rows, the near field's c) are alpha's.
+// relaxation scaled K's LCP part by alpha (the stiffness at dt = 0, every active row of the tool
+// at that alpha: turn_scale_): then -N^T W^-1 V is alpha times the LCP's -N^T (alpha W)^-1 V
+// with W's terms of V at alpha / alpha = 1 (dt -> 0: J(0) = 1, the force's change acts on the
+// elastic compliance); else (turn_scale_ 1) the step's, each body's terms at its alpha. 1 on an
+// elastic body, where nothing is scaled.
+double State::turn_coupling(int body) const {
+  const ViscoelasticHistory* h = bodies_[body].history.get();
+  return (h ? h->alpha() : 1.0) / turn_scale_;
+}
 
 // normal_turn, the rows' turn on body b (nothing when none of tool t's active rows on it turns):
 // v_i's depth term J_i^T (d_i + u_i) and W's term sum_j lambda_j J_j^T B_ji n_i, into turn_v_.
@@ -2786,7 +2802,7 @@ void State::normal_turn(const Model& m, int t, int ns, int tools, ToolContact& c
 // near field's c_i I on one part of one tool. Summed node by node, not row pair by row pair
 // (at a vertex 64 rows of 16 nodes: 40 % of the step was these pairs' 16 x 16 blocks): with U_k
 // = -sum_s C_ks f_s the displacement at node k by the body's stored forces (every active row
-// of every tool, no history here),
+// of every tool; a relaxing body's creep-equivalent forces, its history's with them),
 //   u_j = sum_i lambda_i B_ji n_i = sum_k w_jk U_k + c_j sum_{i on j's part} lambda_i n_i,
 //   sum_j lambda_j J_j^T B_ji n_i = sum_q w_iq M_q n_i + sum_{j on i's part} lambda_j c_j J_j^T n_i,
 // M_q = sum_k A_k C_kq, A_k = sum_j lambda_j w_jk J_j^T (turn_a_): the same sums in another
@@ -2831,6 +2847,17 @@ void State::turn_rows(int t, int ns, int b) {
       turn_a_[at].noalias() += (li * ri.w[k]) * ri.turn.transpose();
     }
   }
+  // A relaxing body (turn_coupling): W's terms at its alpha; the tip's near field, with its own
+  // history, displaced by c F~ (F~ = alpha F - h, the creep-equivalent force on the tool: near_field)
+  // with alpha c in W. The shaft's near field is elastic.
+  const double coupling = turn_coupling(b);
+  double near_alpha = 1.0;
+  if (near_field_history(b, t) != nullptr) {
+    const Vec3 h = near_field_creep(b, t, near_alpha);
+    part_force[0] = near_alpha * part_force[0] - h;
+  }
+  if (near_alpha != turn_scale_) part_turn[0] *= near_alpha / turn_scale_;
+  if (turn_scale_ != 1.0) part_turn[1] /= turn_scale_;
   const int nk = static_cast<int>(turn_nodes_.size());
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
@@ -2843,6 +2870,8 @@ void State::turn_rows(int t, int ns, int b) {
     if (!turn_needs_u_[k]) continue;
     for (int q = 0; q < nk; ++q) turn_y_[q].noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
   }
+  if (coupling != 1.0)
+    for (int q = 0; q < nk; ++q) turn_y_[q] *= coupling;
   for (int i = 0; i < nc; ++i) {
     const Row& ri = rows_[i];
     const double li = lambda_[ns + i];
@@ -2915,7 +2944,8 @@ bool State::slide_weights(const Model& m, int t, int ns) {
 // normal_turn, the sliding weights' terms on body b (slide_weights), summed node by node, not
 // row pair by row pair (the same sums in another order: K as before up to round-off): U_k =
 // -sum_s C_ks f_s over the body's stored forces (f_s on the tissue, -sum_j lambda_j w_jq n_j:
-// every active row of every tool on it, no history here) and Y_k (turn_y_), then per row i:
+// every active row of every tool on it; a relaxing body's creep-equivalent forces, its
+// history's with them) and Y_k (turn_y_), then per row i:
 // sum_k (n_i . U_k) dw_ik (i sliding) + w_ik Y_k^T n_i, into turn_v_.
 void State::slide_rows(int t, int ns, int b) {
   const int nc = static_cast<int>(rows_.size());
@@ -2967,6 +2997,9 @@ void State::slide_rows(int t, int ns, int b) {
         turn_y_[a].noalias() += (cols.block(turn_nodes_[a], rj.slot[q]) * rj.normal) * dw.transpose();
     }
   }
+  const double coupling = turn_coupling(b);  // a relaxing body's W at its alpha (turn_coupling)
+  if (coupling != 1.0)
+    for (int a = 0; a < nk; ++a) turn_y_[a] *= coupling;
   for (int i = 0; i < nc; ++i) {
     const Row& ri = rows_[i];
     if (ri.tool != t || ri.body != b || !(lambda_[ns + i] > 0.0)) continue;
@@ -3008,6 +3041,7 @@ void State::turn_stiffness(int t, int ns, int tools, ToolContact& c) {
       extra.noalias() -= own_y_.row(i).transpose() * turn_z_.row(i);
     }
   }
+  if (turn_scale_ != 1.0) extra *= turn_scale_;  // relaxation's alpha (turn_coupling)
   c.stiffness_n_per_m += extra;
 }
 

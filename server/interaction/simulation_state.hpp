@@ -389,6 +389,8 @@ class State {
   bool slide_weights(const Model& m, int tool, int ns);
   void slide_rows(int tool, int ns, int body);
   void turn_stiffness(int tool, int ns, int tools, ToolContact& c);
+  // A relaxing body's factor on W's terms of V (contact_step.cpp): its alpha / turn_scale_.
+  double turn_coupling(int body) const;
   Vec3 part_response(int tool, int ns, int tools, const Row& d, const Vec3& f);
   // The near field's history of `body` when it follows `tool` (else nullptr: elastic).
   const ViscoelasticHistory* near_field_history(int body, int tool) const {
@@ -626,6 +628,9 @@ class State {
   Eigen::Matrix<double, Eigen::Dynamic, 3> own_y_;
   std::vector<double> own_z_;  // near_field_tangent: L z = N_b^T f (part_response)
   std::vector<Vec3> turn_v_;   // normal_turn: per contact row, v_i (the depth's and W's turn)
+  // relaxation: the factor it scaled this tool's K by (the relaxing body's alpha, else 1), which
+  // normal_turn's -N^T W^-1 V takes too (turn_coupling).
+  double turn_scale_{1.0};
   // normal_turn: per contact row, d w_k / d x of its spread weights (Row::point_slide)
   std::vector<std::array<Vec3, kSpreadNodes>> weight_slide_;
   std::vector<char> weight_slides_;  // per contact row: weight_slide_ holds its gradients
