@@ -1496,7 +1496,7 @@ void State::edge_slide(FeatureRow& fr) const {
 // slide. The 60-degree row presses a node below the tip's centre as a flat punch: a vertex twice
 // as hard as an edge or a face (the block's 10 mm press cycles: 1.025 / 0.508 / 0.508 N in
 // NONLINEAR against LINEAR's 0.503 / 0.488 / 0.460; now 0.505 / 0.488 / 0.459), and the cube's
-// LINEAR 32-40 % off NONLINEAR (now 2.2 / 5.2 % at 5 / 10 mm, 23.8 % at 20 mm where the share
+// LINEAR 32-40 % off NONLINEAR (now 2.2 / 5.2 % at 5 / 10 mm, 21.3 % at 20 mm where the share
 // falls; CalculiX's own linear against NLGEOM 1.4-16 %). The exit row alone (s = 1 always) puts
 // one node of the bundled 5 mm brain under the 6 mm tip's whole press: its elements invert 6-7
 // mm deep and the force turns 42-53 degrees sideways; the 60-degree rows spread that press over
