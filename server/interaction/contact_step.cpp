@@ -365,6 +365,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   std::size_t triangles = 0;
   for (const auto& b : m.bodies_) triangles = std::max(triangles, b.surface.triangles().size());
   hits_.reserve(std::min<std::size_t>(8 * triangles, 8 * 4096));
+  boundary_hits_.reserve(hits_.capacity());
   step_candidates_.resize(static_cast<std::size_t>(tools) * bodies_.size());
   for (auto& sc : step_candidates_) {
     sc.triangles.reserve(2 * triangles);
@@ -581,74 +582,99 @@ void State::candidate_triangles(const Model& m, int body, int tool, const ToolPo
   // displacement, so the step's next geometries mostly keep the list.
   sc.moved_m = 1.25 * bs.max_displacement_m;
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
-  const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
-  std::vector<int>& list = sc.triangles;
   // The rest surface (no force on the body): flat rows, and the smooth tip's (its flat_distance
   // reads the list: reusable_candidates keeps every triangle nearer the tip than its row's height).
   sc.rest_only = sc.moved_m == 0.0 && bs.force_slots.empty();
   if (sc.rest_only) {
-    const double reuse_m = kCandidateReuse * b.surface.mean_edge_m();
-    bool keep = sc.list_valid;  // the last list of the reusable candidates and verdicts
-    if (!sc.reuse_valid || sc.reuse_tool != pose.tool || sc.reuse_slack_m != slack ||
-        (p0 - sc.reuse_p0).norm() > reuse_m || (p1 - sc.reuse_p1).norm() > reuse_m) {
-      reusable_candidates(m, body, pose.tool, p0, p1, slack, reuse_m, sc);
-      keep = false;
+    rest_candidate_list(m, body, pose.tool, p0, p1, slack, sc);
+    return;
+  }
+  full_candidate_list(m, body, pose.tool, p0, p1, slack, sc);
+}
+
+// Phase "candidate triangles" on the rest surface (StepCandidates::rest_only): this pose's list
+// from the reusable candidates (reusable_candidates, made again once the tip or the shaft end
+// moved more than kCandidateReuse mean edges) and their search verdicts (search_verdicts, made
+// again past kSearchReuse tip radii); the last list kept while the grid query's cells are the
+// same. p0, p1: the tip's centre and the shaft's end, slack the box's widening, unit m.
+void State::rest_candidate_list(const Model& m, int body, int tool_index, const Vec3& p0,
+                                const Vec3& p1, double slack, StepCandidates& sc) {
+  const BodyModel& b = m.bodies_[body];
+  const ToolShape& shape = m.tools_[tool_index];
+  const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
+  std::vector<int>& list = sc.triangles;
+  const double reuse_m = kCandidateReuse * b.surface.mean_edge_m();
+  bool keep = sc.list_valid;  // the last list of the reusable candidates and verdicts
+  if (!sc.reuse_valid || sc.reuse_tool != tool_index || sc.reuse_slack_m != slack ||
+      (p0 - sc.reuse_p0).norm() > reuse_m || (p1 - sc.reuse_p1).norm() > reuse_m) {
+    reusable_candidates(m, body, tool_index, p0, p1, slack, reuse_m, sc);
+    keep = false;
+  }
+  const double search_m = kSearchReuse * shape.tip_radius_m;
+  if (!sc.search_valid || sc.search_m != search_m || (p0 - sc.search_p0).norm() > search_m ||
+      (p1 - sc.search_p1).norm() > search_m) {
+    search_verdicts(m, body, p0, p1, search_m, sc);
+    keep = false;
+  }
+  // This pose's list: the reusable candidates its grid query lists, in the query's order (the
+  // tip's box, then the shaft's), so a node's hit sums its triangles' normals in the same
+  // order as the full search's list (the answer does not depend on where the list was found).
+  const auto tip_cells = b.surface.query_cells(p0 - Vec3::Constant(shape.tip_radius_m + slack),
+                                               p0 + Vec3::Constant(shape.tip_radius_m + slack));
+  PointGrid::CellRange shaft_cells;
+  if (has_shaft) {
+    const double reach = shape.shaft_radius_m + slack;
+    shaft_cells = b.surface.query_cells(p0.cwiseMin(p1) - Vec3::Constant(reach),
+                                        p0.cwiseMax(p1) + Vec3::Constant(reach));
+  }
+  // The same cells list the same candidates (a tool moved by a few micrometres per step).
+  auto same = [](const PointGrid::CellRange& a, const PointGrid::CellRange& c) {
+    for (int k = 0; k < 3; ++k)
+      if (a.lo[k] != c.lo[k] || a.hi[k] != c.hi[k]) return false;
+    return true;
+  };
+  if (keep && same(tip_cells, sc.list_tip_cells) && same(shaft_cells, sc.list_shaft_cells))
+    return;
+  list.clear();
+  sc.parts.clear();
+  sc.nodes.clear();
+  sc.list_valid = true;
+  sc.list_tip_cells = tip_cells;
+  sc.list_shaft_cells = shaft_cells;
+  // (a part with neither a search nor a node that can be hit is not searched at all)
+  auto parts = [](const StepCandidates::Reusable& c) {
+    int searched = 0;
+    for (int part = 0; part < 2; ++part)
+      if ((c.search & (1 << part)) || ((c.nodes >> (3 * part)) & 7)) searched |= 1 << part;
+    return static_cast<std::uint8_t>((c.parts & searched) | (c.search << 2) |
+                                     StepCandidates::kSearchKnown);
+  };
+  for (const auto& c : sc.reusable)
+    if (ContactSurface::listed_cell(tip_cells, c.cell)) {
+      list.push_back(c.triangle);
+      sc.parts.push_back(parts(c));
+      sc.nodes.push_back(c.nodes);
     }
-    const double search_m = kSearchReuse * shape.tip_radius_m;
-    if (!sc.search_valid || sc.search_m != search_m || (p0 - sc.search_p0).norm() > search_m ||
-        (p1 - sc.search_p1).norm() > search_m) {
-      search_verdicts(m, body, p0, p1, search_m, sc);
-      keep = false;
-    }
-    // This pose's list: the reusable candidates its grid query lists, in the query's order (the
-    // tip's box, then the shaft's), so a node's hit sums its triangles' normals in the same
-    // order as the full search's list (the answer does not depend on where the list was found).
-    const auto tip_cells = b.surface.query_cells(p0 - Vec3::Constant(shape.tip_radius_m + slack),
-                                                 p0 + Vec3::Constant(shape.tip_radius_m + slack));
-    PointGrid::CellRange shaft_cells;
-    if (has_shaft) {
-      const double reach = shape.shaft_radius_m + slack;
-      shaft_cells = b.surface.query_cells(p0.cwiseMin(p1) - Vec3::Constant(reach),
-                                          p0.cwiseMax(p1) + Vec3::Constant(reach));
-    }
-    // The same cells list the same candidates (a tool moved by a few micrometres per step).
-    auto same = [](const PointGrid::CellRange& a, const PointGrid::CellRange& c) {
-      for (int k = 0; k < 3; ++k)
-        if (a.lo[k] != c.lo[k] || a.hi[k] != c.hi[k]) return false;
-      return true;
-    };
-    if (keep && same(tip_cells, sc.list_tip_cells) && same(shaft_cells, sc.list_shaft_cells))
-      return;
-    list.clear();
-    sc.parts.clear();
-    sc.nodes.clear();
-    sc.list_valid = true;
-    sc.list_tip_cells = tip_cells;
-    sc.list_shaft_cells = shaft_cells;
-    // (a part with neither a search nor a node that can be hit is not searched at all)
-    auto parts = [](const StepCandidates::Reusable& c) {
-      int searched = 0;
-      for (int part = 0; part < 2; ++part)
-        if ((c.search & (1 << part)) || ((c.nodes >> (3 * part)) & 7)) searched |= 1 << part;
-      return static_cast<std::uint8_t>((c.parts & searched) | (c.search << 2) |
-                                       StepCandidates::kSearchKnown);
-    };
+  if (has_shaft)
     for (const auto& c : sc.reusable)
-      if (ContactSurface::listed_cell(tip_cells, c.cell)) {
+      if (!ContactSurface::listed_cell(tip_cells, c.cell) &&
+          ContactSurface::listed_cell(shaft_cells, c.cell)) {
         list.push_back(c.triangle);
         sc.parts.push_back(parts(c));
         sc.nodes.push_back(c.nodes);
       }
-    if (has_shaft)
-      for (const auto& c : sc.reusable)
-        if (!ContactSurface::listed_cell(tip_cells, c.cell) &&
-            ContactSurface::listed_cell(shaft_cells, c.cell)) {
-          list.push_back(c.triangle);
-          sc.parts.push_back(parts(c));
-          sc.nodes.push_back(c.nodes);
-        }
-    return;
-  }
+}
+
+// Phase "candidate triangles" on a deformed surface (or a body carrying a force): the rest
+// grid's boxes about the tip and the shaft, each triangle kept once and only where its rest
+// bounding sphere can reach a part (with the parts it can reach). Unit m.
+void State::full_candidate_list(const Model& m, int body, int tool_index, const Vec3& p0,
+                                const Vec3& p1, double slack, StepCandidates& sc) {
+  const BodyModel& b = m.bodies_[body];
+  BodyState& bs = bodies_[body];
+  const ToolShape& shape = m.tools_[tool_index];
+  const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
+  std::vector<int>& list = sc.triangles;
   sc.list_valid = false;
   list.clear();
   sc.parts.clear();
@@ -717,10 +743,6 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
   const ToolShape& shape = m.tools_[tool_index];
   const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
   const double w = reuse_m * (1.0 + 1e-6);  // the moved pose, with room for rounding
-  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
-  const double behind = b.behind_reach_m;
-  const std::vector<Vec3>& normals = b.body->contact_normals();
-  const bool smooth_tip = m.options_.contact_smooth_normals;
   auto& found = sc.triangles;  // scratch (reserved: two queries' worth); the caller refills it
   found.clear();
   const double tip_box = shape.tip_radius_m + slack + w;
@@ -735,32 +757,8 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
   for (int t : found) {
     if (bs.triangle_stamp[t] == stamp) continue;
     bs.triangle_stamp[t] = stamp;
-    const auto& x = b.surface.rest_vertices(t);
-    const auto& slots = b.surface.triangles()[t].slot;
-    int parts = 0;
-    for (int part = 0; part < (has_shaft ? 2 : 1); ++part) {
-      const Vec3& q1 = part == 1 ? p1 : p0;
-      const double reach = (part == 1 ? shape.shaft_radius_m : shape.tip_radius_m) + margin + w;
-      const double back = std::max(reach, behind + w);
-      // Sphere against capsule first (most of the boxes' triangles are far from the part): a
-      // face or edge hit needs a point c of the axis within reach laterally and reach or back in
-      // height of the triangle's plane (|c - centroid| <= radius + reach + back), a node hit c
-      // within reach or back of the vertex (the same bound): beyond it every test below fails.
-      if (!may_reach_triangle(b.surface.centroid(t), b.surface.radius_m(t) + reach + back, p0, q1))
-        continue;
-      bool may = may_touch_face(x[0], b.surface.rest_normal(t), b.surface.centroid(t),
-                                b.surface.radius_m(t), p0, q1, reach, back);
-      for (int k = 0; k < 3 && !may; ++k)
-        may = slots[k] >= 0 && may_touch_face(x[k], normals[slots[k]], x[k], 0.0, p0, q1, reach, back);
-      if (may) parts |= 1 << part;
-    }
     bool flat = false;  // within reach of flat_distance (the smooth tip's)
-    if (parts == 0 && smooth_tip) {
-      const double reach = shape.tip_radius_m + margin + w;
-      const double back = std::max(reach, behind + w);
-      flat = norm_at_most((b.surface.centroid(t) - p0).squaredNorm(),
-                          (b.surface.radius_m(t) + back) * (1.0 + 1e-9));
-    }
+    const int parts = reusable_parts(m, body, t, shape, p0, p1, w, flat);
     if (parts != 0 || flat)
       sc.reusable.push_back({t, b.surface.query_rank(t), static_cast<std::uint8_t>(parts),
                              b.surface.query_cell(t)});
@@ -776,6 +774,47 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
   sc.reuse_p1 = p1;
   sc.search_valid = false;
   sc.list_valid = false;  // (its triangles were the scratch above)
+}
+
+// reusable_candidates, one triangle t: the parts of a tool at p0-p1 moved by at most w (unit m)
+// that can have a hit on it (bit 0 the tip, 1 the shaft; a vertex inside the part, an edge or
+// face point: may_touch_face of the triangle and of each mobile vertex with its normal, reach and
+// behind widened by w); with SimulationOptions::contact_smooth_normals and no part, `flat`: the
+// triangle's rest bounding sphere is within the tip's flat bound of the moved tip.
+int State::reusable_parts(const Model& m, int body, int t, const ToolShape& shape,
+                          const Vec3& p0, const Vec3& p1, double w, bool& flat) const {
+  const BodyModel& b = m.bodies_[body];
+  const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
+  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
+  const double behind = b.behind_reach_m;
+  const std::vector<Vec3>& normals = b.body->contact_normals();
+  const auto& x = b.surface.rest_vertices(t);
+  const auto& slots = b.surface.triangles()[t].slot;
+  int parts = 0;
+  for (int part = 0; part < (has_shaft ? 2 : 1); ++part) {
+    const Vec3& q1 = part == 1 ? p1 : p0;
+    const double reach = (part == 1 ? shape.shaft_radius_m : shape.tip_radius_m) + margin + w;
+    const double back = std::max(reach, behind + w);
+    // Sphere against capsule first (most of the boxes' triangles are far from the part): a
+    // face or edge hit needs a point c of the axis within reach laterally and reach or back in
+    // height of the triangle's plane (|c - centroid| <= radius + reach + back), a node hit c
+    // within reach or back of the vertex (the same bound): beyond it every test below fails.
+    if (!may_reach_triangle(b.surface.centroid(t), b.surface.radius_m(t) + reach + back, p0, q1))
+      continue;
+    bool may = may_touch_face(x[0], b.surface.rest_normal(t), b.surface.centroid(t),
+                              b.surface.radius_m(t), p0, q1, reach, back);
+    for (int k = 0; k < 3 && !may; ++k)
+      may = slots[k] >= 0 && may_touch_face(x[k], normals[slots[k]], x[k], 0.0, p0, q1, reach, back);
+    if (may) parts |= 1 << part;
+  }
+  flat = false;
+  if (parts == 0 && m.options_.contact_smooth_normals) {
+    const double reach = shape.tip_radius_m + margin + w;
+    const double back = std::max(reach, behind + w);
+    flat = norm_at_most((b.surface.centroid(t) - p0).squaredNorm(),
+                        (b.surface.radius_m(t) + back) * (1.0 + 1e-9));
+  }
+  return parts;
 }
 
 // Phase "candidate triangles" on the rest surface, the reusable list's search verdicts: per
@@ -961,7 +1000,9 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
 }
 
 // The hits of one tool part on one triangle (positions x, unit normal n): its vertices inside
-// the part (+ margin) and the triangle's closest point when it is an edge or face point.
+// the part (+ margin; node_hits) and the triangle's closest point when it is an edge or face
+// point (the smooth tip's projection along the interpolated normals, smooth_projection_hit, else
+// edge_or_face_hit).
 void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                           const Vec3& n, const Vec3& centre, double rho, bool shaft,
                           bool at_rest, const ToolShape& shape,
@@ -975,14 +1016,52 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   h.shaft = shaft;
   h.at_rest = at_rest;
   h.face_normal = n;
-  // Node hits: the triangle's vertices inside the part (each node's own closest centre). One hit
-  // per node, geometry and part: a node seen again from another of its triangles adds that
-  // triangle's normal to the hit's sum (the mean normal of the merge) and the hit keeps the
-  // lowest triangle (the merge's choice), so the merge sorts nodes, not node-triangle pairs.
-  // (node_mask: the vertices that can be hit, search_verdicts; the others are not tested)
+  node_hits(tri, x, shape, p0, p1, reach, max_penetration_m, node_normals, bs, memo, node_mask,
+            lin, h);
+  // Most candidates are far from the part (the box reaches behind_reach behind the surface):
+  // their face or edge point is skipped by a plane test before the closest-point search, and
+  // that test by a sphere-capsule one (may_reach_triangle: the same rejections, cheaper). On the
+  // reusable list the tests were made for the poses near this one (search: 0 none can hit, 2 it
+  // may, 3 it may but not by the smooth tip's projection; search_verdicts), 1 here.
+  if (search == 0) return;
+  const double behind = std::max(reach, max_penetration_m);
+  if (search == 1 &&
+      (!may_reach_triangle(centre, rho + reach + behind, p0, shaft ? p1 : p0) ||
+       !may_touch_face(x[0], n, centre, rho, p0, shaft ? p1 : p0, reach, behind) ||
+       (shaft && beside_axis(x, n, p0, p1, reach))))
+    return;
+  if (!shaft && smooth_normals != nullptr) {
+    if (search != 3 &&
+        smooth_projection_hit(x, *smooth_normals, p0, reach, max_penetration_m, h))
+      return;
+    // No point of the triangle within reach has the centre on its interpolated normal (beside a
+    // steep facet whose node normals turn far from its face normal: on the 4 and 5 mm brains the
+    // tip 1 mm from a 2.9 mm step's top edge, the projection landing on none of the triangles
+    // within reach, and the tip left with one radial node row, 0.2-0.5 of the force around). The
+    // triangle's flat face or edge hit (the closest point, as without smooth normals) stands in;
+    // the merge keeps such rows only where the tip has no projected face row on the body.
+    h.flat_fallback = true;
+  }
+  edge_or_face_hit(tri, x, n, shape, p0, p1, reach, max_penetration_m, h);
+}
+
+// part_features: the triangle's vertices inside the part (each node's own closest centre; h: the
+// hit's triangle, part, geometry and face normal). One hit per node, geometry and part: a node
+// seen again from another of its triangles adds that triangle's normal to the hit's sum (the
+// mean normal of the merge) and the hit keeps the lowest triangle (the merge's choice), so the
+// merge sorts nodes, not node-triangle pairs. (node_mask: the vertices that can be hit,
+// search_verdicts; the others are not tested.) Unit m.
+void State::node_hits(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
+                      const ToolShape& shape, const Vec3& p0, const Vec3& p1, double reach,
+                      double max_penetration_m, const std::vector<Vec3>& node_normals,
+                      BodyState& bs, long long memo, int node_mask,
+                      const TierLinearization* lin, FeatureHit& h) {
+  const int t = h.triangle;
+  const bool shaft = h.shaft;
+  const Vec3 n = h.face_normal;
   for (int k = 0; k < 3; ++k) {
     if (tri.slot[k] < 0 || !(node_mask & (1 << k))) continue;
-    const std::size_t i = 4 * static_cast<std::size_t>(tri.slot[k]) + (at_rest ? 2 : 0) + shaft;
+    const std::size_t i = 4 * static_cast<std::size_t>(tri.slot[k]) + (h.at_rest ? 2 : 0) + shaft;
     BodyState::NodeTest& test = bs.node_tests[i];
     if (test.stamp == memo) {
       if (!test.in) continue;
@@ -1019,111 +1098,108 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
     h.centre_m = ck;
     hits_.push_back(h);
   }
-  // Most candidates are far from the part (the box reaches behind_reach behind the surface):
-  // their face or edge point is skipped by a plane test before the closest-point search, and
-  // that test by a sphere-capsule one (may_reach_triangle: the same rejections, cheaper). On the
-  // reusable list the tests were made for the poses near this one (search: 0 none can hit, 2 it
-  // may, 3 it may but not by the smooth tip's projection; search_verdicts), 1 here.
-  if (search == 0) return;
-  const double behind = std::max(reach, max_penetration_m);
-  if (search == 1 &&
-      (!may_reach_triangle(centre, rho + reach + behind, p0, shaft ? p1 : p0) ||
-       !may_touch_face(x[0], n, centre, rho, p0, shaft ? p1 : p0, reach, behind) ||
-       (shaft && beside_axis(x, n, p0, p1, reach))))
-    return;
-  // SimulationOptions::contact_smooth_normals, the tip: the centre projected along the normals
-  // interpolated from the nodes' (project_along_normals), one face row per triangle that holds
-  // the projection, its normal the interpolated one: no edge rows, and the row, its normal and
-  // its depth pass continuously from a triangle to the next across edges and creases.
-  if (!shaft && smooth_normals != nullptr) {
-    TrianglePoint at;
-    Vec3 smooth_n;
-    double height = 0.0;
-    if (search != 3 && project_along_normals(p0, x, *smooth_normals, at, smooth_n, height) &&
-        within(p0 - at.point_m, smooth_n, reach, max_penetration_m)) {
-      h.key = feature_key(false, TriangleFeature::kFace, 0, static_cast<std::uint64_t>(t));
-      h.at = at;
-      h.centre_m = p0;
-      h.face_normal = smooth_n;
-      hits_.push_back(h);
-      return;
-    }
-    // No point of the triangle within reach has the centre on its interpolated normal (beside a
-    // steep facet whose node normals turn far from its face normal: on the 4 and 5 mm brains the
-    // tip 1 mm from a 2.9 mm step's top edge, the projection landing on none of the triangles
-    // within reach, and the tip left with one radial node row, 0.2-0.5 of the force around). The
-    // triangle's flat face or edge hit (the closest point, as without smooth normals) stands in;
-    // the merge keeps such rows only where the tip has no projected face row on the body.
-    h.flat_fallback = true;
-  }
-  // The part's centre for this triangle: the tip centre, or the shaft axis point closest to the
-  // triangle (alternating projections between the two convex sets).
-  // Four rounds; once a round gives back its own centre bit for bit, the rounds left repeat it
-  // (the same inputs), so they are skipped: the same point as four rounds (a shaft beside a
-  // face parallel to it stops after the first).
-  Vec3 c = p0;
+}
+
+// part_features, SimulationOptions::contact_smooth_normals, the tip: the centre p0 projected
+// along the normals interpolated from the nodes' (project_along_normals), one face row per
+// triangle that holds the projection, its normal the interpolated one: no edge rows, and the row,
+// its normal and its depth pass continuously from a triangle to the next across edges and
+// creases. True (the hit added) if the projection lands within reach (unit m).
+bool State::smooth_projection_hit(const std::array<Vec3, 3>& x,
+                                  const std::array<Vec3, 3>& smooth_normals, const Vec3& p0,
+                                  double reach, double max_penetration_m, FeatureHit& h) {
   TrianglePoint at;
-  bool fixed = false;
-  // The shaft: the centre's derivative in the tool's translation t, dc/dt = (I - u u^T) + u w^T
-  // (u the unit axis), carried through the rounds as w (FeatureHit::centre_slide; K's rows,
-  // merge_features): the rounds stop short of the closest pair where the axis is tilted against
-  // the triangle (each round leaves u . P u of the centre's distance to it, P the projection onto
-  // the feature reached: 1 - (n . u)^2 on a face, (e . u)^2 on an edge), so the centre and the
-  // point depend on t through the rounds made, not through the closest pair's formula.
-  if (shaft) {
-    // (closest_on_segment's axis and its squared length formed once: the same values)
-    const Vec3 e = p1 - p0;
-    const double len2 = e.squaredNorm();
-    const Vec3 u = len2 > 0.0 ? Vec3(e / std::sqrt(len2)) : Vec3::Zero();
-    Vec3 w = Vec3::Zero();
-    // The axis point of q (clamped to the segment: there dc/dt = I, w = u); dq/dt = P dc/dt with
-    // P u = pu gives dnext/dt = (I - u u^T) + u ((I - u u^T) pu + (u . pu) w)^T inside it.
-    auto on_axis = [&](const Vec3& q, const Vec3& pu) {
-      if (len2 == 0.0) return p0;
-      const double s = (q - p0).dot(e) / len2;
-      if (!(s > 0.0 && s < 1.0)) {
-        w = u;
-        return Vec3(p0 + std::clamp(s, 0.0, 1.0) * e);
-      }
-      const double along = u.dot(pu);
-      w = pu - along * u + along * w;
-      return Vec3(p0 + s * e);
-    };
-    // P u of the point's feature: the face's plane, the edge's line, a vertex (fixed).
-    auto projected_axis = [&](const TrianglePoint& q) -> Vec3 {
-      if (q.feature == TriangleFeature::kFace) return u - n.dot(u) * n;
-      if (q.feature == TriangleFeature::kVertex) return Vec3::Zero();
-      const Vec3 d = (x[(q.a + 1) % 3] - x[q.a]).normalized();
-      return d.dot(u) * d;
-    };
-    c = on_axis((x[0] + x[1] + x[2]) / 3.0, Vec3::Zero());
-    for (int it = 0; it < 4 && !fixed; ++it) {
-      at = closest_on_triangle(c, x);
-      // (A round that gives its own centre back leaves w as it was: on a vertex pu = 0 and w = 0
-      // before and after, on a face parallel to the axis pu = u, at an end w = u.)
-      const Vec3 next = on_axis(at.point_m, projected_axis(at));
-      fixed = std::memcmp(next.data(), c.data(), sizeof(Vec3)) == 0;
-      c = next;
-    }
-    h.centre_slide = w;
-  }
-  if (!fixed) at = closest_on_triangle(c, x);
-  // An edge by its distance only (behind a ridge the far flank's edge is not the surface the
-  // tool went through); a face also from behind.
+  Vec3 smooth_n;
+  double height = 0.0;
+  if (!project_along_normals(p0, x, smooth_normals, at, smooth_n, height) ||
+      !within(p0 - at.point_m, smooth_n, reach, max_penetration_m))
+    return false;
+  h.key = feature_key(false, TriangleFeature::kFace, 0, static_cast<std::uint64_t>(h.triangle));
+  h.at = at;
+  h.centre_m = p0;
+  h.face_normal = smooth_n;
+  hits_.push_back(h);
+  return true;
+}
+
+// part_features: the triangle's closest point to the part's centre (the tip centre, or the shaft
+// axis point closest to the triangle: shaft_centre) when it is an edge point within reach (by its
+// distance only: behind a ridge the far flank's edge is not the surface the tool went through)
+// or a face point within reach, also from behind (within). Unit m.
+void State::edge_or_face_hit(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
+                             const Vec3& n, const ToolShape& shape, const Vec3& p0,
+                             const Vec3& p1, double reach, double max_penetration_m,
+                             FeatureHit& h) {
+  TrianglePoint at;
+  const Vec3 c = h.shaft ? shaft_centre(x, n, p0, p1, at, h.centre_slide) : p0;
+  if (!h.shaft) at = closest_on_triangle(c, x);
   if (at.feature == TriangleFeature::kVertex) return;
-  if (shaft && inside_tip(at.point_m, p0, shape)) return;
+  if (h.shaft && inside_tip(at.point_m, p0, shape)) return;
   if (at.feature == TriangleFeature::kEdge ? (c - at.point_m).norm() > reach
                                            : !within(c - at.point_m, n, reach, max_penetration_m))
     return;
   if (at.feature == TriangleFeature::kEdge) {
     const std::uint64_t a = tri.node[at.a], e = tri.node[(at.a + 1) % 3];
-    h.key = feature_key(shaft, TriangleFeature::kEdge, std::min(a, e), std::max(a, e));
+    h.key = feature_key(h.shaft, TriangleFeature::kEdge, std::min(a, e), std::max(a, e));
   } else {
-    h.key = feature_key(shaft, TriangleFeature::kFace, 0, static_cast<std::uint64_t>(t));
+    h.key = feature_key(h.shaft, TriangleFeature::kFace, 0, static_cast<std::uint64_t>(h.triangle));
   }
   h.at = at;
   h.centre_m = c;
   hits_.push_back(h);
+}
+
+// part_features, the shaft: its axis point (the segment p0-p1) closest to the triangle x (unit
+// normal n) by alternating projections between the two convex sets, and `at` the triangle's
+// closest point to it (unit m). Four rounds; once a round gives back its own centre bit for bit,
+// the rounds left repeat it (the same inputs), so they are skipped: the same point as four rounds
+// (a shaft beside a face parallel to it stops after the first).
+// The centre's derivative in the tool's translation t, dc/dt = (I - u u^T) + u w^T (u the unit
+// axis), carried through the rounds as w (centre_slide: FeatureHit::centre_slide; K's rows,
+// merge_features): the rounds stop short of the closest pair where the axis is tilted against
+// the triangle (each round leaves u . P u of the centre's distance to it, P the projection onto
+// the feature reached: 1 - (n . u)^2 on a face, (e . u)^2 on an edge), so the centre and the
+// point depend on t through the rounds made, not through the closest pair's formula.
+Vec3 State::shaft_centre(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0,
+                         const Vec3& p1, TrianglePoint& at, Vec3& centre_slide) {
+  // (closest_on_segment's axis and its squared length formed once: the same values)
+  const Vec3 e = p1 - p0;
+  const double len2 = e.squaredNorm();
+  const Vec3 u = len2 > 0.0 ? Vec3(e / std::sqrt(len2)) : Vec3::Zero();
+  Vec3 w = Vec3::Zero();
+  // The axis point of q (clamped to the segment: there dc/dt = I, w = u); dq/dt = P dc/dt with
+  // P u = pu gives dnext/dt = (I - u u^T) + u ((I - u u^T) pu + (u . pu) w)^T inside it.
+  auto on_axis = [&](const Vec3& q, const Vec3& pu) {
+    if (len2 == 0.0) return p0;
+    const double s = (q - p0).dot(e) / len2;
+    if (!(s > 0.0 && s < 1.0)) {
+      w = u;
+      return Vec3(p0 + std::clamp(s, 0.0, 1.0) * e);
+    }
+    const double along = u.dot(pu);
+    w = pu - along * u + along * w;
+    return Vec3(p0 + s * e);
+  };
+  // P u of the point's feature: the face's plane, the edge's line, a vertex (fixed).
+  auto projected_axis = [&](const TrianglePoint& q) -> Vec3 {
+    if (q.feature == TriangleFeature::kFace) return u - n.dot(u) * n;
+    if (q.feature == TriangleFeature::kVertex) return Vec3::Zero();
+    const Vec3 d = (x[(q.a + 1) % 3] - x[q.a]).normalized();
+    return d.dot(u) * d;
+  };
+  Vec3 c = on_axis((x[0] + x[1] + x[2]) / 3.0, Vec3::Zero());
+  bool fixed = false;
+  for (int it = 0; it < 4 && !fixed; ++it) {
+    at = closest_on_triangle(c, x);
+    // (A round that gives its own centre back leaves w as it was: on a vertex pu = 0 and w = 0
+    // before and after, on a face parallel to the axis pu = u, at an end w = u.)
+    const Vec3 next = on_axis(at.point_m, projected_axis(at));
+    fixed = std::memcmp(next.data(), c.data(), sizeof(Vec3)) == 0;
+    c = next;
+  }
+  centre_slide = w;
+  if (!fixed) at = closest_on_triangle(c, x);
+  return c;
 }
 
 // Phase "rows", helper of the merge: the distance of c to the closest point of the flat
@@ -1181,10 +1257,14 @@ void State::drop_shared_projections(double tip_radius_m) {
       if (w <= kOnBoundary) return true;
     return false;
   };
+  // Each boundary hit against the earlier boundary hits only (boundary_hits_, ascending: the
+  // pairs and their order of the test over all earlier hits, which skipped the others): linear
+  // in the hits, quadratic in the boundary hits alone (the copies at an edge or vertex).
   bool dropped = false;
+  boundary_hits_.clear();
   for (std::size_t i = 0; i < hits_.size(); ++i) {
     if (!on_boundary(hits_[i])) continue;
-    for (std::size_t j = 0; j < i; ++j) {
+    for (const std::size_t j : boundary_hits_) {
       FeatureHit& a = hits_[i];
       FeatureHit& c = hits_[j];
       if (!on_boundary(c) || c.at_rest != a.at_rest ||
@@ -1194,6 +1274,7 @@ void State::drop_shared_projections(double tip_radius_m) {
       dropped = true;
       if (a.triangle < 0) break;
     }
+    boundary_hits_.push_back(i);
   }
   if (!dropped) return;
   std::size_t kept = 0;

@@ -299,6 +299,12 @@ class State {
   struct StepCandidates;
   void reusable_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
                            const Vec3& p1, double slack, double reuse_m, StepCandidates& sc);
+  int reusable_parts(const Model& m, int body, int t, const ToolShape& shape, const Vec3& p0,
+                     const Vec3& p1, double w, bool& flat) const;
+  void rest_candidate_list(const Model& m, int body, int tool_index, const Vec3& p0,
+                           const Vec3& p1, double slack, StepCandidates& sc);
+  void full_candidate_list(const Model& m, int body, int tool_index, const Vec3& p0,
+                           const Vec3& p1, double slack, StepCandidates& sc);
   void search_verdicts(const Model& m, int body, const Vec3& p0, const Vec3& p1, double search_m,
                        StepCandidates& sc);
   void triangle_features(const Model& m, int body, int tool, const ToolPose& pose,
@@ -312,6 +318,19 @@ class State {
                      const std::vector<Vec3>& node_normals, BodyState& bs, long long memo,
                      const std::array<Vec3, 3>* smooth_normals, int search, int node_mask,
                      const TierLinearization* lin);
+  // part_features' steps (contact_step.cpp).
+  void node_hits(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
+                 const ToolShape& shape, const Vec3& p0, const Vec3& p1, double reach,
+                 double max_penetration_m, const std::vector<Vec3>& node_normals, BodyState& bs,
+                 long long memo, int node_mask, const TierLinearization* lin, FeatureHit& h);
+  bool smooth_projection_hit(const std::array<Vec3, 3>& x,
+                             const std::array<Vec3, 3>& smooth_normals, const Vec3& p0,
+                             double reach, double max_penetration_m, FeatureHit& h);
+  void edge_or_face_hit(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x, const Vec3& n,
+                        const ToolShape& shape, const Vec3& p0, const Vec3& p1, double reach,
+                        double max_penetration_m, FeatureHit& h);
+  static Vec3 shaft_centre(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0,
+                           const Vec3& p1, TrianglePoint& at, Vec3& centre_slide);
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape,
                       const Vec3& tip, const Vec3& axis);
   // merge_features' steps: one feature's row as they form it (contact_step.cpp).
@@ -428,6 +447,7 @@ class State {
   long long stamp_counter_{0};
   long long geometry_counter_{0};  // rows found on a new geometry (positions cached per value)
   std::vector<FeatureHit> hits_;   // features of one body and tool, before merging
+  std::vector<std::size_t> boundary_hits_;  // drop_shared_projections: hits on an edge or vertex
   // Per tool and body (index tool * bodies + body), kept through the geometries of one step: the
   // candidate triangles (and the slack they were found with) and, LINEAR, the hits of the first
   // geometry, which is the rest surface (the later geometries' rest hits, not searched again).
