@@ -1342,9 +1342,12 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
     }
     // A part whose centre lies deeper than behind_reach behind the surface does not push it.
     if ((fr.exit_row ? fr.plane_h : fr.n.dot(fr.d)) < -b.behind_reach_m) continue;
-    Row r;
-    if (!feature_row(m, body, tool, shape, h, fr, r)) continue;  // all on fixed nodes
-    tool_rows_.push_back(r);
+    // (made in place: a Row is ~1 kB, and most of the merge's time was copying them)
+    Row& r = tool_rows_.emplace_back();
+    if (!feature_row(m, body, tool, shape, h, fr, r)) {  // all on fixed nodes
+      tool_rows_.pop_back();
+      continue;
+    }
     tool_row_centre_.push_back(h.centre_m);
     tool_row_plane_.push_back(fr.exit_row ? fr.plane_n : r.normal);
     tool_row_plane_h_.push_back(fr.exit_row ? fr.plane_h : r.height_m);
@@ -1978,9 +1981,10 @@ bool State::spread_row(const Model& m, Row& r) {
   // A sliding row's weight gradient is made with its load (normal_turn reads it from the memo).
   const bool slides = !tier_ && !r.point_slide.isZero(0.0);
   bool found;
+  const SpreadLoad* load = &spread_load_;  // (the memo's read in place, not copied)
   if (memo && (memo->has_gradient || !slides)) {
     found = memo->found;
-    if (found) spread_load_ = memo->load;
+    load = &memo->load;
     // Carried into this geometry's memo, so the next geometry finds it too (a held tool's rows
     // repeat for many steps: else spread again every second step).
     last_spread_ = memo;
@@ -2003,10 +2007,10 @@ bool State::spread_row(const Model& m, Row& r) {
     }
   }
   if (found) {
-    r.nodes = spread_load_.nodes;
+    r.nodes = load->nodes;
     for (int k = 0; k < r.nodes; ++k) {
-      r.slot[k] = spread_load_.slot[k];
-      r.w[k] = spread_load_.weight[k];
+      r.slot[k] = load->slot[k];
+      r.w[k] = load->weight[k];
     }
   } else {
     r.spread_radius_m = 0.0;
