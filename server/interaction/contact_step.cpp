@@ -188,6 +188,22 @@ bool deeper(const Row& a, const Row& b) {
   return a.key < b.key;
 }
 
+// A spread's inputs (body, point, normal, radius) as one 64-bit key, of their bits: inputs equal
+// bit for bit (find_spread's test) have equal keys.
+std::uint64_t spread_key(int body, const Vec3& at, const Vec3& normal, double radius) {
+  std::uint64_t h = static_cast<std::uint64_t>(static_cast<std::uint32_t>(body)) * 0x9E3779B97F4A7C15ull;
+  auto mix = [&h](double v) {
+    std::uint64_t b;
+    std::memcpy(&b, &v, sizeof b);
+    h = (h ^ b) * 0x100000001B3ull;
+    h ^= h >> 29;
+  };
+  for (int k = 0; k < 3; ++k) mix(at[k]);
+  for (int k = 0; k < 3; ++k) mix(normal[k]);
+  mix(radius);
+  return h;
+}
+
 // A row's feature, tool and body as one key (rows of two geometries or steps compared).
 std::uint64_t row_key(const Row& r) {
   return (static_cast<std::uint64_t>(r.tool) << 48) ^ r.key ^
@@ -346,6 +362,10 @@ void State::reserve_workspace(const Model& m, int tools) {
   spread_memo_.reserve(2 * static_cast<std::size_t>(max_contact));
   spread_prev_memo_.clear();
   spread_prev_memo_.reserve(2 * static_cast<std::size_t>(max_contact));
+  spread_keys_.clear();
+  spread_keys_.reserve(spread_memo_.capacity());
+  spread_prev_keys_.clear();
+  spread_prev_keys_.reserve(spread_prev_memo_.capacity());
   rows_.reserve(max_contact);
   row_main_slot_.reserve(max_contact);
   // The sliding rows' block of W is constant: W_A (host, coupled) + W_B (embedded), per body.
@@ -1865,7 +1885,7 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
       std::memcmp(memo.axis.data(), pose.axis.data(), sizeof(double) * 3) == 0) {
     for (const Row& r : memo.rows) merge_tool_row(r);
     for (const SpreadMemo& e : memo.spreads)
-      if (spread_memo_.size() < spread_memo_.capacity()) spread_memo_.push_back(e);
+      add_spread(e);
     geometry_rows_dropped_ += memo.dropped;
     return;
   }
@@ -1954,18 +1974,33 @@ void State::merge_tool_row(const Row& r) {
 }
 
 // A spread memo entry with the row's inputs (bit for bit): this geometry's, else the last's
-// (*from_last then true).
+// (*from_last then true). The entries' keys are scanned (spread_keys_: 8 bytes an entry, where
+// an entry is ~0.7 kB) and an entry compared only where its key is the row's.
 const State::SpreadMemo* State::find_spread(const Row& r, bool* from_last) const {
-  for (const auto* list : {&spread_memo_, &spread_prev_memo_})
-    for (const SpreadMemo& e : *list)
+  const std::uint64_t key = spread_key(r.body, r.spread_at_m, r.spread_normal, r.spread_radius_m);
+  for (int l = 0; l < 2; ++l) {
+    const std::vector<SpreadMemo>& list = l == 0 ? spread_memo_ : spread_prev_memo_;
+    const std::vector<std::uint64_t>& keys = l == 0 ? spread_keys_ : spread_prev_keys_;
+    for (std::size_t i = 0; i < keys.size(); ++i) {
+      if (keys[i] != key) continue;
+      const SpreadMemo& e = list[i];
       if (e.body == r.body && e.radius_m == r.spread_radius_m &&
           std::memcmp(e.at_m.data(), r.spread_at_m.data(), sizeof(double) * 3) == 0 &&
           std::memcmp(e.normal.data(), r.spread_normal.data(), sizeof(double) * 3) == 0 &&
           std::signbit(e.radius_m) == std::signbit(r.spread_radius_m)) {
-        if (from_last) *from_last = list == &spread_prev_memo_;
+        if (from_last) *from_last = l == 1;
         return &e;
       }
+    }
+  }
   return nullptr;
+}
+
+// A spread memo entry appended to this geometry's (within the reserved capacity), with its key.
+void State::add_spread(const SpreadMemo& e) {
+  if (spread_memo_.size() >= spread_memo_.capacity()) return;
+  spread_memo_.push_back(e);
+  spread_keys_.push_back(spread_key(e.body, e.at_m, e.normal, e.radius_m));
 }
 
 // Phase "rows", a kept row's spread (SimulationOptions::contact_spread): the unit load spread
@@ -1988,12 +2023,14 @@ bool State::spread_row(const Model& m, Row& r) {
     // Carried into this geometry's memo, so the next geometry finds it too (a held tool's rows
     // repeat for many steps: else spread again every second step).
     last_spread_ = memo;
-    if (from_last && spread_memo_.size() < spread_memo_.capacity()) spread_memo_.push_back(*memo);
+    if (from_last) add_spread(*memo);
   } else {
     found = m.bodies_[r.body].surface.spread(r.spread_at_m, r.spread_normal, r.spread_radius_m,
                                              spread_triangles_, spread_load_,
                                              slides ? &spread_gradient_ : nullptr);
     if (spread_memo_.size() < spread_memo_.capacity()) {
+      spread_keys_.push_back(
+          spread_key(r.body, r.spread_at_m, r.spread_normal, r.spread_radius_m));
       SpreadMemo& e = spread_memo_.emplace_back();
       e.body = r.body;
       e.at_m = r.spread_at_m;
@@ -3278,6 +3315,8 @@ LcpResult State::solve_geometry(const Model& m, const std::vector<ToolPose>& pos
   geometry_rows_dropped_ = 0;
   spread_prev_memo_.swap(spread_memo_);
   spread_memo_.clear();
+  spread_prev_keys_.swap(spread_keys_);
+  spread_keys_.clear();
   // The rest surface: LINEAR (no tier offsets in the rows) with no force on any body.
   rest_geometry_ = !tier_;
   for (const BodyState& bs : bodies_)

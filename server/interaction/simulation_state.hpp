@@ -625,6 +625,10 @@ class State {
   // is a function of these and the constant rest surface, so an equal input (bit for bit) takes
   // the stored load.
   std::vector<SpreadMemo> spread_memo_, spread_prev_memo_;
+  // Per entry of spread_memo_ / spread_prev_memo_: its inputs' key (contact_step.cpp spread_key),
+  // which find_spread scans.
+  std::vector<std::uint64_t> spread_keys_, spread_prev_keys_;
+  void add_spread(const SpreadMemo& e);
   const SpreadMemo* last_spread_{nullptr};  // spread_row: the memo entry of its row's spread
   // The memo entry of a spread with the row's inputs (bit for bit), this geometry's or the last's.
   const SpreadMemo* find_spread(const Row& r, bool* from_last) const;
