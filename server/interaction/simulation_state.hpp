@@ -512,6 +512,7 @@ class State {
   std::vector<mesh::Vec3> tool_row_plane_;
   std::vector<double> tool_row_plane_h_;
   std::vector<char> tool_row_fallback_;  // per row from the body's first: a flat fallback row
+  // (copied field by field: contact_step.cpp copy_spread)
   struct SpreadMemo {  // a spread (spread_row) by its inputs: body, point, normal, radius
     int body{-1};
     Vec3 at_m{Vec3::Zero()};
@@ -629,6 +630,7 @@ class State {
   // which find_spread scans.
   std::vector<std::uint64_t> spread_keys_, spread_prev_keys_;
   void add_spread(const SpreadMemo& e);
+  static void copy_spread(SpreadMemo& d, const SpreadMemo& e);
   const SpreadMemo* last_spread_{nullptr};  // spread_row: the memo entry of its row's spread
   // The memo entry of a spread with the row's inputs (bit for bit), this geometry's or the last's.
   const SpreadMemo* find_spread(const Row& r, bool* from_last) const;
