@@ -386,6 +386,8 @@ void State::reserve_workspace(const Model& m, int tools) {
   for (const auto& b : m.bodies_) triangles = std::max(triangles, b.surface.triangles().size());
   hits_.reserve(std::min<std::size_t>(8 * triangles, 8 * 4096));
   boundary_hits_.reserve(hits_.capacity());
+  hit_order_.reserve(hits_.capacity());
+  sorted_hits_.reserve(hits_.capacity());
   step_candidates_.resize(static_cast<std::size_t>(tools) * bodies_.size());
   for (auto& sc : step_candidates_) {
     sc.triangles.reserve(2 * triangles);
@@ -1322,12 +1324,8 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   const bool smooth_tip = m.options_.contact_smooth_normals;
   if (smooth_tip) drop_shared_projections(shape.tip_radius_m);
   // One row per feature, from the deformed surface's hits when there are any (else the rest
-  // surface's): sorted by feature, then geometry, then triangle.
-  std::sort(hits_.begin(), hits_.end(), [](const FeatureHit& a, const FeatureHit& c) {
-    if (a.key != c.key) return a.key < c.key;
-    if (a.at_rest != c.at_rest) return c.at_rest;
-    return a.triangle < c.triangle;
-  });
+  // surface's): sorted by feature, then geometry, then triangle (sort_hits).
+  sort_hits();
   for (std::size_t i = 0; i < hits_.size();) {
     const std::size_t i0 = i;
     FeatureRow fr;
@@ -1377,6 +1375,29 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
   // The flat fallback rows only where no triangle holds the tip's projection.
   if (projected_face) drop_fallback_rows(first);
   drop_behind_rows(first, shape, axis);
+}
+
+// Phase "rows", merge (merge_features): the hits sorted by feature, then geometry (the deformed
+// surface's first), then triangle. A total order (one hit per feature, geometry and triangle:
+// a node's hits are one per geometry and part, a triangle gives one edge or face hit per part),
+// so sorting 24-byte records of these (hit_order_) and moving each hit once gives the order of
+// sorting the ~150-byte hits themselves.
+void State::sort_hits() {
+  hit_order_.clear();
+  for (std::size_t i = 0; i < hits_.size(); ++i) {
+    const FeatureHit& h = hits_[i];
+    hit_order_.push_back({h.key,
+                          (static_cast<std::uint64_t>(h.at_rest ? 1 : 0) << 32) |
+                              static_cast<std::uint32_t>(h.triangle),
+                          i});
+  }
+  std::sort(hit_order_.begin(), hit_order_.end(), [](const HitOrder& a, const HitOrder& c) {
+    if (a.key != c.key) return a.key < c.key;
+    return a.then < c.then;
+  });
+  sorted_hits_.clear();
+  for (const HitOrder& o : hit_order_) sorted_hits_.push_back(hits_[o.index]);
+  hits_.swap(sorted_hits_);
 }
 
 // Phase "rows", merge (merge_features): the hits of the feature of hits_[i0] (sorted: they

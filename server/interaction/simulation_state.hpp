@@ -363,6 +363,7 @@ class State {
     Vec3 plane_n{Vec3::Zero()};    // exit_row: the surface's plane for the entry rule
     double plane_h{0.0};           // and the centre's height above it, unit m
   };
+  void sort_hits();
   std::size_t feature_hits(std::size_t i0, FeatureRow& fr) const;
   void feature_nodes(const Model& m, int body, const FeatureHit& h, FeatureRow& fr);
   void face_row_geometry(const BodyModel& b, const FeatureHit& h, const Vec3& axis,
@@ -448,6 +449,14 @@ class State {
   long long geometry_counter_{0};  // rows found on a new geometry (positions cached per value)
   std::vector<FeatureHit> hits_;   // features of one body and tool, before merging
   std::vector<std::size_t> boundary_hits_;  // drop_shared_projections: hits on an edge or vertex
+  // sort_hits: per hit its key, (geometry, triangle) and index; the hits in that order.
+  struct HitOrder {
+    std::uint64_t key;
+    std::uint64_t then;
+    std::size_t index;
+  };
+  std::vector<HitOrder> hit_order_;
+  std::vector<FeatureHit> sorted_hits_;
   // Per tool and body (index tool * bodies + body), kept through the geometries of one step: the
   // candidate triangles (and the slack they were found with) and, LINEAR, the hits of the first
   // geometry, which is the rest surface (the later geometries' rest hits, not searched again).
