@@ -230,6 +230,9 @@ State::State(const Model& m) {
                                                          static_cast<int>(b.rest_m.size()));
       bs.tool_force_n.assign(b.rest_m.size(), Vec3::Zero());
       bs.relax_stamp.assign(b.rest_m.size(), -1);
+      bs.history_u_m.assign(b.rest_m.size(), Vec3::Zero());
+      bs.history_u_stamp.assign(b.rest_m.size(), -1);
+      bs.history_forces_n.assign(b.rest_m.size(), Vec3::Zero());
     }
     if (m.options_.contact_near_field && !b.host_material.viscoelastic.empty()) {
       // One slot per pose index: the scene's tools or the stations (scene ranges), the more.
@@ -2595,18 +2598,26 @@ void State::delassus_fill(const Model& m, int ns) {
   const int nc = static_cast<int>(rows_.size());
   const int nn = static_cast<int>(delassus_nodes_.size());
   const double eps = m.options_.contact_row_compliance;
+  // Viscoelastic: the history's displacement C h at each distinct node of the rows, once
+  // (BodyState::history_u_m, stamped with this geometry; normal_turn's U_k reads it too).
+  for (const auto& [body, slot] : delassus_nodes_) {
+    BodyState& bs = bodies_[body];
+    if (!bs.history || bs.history->slots().empty()) continue;
+    bs.history_u_m[slot] = bs.history->displacement(*bs.columns, slot);
+    bs.history_u_stamp[slot] = geometry_counter_;
+  }
   for (int r = 0; r < nc; ++r) {
     const Row& a = rows_[r];
     const int i = ns + r;
-    const auto& cols = *bodies_[a.body].columns;
-    const ViscoelasticHistory* hist = bodies_[a.body].history.get();
+    const BodyState& bs = bodies_[a.body];
+    const ViscoelasticHistory* hist = bs.history.get();
     delta_[i] = a.rest_depth_m;
     // Viscoelastic: the history's displacement moves the surface (depth + its share along m),
     // and the step's compliance is alpha W (viscoelastic_history.hpp).
     const double alpha = hist ? hist->alpha() : 1.0;
     if (hist && !hist->slots().empty())
       for (int p = 0; p < a.nodes; ++p)
-        if (a.slot[p] >= 0) delta_[i] += a.w[p] * a.m[p].dot(hist->displacement(cols, a.slot[p]));
+        if (a.slot[p] >= 0) delta_[i] += a.w[p] * a.m[p].dot(bs.history_u_m[a.slot[p]]);
     for (int s = r; s < nc; ++s) {
       const Row& c = rows_[s];
       double v = 0.0;
@@ -3075,6 +3086,36 @@ double State::turn_coupling(int body) const {
   return (h ? h->alpha() : 1.0) / turn_scale_;
 }
 
+// normal_turn, U_k on a relaxing body (false: an elastic body, or the history's displacement not
+// formed for this geometry; the caller sums the stored forces): the history's displacement C h at
+// the node as delassus_fill formed it (BodyState::history_u_m) plus the step's forces' alone, the
+// stored forces less the history's (store_forces put those first), so the history's slots, which
+// may be many more than the rows' nodes, are not summed again per node.
+bool State::relaxing_displacement(int b) {
+  const BodyState& bs = bodies_[b];
+  if (!bs.history) return false;
+  const int nk = static_cast<int>(turn_nodes_.size());
+  // (after commit_history: the step's history forces as store_forces kept them)
+  const std::size_t nh = static_cast<std::size_t>(bs.history_count);
+  const std::vector<Vec3>& h = bs.history_forces_n;
+  const bool any_history = nh > 0;
+  for (int k = 0; k < nk; ++k) {
+    if (!turn_needs_u_[k]) continue;
+    if (any_history && bs.history_u_stamp[turn_nodes_[k]] != geometry_counter_) return false;
+  }
+  for (int k = 0; k < nk; ++k)
+    if (turn_needs_u_[k]) turn_u_[k] = any_history ? Vec3(-bs.history_u_m[turn_nodes_[k]]) : Vec3::Zero();
+  const ContactColumns& cols = *bs.columns;
+  for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
+    const Vec3 step = f < nh ? Vec3(bs.forces_n[f] - h[f]) : bs.forces_n[f];
+    if (step.isZero(0.0)) continue;  // a history slot the step does not load
+    const int s = bs.force_slots[f];
+    for (int k = 0; k < nk; ++k)
+      if (turn_needs_u_[k]) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * step;
+  }
+  return true;
+}
+
 // normal_turn, the rows' turn on body b (nothing when none of tool t's active rows on it turns):
 // v_i's depth term J_i^T (d_i + u_i) and W's term sum_j lambda_j J_j^T B_ji n_i, into turn_v_.
 // B_ij between two rows: their nodes' columns by the weights, sum_kq w_ik w_jq C_kq, and the
@@ -3132,18 +3173,24 @@ void State::turn_rows(int t, int ns, int b) {
   const double coupling = turn_coupling(b);
   double near_alpha = 1.0;
   if (near_field_history(b, t) != nullptr) {
-    const Vec3 h = near_field_creep(b, t, near_alpha);
-    part_force[0] = near_alpha * part_force[0] - h;
+    // F~ = alpha F - h as store_forces kept it (on the tissue: -F~), the history committed since.
+    near_field_creep(b, t, near_alpha);
+    const BodyState& nb = bodies_[b];
+    const auto at = std::find(nb.near_field_tools.begin(), nb.near_field_tools.end(), t);
+    if (at != nb.near_field_tools.end())
+      part_force[0] = -nb.near_field_forces_n[static_cast<std::size_t>(at - nb.near_field_tools.begin())];
   }
   if (near_alpha != turn_scale_) part_turn[0] *= near_alpha / turn_scale_;
   if (turn_scale_ != 1.0) part_turn[1] /= turn_scale_;
   const int nk = static_cast<int>(turn_nodes_.size());
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
-  for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
-    const int s = bs.force_slots[f];
-    for (int k = 0; k < nk; ++k)
-      if (turn_needs_u_[k]) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * bs.forces_n[f];
+  if (!relaxing_displacement(b)) {
+    for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
+      const int s = bs.force_slots[f];
+      for (int k = 0; k < nk; ++k)
+        if (turn_needs_u_[k]) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * bs.forces_n[f];
+    }
   }
   for (int k = 0; k < nk; ++k) {
     if (!turn_needs_u_[k]) continue;
@@ -3252,7 +3299,7 @@ void State::slide_rows(int t, int ns, int b) {
   const ContactColumns& cols = *bs.columns;
   // (the next force slot's blocks fetched ahead: each is a cache miss, the loads of one block
   // after another waited on memory)
-  const std::size_t nf = bs.force_slots.size();
+  const std::size_t nf = relaxing_displacement(b) ? 0 : bs.force_slots.size();
   for (std::size_t f = 0; f < nf; ++f) {
     const int s = bs.force_slots[f];
     if (f + 1 < nf)
@@ -3629,7 +3676,9 @@ void State::add_history_forces(BodyState& bs) {
     bs.force_index[slots[i]] = static_cast<int>(bs.force_slots.size());
     bs.force_slots.push_back(slots[i]);
     bs.forces_n.push_back(h[i]);
+    bs.history_forces_n[i] = h[i];  // (the step's history: commit_history replaces it)
   }
+  bs.history_count = static_cast<int>(slots.size());
 }
 
 }  // namespace neurosim::interaction

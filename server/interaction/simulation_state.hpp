@@ -173,6 +173,15 @@ struct BodyState {
   // which entries belong to the current tool (sized with the history).
   std::vector<mesh::Vec3> tool_force_n;
   std::vector<long long> relax_stamp;
+  // Phase "Delassus" (delassus_fill): per contact slot the history's displacement C h_n at the
+  // rows' nodes (unit m) and the geometry (State::geometry_counter_) that formed it; normal_turn's
+  // U_k reads it (sized with the history).
+  std::vector<mesh::Vec3> history_u_m;
+  std::vector<long long> history_u_stamp;
+  // store_forces: the step's history forces h_n, first in forces_n (history_count of them;
+  // sized with the history), kept for normal_turn after commit_history.
+  int history_count{0};
+  std::vector<mesh::Vec3> history_forces_n;
   // SimulationOptions::contact_near_field on a relaxing body (its host material has Prony terms;
   // LINEAR or NONLINEAR tier): the near field's own hereditary integral, one slot per tool (the
   // tip's total force on the body), with the host's kernel, so the compliance in series creeps
@@ -420,6 +429,8 @@ class State {
   void turn_stiffness(int tool, int ns, int tools, ToolContact& c);
   // A relaxing body's factor on W's terms of V (contact_step.cpp): its alpha / turn_scale_.
   double turn_coupling(int body) const;
+  // normal_turn's U_k on a relaxing body from the history's displacement (false: not formed here).
+  bool relaxing_displacement(int body);
   Vec3 part_response(int tool, int ns, int tools, const Row& d, const Vec3& f);
   // The near field's history of `body` when it follows `tool` (else nullptr: elastic).
   const ViscoelasticHistory* near_field_history(int body, int tool) const {
