@@ -8,10 +8,8 @@
 //     sphere or capsule (CalculiX's node-to-surface contact with the tool as master), so a tip
 //     wider than the triangles feels a patch; its normal the part's where the node, moved along
 //     its surface's normal line, leaves the part (merge_features: radial while the centre is in
-//     the node's normal cone, turning into the mean normal outside it; the multirate tiers: the
-//     same from the point as their latest equilibrium deformed it while its elements keep their
-//     volume, radial within 60 degrees of the mean normal, else the mean normal where they do
-//     not: deformed_row_geometry);
+//     the node's normal cone, turning into the mean normal outside it; the multirate tiers:
+//     radial within 60 degrees of the mean normal, else the mean normal);
 //   - a face row where a triangle's closest point is inside it (normal: the triangle's);
 //   - an edge row where every contactable triangle of the edge reports that edge (the distance
 //     has a local minimum there; otherwise a neighbouring face row already holds it);
@@ -166,22 +164,6 @@ bool row_node_normals(Row& r, const TierLinearization* lin, Vec3& offset) {
   return !(mobile < 1e-6);
 }
 
-// The multirate tiers' node and edge rows (State::deformed_row_geometry): the share of the exit
-// row from the deformed point against the 60-degree row, by the least volume ratio det F of the
-// elements around a node in the tier's latest equilibrium: 1 down to kDeformedRowsVolume[1], 0
-// from kDeformedRowsVolume[0] down, linear between. Measured (bench/RESULTS.md, "The tiers' rows
-// from the deformed point while the elements hold"): the 7 mm brain's 10 mm press keeps det F
-// above 0.35 with the deformed-point rows, the bundled 5 mm brain's drops from 0.32 to below
-// zero in one update once one node takes most of the press; the block's 10 mm vertex, edge and
-// face press cycles stay above 0.6.
-constexpr double kDeformedRowsVolume[2] = {0.35, 0.6};
-
-double volume_share(double least_volume) {
-  return std::clamp((least_volume - kDeformedRowsVolume[0]) /
-                        (kDeformedRowsVolume[1] - kDeformedRowsVolume[0]),
-                    0.0, 1.0);
-}
-
 bool deeper(const Row& a, const Row& b) {
   if (a.depth_m != b.depth_m) return a.depth_m > b.depth_m;
   if (a.body != b.body) return a.body < b.body;
@@ -223,7 +205,6 @@ State::State(const Model& m) {
     bs.position_m.assign(b.rest_m.size(), Vec3::Zero());
     bs.force_index.assign(b.rest_m.size(), -1);
     bs.node_tests.assign(4 * b.rest_m.size(), BodyState::NodeTest{});
-    if (m.tier_ != scene::Tier::kLinear) bs.deformed_share.assign(b.rest_m.size(), 1.0);
     bs.sliding_lambda.setZero(b.body->sliding().size());
     if (!b.creep.terms.empty()) {
       bs.history = std::make_unique<ViscoelasticHistory>(b.host_material.viscoelastic, b.creep,
@@ -543,21 +524,8 @@ void State::begin_step(const Model& m, int tools, StepStats& stats) {
   stats.inverted_elements = 0;
   if (tier_) {
     tier_->begin_step();
-    for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
-      const TierLinearization& lin = tier_->linearization(static_cast<int>(bi));
-      stats.inverted_elements += lin.inverted_elements;
-      // Each new equilibrium lowers the slots' deformed-point share where it compressed their
-      // elements (volume_share; never raised while the body carries a force, so the rows do not
-      // switch back and forth between updates); a body that carries none starts again from 1.
-      BodyState& bs = bodies_[bi];
-      if (lin.count != bs.share_count && lin.least_volume.size() == bs.deformed_share.size()) {
-        bs.share_count = lin.count;
-        for (std::size_t s = 0; s < bs.deformed_share.size(); ++s)
-          bs.deformed_share[s] =
-              lin.load.slots.empty() ? 1.0
-                                     : std::min(bs.deformed_share[s], volume_share(lin.least_volume[s]));
-      }
-    }
+    for (std::size_t bi = 0; bi < bodies_.size(); ++bi)
+      stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
   }
   rows_.clear();
 }
@@ -942,11 +910,6 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   const auto& tris = b.surface.triangles();
   const auto& rest = b.body->contact_mesh().vertices();
-  // The multirate tiers' latest equilibrium (u* per contact slot), where their node tests take
-  // the tip's nodes (part_features).
-  const TierLinearization* lin =
-      tier_ && !tier_->linearization(body).displacement_m.empty() ? &tier_->linearization(body)
-                                                                   : nullptr;
   // The deformed surface, and the rest surface too once the body carries a force: the LCP's
   // depths are taken from rest, so a feature that penetrates at rest is a row even when the last
   // answer moved it out of reach (a tool leaving faster than the margin would otherwise lose the
@@ -1014,7 +977,7 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
         if (parts & (1 << part))
           part_features(t, tri, *x, n, centre, rho, part == 1, g == 1, shape, p0, p1, margin,
                         b.behind_reach_m, b.body->contact_normals(), bs, memo, smooth,
-                        search(part), (nodes >> (3 * part)) & 7, lin);
+                        search(part), (nodes >> (3 * part)) & 7);
     }
   }
   if (first_is_rest) {
@@ -1034,7 +997,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
                           const Vec3& p0, const Vec3& p1, double margin,
                           double max_penetration_m, const std::vector<Vec3>& node_normals,
                           BodyState& bs, long long memo, const std::array<Vec3, 3>* smooth_normals,
-                          int search, int node_mask, const TierLinearization* lin) {
+                          int search, int node_mask) {
   const double reach = (shaft ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
   FeatureHit h;
   h.triangle = t;
@@ -1042,7 +1005,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   h.at_rest = at_rest;
   h.face_normal = n;
   node_hits(tri, x, shape, p0, p1, reach, max_penetration_m, node_normals, bs, memo, node_mask,
-            lin, h);
+            h);
   // Most candidates are far from the part (the box reaches behind_reach behind the surface):
   // their face or edge point is skipped by a plane test before the closest-point search, and
   // that test by a sphere-capsule one (may_reach_triangle: the same rejections, cheaper). On the
@@ -1079,8 +1042,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
 void State::node_hits(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                       const ToolShape& shape, const Vec3& p0, const Vec3& p1, double reach,
                       double max_penetration_m, const std::vector<Vec3>& node_normals,
-                      BodyState& bs, long long memo, int node_mask,
-                      const TierLinearization* lin, FeatureHit& h) {
+                      BodyState& bs, long long memo, int node_mask, FeatureHit& h) {
   const int t = h.triangle;
   const bool shaft = h.shaft;
   const Vec3 n = h.face_normal;
@@ -1103,14 +1065,7 @@ void State::node_hits(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
     }
     const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
     test.stamp = memo;
-    // The multirate tiers test the tip's node where their latest equilibrium carried it, by the
-    // share of the deformed-point row (x + s u*; deformed_row_geometry): the nodes that ring a
-    // deep press's tip are then all rows, not only those whose rest point was within reach. The
-    // rest point stays the row's point.
-    const std::size_t slot = static_cast<std::size_t>(tri.slot[k]);
-    const Vec3 xk = lin && !shaft ? Vec3(x[k] + bs.deformed_share[slot] * lin->displacement_m[slot])
-                                  : x[k];
-    test.in = within(ck - xk, node_normals[tri.slot[k]], reach, max_penetration_m) &&
+    test.in = within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m) &&
               !(shaft && inside_tip(x[k], p0, shape));
     if (!test.in) continue;
     test.hit = static_cast<int>(hits_.size());
@@ -1349,7 +1304,6 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       radial_row_geometry(shape, h, axis, fr);
     }
     if (f == TriangleFeature::kEdge && !h.shaft) edge_slide(fr);
-    if (tier_ && f != TriangleFeature::kFace && !h.shaft) deformed_row_geometry(m, body, shape, h, fr);
     // The turn as the haptic model can use it: the station extrapolates over the validity radius,
     // at least a quarter of the tip's radius (answer), so a normal turning faster than 1 rad per
     // quarter radius of the part (a radial row with the centre by the feature, |d| -> 0; an exit
@@ -1556,11 +1510,10 @@ void State::exit_row_geometry(const ToolShape& shape, const FeatureHit& h, const
 // Phase "rows", merge, the multirate tiers: a node or an edge row radial from the part's centre
 // (the point against a rigid sphere or capsule) when the centre is within 60 degrees of the mean
 // normal of the triangles that report it, else along that mean normal (the depth r - n . d), and
-// its turn (unit 1/m): the shaft's rows, and the tip's where the elements around the row's nodes
-// have collapsed (deformed_row_geometry blends the tip's into the deformed point's exit row). 60,
-// not 90: the depth adds n . u0 of an equilibrium that may have carried the point far along the
-// surface, which a nearly tangential normal turns into a depth (measured with 90: a 10 mm vertex
-// press cycle in NONLINEAR reached 101.6 N against the block's 50.5 N bound, stability_test).
+// its turn (unit 1/m). The tiers keep 60: their depth adds n . u0 of an equilibrium that may have
+// carried the point far along the surface, which a nearly tangential normal turns into a depth
+// (measured with 90: a 10 mm vertex press cycle in NONLINEAR reached 101.6 N against the block's
+// 50.5 N bound, stability_test).
 void State::radial_row_geometry(const ToolShape& shape, const FeatureHit& h, const Vec3& axis,
                                 FeatureRow& fr) {
   const Vec3 mean = fr.normal_sum.normalized();
@@ -1608,76 +1561,6 @@ void State::edge_slide(FeatureRow& fr) const {
     }
   }
   if (!fr.turn.isZero(0.0)) fr.turn = fr.turn * (Mat3::Identity() - e * e.transpose());
-}
-
-// Phase "rows", merge, the multirate tiers: the tip's node or edge row as LINEAR's exit row
-// (exit_row_geometry) from the point as the tier's latest equilibrium deformed it, x = p +
-// sum_k w_k u*_k (u* TierLinearization::displacement_m), along the mean normal turned by the
-// nodes' rotations (sum_k w_k R_k m, normalized), blended into the 60-degree row
-// (radial_row_geometry, edge_slide) by the share s of the row's nodes (BodyState::deformed_share,
-// volume_share): n = (s n_exit + (1 - s) n_60) / |...|, turned by the blend's derivative. The
-// depth stays r - n . (c - p) + n . u0 (feature_row; u0 = u* - R C R^T f*), to which the LCP adds
-// n . R C R^T f: at the tier's fixed point (f = f*) it is r - n . (c - x), the depth of the
-// sphere's tangent plane where the deformed point leaves it (u* enters the normal only). Rows
-// and planes stay the rest surface's, so the step and the updates remain a fixed-point
-// iteration; an edge's deformed point slides by the deformed edge per unit of the rest point's
-// slide. The 60-degree row presses a node below the tip's centre as a flat punch: a vertex twice
-// as hard as an edge or a face (the block's 10 mm press cycles: 1.025 / 0.508 / 0.508 N in
-// NONLINEAR against LINEAR's 0.503 / 0.488 / 0.460; now 0.505 / 0.488 / 0.459), and the cube's
-// LINEAR 32-40 % off NONLINEAR (now 2.2 / 5.2 % at 5 / 10 mm, 21.3 % at 20 mm where the share
-// falls; CalculiX's own linear against NLGEOM 1.4-16 %). The exit row alone (s = 1 always) puts
-// one node of the bundled 5 mm brain under the 6 mm tip's whole press: its elements invert 6-7
-// mm deep and the force turns 42-53 degrees sideways; the 60-degree rows spread that press over
-// the ring of nodes around it. The share falls with the elements' volume, so where a node's
-// elements collapse its rows become the 60-degree ones (bench/RESULTS.md, "The tiers' rows from
-// the deformed point while the elements hold"). The shaft keeps the 60-degree rows.
-void State::deformed_row_geometry(const Model& m, int body, const ToolShape& shape,
-                                  const FeatureHit& h, FeatureRow& fr) const {
-  const SurfaceTriangle& tri = m.bodies_[body].surface.triangles()[h.triangle];
-  const std::vector<double>& shares = bodies_[body].deformed_share;
-  double share = 1.0;
-  for (int k = 0; k < 3; ++k)
-    if (h.at.weights[k] != 0.0 && tri.slot[k] >= 0)
-      share = std::min(share, shares[static_cast<std::size_t>(tri.slot[k])]);
-  if (!(share > 0.0)) return;
-  const TierLinearization& lin = tier_->linearization(body);
-  if (lin.displacement_m.empty()) return;
-  const auto& rest = m.bodies_[body].body->contact_mesh().vertices();
-  auto carried = [&](int k) {
-    return tri.slot[k] >= 0 ? lin.displacement_m[static_cast<std::size_t>(tri.slot[k])]
-                            : Vec3(Vec3::Zero());
-  };
-  const Vec3 mean = fr.normal_sum.normalized();
-  Vec3 x_line = h.at.point_m;
-  Mat3 rot = Mat3::Zero();
-  for (int k = 0; k < 3; ++k) {
-    const double w = h.at.weights[k];
-    if (w == 0.0) continue;
-    x_line += w * carried(k);
-    rot += w * (tri.slot[k] >= 0 ? lin.rotation[static_cast<std::size_t>(tri.slot[k])]
-                                 : Mat3(Mat3::Identity()));
-  }
-  const Vec3 turned = rot * mean;
-  const Vec3 m_line = turned.norm() > 0.0 ? Vec3(turned.normalized()) : mean;
-  const Vec3 d_line = h.centre_m - x_line;
-  const Vec3 n_exit = exit_normal(d_line, m_line, fr.cos_alpha, shape.tip_radius_m);
-  Mat3 turn_exit = exit_normal_turn(d_line, m_line, fr.cos_alpha, shape.tip_radius_m);
-  if (key_feature(h.key) == TriangleFeature::kEdge && !turn_exit.isZero(0.0)) {
-    const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
-    const Vec3 edge = rest[tri.node[k1]] - rest[tri.node[k0]];
-    const Vec3 moved = (edge + carried(k1) - carried(k0)) / edge.norm();
-    turn_exit = turn_exit * (Mat3::Identity() - moved * fr.edge.transpose());
-  }
-  const Vec3 v = share * n_exit + (1.0 - share) * fr.n;
-  const double vn = v.norm();
-  if (!(vn > 1e-9)) return;
-  const Vec3 n = v / vn;
-  fr.turn = (Mat3::Identity() - n * n.transpose()) / vn * (share * turn_exit + (1.0 - share) * fr.turn);
-  fr.n = n;
-  fr.exit_row = true;
-  fr.plane_n = mean;
-  fr.plane_h = fr.d.dot(mean);
-  fr.radial = fr.dn > 1e-9 * shape.tip_radius_m && fr.plane_h > 0.0;  // not an entry
 }
 
 // Phase "rows", merge: the row of a feature from its first hit and its geometry (fr): the

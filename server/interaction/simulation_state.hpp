@@ -153,12 +153,6 @@ struct BodyState {
     bool in{false};
   };
   std::vector<NodeTest> node_tests;
-  // The multirate tiers: per contact slot, how much of its node and edge rows is the exit row
-  // from the deformed point rather than the 60-degree row (contact_step.cpp, volume_share): the
-  // least over the equilibria since the body last carried no force; and the update it was last
-  // taken from (TierLinearization::count).
-  std::vector<double> deformed_share;
-  std::uint64_t share_count{0};
   // Largest displacement at the loaded slots of the last geometry followed by another (LINEAR:
   // within one step; 0 at a step's start) or of the last good step (the tiers), unit m.
   double max_displacement_m{0.0};
@@ -325,13 +319,12 @@ class State {
                      const ToolShape& shape,
                      const Vec3& p0, const Vec3& p1, double margin, double max_penetration_m,
                      const std::vector<Vec3>& node_normals, BodyState& bs, long long memo,
-                     const std::array<Vec3, 3>* smooth_normals, int search, int node_mask,
-                     const TierLinearization* lin);
+                     const std::array<Vec3, 3>* smooth_normals, int search, int node_mask);
   // part_features' steps (contact_step.cpp).
   void node_hits(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                  const ToolShape& shape, const Vec3& p0, const Vec3& p1, double reach,
                  double max_penetration_m, const std::vector<Vec3>& node_normals, BodyState& bs,
-                 long long memo, int node_mask, const TierLinearization* lin, FeatureHit& h);
+                 long long memo, int node_mask, FeatureHit& h);
   bool smooth_projection_hit(const std::array<Vec3, 3>& x,
                              const std::array<Vec3, 3>& smooth_normals, const Vec3& p0,
                              double reach, double max_penetration_m, FeatureHit& h);
@@ -382,8 +375,6 @@ class State {
   void radial_row_geometry(const ToolShape& shape, const FeatureHit& h, const Vec3& axis,
                            FeatureRow& fr);
   void edge_slide(FeatureRow& fr) const;
-  void deformed_row_geometry(const Model& m, int body, const ToolShape& shape,
-                             const FeatureHit& h, FeatureRow& fr) const;
   bool feature_row(const Model& m, int body, int tool, const ToolShape& shape,
                    const FeatureHit& h, const FeatureRow& fr, Row& r);
   static void row_weight_slide(const FeatureRow& fr, Row& r);

@@ -89,7 +89,6 @@ TierEquilibrium::TierEquilibrium(const TierEquilibriumDefinition& def)
   for (std::size_t b = 0; b < u_body_.size(); ++b)
     u_body_[b].setZero(solver_->body_forces(static_cast<int>(b)).num_dofs());
   rotation_.assign(slot_dof_.size(), Eigen::Matrix3d::Identity());
-  least_volume_.assign(slot_dof_.size(), 1.0);
   compliance_.assign(slot_dof_.size(), mesh::Vec3::Zero());
   // The linearization's compliance columns, as many slots as the budget holds.
   if (!slot_dof_.empty()) {
@@ -116,7 +115,6 @@ void TierEquilibrium::rest(TierLinearization& out) const {
   out.warped_normal = body_->contact_normals();
   out.rotation.assign(slot_dof_.size(), Eigen::Matrix3d::Identity());
   out.displacement_m.assign(slot_dof_.size(), mesh::Vec3::Zero());
-  out.least_volume.assign(slot_dof_.size(), 1.0);
   out.u_m.setZero(solver_->num_dofs());
   out.load.slots.clear();
   out.load.forces_n.clear();
@@ -144,13 +142,8 @@ void TierEquilibrium::rotations() {
     const Eigen::VectorXd& u_mesh = u_body_[static_cast<std::size_t>(b)];
     Eigen::Matrix3d f = Eigen::Matrix3d::Zero();
     int n = 0;
-    double least = 1.0;
-    for (int k = offsets[v]; k < offsets[v + 1]; ++k, ++n) {
-      const Eigen::Matrix3d h = forces.displacement_gradient(static_cast<std::size_t>(list[k]), u_mesh);
-      f += h;
-      least = std::min(least, (Eigen::Matrix3d::Identity() + h).determinant());
-    }
-    least_volume_[s] = least;
+    for (int k = offsets[v]; k < offsets[v + 1]; ++k, ++n)
+      f += forces.displacement_gradient(static_cast<std::size_t>(list[k]), u_mesh);
     // Mean gradient of the tetrahedra around the node; its polar rotation (stable for flat and
     // inverted elements: sign-corrected SVD).
     rotation_[s] = n > 0 ? fem::polar_rotation(Eigen::Matrix3d::Identity() + f / n)
@@ -345,7 +338,6 @@ void TierEquilibrium::linearize(const TierLoad& load, TierLinearization& out) {
   out.offset_m.resize(slot_dof_.size());
   out.warped_normal.resize(slot_dof_.size());
   out.rotation = rotation_;
-  out.least_volume = least_volume_;
   out.displacement_m.resize(slot_dof_.size());
   for (std::size_t s = 0; s < slot_dof_.size(); ++s) {
     out.displacement_m[s] = u_.segment<3>(slot_dof_[s]);

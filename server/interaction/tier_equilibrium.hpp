@@ -69,10 +69,6 @@ struct TierLinearization {
   // Per contact slot: u* at its node (the host's, or an exposed tied mesh's: its stacked dofs,
   // TierEquilibrium::slot_dof), unit m.
   std::vector<mesh::Vec3> displacement_m;
-  // Per contact slot: the smallest volume ratio det F (F = I + grad u*) over the tetrahedra
-  // around its node (<= 0: one of them is inverted; 1 at rest), dimensionless. The step's node
-  // and edge rows read it (contact_step.cpp merge_features).
-  std::vector<double> least_volume;
   // The equilibrium: host (3 N_A) then each tied mesh (TierEquilibrium::body_offset), unit m.
   Eigen::VectorXd u_m;
   TierLoad load;             // the forces u_m is the equilibrium of
@@ -192,7 +188,6 @@ class TierEquilibrium {
   // The worker's own solve scratch: its linearizations lock nothing the step or the fields use.
   std::unique_ptr<fem::SolveWorkspace> ws_ = std::make_unique<fem::SolveWorkspace>();
   std::vector<Eigen::Matrix3d> rotation_;  // per contact slot
-  std::vector<double> least_volume_;      // per contact slot (TierLinearization::least_volume)
   std::uint64_t count_{0};
   // Relaxing meshes: per solver body (null: elastic), the time of the last update.
   std::vector<std::unique_ptr<fem::QuasiLinearViscoelastic>> qlv_;
