@@ -899,6 +899,35 @@ void State::search_verdicts(const Model& m, int body, const Vec3& p0, const Vec3
   sc.search_p1 = p1;
 }
 
+// triangle_features' step: triangle t's positions x, unit normal n, centroid and radius (m),
+// deformed (the host's positions, into moved) or at rest (the surface's own values); false for
+// a degenerate triangle (never searched).
+bool State::triangle_geometry(const Model& m, int body, int t, bool deformed,
+                              std::array<Vec3, 3>& moved, const std::array<Vec3, 3>*& x, Vec3& n,
+                              Vec3& centre, double& rho) {
+  const BodyModel& b = m.bodies_[body];
+  if (deformed) {
+    const SurfaceTriangle& tri = b.surface.triangles()[t];
+    const auto& rest = b.body->contact_mesh().vertices();
+    for (int k = 0; k < 3; ++k)
+      moved[k] = tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
+    x = &moved;
+    n = (moved[1] - moved[0]).cross(moved[2] - moved[0]);
+    if (!(n.norm() > 0.0)) return false;
+    n.normalize();
+    centre = (moved[0] + moved[1] + moved[2]) / 3.0;
+    double rho2 = 0.0;
+    for (int k = 0; k < 3; ++k) rho2 = std::max(rho2, (moved[k] - centre).squaredNorm());
+    rho = std::sqrt(rho2);
+    return true;
+  }
+  n = b.surface.rest_normal(t);
+  if (n.isZero(0.0)) return false;  // degenerate
+  centre = b.surface.centroid(t);
+  rho = b.surface.radius_m(t);
+  return true;
+}
+
 // Phase "rows", geometry: the closest features of the deformed candidate triangles to the tip
 // centre and to the shaft axis, within the part's radius + margin.
 void State::triangle_features(const Model& m, int body, int tool, const ToolPose& pose,
@@ -909,7 +938,6 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
   const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   const auto& tris = b.surface.triangles();
-  const auto& rest = b.body->contact_mesh().vertices();
   // The deformed surface, and the rest surface too once the body carries a force: the LCP's
   // depths are taken from rest, so a feature that penetrates at rest is a row even when the last
   // answer moved it out of reach (a tool leaving faster than the margin would otherwise lose the
@@ -954,23 +982,7 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
       const std::array<Vec3, 3>* x = &b.surface.rest_vertices(t);
       Vec3 n, centre;
       double rho = 0.0;
-      if (g == 0 && deformed) {
-        for (int k = 0; k < 3; ++k)
-          moved[k] = tri.slot[k] >= 0 ? position(m, body, tri.slot[k]) : rest[tri.node[k]];
-        x = &moved;
-        n = (moved[1] - moved[0]).cross(moved[2] - moved[0]);
-        if (!(n.norm() > 0.0)) continue;
-        n.normalize();
-        centre = (moved[0] + moved[1] + moved[2]) / 3.0;
-        double rho2 = 0.0;
-        for (int k = 0; k < 3; ++k) rho2 = std::max(rho2, (moved[k] - centre).squaredNorm());
-        rho = std::sqrt(rho2);
-      } else {
-        n = b.surface.rest_normal(t);
-        if (n.isZero(0.0)) continue;  // degenerate
-        centre = b.surface.centroid(t);
-        rho = b.surface.radius_m(t);
-      }
+      if (!triangle_geometry(m, body, t, g == 0 && deformed, moved, x, n, centre, rho)) continue;
       const std::array<Vec3, 3>* smooth =
           m.options_.contact_smooth_normals ? &b.surface.node_normals(t) : nullptr;
       for (int part = 0; part < 2; ++part)
@@ -2999,6 +3011,47 @@ bool State::relaxing_displacement(int b) {
   return true;
 }
 
+// turn_rows on a relaxing body (turn_coupling): the tip's near field, with its own history, is
+// displaced by c F~ (F~ = alpha F - h, the creep-equivalent force on the tool: near_field, on the
+// tissue -F~ as store_forces kept it, the history committed since) with alpha c in W: the tip
+// part's force sum replaced by F~ and its c J^T sum scaled to alpha / turn_scale_; the shaft's
+// near field is elastic (1 / turn_scale_). Unit N and m/N as the sums.
+void State::turn_parts_relaxed(int t, int b, Vec3 part_force[2], Mat3 part_turn[2]) const {
+  double near_alpha = 1.0;
+  if (near_field_history(b, t) != nullptr) {
+    near_field_creep(b, t, near_alpha);
+    const BodyState& nb = bodies_[b];
+    const auto at = std::find(nb.near_field_tools.begin(), nb.near_field_tools.end(), t);
+    if (at != nb.near_field_tools.end())
+      part_force[0] = -nb.near_field_forces_n[static_cast<std::size_t>(at - nb.near_field_tools.begin())];
+  }
+  if (near_alpha != turn_scale_) part_turn[0] *= near_alpha / turn_scale_;
+  if (turn_scale_ != 1.0) part_turn[1] /= turn_scale_;
+}
+
+// turn_rows' node sums on body b over turn_nodes_: U_k = -sum_s C_ks f_s (the body's stored
+// forces; a relaxing body's from its history's displacement, relaxing_displacement) where a
+// turning row needs it, and Y_q = coupling * sum_k A_k C_kq (W's terms at a relaxing body's
+// alpha), unit m and m/N.
+void State::turn_node_sums(int b, double coupling) {
+  const int nk = static_cast<int>(turn_nodes_.size());
+  const BodyState& bs = bodies_[b];
+  const ContactColumns& cols = *bs.columns;
+  if (!relaxing_displacement(b)) {
+    for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
+      const int s = bs.force_slots[f];
+      for (int k = 0; k < nk; ++k)
+        if (turn_needs_u_[k]) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * bs.forces_n[f];
+    }
+  }
+  for (int k = 0; k < nk; ++k) {
+    if (!turn_needs_u_[k]) continue;
+    for (int q = 0; q < nk; ++q) turn_y_[q].noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
+  }
+  if (coupling != 1.0)
+    for (int q = 0; q < nk; ++q) turn_y_[q] *= coupling;
+}
+
 // normal_turn, the rows' turn on body b (nothing when none of tool t's active rows on it turns):
 // v_i's depth term J_i^T (d_i + u_i) and W's term sum_j lambda_j J_j^T B_ji n_i, into turn_v_.
 // B_ij between two rows: their nodes' columns by the weights, sum_kq w_ik w_jq C_kq, and the
@@ -3050,37 +3103,9 @@ void State::turn_rows(int t, int ns, int b) {
       turn_a_[at].noalias() += (li * ri.w[k]) * ri.turn.transpose();
     }
   }
-  // A relaxing body (turn_coupling): W's terms at its alpha; the tip's near field, with its own
-  // history, displaced by c F~ (F~ = alpha F - h, the creep-equivalent force on the tool: near_field)
-  // with alpha c in W. The shaft's near field is elastic.
   const double coupling = turn_coupling(b);
-  double near_alpha = 1.0;
-  if (near_field_history(b, t) != nullptr) {
-    // F~ = alpha F - h as store_forces kept it (on the tissue: -F~), the history committed since.
-    near_field_creep(b, t, near_alpha);
-    const BodyState& nb = bodies_[b];
-    const auto at = std::find(nb.near_field_tools.begin(), nb.near_field_tools.end(), t);
-    if (at != nb.near_field_tools.end())
-      part_force[0] = -nb.near_field_forces_n[static_cast<std::size_t>(at - nb.near_field_tools.begin())];
-  }
-  if (near_alpha != turn_scale_) part_turn[0] *= near_alpha / turn_scale_;
-  if (turn_scale_ != 1.0) part_turn[1] /= turn_scale_;
-  const int nk = static_cast<int>(turn_nodes_.size());
-  const BodyState& bs = bodies_[b];
-  const ContactColumns& cols = *bs.columns;
-  if (!relaxing_displacement(b)) {
-    for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
-      const int s = bs.force_slots[f];
-      for (int k = 0; k < nk; ++k)
-        if (turn_needs_u_[k]) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * bs.forces_n[f];
-    }
-  }
-  for (int k = 0; k < nk; ++k) {
-    if (!turn_needs_u_[k]) continue;
-    for (int q = 0; q < nk; ++q) turn_y_[q].noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
-  }
-  if (coupling != 1.0)
-    for (int q = 0; q < nk; ++q) turn_y_[q] *= coupling;
+  turn_parts_relaxed(t, b, part_force, part_turn);
+  turn_node_sums(b, coupling);
   for (int i = 0; i < nc; ++i) {
     const Row& ri = rows_[i];
     const double li = lambda_[ns + i];

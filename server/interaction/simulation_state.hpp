@@ -312,6 +312,9 @@ class State {
                        StepCandidates& sc);
   void triangle_features(const Model& m, int body, int tool, const ToolPose& pose,
                          const Vec3& axis);
+  bool triangle_geometry(const Model& m, int body, int t, bool deformed,
+                         std::array<Vec3, 3>& moved, const std::array<Vec3, 3>*& x, Vec3& n,
+                         Vec3& centre, double& rho);
   void rows_of_tool(const Model& m, int tool, const ToolPose& pose, const Vec3& axis);
   void merge_tool_row(const Row& r);
   void part_features(int t, const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
@@ -415,6 +418,9 @@ class State {
   // normal_turn's parts (contact_step.cpp): the rows' turn on a body (the depth's and W's terms
   // of V), the rows' sliding weights, W's change as they slide on a body, and -N^T W^-1 V.
   void turn_rows(int tool, int ns, int body);
+  // turn_rows' steps: the parts' near-field sums on a relaxing body, the node sums U_k and Y_q.
+  void turn_parts_relaxed(int tool, int body, Vec3 part_force[2], Mat3 part_turn[2]) const;
+  void turn_node_sums(int body, double coupling);
   bool slide_weights(const Model& m, int tool, int ns);
   void slide_rows(int tool, int ns, int body);
   void turn_stiffness(int tool, int ns, int tools, ToolContact& c);
