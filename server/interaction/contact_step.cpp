@@ -420,6 +420,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   turn_nodes_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_u_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_needs_u_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  turn_u_at_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_y_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_a_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_node_.resize(m.bodies_.size());
@@ -3037,13 +3038,7 @@ void State::turn_node_sums(int b, double coupling) {
   const int nk = static_cast<int>(turn_nodes_.size());
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
-  if (!relaxing_displacement(b)) {
-    for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
-      const int s = bs.force_slots[f];
-      for (int k = 0; k < nk; ++k)
-        if (turn_needs_u_[k]) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * bs.forces_n[f];
-    }
-  }
+  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b, nk);
   for (int k = 0; k < nk; ++k) {
     if (!turn_needs_u_[k]) continue;
     for (int q = 0; q < nk; ++q) turn_y_[q].noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
@@ -3205,21 +3200,7 @@ void State::slide_rows(int t, int ns, int b) {
   const int nk = static_cast<int>(turn_nodes_.size());
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
-  // (the next force slot's blocks fetched ahead: each is a cache miss, the loads of one block
-  // after another waited on memory)
-  const std::size_t nf = relaxing_displacement(b) ? 0 : bs.force_slots.size();
-  for (std::size_t f = 0; f < nf; ++f) {
-    const int s = bs.force_slots[f];
-    if (f + 1 < nf)
-      for (int a = 0; a < nk; ++a)
-        if (turn_needs_u_[a]) {
-          const double* ahead = cols.block(turn_nodes_[a], bs.force_slots[f + 1]).data();
-          __builtin_prefetch(ahead);
-          __builtin_prefetch(ahead + 8);
-        }
-    for (int a = 0; a < nk; ++a)
-      if (turn_needs_u_[a]) turn_u_[a].noalias() -= cols.block(turn_nodes_[a], s) * bs.forces_n[f];
-  }
+  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b, nk);
   for (int j = 0; j < nc; ++j) {
     const Row& rj = rows_[j];
     if (!weight_slides_[j] || rj.body != b) continue;
@@ -3247,6 +3228,35 @@ void State::slide_rows(int t, int ns, int b) {
     turn_v_[i] += v;
   }
   for (int slot : turn_nodes_) index[slot] = -1;
+}
+
+// normal_turn's U_k = -sum_s C_ks f_s (turn_rows, slide_rows) at the nodes of turn_nodes_ that
+// need it (turn_needs_u_, U_k zero on entry) on an elastic body with forces, unit m: the force
+// slots in order, node by node the same sums. The nodes' blocks of a force slot's column are
+// read through a list of the nodes, the next slot's fetched ahead (each block is a cache miss:
+// the loads of one block after another waited on memory).
+void State::node_displacements(int b, int nk) {
+  const BodyState& bs = bodies_[b];
+  const ContactColumns& cols = *bs.columns;
+  turn_u_at_.clear();
+  for (int a = 0; a < nk; ++a)
+    if (turn_needs_u_[a]) turn_u_at_.push_back(a);
+  const std::size_t nf = bs.force_slots.size();
+  using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
+  const double* column = cols.block(0, bs.force_slots[0]).data();
+  for (std::size_t f = 0; f < nf; ++f) {
+    const double* next = f + 1 < nf ? cols.block(0, bs.force_slots[f + 1]).data() : nullptr;
+    const Vec3& force = bs.forces_n[f];
+    for (const int a : turn_u_at_) {
+      const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(turn_nodes_[a]);
+      if (next != nullptr) {
+        __builtin_prefetch(next + at);
+        __builtin_prefetch(next + at + 8);
+      }
+      turn_u_[a].noalias() -= Block(column + at) * force;
+    }
+    column = next;
+  }
 }
 
 // normal_turn, the last term: -N^T W^-1 V over tool t's active rows (V: turn_v_), added to K.

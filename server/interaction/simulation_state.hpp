@@ -423,6 +423,7 @@ class State {
   void turn_node_sums(int body, double coupling);
   bool slide_weights(const Model& m, int tool, int ns);
   void slide_rows(int tool, int ns, int body);
+  void node_displacements(int body, int nodes);
   void turn_stiffness(int tool, int ns, int tools, ToolContact& c);
   // A relaxing body's factor on W's terms of V (contact_step.cpp): its alpha / turn_scale_.
   double turn_coupling(int body) const;
@@ -693,6 +694,7 @@ class State {
   std::vector<int> turn_nodes_;
   std::vector<Vec3> turn_u_;
   std::vector<char> turn_needs_u_;
+  std::vector<int> turn_u_at_;  // node_displacements: the indices of the nodes that need U_k
   std::vector<Mat3> turn_y_;
   std::vector<Mat3> turn_a_;  // normal_turn, the rows' turn: per node A_k (contact_step.cpp)
   std::vector<std::vector<int>> turn_node_;
