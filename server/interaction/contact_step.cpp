@@ -421,6 +421,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   turn_u_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_needs_u_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_u_at_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  slide_terms_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_y_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_a_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_node_.resize(m.bodies_.size());
@@ -3201,16 +3202,25 @@ void State::slide_rows(int t, int ns, int b) {
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
   if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b, nk);
+  // Y_k: the sliding rows' terms (their column, normal and lambda_j dw_jq, in row and node
+  // order) listed once, then node by node (each sum in the same order as term by term).
+  slide_terms_.clear();
   for (int j = 0; j < nc; ++j) {
     const Row& rj = rows_[j];
     if (!weight_slides_[j] || rj.body != b) continue;
     const double lj = lambda_[ns + j];
     for (int q = 0; q < rj.nodes; ++q) {
       if (rj.slot[q] < 0 || rj.w[q] == 0.0) continue;
-      const Vec3 dw = lj * weight_slide_[j][q];
-      for (int a = 0; a < nk; ++a)
-        turn_y_[a].noalias() += (cols.block(turn_nodes_[a], rj.slot[q]) * rj.normal) * dw.transpose();
+      slide_terms_.push_back({cols.block(0, rj.slot[q]).data(), &rj.normal, lj * weight_slide_[j][q]});
     }
+  }
+  using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
+  for (int a = 0; a < nk; ++a) {
+    const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(turn_nodes_[a]);
+    Mat3 y = turn_y_[a];
+    for (const SlideTerm& term : slide_terms_)
+      y.noalias() += (Block(term.column + at) * *term.normal) * term.dw.transpose();
+    turn_y_[a] = y;
   }
   const double coupling = turn_coupling(b);  // a relaxing body's W at its alpha (turn_coupling)
   if (coupling != 1.0)
@@ -3231,10 +3241,10 @@ void State::slide_rows(int t, int ns, int b) {
 }
 
 // normal_turn's U_k = -sum_s C_ks f_s (turn_rows, slide_rows) at the nodes of turn_nodes_ that
-// need it (turn_needs_u_, U_k zero on entry) on an elastic body with forces, unit m: the force
-// slots in order, node by node the same sums. The nodes' blocks of a force slot's column are
-// read through a list of the nodes, the next slot's fetched ahead (each block is a cache miss:
-// the loads of one block after another waited on memory).
+// need it (turn_needs_u_, U_k zero on entry) on an elastic body with forces, unit m: node by
+// node over the force slots in order (each sum as before), the node's blocks a few slots ahead
+// fetched (each block is a cache miss: the loads of one block after another waited on memory),
+// the sum held in registers.
 void State::node_displacements(int b, int nk) {
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
@@ -3243,19 +3253,24 @@ void State::node_displacements(int b, int nk) {
     if (turn_needs_u_[a]) turn_u_at_.push_back(a);
   const std::size_t nf = bs.force_slots.size();
   using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
-  const double* column = cols.block(0, bs.force_slots[0]).data();
-  for (std::size_t f = 0; f < nf; ++f) {
-    const double* next = f + 1 < nf ? cols.block(0, bs.force_slots[f + 1]).data() : nullptr;
-    const Vec3& force = bs.forces_n[f];
-    for (const int a : turn_u_at_) {
-      const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(turn_nodes_[a]);
-      if (next != nullptr) {
-        __builtin_prefetch(next + at);
-        __builtin_prefetch(next + at + 8);
-      }
-      turn_u_[a].noalias() -= Block(column + at) * force;
+  constexpr std::size_t kAhead = 6;
+  for (const int a : turn_u_at_) {
+    const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(turn_nodes_[a]);
+    for (std::size_t f = 0; f < std::min(nf, kAhead); ++f) {
+      const double* ahead = cols.block(0, bs.force_slots[f]).data() + at;
+      __builtin_prefetch(ahead);
+      __builtin_prefetch(ahead + 8);
     }
-    column = next;
+    Vec3 u = turn_u_[a];
+    for (std::size_t f = 0; f < nf; ++f) {
+      if (f + kAhead < nf) {
+        const double* ahead = cols.block(0, bs.force_slots[f + kAhead]).data() + at;
+        __builtin_prefetch(ahead);
+        __builtin_prefetch(ahead + 8);
+      }
+      u.noalias() -= Block(cols.block(0, bs.force_slots[f]).data() + at) * bs.forces_n[f];
+    }
+    turn_u_[a] = u;
   }
 }
 

@@ -695,6 +695,14 @@ class State {
   std::vector<Vec3> turn_u_;
   std::vector<char> turn_needs_u_;
   std::vector<int> turn_u_at_;  // node_displacements: the indices of the nodes that need U_k
+  // slide_rows: a sliding row's term of Y_k per node q, its column of C (node k's block at 9 k),
+  // its normal and lambda_j dw_jq / dx
+  struct SlideTerm {
+    const double* column;
+    const Vec3* normal;
+    Vec3 dw;
+  };
+  std::vector<SlideTerm> slide_terms_;
   std::vector<Mat3> turn_y_;
   std::vector<Mat3> turn_a_;  // normal_turn, the rows' turn: per node A_k (contact_step.cpp)
   std::vector<std::vector<int>> turn_node_;
