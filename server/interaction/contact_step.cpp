@@ -3039,10 +3039,15 @@ void State::turn_node_sums(int b, double coupling) {
   const int nk = static_cast<int>(turn_nodes_.size());
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
+  turn_u_at_.clear();
+  for (int k = 0; k < nk; ++k)
+    if (turn_needs_u_[k]) turn_u_at_.push_back(k);
   if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b, nk);
-  for (int k = 0; k < nk; ++k) {
-    if (!turn_needs_u_[k]) continue;
-    for (int q = 0; q < nk; ++q) turn_y_[q].noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
+  // (node q by node q, its sum held in registers: the same sums in the same order as k by k)
+  for (int q = 0; q < nk; ++q) {
+    Mat3 y = turn_y_[q];
+    for (const int k : turn_u_at_) y.noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
+    turn_y_[q] = y;
   }
   if (coupling != 1.0)
     for (int q = 0; q < nk; ++q) turn_y_[q] *= coupling;
