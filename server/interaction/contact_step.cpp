@@ -427,6 +427,12 @@ void State::reserve_workspace(const Model& m, int tools) {
   turn_node_.resize(m.bodies_.size());
   for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi)
     turn_node_[bi].assign(m.bodies_[bi].rest_m.size(), -1);
+  turn_u_memo_.resize(m.bodies_.size());
+  turn_u_memo_stamp_.resize(m.bodies_.size());
+  for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
+    turn_u_memo_[bi].assign(m.bodies_[bi].rest_m.size(), Vec3::Zero());
+    turn_u_memo_stamp_[bi].assign(m.bodies_[bi].rest_m.size(), 0);
+  }
   turn_z_.setZero(max_contact, 3);
   previous_row_keys_.reserve(max_rows);
   for (auto& l : tier_loads_) {
@@ -3259,8 +3265,15 @@ void State::node_displacements(int b, int nk) {
   const std::size_t nf = bs.force_slots.size();
   using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
   constexpr std::size_t kAhead = 6;
+  std::vector<Vec3>& memo = turn_u_memo_[b];
+  std::vector<std::uint64_t>& memo_stamp = turn_u_memo_stamp_[b];
   for (const int a : turn_u_at_) {
-    const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(turn_nodes_[a]);
+    const int slot = turn_nodes_[a];
+    if (memo_stamp[slot] == turn_u_stamp_) {  // formed for another tool or phase this step
+      turn_u_[a] = memo[slot];
+      continue;
+    }
+    const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(slot);
     for (std::size_t f = 0; f < std::min(nf, kAhead); ++f) {
       const double* ahead = cols.block(0, bs.force_slots[f]).data() + at;
       __builtin_prefetch(ahead);
@@ -3276,6 +3289,8 @@ void State::node_displacements(int b, int nk) {
       u.noalias() -= Block(cols.block(0, bs.force_slots[f]).data() + at) * bs.forces_n[f];
     }
     turn_u_[a] = u;
+    memo[slot] = u;
+    memo_stamp[slot] = turn_u_stamp_;
   }
 }
 
@@ -3571,6 +3586,7 @@ void State::solve_held_poses(const Model& m, double time_s, std::vector<ToolCont
     contacts[t].held_tip_m = poses[t].tip_m;
   }
   commit_history();
+  ++turn_u_stamp_;  // the forces node_displacements sums are these until the next step
   for (int t = 0; t < nt; ++t) {
     relaxation(m, t, ns, contacts[t]);
     normal_turn(m, t, ns, nt, contacts[t]);

@@ -706,6 +706,12 @@ class State {
   std::vector<Mat3> turn_y_;
   std::vector<Mat3> turn_a_;  // normal_turn, the rows' turn: per node A_k (contact_step.cpp)
   std::vector<std::vector<int>> turn_node_;
+  // node_displacements: per body and slot U_k as last formed, and the turn_u_stamp_ it was formed
+  // under (the forces do not change while normal_turn runs over the tools: one U_k per node and
+  // step, however many tools' rows and phases have the node)
+  std::vector<std::vector<Vec3>> turn_u_memo_;
+  std::vector<std::vector<std::uint64_t>> turn_u_memo_stamp_;
+  std::uint64_t turn_u_stamp_{0};
   Eigen::Matrix<double, Eigen::Dynamic, 3> turn_z_;  // normal_turn, several tools: L Z = V
 };
 
