@@ -2997,24 +2997,21 @@ double State::turn_coupling(int body) const {
 bool State::relaxing_displacement(int b) {
   const BodyState& bs = bodies_[b];
   if (!bs.history) return false;
-  const int nk = static_cast<int>(turn_nodes_.size());
   // (after commit_history: the step's history forces as store_forces kept them)
   const std::size_t nh = static_cast<std::size_t>(bs.history_count);
   const std::vector<Vec3>& h = bs.history_forces_n;
   const bool any_history = nh > 0;
-  for (int k = 0; k < nk; ++k) {
-    if (!turn_needs_u_[k]) continue;
-    if (any_history && bs.history_u_stamp[turn_nodes_[k]] != geometry_counter_) return false;
-  }
-  for (int k = 0; k < nk; ++k)
-    if (turn_needs_u_[k]) turn_u_[k] = any_history ? Vec3(-bs.history_u_m[turn_nodes_[k]]) : Vec3::Zero();
+  if (any_history)
+    for (const int k : turn_u_at_)
+      if (bs.history_u_stamp[turn_nodes_[k]] != geometry_counter_) return false;
+  for (const int k : turn_u_at_)
+    turn_u_[k] = any_history ? Vec3(-bs.history_u_m[turn_nodes_[k]]) : Vec3::Zero();
   const ContactColumns& cols = *bs.columns;
   for (std::size_t f = 0; f < bs.force_slots.size(); ++f) {
     const Vec3 step = f < nh ? Vec3(bs.forces_n[f] - h[f]) : bs.forces_n[f];
     if (step.isZero(0.0)) continue;  // a history slot the step does not load
     const int s = bs.force_slots[f];
-    for (int k = 0; k < nk; ++k)
-      if (turn_needs_u_[k]) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * step;
+    for (const int k : turn_u_at_) turn_u_[k].noalias() -= cols.block(turn_nodes_[k], s) * step;
   }
   return true;
 }
@@ -3045,10 +3042,8 @@ void State::turn_node_sums(int b, double coupling) {
   const int nk = static_cast<int>(turn_nodes_.size());
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
-  turn_u_at_.clear();
-  for (int k = 0; k < nk; ++k)
-    if (turn_needs_u_[k]) turn_u_at_.push_back(k);
-  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b, nk);
+  list_u_nodes();
+  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b);
   // (node q by node q, its sum held in registers: the same sums in the same order as k by k)
   for (int q = 0; q < nk; ++q) {
     Mat3 y = turn_y_[q];
@@ -3212,7 +3207,8 @@ void State::slide_rows(int t, int ns, int b) {
   const int nk = static_cast<int>(turn_nodes_.size());
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
-  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b, nk);
+  list_u_nodes();
+  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b);
   // Y_k: the sliding rows' terms (their column, normal and lambda_j dw_jq, in row and node
   // order) listed once, then node by node (each sum in the same order as term by term).
   slide_terms_.clear();
@@ -3251,17 +3247,24 @@ void State::slide_rows(int t, int ns, int b) {
   for (int slot : turn_nodes_) index[slot] = -1;
 }
 
-// normal_turn's U_k = -sum_s C_ks f_s (turn_rows, slide_rows) at the nodes of turn_nodes_ that
-// need it (turn_needs_u_, U_k zero on entry) on an elastic body with forces, unit m: node by
-// node over the force slots in order (each sum as before), the node's blocks a few slots ahead
-// fetched (each block is a cache miss: the loads of one block after another waited on memory),
-// the sum held in registers.
-void State::node_displacements(int b, int nk) {
+// normal_turn (turn_node_sums, slide_rows): the indices into turn_nodes_ of the nodes that need
+// U_k (turn_needs_u_), ascending, into turn_u_at_: listed once per node set, read by
+// relaxing_displacement, node_displacements and turn_node_sums' Y_q.
+void State::list_u_nodes() {
+  const int nk = static_cast<int>(turn_nodes_.size());
+  turn_u_at_.clear();
+  for (int k = 0; k < nk; ++k)
+    if (turn_needs_u_[k]) turn_u_at_.push_back(k);
+}
+
+// normal_turn's U_k = -sum_s C_ks f_s (turn_rows, slide_rows) at the nodes of turn_u_at_
+// (list_u_nodes; U_k zero on entry) on an elastic body with forces, unit m: node by node over
+// the force slots in order (each sum as before), the node's blocks a few slots ahead fetched
+// (each block is a cache miss: the loads of one block after another waited on memory), the sum
+// held in registers.
+void State::node_displacements(int b) {
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
-  turn_u_at_.clear();
-  for (int a = 0; a < nk; ++a)
-    if (turn_needs_u_[a]) turn_u_at_.push_back(a);
   const std::size_t nf = bs.force_slots.size();
   using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
   constexpr std::size_t kAhead = 6;

@@ -423,7 +423,8 @@ class State {
   void turn_node_sums(int body, double coupling);
   bool slide_weights(const Model& m, int tool, int ns);
   void slide_rows(int tool, int ns, int body);
-  void node_displacements(int body, int nodes);
+  void list_u_nodes();
+  void node_displacements(int body);
   void turn_stiffness(int tool, int ns, int tools, ToolContact& c);
   // A relaxing body's factor on W's terms of V (contact_step.cpp): its alpha / turn_scale_.
   double turn_coupling(int body) const;
@@ -694,7 +695,9 @@ class State {
   std::vector<int> turn_nodes_;
   std::vector<Vec3> turn_u_;
   std::vector<char> turn_needs_u_;
-  std::vector<int> turn_u_at_;  // node_displacements: the indices of the nodes that need U_k
+  // list_u_nodes: the indices into turn_nodes_ of the nodes that need U_k, ascending (one list
+  // per node set: relaxing_displacement, node_displacements and turn_node_sums read it)
+  std::vector<int> turn_u_at_;
   // slide_rows: a sliding row's term of Y_k per node q, its column of C (node k's block at 9 k),
   // its normal and lambda_j dw_jq / dx
   struct SlideTerm {
