@@ -1162,10 +1162,21 @@ void State::edge_or_face_hit(const SurfaceTriangle& tri, const std::array<Vec3, 
 // point depend on t through the rounds made, not through the closest pair's formula.
 Vec3 State::shaft_centre(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0,
                          const Vec3& p1, TrianglePoint& at, Vec3& centre_slide) {
-  // (closest_on_segment's axis and its squared length formed once: the same values)
-  const Vec3 e = p1 - p0;
-  const double len2 = e.squaredNorm();
-  const Vec3 u = len2 > 0.0 ? Vec3(e / std::sqrt(len2)) : Vec3::Zero();
+  // (closest_on_segment's axis, its squared length and unit axis formed once per segment: the
+  // same values for every triangle of the pose)
+  AxisMemo& axis = shaft_axis_;
+  if (!axis.valid || std::memcmp(axis.p0.data(), p0.data(), sizeof(Vec3)) != 0 ||
+      std::memcmp(axis.p1.data(), p1.data(), sizeof(Vec3)) != 0) {
+    axis.p0 = p0;
+    axis.p1 = p1;
+    axis.e = p1 - p0;
+    axis.len2 = axis.e.squaredNorm();
+    axis.u = axis.len2 > 0.0 ? Vec3(axis.e / std::sqrt(axis.len2)) : Vec3::Zero();
+    axis.valid = true;
+  }
+  const Vec3 e = axis.e;
+  const double len2 = axis.len2;
+  const Vec3 u = axis.u;
   Vec3 w = Vec3::Zero();
   // The axis point of q (clamped to the segment: there dc/dt = I, w = u); dq/dt = P dc/dt with
   // P u = pu gives dnext/dt = (I - u u^T) + u ((I - u u^T) pu + (u . pu) w)^T inside it.

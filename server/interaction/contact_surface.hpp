@@ -24,8 +24,9 @@ struct TrianglePoint {
   TriangleFeature feature{TriangleFeature::kFace};
   int a{0};
 };
-// Inline: the step calls it for every candidate feature (its answer kept in registers).
-inline TrianglePoint closest_on_triangle(const mesh::Vec3& x, const std::array<mesh::Vec3, 3>& p) {
+// Inline, always: the step calls it for every candidate feature and every round of the shaft's
+// projections (its answer kept in registers; called out of line it came back through memory).
+[[gnu::always_inline]] inline TrianglePoint closest_on_triangle(const mesh::Vec3& x, const std::array<mesh::Vec3, 3>& p) {
   // Voronoi regions of the vertices, then of the edges, else the face.
   TrianglePoint r;
   const mesh::Vec3 ab = p[1] - p[0], ac = p[2] - p[0], ap = x - p[0];

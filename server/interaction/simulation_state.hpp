@@ -334,8 +334,16 @@ class State {
   void edge_or_face_hit(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x, const Vec3& n,
                         const ToolShape& shape, const Vec3& p0, const Vec3& p1, double reach,
                         double max_penetration_m, FeatureHit& h);
-  static Vec3 shaft_centre(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0,
-                           const Vec3& p1, TrianglePoint& at, Vec3& centre_slide);
+  Vec3 shaft_centre(const std::array<Vec3, 3>& x, const Vec3& n, const Vec3& p0,
+                    const Vec3& p1, TrianglePoint& at, Vec3& centre_slide);
+  // shaft_centre: the last segment's axis p1 - p0, its squared length and unit axis (formed again
+  // when the segment differs bit for bit)
+  struct AxisMemo {
+    Vec3 p0{Vec3::Zero()}, p1{Vec3::Zero()}, e{Vec3::Zero()}, u{Vec3::Zero()};
+    double len2{0.0};
+    bool valid{false};
+  };
+  AxisMemo shaft_axis_;
   void merge_features(const Model& m, int body, int tool, const ToolShape& shape,
                       const Vec3& tip, const Vec3& axis);
   // merge_features' steps: one feature's row as they form it (contact_step.cpp).
