@@ -132,6 +132,10 @@ bool inside_tip(const Vec3& point, const Vec3& tip_centre, const ToolShape& shap
   return (point - tip_centre).norm() < shape.tip_radius_m;
 }
 
+// The most loaded nodes whose blocks a body's LoadedBlocks holds (node_displacements): 256 x 256
+// blocks of 72 bytes, 4.7 MB reserved, touched only where used.
+constexpr int kLoadedNodes = 256;
+
 // The reusable candidate list (State::reusable_candidates) holds for a tool moved by up to this
 // many mean surface edges (tip and shaft end): a hand moves the tool by far less per step.
 constexpr double kCandidateReuse = 0.25;
@@ -233,6 +237,9 @@ State::State(const Model& m) {
       columns_s_ += seconds_since(t0);
     }
   }
+  loaded_blocks_.resize(m.bodies_.size());
+  for (std::size_t i = 0; i < m.bodies_.size(); ++i)
+    loaded_blocks_[i].reserve(bodies_[i].columns->num_slots(), kLoadedNodes);
   missing_.resize(m.bodies_.size());
   not_ready_stamp_.resize(m.bodies_.size());
   for (std::size_t i = 0; i < m.bodies_.size(); ++i)
@@ -427,6 +434,8 @@ void State::reserve_workspace(const Model& m, int tools) {
   turn_node_.resize(m.bodies_.size());
   for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi)
     turn_node_[bi].assign(m.bodies_[bi].rest_m.size(), -1);
+  loaded_force_index_.reserve(kSpreadNodes * static_cast<std::size_t>(max_rows));
+  loaded_node_index_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_u_memo_.resize(m.bodies_.size());
   turn_u_memo_stamp_.resize(m.bodies_.size());
   for (std::size_t bi = 0; bi < m.bodies_.size(); ++bi) {
@@ -3054,11 +3063,21 @@ void State::turn_node_sums(int b, double coupling) {
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
   list_u_nodes();
-  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b);
-  // (node q by node q, its sum held in registers: the same sums in the same order as k by k)
+  const bool compact = loaded_indices(b);
+  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b, compact);
+  // (node q by node q, its sum held in registers: the same sums in the same order as k by k;
+  // the blocks from the body's LoadedBlocks where the nodes fit there: the same bits)
+  using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
+  LoadedBlocks& loaded = loaded_blocks_[b];
   for (int q = 0; q < nk; ++q) {
     Mat3 y = turn_y_[q];
-    for (const int k : turn_u_at_) y.noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
+    if (compact) {
+      const int iq = loaded_node_index_[q];
+      for (const int k : turn_u_at_)
+        y.noalias() += turn_a_[k] * Block(loaded.block(cols, loaded_node_index_[k], iq));
+    } else {
+      for (const int k : turn_u_at_) y.noalias() += turn_a_[k] * cols.block(turn_nodes_[k], turn_nodes_[q]);
+    }
     turn_y_[q] = y;
   }
   if (coupling != 1.0)
@@ -3217,9 +3236,9 @@ void State::slide_rows(int t, int ns, int b) {
   if (turn_nodes_.empty()) return;
   const int nk = static_cast<int>(turn_nodes_.size());
   const BodyState& bs = bodies_[b];
-  const ContactColumns& cols = *bs.columns;
   list_u_nodes();
-  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b);
+  bool compact = loaded_indices(b);
+  if (!relaxing_displacement(b) && !bs.force_slots.empty()) node_displacements(b, compact);
   // Y_k: the sliding rows' terms (their column, normal and lambda_j dw_jq, in row and node
   // order) listed once, then node by node (each sum in the same order as term by term).
   slide_terms_.clear();
@@ -3229,17 +3248,13 @@ void State::slide_rows(int t, int ns, int b) {
     const double lj = lambda_[ns + j];
     for (int q = 0; q < rj.nodes; ++q) {
       if (rj.slot[q] < 0 || rj.w[q] == 0.0) continue;
-      slide_terms_.push_back({cols.block(0, rj.slot[q]).data(), &rj.normal, lj * weight_slide_[j][q]});
+      const int at = compact ? loaded_blocks_[b].index(rj.slot[q]) : -1;
+      if (at < 0) compact = false;  // (a node the copy has no room for: the columns then)
+      slide_terms_.push_back({bs.columns->block(0, rj.slot[q]).data(), at, &rj.normal,
+                              lj * weight_slide_[j][q]});
     }
   }
-  using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
-  for (int a = 0; a < nk; ++a) {
-    const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(turn_nodes_[a]);
-    Mat3 y = turn_y_[a];
-    for (const SlideTerm& term : slide_terms_)
-      y.noalias() += (Block(term.column + at) * *term.normal) * term.dw.transpose();
-    turn_y_[a] = y;
-  }
+  slide_node_sums(b, compact);
   const double coupling = turn_coupling(b);  // a relaxing body's W at its alpha (turn_coupling)
   if (coupling != 1.0)
     for (int a = 0; a < nk; ++a) turn_y_[a] *= coupling;
@@ -3268,12 +3283,37 @@ void State::list_u_nodes() {
     if (turn_needs_u_[k]) turn_u_at_.push_back(k);
 }
 
+// slide_rows' Y_k = sum over the sliding rows' terms (slide_terms_) of (C_kq n_j) (lambda_j
+// dw_jq)^T, node by node (each sum in the same order as term by term), the blocks from the
+// body's LoadedBlocks (compact: every term's node and turn_nodes_ there) else from the columns.
+void State::slide_node_sums(int b, bool compact) {
+  const ContactColumns& cols = *bodies_[b].columns;
+  LoadedBlocks& loaded = loaded_blocks_[b];
+  using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
+  const int nk = static_cast<int>(turn_nodes_.size());
+  for (int a = 0; a < nk; ++a) {
+    Mat3 y = turn_y_[a];
+    if (compact) {
+      const int i = loaded_node_index_[a];
+      for (const SlideTerm& term : slide_terms_)
+        y.noalias() += (Block(loaded.block(cols, i, term.index)) * *term.normal) * term.dw.transpose();
+    } else {
+      const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(turn_nodes_[a]);
+      for (const SlideTerm& term : slide_terms_)
+        y.noalias() += (Block(term.column + at) * *term.normal) * term.dw.transpose();
+    }
+    turn_y_[a] = y;
+  }
+}
+
 // normal_turn's U_k = -sum_s C_ks f_s (turn_rows, slide_rows) at the nodes of turn_u_at_
 // (list_u_nodes; U_k zero on entry) on an elastic body with forces, unit m: node by node over
-// the force slots in order (each sum as before), the node's blocks a few slots ahead fetched
-// (each block is a cache miss: the loads of one block after another waited on memory), the sum
-// held in registers.
-void State::node_displacements(int b) {
+// the force slots in order (each sum as before), the sum held in registers. The blocks are read
+// from the body's LoadedBlocks (the loaded nodes' blocks, one node's in one row, kept across
+// steps: loaded_indices), else, when the nodes do not fit there, from the columns, the node's
+// blocks a few slots ahead fetched (each block is a cache miss: the loads of one block after
+// another waited on memory).
+void State::node_displacements(int b, bool compact) {
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
   const std::size_t nf = bs.force_slots.size();
@@ -3281,31 +3321,65 @@ void State::node_displacements(int b) {
   constexpr std::size_t kAhead = 6;
   std::vector<Vec3>& memo = turn_u_memo_[b];
   std::vector<std::uint64_t>& memo_stamp = turn_u_memo_stamp_[b];
+  LoadedBlocks& loaded = loaded_blocks_[b];
   for (const int a : turn_u_at_) {
     const int slot = turn_nodes_[a];
     if (memo_stamp[slot] == turn_u_stamp_) {  // formed for another tool or phase this step
       turn_u_[a] = memo[slot];
       continue;
     }
-    const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(slot);
-    for (std::size_t f = 0; f < std::min(nf, kAhead); ++f) {
-      const double* ahead = cols.block(0, bs.force_slots[f]).data() + at;
-      __builtin_prefetch(ahead);
-      __builtin_prefetch(ahead + 8);
-    }
     Vec3 u = turn_u_[a];
-    for (std::size_t f = 0; f < nf; ++f) {
-      if (f + kAhead < nf) {
-        const double* ahead = cols.block(0, bs.force_slots[f + kAhead]).data() + at;
+    if (compact) {
+      const int i = loaded_node_index_[a];
+      for (std::size_t f = 0; f < nf; ++f)
+        u.noalias() -= Block(loaded.block(cols, i, loaded_force_index_[f])) * bs.forces_n[f];
+    } else {
+      const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(slot);
+      for (std::size_t f = 0; f < std::min(nf, kAhead); ++f) {
+        const double* ahead = cols.block(0, bs.force_slots[f]).data() + at;
         __builtin_prefetch(ahead);
         __builtin_prefetch(ahead + 8);
       }
-      u.noalias() -= Block(cols.block(0, bs.force_slots[f]).data() + at) * bs.forces_n[f];
+      for (std::size_t f = 0; f < nf; ++f) {
+        if (f + kAhead < nf) {
+          const double* ahead = cols.block(0, bs.force_slots[f + kAhead]).data() + at;
+          __builtin_prefetch(ahead);
+          __builtin_prefetch(ahead + 8);
+        }
+        u.noalias() -= Block(cols.block(0, bs.force_slots[f]).data() + at) * bs.forces_n[f];
+      }
     }
     turn_u_[a] = u;
     memo[slot] = u;
     memo_stamp[slot] = turn_u_stamp_;
   }
+}
+
+// normal_turn's node sums on body b (turn_node_sums, slide_rows): the indices in the body's
+// LoadedBlocks per force slot (loaded_force_index_) and per node of turn_nodes_
+// (loaded_node_index_). When they do not fit beside the nodes held from earlier steps, the copy
+// starts over; false if they do not fit at all (the sums read the columns).
+bool State::loaded_indices(int b) {
+  LoadedBlocks& loaded = loaded_blocks_[b];
+  const BodyState& bs = bodies_[b];
+  loaded.refresh(*bs.columns);
+  for (int round = 0; round < 2; ++round) {
+    bool fits = true;
+    loaded_force_index_.clear();
+    for (std::size_t f = 0; f < bs.force_slots.size() && fits; ++f) {
+      const int i = loaded.index(bs.force_slots[f]);
+      fits = i >= 0;
+      loaded_force_index_.push_back(i);
+    }
+    for (std::size_t a = 0; a < turn_nodes_.size() && fits; ++a) {
+      const int i = loaded.index(turn_nodes_[a]);
+      fits = i >= 0;
+      loaded_node_index_[a] = i;
+    }
+    if (fits) return true;
+    loaded.clear();
+  }
+  return false;
 }
 
 // normal_turn, the last term: -N^T W^-1 V over tool t's active rows (V: turn_v_), added to K.

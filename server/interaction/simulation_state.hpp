@@ -8,6 +8,7 @@
 #include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/contact_surface.hpp"
 #include "server/interaction/coupled_body.hpp"
+#include "server/interaction/loaded_blocks.hpp"
 #include "server/interaction/simulation.hpp"
 #include "server/interaction/sliding_coupling.hpp"
 #include "server/interaction/tier_worker.hpp"
@@ -432,7 +433,9 @@ class State {
   bool slide_weights(const Model& m, int tool, int ns);
   void slide_rows(int tool, int ns, int body);
   void list_u_nodes();
-  void node_displacements(int body);
+  void node_displacements(int body, bool compact);
+  bool loaded_indices(int body);
+  void slide_node_sums(int body, bool compact);
   void turn_stiffness(int tool, int ns, int tools, ToolContact& c);
   // A relaxing body's factor on W's terms of V (contact_step.cpp): its alpha / turn_scale_.
   double turn_coupling(int body) const;
@@ -710,6 +713,7 @@ class State {
   // its normal and lambda_j dw_jq / dx
   struct SlideTerm {
     const double* column;
+    int index;  // the node's index in the body's LoadedBlocks (-1: not there)
     const Vec3* normal;
     Vec3 dw;
   };
@@ -720,6 +724,11 @@ class State {
   // node_displacements: per body and slot U_k as last formed, and the turn_u_stamp_ it was formed
   // under (the forces do not change while normal_turn runs over the tools: one U_k per node and
   // step, however many tools' rows and phases have the node)
+  // node_displacements: per body the loaded nodes' compliance blocks (kept across steps), and
+  // this use's indices there per force slot and per node of turn_u_at_ (loaded_indices)
+  std::vector<LoadedBlocks> loaded_blocks_;
+  std::vector<int> loaded_force_index_;
+  std::vector<int> loaded_node_index_;
   std::vector<std::vector<Vec3>> turn_u_memo_;
   std::vector<std::vector<std::uint64_t>> turn_u_memo_stamp_;
   std::uint64_t turn_u_stamp_{0};
