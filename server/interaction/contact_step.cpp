@@ -428,6 +428,7 @@ void State::reserve_workspace(const Model& m, int tools) {
   turn_u_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_needs_u_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_u_at_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
+  turn_u_todo_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
   slide_terms_.reserve(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_y_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
   turn_a_.resize(kSpreadNodes * static_cast<std::size_t>(max_contact));
@@ -3307,51 +3308,98 @@ void State::slide_node_sums(int b, bool compact) {
 }
 
 // normal_turn's U_k = -sum_s C_ks f_s (turn_rows, slide_rows) at the nodes of turn_u_at_
-// (list_u_nodes; U_k zero on entry) on an elastic body with forces, unit m: node by node over
-// the force slots in order (each sum as before), the sum held in registers. The blocks are read
-// from the body's LoadedBlocks (the loaded nodes' blocks, one node's in one row, kept across
-// steps: loaded_indices), else, when the nodes do not fit there, from the columns, the node's
-// blocks a few slots ahead fetched (each block is a cache miss: the loads of one block after
-// another waited on memory).
+// (list_u_nodes; U_k zero on entry) on an elastic body with forces, unit m, once per node and
+// step (turn_u_memo_): over the force slots in order (each sum as before), the sums held in
+// registers, the blocks read from the body's LoadedBlocks (loaded_displacements; the loaded
+// nodes' blocks kept across steps: loaded_indices), else from the columns.
 void State::node_displacements(int b, bool compact) {
+  std::vector<Vec3>& memo = turn_u_memo_[b];
+  std::vector<std::uint64_t>& memo_stamp = turn_u_memo_stamp_[b];
+  turn_u_todo_.clear();
+  for (const int a : turn_u_at_) {
+    const int slot = turn_nodes_[a];
+    if (memo_stamp[slot] == turn_u_stamp_) {  // formed for another tool or phase this step
+      turn_u_[a] = memo[slot];
+    } else {
+      turn_u_todo_.push_back(a);
+    }
+  }
+  if (compact) {
+    loaded_displacements(b);
+  } else {
+    column_displacements(b);
+  }
+  for (const int a : turn_u_todo_) {
+    memo[turn_nodes_[a]] = turn_u_[a];
+    memo_stamp[turn_nodes_[a]] = turn_u_stamp_;
+  }
+}
+
+// node_displacements from the body's LoadedBlocks, at the nodes of turn_u_todo_: four nodes at a
+// time over the force slots (four sums in flight: one node's sum waited on each subtraction's
+// latency), each sum as before.
+void State::loaded_displacements(int b) {
+  const BodyState& bs = bodies_[b];
+  const ContactColumns& cols = *bs.columns;
+  LoadedBlocks& loaded = loaded_blocks_[b];
+  const std::size_t nf = bs.force_slots.size();
+  using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
+  const std::size_t n = turn_u_todo_.size();
+  std::size_t k = 0;
+  for (; k + 4 <= n; k += 4) {
+    const int* a = turn_u_todo_.data() + k;
+    const int i0 = loaded_node_index_[a[0]], i1 = loaded_node_index_[a[1]],
+              i2 = loaded_node_index_[a[2]], i3 = loaded_node_index_[a[3]];
+    Vec3 u0 = turn_u_[a[0]], u1 = turn_u_[a[1]], u2 = turn_u_[a[2]], u3 = turn_u_[a[3]];
+    for (std::size_t f = 0; f < nf; ++f) {
+      const int j = loaded_force_index_[f];
+      const Vec3& force = bs.forces_n[f];
+      u0.noalias() -= Block(loaded.block(cols, i0, j)) * force;
+      u1.noalias() -= Block(loaded.block(cols, i1, j)) * force;
+      u2.noalias() -= Block(loaded.block(cols, i2, j)) * force;
+      u3.noalias() -= Block(loaded.block(cols, i3, j)) * force;
+    }
+    turn_u_[a[0]] = u0;
+    turn_u_[a[1]] = u1;
+    turn_u_[a[2]] = u2;
+    turn_u_[a[3]] = u3;
+  }
+  for (; k < n; ++k) {
+    const int a = turn_u_todo_[k];
+    const int i = loaded_node_index_[a];
+    Vec3 u = turn_u_[a];
+    for (std::size_t f = 0; f < nf; ++f)
+      u.noalias() -= Block(loaded.block(cols, i, loaded_force_index_[f])) * bs.forces_n[f];
+    turn_u_[a] = u;
+  }
+}
+
+// node_displacements from the columns (the nodes do not fit in the LoadedBlocks), at the nodes
+// of turn_u_todo_: node by node, the node's blocks a few slots ahead fetched (each block is a
+// cache miss: the loads of one block after another waited on memory).
+void State::column_displacements(int b) {
   const BodyState& bs = bodies_[b];
   const ContactColumns& cols = *bs.columns;
   const std::size_t nf = bs.force_slots.size();
   using Block = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
   constexpr std::size_t kAhead = 6;
-  std::vector<Vec3>& memo = turn_u_memo_[b];
-  std::vector<std::uint64_t>& memo_stamp = turn_u_memo_stamp_[b];
-  LoadedBlocks& loaded = loaded_blocks_[b];
-  for (const int a : turn_u_at_) {
-    const int slot = turn_nodes_[a];
-    if (memo_stamp[slot] == turn_u_stamp_) {  // formed for another tool or phase this step
-      turn_u_[a] = memo[slot];
-      continue;
+  for (const int a : turn_u_todo_) {
+    const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(turn_nodes_[a]);
+    for (std::size_t f = 0; f < std::min(nf, kAhead); ++f) {
+      const double* ahead = cols.block(0, bs.force_slots[f]).data() + at;
+      __builtin_prefetch(ahead);
+      __builtin_prefetch(ahead + 8);
     }
     Vec3 u = turn_u_[a];
-    if (compact) {
-      const int i = loaded_node_index_[a];
-      for (std::size_t f = 0; f < nf; ++f)
-        u.noalias() -= Block(loaded.block(cols, i, loaded_force_index_[f])) * bs.forces_n[f];
-    } else {
-      const std::ptrdiff_t at = 9 * static_cast<std::ptrdiff_t>(slot);
-      for (std::size_t f = 0; f < std::min(nf, kAhead); ++f) {
-        const double* ahead = cols.block(0, bs.force_slots[f]).data() + at;
+    for (std::size_t f = 0; f < nf; ++f) {
+      if (f + kAhead < nf) {
+        const double* ahead = cols.block(0, bs.force_slots[f + kAhead]).data() + at;
         __builtin_prefetch(ahead);
         __builtin_prefetch(ahead + 8);
       }
-      for (std::size_t f = 0; f < nf; ++f) {
-        if (f + kAhead < nf) {
-          const double* ahead = cols.block(0, bs.force_slots[f + kAhead]).data() + at;
-          __builtin_prefetch(ahead);
-          __builtin_prefetch(ahead + 8);
-        }
-        u.noalias() -= Block(cols.block(0, bs.force_slots[f]).data() + at) * bs.forces_n[f];
-      }
+      u.noalias() -= Block(cols.block(0, bs.force_slots[f]).data() + at) * bs.forces_n[f];
     }
     turn_u_[a] = u;
-    memo[slot] = u;
-    memo_stamp[slot] = turn_u_stamp_;
   }
 }
 

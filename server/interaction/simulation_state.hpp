@@ -434,6 +434,8 @@ class State {
   void slide_rows(int tool, int ns, int body);
   void list_u_nodes();
   void node_displacements(int body, bool compact);
+  void loaded_displacements(int body);
+  void column_displacements(int body);
   bool loaded_indices(int body);
   void slide_node_sums(int body, bool compact);
   void turn_stiffness(int tool, int ns, int tools, ToolContact& c);
@@ -709,6 +711,7 @@ class State {
   // list_u_nodes: the indices into turn_nodes_ of the nodes that need U_k, ascending (one list
   // per node set: relaxing_displacement, node_displacements and turn_node_sums read it)
   std::vector<int> turn_u_at_;
+  std::vector<int> turn_u_todo_;  // node_displacements: the nodes of turn_u_at_ not formed yet
   // slide_rows: a sliding row's term of Y_k per node q, its column of C (node k's block at 9 k),
   // its normal and lambda_j dw_jq / dx
   struct SlideTerm {
