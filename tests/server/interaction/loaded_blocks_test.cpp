@@ -4,7 +4,7 @@
 // started over holds the columns' blocks again, never a stale one.
 #include "server/interaction/loaded_blocks.hpp"
 
-#include "server/mesh/generate.hpp"
+#include "fixed_base_box.hpp"
 
 #include <gtest/gtest.h>
 
@@ -16,24 +16,18 @@ namespace neurosim::interaction {
 namespace {
 
 struct Body {
-  mesh::TetMesh mesh;
+  fixtures::FixedBaseBox box;
   std::unique_ptr<CoupledBody> body;
 };
 
 Body make_body() {
   Body b;
-  mesh::MeshingOptions o;
-  o.cell_size_m = 0.01;
-  o.seed = 1;
-  b.mesh = mesh::generate_box({0, 0, 0}, {0.04, 0.04, 0.04}, o).mesh;
-  std::vector<int> fixed;
-  for (std::size_t v = 0; v < b.mesh.num_vertices(); ++v)
-    if (b.mesh.vertices()[v].z() < 1e-9) fixed.push_back(static_cast<int>(v));
+  b.box = fixtures::fixed_base_box(0.01);
   fem::Material m;
   m.youngs_modulus_pa = 3000.0;
   m.poisson_ratio = 0.45;
   m.name = "block";
-  b.body = std::make_unique<CoupledBody>(0, b.mesh, m, fixed);
+  b.body = std::make_unique<CoupledBody>(0, b.box.mesh, m, b.box.fixed);
   b.body->finalize();
   return b;
 }
