@@ -724,14 +724,14 @@ class State {
   std::vector<Mat3> turn_y_;
   std::vector<Mat3> turn_a_;  // normal_turn, the rows' turn: per node A_k (contact_step.cpp)
   std::vector<std::vector<int>> turn_node_;
-  // node_displacements: per body and slot U_k as last formed, and the turn_u_stamp_ it was formed
-  // under (the forces do not change while normal_turn runs over the tools: one U_k per node and
-  // step, however many tools' rows and phases have the node)
   // node_displacements: per body the loaded nodes' compliance blocks (kept across steps), and
-  // this use's indices there per force slot and per node of turn_u_at_ (loaded_indices)
+  // this use's indices there per force slot and per node of turn_nodes_ (loaded_indices)
   std::vector<LoadedBlocks> loaded_blocks_;
   std::vector<int> loaded_force_index_;
   std::vector<int> loaded_node_index_;
+  // node_displacements: per body and slot U_k as last formed, and the turn_u_stamp_ it was formed
+  // under (the forces do not change while normal_turn runs over the tools: one U_k per node and
+  // step, however many tools' rows and phases have the node)
   std::vector<std::vector<Vec3>> turn_u_memo_;
   std::vector<std::vector<std::uint64_t>> turn_u_memo_stamp_;
   std::uint64_t turn_u_stamp_{0};
