@@ -282,11 +282,13 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     }
     // Tool contact with B's exposed part is built for the LINEAR and NONLINEAR tiers with a TIE
     // coupling (method EXACT): B's exposed surface gets contact slots (CoupledBody::expose_tie;
-    // in NONLINEAR they are B's nodes in the tier's stacked equilibrium, TierEquilibrium). In
-    // LINEAR the tissue may relax: the body's hereditary integral lives on its contact slots
-    // (ViscoelasticHistory, with the host's kernel), B's exposed slots among them. Anything else
-    // would leave the exposed part without contact rows (the tool would pass through it without
-    // force), so it is refused, naming what is not built.
+    // in NONLINEAR they are B's nodes in the tier's stacked equilibrium, TierEquilibrium). The
+    // tissue may relax in both: in LINEAR the body's hereditary integral lives on its contact
+    // slots (ViscoelasticHistory, with the host's kernel), B's exposed slots among them; in
+    // NONLINEAR each mesh of the stacked equilibrium relaxes with its own kernel (quasi-linear
+    // viscoelasticity, TierEquilibrium), the forces on B's exposed slots loading B's dofs.
+    // Anything else would leave the exposed part without contact rows (the tool would pass
+    // through it without force), so it is refused, naming what is not built.
     const bool tool_touch = model.effects.tool_contact && !model.tools.empty();
     std::string not_built;
     if (tier_ != scene::Tier::kLinear && tier_ != scene::Tier::kNonlinear)
@@ -296,10 +298,6 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       not_built = "with a SLIDING coupling (built for TIE only)";
     else if (iterative_host[h])
       not_built = "with coupling method ITERATIVE (built for EXACT only)";
-    else if (tier_ != scene::Tier::kLinear &&
-             (!host.material.viscoelastic.empty() || !emb.material.viscoelastic.empty()))
-      not_built = std::string("with viscoelastic tissue in effects.tier ") +
-                  scene::tier_name(tier_) + " (built in the LINEAR tier only)";
     if (ex.nodes_outside > 0 && tool_touch && !not_built.empty()) {
       char buf[320];
       std::snprintf(buf, sizeof buf,
@@ -310,9 +308,8 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       throw std::runtime_error(
           source_ + ": embedded mesh " + emb.id + ": " + buf +
           "; tool contact with an exposed embedded mesh is not implemented " + not_built +
-          ": use a TIE coupling (method EXACT) in the LINEAR tier, or in the NONLINEAR tier with "
-          "elastic meshes, place the embedded mesh inside its host, or remove the tools or "
-          "effects.tool_contact");
+          ": use a TIE coupling (method EXACT) in the LINEAR or NONLINEAR tier, place the "
+          "embedded mesh inside its host, or remove the tools or effects.tool_contact");
     }
     if (ex.nodes_outside > 0 && tool_touch) exposed[m] = ex.outside;
     setup_.fusion_s += seconds_since(t0);
