@@ -22,6 +22,29 @@ namespace {
 
 using common::seconds_since;
 
+// X = L B for free-dof right-hand sides b of a host with ties: Woodbury on the tie stiffness,
+// L b = L_A (b - P_b^T G (L_A b)[b]), two host solves; apply(v, gv) gives gv = G v (m3 rows, the
+// boundary dofs boundary_nodes (A ids) in triples).
+template <typename Solve, typename Apply>
+void woodbury_solve(const std::vector<int>& reduced, const std::vector<int>& boundary_nodes,
+                    int m3, const Solve& solve, const Apply& apply, const Eigen::MatrixXd& b,
+                    Eigen::MatrixXd& x) {
+  solve(b, x);
+  if (m3 == 0) return;
+  Eigen::MatrixXd v = Eigen::MatrixXd::Zero(m3, b.cols()), gv;
+  for (int r = 0; r < m3; ++r) {
+    const int red = reduced[3 * boundary_nodes[r / 3] + r % 3];
+    if (red >= 0) v.row(r) = x.row(red);
+  }
+  apply(v, gv);
+  Eigen::MatrixXd rhs = b;
+  for (int r = 0; r < m3; ++r) {
+    const int red = reduced[3 * boundary_nodes[r / 3] + r % 3];
+    if (red >= 0) rhs.row(red) -= gv.row(r);
+  }
+  solve(rhs, x);
+}
+
 }  // namespace
 
 std::vector<mesh::Vec3> surface_vertex_normals(const mesh::TetMesh& m) {
@@ -235,23 +258,9 @@ void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixX
     if (ws != nullptr) solver_->solve_reduced(rhs, out, *ws);
     else solver_->solve_reduced(rhs, out);
   };
-  solve(b, x);
-  const int m3 = static_cast<int>(op_.l_bb.rows());
-  if (m3 == 0) return;
-  // Woodbury on the tie stiffness: L b = L_A (b - P_b^T G (L_A b)[b]).
-  const auto& reduced = solver_->reduced_index();
-  Eigen::MatrixXd v = Eigen::MatrixXd::Zero(m3, b.cols()), gv;
-  for (int r = 0; r < m3; ++r) {
-    const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
-    if (red >= 0) v.row(r) = x.row(red);
-  }
-  apply_coupling(v, gv);
-  Eigen::MatrixXd rhs = b;
-  for (int r = 0; r < m3; ++r) {
-    const int red = reduced[3 * boundary_nodes_[r / 3] + r % 3];
-    if (red >= 0) rhs.row(red) -= gv.row(r);
-  }
-  solve(rhs, x);
+  const auto apply = [&](const Eigen::MatrixXd& v, Eigen::MatrixXd& gv) { apply_coupling(v, gv); };
+  woodbury_solve(solver_->reduced_index(), boundary_nodes_, static_cast<int>(op_.l_bb.rows()),
+                 solve, apply, b, x);
 }
 
 void CoupledBody::coupled_displacement(const Eigen::MatrixXd& forces_n,
@@ -395,10 +404,18 @@ void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::Ma
   bool on_tie = false;
   for (int s : slots) on_tie = on_tie || s >= num_host_contact_;
   if (on_tie) {
-    // Slots on an exposed tie: their equivalent host loads, one coupled solve (two with ties).
+    // Slots on an exposed tie: their equivalent host loads, one coupled solve (two with ties;
+    // the ITERATIVE baseline iterates G inside it, counted as for the host's slots).
     Eigen::MatrixXd rhs;
     tie_slot_loads(slots, rhs, ws);
-    coupled_solve_reduced(rhs, x, ws);
+    const auto solve = [&](const Eigen::MatrixXd& b, Eigen::MatrixXd& out) {
+      if (ws != nullptr) solver_->solve_reduced(b, out, *ws);
+      else solver_->solve_reduced(b, out);
+    };
+    const auto apply = [&](const Eigen::MatrixXd& v, Eigen::MatrixXd& gv) {
+      apply_coupling(v, gv, iterations);
+    };
+    woodbury_solve(reduced, boundary_nodes_, m3, solve, apply, rhs, x);
     return;
   }
   Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nf, 3 * n), lb, glb;

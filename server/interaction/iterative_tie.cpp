@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 namespace neurosim::interaction {
 
@@ -32,8 +33,14 @@ Eigen::VectorXd IterativeTie::load(const std::vector<int>& slots,
                                    const std::vector<Eigen::Vector3d>& forces_n) const {
   const auto& l_sb = body_.contact_boundary_compliance();
   Eigen::VectorXd v = Eigen::VectorXd::Zero(l_sb.cols());
-  for (std::size_t k = 0; k < slots.size(); ++k)
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    // L_A's rows at the host's contact slots only (an exposed tie's slot loads A through the
+    // tie's equivalent load: not this comparison's).
+    if (slots[k] < 0 || 3 * slots[k] + 3 > l_sb.rows())
+      throw std::invalid_argument("IterativeTie: contact slot " + std::to_string(slots[k]) +
+                                  " is not one of the host's");
     v.noalias() += l_sb.middleRows(3 * slots[k], 3).transpose() * forces_n[k];
+  }
   return v;
 }
 

@@ -281,7 +281,8 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       throw std::runtime_error(what + ": " + e.what());
     }
     // Tool contact with B's exposed part is built for the LINEAR and NONLINEAR tiers with a TIE
-    // coupling (method EXACT): B's exposed surface gets contact slots (CoupledBody::expose_tie;
+    // coupling (method EXACT; in LINEAR also ITERATIVE, the paper's baseline iterating G in the
+    // same coupled solves): B's exposed surface gets contact slots (CoupledBody::expose_tie;
     // in NONLINEAR they are B's nodes in the tier's stacked equilibrium, TierEquilibrium). The
     // tissue may relax in both: in LINEAR the body's hereditary integral lives on its contact
     // slots (ViscoelasticHistory, with the host's kernel), B's exposed slots among them; in
@@ -296,8 +297,6 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
                   " (built in the LINEAR and NONLINEAR tiers only)";
     else if (sliding[m])
       not_built = "with a SLIDING coupling (built for TIE only)";
-    else if (iterative_host[h])
-      not_built = "with coupling method ITERATIVE (built for EXACT only)";
     if (ex.nodes_outside > 0 && tool_touch && !not_built.empty()) {
       char buf[320];
       std::snprintf(buf, sizeof buf,
@@ -308,8 +307,8 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       throw std::runtime_error(
           source_ + ": embedded mesh " + emb.id + ": " + buf +
           "; tool contact with an exposed embedded mesh is not implemented " + not_built +
-          ": use a TIE coupling (method EXACT) in the LINEAR or NONLINEAR tier, place the "
-          "embedded mesh inside its host, or remove the tools or effects.tool_contact");
+          ": use a TIE coupling in the LINEAR or NONLINEAR tier, place the embedded mesh "
+          "inside its host, or remove the tools or effects.tool_contact");
     }
     if (ex.nodes_outside > 0 && tool_touch) exposed[m] = ex.outside;
     setup_.fusion_s += seconds_since(t0);
