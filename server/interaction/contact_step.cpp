@@ -2027,6 +2027,29 @@ bool State::spread_row(const Model& m, Row& r) {
   return true;
 }
 
+namespace {
+
+// The near field's material under a part (its deepest row on the body): the mesh carrying that
+// row's largest weight, the body's host or an exposed tied mesh (CoupledBody::expose_tie: a
+// vessel leaving the brain is indented with its own E and nu, not the brain's).
+const fem::Material& near_field_material(const Model& m, int body, const Row* deepest) {
+  const BodyModel& b = m.bodies_[body];
+  if (deepest == nullptr || !b.body->has_exposed_contact()) return b.host_material;
+  int slot = -1;
+  double heaviest = -1.0;
+  for (int p = 0; p < deepest->nodes; ++p) {
+    if (deepest->slot[p] >= 0 && deepest->w[p] > heaviest) {
+      heaviest = deepest->w[p];
+      slot = deepest->slot[p];
+    }
+  }
+  if (slot < 0) return b.host_material;
+  const int tie = b.body->contact_point(slot).tie;
+  return tie < 0 ? b.host_material : b.body->ties()[static_cast<std::size_t>(tie)].material();
+}
+
+}  // namespace
+
 // SimulationOptions::contact_near_field, per body the tool's tip rows: the compliance the
 // mesh cannot show under a contact patch smaller than its cells, in series with all of them
 // (the tip's local indentation grows with the sum of its rows' forces): Hertz's secant
@@ -2044,8 +2067,8 @@ bool State::spread_row(const Model& m, Row& r) {
 // cells shrink below the patch, where the former max(0, 0.75 / a - 0.766 / rho) left the
 // spread's smear uncorrected for a > 0.98 rho (the 2 mm tip 1 mm into the block graded to 1 mm
 // cells: 11.4 mN against 8.4 now, Sneddon 6.7; bench/RESULTS.md, "The near field of a patch
-// wider than the spread"). E* = E / (1 - nu^2) of the body's host. Large at first touch
-// (d -> 0), so a tip's force grows from zero with the depth.
+// wider than the spread"). E* = E / (1 - nu^2) of the mesh under the tip (near_field_material).
+// Large at first touch (d -> 0), so a tip's force grows from zero with the depth.
 void State::near_field_of_tool(const Model& m, const ToolShape& shape) {
   if (!m.options_.contact_near_field) return;
   // One pass per body over the tool's rows (a few bodies, tens of rows).
@@ -2062,7 +2085,7 @@ void State::near_field_of_tool(const Model& m, const ToolShape& shape) {
       deepest = &r;
     }
     if (!any) continue;
-    const fem::Material& mat = m.bodies_[body].host_material;
+    const fem::Material& mat = near_field_material(m, body, deepest);
     const double e_star =
         mat.youngs_modulus_pa / (1.0 - mat.poisson_ratio * mat.poisson_ratio);
     const double radius = shape.tip_radius_m;
@@ -2112,7 +2135,7 @@ void State::near_field_of_shaft(const Model& m, const ToolShape& shape, const Ve
       if (r.shaft && r.body == body && (deepest == nullptr || r.depth_m > deepest->depth_m))
         deepest = &r;
     if (deepest == nullptr || !(deepest->depth_m > 0.0)) continue;
-    const fem::Material& mat = m.bodies_[body].host_material;
+    const fem::Material& mat = near_field_material(m, body, deepest);
     const double e_star =
         mat.youngs_modulus_pa / (1.0 - mat.poisson_ratio * mat.poisson_ratio);
     const double sin_tilt = deepest->normal.dot(axis);

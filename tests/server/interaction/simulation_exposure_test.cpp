@@ -373,7 +373,12 @@ void forces_by_mesh(const Simulation& sim, int host, mesh::Vec3& on_host, mesh::
 // the first touch (20 um) on, growing with the depth; the answer names the cylinder and its node
 // under the tip; the cylinder's field (for the viewers) closes the gap there.
 TEST(interaction_simulation_exposure, TipPressingTheRaisedCylindersTopFeelsIt) {
-  const auto p = raised_press();
+  // Without the tip's near field (the indentation below the cells, which takes most of the depth
+  // on the cylinder's coarse cells: TipNearFieldOnTheExposedTopIsTheCylinders), so the field
+  // shows the whole depth.
+  SimulationOptions o;
+  o.contact_near_field = false;
+  const auto p = raised_press(scene::Effects::LINEAR, o);
   ASSERT_GE(p->top_node, 0);
   ASSERT_GT(p->top_m.z(), 0.119);  // the cylinder's top, 20 mm above the cube's
   const CoupledBody& body = *p->sim->body_of(p->cylinder);
@@ -419,6 +424,67 @@ TEST(interaction_simulation_exposure, TipPressingTheRaisedCylindersTopFeelsIt) {
       EXPECT_LT(p->sim->tie_residual_m(), 1e-12);
     }
   }
+}
+
+// The tip's near field (SimulationOptions::contact_near_field: the indentation the cells cannot
+// show under the tip, in series with its rows) on the exposed top is the cylinder's: its
+// compliance, d / F with it less d / F without it, does not follow the cube's E (the cube 1 and
+// 4 MPa, the cylinder 0.1 MPa throughout). Taken from the host's material it fell fourfold.
+TEST(interaction_simulation_exposure, TipNearFieldOnTheExposedTopIsTheCylinders) {
+  const double d = 0.00025;  // m
+  double near_field[2] = {0.0, 0.0}, f_mesh[2] = {0.0, 0.0}, tip_radius_m = 0.0;
+  fem::Material cylinder;
+  for (int k = 0; k < 2; ++k) {
+    const double e_cube = k == 0 ? 1.0e6 : 4.0e6;
+    auto edit = [&](scene::Scene& s) {
+      s.mutable_meshes(scene::find_mesh(s, "cube"))->mutable_material()->set_youngs_modulus_pa(e_cube);
+    };
+    double f[2] = {0.0, 0.0};
+    for (int on = 0; on < 2; ++on) {
+      SimulationOptions o;
+      o.contact_near_field = on == 1;
+      const auto p = raised_press(scene::Effects::LINEAR, o, edit);
+      ASSERT_GE(p->top_node, 0);
+      std::vector<ToolContact> c;
+      StepStats st;
+      ToolPose pose;
+      pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
+      pose.axis = Vec3::UnitZ();
+      p->sim->step({pose}, c, st);
+      ASSERT_TRUE(st.converged);
+      ASSERT_TRUE(c[0].in_contact);
+      EXPECT_EQ(c[0].mesh, p->cylinder);
+      f[on] = c[0].force_n.z();
+      ASSERT_GT(f[on], 0.0);
+      cylinder = p->model.meshes[static_cast<std::size_t>(p->cylinder)].material;
+      tip_radius_m = p->tip_radius_m;
+    }
+    near_field[k] = d / f[1] - d / f[0];
+    f_mesh[k] = f[0];
+    std::printf("cube E %.0f MPa: F %.6f N without the near field, %.6f N with it: near-field "
+                "compliance %.4e m/N\n",
+                e_cube * 1e-6, f[0], f[1], near_field[k]);
+    EXPECT_GT(near_field[k], 0.0);
+  }
+  // Against Hertz (outside the mesh): a rigid sphere of radius R on the cylinder's top (radius
+  // 15 mm, its axis along y), principal radii R' = R R_c / (R + R_c) across the axis and R along
+  // it, F = 4/3 E* sqrt(R_e) d^3/2 with R_e = sqrt(R' R) (ellipticity R'/R = 0.83: its factor
+  // within 0.1 % of 1), E* = E / (1 - nu^2) of the cylinder. The mesh alone (no near field) is
+  // over ten times stiffer here (its cells are several tip radii wide).
+  {
+    const double r = tip_radius_m, rc = 0.015;
+    const double r_e = std::sqrt(r * rc / (r + rc) * r);
+    const double e_star = cylinder.youngs_modulus_pa /
+                          (1.0 - cylinder.poisson_ratio * cylinder.poisson_ratio);
+    const double hertz = 4.0 / 3.0 * e_star * std::sqrt(r_e) * std::pow(d, 1.5);
+    std::printf("Hertz %.6f N (R %.1f mm, R_e %.2f mm, E* %.0f Pa); with the near field %.6f N\n",
+                hertz, r * 1e3, r_e * 1e3, e_star, d / (near_field[0] + d / f_mesh[0]));
+    EXPECT_NEAR(d / (near_field[0] + d / f_mesh[0]), hertz, 0.2 * hertz);
+  }
+  const double ratio = near_field[1] / near_field[0];
+  std::printf("near-field compliance, cube 4 MPa over 1 MPa: %.4f\n", ratio);
+  EXPECT_GT(ratio, 0.8);
+  EXPECT_LT(ratio, 1.25);
 }
 
 // Coupling method ITERATIVE (the paper's baseline: G applied by the boundary iteration inside the
