@@ -107,11 +107,14 @@ Verdict ToolFilter::check(const neurosim_ToolState& s, const ReceiveTime& at, do
     if (!have_tokens_) {
       have_tokens_ = true;
       tokens_ = def_.rate_burst;
-    } else {
-      const double dt = 1e-9 * static_cast<double>(std::max<std::int64_t>(0, at.monotonic_ns - tokens_at_ns_));
-      tokens_ = std::min(def_.rate_burst, tokens_ + dt * def_.max_rate_hz);
+      source_high_ns_ = s.source_time_ns;
+    } else if (s.source_time_ns > source_high_ns_) {
+      // The difference as unsigned: exact for any two int64 with source > high (no overflow).
+      const std::uint64_t advance_ns = static_cast<std::uint64_t>(s.source_time_ns) -
+                                       static_cast<std::uint64_t>(source_high_ns_);
+      tokens_ = std::min(def_.rate_burst, tokens_ + 1e-9 * static_cast<double>(advance_ns) * def_.max_rate_hz);
+      source_high_ns_ = s.source_time_ns;
     }
-    tokens_at_ns_ = at.monotonic_ns;
     if (tokens_ < 1.0) return Verdict::Rate;
     tokens_ -= 1.0;
   }

@@ -52,11 +52,16 @@ struct ToolFilterDef {
   double slack_s{2e-3};
   Workspace workspace{};          // the tip must stay inside (scene bounding box + margin)
   double max_future_s{1.0};       // source_time_ns at most this far ahead of receive, unit s
-  // Token bucket over receive times: on average at most max_rate_hz samples per second with
-  // bursts of rate_burst; the excess is rejected (Rate). <= 0 Hz: no rate limit. The burst
-  // covers what a legitimate station sends after a stall of its machine: the haptic client
-  // writes up to 100 missed ticks back to back before it re-anchors its clock. The limit is
-  // there against floods (their average), and 200 samples once cost the server nothing.
+  // Token bucket: on average at most max_rate_hz samples per second with bursts of rate_burst;
+  // the excess is rejected (Rate). <= 0 Hz: no rate limit. The bucket refills by the advance of
+  // the newest source time seen (its high-water mark), which the Time check holds within
+  // max_future_s of the server's wall clock: a writer gains at most that once (capped by the
+  // burst), then no more than the clock; and samples a stall of the server's own receive thread
+  // (a loaded machine) delivers at once still carry their station's spacing, so they are not
+  // taken for a flood (over receive times they were, past the burst). The burst covers what a
+  // legitimate station sends after a stall of its machine: the haptic client writes up to 100
+  // missed ticks back to back before it re-anchors its clock. The limit is there against floods
+  // (their average), and 200 samples once cost the server nothing.
   double max_rate_hz{2000.0};
   double rate_burst{200.0};
 };
@@ -91,7 +96,7 @@ class ToolFilter {
   std::int64_t last_receive_ns_{0};
   std::uint64_t last_sequence_{0};
   double tokens_{0};
-  std::int64_t tokens_at_ns_{0};
+  std::int64_t source_high_ns_{0};  // the newest source time seen by the rate check, unit ns
   bool have_tokens_{false};
 };
 

@@ -144,13 +144,23 @@ TEST(service_tool_filter, RateAboveTheLimitIsRejectedA1kHzStationNever) {
   d.rate_burst = 20;
   ToolFilter fast(d), steady(d);
   int rate = 0;
-  for (std::int64_t k = 0; k < 2000; ++k) {  // 20 kHz for 0.1 s
-    auto s = at_ms(0.0, 0);
+  for (std::int64_t k = 0; k < 2000; ++k) {  // 20 kHz for 0.1 s, each sample stamped when sent
+    auto s = at_ms(0.0, k * 50000);
     s.sequence_number = static_cast<std::uint64_t>(k + 1);
     rate += fast.check(s, at(k * 50000)) == Verdict::Rate;
   }
   EXPECT_GT(rate, 1700);  // ~200 + 20 of 2000 pass
   EXPECT_LT(rate, 1800);
+  // The same flood with one source time (a writer that does not stamp its samples): the bucket
+  // never refills, the burst alone passes.
+  ToolFilter stale(d);
+  rate = 0;
+  for (std::int64_t k = 0; k < 2000; ++k) {
+    auto s = at_ms(0.0, 0);
+    s.sequence_number = static_cast<std::uint64_t>(k + 1);
+    rate += stale.check(s, at(k * 50000)) == Verdict::Rate;
+  }
+  EXPECT_EQ(rate, 2000 - 20);
   for (std::int64_t k = 0; k < 2000; ++k) {  // 1 kHz with +-0.4 ms jitter
     const std::int64_t t = k * kMs + ((k % 2) ? 400000 : -400000);
     auto s = at_ms(0.0, k * kMs);
@@ -182,6 +192,42 @@ TEST(service_tool_filter, TheDefaultRateLimitAcceptsTheClientsCatchUpBurstNotAFl
   int passed = 0;
   for (std::int64_t k = 0; k < 20000; ++k) passed += send(flood, k * 50000) == Verdict::Accepted;
   EXPECT_LE(passed, static_cast<int>(d.max_rate_hz + d.rate_burst) + 1);
+  EXPECT_GE(passed, static_cast<int>(d.max_rate_hz) - 1);
+}
+
+// A stall of the server's own receive thread (a loaded machine) delivers a 1 kHz station's
+// samples at once: they carry their 1 ms spacing in their source times, so however long the
+// stall, none is taken for a flood. Forged source times (jumping to the Time check's limit and
+// back) refill the bucket by their high-water mark's advance only: once, then with the clock.
+TEST(service_tool_filter, AServerStallsBurstPassesForgedSourceTimesGainNothing) {
+  const ToolFilterDef d;
+  ToolFilter station(d), forger(d);
+  std::uint64_t seq = 0;
+  std::int64_t t = 0;
+  for (int k = 0; k < 100; ++k, t += kMs) {
+    auto s = at_ms(0.0, t);
+    s.sequence_number = ++seq;
+    ASSERT_EQ(station.check(s, at(t)), Verdict::Accepted) << k;
+  }
+  // 1000 samples sent 1 ms apart, received within 10 ms after a 1 s stall of the server.
+  const std::int64_t stall_end = t + 1000 * kMs;
+  for (int k = 0; k < 1000; ++k, t += kMs) {
+    auto s = at_ms(0.0, t);
+    s.sequence_number = ++seq;
+    ASSERT_EQ(station.check(s, at(stall_end + k * 10000)), Verdict::Accepted) << "burst sample " << k;
+  }
+  // A flood at 20 kHz for 1 s whose source times alternate between the Time check's limit
+  // (0.99 s ahead of the wall clock) and 5 s behind it: about max_rate_hz + rate_burst pass.
+  seq = 0;
+  int passed = 0;
+  for (std::int64_t k = 0; k < 20000; ++k) {
+    const std::int64_t r = k * 50000;
+    auto s = at_ms(0.0, (k % 2) ? r + 990 * kMs : r - 5000 * kMs);
+    s.sequence_number = ++seq;
+    passed += forger.check(s, at(r)) == Verdict::Accepted;
+  }
+  std::printf("forged source times: %d of 20000 passed\n", passed);
+  EXPECT_LE(passed, static_cast<int>(d.max_rate_hz + 2 * d.rate_burst) + 1);
   EXPECT_GE(passed, static_cast<int>(d.max_rate_hz) - 1);
 }
 
