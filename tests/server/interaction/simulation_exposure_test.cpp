@@ -29,6 +29,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <initializer_list>
 #include <functional>
 #include <stdexcept>
 #include <string>
@@ -64,6 +65,20 @@ std::array<int, 3> sorted(const std::array<int, 3>& t) {
   return f;
 }
 
+// Adds the Prony terms to the material of each named mesh of the scene.
+void add_kernel(scene::Scene& s, std::initializer_list<const char*> meshes,
+                const std::vector<fem::PronyTerm>& terms) {
+  for (const char* mesh : meshes)
+    for (const auto& t : terms) {
+      auto* term = s.mutable_meshes(scene::find_mesh(s, mesh))
+                       ->mutable_material()
+                       ->mutable_viscoelastic()
+                       ->add_terms();
+      term->set_g(t.g);
+      term->set_tau_s(t.tau_s);
+    }
+}
+
 std::string build_error(const scene::Model& model) {
   try {
     (void)build_model(model, SimulationOptions{});
@@ -82,14 +97,7 @@ TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefusedWhereNotBuilt
   // built.
   {
     scene::Scene s = cube_cylinder(0.105, true);
-    for (const char* mesh : {"cube", "cylinder"}) {
-      auto* term = s.mutable_meshes(scene::find_mesh(s, mesh))
-                       ->mutable_material()
-                       ->mutable_viscoelastic()
-                       ->add_terms();
-      term->set_g(0.3);
-      term->set_tau_s(1.0);
-    }
+    add_kernel(s, {"cube", "cylinder"}, {{0.3, 1.0}});
     s.mutable_effects()->set_tier(scene::Effects::LINEAR);
     EXPECT_EQ(build_error(scene::compile(s, path.string())), "");
     s.mutable_effects()->set_tier(scene::Effects::NONLINEAR);
@@ -548,15 +556,7 @@ TEST(interaction_simulation_exposure, HeldPressOnTheRaisedCylindersTopRelaxesAsT
   o.contact_geometry_iterations = 1;
   const auto elastic = raised_press(scene::Effects::LINEAR, o);
   const auto visco = raised_press(scene::Effects::LINEAR, o, [&](scene::Scene& s) {
-    for (const char* mesh : {"cube", "cylinder"})
-      for (const auto& t : terms) {
-        auto* term = s.mutable_meshes(scene::find_mesh(s, mesh))
-                         ->mutable_material()
-                         ->mutable_viscoelastic()
-                         ->add_terms();
-        term->set_g(t.g);
-        term->set_tau_s(t.tau_s);
-      }
+    add_kernel(s, {"cube", "cylinder"}, terms);
   });
   ASSERT_TRUE(visco->sim->body_of(visco->cylinder)->has_exposed_contact());
   ASSERT_EQ(visco->top_node, elastic->top_node);
@@ -1084,15 +1084,7 @@ TEST(interaction_simulation_exposure, NonlinearHeldPressOnTheRaisedCylindersTopR
     }
   });
   const auto visco = raised_press(scene::Effects::NONLINEAR, o, [&](scene::Scene& s) {
-    for (const char* mesh : {"cube", "cylinder"})
-      for (const auto& t : terms) {
-        auto* term = s.mutable_meshes(scene::find_mesh(s, mesh))
-                         ->mutable_material()
-                         ->mutable_viscoelastic()
-                         ->add_terms();
-        term->set_g(t.g);
-        term->set_tau_s(t.tau_s);
-      }
+    add_kernel(s, {"cube", "cylinder"}, terms);
   });
   ASSERT_TRUE(visco->sim->body_of(visco->cylinder)->has_exposed_contact());
   ASSERT_EQ(visco->top_node, elastic->top_node);
