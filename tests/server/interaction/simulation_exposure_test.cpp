@@ -79,6 +79,24 @@ void add_kernel(scene::Scene& s, std::initializer_list<const char*> meshes,
     }
 }
 
+// Steps the pose at time t until the force changes by less than 1e-12 relative (at most 200
+// steps); the settled force (c: the last step's answer; steps: how many were taken).
+Vec3 settle(Simulation& sim, double t, const ToolPose& pose, std::vector<ToolContact>& c,
+            int* steps = nullptr) {
+  StepStats st;
+  Vec3 prev = Vec3::Constant(1e300);
+  int k = 1;
+  for (; k <= 200; ++k) {
+    sim.step_at(t, {pose}, c, st);
+    EXPECT_TRUE(st.converged) << "t " << t;
+    if (!c[0].force_n.allFinite()) break;
+    if ((c[0].force_n - prev).norm() <= 1e-12 * c[0].force_n.norm()) break;
+    prev = c[0].force_n;
+  }
+  if (steps != nullptr) *steps = k;
+  return c[0].force_n;
+}
+
 std::string build_error(const scene::Model& model) {
   try {
     (void)build_model(model, SimulationOptions{});
@@ -1094,19 +1112,8 @@ TEST(interaction_simulation_exposure, NonlinearHeldPressOnTheRaisedCylindersTopR
   pose.tip_m = elastic->top_m + Vec3(0.0, 0.0, elastic->tip_radius_m - kDepth);
   pose.axis = Vec3::UnitZ();
   std::vector<ToolContact> c;
-  StepStats st;
-  // Steps the pose at time t until the force changes by less than 1e-12 relative (at most 200
-  // steps); the settled force and the steps taken.
   auto settle_at = [&](Simulation& sim, double t, int& steps) {
-    Vec3 prev = Vec3::Constant(1e300);
-    for (steps = 1; steps <= 200; ++steps) {
-      sim.step_at(t, {pose}, c, st);
-      EXPECT_TRUE(st.converged) << "t " << t;
-      if (!c[0].force_n.allFinite()) break;
-      if ((c[0].force_n - prev).norm() <= 1e-12 * c[0].force_n.norm()) break;
-      prev = c[0].force_n;
-    }
-    return c[0].force_n;
+    return settle(sim, t, pose, c, &steps);
   };
   int steps = 0;
   const Vec3 f_el = settle_at(*elastic->sim, 0.0, steps);
@@ -1188,18 +1195,7 @@ TEST(interaction_simulation_exposure, NonlinearHeldPressWithAKernelPerMeshRelaxe
   pose.tip_m = elastic->top_m + Vec3(0.0, 0.0, elastic->tip_radius_m - 0.002);
   pose.axis = Vec3::UnitZ();
   std::vector<ToolContact> c;
-  StepStats st;
-  auto settle_at = [&](Simulation& sim, double t) {
-    Vec3 prev = Vec3::Constant(1e300);
-    for (int k = 0; k < 200; ++k) {
-      sim.step_at(t, {pose}, c, st);
-      EXPECT_TRUE(st.converged) << "t " << t;
-      if (!c[0].force_n.allFinite()) break;
-      if ((c[0].force_n - prev).norm() <= 1e-12 * c[0].force_n.norm()) break;
-      prev = c[0].force_n;
-    }
-    return c[0].force_n;
-  };
+  auto settle_at = [&](Simulation& sim, double t) { return settle(sim, t, pose, c); };
   const Vec3 f_el = settle_at(*elastic->sim, 0.0);
   const Vec3 f_rel = settle_at(*relaxed->sim, 0.0);
   const Vec3 f0 = settle_at(*visco->sim, 0.0);
