@@ -59,9 +59,8 @@ class CoupledBody {
   // Tool contact on tie `tie`'s exposed part (before finalize; LINEAR and NONLINEAR tiers):
   // outside has one entry per node of that mesh, 1 for a surface node outside the host
   // (fusion::Exposure). Its surface faces with a node outside become contactable, and their
-  // free nodes contact slots
-  // after the host's (see contact_point); their columns are the tied system's (the unit force on
-  // B reaches A through TieCondensation::add_equivalent_host_loads).
+  // free nodes contact slots after the host's (see contact_point); their columns are the tied
+  // system's (the unit force on B reaches A through TieCondensation::add_equivalent_host_loads).
   void expose_tie(int tie, const std::vector<char>& outside);
 
   // Registers the host side of sliding rows (before finalize; the rows of all calls are stacked,
