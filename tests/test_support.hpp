@@ -27,6 +27,11 @@ namespace neurosim::testing {
 inline std::filesystem::path source_dir() { return NEUROSIM_SOURCE_DIR; }
 // Where the built programs are (build/bin).
 inline std::filesystem::path bin_dir() { return NEUROSIM_BIN_DIR; }
+// The folder one ctest run's tests share for the hosts' factors and boundary operators (pass
+// it as neurosim-server's --cache-dir or SimulationOptions::compliance_cache_dir): emptied before
+// every ctest run (tests/CMakeLists.txt, test_cache_clear), filled by the first test that builds
+// a host, read by the next. Only for tests that do not test the cache itself.
+inline std::filesystem::path shared_cache_dir() { return NEUROSIM_TEST_CACHE_DIR; }
 #ifdef NEUROSIM_BRAIN7_DIR
 // A scene of the tests' 7 mm brains ("brain_artery", "brain_skull"; neurosim-model --cell-size 7,
 // built at build time: tests/CMakeLists.txt, neurosim_use_brain7) for tests that need a brain,

@@ -1297,7 +1297,9 @@ LinearBrain linear_brain() {
       scene::load_model(neurosim::testing::source_dir() / "scenes" / "brain_artery.scene");
   model.effects.tier = scene::Tier::kLinear;
   LinearBrain b;
-  b.sim = Simulation::build(model);
+  SimulationOptions o;
+  o.compliance_cache_dir = neurosim::testing::shared_cache_dir().string();  // factored once a run
+  b.sim = Simulation::build(model, o);
   b.mesh = &b.sim->mesh(0);
   b.tip_radius_m = model.tools.at(0).tip_radius_m;
   return b;

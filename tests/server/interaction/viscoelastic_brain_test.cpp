@@ -44,7 +44,9 @@ struct BrainRun {
 
 BrainRun make_run(const scene::Model& model) {
   BrainRun r;
-  r.sim = Simulation::build(model);
+  SimulationOptions o;
+  o.compliance_cache_dir = neurosim::testing::shared_cache_dir().string();  // factored once a run
+  r.sim = Simulation::build(model, o);
   r.tip_radius_m = model.tools.at(0).tip_radius_m;
   return r;
 }

@@ -278,7 +278,8 @@ TEST(service_rigid, ApproachStationSlidesOnTheBoneThenPressesTheCerebellumThroug
   const std::string prefix = "approach" + std::to_string(::getpid()) + "_";
   const fs::path scene = nt::source_dir() / "scenes/brain_skull.scene";
   st::ChildProcess server(nt::bin_dir() / "neurosim-server",
-                          {"--scene", scene.string(), "--topic-prefix", prefix, "--duration", "120"},
+                          {"--scene", scene.string(), "--topic-prefix", prefix, "--duration", "120",
+                           "--cache-dir", nt::shared_cache_dir().string()},
                           dir / "server.log");
   st::ChildProcess station(nt::bin_dir() / "neurosim-haptic",
                            {"--station", "approach", "--device", "script:approach", "--at-opening",

@@ -38,6 +38,9 @@ struct Session {
     std::vector<std::string> a{"--scene", s.scene.string(), "--domain", std::to_string(domain),
                                "--duration", std::to_string(duration_s)};
     a.insert(a.end(), s.server_args.begin(), s.server_args.end());
+    // The run's shared factor cache unless the test names its own (test_support.hpp).
+    if (std::find(a.begin(), a.end(), "--cache-dir") == a.end())
+      a.insert(a.end(), {"--cache-dir", neurosim::testing::shared_cache_dir().string()});
     return a;
   }
   // The server published its first SimStatus (it is serving).

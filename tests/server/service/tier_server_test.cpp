@@ -93,6 +93,7 @@ void press_and_hold(const Press& press, const char* tier) {
   // The reference: the same tier in process, synchronous updates (deterministic).
   ni::SimulationOptions sync;
   sync.tier_worker_thread = false;
+  sync.compliance_cache_dir = nt::shared_cache_dir().string();  // the server's factor, once a run
   auto ref = ni::Simulation::build(model, sync);
   ASSERT_TRUE(ses.wait_ready());
   const neurosim_Tier want = wire_tier(tier);

@@ -202,7 +202,9 @@ inline std::vector<std::string> server_args(const std::string& prefix, double du
           "--topic-prefix",
           prefix,
           "--duration",
-          std::to_string(duration_s)};
+          std::to_string(duration_s),
+          "--cache-dir",
+          shared_cache_dir().string()};
 }
 
 // Where the tests press the brain: the brain surface vertex furthest right (+x) near the
