@@ -20,6 +20,7 @@
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -38,6 +39,12 @@ std::atomic<bool> g_stop{false};
 void on_signal(int) { g_stop = true; }
 void warn(const char* m) { std::fprintf(stderr, "neurosim-haptic: warning: %s\n", m); }
 void sched_line(const char* m) { std::fprintf(stderr, "neurosim-haptic: %s\n", m); }
+// A clock difference in ns as seconds with nine decimals (exact to the ns, whatever its size).
+std::string clock_s(std::int64_t ns) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.9f", 1e-9 * static_cast<double>(ns));
+  return buf;
+}
 
 const char* kSpecHelp =
     "SPEC: omni[:NAME] | replay:FILE | script:NAME | hand:SCRIPT  (scripts: press, stroke, circle,\n"
@@ -103,7 +110,8 @@ int main(int argc, char** argv) {
   cli->add_option("--topic-prefix", topic_prefix,
                   "prepended to every topic name, as neurosim-server's");
   cli->add_option("--trace", trace_file,
-                  "every tick as CSV: time, position, force, model age, gain, rigid wall");
+                  "every tick as CSV: time, position, force, model age, gain, rigid wall, and "
+                  "the loop clock (clock_s: a late tick shows there, t_s is the nominal k T)");
   cli->footer(kSpecHelp);
   if (auto rc = cli.parse(argc, argv)) return *rc;
   if (origin_opt->count() > 0)
@@ -285,15 +293,17 @@ int main(int argc, char** argv) {
       std::ofstream tf(trace_file);
       if (!tf) throw std::runtime_error(trace_file + ": cannot open for the force trace");
       tf << "t_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,model_age_ms,gain,in_contact,model_sequence,"
-            "rigid_contact,proxy_x_m,proxy_y_m,proxy_z_m,wall_fx_n,wall_fy_n,wall_fz_n\n";
+            "rigid_contact,proxy_x_m,proxy_y_m,proxy_z_m,wall_fx_n,wall_fy_n,wall_fz_n,clock_s\n";
       tf.precision(9);
+      const std::int64_t first_ns = loop.trace().empty() ? 0 : loop.trace().front().now_ns;
       for (const auto& t : loop.trace())
         tf << t.t_s << ',' << t.position_m.x() << ',' << t.position_m.y() << ',' << t.position_m.z()
            << ',' << t.force_n.x() << ',' << t.force_n.y() << ',' << t.force_n.z() << ','
            << (t.model_age_s >= 0 ? t.model_age_s * 1e3 : -1) << ',' << t.gain << ','
            << (t.in_contact ? 1 : 0) << ',' << t.model_sequence << ',' << (t.rigid_contact ? 1 : 0)
            << ',' << t.proxy_m.x() << ',' << t.proxy_m.y() << ',' << t.proxy_m.z() << ','
-           << t.wall_force_n.x() << ',' << t.wall_force_n.y() << ',' << t.wall_force_n.z() << '\n';
+           << t.wall_force_n.x() << ',' << t.wall_force_n.y() << ',' << t.wall_force_n.z() << ','
+           << clock_s(t.now_ns - first_ns) << '\n';
       if (!tf) throw std::runtime_error(trace_file + ": write failed");
     }
     if (!recording_error.empty()) {

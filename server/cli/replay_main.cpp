@@ -54,6 +54,7 @@ struct Options {
   bool skip_rejected{false};  // replay without the samples the live server would reject
   int max_rows{0};            // --contact-max-rows (0: the library's), as neurosim-server's
   int lcp_max_iterations{0};  // --lcp-max-iterations (0: the library's), as neurosim-server's
+  std::string cache_dir;      // --cache-dir (empty: none), as neurosim-server's
 };
 
 std::string g17(double v) {
@@ -92,6 +93,7 @@ int run(const Options& opt) {
   sim_options.column_worker = false;
   if (opt.max_rows > 0) sim_options.max_contact_nodes_per_tool = opt.max_rows;
   if (opt.lcp_max_iterations > 0) sim_options.lcp_max_iterations = opt.lcp_max_iterations;
+  sim_options.compliance_cache_dir = opt.cache_dir;  // a read factor solves bit for bit as its own
   std::unique_ptr<neurosim::interaction::Simulation> sim =
       neurosim::interaction::Simulation::build(model, sim_options);
   // The live server's filter on every sample (its code, server/service/tool_filter.hpp): a
@@ -245,6 +247,10 @@ int main(int argc, char** argv) {
   cli->add_option("--lcp-max-iterations", opt.lcp_max_iterations,
                   "the contact LCP's pivots, as neurosim-server's (default: the library's, 200)")
       ->check(CLI::Range(1, 1000000));
+  cli->add_option("--cache-dir", opt.cache_dir,
+                  "disk cache of the hosts' factors and boundary operators, keyed by their "
+                  "content, as neurosim-server's: a second replay of the same scene reads them "
+                  "instead of factoring; the answers are the same bit for bit (default: none)");
   cli.check([&] {
     if (!opt.tier.empty() && !neurosim::fem::parse_tier(opt.tier)) {
       throw neurosim::cli::UsageError("--tier " + opt.tier +

@@ -16,7 +16,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
-
+#include <map>
 #include <sstream>
 
 namespace neurosim {
@@ -136,6 +136,34 @@ TEST_F(ReplayCli, LinearRunsAreByteIdenticalAndEqualTheInProcessSimulation) {
   const std::string a = testing::slurp(d / "run1" / "forces.csv");
   ASSERT_FALSE(a.empty());
   EXPECT_EQ(a, testing::slurp(d / "run2" / "forces.csv"));
+  // --cache-dir: the first run writes the host's factor and boundary operator, the second reads
+  // them; both answer byte for byte as the runs without a cache.
+  const fs::path cache = d / "cache";
+  auto cache_files = [&] {
+    std::map<std::string, fs::file_time_type> files;
+    for (const auto& e : fs::directory_iterator(cache))
+      files[e.path().filename().string()] = e.last_write_time();
+    return files;
+  };
+  std::map<std::string, fs::file_time_type> written;
+  for (const char* run : {"cached1", "cached2"}) {
+    const Outcome r = run_replay(args + " --cache-dir " + cache.string() + " --out " +
+                                     (d / run).string(),
+                                 d / (std::string(run) + ".log"));
+    ASSERT_EQ(r.exit_code, 0) << r.log;
+    EXPECT_EQ(a, testing::slurp(d / run / "forces.csv")) << run;
+    if (written.empty()) written = cache_files();
+  }
+  // The host's factor and the tie's boundary operator, written by the first run and only read
+  // by the second (the same files, not rewritten).
+  int factors = 0, couplings = 0;
+  for (const auto& [name, time] : written) {
+    factors += name.rfind("factor_", 0) == 0;
+    couplings += name.rfind("coupling_", 0) == 0;
+  }
+  EXPECT_EQ(factors, 1) << cache;
+  EXPECT_EQ(couplings, 1) << cache;
+  EXPECT_EQ(cache_files(), written) << "the second run rewrote the cache";
 
   std::string header;
   const std::vector<Row> rows = read_forces(d / "run1" / "forces.csv", &header);

@@ -78,6 +78,8 @@ inline int run_replay(const std::filesystem::path& scene, const std::vector<std:
                       const std::filesystem::path& out, const std::filesystem::path& log) {
   std::string cmd = (neurosim::testing::bin_dir() / "neurosim-replay").string() + " --scene " + scene.string();
   for (const auto& r : recordings) cmd += " --recording " + r.string();
+  // The run's shared factor cache (test_support.hpp): the live server of the same scene filled it.
+  cmd += " --cache-dir " + neurosim::testing::shared_cache_dir().string();
   cmd += " --out " + out.string() + " > " + log.string() + " 2>&1";
   const int status = std::system(cmd.c_str());
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
