@@ -74,14 +74,16 @@ int ContactColumns::ensure(const std::vector<int>& slots, fem::SolveWorkspace& w
   const int n3 = 3 * static_cast<int>(body_->host().num_vertices());
   const SlidingOperator& sliding = body_->sliding();
   const std::size_t chunk = static_cast<std::size_t>(CoupledBody::kBlockColumns / 3);
-  Eigen::MatrixXd x, rows;
+  const bool slides = body_->has_exposed_slide() && sliding.size() > 0;
+  Eigen::MatrixXd x, rows, slide_rows;
   for (std::size_t first = 0; first < missing.size(); first += chunk) {
     const std::size_t n = std::min(chunk, missing.size() - first);
     const std::vector<int> part(missing.begin() + static_cast<std::ptrdiff_t>(first),
                                 missing.begin() + static_cast<std::ptrdiff_t>(first + n));
     body_->solve_contact_columns(part, x, &ws, &iterations_);
-    // Rows at every contact slot (an exposed tie's from its mesh's displacement).
-    body_->contact_rows(part, x, rows, &ws);
+    // Rows at every contact slot (an exposed tie's from its mesh's displacement, an exposed
+    // sliding mesh's from its own compliance, with its part of the sliding rows).
+    body_->contact_rows(part, x, rows, &ws, slides ? &slide_rows : nullptr);
     for (std::size_t j = 0; j < n; ++j) {
       const int c = 3 * static_cast<int>(j);
       const int slot = part[j];
@@ -89,6 +91,9 @@ int ContactColumns::ensure(const std::vector<int>& slots, fem::SolveWorkspace& w
       col = rows.middleCols(c, 3);
       columns_[slot] = std::move(col);
       if (sliding.size() > 0) sliding_columns_[slot] = sliding.apply(x.middleCols(c, 3));
+      // A slot on an exposed sliding mesh: J_A x is zero, its rows are J_B L_B[:, node].
+      if (slides && body_->contact_point(slot).slide >= 0)
+        sliding_columns_[slot] += slide_rows.middleCols(c, 3);
       if (keep_full_) {
         Columns full = Columns::Zero(n3, 3);
         for (int r = 0; r < nf; ++r) full.row(solver.free_dofs()[r]) = x.block<1, 3>(r, c);

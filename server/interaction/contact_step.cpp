@@ -2044,8 +2044,9 @@ const fem::Material& near_field_material(const Model& m, int body, const Row* de
     }
   }
   if (slot < 0) return b.host_material;
-  const int tie = b.body->contact_point(slot).tie;
-  return tie < 0 ? b.host_material : b.body->ties()[static_cast<std::size_t>(tie)].material();
+  const CoupledBody::ContactPoint p = b.body->contact_point(slot);
+  if (p.slide >= 0) return b.body->exposed_slide(p.slide)->material();
+  return p.tie < 0 ? b.host_material : b.body->ties()[static_cast<std::size_t>(p.tie)].material();
 }
 
 }  // namespace
@@ -2864,24 +2865,24 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
     if (row.body != main_body) continue;
     centre += (l / best) * row.point_m;
   }
-  // The main mesh: of the main body's host and its exposed tied meshes, the one whose nodes
-  // carry most of the force (CoupledBody::contact_point: each slot's mesh and node); its nodes.
-  int main_tie = -1;
+  // The main mesh: of the main body's host, its exposed tied and sliding meshes, the one whose
+  // nodes carry most of the force (CoupledBody::contact_part: each slot's mesh); its nodes.
+  int main_part = -1;
   if (main_body >= 0 && m.bodies_[main_body].body->has_exposed_contact()) {
     const CoupledBody& body = *m.bodies_[main_body].body;
     double most = -1.0;
-    for (int tie = -1; tie < static_cast<int>(body.ties().size()); ++tie) {
+    for (int part = -1; part < body.num_parts(); ++part) {
       double share = 0.0;
       for (int r = 0; r < nc; ++r) {
         const Row& row = rows_[r];
         const double l = lambda_[ns + r];
         if (row.tool != t || row.body != main_body || !(l > 0.0)) continue;
         for (int k = 0; k < row.nodes; ++k)
-          if (row.slot[k] >= 0 && body.contact_point(row.slot[k]).tie == tie) share += l * row.w[k];
+          if (row.slot[k] >= 0 && body.contact_part(row.slot[k]) == part) share += l * row.w[k];
       }
       if (share > most) {
         most = share;
-        main_tie = tie;
+        main_part = part;
       }
     }
   }
@@ -2891,9 +2892,9 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
     const CoupledBody& body = *m.bodies_[row.body].body;
     for (int k = 0; k < row.nodes; ++k) {
       if (row.slot[k] < 0 || row.w[k] == 0.0) continue;
-      const CoupledBody::ContactPoint p = body.contact_point(row.slot[k]);
-      if (p.tie != main_tie) continue;
-      if (std::find(c.nodes.begin(), c.nodes.end(), p.node) == c.nodes.end()) c.nodes.push_back(p.node);
+      if (body.contact_part(row.slot[k]) != main_part) continue;
+      const int node = body.contact_point(row.slot[k]).node;
+      if (std::find(c.nodes.begin(), c.nodes.end(), node) == c.nodes.end()) c.nodes.push_back(node);
     }
   }
   if (tools == 1) {
@@ -2909,7 +2910,7 @@ void State::answer(const Model& m, int t, const ToolPose& pose, int ns, int iter
   c.validity_radius_m = 0.0;
   if (c.in_contact) {
     const CoupledBody& body = *m.bodies_[main_body].body;
-    c.mesh = main_tie < 0 ? body.host_index() : body.ties()[main_tie].mesh();
+    c.mesh = body.part_mesh(main_part);
     double patch = 0.0;
     for (int r = 0; r < nc; ++r)
       if (rows_[r].tool == t && rows_[r].body == main_body && lambda_[ns + r] > 0.0)

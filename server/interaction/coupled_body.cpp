@@ -108,15 +108,59 @@ void CoupledBody::expose_tie(int tie, const std::vector<char>& outside) {
   exposed_[tie] = outside;
 }
 
+void CoupledBody::expose_slide(int slide, const SlidingCoupling& coupling, int first_row,
+                               const std::vector<char>& outside) {
+  if (finalized_) throw std::logic_error("CoupledBody::expose_slide after finalize");
+  if (slide < 0 || first_row < 0 ||
+      first_row + coupling.size() > static_cast<int>(sliding_rows_.size()))
+    throw std::invalid_argument("CoupledBody::expose_slide: slide " + std::to_string(slide) +
+                                " with rows from " + std::to_string(first_row) +
+                                " is not among the body's sliding rows");
+  if (outside.size() != coupling.geometry().num_vertices())
+    throw std::invalid_argument("CoupledBody::expose_slide: " + std::to_string(outside.size()) +
+                                " flags for " + std::to_string(coupling.geometry().num_vertices()) +
+                                " nodes");
+  if (static_cast<std::size_t>(slide) >= exposed_slides_.size())
+    exposed_slides_.resize(static_cast<std::size_t>(slide) + 1);
+  exposed_slides_[slide] = ExposedSlide{&coupling, first_row, outside, -1};
+}
+
+int CoupledBody::part_mesh(int part) const {
+  if (part < 0) return host_index_;
+  if (part < static_cast<int>(ties_.size())) return ties_[part].mesh();
+  const SlidingCoupling* sl = exposed_slide(part - static_cast<int>(ties_.size()));
+  if (sl == nullptr)
+    throw std::invalid_argument("CoupledBody::part_mesh: no part " + std::to_string(part));
+  return sl->mesh();
+}
+
 void CoupledBody::select_exposed_contact_nodes() {
   std::vector<mesh::Vec3> vertices = host_->vertices();
   std::vector<mesh::Tet> tets = host_->tets();
   tie_offset_.assign(ties_.size(), -1);
+  // The exposed meshes: the ties first, then the sliding meshes (their slots in that order).
+  struct Exposed {
+    const mesh::TetMesh* geometry;
+    const std::vector<char>* outside;
+    const std::vector<int>* fixed;
+    int tie, slide;
+  };
+  std::vector<Exposed> parts;
   for (std::size_t t = 0; t < ties_.size(); ++t) {
     if (t >= exposed_.size() || exposed_[t].empty()) continue;
-    const auto& b = ties_[t].geometry();
+    parts.push_back(
+        {&ties_[t].geometry(), &exposed_[t], &ties_[t].fixed_nodes(), static_cast<int>(t), -1});
+  }
+  for (std::size_t i = 0; i < exposed_slides_.size(); ++i) {
+    const ExposedSlide& e = exposed_slides_[i];
+    if (e.coupling == nullptr) continue;
+    parts.push_back(
+        {&e.coupling->geometry(), &e.outside, &e.coupling->fixed_nodes(), -1, static_cast<int>(i)});
+  }
+  for (const Exposed& part : parts) {
+    const auto& b = *part.geometry;
     const int offset = static_cast<int>(vertices.size());
-    tie_offset_[t] = offset;
+    (part.tie >= 0 ? tie_offset_[part.tie] : exposed_slides_[part.slide].offset) = offset;
     vertices.insert(vertices.end(), b.vertices().begin(), b.vertices().end());
     for (const auto& tet : b.tets())
       tets.push_back({tet[0] + offset, tet[1] + offset, tet[2] + offset, tet[3] + offset});
@@ -127,11 +171,10 @@ void CoupledBody::select_exposed_contact_nodes() {
   contact_mesh_ = std::make_unique<mesh::TetMesh>(mesh::TetMesh::build(vertices, tets, bo));
   contact_slot_.resize(vertices.size(), -1);
   contact_excluded_faces_ = covered_faces_;
-  for (std::size_t t = 0; t < ties_.size(); ++t) {
-    if (tie_offset_[t] < 0) continue;
-    const auto& b = ties_[t].geometry();
-    const auto& out = exposed_[t];
-    const int offset = tie_offset_[t];
+  for (const Exposed& part : parts) {
+    const auto& b = *part.geometry;
+    const auto& out = *part.outside;
+    const int offset = part.tie >= 0 ? tie_offset_[part.tie] : exposed_slides_[part.slide].offset;
     // Faces with a node outside A are contactable (a face across the rim too: no gap between
     // A's ring and B's exposed part); those wholly inside are under A, never touched.
     std::vector<mesh::Vec3> normals(b.num_vertices(), mesh::Vec3::Zero());
@@ -146,7 +189,7 @@ void CoupledBody::select_exposed_contact_nodes() {
       const mesh::Vec3 n = (x[f[1]] - x[f[0]]).cross(x[f[2]] - x[f[0]]);
       for (int v : f) normals[v] += n;
     }
-    const auto& fixed = ties_[t].fixed_nodes();
+    const auto& fixed = *part.fixed;
     for (int v : b.surface_vertices()) {
       if (std::binary_search(fixed.begin(), fixed.end(), v)) {
         contact_fixed_nodes_.push_back(v + offset);
@@ -157,7 +200,9 @@ void CoupledBody::select_exposed_contact_nodes() {
       contact_slot_[v + offset] = static_cast<int>(contact_nodes_.size());
       contact_nodes_.push_back(v + offset);
       contact_normals_.push_back(normals[v] / len);
-      contact_tie_.push_back(static_cast<int>(t));
+      contact_tie_.push_back(part.tie);
+      contact_slide_.push_back(part.slide);
+      exposed_slide_slots_ = exposed_slide_slots_ || part.slide >= 0;
     }
   }
   std::sort(contact_excluded_faces_.begin(), contact_excluded_faces_.end());
@@ -196,6 +241,7 @@ void CoupledBody::select_contact_nodes() {
   std::sort(contact_fixed_nodes_.begin(), contact_fixed_nodes_.end());
   bool exposed = false;
   for (const auto& e : exposed_) exposed = exposed || !e.empty();
+  for (const auto& e : exposed_slides_) exposed = exposed || e.coupling != nullptr;
   if (exposed) select_exposed_contact_nodes();
 }
 
@@ -408,6 +454,10 @@ void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::Ma
     // the ITERATIVE baseline iterates G inside it, counted as for the host's slots).
     Eigen::MatrixXd rhs;
     tie_slot_loads(slots, rhs, ws);
+    if (rhs.isZero(0.0)) {  // slots on exposed sliding meshes only: no force on A
+      x.setZero(nf, 3 * n);
+      return;
+    }
     const auto solve = [&](const Eigen::MatrixXd& b, Eigen::MatrixXd& out) {
       if (ws != nullptr) solver_->solve_reduced(b, out, *ws);
       else solver_->solve_reduced(b, out);
@@ -470,7 +520,8 @@ void CoupledBody::tie_slot_loads(const std::vector<int>& slots, Eigen::MatrixXd&
 }
 
 void CoupledBody::contact_rows(const std::vector<int>& slots, const Eigen::MatrixXd& x,
-                               Eigen::MatrixXd& rows, fem::SolveWorkspace* ws) const {
+                               Eigen::MatrixXd& rows, fem::SolveWorkspace* ws,
+                               Eigen::MatrixXd* sliding) const {
   const auto& reduced = solver_->reduced_index();
   const auto& free = solver_->free_dofs();
   const int s3 = 3 * static_cast<int>(contact_nodes_.size());
@@ -478,6 +529,7 @@ void CoupledBody::contact_rows(const std::vector<int>& slots, const Eigen::Matri
   if (k != 3 * static_cast<int>(slots.size()))
     throw std::invalid_argument("CoupledBody::contact_rows: columns and slots differ");
   rows.resize(s3, k);
+  if (sliding != nullptr) sliding->setZero(sliding_.size(), k);
   for (int r = 0; r < 3 * num_host_contact_; ++r)
     rows.row(r) = x.row(reduced[3 * contact_nodes_[r / 3] + r % 3]);
   if (!has_exposed_contact()) return;
@@ -498,6 +550,50 @@ void CoupledBody::contact_rows(const std::vector<int>& slots, const Eigen::Matri
     for (int s = num_host_contact_; s < static_cast<int>(contact_nodes_.size()); ++s) {
       if (contact_tie_[s - num_host_contact_] != static_cast<int>(t)) continue;
       rows.middleRows(3 * s, 3) = u_b.middleRows(3 * (contact_nodes_[s] - tie_offset_[t]), 3);
+    }
+  }
+  if (exposed_slide_slots_) slide_rows(slots, rows, ws, sliding);
+}
+
+// contact_rows on the exposed sliding meshes: B's rows of its own columns, L_B[slot nodes, node]
+// (zero for every other column: B moves under A's forces only through the sliding rows, which
+// the LCP carries), and their sliding rows' part, J_B L_B[:, node] = -n_k . L_B(k, node).
+void CoupledBody::slide_rows(const std::vector<int>& slots, Eigen::MatrixXd& rows,
+                             fem::SolveWorkspace* ws, Eigen::MatrixXd* sliding) const {
+  Eigen::MatrixXd f, u;
+  std::vector<int> cols;
+  for (std::size_t i = 0; i < exposed_slides_.size(); ++i) {
+    const ExposedSlide& e = exposed_slides_[i];
+    if (e.coupling == nullptr) continue;
+    for (int s = num_host_contact_; s < static_cast<int>(contact_nodes_.size()); ++s)
+      if (contact_slide_[s - num_host_contact_] == static_cast<int>(i))
+        rows.middleRows(3 * s, 3).setZero();
+    cols.clear();
+    for (std::size_t j = 0; j < slots.size(); ++j)
+      if (slots[j] >= num_host_contact_ &&
+          contact_slide_[slots[j] - num_host_contact_] == static_cast<int>(i))
+        cols.push_back(static_cast<int>(j));
+    if (cols.empty()) continue;
+    const SlidingCoupling& sl = *e.coupling;
+    f.setZero(3 * static_cast<int>(sl.geometry().num_vertices()),
+              3 * static_cast<int>(cols.size()));
+    for (std::size_t c = 0; c < cols.size(); ++c) {
+      const int v = contact_nodes_[slots[cols[c]]] - e.offset;
+      for (int a = 0; a < 3; ++a) f(3 * v + a, 3 * static_cast<int>(c) + a) = 1.0;
+    }
+    sl.operator_b().apply(f, u, ws);
+    for (std::size_t c = 0; c < cols.size(); ++c) {
+      const int j = 3 * cols[c], uc = 3 * static_cast<int>(c);
+      for (int s = num_host_contact_; s < static_cast<int>(contact_nodes_.size()); ++s) {
+        if (contact_slide_[s - num_host_contact_] != static_cast<int>(i)) continue;
+        rows.block(3 * s, j, 3, 3) = u.block(3 * (contact_nodes_[s] - e.offset), uc, 3, 3);
+      }
+      if (sliding == nullptr) continue;
+      for (int r = 0; r < sl.size(); ++r) {
+        const SlidingPair& p = sl.pairs()[static_cast<std::size_t>(r)];
+        sliding->block(e.first_row + r, j, 1, 3) =
+            -p.normal.transpose() * u.block(3 * p.embedded_node, uc, 3, 3);
+      }
     }
   }
 }
@@ -522,6 +618,28 @@ void CoupledBody::add_contact_loads(const std::vector<int>& slots,
     ties_[t].add_equivalent_host_loads(Eigen::MatrixXd(f_b), load, ws);
     host_load_n += load.col(0);
   }
+}
+
+bool CoupledBody::slide_contact_forces(int slide, const std::vector<int>& slots,
+                                       const std::vector<mesh::Vec3>& forces_n,
+                                       Eigen::VectorXd& forces_b) const {
+  const SlidingCoupling* sl = exposed_slide(slide);
+  if (sl == nullptr || !exposed_slide_slots_) return false;
+  const int offset = exposed_slides_[static_cast<std::size_t>(slide)].offset;
+  bool any = false;
+  forces_b.setZero(3 * static_cast<Eigen::Index>(sl->geometry().num_vertices()));
+  for (std::size_t k = 0; k < slots.size() && k < forces_n.size(); ++k) {
+    const int s = slots[k];
+    if (s < num_host_contact_ || s >= static_cast<int>(contact_nodes_.size()) ||
+        contact_slide_[s - num_host_contact_] != slide)
+      continue;
+    if (!forces_n[k].allFinite())
+      throw std::invalid_argument("CoupledBody::slide_contact_forces: force at entry " +
+                                  std::to_string(k) + " is not finite");
+    forces_b.segment<3>(3 * (contact_nodes_[s] - offset)) += forces_n[k];
+    any = true;
+  }
+  return any;
 }
 
 bool CoupledBody::tie_contact_forces(int tie, const std::vector<int>& slots,

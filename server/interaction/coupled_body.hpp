@@ -13,6 +13,7 @@
 #include "server/fem/static_solver.hpp"
 #include "server/interaction/boundary_cache.hpp"
 #include "server/interaction/iterative_tie.hpp"
+#include "server/interaction/sliding_coupling.hpp"
 #include "server/interaction/sliding_operator.hpp"
 #include "server/interaction/tie_condensation.hpp"
 #include "server/mesh/tet_mesh.hpp"
@@ -62,6 +63,15 @@ class CoupledBody {
   // free nodes contact slots after the host's (see contact_point); their columns are the tied
   // system's (the unit force on B reaches A through TieCondensation::add_equivalent_host_loads).
   void expose_tie(int tie, const std::vector<char>& outside);
+  // Tool contact on the exposed part of a SLIDING-coupled mesh (before finalize; LINEAR tier):
+  // `slide` is its index among the body's sliding couplings (BodyModel::slides), `first_row`
+  // the index of its first row among the body's sliding rows (add_sliding_rows' return), outside
+  // as for expose_tie. Its contact slots come after the exposed ties'; B is not part of the
+  // coupled compliance: a column of a slot on B is B's own L_B[:, node] (EmbeddedCompliance, zero
+  // on A and the ties) and reaches A only through the sliding rows (contact_rows' `sliding`:
+  // J_B L_B[:, node], row k -n_k . L_B(k, node)). `coupling` must outlive the body.
+  void expose_slide(int slide, const SlidingCoupling& coupling, int first_row,
+                    const std::vector<char>& outside);
 
   // Registers the host side of sliding rows (before finalize; the rows of all calls are stacked,
   // returns the index of the first one). Finalize builds
@@ -119,21 +129,46 @@ class CoupledBody {
   int contact_slot(int contact_mesh_node) const { return contact_slot_[contact_mesh_node]; }
   // Slots [0, num_host_contact()) are A's nodes, the rest an exposed tie's.
   int num_host_contact() const { return num_host_contact_; }
-  // The mesh and node of a slot: tie -1 for A (node: A's id), else the tie index and B's id.
+  // The mesh and node of a slot: tie and slide -1 for A (node: A's id); else on an exposed tie
+  // (tie: its index, slide -1) or an exposed sliding mesh (slide: its index as in expose_slide,
+  // tie -1), node: that mesh's id.
   struct ContactPoint {
     int tie{-1};
     int node{-1};
+    int slide{-1};
   };
   ContactPoint contact_point(int slot) const {
-    return slot < num_host_contact_ ? ContactPoint{-1, contact_nodes_[slot]}
-                                    : ContactPoint{contact_tie_[slot - num_host_contact_],
-                                                   contact_nodes_[slot] - tie_offset_[contact_tie_[slot - num_host_contact_]]};
+    if (slot < num_host_contact_) return ContactPoint{-1, contact_nodes_[slot], -1};
+    const int e = slot - num_host_contact_;
+    const int tie = contact_tie_[e], slide = contact_slide_[e];
+    const int offset = tie >= 0 ? tie_offset_[tie] : exposed_slides_[slide].offset;
+    return ContactPoint{tie, contact_nodes_[slot] - offset, slide};
   }
+  // The slot's part of the body: -1 the host, t < ties().size() tie t, else an exposed sliding
+  // mesh (ties().size() + its slide index); num_parts() bounds it. part_mesh: the scene mesh.
+  int contact_part(int slot) const {
+    const ContactPoint p = contact_point(slot);
+    return p.slide >= 0 ? static_cast<int>(ties_.size()) + p.slide : p.tie;
+  }
+  int num_parts() const { return static_cast<int>(ties_.size() + exposed_slides_.size()); }
+  int part_mesh(int part) const;
   bool has_exposed_contact() const { return num_host_contact_ < static_cast<int>(contact_nodes_.size()); }
-  // The mesh the contact geometry lives on: A itself, or with exposed ties A and those ties'
-  // meshes in one vertex numbering (B's vertex v is tie_vertex_offset(tie) + v).
+  // Some slot lies on an exposed sliding mesh (expose_slide).
+  bool has_exposed_slide() const { return exposed_slide_slots_; }
+  // The mesh the contact geometry lives on: A itself, or with exposed ties and sliding meshes A
+  // and those meshes in one vertex numbering (a tie's vertex v is tie_vertex_offset(tie) + v, a
+  // sliding mesh's slide_vertex_offset(slide) + v).
   const mesh::TetMesh& contact_mesh() const { return contact_mesh_ ? *contact_mesh_ : *host_; }
   int tie_vertex_offset(int tie) const { return tie_offset_.at(static_cast<std::size_t>(tie)); }
+  int slide_vertex_offset(int slide) const {
+    return exposed_slides_.at(static_cast<std::size_t>(slide)).offset;
+  }
+  // The SLIDING coupling of an exposed sliding mesh (expose_slide), null if `slide` is not one.
+  const SlidingCoupling* exposed_slide(int slide) const {
+    return slide >= 0 && slide < static_cast<int>(exposed_slides_.size())
+               ? exposed_slides_[static_cast<std::size_t>(slide)].coupling
+               : nullptr;
+  }
   // Faces of contact_mesh() never contactable (sorted triples, sorted): covered_faces() and the
   // exposed ties' surface faces with no node outside A.
   const std::vector<std::array<int, 3>>& contact_excluded_faces() const {
@@ -148,11 +183,18 @@ class CoupledBody {
   // The forces (3N_B) those slots put on tie `tie`'s own nodes; false if none.
   bool tie_contact_forces(int tie, const std::vector<int>& slots,
                           const std::vector<mesh::Vec3>& forces_n, Eigen::VectorXd& forces_b) const;
+  // The forces (3N_B) those slots put on exposed sliding mesh `slide`'s nodes; false if none.
+  bool slide_contact_forces(int slide, const std::vector<int>& slots,
+                            const std::vector<mesh::Vec3>& forces_n,
+                            Eigen::VectorXd& forces_b) const;
   // Displacement rows at every contact slot (3S x 3n, unit m/N) of the columns x (free dofs x 3n)
   // solve_contact_columns gave for `slots`: A's slots read from x, a tie's slots from B's
-  // displacement (A's field and, for a column of a slot on B, its unit force).
-  void contact_rows(const std::vector<int>& slots, const Eigen::MatrixXd& x,
-                    Eigen::MatrixXd& rows, fem::SolveWorkspace* ws = nullptr) const;
+  // displacement (A's field and, for a column of a slot on B, its unit force), an exposed
+  // sliding mesh's from L_B (its own columns only; zero elsewhere). sliding (optional, with
+  // exposed sliding meshes): the sliding rows' part of each column on a sliding mesh, J_B L_B
+  // (sliding rows x 3n; zero for the other columns, whose part is sliding().apply(x)).
+  void contact_rows(const std::vector<int>& slots, const Eigen::MatrixXd& x, Eigen::MatrixXd& rows,
+                    fem::SolveWorkspace* ws = nullptr, Eigen::MatrixXd* sliding = nullptr) const;
 
   // Coupled compliance columns for unit forces at the given contact slots: X (free dofs x 3n,
   // the reduced index of host_solver()), one block solve (ContactColumns caches them).
@@ -192,7 +234,19 @@ class CoupledBody {
   int num_host_contact_{0};
   std::vector<std::vector<char>> exposed_;  // per tie: expose_tie's flags (empty: not exposed)
   std::vector<int> tie_offset_;             // per tie: its vertex offset in contact_mesh_
-  std::vector<int> contact_tie_;            // per slot beyond the host's: its tie
+  std::vector<int> contact_tie_;            // per slot beyond the host's: its tie or -1
+  std::vector<int> contact_slide_;          // per slot beyond the host's: its slide or -1
+  struct ExposedSlide {
+    const SlidingCoupling* coupling{nullptr};  // null: that slide is not exposed
+    int first_row{0};
+    std::vector<char> outside;
+    int offset{-1};  // its vertex offset in contact_mesh_
+  };
+  std::vector<ExposedSlide> exposed_slides_;  // indexed by slide (expose_slide)
+  bool exposed_slide_slots_{false};
+  // The exposed meshes' rows of the columns on sliding meshes (contact_rows).
+  void slide_rows(const std::vector<int>& slots, Eigen::MatrixXd& rows, fem::SolveWorkspace* ws,
+                  Eigen::MatrixXd* sliding) const;
   std::unique_ptr<mesh::TetMesh> contact_mesh_;  // A + the exposed ties (null: A alone)
   std::vector<std::array<int, 3>> contact_excluded_faces_;
   std::vector<int> contact_fixed_nodes_;

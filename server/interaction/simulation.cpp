@@ -288,6 +288,10 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     // slots (ViscoelasticHistory, with the host's kernel), B's exposed slots among them; in
     // NONLINEAR each mesh of the stacked equilibrium relaxes with its own kernel (quasi-linear
     // viscoelasticity, TierEquilibrium), the forces on B's exposed slots loading B's dofs.
+    // With a SLIDING coupling (LINEAR only, elastic: both refused above and below) B's exposed
+    // surface gets contact slots whose columns are B's own compliance (CoupledBody::expose_slide),
+    // reaching A through the sliding rows in the same LCP; the rows are found on the rest surface
+    // only (the deformed positions would need the sliding forces' displacement of B).
     // Anything else would leave the exposed part without contact rows (the tool would pass
     // through it without force), so it is refused, naming what is not built.
     const bool tool_touch = model.effects.tool_contact && !model.tools.empty();
@@ -295,8 +299,10 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
     if (tier_ != scene::Tier::kLinear && tier_ != scene::Tier::kNonlinear)
       not_built = std::string("in effects.tier ") + scene::tier_name(tier_) +
                   " (built in the LINEAR and NONLINEAR tiers only)";
-    else if (sliding[m])
-      not_built = "with a SLIDING coupling (built for TIE only)";
+    else if (sliding[m] && options_.contact_geometry_iterations > 1)
+      not_built =
+          "with a SLIDING coupling and SimulationOptions.contact_geometry_iterations > 1 "
+          "(built on the rest surface, contact_geometry_iterations = 1, only)";
     if (ex.nodes_outside > 0 && tool_touch && !not_built.empty()) {
       char buf[320];
       std::snprintf(buf, sizeof buf,
@@ -307,8 +313,9 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
       throw std::runtime_error(
           source_ + ": embedded mesh " + emb.id + ": " + buf +
           "; tool contact with an exposed embedded mesh is not implemented " + not_built +
-          ": use a TIE coupling in the LINEAR or NONLINEAR tier, place the embedded mesh "
-          "inside its host, or remove the tools or effects.tool_contact");
+          ": use a TIE coupling in the LINEAR or NONLINEAR tier or a SLIDING one in LINEAR with "
+          "the rows on the rest surface, place the embedded mesh inside its host, or remove the "
+          "tools or effects.tool_contact");
     }
     if (ex.nodes_outside > 0 && tool_touch) exposed[m] = ex.outside;
     setup_.fusion_s += seconds_since(t0);
@@ -451,6 +458,10 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
             static_cast<int>(m), &emb.mesh, emb.material, emb.fixed_nodes, std::move(pairs),
             options_.sliding_anchor_ratio, what + ": mesh " + emb.id}));
         body.slide_first_row.push_back(first);
+        // The tool on B's exposed part: slots with B's own columns (CoupledBody::expose_slide).
+        if (!exposed[m].empty())
+          body.body->expose_slide(static_cast<int>(body.slides.size()) - 1, *body.slides.back(),
+                                  first, exposed[m]);
       } catch (const std::invalid_argument& ex) {
         throw std::runtime_error(ex.what());
       }
@@ -559,6 +570,13 @@ void Model::mesh_field(const MeshEntry& e, const Eigen::VectorXd& sliding_lambda
         sliding_lambda_n.size() > 0
             ? Eigen::VectorXd(sliding_lambda_n.segment(b.slide_first_row[e.slide], sl.size()))
             : Eigen::VectorXd(Eigen::VectorXd::Zero(sl.size()));
+    // The tool's forces on an exposed sliding mesh's own nodes, with the sliding forces.
+    Eigen::VectorXd f_b;
+    if (slots != nullptr && forces_n != nullptr &&
+        b.body->slide_contact_forces(e.slide, *slots, *forces_n, f_b)) {
+      sl.displacement(lambda, f_b, u_m, ws);
+      return;
+    }
     sl.displacement(lambda, u_m, ws);
     return;
   }
@@ -605,8 +623,9 @@ void SimulationImpl::displacements(int m, Eigen::VectorXd& u_m) const {
     return;
   }
   const BodyState& bs = state_->bodies_[e.body];
-  if (e.slide >= 0) {  // B's field depends on the sliding forces only
-    model_->mesh_field(e, bs.sliding_lambda, Eigen::VectorXd(), u_m, state_->field_workspace.get());
+  if (e.slide >= 0) {  // B's field: the sliding forces and the tool's on its exposed part
+    model_->mesh_field(e, bs.sliding_lambda, Eigen::VectorXd(), u_m, state_->field_workspace.get(),
+                       &bs.force_slots, &bs.forces_n);
     return;
   }
   if (e.tie < 0) {
@@ -704,12 +723,12 @@ double SimulationImpl::sliding_penetration_m() const {
   for (std::size_t bi = 0; bi < model_->bodies_.size(); ++bi) {
     const BodyModel& b = model_->bodies_[bi];
     if (b.slides.empty()) continue;
-    const auto& lambda = state_->bodies_[bi].sliding_lambda;
+    const BodyState& bs = state_->bodies_[bi];
     state_->host_field(*model_, static_cast<int>(bi), u_host);
     for (std::size_t i = 0; i < b.slides.size(); ++i) {
       const auto& sl = *b.slides[i];
-      sl.displacement(lambda.segment(b.slide_first_row[i], sl.size()), u_emb,
-                      state_->field_workspace.get());
+      model_->mesh_field(model_->entry(sl.mesh()), bs.sliding_lambda, u_host, u_emb,
+                         state_->field_workspace.get(), &bs.force_slots, &bs.forces_n);
       for (int k = 0; k < sl.size(); ++k) worst = std::max(worst, -sl.gap(k, u_host, u_emb));
     }
   }

@@ -156,7 +156,12 @@ void EmbeddedCompliance::apply(const Eigen::MatrixXd& forces_n, Eigen::MatrixXd&
 }
 
 SlidingCoupling::SlidingCoupling(SlidingDefinition def)
-    : mesh_(def.mesh), geometry_(def.embedded), pairs_(std::move(def.pairs)) {
+    : mesh_(def.mesh),
+      geometry_(def.embedded),
+      pairs_(std::move(def.pairs)),
+      material_(def.material),
+      fixed_(def.fixed_nodes) {
+  std::sort(fixed_.begin(), fixed_.end());
   const std::string& what = def.what;
   if (geometry_ == nullptr) throw std::invalid_argument(what + ": no embedded mesh");
   const mesh::TetMesh& embedded = *geometry_;
@@ -194,9 +199,20 @@ SlidingCoupling::SlidingCoupling(SlidingDefinition def)
 
 void SlidingCoupling::displacement(const Eigen::VectorXd& lambda_n, Eigen::VectorXd& u_m,
                                    fem::SolveWorkspace* ws) const {
+  displacement(lambda_n,
+               Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(geometry_->num_vertices())), u_m,
+               ws);
+}
+
+void SlidingCoupling::displacement(const Eigen::VectorXd& lambda_n,
+                                   const Eigen::VectorXd& forces_b_n, Eigen::VectorXd& u_m,
+                                   fem::SolveWorkspace* ws) const {
   if (lambda_n.size() != size() || !lambda_n.allFinite())
     throw std::invalid_argument("SlidingCoupling::displacement: bad row forces");
-  Eigen::MatrixXd f = Eigen::MatrixXd::Zero(3 * geometry_->num_vertices(), 1), u;
+  if (forces_b_n.size() != 3 * static_cast<Eigen::Index>(geometry_->num_vertices()) ||
+      !forces_b_n.allFinite())
+    throw std::invalid_argument("SlidingCoupling::displacement: bad forces on B's nodes");
+  Eigen::MatrixXd f = forces_b_n, u;
   for (int k = 0; k < size(); ++k)
     f.block<3, 1>(3 * pairs_[k].embedded_node, 0) -= lambda_n[k] * pairs_[k].normal;
   compliance_->apply(f, u, ws);

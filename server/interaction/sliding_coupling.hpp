@@ -97,6 +97,8 @@ class SlidingCoupling {
   int mesh() const { return mesh_; }
   const mesh::TetMesh& geometry() const { return *geometry_; }
   const std::vector<SlidingPair>& pairs() const { return pairs_; }
+  const fem::Material& material() const { return material_; }
+  const std::vector<int>& fixed_nodes() const { return fixed_; }  // B's own, sorted
   int size() const { return static_cast<int>(pairs_.size()); }
   // W_B = J_B L_B J_B^T (pairs x pairs), unit m/N.
   const Eigen::MatrixXd& compliance() const { return w_b_; }
@@ -105,6 +107,9 @@ class SlidingCoupling {
   // EmbeddedCompliance::apply.
   void displacement(const Eigen::VectorXd& lambda_n, Eigen::VectorXd& u_m,
                     fem::SolveWorkspace* ws = nullptr) const;
+  // The same with other forces on B's nodes too (3N_B, unit N: a tool's on B's exposed part).
+  void displacement(const Eigen::VectorXd& lambda_n, const Eigen::VectorXd& forces_b_n,
+                    Eigen::VectorXd& u_m, fem::SolveWorkspace* ws = nullptr) const;
   std::uint64_t shared_workspace_uses() const { return compliance_->shared_workspace_uses(); }
   // g_k for the given full fields of A and B (unit m).
   double gap(int k, const Eigen::VectorXd& u_host_m, const Eigen::VectorXd& u_embedded_m) const;
@@ -113,6 +118,8 @@ class SlidingCoupling {
   int mesh_{-1};
   const mesh::TetMesh* geometry_{nullptr};
   std::vector<SlidingPair> pairs_;
+  fem::Material material_;
+  std::vector<int> fixed_;
   std::unique_ptr<EmbeddedCompliance> compliance_;
   Eigen::MatrixXd w_b_;
 };

@@ -3,7 +3,9 @@
 // NONLINEAR tiers' worker thread allocates in its Newton solves: not the 1 kHz step).
 #include "server/interaction/contact_lcp.hpp"
 #include "server/interaction/simulation.hpp"
+#include "server/scene/compile.hpp"
 
+#include "cube_cylinder_fixtures.hpp"
 #include "interaction_fixtures.hpp"
 
 #include <gtest/gtest.h>
@@ -88,6 +90,36 @@ TEST(interaction_allocation, WarmSlidingStepDoesNotAllocate) {
   testing::SceneSpec spec;
   spec.sliding = true;
   expect_warm_step_does_not_allocate(spec);
+}
+
+// SLIDING with an exposed embedded mesh (the cube/cylinder scene, the cylinder raised 20 mm out
+// of the cube's top): the tip pressing its top, B's own columns and their sliding rows in the LCP.
+TEST(interaction_allocation, WarmExposedSlidingStepDoesNotAllocate) {
+  scene::Scene s = testing::cube_cylinder_at(0.105, true);
+  s.mutable_couplings(0)->set_kind(scene::Coupling::SLIDING);
+  auto sim = Simulation::build(scene::compile(s, testing::cube_cylinder_path().string()));
+  std::vector<ToolPose> poses(1);
+  std::vector<ToolContact> contacts;
+  StepStats stats;
+  // Over the cylinder's top (its axis at x = 50 mm, z = 105 mm; radius 15 mm; the 3 mm tip).
+  auto set = [&](double d) {
+    poses[0].tip_m = Vec3(0.05, 0.05, 0.12 + 0.003 - d);
+    poses[0].axis = Vec3::UnitZ();
+  };
+  const long at_build = g_allocations.load();
+  for (int k = 0; k <= 10; ++k) {
+    set(0.0001 * k);
+    sim->step(poses, contacts, stats);
+  }
+  ASSERT_TRUE(contacts[0].in_contact);
+  EXPECT_GT(stats.sliding_rows, 0);
+  EXPECT_GT(g_allocations.load() - at_build, 0);
+  const long before = g_allocations.load();
+  for (int k = 10; k >= 0; --k) {
+    set(0.0001 * k);
+    sim->step(poses, contacts, stats);
+  }
+  EXPECT_EQ(g_allocations.load() - before, 0);
 }
 
 // The LCP's inactive-set path for a constant leading block (ContactLcp::set_constant_block): no
