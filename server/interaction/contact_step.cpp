@@ -8,8 +8,10 @@
 //     sphere or capsule (CalculiX's node-to-surface contact with the tool as master), so a tip
 //     wider than the triangles feels a patch; its normal the part's where the node, moved along
 //     its surface's normal line, leaves the part (merge_features: radial while the centre is in
-//     the node's normal cone, turning into the mean normal outside it; the multirate tiers:
-//     radial within 60 degrees of the mean normal, else the mean normal);
+//     the node's normal cone, turning into the mean normal outside it; the multirate tiers' tip:
+//     the same from the point as their latest equilibrium carried it along the mean normal,
+//     depth to that point, carried_row_geometry; their shaft: radial within 60 degrees of the
+//     mean normal, else the mean normal);
 //   - a face row where a triangle's closest point is inside it (normal: the triangle's);
 //   - an edge row where every contactable triangle of the edge reports that edge (the distance
 //     has a local minimum there; otherwise a neighbouring face row already holds it);
@@ -956,6 +958,11 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
   const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
   const Vec3 p0 = pose.tip_m, p1 = pose.tip_m + shape.shaft_length_m * axis;
   const auto& tris = b.surface.triangles();
+  // The multirate tiers' latest equilibrium (u* per contact slot), where their node tests take
+  // the tip's nodes too (node_hits).
+  const TierLinearization* lin =
+      tier_ && !tier_->linearization(body).displacement_m.empty() ? &tier_->linearization(body)
+                                                                   : nullptr;
   // The deformed surface, and the rest surface too once the body carries a force: the LCP's
   // depths are taken from rest, so a feature that penetrates at rest is a row even when the last
   // answer moved it out of reach (a tool leaving faster than the margin would otherwise lose the
@@ -1007,7 +1014,7 @@ void State::triangle_features(const Model& m, int body, int tool, const ToolPose
         if (parts & (1 << part))
           part_features(t, tri, *x, n, centre, rho, part == 1, g == 1, shape, p0, p1, margin,
                         b.behind_reach_m, b.body->contact_normals(), bs, memo, smooth,
-                        search(part), (nodes >> (3 * part)) & 7);
+                        search(part), (nodes >> (3 * part)) & 7, lin);
     }
   }
   if (first_is_rest) {
@@ -1027,7 +1034,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
                           const Vec3& p0, const Vec3& p1, double margin,
                           double max_penetration_m, const std::vector<Vec3>& node_normals,
                           BodyState& bs, long long memo, const std::array<Vec3, 3>* smooth_normals,
-                          int search, int node_mask) {
+                          int search, int node_mask, const TierLinearization* lin) {
   const double reach = (shaft ? shape.shaft_radius_m : shape.tip_radius_m) + margin;
   FeatureHit h;
   h.triangle = t;
@@ -1035,7 +1042,7 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
   h.at_rest = at_rest;
   h.face_normal = n;
   node_hits(tri, x, shape, p0, p1, reach, max_penetration_m, node_normals, bs, memo, node_mask,
-            h);
+            lin, h);
   // Most candidates are far from the part (the box reaches behind_reach behind the surface):
   // their face or edge point is skipped by a plane test before the closest-point search, and
   // that test by a sphere-capsule one (may_reach_triangle: the same rejections, cheaper). On the
@@ -1072,7 +1079,8 @@ void State::part_features(int t, const SurfaceTriangle& tri, const std::array<Ve
 void State::node_hits(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                       const ToolShape& shape, const Vec3& p0, const Vec3& p1, double reach,
                       double max_penetration_m, const std::vector<Vec3>& node_normals,
-                      BodyState& bs, long long memo, int node_mask, FeatureHit& h) {
+                      BodyState& bs, long long memo, int node_mask,
+                      const TierLinearization* lin, FeatureHit& h) {
   const int t = h.triangle;
   const bool shaft = h.shaft;
   const Vec3 n = h.face_normal;
@@ -1095,8 +1103,15 @@ void State::node_hits(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
     }
     const Vec3 ck = shaft ? closest_on_segment(x[k], p0, p1) : p0;
     test.stamp = memo;
-    test.in = within(ck - x[k], node_normals[tri.slot[k]], reach, max_penetration_m) &&
-              !(shaft && inside_tip(x[k], p0, shape));
+    // The multirate tiers test the tip's node at rest and where their latest equilibrium carried
+    // it (x + u*; carried_row_geometry): the nodes that ring a deep press's tip are then all
+    // rows, not only those whose rest point was within reach. The rest point stays the row's.
+    const Vec3& nk = node_normals[tri.slot[k]];
+    test.in = within(ck - x[k], nk, reach, max_penetration_m) ||
+              (lin && !shaft &&
+               within(ck - x[k] - lin->displacement_m[static_cast<std::size_t>(tri.slot[k])], nk,
+                      reach, max_penetration_m));
+    test.in = test.in && !(shaft && inside_tip(x[k], p0, shape));
     if (!test.in) continue;
     test.hit = static_cast<int>(hits_.size());
     h.key = feature_key(shaft, TriangleFeature::kVertex, 0, tri.node[k]);
@@ -1307,8 +1322,8 @@ void State::drop_shared_projections(double tip_radius_m) {
 // Phase "rows", merge: one row per feature (an edge only where all its triangles report it),
 // normals, depths on the deformed and the rest surface. In named steps: the feature's hits
 // (feature_hits), its triangle's nodes (feature_nodes), the row's normal and slides (a face:
-// face_row_geometry; a node or edge: exit_row_geometry, LINEAR, or radial_row_geometry, the
-// tiers; the tip's edge: edge_slide), the row itself (feature_row), then the flat fallback rows
+// face_row_geometry; a node or edge: exit_row_geometry, LINEAR, carried_row_geometry, the
+// tiers' tip, or radial_row_geometry, the tiers' shaft; LINEAR's tip edge: edge_slide), the row itself (feature_row), then the flat fallback rows
 // (drop_fallback_rows) and the rows behind the surface (drop_behind_rows) left out.
 void State::merge_features(const Model& m, int body, int tool, const ToolShape& shape,
                            const Vec3& tip, const Vec3& axis) {
@@ -1341,10 +1356,12 @@ void State::merge_features(const Model& m, int body, int tool, const ToolShape& 
       face_row_geometry(b, h, axis, smooth_tip, fr);
     } else if (!tier_) {
       exit_row_geometry(shape, h, tip, axis, fr);
-    } else {
+    } else if (h.shaft) {
       radial_row_geometry(shape, h, axis, fr);
+    } else {
+      carried_row_geometry(m, body, shape, h, fr);
     }
-    if (f == TriangleFeature::kEdge && !h.shaft) edge_slide(fr);
+    if (f == TriangleFeature::kEdge && !h.shaft && !tier_) edge_slide(fr);
     // The turn as the haptic model can use it: the station extrapolates over the validity radius,
     // at least a quarter of the tip's radius (answer), so a normal turning faster than 1 rad per
     // quarter radius of the part (a radial row with the centre by the feature, |d| -> 0; an exit
@@ -1551,10 +1568,9 @@ void State::exit_row_geometry(const ToolShape& shape, const FeatureHit& h, const
 // Phase "rows", merge, the multirate tiers: a node or an edge row radial from the part's centre
 // (the point against a rigid sphere or capsule) when the centre is within 60 degrees of the mean
 // normal of the triangles that report it, else along that mean normal (the depth r - n . d), and
-// its turn (unit 1/m). The tiers keep 60: their depth adds n . u0 of an equilibrium that may have
-// carried the point far along the surface, which a nearly tangential normal turns into a depth
-// (measured with 90: a 10 mm vertex press cycle in NONLINEAR reached 101.6 N against the block's
-// 50.5 N bound, stability_test).
+// its turn (unit 1/m): the shaft's rows (the tip's: carried_row_geometry). 60, not 90: the depth adds n . u0 of an equilibrium that may have carried the point far along the
+// surface, which a nearly tangential normal turns into a depth (measured with 90: a 10 mm vertex
+// press cycle in NONLINEAR reached 101.6 N against the block's 50.5 N bound, stability_test).
 void State::radial_row_geometry(const ToolShape& shape, const FeatureHit& h, const Vec3& axis,
                                 FeatureRow& fr) {
   const Vec3 mean = fr.normal_sum.normalized();
@@ -1587,21 +1603,73 @@ void State::radial_row_geometry(const ToolShape& shape, const FeatureHit& h, con
 // the tool moves across, and the point goes on into a triangle's face, so it slides by I - n n^T
 // and the normal (the plane's) does not turn; the triangle it enters depends on the side, so the
 // barycentric weights have a kink there (no weight_slide: held) and only a spread's weights
-// (smooth in the point) follow it. Every tier: the edge's closest point slides along the edge as
-// the tool moves, so d changes by the move across it (the turn; the shaft's edge rows have none).
+// (smooth in the point) follow it. The edge's closest point slides along the edge as the tool
+// moves, so d changes by the move across it (the turn). (The tiers' tip edges:
+// carried_row_geometry; the shaft's edge rows have no slide.)
 void State::edge_slide(FeatureRow& fr) const {
   const Vec3& e = fr.edge;
-  if (!tier_) {
-    if (fr.cos_alpha > 1.0 - 1e-12) {
-      const Vec3 mean = fr.normal_sum.normalized();
-      fr.point_slide = Mat3::Identity() - mean * mean.transpose();
-      fr.turn.setZero();  // the face row it becomes has the plane's normal
-      fr.weights_kink = true;
-    } else {
-      fr.point_slide = e * e.transpose();
-    }
+  if (fr.cos_alpha > 1.0 - 1e-12) {
+    const Vec3 mean = fr.normal_sum.normalized();
+    fr.point_slide = Mat3::Identity() - mean * mean.transpose();
+    fr.turn.setZero();  // the face row it becomes has the plane's normal
+    fr.weights_kink = true;
+  } else {
+    fr.point_slide = e * e.transpose();
   }
   if (!fr.turn.isZero(0.0)) fr.turn = fr.turn * (Mat3::Identity() - e * e.transpose());
+}
+
+// Phase "rows", merge, the multirate tiers: the tip's node or edge row as LINEAR's exit row
+// (exit_row_geometry) from the point as the tier's latest equilibrium carried it along the mean
+// normal m of the triangles that report it, x = p + m (m . u), u = sum_k w_k u*_k
+// (TierLinearization::displacement_m), its line m; its turn (unit 1/m; an edge's carried point
+// slides by the carried edge per unit of the rest point's slide). The depth is the rest one,
+// r - n . (c - p) + n . u0 (feature_row; u0 = u* - R C R^T f*), to which the LCP adds
+// n . R C R^T f, plus n . (c - y) - |c - y|, y = p + u the point as the equilibrium carried it
+// (FeatureRow::depth_add): at the tier's fixed point (f = f*) r - |c - y|, the sphere against
+// that point. Rows and planes stay the rest
+// surface's, so the step and the updates remain a fixed-point iteration, and the rows are a
+// function of the latest equilibrium alone (no share, no history): one fixed point. The tangential
+// part of u* is left out of the line: a node loaded alone, carried sideways under the tip, took
+// the exit normal of a point off the centre's axis, which pushes it further (lateral stiffness
+// -F / |c - x|), and slid off the tip (the exposed cylinder's 10 mm cycle; bench/RESULTS.md, "The
+// tiers' rows as a function of the equilibrium alone"). The 60-degree rows before pressed a node
+// under the tip's centre as a flat punch: a vertex twice as hard as an edge or a face (the
+// block's 10 mm press cycles: 1.025 / 0.508 / 0.508 N in NONLINEAR against LINEAR's 0.503 /
+// 0.488 / 0.460; these rows 0.505 / 0.488 / 0.460). The shaft keeps the 60-degree rows
+// (radial_row_geometry).
+void State::carried_row_geometry(const Model& m, int body, const ToolShape& shape,
+                                 const FeatureHit& h, FeatureRow& fr) const {
+  const Vec3 mean = fr.normal_sum.normalized();
+  fr.cos_alpha = fr.normal_sum.norm() / std::max(fr.normals, 1);
+  fr.exit_row = true;
+  fr.plane_n = mean;
+  fr.plane_h = fr.d.dot(mean);
+  fr.radial = fr.dn > 1e-9 * shape.tip_radius_m && fr.plane_h > 0.0;  // not an entry
+  const SurfaceTriangle& tri = m.bodies_[body].surface.triangles()[h.triangle];
+  const TierLinearization& lin = tier_->linearization(body);
+  const bool carried = !lin.displacement_m.empty();
+  auto u_at = [&](int k) {
+    return carried && tri.slot[k] >= 0 ? lin.displacement_m[static_cast<std::size_t>(tri.slot[k])]
+                                       : Vec3(Vec3::Zero());
+  };
+  Vec3 u = Vec3::Zero();
+  for (int k = 0; k < 3; ++k)
+    if (h.at.weights[k] != 0.0) u += h.at.weights[k] * u_at(k);
+  const Vec3 x = h.at.point_m + mean * mean.dot(u);
+  const Vec3 d = h.centre_m - x;
+  const double r = shape.tip_radius_m;
+  fr.n = exit_normal(d, mean, fr.cos_alpha, r);
+  fr.turn = exit_normal_turn(d, mean, fr.cos_alpha, r);
+  const Vec3 to_carried = h.centre_m - h.at.point_m - u;  // c - (p + u)
+  fr.depth_add = fr.n.dot(to_carried) - to_carried.norm();
+  if (key_feature(h.key) == TriangleFeature::kEdge && !fr.turn.isZero(0.0)) {
+    const auto& rest = m.bodies_[body].body->contact_mesh().vertices();
+    const int k0 = h.at.a, k1 = (h.at.a + 1) % 3;
+    const double length = (rest[tri.node[k1]] - rest[tri.node[k0]]).norm();
+    const Vec3 moved = fr.edge + mean * (mean.dot(u_at(k1) - u_at(k0)) / length);
+    fr.turn = fr.turn * (Mat3::Identity() - moved * fr.edge.transpose());
+  }
 }
 
 // Phase "rows", merge: the row of a feature from its first hit and its geometry (fr): the
@@ -1650,7 +1718,7 @@ bool State::feature_row(const Model& m, int body, int tool, const ToolShape& sha
   r.depth_m = radius - r.height_m;
   // LINEAR: the LCP's W lambda is the whole displacement, so its depth is the rest one; the
   // other tiers add the offset u0 of the latest equilibrium (tier_equilibrium.hpp).
-  r.rest_depth_m = radius - n.dot(fr.depth_centre - rest_point) + lift;
+  r.rest_depth_m = radius - n.dot(fr.depth_centre - rest_point) + lift + fr.depth_add;
   if (!r.spread_pending) r.rest_depth_m += n.dot(offset);
   return true;
 }

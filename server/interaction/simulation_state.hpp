@@ -323,12 +323,13 @@ class State {
                      const ToolShape& shape,
                      const Vec3& p0, const Vec3& p1, double margin, double max_penetration_m,
                      const std::vector<Vec3>& node_normals, BodyState& bs, long long memo,
-                     const std::array<Vec3, 3>* smooth_normals, int search, int node_mask);
+                     const std::array<Vec3, 3>* smooth_normals, int search, int node_mask,
+                     const TierLinearization* lin);
   // part_features' steps (contact_step.cpp).
   void node_hits(const SurfaceTriangle& tri, const std::array<Vec3, 3>& x,
                  const ToolShape& shape, const Vec3& p0, const Vec3& p1, double reach,
                  double max_penetration_m, const std::vector<Vec3>& node_normals, BodyState& bs,
-                 long long memo, int node_mask, FeatureHit& h);
+                 long long memo, int node_mask, const TierLinearization* lin, FeatureHit& h);
   bool smooth_projection_hit(const std::array<Vec3, 3>& x,
                              const std::array<Vec3, 3>& smooth_normals, const Vec3& p0,
                              double reach, double max_penetration_m, FeatureHit& h);
@@ -376,6 +377,10 @@ class State {
     bool exit_row{false};          // LINEAR's node or edge row (exit_row_geometry)
     Vec3 plane_n{Vec3::Zero()};    // exit_row: the surface's plane for the entry rule
     double plane_h{0.0};           // and the centre's height above it, unit m
+    // The multirate tiers' tip node and edge rows: added to the rest depth, so that at the tier's
+    // fixed point the depth is the part's radius less the distance to the carried point (unit m;
+    // carried_row_geometry).
+    double depth_add{0.0};
   };
   void sort_hits();
   std::size_t feature_hits(std::size_t i0, FeatureRow& fr) const;
@@ -387,6 +392,8 @@ class State {
   void radial_row_geometry(const ToolShape& shape, const FeatureHit& h, const Vec3& axis,
                            FeatureRow& fr);
   void edge_slide(FeatureRow& fr) const;
+  void carried_row_geometry(const Model& m, int body, const ToolShape& shape,
+                            const FeatureHit& h, FeatureRow& fr) const;
   bool feature_row(const Model& m, int body, int tool, const ToolShape& shape,
                    const FeatureHit& h, const FeatureRow& fr, Row& r);
   static void row_weight_slide(const FeatureRow& fr, Row& r);
