@@ -192,6 +192,18 @@ std::uint64_t spread_key(int body, const Vec3& at, const Vec3& normal, double ra
   return h;
 }
 
+// The least spread radius of a tip row (unit m; SimulationOptions::contact_spread > 0), of the
+// rest mesh and the tip alone: 5/3 of the tip's radius R, faded in from nothing at a local edge
+// of R / 2 to full at 3/4 R (cells finer than that resolve the tip: their rows sample it). With
+// each row's load over about two of the cells the tip covers, no node takes the press alone: the
+// bundled 5 mm brain under the 6 mm tip (NONLINEAR, 10 mm) inverted an element 6-7 mm deep with a
+// spread of 1-1.5 edges (one node 25-61 % of the press) and held with this floor (the largest
+// node 16 %; bench/RESULTS.md, "The tiers' tip rows spread over the tip's footprint").
+double tip_spread_floor_m(double edge_m, double tip_radius_m) {
+  const double fade = std::clamp((edge_m - 0.5 * tip_radius_m) / (0.25 * tip_radius_m), 0.0, 1.0);
+  return (5.0 / 3.0) * tip_radius_m * fade;
+}
+
 // A row's feature, tool and body as one key (rows of two geometries or steps compared).
 std::uint64_t row_key(const Row& r) {
   return (static_cast<std::uint64_t>(r.tool) << 48) ^ r.key ^
@@ -1745,7 +1757,9 @@ void State::row_weight_slide(const FeatureRow& fr, Row& r) {
 // local edge of R and more, none (the triangle's own barycentric rows) at R / 2 and less, linear
 // in between. A spread over cells finer than the part smears a load the rows already sample and
 // stiffens the press (the 2 mm tip 1 mm into 0.5 mm cells: 8.06 mN with it, 7.20 without,
-// Sneddon 6.74). Fixed per mesh and part, so the force stays continuous in time.
+// Sneddon 6.74). The tip's rows (LINEAR's and the tiers' alike, so that at vanishing load the
+// tiers' rows are LINEAR's) spread over at least tip_spread_floor_m. Fixed per mesh and part, so
+// the force stays continuous in time.
 void State::row_spread_inputs(const Model& m, const BodyModel& b, const ToolShape& shape,
                               const FeatureHit& h, const FeatureRow& fr, const Vec3& rest_point,
                               Row& r) {
@@ -1754,7 +1768,8 @@ void State::row_spread_inputs(const Model& m, const BodyModel& b, const ToolShap
   const double edge = b.surface.edge_at_m(h.triangle, h.at.weights);
   const double part_r = h.shaft ? shape.shaft_radius_m : shape.tip_radius_m;
   const double fade = std::clamp((edge - 0.5 * part_r) / (0.5 * part_r), 0.0, 1.0);
-  const double rho = m.options_.contact_spread * edge * fade;
+  double rho = m.options_.contact_spread * edge * fade;
+  if (!h.shaft) rho = std::max(rho, tip_spread_floor_m(edge, part_r));
   if (rho > 0.0) {
     r.spread_pending = true;
     r.spread_radius_m = rho;

@@ -99,8 +99,13 @@ struct SurfaceTriangle {
 };
 
 // A unit load spread over the surface around a point: per node (host id, contact slot or -1 for
-// a fixed node) its consistent weight (ContactSurface::spread), the weights summing to 1.
-inline constexpr int kSpreadNodes = 16;
+// a fixed node) its consistent weight (ContactSurface::spread), the weights summing to 1. At most
+// kSpreadNodes (the largest weights kept): 32, since the tip's spread floor (5/3 of its radius,
+// contact_step.cpp tip_spread_floor_m) covers 20-25 nodes of cells about the tip's radius; with
+// 16, the 1 mm tip on 1 mm cells had K's lateral columns 2-25 % of s off the force's central
+// differences at face points (tests/server/interaction/contact_step_test.cpp
+// TipStiffnessIsTheForceDerivative; with 32 at most 1e-10).
+inline constexpr int kSpreadNodes = 32;
 struct SpreadLoad {
   int nodes{0};
   std::array<int, kSpreadNodes> node{};

@@ -170,13 +170,15 @@ struct SimulationOptions {
   int contact_geometry_iterations{1};
   // Spread each contact row's load over the surface around its point, over a radius of
   // contact_spread x the local edge length (ContactSurface::spread: consistent nodal weights of
-  // a smooth pressure on the rest triangles, at most 16 nodes), instead of the point's
+  // a smooth pressure on the rest triangles, at most 32 nodes), instead of the point's
   // barycentric weights on its triangle: a tip whose contact patch is smaller than a triangle
   // then loads about the same surface wherever in the triangle it lands (a vertex and a face
   // centre differ less), and the row's weights change continuously as it slides. 0: barycentric
   // (dimensionless). The spread fades with the cells' size against the tool part's radius R:
   // full where the local edge is R or more, none at R / 2 and less (the cells resolve the part:
-  // the barycentric rows). On by default (1, the best measured: the bundled brain's 40 mm slide
+  // the barycentric rows). The tip's rows spread over at least 5/3 R, faded in from nothing at a
+  // local edge of R / 2 to full at 3/4 R (contact_step.cpp tip_spread_floor_m; LINEAR's and the
+  // tiers' alike; 0 turns it off with the rest). On by default (1, the best measured: the bundled brain's 40 mm slide
   // |F|/depth spread 1.69 at 1 mm and 1.33 at 2 mm with the two options below, against 3.93 /
   // 3.20 with barycentric rows; bench/RESULTS.md, "Contact options: the depth to the flat
   // surface", "The near field of a patch wider than the spread", "The spread fading on cells
