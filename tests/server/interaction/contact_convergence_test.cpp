@@ -189,6 +189,9 @@ TEST(interaction_contact_convergence, SamePressOnEverFinerCellsConverges) {
 // the point leaves it, contact_step.cpp merge_features)
 //   1 mm: 8.29 / 8.83 / 8.52 / 7.24   2 mm: 24.89 / 24.83 / 20.61 / 18.09
 //   3 mm: 47.63 / 43.83 / 33.91 / 29.47
+// (with the tip's spread floor, contact_step.cpp tip_spread_floor_m, 2026-11-30: the 2 and 1 mm
+// cells 8.19 / 7.66, 23.58 / 21.20, 43.01 / 36.63, the 4 and 0.5 mm cells unchanged: nearer
+// Sneddon on the 2 mm cells and at 1 mm deep, farther at 2 and 3 mm deep on the 1 mm cells)
 // (with radial rows up to 90 degrees and the mean normal past it: 8.29 / 8.83 / 8.37 / 7.39,
 // 24.89 / 24.83 / 21.87 / 21.08, 47.63 / 43.83 / 40.10 / 37.51: the mean normal's rows past
 // d = r pushed every node along the surface normal, as if it stuck to the sphere, 17-20 % above
