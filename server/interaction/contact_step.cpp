@@ -198,7 +198,10 @@ std::uint64_t spread_key(int body, const Vec3& at, const Vec3& normal, double ra
 // each row's load over about two of the cells the tip covers, no node takes the press alone: the
 // bundled 5 mm brain under the 6 mm tip (NONLINEAR, 10 mm) inverted an element 6-7 mm deep with a
 // spread of 1-1.5 edges (one node 25-61 % of the press) and held with this floor (the largest
-// node 16 %; bench/RESULTS.md, "The tiers' tip rows spread over the tip's footprint").
+// node 16 %; bench/RESULTS.md, "The tiers' tip rows spread over the tip's footprint"). Lower
+// floors bring LINEAR's press there nearer the brain refined under it (1.3 R: 0.2890 N against
+// 0.2835) but invert an element in the NONLINEAR press (1.3 R at step 72, 1.5 R at step 86;
+// bench/RESULTS.md, "The tip's spread floor against the refined brain and Sneddon").
 double tip_spread_floor_m(double edge_m, double tip_radius_m) {
   const double fade = std::clamp((edge_m - 0.5 * tip_radius_m) / (0.25 * tip_radius_m), 0.0, 1.0);
   return (5.0 / 3.0) * tip_radius_m * fade;
