@@ -144,9 +144,9 @@ TEST_P(EmbeddedComplianceElements, FloatingAnswersSelfEquilibratedLoadsExactly) 
 
 INSTANTIATE_TEST_SUITE_P(interaction_sliding_coupling, EmbeddedComplianceElements,
                          ::testing::Values(fem::Element::kLinearTet, fem::Element::kSmoothedTet),
-                         [](const ::testing::TestParamInfo<fem::Element>& info) {
-                           return info.param == fem::Element::kLinearTet ? "LinearTet"
-                                                                         : "SmoothedTet";
+                         [](const ::testing::TestParamInfo<fem::Element>& param_info) {
+                           return param_info.param == fem::Element::kLinearTet ? "LinearTet"
+                                                                               : "SmoothedTet";
                          });
 
 SlidingDefinition definition(const fixtures::FixedBaseBox& box, std::vector<SlidingPair> pairs,
@@ -204,8 +204,11 @@ TEST(interaction_sliding_coupling, DisplacementAndGapFollowTheRowForces) {
   s.operator_b().apply(f, u);
   EXPECT_LT((u_b - u.col(0)).cwiseAbs().maxCoeff(), 1e-15 + 1e-12 * u.cwiseAbs().maxCoeff());
   // The row forces push B's nodes inward (against their outward normals): each gap opens.
-  for (int k = 0; k < 4; ++k)
-    if (lambda[k] > 0.0) EXPECT_LT(pairs[k].normal.dot(u_b.segment<3>(3 * pairs[k].embedded_node)), 0.0);
+  for (int k = 0; k < 4; ++k) {
+    if (lambda[k] > 0.0) {
+      EXPECT_LT(pairs[k].normal.dot(u_b.segment<3>(3 * pairs[k].embedded_node)), 0.0);
+    }
+  }
 
   // g_k = n_k . (sum_a w_a u_A,a - u_B,k) + g0_k, with A's triangle nodes 0, 1, 2 moved by hand.
   Eigen::VectorXd u_a = Eigen::VectorXd::Zero(9);
