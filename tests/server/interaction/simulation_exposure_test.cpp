@@ -378,6 +378,13 @@ struct RaisedPress {
   int top_node{-1};
   mesh::Vec3 top_m{mesh::Vec3::Zero()};
   double tip_radius_m{0.0};
+  // The tip depth_m past the cylinder's top (unit m), pressed down z with its shaft up.
+  ToolPose pose_at(double depth_m) const {
+    ToolPose pose;
+    pose.tip_m = top_m + Vec3(0.0, 0.0, tip_radius_m - depth_m);
+    pose.axis = Vec3::UnitZ();
+    return pose;
+  }
 };
 
 // tier: effects.tier (the scene's own: LINEAR); options: the simulation's; edit: applied to the
@@ -440,9 +447,7 @@ TEST(interaction_simulation_exposure, TipPressingTheRaisedCylindersTopFeelsIt) {
   StepStats st;
   double last = 0.0;
   for (double d : {-0.0002, 0.00002, 0.00025, 0.0005, 0.001}) {
-    ToolPose pose;
-    pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
-    pose.axis = Vec3::UnitZ();
+    const ToolPose pose = p->pose_at(d);
     p->sim->step({pose}, c, st);
     ASSERT_TRUE(st.converged) << "depth " << d;
     Vec3 on_host, on_tied;
@@ -498,9 +503,7 @@ TEST(interaction_simulation_exposure, TipNearFieldOnTheExposedTopIsTheCylinders)
       ASSERT_GE(p->top_node, 0);
       std::vector<ToolContact> c;
       StepStats st;
-      ToolPose pose;
-      pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
-      pose.axis = Vec3::UnitZ();
+      const ToolPose pose = p->pose_at(d);
       p->sim->step({pose}, c, st);
       ASSERT_TRUE(st.converged);
       ASSERT_TRUE(c[0].in_contact);
@@ -555,9 +558,7 @@ TEST(interaction_simulation_exposure, IterativePressOnTheRaisedCylinderEqualsExa
   StepStats st;
   double worst = 0.0, worst_field = 0.0;
   for (double d : {0.00025, 0.0005, 0.001}) {
-    ToolPose pose;
-    pose.tip_m = exact->top_m + Vec3(0.0, 0.0, exact->tip_radius_m - d);
-    pose.axis = Vec3::UnitZ();
+    const ToolPose pose = exact->pose_at(d);
     exact->sim->step({pose}, ce, st);
     ASSERT_TRUE(st.converged);
     iter->sim->step({pose}, ci, st);
@@ -604,9 +605,7 @@ TEST(interaction_simulation_exposure, HeldPressOnTheRaisedCylindersTopRelaxesAsT
   ASSERT_TRUE(visco->sim->body_of(visco->cylinder)->has_exposed_contact());
   ASSERT_EQ(visco->top_node, elastic->top_node);
   constexpr double kDepth = 0.0005, kDt = 1e-3;
-  ToolPose pose;
-  pose.tip_m = elastic->top_m + Vec3(0.0, 0.0, elastic->tip_radius_m - kDepth);
-  pose.axis = Vec3::UnitZ();
+  const ToolPose pose = elastic->pose_at(kDepth);
   std::vector<ToolContact> c;
   StepStats st;
   elastic->sim->step_at(0.0, {pose}, c, st);
@@ -682,9 +681,7 @@ TEST(interaction_simulation_exposure, PressOnTheRaisedCylinderEqualsTheMonolithi
   const auto ka = fem::assemble_stiffness(host, fem::MaterialMap::uniform(p->model.meshes[p->cube].material));
   const auto kb = fem::assemble_stiffness(emb, fem::MaterialMap::uniform(tie.material()));
   for (double d : {0.00025, 0.0005, 0.001}) {
-    ToolPose pose;
-    pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
-    pose.axis = Vec3::UnitZ();
+    const ToolPose pose = p->pose_at(d);
     std::vector<ToolContact> c;
     StepStats st;
     p->sim->step({pose}, c, st);
@@ -955,9 +952,7 @@ TEST(interaction_simulation_exposure, PressOnASlidingRaisedCylinderEqualsTheSlid
     double last = 0.0;
     for (double d : {0.00025, 0.0005, 0.001}) {
       if (variant > 0 && d != 0.001) continue;
-      ToolPose pose;
-      pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
-      pose.axis = Vec3::UnitZ();
+      const ToolPose pose = p->pose_at(d);
       std::vector<ToolContact> c, ct;
       StepStats st;
       p->sim->step({pose}, c, st);
@@ -1068,9 +1063,7 @@ TEST(interaction_simulation_exposure, SlidingCylinderStiffnessIsTheForcesDerivat
   const auto p = raised_sliding_press();
   const double h = 1e-7;
   for (double d : {0.0005, 0.001}) {
-    ToolPose pose;
-    pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
-    pose.axis = Vec3::UnitZ();
+    const ToolPose pose = p->pose_at(d);
     std::vector<ToolContact> c;
     StepStats st;
     p->sim->step({pose}, c, st);
@@ -1302,12 +1295,7 @@ TEST(interaction_simulation_exposure, NonlinearPressOnTheRaisedCylinderThroughAT
   o.contact_near_field = false;
   const auto p = raised_press(scene::Effects::NONLINEAR, o);
   const auto pl = raised_press(scene::Effects::LINEAR, o);
-  auto pose_at = [&](double d) {
-    ToolPose pose;
-    pose.tip_m = p->top_m + Vec3(0.0, 0.0, p->tip_radius_m - d);
-    pose.axis = Vec3::UnitZ();
-    return pose;
-  };
+  auto pose_at = [&](double d) { return p->pose_at(d); };
   std::vector<ToolContact> c;
   StepStats st;
   // Holds a pose until the force changes by less than 1e-10 relative (at most 200 steps).
@@ -1408,9 +1396,7 @@ TEST(interaction_simulation_exposure, NonlinearWorkerThreadReachesTheSynchronous
   worker_options.tier_newton_tolerance = 1e-12;
   const auto ps = raised_press(scene::Effects::NONLINEAR, sync_options);
   const auto pw = raised_press(scene::Effects::NONLINEAR, worker_options);
-  ToolPose pose;
-  pose.tip_m = ps->top_m + Vec3(0.0, 0.0, ps->tip_radius_m - 0.003);
-  pose.axis = Vec3::UnitZ();
+  const ToolPose pose = ps->pose_at(0.003);
   std::vector<ToolContact> c;
   StepStats st;
   Vec3 prev = Vec3::Constant(1e300);
@@ -1472,9 +1458,7 @@ TEST(interaction_simulation_exposure, NonlinearHeldPressOnTheRaisedCylindersTopR
   ASSERT_EQ(visco->top_node, elastic->top_node);
   ASSERT_EQ(relaxed->top_node, elastic->top_node);
   constexpr double kDepth = 0.002;
-  ToolPose pose;
-  pose.tip_m = elastic->top_m + Vec3(0.0, 0.0, elastic->tip_radius_m - kDepth);
-  pose.axis = Vec3::UnitZ();
+  const ToolPose pose = elastic->pose_at(kDepth);
   std::vector<ToolContact> c;
   auto settle_at = [&](Simulation& sim, double t, int& steps) {
     return settle(sim, t, pose, c, &steps);
@@ -1555,9 +1539,7 @@ TEST(interaction_simulation_exposure, NonlinearHeldPressWithAKernelPerMeshRelaxe
     with(cyl_terms, 1.0)(s, "cylinder");
   });
   ASSERT_EQ(visco->top_node, elastic->top_node);
-  ToolPose pose;
-  pose.tip_m = elastic->top_m + Vec3(0.0, 0.0, elastic->tip_radius_m - 0.002);
-  pose.axis = Vec3::UnitZ();
+  const ToolPose pose = elastic->pose_at(0.002);
   std::vector<ToolContact> c;
   auto settle_at = [&](Simulation& sim, double t) { return settle(sim, t, pose, c); };
   const Vec3 f_el = settle_at(*elastic->sim, 0.0);
