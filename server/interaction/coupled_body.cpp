@@ -45,6 +45,38 @@ void woodbury_solve(const std::vector<int>& reduced, const std::vector<int>& bou
   solve(rhs, x);
 }
 
+// One exposed part of the contact mesh (a tied or a sliding embedded mesh): slot s beyond the
+// host's belongs to it when owner[s - first_slot] == part; its node is nodes[s] - offset.
+struct ExposedPart {
+  const std::vector<int>& nodes;
+  int first_slot;
+  const std::vector<int>& owner;
+  int part;
+  int offset;
+  int num_vertices;
+};
+
+// The forces (3 num_vertices, unit N) the slots of `part` put on its own nodes; false if none.
+// Throws on a non-finite force.
+bool part_contact_forces(const ExposedPart& part, const std::vector<int>& slots,
+                         const std::vector<mesh::Vec3>& forces_n, Eigen::VectorXd& forces_b) {
+  bool any = false;
+  forces_b.setZero(3 * static_cast<Eigen::Index>(part.num_vertices));
+  for (std::size_t k = 0; k < slots.size() && k < forces_n.size(); ++k) {
+    const int s = slots[k];
+    if (s < part.first_slot || s >= static_cast<int>(part.nodes.size()) ||
+        part.owner[static_cast<std::size_t>(s - part.first_slot)] != part.part)
+      continue;
+    if (!forces_n[k].allFinite())
+      throw std::invalid_argument("CoupledBody: contact force at entry " + std::to_string(k) +
+                                  " (slot " + std::to_string(s) + ") is not finite");
+    forces_b.segment<3>(3 * (part.nodes[static_cast<std::size_t>(s)] - part.offset)) +=
+        forces_n[k];
+    any = true;
+  }
+  return any;
+}
+
 }  // namespace
 
 std::vector<mesh::Vec3> surface_vertex_normals(const mesh::TetMesh& m) {
@@ -625,21 +657,10 @@ bool CoupledBody::slide_contact_forces(int slide, const std::vector<int>& slots,
                                        Eigen::VectorXd& forces_b) const {
   const SlidingCoupling* sl = exposed_slide(slide);
   if (sl == nullptr || !exposed_slide_slots_) return false;
-  const int offset = exposed_slides_[static_cast<std::size_t>(slide)].offset;
-  bool any = false;
-  forces_b.setZero(3 * static_cast<Eigen::Index>(sl->geometry().num_vertices()));
-  for (std::size_t k = 0; k < slots.size() && k < forces_n.size(); ++k) {
-    const int s = slots[k];
-    if (s < num_host_contact_ || s >= static_cast<int>(contact_nodes_.size()) ||
-        contact_slide_[s - num_host_contact_] != slide)
-      continue;
-    if (!forces_n[k].allFinite())
-      throw std::invalid_argument("CoupledBody::slide_contact_forces: force at entry " +
-                                  std::to_string(k) + " is not finite");
-    forces_b.segment<3>(3 * (contact_nodes_[s] - offset)) += forces_n[k];
-    any = true;
-  }
-  return any;
+  const ExposedPart part{contact_nodes_, num_host_contact_, contact_slide_, slide,
+                         exposed_slides_[static_cast<std::size_t>(slide)].offset,
+                         sl->geometry().num_vertices()};
+  return part_contact_forces(part, slots, forces_n, forces_b);
 }
 
 bool CoupledBody::tie_contact_forces(int tie, const std::vector<int>& slots,
@@ -648,17 +669,9 @@ bool CoupledBody::tie_contact_forces(int tie, const std::vector<int>& slots,
   if (tie < 0 || tie >= static_cast<int>(ties_.size()) || tie_offset_.empty() ||
       tie_offset_[tie] < 0)
     return false;
-  bool any = false;
-  forces_b.setZero(3 * static_cast<Eigen::Index>(ties_[tie].geometry().num_vertices()));
-  for (std::size_t k = 0; k < slots.size() && k < forces_n.size(); ++k) {
-    const int s = slots[k];
-    if (s < num_host_contact_ || s >= static_cast<int>(contact_nodes_.size()) ||
-        contact_tie_[s - num_host_contact_] != tie)
-      continue;
-    forces_b.segment<3>(3 * (contact_nodes_[s] - tie_offset_[tie])) += forces_n[k];
-    any = true;
-  }
-  return any;
+  const ExposedPart part{contact_nodes_, num_host_contact_, contact_tie_, tie, tie_offset_[tie],
+                         ties_[tie].geometry().num_vertices()};
+  return part_contact_forces(part, slots, forces_n, forces_b);
 }
 
 void CoupledBody::set_iterative(const IterativeOptions& options) {
