@@ -32,6 +32,14 @@
 namespace neurosim::interaction {
 namespace {
 
+// The run's shared cache of the brain's factor and boundary operator (test_support.hpp): each
+// Simulation::build of the same brain below reads what the first one wrote instead of factoring
+// again (a read factor solves bit for bit as the factored one: fem_factor_cache_test).
+SimulationOptions cached(SimulationOptions o) {
+  o.compliance_cache_dir = neurosim::testing::shared_cache_dir().string();
+  return o;
+}
+
 struct Brain {
   scene::Model model;
   std::unique_ptr<Simulation> worker;  // column_worker on
@@ -45,8 +53,8 @@ Brain load_brain() {
   SimulationOptions on;
   on.column_worker = true;
   on.column_preload_budget_mb = 0.0;  // nothing at load: every column by the worker
-  b.worker = Simulation::build(b.model, on);
-  b.sync = Simulation::build(b.model, SimulationOptions{});
+  b.worker = Simulation::build(b.model, cached(on));
+  b.sync = Simulation::build(b.model, cached(SimulationOptions{}));
   b.tip_radius_m = b.model.tools.at(0).tip_radius_m;
   return b;
 }
@@ -218,8 +226,8 @@ TEST(interaction_column_worker, ColumnsOfASmallBodyAndUnderAnOpeningAreReadyAtLo
   ASSERT_FALSE(skull.rigid.empty());
   ASSERT_FALSE(skull.rigid.front().openings.empty());
   const scene::RigidOpening& hole = skull.rigid.front().openings.front();
-  auto sim = Simulation::build(skull, on);
-  auto ref = Simulation::build(skull, SimulationOptions{});
+  auto sim = Simulation::build(skull, cached(on));
+  auto ref = Simulation::build(skull, cached(SimulationOptions{}));
   sim->pause_column_worker(true);
   EXPECT_EQ(sim->columns_solved_ahead(), 0u);
   std::vector<ToolPose> one(1);
@@ -257,7 +265,7 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
   on.column_worker = true;
   on.column_preload_budget_mb = 0.0;
   on.column_cache_budget_mb = 0.0;  // first unbounded: the size of one pose's reach
-  auto sync = Simulation::build(model, SimulationOptions{});
+  auto sync = Simulation::build(model, cached(SimulationOptions{}));
   auto press_at = [&](double x, double y) { return pose_at(sync->mesh(0), tip, x, y, 2e-3); };
   std::vector<ToolPose> poses;
   for (int k = 0; k < 5; ++k) poses.push_back(press_at(0.060, 0.060 + 0.025 * k));
@@ -273,7 +281,7 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
   // reaches together.
   std::size_t reach = 0, per_slot = 0;
   {
-    auto probe = Simulation::build(model, on);
+    auto probe = Simulation::build(model, cached(on));
     std::size_t before = 0;
     for (std::size_t k = 0; k + 1 < poses.size(); ++k) {
       probe->step({poses[k]}, c, st);
@@ -290,7 +298,7 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
   ASSERT_GT(per_slot, 0u);
   const std::size_t bound = 2 * reach + 2 * CoupledBody::kBlockColumns / 3 + 10;
   on.column_cache_budget_mb = static_cast<double>(bound * per_slot) * 1e-6 + 1e-9;
-  auto sim = Simulation::build(model, on);
+  auto sim = Simulation::build(model, cached(on));
   ASSERT_EQ(sim->column_cache(0).capacity_slots, bound);
   const std::size_t block = CoupledBody::kBlockColumns / 3;
   std::size_t most = 0;
@@ -336,21 +344,21 @@ TEST(interaction_column_worker, BoundBelowOnePosesReachIsRaisedToTheReach) {
   on.column_worker = true;
   on.column_preload_budget_mb = 0.0;
   on.column_cache_budget_mb = 0.0;  // the probe: unbounded
-  auto sync = Simulation::build(model, SimulationOptions{});
+  auto sync = Simulation::build(model, cached(SimulationOptions{}));
   auto press_at = [&](double x, double y) { return pose_at(sync->mesh(0), tip, x, y, 2e-3); };
   const std::vector<ToolPose> poses{press_at(0.060, 0.060), press_at(0.060, 0.085)};
   std::vector<ToolContact> c, ref;
   StepStats st, ref_st;
   std::vector<std::size_t> reach;  // each pose's reach alone (an unbounded cache, fresh per pose)
   for (const ToolPose& p : poses) {
-    auto probe = Simulation::build(model, on);
+    auto probe = Simulation::build(model, cached(on));
     probe->step({p}, c, st);
     ASSERT_TRUE(probe->wait_columns_ready(600.0));
     reach.push_back(probe->column_cache(0).ready_slots);
   }
   const std::size_t block = CoupledBody::kBlockColumns / 3;
   on.column_cache_budget_mb = 1e-9;  // the floor: two blocks
-  auto sim = Simulation::build(model, on);
+  auto sim = Simulation::build(model, cached(on));
   ASSERT_EQ(sim->column_cache(0).capacity_slots, 2 * block);
   EXPECT_EQ(sim->column_cache(0).raised_capacity_slots, 0u) << "nothing raised before a pose";
   std::printf("reach %zu and %zu nodes, bound %zu\n", reach[0], reach[1], 2 * block);
