@@ -40,6 +40,14 @@ SimulationOptions cached(SimulationOptions o) {
   return o;
 }
 
+// The worker's look-ahead in the two cache tests: 20 ms instead of the server's 50 ms
+// (SimulationOptions::column_horizon_s). A pose's reach (tip radius + 0.5 m/s x horizon + slack +
+// the body's behind reach) then holds 121 / 126 contact nodes at their first two poses instead of
+// 247 / 258, about half the columns for the worker to solve, and still over four blocks (the
+// premise of BoundBelowOnePosesReachIsRaisedToTheReach); the cache's bound, raise and evictions
+// do not depend on how far the reach extends, only on how many blocks it holds.
+constexpr double kCacheTestHorizonS = 0.02;
+
 struct Brain {
   scene::Model model;
   std::unique_ptr<Simulation> worker;  // column_worker on
@@ -265,6 +273,7 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
   on.column_worker = true;
   on.column_preload_budget_mb = 0.0;
   on.column_cache_budget_mb = 0.0;  // first unbounded: the size of one pose's reach
+  on.column_horizon_s = kCacheTestHorizonS;
   auto sync = Simulation::build(model, cached(SimulationOptions{}));
   auto press_at = [&](double x, double y) { return pose_at(sync->mesh(0), tip, x, y, 2e-3); };
   std::vector<ToolPose> poses;
@@ -277,8 +286,9 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
   // one (before that change such a bound left a pose's rows on the fallback). An
   // unbounded cache visits every pose; the growth of its ready count at a pose is at most that
   // pose's reach (neighbouring reaches may overlap); twice the largest growth (on the 7 mm brain
-  // 247 / 74 / 69 / 79 / 141 new nodes, bound 546, 128 evicted) is the bound, still below the five
-  // reaches together.
+  // with kCacheTestHorizonS 121 / 58 / 53 / 49 / 95 new nodes, bound 294, 158 evicted; with the
+  // server's 50 ms 247 / 74 / 69 / 79 / 141, bound 546, 128 evicted) is the bound, still below
+  // the five reaches together.
   std::size_t reach = 0, per_slot = 0;
   {
     auto probe = Simulation::build(model, cached(on));
@@ -327,11 +337,13 @@ TEST(interaction_column_worker, BoundedCacheEvictsNodesOutOfReachAndKeepsTheForc
 
 
 // A bound below one pose's reach (column_cache_budget_mb at its floor: two blocks, 42 nodes, on a
-// brain where one pose reaches hundreds). Before, the worker filled the bound with the nearest
-// nodes of the first pose; at a second pose 25 mm on, every ready node was still within its
-// reach, so nothing could be evicted, the worker stopped as "full" and the rows under the tip
-// stayed on the fallback for as long as the tool stayed (this test on that code: 14 nodes not
-// ready at the second pose, the force 43 % low, nothing evicted). Now the bound is raised to the
+// brain where one pose reaches over a hundred with kCacheTestHorizonS). Before, the worker filled
+// the bound with the nearest nodes of the first pose; at a second pose 25 mm on, every ready node
+// was still within its reach, so nothing could be evicted, the worker stopped as "full" and the
+// rows under the tip stayed on the fallback for as long as the tool stayed (this test on that
+// code, the bound not raised in ColumnWorker::room: with the server's 50 ms horizon 14 nodes not
+// ready at the second pose, the force 43 % low, nothing evicted; with kCacheTestHorizonS 2 nodes
+// not ready, the force 0.3 % off, raised_capacity_slots 0: it fails at the same assertions). Now the bound is raised to the
 // reach (ColumnCacheStats::raised_capacity_slots; the server logs it): at each pose the columns all
 // become ready, the worker solves no more than the reach (an unbounded probe's count, per pose)
 // plus a block, the force equals the synchronous one, nodes of the first reach are evicted at the
@@ -344,6 +356,7 @@ TEST(interaction_column_worker, BoundBelowOnePosesReachIsRaisedToTheReach) {
   on.column_worker = true;
   on.column_preload_budget_mb = 0.0;
   on.column_cache_budget_mb = 0.0;  // the probe: unbounded
+  on.column_horizon_s = kCacheTestHorizonS;
   auto sync = Simulation::build(model, cached(SimulationOptions{}));
   auto press_at = [&](double x, double y) { return pose_at(sync->mesh(0), tip, x, y, 2e-3); };
   const std::vector<ToolPose> poses{press_at(0.060, 0.060), press_at(0.060, 0.085)};
