@@ -169,7 +169,11 @@ TEST(service_replay, BrainSkullLiveServerAndReplayGiveTheSameForcesWithTheSkullH
   // path goes past it and the comparison can fail), and where the opening's path first touches.
   neurosim::scene::Model no_skull = scene;
   no_skull.rigid.clear();
-  const auto model = ni::build_model(no_skull);
+  // Built through the run's shared cache (test_support.hpp): the live server and the replay of
+  // the same brain below read its factor and boundary operator instead of factoring again.
+  ni::SimulationOptions cached;
+  cached.compliance_cache_dir = nt::shared_cache_dir().string();
+  const auto model = ni::build_model(no_skull, cached);
   const ni::Vec3 down(0, 0, -1);
   const ni::Vec3 top = ni::top_of_obstacle(*obstacle);
   auto first_touch = [&](const std::function<ni::ToolPose(int)>& path, int max_steps) {
