@@ -97,12 +97,14 @@ void press_and_hold(const Press& press, const char* tier) {
   setup.scene = scene;
   setup.server_args = {"--tier", tier, "--accuracy-table", table.string()};
   setup.startup_timeout_s = 300;  // brain: meshes, factorization, boundary operator on 2 cores
-  st::Session ses(setup, std::string("tier_") + tier, 240);
-  // The reference: the same tier in process, synchronous updates (deterministic).
+  // The reference: the same tier in process, synchronous updates (deterministic). Built before
+  // the server starts: with the run's cache still empty it factors the host once and the server
+  // reads that factor, instead of both factoring the same brain at once on the two cores.
   ni::SimulationOptions sync;
   sync.tier_worker_thread = false;
   sync.compliance_cache_dir = nt::shared_cache_dir().string();  // the server's factor, once a run
   auto ref = ni::Simulation::build(model, sync);
+  st::Session ses(setup, std::string("tier_") + tier, 240);
   ASSERT_TRUE(ses.wait_ready());
   const neurosim_Tier want = wire_tier(tier);
   ASSERT_TRUE(ses.status.wait_for([&](const neurosim_SimStatus& s) { return s.tier == want; }, 5))
