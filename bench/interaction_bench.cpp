@@ -103,6 +103,9 @@ struct RunTimes {
 // step, contact rows, LCP iterations (geometries, the answer's), whether it converged, and per
 // tool the force, the stiffness K, the validity radius and the loaded nodes.
 FILE* dump_file = nullptr;
+// --step-csv FILE: one line per timed step (case, step, wall and thread CPU time, rows, LCPs,
+// pivots, warm starts taken, columns computed / not ready): which steps make the tail.
+FILE* step_csv = nullptr;
 void dump_step(const char* name, std::size_t k, const std::vector<ni::ToolContact>& contacts,
                const ni::StepStats& stats) {
   if (dump_file == nullptr) return;
@@ -145,6 +148,11 @@ RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses, 
     r.columns += stats.columns_computed;
     r.not_ready += stats.columns_not_ready;
     if (dump_name) dump_step(dump_name, r.us.size() - 1, contacts, stats);
+    if (step_csv && dump_name)
+      std::fprintf(step_csv, "%s,%zu,%.2f,%.2f,%d,%d,%d,%d,%d,%d\n", dump_name, r.us.size() - 1,
+                   r.us.back(), r.cpu_us.back(), stats.contact_rows, stats.geometry_iterations,
+                   stats.lcp_pivots, stats.lcp_warm_taken, stats.columns_computed,
+                   stats.columns_not_ready);
     if (!(contacts[0].force_n.norm() > 0.0)) {
       if (r.zero_force < 8) r.zero_force_at.push_back(r.us.size() - 1);
       ++r.zero_force;
@@ -370,7 +378,22 @@ int main(int argc, char** argv) {
   cli->add_option("--dump", dump,
                   "write every step's answer of the deterministic paths (%a: force, K, rows, LCP "
                   "iterations, nodes) to this file, to compare two builds bit for bit");
+  std::string step_csv_path;
+  cli->add_option("--step-csv", step_csv_path,
+                  "write one line per timed step (case, step, wall_us, cpu_us, rows, lcps, pivots, "
+                  "warm_taken, columns_computed, columns_not_ready) to this file: which steps make "
+                  "the tail");
   if (auto rc = cli.parse(argc, argv)) return *rc;
+  if (!step_csv_path.empty()) {
+    step_csv = std::fopen(step_csv_path.c_str(), "w");
+    if (step_csv == nullptr) {
+      std::cerr << "interaction_bench: cannot write " << step_csv_path << "\n";
+      return 2;
+    }
+    std::fprintf(step_csv,
+                 "case,step,wall_us,cpu_us,rows,lcps,pivots,warm_taken,columns_computed,"
+                 "columns_not_ready\n");
+  }
   if (!dump.empty()) {
     dump_file = std::fopen(dump.c_str(), "w");
     if (dump_file == nullptr) {
@@ -381,6 +404,7 @@ int main(int argc, char** argv) {
   struct CloseDump {
     ~CloseDump() {
       if (dump_file) std::fclose(dump_file);
+      if (step_csv) std::fclose(step_csv);
     }
   } close_dump;
   if (four) return four_probes(steps);
