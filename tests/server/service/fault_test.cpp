@@ -135,7 +135,11 @@ TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUna
   // A quarter: the load of a parallel suite varies between the two windows too; a starved
   // station falls to ~0.
   EXPECT_GT(attack_hz, 0.25 * baseline_hz) << "the attacker starved the legitimate station";
-  // Every cause counted; the idle attacker station reclaimed after the 2 s timeout.
+  // Every cause counted; the idle attacker station reclaimed after the 2 s timeout. The rate
+  // limit's count is only asked to be non-zero: of evil-1's 0.5 s at 20 kHz the server sees what
+  // its best-effort keep-last-1 reader holds when it takes (a loaded machine delays the reader and
+  // the burst overwrites itself: 897 rejections were seen beside stress-ng, of at most 9000 the
+  // burst can give); without the limit it stays 0.
   const bool counted = ses.status.wait_for(
       [&](const neurosim_SimStatus& s) {
         note_refusal(s);
@@ -143,7 +147,7 @@ TEST(service_fault, HostileSamplesAreCountedPerCauseAndTheLegitimateStationIsUna
         return s.samples_rejected_nonfinite > 0 && s.samples_rejected_workspace > 0 &&
                s.samples_rejected_time > 0 && s.samples_rejected_sequence > 0 &&
                s.samples_rejected_identity > static_cast<std::uint64_t>(flood) / 2 &&
-               s.samples_rejected_rate > 1000 && s.stations_refused >= 1 && s.stations_reclaimed >= 1 &&
+               s.samples_rejected_rate > 0 && s.stations_refused >= 1 && s.stations_reclaimed >= 1 &&
                l != nullptr && l->samples_rejected_identity > 0 && st::find_station(s, "evil-2") == nullptr;
       },
       10);
