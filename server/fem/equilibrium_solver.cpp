@@ -128,6 +128,51 @@ struct EquilibriumSolver::Impl {
   }
 
   SupernodalFactor llt;
+  // A numeric factorization's cost in chord steps (a back-substitution with the factor and a
+  // residual), from the symbolic analysis: flops / (4 nnz(L) kSolveRateRatio), at least 1.
+  // The factorization runs dense BLAS-3 kernels on the supernodes, a back-substitution streams
+  // the factor once forwards and once backwards: kSolveRateRatio = 7 is the ratio of their flop
+  // rates measured on the 5 mm brain's smoothed-tet tangent (151.8 GFlop in 7.3 s, 4 x 58.4 M
+  // in 0.08 s: about 70 chord steps with the tangent's assembly and the residual) and about
+  // that of the 7 mm brain's linear-tet one (2.5 GFlop in 0.18 s, 4 x 4.2 M in 5 ms: about 25).
+  // Deterministic (the analysis' counts, not a clock): the iterates do not depend on the load.
+  static constexpr double kSolveRateRatio = 7.0;
+  double factor_steps{1.0};
+  // The last contractions max |r_new| / max |r_old| of the steps with the current factor (logs,
+  // a ring of kRateWindow): their geometric mean is the chord iteration's rate. Anderson steps
+  // contract unevenly (a step of 0.6-1.0 between steps of 0.01-0.1 is common), so one step's
+  // contraction misjudges it.
+  static constexpr int kRateWindow = 3;
+  std::array<double, kRateWindow> rate_log{};
+  int rate_count{0}, rate_head{0};
+  void rate_reset() { rate_count = rate_head = 0; }
+  // A refactorization asked for by the last iteration of a call cut short by step_limit: the
+  // next call (warm-started from that iterate) starts with it.
+  bool refactor_carried{false};
+  // Records a step's contraction; returns the window's geometric mean, or 0 (no verdict) while
+  // the window holds only one step that decreased the residual: a call's first step is a plain
+  // chord step, the Anderson steps after it often contract much better.
+  double rate_push(double contraction) {
+    rate_log[static_cast<std::size_t>(rate_head)] = std::log(std::max(contraction, 1e-300));
+    rate_head = (rate_head + 1) % kRateWindow;
+    rate_count = std::min(rate_count + 1, kRateWindow);
+    if (rate_count < 2 && contraction < 1.0) return 0.0;
+    double sum = 0.0;
+    for (int i = 0; i < rate_count; ++i) sum += rate_log[static_cast<std::size_t>(i)];
+    return std::exp(sum / rate_count);
+  }
+  // The chord rate above which the next iteration refactorizes, at residual r (target: the
+  // tolerance's, both N) after iteration `it`: n chord steps at rate rho reach the target when
+  // rho^n = target / r; a refactorization costs factor_steps chord steps and is followed by
+  // about two Newton steps, and the chord steps must fit in the iterations left before the
+  // budget (max_iterations / 2, below). Never below opt.refactor_contraction (a cheap factor
+  // keeps that threshold).
+  double refactor_rate(const NewtonOptions& opt, double r, double target, int it) const {
+    const double left = static_cast<double>(opt.max_iterations / 2 - (it + 1));
+    const double steps = std::min(factor_steps + 2.0, left);
+    if (!(r > target) || !(target > 0.0) || steps < 1.0) return opt.refactor_contraction;
+    return std::max(opt.refactor_contraction, std::pow(target / r, 1.0 / steps));
+  }
   // llt holds a successful factorization (of the exact or the projected tangent at some earlier
   // u): what reuse_factorization steps with. Cleared when a factorization fails.
   bool factor_valid{false};
@@ -368,6 +413,9 @@ struct EquilibriumSolver::Impl {
         throw std::runtime_error(where + ": CHOLMOD analysis failed");
       }
       check_factor_memory();
+      const cholmod_common& c = llt.common();
+      if (c.lnz > 0.0 && c.fl > 0.0)
+        factor_steps = std::max(1.0, c.fl / (4.0 * c.lnz * kSolveRateRatio));
       build_permuted_pattern();
     }
   }
@@ -442,6 +490,7 @@ struct EquilibriumSolver::Impl {
   bool factor(const Eigen::VectorXd& u, bool project, NewtonIncrement& inc) {
     ++inc.factorizations;
     factor_valid = false;
+    rate_reset();
     const SparseMatrix& k = tangent(u, project);
     // The structure of K (assembler pattern) and of T^T K T (a product of fixed structures) never
     // changes, so the free-block map and the symbolic analysis made at construction hold.
@@ -556,6 +605,7 @@ struct EquilibriumSolver::Impl {
     // SparseMatrix::swap exchanges the arrays; std::swap copied T^T K T three times (Eigen 3.4's
     // SparseMatrix has no move assignment): a quarter of a 7 mm brain update's time.
     kq.swap(pending->kq);
+    rate_reset();
     factor_valid = true;
     factor_projected = pending->projected;
     return true;
@@ -735,9 +785,11 @@ struct EquilibriumSolver::Impl {
         (!factor_valid || !background || pending_done()) && adopt_pending()) {
       ++inc.adopted_factorizations;
     }
-    bool refactor = !opt.reuse_factorization || !factor_valid;
+    bool refactor = !opt.reuse_factorization || !factor_valid || refactor_carried;
+    refactor_carried = false;
     const bool accelerate = opt.reuse_factorization && opt.anderson_depth > 0;
     aa_reset();
+    rate_reset();
     inc.residual_n.assign(1, rnorm);
     for (int it = 0;; ++it) {
       const bool converged = rnorm <= opt.tolerance * force_scale(fext);
@@ -748,6 +800,7 @@ struct EquilibriumSolver::Impl {
       }
       if (opt.step_limit > 0 && it >= opt.step_limit) {
         inc.converged = converged;
+        refactor_carried = refactor && !converged && opt.reuse_factorization;
         f_int_u = u;  // f_int, rq belong to u here
         f_int_known = true;
         return;
@@ -871,12 +924,16 @@ struct EquilibriumSolver::Impl {
       u.swap(trial);
       pi_u = pi;
       // Refactorize at the next iteration unless the step with the (possibly old) factor was a
-      // full one that contracted the residual well: a chord iteration costs a back-substitution
-      // and a residual (~3-8 % of a factorization on the brain mesh); at a rate worse than 1/2
-      // per step, ~30 of them are needed for 1e-9, more than a factorization saves.
+      // full one and the chord iteration contracts well: its rate over the last steps with this
+      // factor (rate_push) against the rate at which the chord steps still left to the
+      // tolerance would cost more than a factorization (refactor_rate: a chord step is about
+      // 1/25 of a factorization on the 7 mm linear-tet brain, 1/70 on the 5 mm smoothed-tet one).
       const bool budget = 2 * (it + 1) >= opt.max_iterations;
-      refactor = !opt.reuse_factorization || alpha < 1.0 ||
-                 r_trial > opt.refactor_contraction * rnorm || budget;
+      refactor = !opt.reuse_factorization || alpha < 1.0 || budget;
+      if (!refactor) {
+        const double target = opt.tolerance * force_scale(fext);
+        refactor = rate_push(r_trial / rnorm) > refactor_rate(opt, r_trial, target, it);
+      }
       // Background: the tangent at the new u is factorized on another thread while the next
       // steps go on with the old factor (a step it cannot take waits for it, above).
       if (refactor && background && !budget && (pending_running || launch(u))) refactor = false;

@@ -100,15 +100,21 @@ struct NewtonOptions {
   // iteration, increment or call of this solver) and step with it, u += K_old^-1 r (Anderson-
   // accelerated, below), accepted by the same test as the line search's; the tangent is
   // reassembled and refactorized at the current u (a full Newton step with line search) only
-  // when there is no factor yet, when a step with the old one finds no decrease, when the last
-  // step reduced max |r_free| by less than refactor_contraction (r_new > c r_old) or needed a
-  // line-search halving, and at every iteration after the first max_iterations / 2 (so a slow
-  // chord sequence cannot use up the budget). The convergence test and tolerance are the ones
+  // when there is no factor yet, when a step with the old one finds no decrease, when the steps
+  // with the current factor contract max |r_free| too slowly (their geometric mean over the last
+  // two or three steps above refactor_contraction, or above the rate at which the chord steps
+  // left to the tolerance would cost more than a factorization: the factorization's cost in
+  // back-substitutions from its flop count, about 70 on the 5 mm smoothed-tet brain), when the
+  // last step needed a line-search halving, and at every iteration after the first
+  // max_iterations / 2 (so a slow chord sequence cannot use up the budget). A call cut short by
+  // step_limit when a refactorization was due leaves it to the next call's first iteration.
+  // The convergence test and tolerance are the ones
   // above: the answer is the converged equilibrium, not an approximation. Applies to solve (the
   // factor carried from increment to increment) and solve_from. false: a fresh tangent at every
   // iteration (full Newton, today's iterates exactly).
   bool reuse_factorization{false};
-  // Residual ratio r_new / r_old (max norms) above which the next iteration refactorizes;
+  // Chord rate (residual ratio r_new / r_old per step, max norms, the geometric mean over the
+  // last steps with one factor) above which the next iteration refactorizes at least;
   // dimensionless, in (0, 1). Smaller: closer to full Newton (more factorizations, fewer
   // iterations). Only read when reuse_factorization is set.
   double refactor_contraction{0.5};
