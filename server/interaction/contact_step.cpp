@@ -717,9 +717,12 @@ void State::full_candidate_list(const Model& m, int body, int tool_index, const 
   b.surface.query(p0 - Vec3::Constant(shape.tip_radius_m + slack),
                   p0 + Vec3::Constant(shape.tip_radius_m + slack), list);
   if (has_shaft) {
+    // (only the cells near the axis: a kept triangle's centroid is within its radius plus the
+    // larger of the tests' reaches below of the axis, the tip's centre being on it)
     const double reach = shape.shaft_radius_m + slack;
-    b.surface.query(p0.cwiseMin(p1) - Vec3::Constant(reach),
-                    p0.cwiseMax(p1) + Vec3::Constant(reach), list);
+    b.surface.query_near(p0.cwiseMin(p1) - Vec3::Constant(reach),
+                         p0.cwiseMax(p1) + Vec3::Constant(reach), p0, p1,
+                         std::max(shape.tip_radius_m, shape.shaft_radius_m) + slack, list);
   }
   // Keep each triangle once, and only those whose rest bounding sphere can reach a tool part;
   // per triangle, the parts it can reach. A part's hits (a node, an edge or face point) lie
@@ -776,9 +779,18 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
   const double tip_box = shape.tip_radius_m + slack + w;
   b.surface.query(p0 - Vec3::Constant(tip_box), p0 + Vec3::Constant(tip_box), found);
   if (has_shaft) {
+    // (only the cells near the axis: reusable_parts keeps a triangle whose centroid is within
+    // its radius + reach + back of the tip's centre or the axis (both on the axis), widened by
+    // 1e-6, or within its radius + the tip's back of the tip's centre)
+    const double margin = m.options_.candidate_margin * shape.tip_radius_m;
+    double near = 0.0;
+    for (const double radius : {shape.tip_radius_m, shape.shaft_radius_m}) {
+      const double reach = radius + margin + w;
+      near = std::max(near, reach + std::max(reach, b.behind_reach_m + w));
+    }
     const double reach = shape.shaft_radius_m + slack + w;
-    b.surface.query(p0.cwiseMin(p1) - Vec3::Constant(reach),
-                    p0.cwiseMax(p1) + Vec3::Constant(reach), found);
+    b.surface.query_near(p0.cwiseMin(p1) - Vec3::Constant(reach),
+                         p0.cwiseMax(p1) + Vec3::Constant(reach), p0, p1, near, found);
   }
   sc.reusable.clear();
   const long long stamp = ++stamp_counter_;

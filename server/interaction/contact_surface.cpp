@@ -183,6 +183,12 @@ void ContactSurface::query(const mesh::Vec3& lo, const mesh::Vec3& hi,
   grid_.query(lo - pad, hi + pad, out);
 }
 
+void ContactSurface::query_near(const mesh::Vec3& lo, const mesh::Vec3& hi, const mesh::Vec3& a,
+                                const mesh::Vec3& b, double reach_m, std::vector<int>& out) const {
+  const mesh::Vec3 pad = mesh::Vec3::Constant(max_radius_m_);
+  grid_.query_near(lo - pad, hi + pad, a, b, (reach_m + max_radius_m_) * (1.0 + 1e-6), out);
+}
+
 PointGrid::CellRange ContactSurface::query_cells(const mesh::Vec3& lo,
                                                 const mesh::Vec3& hi) const {
   const mesh::Vec3 pad = mesh::Vec3::Constant(max_radius_m_);

@@ -131,6 +131,11 @@ class ContactSurface {
   const std::vector<SurfaceTriangle>& triangles() const { return triangles_; }
   // Appends the triangles whose rest bounding sphere may reach the box [lo, hi] (a superset).
   void query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const;
+  // As query(lo, hi) less triangles far from the segment [a, b]: the same triangles in the same
+  // order less some, every triangle whose centroid is within (reach + the largest bounding
+  // radius) (1 + 1e-6) of the segment kept (unit m).
+  void query_near(const mesh::Vec3& lo, const mesh::Vec3& hi, const mesh::Vec3& a,
+                  const mesh::Vec3& b, double reach_m, std::vector<int>& out) const;
   // The grid cells query(lo, hi) visits, whether triangle t is among the triangles they list,
   // and t's rank in a query's order (by rank; PointGrid).
   PointGrid::CellRange query_cells(const mesh::Vec3& lo, const mesh::Vec3& hi) const;

@@ -196,6 +196,26 @@ PointGrid::CellRange PointGrid::cells(const mesh::Vec3& lo, const mesh::Vec3& hi
   return in;
 }
 
+void PointGrid::query_near(const mesh::Vec3& lo, const mesh::Vec3& hi, const mesh::Vec3& a,
+                           const mesh::Vec3& b, double radius, std::vector<int>& out) const {
+  if (!(radius >= 0.0)) throw std::invalid_argument("PointGrid::query_near: radius must be >= 0");
+  const CellRange r = cells(lo, hi);
+  // A cell is skipped when its centre is farther from the segment than radius plus the cell's
+  // half diagonal (every point of the cell then farther than radius), with room for rounding.
+  const double half = 0.5 * std::sqrt(3.0) * cell_;
+  const double bound = (radius + half) * (1.0 + 1e-9) + 1e-9 * cell_;
+  const double bound2 = bound * bound;
+  for (int z = r.lo[2]; z <= r.hi[2]; ++z)
+    for (int y = r.lo[1]; y <= r.hi[1]; ++y)
+      for (int x = r.lo[0]; x <= r.hi[0]; ++x) {
+        const int c = (z * dims_[1] + y) * dims_[0] + x;
+        if (offsets_[c] == offsets_[c + 1]) continue;
+        const mesh::Vec3 centre = origin_ + cell_ * mesh::Vec3(x + 0.5, y + 0.5, z + 0.5);
+        if ((centre - closest_on_segment(centre, a, b)).squaredNorm() > bound2) continue;
+        for (int k = offsets_[c]; k < offsets_[c + 1]; ++k) out.push_back(items_[k]);
+      }
+}
+
 void PointGrid::query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const {
   const CellRange r = cells(lo, hi);
   for (int z = r.lo[2]; z <= r.hi[2]; ++z)

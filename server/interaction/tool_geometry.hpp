@@ -128,6 +128,11 @@ class PointGrid {
   PointGrid(const std::vector<mesh::Vec3>& points_m, double cell_m);
   // Appends the indices of points in cells overlapping [lo, hi] (a superset of the points in it).
   void query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const;
+  // As query(lo, hi) without the cells wholly farther than radius from the segment [a, b]: the
+  // same points in the same order less some, every point within radius of the segment kept (a
+  // long tilted shaft's box holds far more of the surface than its capsule).
+  void query_near(const mesh::Vec3& lo, const mesh::Vec3& hi, const mesh::Vec3& a,
+                  const mesh::Vec3& b, double radius, std::vector<int>& out) const;
   bool empty() const { return count_ == 0; }
   // The cells query(lo, hi) visits (per axis lo..hi; none when some hi < lo), whether point i
   // lies in one of them, and its rank in the grid's order: a query lists its points by rank.

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <random>
 #include <set>
+#include <stdexcept>
 #include <vector>
 
 namespace neurosim::interaction {
@@ -74,6 +75,50 @@ TEST(interaction_tool_geometry, QueryListsTheBoxCellsPointsByRank) {
   // A box beside the grid visits no cell.
   const PointGrid::CellRange none = grid.cells(Vec3::Constant(0.2), Vec3::Constant(0.3));
   for (int i = 0; i < static_cast<int>(points.size()); ++i) ASSERT_FALSE(grid.contains(none, i));
+}
+
+// A long tool's box against its axis: query_near lists query's points in query's order less
+// some, keeps every point within the radius of the segment, and drops most of a tilted shaft's
+// box (a 150 mm shaft's box holds far more of a surface than its capsule).
+TEST(interaction_tool_geometry, QueryNearKeepsThePointsNearTheSegmentInQueryOrder) {
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<double> u(-0.05, 0.05);
+  std::vector<Vec3> points(3000);
+  for (auto& p : points) p = Vec3(u(rng), u(rng), u(rng));
+  const PointGrid grid(points, 0.005);
+  std::vector<int> all, near;
+  std::size_t listed = 0, kept = 0;
+  for (int q = 0; q < 200; ++q) {
+    const Vec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
+    const double radius = 0.001 + 0.01 * std::abs(u(rng)) / 0.05;
+    const Vec3 lo = a.cwiseMin(b) - Vec3::Constant(radius);
+    const Vec3 hi = a.cwiseMax(b) + Vec3::Constant(radius);
+    all.clear();
+    near.clear();
+    grid.query(lo, hi, all);
+    grid.query_near(lo, hi, a, b, radius, near);
+    // A subsequence of query's list ...
+    std::size_t k = 0;
+    for (int i : near) {
+      while (k < all.size() && all[k] != i) ++k;
+      ASSERT_LT(k, all.size()) << "query " << q << ": point " << i << " not in query's order";
+      ++k;
+    }
+    // ... holding every listed point within the radius of the segment.
+    const std::set<int> kept_set(near.begin(), near.end());
+    for (int i : all) {
+      const Vec3& p = points[static_cast<std::size_t>(i)];
+      if ((p - closest_on_segment(p, a, b)).norm() <= radius) {
+        ASSERT_TRUE(kept_set.count(i)) << "query " << q << ": point " << i << " near the axis dropped";
+      }
+    }
+    listed += all.size();
+    kept += near.size();
+  }
+  EXPECT_LT(static_cast<double>(kept), 0.5 * static_cast<double>(listed))
+      << "query_near dropped little of the boxes: " << kept << " of " << listed;
+  EXPECT_THROW(grid.query_near(Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), -1.0, near),
+               std::invalid_argument);
 }
 
 TEST(interaction_tool_geometry, NormalLineDepthIsTheSpheresReachAlongTheNormal) {
