@@ -18,11 +18,18 @@ namespace {
 
 using mesh::Vec3;
 
+// n points drawn from u per coordinate (the grid tests' clouds; fixed seeds).
+std::vector<Vec3> random_points(std::mt19937& rng, std::uniform_real_distribution<double>& u,
+                                int n) {
+  std::vector<Vec3> points(static_cast<std::size_t>(n));
+  for (auto& p : points) p = Vec3(u(rng), u(rng), u(rng));
+  return points;
+}
+
 TEST(interaction_tool_geometry, GridQueriesHoldEveryPointInTheBoxOnce) {
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> u(-0.05, 0.05);
-  std::vector<Vec3> points(2000);
-  for (auto& p : points) p = Vec3(u(rng), u(rng), u(rng));
+  const std::vector<Vec3> points = random_points(rng, u, 2000);
   const PointGrid grid(points, 0.007);
   std::vector<int> found;
   for (int q = 0; q < 200; ++q) {
@@ -50,8 +57,7 @@ TEST(interaction_tool_geometry, GridQueriesHoldEveryPointInTheBoxOnce) {
 TEST(interaction_tool_geometry, QueryListsTheBoxCellsPointsByRank) {
   std::mt19937 rng(12);
   std::uniform_real_distribution<double> u(-0.05, 0.05);
-  std::vector<Vec3> points(1500);
-  for (auto& p : points) p = Vec3(u(rng), u(rng), u(rng));
+  const std::vector<Vec3> points = random_points(rng, u, 1500);
   const PointGrid grid(points, 0.006);
   std::vector<int> by_rank(points.size(), -1);
   for (int i = 0; i < static_cast<int>(points.size()); ++i) {
@@ -83,8 +89,7 @@ TEST(interaction_tool_geometry, QueryListsTheBoxCellsPointsByRank) {
 TEST(interaction_tool_geometry, QueryNearKeepsThePointsNearTheSegmentInQueryOrder) {
   std::mt19937 rng(13);
   std::uniform_real_distribution<double> u(-0.05, 0.05);
-  std::vector<Vec3> points(3000);
-  for (auto& p : points) p = Vec3(u(rng), u(rng), u(rng));
+  const std::vector<Vec3> points = random_points(rng, u, 3000);
   const PointGrid grid(points, 0.005);
   std::vector<int> all, near;
   std::size_t listed = 0, kept = 0;
