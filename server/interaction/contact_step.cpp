@@ -770,43 +770,41 @@ void State::full_candidate_list(const Model& m, int body, int tool_index, const 
 void State::reusable_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
                                 const Vec3& p1, double slack, double reuse_m, StepCandidates& sc) {
   const BodyModel& b = m.bodies_[body];
-  BodyState& bs = bodies_[body];
   const ToolShape& shape = m.tools_[tool_index];
   const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
   const double w = reuse_m * (1.0 + 1e-6);  // the moved pose, with room for rounding
   auto& found = sc.triangles;  // scratch (reserved: two queries' worth); the caller refills it
   found.clear();
+  // The tip's box and the shaft's box near its axis, each triangle once, in rank order, less
+  // those whose rest bounding sphere is beyond every test below: reusable_parts' sphere-capsule
+  // tests (may_reach_triangle: centroid within radius + reach + back of the tip's centre or the
+  // axis, widened by 1e-6) and the flat bound (radius + back of the tip's centre, within the
+  // first), the tip's centre being on the axis; 1e-9 more for the rounding of the distances.
+  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
+  auto reach_and_back = [&](double radius) {
+    const double reach = radius + margin + w;
+    return reach + std::max(reach, b.behind_reach_m + w);
+  };
+  const double near = has_shaft ? std::max(reach_and_back(shape.tip_radius_m),
+                                           reach_and_back(shape.shaft_radius_m))
+                                : reach_and_back(shape.tip_radius_m);
   const double tip_box = shape.tip_radius_m + slack + w;
-  b.surface.query(p0 - Vec3::Constant(tip_box), p0 + Vec3::Constant(tip_box), found);
-  if (has_shaft) {
-    // (only the cells near the axis: reusable_parts keeps a triangle whose centroid is within
-    // its radius + reach + back of the tip's centre or the axis (both on the axis), widened by
-    // 1e-6, or within its radius + the tip's back of the tip's centre)
-    const double margin = m.options_.candidate_margin * shape.tip_radius_m;
-    double near = 0.0;
-    for (const double radius : {shape.tip_radius_m, shape.shaft_radius_m}) {
-      const double reach = radius + margin + w;
-      near = std::max(near, reach + std::max(reach, b.behind_reach_m + w));
-    }
-    const double reach = shape.shaft_radius_m + slack + w;
-    b.surface.query_near(p0.cwiseMin(p1) - Vec3::Constant(reach),
-                         p0.cwiseMax(p1) + Vec3::Constant(reach), p0, p1, near, found);
-  }
+  const double reach = shape.shaft_radius_m + slack + w;
+  const Vec3& end = has_shaft ? p1 : p0;
+  b.surface.query_tool(p0 - Vec3::Constant(tip_box), p0 + Vec3::Constant(tip_box), has_shaft,
+                       p0.cwiseMin(p1) - Vec3::Constant(reach),
+                       p0.cwiseMax(p1) + Vec3::Constant(reach), p0, end, near,
+                       near * (1.0 + 1e-9), found);
   sc.reusable.clear();
-  const long long stamp = ++stamp_counter_;
-  for (int t : found) {
-    if (bs.triangle_stamp[t] == stamp) continue;
-    bs.triangle_stamp[t] = stamp;
+  for (const int rank : found) {
+    const int t = b.surface.ranked_triangle(rank);
     bool flat = false;  // within reach of flat_distance (the smooth tip's)
     const int parts = reusable_parts(m, body, t, shape, p0, p1, w, flat);
     if (parts != 0 || flat)
-      sc.reusable.push_back({t, b.surface.query_rank(t), static_cast<std::uint8_t>(parts),
-                             b.surface.query_cell(t)});
+      sc.reusable.push_back(
+          {t, rank, static_cast<std::uint8_t>(parts), b.surface.query_cell(t)});
   }
-  std::sort(sc.reusable.begin(), sc.reusable.end(),
-            [](const StepCandidates::Reusable& a, const StepCandidates::Reusable& c) {
-              return a.rank < c.rank;
-            });
+  // (in rank order: the grid's, as query_tool lists them)
   sc.reuse_valid = true;
   sc.reuse_tool = tool_index;
   sc.reuse_slack_m = slack;

@@ -175,6 +175,31 @@ ContactSurface::ContactSurface(const ContactSurfaceDefinition& def) {
     node_normal_.push_back(nn);
   }
   grid_ = PointGrid(centroid_, 2.0 * mean_edge_m_);
+  ranked_sphere_.resize(triangles_.size());
+  for (std::size_t t = 0; t < triangles_.size(); ++t) {
+    const mesh::Vec3& c = centroid_[t];
+    ranked_sphere_[grid_.rank(static_cast<int>(t))] = {c.x(), c.y(), c.z(), radius_m_[t]};
+  }
+}
+
+void ContactSurface::query_tool(const mesh::Vec3& lo, const mesh::Vec3& hi, bool has_near,
+                                const mesh::Vec3& near_lo, const mesh::Vec3& near_hi,
+                                const mesh::Vec3& a, const mesh::Vec3& b, double near_m,
+                                double sphere_m, std::vector<int>& ranks) const {
+  if (!(sphere_m >= 0.0))
+    throw std::invalid_argument("ContactSurface::query_tool: sphere reach must be >= 0");
+  const mesh::Vec3 pad = mesh::Vec3::Constant(max_radius_m_);
+  const std::size_t first = ranks.size();
+  grid_.query_ranks(lo - pad, hi + pad, has_near, near_lo - pad, near_hi + pad, a, b,
+                    (near_m + max_radius_m_) * (1.0 + 1e-6), ranks);
+  std::size_t kept = first;
+  for (std::size_t i = first; i < ranks.size(); ++i) {
+    const auto& s = ranked_sphere_[ranks[i]];
+    const mesh::Vec3 c(s[0], s[1], s[2]);
+    const double bound = (s[3] + sphere_m) * (1.0 + 1e-6);
+    if ((c - closest_on_segment(c, a, b)).squaredNorm() <= bound * bound) ranks[kept++] = ranks[i];
+  }
+  ranks.resize(kept);
 }
 
 void ContactSurface::query(const mesh::Vec3& lo, const mesh::Vec3& hi,

@@ -136,6 +136,17 @@ class ContactSurface {
   // radius) (1 + 1e-6) of the segment kept (unit m).
   void query_near(const mesh::Vec3& lo, const mesh::Vec3& hi, const mesh::Vec3& a,
                   const mesh::Vec3& b, double reach_m, std::vector<int>& out) const;
+  // A tool's candidates as ranks (ascending, each once; ranked_triangle(rank) is the triangle):
+  // the union of query(lo, hi) and, with has_near, query_near(near_lo, near_hi, a, b, near_m),
+  // less the triangles whose rest bounding sphere is farther than sphere_m from the segment
+  // [a, b] (kept: centroid within (radius + sphere_m) (1 + 1e-6) of it). The sphere test reads
+  // the centroids and radii in rank order (a long shaft's boxes list far more triangles than
+  // reach it). Unit m.
+  void query_tool(const mesh::Vec3& lo, const mesh::Vec3& hi, bool has_near,
+                  const mesh::Vec3& near_lo, const mesh::Vec3& near_hi, const mesh::Vec3& a,
+                  const mesh::Vec3& b, double near_m, double sphere_m,
+                  std::vector<int>& ranks) const;
+  int ranked_triangle(int rank) const { return grid_.item(rank); }
   // The grid cells query(lo, hi) visits, whether triangle t is among the triangles they list,
   // and t's rank in a query's order (by rank; PointGrid).
   PointGrid::CellRange query_cells(const mesh::Vec3& lo, const mesh::Vec3& hi) const;
@@ -187,6 +198,7 @@ class ContactSurface {
   std::vector<double> spread_area_m2_;                  // per triangle: rest area (spread)
   std::vector<double> spread_longest_m_;                // per triangle: longest rest edge (spread)
   PointGrid grid_;
+  std::vector<std::array<double, 4>> ranked_sphere_;  // per grid rank: centroid, radius (m)
   double max_radius_m_{0.0};
   double mean_edge_m_{0.0};
 };

@@ -196,34 +196,67 @@ PointGrid::CellRange PointGrid::cells(const mesh::Vec3& lo, const mesh::Vec3& hi
   return in;
 }
 
-void PointGrid::query_near(const mesh::Vec3& lo, const mesh::Vec3& hi, const mesh::Vec3& a,
-                           const mesh::Vec3& b, double radius, std::vector<int>& out) const {
-  if (!(radius >= 0.0)) throw std::invalid_argument("PointGrid::query_near: radius must be >= 0");
-  const CellRange r = cells(lo, hi);
-  // A cell is skipped when its centre is farther from the segment than radius plus the cell's
-  // half diagonal (every point of the cell then farther than radius), with room for rounding.
+template <class Visit>
+void PointGrid::visit_cells(const CellRange& box, bool has_near, const CellRange& near,
+                            const mesh::Vec3& a, const mesh::Vec3& b, double radius,
+                            Visit&& visit) const {
+  if (!(radius >= 0.0)) throw std::invalid_argument("PointGrid: a query's radius must be >= 0");
+  // The cells of both ranges in the grid's order (z, y, x), so the ranks come out ascending.
+  CellRange all = box;
+  if (has_near) {
+    for (int k = 0; k < 3; ++k) {
+      all.lo[k] = std::min(box.lo[k], near.lo[k]);
+      all.hi[k] = std::max(box.hi[k], near.hi[k]);
+    }
+    const bool empty_box = box.hi[0] < box.lo[0] || box.hi[1] < box.lo[1] || box.hi[2] < box.lo[2];
+    if (empty_box) all = near;
+    if (near.hi[0] < near.lo[0] || near.hi[1] < near.lo[1] || near.hi[2] < near.lo[2]) {
+      all = box;
+      has_near = false;
+    }
+  }
+  // A near cell is skipped when its centre is farther from the segment than radius plus the
+  // cell's half diagonal (every point of the cell then farther than radius), with room for
+  // rounding.
   const double half = 0.5 * std::sqrt(3.0) * cell_;
   const double bound = (radius + half) * (1.0 + 1e-9) + 1e-9 * cell_;
   const double bound2 = bound * bound;
-  for (int z = r.lo[2]; z <= r.hi[2]; ++z)
-    for (int y = r.lo[1]; y <= r.hi[1]; ++y)
-      for (int x = r.lo[0]; x <= r.hi[0]; ++x) {
+  for (int z = all.lo[2]; z <= all.hi[2]; ++z)
+    for (int y = all.lo[1]; y <= all.hi[1]; ++y)
+      for (int x = all.lo[0]; x <= all.hi[0]; ++x) {
         const int c = (z * dims_[1] + y) * dims_[0] + x;
         if (offsets_[c] == offsets_[c + 1]) continue;
-        const mesh::Vec3 centre = origin_ + cell_ * mesh::Vec3(x + 0.5, y + 0.5, z + 0.5);
-        if ((centre - closest_on_segment(centre, a, b)).squaredNorm() > bound2) continue;
-        for (int k = offsets_[c]; k < offsets_[c + 1]; ++k) out.push_back(items_[k]);
+        const std::array<int, 3> at{x, y, z};
+        if (!contains(box, at)) {
+          if (!has_near || !contains(near, at)) continue;
+          const mesh::Vec3 centre = origin_ + cell_ * mesh::Vec3(x + 0.5, y + 0.5, z + 0.5);
+          if ((centre - closest_on_segment(centre, a, b)).squaredNorm() > bound2) continue;
+        }
+        visit(offsets_[c], offsets_[c + 1]);
       }
 }
 
+void PointGrid::query_near(const mesh::Vec3& lo, const mesh::Vec3& hi, const mesh::Vec3& a,
+                           const mesh::Vec3& b, double radius, std::vector<int>& out) const {
+  visit_cells(CellRange{}, true, cells(lo, hi), a, b, radius, [&](int first, int last) {
+    for (int k = first; k < last; ++k) out.push_back(items_[k]);
+  });
+}
+
 void PointGrid::query(const mesh::Vec3& lo, const mesh::Vec3& hi, std::vector<int>& out) const {
-  const CellRange r = cells(lo, hi);
-  for (int z = r.lo[2]; z <= r.hi[2]; ++z)
-    for (int y = r.lo[1]; y <= r.hi[1]; ++y)
-      for (int x = r.lo[0]; x <= r.hi[0]; ++x) {
-        const int c = (z * dims_[1] + y) * dims_[0] + x;
-        for (int k = offsets_[c]; k < offsets_[c + 1]; ++k) out.push_back(items_[k]);
-      }
+  visit_cells(cells(lo, hi), false, CellRange{}, lo, lo, 0.0, [&](int first, int last) {
+    for (int k = first; k < last; ++k) out.push_back(items_[k]);
+  });
+}
+
+void PointGrid::query_ranks(const mesh::Vec3& lo, const mesh::Vec3& hi, bool has_near,
+                            const mesh::Vec3& near_lo, const mesh::Vec3& near_hi,
+                            const mesh::Vec3& a, const mesh::Vec3& b, double radius,
+                            std::vector<int>& ranks) const {
+  visit_cells(cells(lo, hi), has_near, has_near ? cells(near_lo, near_hi) : CellRange{}, a, b,
+              radius, [&](int first, int last) {
+                for (int k = first; k < last; ++k) ranks.push_back(k);
+              });
 }
 
 }  // namespace neurosim::interaction

@@ -133,6 +133,13 @@ class PointGrid {
   // long tilted shaft's box holds far more of the surface than its capsule).
   void query_near(const mesh::Vec3& lo, const mesh::Vec3& hi, const mesh::Vec3& a,
                   const mesh::Vec3& b, double radius, std::vector<int>& out) const;
+  // The union of query(lo, hi) and query_near(near_lo, near_hi, a, b, radius) with each point
+  // once, as ranks (ascending: the grid's order; item(rank) is the point). Without a second box
+  // (has_near false) it is query(lo, hi)'s ranks.
+  void query_ranks(const mesh::Vec3& lo, const mesh::Vec3& hi, bool has_near,
+                   const mesh::Vec3& near_lo, const mesh::Vec3& near_hi, const mesh::Vec3& a,
+                   const mesh::Vec3& b, double radius, std::vector<int>& ranks) const;
+  int item(int rank) const { return items_[rank]; }
   bool empty() const { return count_ == 0; }
   // The cells query(lo, hi) visits (per axis lo..hi; none when some hi < lo), whether point i
   // lies in one of them, and its rank in the grid's order: a query lists its points by rank.
@@ -152,6 +159,13 @@ class PointGrid {
   int rank(int i) const { return rank_[i]; }
 
  private:
+  // Calls visit(first, last) for the rank ranges [first, last) of the cells in `box` and of the
+  // cells in `near` not wholly farther than radius from the segment [a, b] (none without
+  // has_near), each cell once, in the grid's order. Defined and used in tool_geometry.cpp.
+  template <class Visit>
+  void visit_cells(const CellRange& box, bool has_near, const CellRange& near, const mesh::Vec3& a,
+                   const mesh::Vec3& b, double radius, Visit&& visit) const;
+
   mesh::Vec3 origin_{mesh::Vec3::Zero()};
   double cell_{1.0};
   int dims_[3]{0, 0, 0};

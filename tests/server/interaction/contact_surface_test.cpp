@@ -110,6 +110,52 @@ TEST(interaction_contact_surface, BoxSurfaceTrianglesAndEdgeIncidence) {
 }
 
 
+// A tool's candidates: query_tool lists the triangles of query(tip box) and query_near(shaft
+// box) whose bounding sphere is within the reach of the axis, each once, by rank.
+TEST(interaction_contact_surface, QueryToolListsTheTwoBoxesTrianglesNearTheAxisByRank) {
+  const TopFace f;
+  const ContactSurface& s = f.surface;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.2, 1.2);
+  std::vector<int> tip, shaft, ranks;
+  std::size_t listed = 0, kept = 0;
+  for (int q = 0; q < 300; ++q) {
+    const Vec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
+    const double h = 0.05 + 0.2 * std::abs(u(rng));
+    const double near = 0.02 + 0.2 * std::abs(u(rng)), sphere = 0.3 * std::abs(u(rng));
+    const Vec3 lo = a - Vec3::Constant(h), hi = a + Vec3::Constant(h);
+    const Vec3 near_lo = a.cwiseMin(b) - Vec3::Constant(h), near_hi = a.cwiseMax(b) + Vec3::Constant(h);
+    const bool has_near = q % 4 != 0;
+    tip.clear();
+    shaft.clear();
+    ranks.clear();
+    s.query(lo, hi, tip);
+    if (has_near) s.query_near(near_lo, near_hi, a, b, near, shaft);
+    s.query_tool(lo, hi, has_near, near_lo, near_hi, a, b, near, sphere, ranks);
+    std::vector<int> expected;
+    for (const auto* list : {&tip, &shaft})
+      for (int t : *list) {
+        const Vec3& c = s.centroid(t);
+        const double bound = (s.radius_m(t) + sphere) * (1.0 + 1e-6);
+        if ((c - closest_on_segment(c, a, b)).squaredNorm() <= bound * bound) expected.push_back(t);
+      }
+    std::sort(expected.begin(), expected.end(),
+              [&](int x, int y) { return s.query_rank(x) < s.query_rank(y); });
+    expected.erase(std::unique(expected.begin(), expected.end()), expected.end());
+    ASSERT_EQ(ranks.size(), expected.size()) << "query " << q;
+    for (std::size_t k = 0; k < ranks.size(); ++k) {
+      ASSERT_EQ(s.ranked_triangle(ranks[k]), expected[k]) << "query " << q;
+      ASSERT_EQ(s.query_rank(expected[k]), ranks[k]);
+    }
+    listed += tip.size() + shaft.size();
+    kept += ranks.size();
+  }
+  EXPECT_LT(kept, listed) << "the sphere test dropped nothing";
+  EXPECT_THROW(s.query_tool(Vec3::Zero(), Vec3::Zero(), false, Vec3::Zero(), Vec3::Zero(),
+                            Vec3::Zero(), Vec3::Zero(), 0.1, -1.0, ranks),
+               std::invalid_argument);
+}
+
 TEST(interaction_contact_surface, SpreadLoadWeightsAreConsistentAndContinuous) {
   const TopFace f;
   std::vector<int> scratch;

@@ -126,6 +126,60 @@ TEST(interaction_tool_geometry, QueryNearKeepsThePointsNearTheSegmentInQueryOrde
                std::invalid_argument);
 }
 
+// A tool's two boxes in one pass: query_ranks lists the union of query(tip box) and
+// query_near(shaft box) as ranks, each point once, ascending (the grid's order), and alone
+// (no second box) query's points as ranks.
+TEST(interaction_tool_geometry, QueryRanksIsTheUnionOfTheTwoQueriesInRankOrder) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-0.05, 0.05);
+  const std::vector<Vec3> points = random_points(rng, u, 3000);
+  const PointGrid grid(points, 0.005);
+  std::vector<int> tip, shaft, ranks, alone;
+  for (int q = 0; q < 200; ++q) {
+    const Vec3 a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
+    const double h = 0.002 + 0.01 * std::abs(u(rng)) / 0.05;
+    const double radius = 0.001 + 0.01 * std::abs(u(rng)) / 0.05;
+    const Vec3 lo = a - Vec3::Constant(h), hi = a + Vec3::Constant(h);
+    const Vec3 near_lo = a.cwiseMin(b) - Vec3::Constant(radius);
+    const Vec3 near_hi = a.cwiseMax(b) + Vec3::Constant(radius);
+    tip.clear();
+    shaft.clear();
+    ranks.clear();
+    alone.clear();
+    grid.query(lo, hi, tip);
+    grid.query_near(near_lo, near_hi, a, b, radius, shaft);
+    grid.query_ranks(lo, hi, true, near_lo, near_hi, a, b, radius, ranks);
+    std::set<int> expected(tip.begin(), tip.end());
+    expected.insert(shaft.begin(), shaft.end());
+    ASSERT_EQ(ranks.size(), expected.size()) << "query " << q;
+    for (std::size_t k = 0; k < ranks.size(); ++k) {
+      if (k > 0) {
+        ASSERT_LT(ranks[k - 1], ranks[k]) << "query " << q << ": not ascending";
+      }
+      ASSERT_TRUE(expected.count(grid.item(ranks[k]))) << "query " << q << ": rank " << ranks[k];
+    }
+    grid.query_ranks(lo, hi, false, near_lo, near_hi, a, b, radius, alone);
+    ASSERT_EQ(alone.size(), tip.size()) << "query " << q;
+    for (std::size_t k = 0; k < alone.size(); ++k) ASSERT_EQ(grid.item(alone[k]), tip[k]);
+  }
+  // A second box wholly beside the grid adds nothing; the first one beside it lists only the
+  // second's.
+  const Vec3 far(0.5, 0.5, 0.5);
+  ranks.clear();
+  tip.clear();
+  grid.query(Vec3::Constant(-0.01), Vec3::Constant(0.01), tip);
+  grid.query_ranks(Vec3::Constant(-0.01), Vec3::Constant(0.01), true, far, far, far, far, 0.001,
+                   ranks);
+  ASSERT_EQ(ranks.size(), tip.size());
+  ranks.clear();
+  grid.query_ranks(far, far, true, Vec3::Constant(-0.01), Vec3::Constant(0.01), Vec3::Zero(),
+                   Vec3::Zero(), 0.05, ranks);
+  ASSERT_EQ(ranks.size(), tip.size());
+  EXPECT_THROW(grid.query_ranks(Vec3::Zero(), Vec3::Zero(), true, Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), -1.0,
+                                ranks),
+               std::invalid_argument);
+}
+
 TEST(interaction_tool_geometry, NormalLineDepthIsTheSpheresReachAlongTheNormal) {
   const Vec3 x(0.01, 0.02, 0.03), n(0, 0, 1);
   const double r = 0.004;
