@@ -101,8 +101,9 @@ bool may_touch_face(const Vec3& x0, const Vec3& n, const Vec3& centre, double rh
 }
 
 // Whether the segment p0-p1 comes within `bound` of the point c (a prefilter of may_touch_face
-// over a triangle and its vertices: bound = triangle radius + reach + behind, widened by 1e-6
-// relative, far more than the rounding of either test, so it never rejects what they take).
+// over a triangle and its vertices: bound = triangle radius + hypot(reach, behind) or more,
+// widened by 1e-6 relative, far more than the rounding of either test, so it never rejects what
+// they take).
 bool may_reach_triangle(const Vec3& c, double bound, const Vec3& p0, const Vec3& p1) {
   bound *= 1.0 + 1e-6;
   return !((c - closest_on_segment(c, p0, p1)).squaredNorm() > bound * bound);
@@ -777,13 +778,13 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
   found.clear();
   // The tip's box and the shaft's box near its axis, each triangle once, in rank order, less
   // those whose rest bounding sphere is beyond every test below: reusable_parts' sphere-capsule
-  // tests (may_reach_triangle: centroid within radius + reach + back of the tip's centre or the
-  // axis, widened by 1e-6) and the flat bound (radius + back of the tip's centre, within the
-  // first), the tip's centre being on the axis; 1e-9 more for the rounding of the distances.
+  // tests (may_reach_triangle: centroid within radius + hypot(reach, back) of the tip's centre
+  // or the axis, widened by 1e-6) and the flat bound (radius + back of the tip's centre, within
+  // the first), the tip's centre being on the axis; 1e-9 more for the rounding of the distances.
   const double margin = m.options_.candidate_margin * shape.tip_radius_m;
   auto reach_and_back = [&](double radius) {
     const double reach = radius + margin + w;
-    return reach + std::max(reach, b.behind_reach_m + w);
+    return std::hypot(reach, std::max(reach, b.behind_reach_m + w));
   };
   const double near = has_shaft ? std::max(reach_and_back(shape.tip_radius_m),
                                            reach_and_back(shape.shaft_radius_m))
@@ -834,10 +835,13 @@ int State::reusable_parts(const Model& m, int body, int t, const ToolShape& shap
     const double reach = (part == 1 ? shape.shaft_radius_m : shape.tip_radius_m) + margin + w;
     const double back = std::max(reach, behind + w);
     // Sphere against capsule first (most of the boxes' triangles are far from the part): a
-    // face or edge hit needs a point c of the axis within reach laterally and reach or back in
-    // height of the triangle's plane (|c - centroid| <= radius + reach + back), a node hit c
-    // within reach or back of the vertex (the same bound): beyond it every test below fails.
-    if (!may_reach_triangle(b.surface.centroid(t), b.surface.radius_m(t) + reach + back, p0, q1))
+    // face or edge hit needs a point c of the axis within radius + reach laterally of the
+    // centroid and within back in height of the triangle's plane (may_touch_face: |c - centroid|
+    // <= hypot(radius + reach, back)), a node hit c within reach laterally and back in height of
+    // the vertex (|c - vertex| <= hypot(reach, back), so |c - centroid| <= radius + hypot(reach,
+    // back), the larger bound): beyond it every test below fails.
+    if (!may_reach_triangle(b.surface.centroid(t), b.surface.radius_m(t) + std::hypot(reach, back),
+                            p0, q1))
       continue;
     bool may = may_touch_face(x[0], b.surface.rest_normal(t), b.surface.centroid(t),
                               b.surface.radius_m(t), p0, q1, reach, back);
