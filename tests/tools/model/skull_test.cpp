@@ -1,6 +1,10 @@
 // neurosim-model --skull: the skull is a closed surface outside the brain with a CSF gap, open
 // where the scene's craniotomy is; AAL regions put the cerebellum posterior-inferior with a
-// plausible volume. Built once (default sizes, ~10 s) for the whole suite.
+// plausible volume. The scene's properties are checked on the tests' 7 mm brain under the skull
+// (brain7_scene("brain_skull"): neurosim-model --skull --cell-size 7, built once at build time
+// and rebuilt whenever neurosim-model changes, tests/CMakeLists.txt); the build's own report
+// (ModelResult: region statistics, triangle count) on one in-process build_model with the same
+// options, whose files must equal the build-time ones byte for byte.
 #include "tools/model/skull.hpp"
 #include "server/mesh/tri_surface.hpp"
 #include "server/scene/compile.hpp"
@@ -51,6 +55,15 @@ Built& built() {
   return *b;
 }
 
+// The same model as built() (the same options: neurosim-model's defaults with --skull
+// --cell-size 7), written at build time: the tests of the scene's geometry load it instead of
+// building the model again in their own process (gtest_discover_tests runs each test alone).
+const scene::Model& scene_model() {
+  static const scene::Model* m =
+      new scene::Model(scene::load_model(neurosim::testing::brain7_scene("brain_skull")));
+  return *m;
+}
+
 // Closest distance from p to triangle abc (Ericson, Real-Time Collision Detection, 5.1.5).
 double point_triangle_distance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
   const Vec3 ab = b - a, ac = c - a, ap = p - a;
@@ -96,7 +109,7 @@ bool inside_solid(const Vec3& p, const scene::RigidSurface& s) {
 }
 
 TEST(SkullModel, SkullIsAClosedOutwardSurfaceOfServerSize) {
-  const auto& m = *built().scene_model;
+  const auto& m = scene_model();
   ASSERT_EQ(m.rigid.size(), 1u);
   const auto& s = m.rigid[0];
   EXPECT_EQ(s.id, "skull");
@@ -111,11 +124,10 @@ TEST(SkullModel, SkullIsAClosedOutwardSurfaceOfServerSize) {
   EXPECT_GE(r.triangles, 5000);
   EXPECT_LE(r.triangles, 20000);
   EXPECT_FALSE(s.provenance.empty());
-  EXPECT_EQ(built().result.skull.triangles, r.triangles);
 }
 
 TEST(SkullModel, BrainOutsideTheBoneWithACsfGap) {
-  const auto& m = *built().scene_model;
+  const auto& m = scene_model();
   const auto& brain = m.meshes[static_cast<std::size_t>(m.find_mesh("brain"))].mesh;
   const auto& s = m.rigid[0];
   double min_m = std::numeric_limits<double>::infinity();
@@ -138,7 +150,7 @@ TEST(SkullModel, BrainOutsideTheBoneWithACsfGap) {
 }
 
 TEST(SkullModel, OpeningWhereTheSceneSaysOverTheCerebellum) {
-  const auto& m = *built().scene_model;
+  const auto& m = scene_model();
   const auto& s = m.rigid[0];
   ASSERT_EQ(s.openings.size(), 1u);
   const auto& o = s.openings[0];
@@ -176,7 +188,7 @@ TEST(SkullModel, OpeningWhereTheSceneSaysOverTheCerebellum) {
 // (The head's dark occipital bone once left the head mask open towards the neck, and with it
 // the shell over the cerebellum: a hole several times the opening's size.)
 TEST(SkullModel, BoneAllRoundTheOpening) {
-  const auto& s = built().scene_model->rigid[0];
+  const auto& s = scene_model().rigid[0];
   ASSERT_EQ(s.openings.size(), 1u);
   const auto& o = s.openings[0];
   const Vec3 u = o.axis.unitOrthogonal(), v = o.axis.cross(u);
@@ -219,6 +231,22 @@ TEST(SkullModel, AalRegionsPosteriorInferiorCerebellumOfPlausibleVolume) {
   EXPECT_LT(fraction, 0.15);
   EXPECT_GT(st.volume_ml[model::kCerebellum], 120.0);
   EXPECT_LT(st.volume_ml[model::kCerebellum], 230.0);
+
+  // The build's report counts the skull it wrote, and the files it wrote are the build-time
+  // model's that the tests above check (the scene and its meshes, byte for byte: the mesher is
+  // seeded), so those tests judge what build_model makes now. Here, not in a test of
+  // its own: each test runs in its own process, and this one builds the model anyway.
+  const auto& s = built().scene_model->rigid.at(0);
+  EXPECT_EQ(built().result.skull.triangles,
+            neurosim::mesh::check_closed(s.vertices_m, s.triangles).triangles);
+  const auto tested = neurosim::testing::brain7_scene("brain_skull").parent_path();
+  for (const char* file : {"brain_skull.scene", "brain_skull/brain.mesh", "brain_skull/skull.mesh",
+                           "brain_skull/artery.mesh"}) {
+    const std::string here = neurosim::testing::slurp(built().dir / file);
+    EXPECT_FALSE(here.empty()) << file;
+    EXPECT_TRUE(here == neurosim::testing::slurp(tested / file))
+        << file << " differs from the build-time model's " << tested / file;
+  }
 }
 
 TEST(SkullModel, DistanceTransformMatchesBruteForce) {
