@@ -29,6 +29,8 @@ ColumnWorker::ColumnWorker(std::vector<ColumnWorkerBody> bodies, const std::vect
     throw std::invalid_argument("ColumnWorkerOptions: idle_slack_m must be finite and >= 0");
   if (!(options_.idle_sleep_s > 0.0 && options_.idle_sleep_s <= 1.0))
     throw std::invalid_argument("ColumnWorkerOptions: idle_sleep_s must be in (0, 1] s");
+  if (options_.nice < 0 || options_.nice > 19)
+    throw std::invalid_argument("ColumnWorkerOptions: nice must be in 0..19");
   for (const auto& b : bodies_)
     if (b.rest_m == nullptr || b.columns == nullptr)
       throw std::invalid_argument("ColumnWorker: a body without rest positions or cache");
@@ -150,10 +152,10 @@ bool ColumnWorker::within_slack(const Poses& now, const Poses& then, double slac
 
 void ColumnWorker::run() {
   pthread_setname_np(pthread_self(), "ns-columns");
-  // Below the other normal threads (nice 10): on a loaded machine the step (and, without real-
-  // time priority, the DDS and field threads) go first; a lagging worker only means more rows
-  // take the fallback. Lowering one's own priority needs no privilege.
-  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 10);
+  // Below the other normal threads (nice 10 by default): on a loaded machine the step (and,
+  // without real-time priority, the DDS and field threads) go first; a lagging worker only means
+  // more rows take the fallback. Lowering one's own priority needs no privilege.
+  if (options_.nice != 0) setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), options_.nice);
   // Its block solves go through CHOLMOD: with OMP_NUM_THREADS=1, any parallel region of it runs
   // on this thread alone (cholmod_threads.hpp).
   fem::cholmod_threads_follow_omp_num_threads();

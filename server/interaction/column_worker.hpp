@@ -44,6 +44,11 @@ struct ColumnWorkerOptions {
   // The reach is solved this much wider, so a tool that moved less since everything was ready
   // needs no new scan of the surface, unit m.
   double idle_slack_m{0.001};
+  // The thread's nice value, 0..19 (setpriority): by default below the other normal threads, so
+  // on a loaded machine the step and the DDS threads go first and a lagging worker only means
+  // more rows on the fallback. Tests that wait for the worker set 0: their counts do not depend
+  // on its priority, but at nice 10 next to busy threads it gets a few % of a core.
+  int nice{10};
 };
 
 // One body the worker fills: its contact slots' rest positions and the State's cache.
@@ -66,7 +71,8 @@ class ColumnWorker {
   // Tools beyond this many in one post are not looked ahead of (their rows use the fallback).
   static constexpr int kMaxTools = 64;
 
-  // Starts the thread (named "ns-columns", SCHED_OTHER at nice 10). bodies and tools must outlive it.
+  // Starts the thread (named "ns-columns", SCHED_OTHER at options.nice). bodies and tools must
+  // outlive it.
   ColumnWorker(std::vector<ColumnWorkerBody> bodies, const std::vector<ToolShape>& tools,
                const ColumnWorkerOptions& options);
   ~ColumnWorker();  // stops and joins (a block solve under way finishes first)

@@ -281,6 +281,7 @@ State::State(const Model& m) {
     ColumnWorkerOptions o;
     o.horizon_s = m.options_.column_horizon_s;
     o.max_tool_speed_m_per_s = m.options_.column_max_tool_speed_m_per_s;
+    o.nice = m.options_.column_worker_nice;
     column_worker_ = std::make_unique<ColumnWorker>(std::move(targets), m.tools_, o);
   }
   sliding_active_.assign(m.num_sliding_, 0);

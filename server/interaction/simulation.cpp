@@ -185,6 +185,9 @@ Model::Model(const scene::Model& model, const SimulationOptions& options)
                                 ": SimulationOptions.contact_near_field needs contact_spread > 0 "
                                 "(the near field is the part the spread load does not carry)");
   }
+  if (options_.column_worker_nice < 0 || options_.column_worker_nice > 19) {
+    throw std::invalid_argument(source_ + ": SimulationOptions.column_worker_nice must be in 0..19");
+  }
   if (!(options_.column_horizon_s >= 0.0) || !(options_.column_max_tool_speed_m_per_s >= 0.0) ||
       !std::isfinite(options_.column_horizon_s * options_.column_max_tool_speed_m_per_s) ||
       !(options_.column_preload_budget_mb >= 0.0) || !std::isfinite(options_.column_preload_budget_mb)) {

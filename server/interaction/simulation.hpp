@@ -245,6 +245,9 @@ struct SimulationOptions {
   bool column_worker{false};
   double column_horizon_s{0.05};              // unit s
   double column_max_tool_speed_m_per_s{0.5};  // unit m/s
+  // column_worker: the worker thread's nice value, 0..19 (ColumnWorkerOptions::nice; the server
+  // keeps 10, below the step; tests that wait for the worker set 0).
+  int column_worker_nice{10};
   // column_worker: columns solved at load, so the first touch of a small body or of the tissue
   // under a rigid opening never waits for the worker: every contact node's when they all fit in
   // this budget, else the nodes within the opening's radius + the widest tool part + the
