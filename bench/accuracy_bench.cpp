@@ -511,37 +511,37 @@ int main(int argc, char** argv) {
                             "What accuracy costs in time: tiers x resolutions x coupling over "
                             "recorded presses, errors against the finest nonlinear run and, split "
                             "into discretization and model, against CalculiX C3D10.");
-  cli->add_flag("--csv", csv, "print only the CSV table");
-  cli->add_option("--out", out_dir, "output folder DIR (accuracy.csv, calculix.csv, pareto.png)")
+  cli.add_flag("--csv", csv, "print only the CSV table");
+  cli.add_option("--out", out_dir, "output folder DIR (accuracy.csv, calculix.csv, pareto.png)")
       ->required();
-  cli->add_option("--scene", scenes, "scenes to run (cube_cylinder, brain_artery)")
+  cli.add_option("--scene", scenes, "scenes to run (cube_cylinder, brain_artery)")
       ->capture_default_str();
-  cli->add_option("--element", elements,
-                  "smoothed-tet | anp-tet | linear-tet, repeatable: the element axis (every "
-                  "mesh's element per run; default: the scenes' material.element)")
-      ->check(CLI::IsMember({"smoothed-tet", "anp-tet", "linear-tet"}));
-  cli->add_option("--press", press_filter, "presses to run: 5, 10, 20, L10 (default all)")
-      ->check(CLI::IsMember({"5", "10", "20", "L10"}));
-  cli->add_flag("--exact-only", exact_only, "leave out the ITERATIVE coupling runs");
-  cli->add_flag("--finest-only", finest_only,
-                "only the finest mesh, no C3D10 and no CalculiX: the tier table's runs");
-  cli->add_option("--max-hold", max_hold_s,
-                  "hold the tool at its last pose up to S seconds longer until the force has "
-                  "settled (moved at most 0.1 % over 20 steps; default 0: the recording's 0.3 s)")
-      ->check(CLI::Range(0.0, 600.0));
-  cli->add_option("--tier-update-steps", tier_update_steps,
-                  "Newton steps per NONLINEAR equilibrium update (SimulationOptions::"
-                  "tier_update_steps; 0: each update converges; default: the server's)")
-      ->check(CLI::Range(0, 1000));
-  cli->add_flag("--trace", trace, "per-step tool force of every run in DIR/traces/*.csv");
-  cli->add_option("--brain-scene", brain_scene,
-                  "the brain's finest mesh: this scene (a neurosim-model brain_artery of another "
-                  "cell size; default scenes/brain_artery.scene)");
-  cli->add_option("--table", table_path,
-                  "measured force-error table for the server (default DIR/force_error.csv)");
-  cli->add_option("--disc-table", disc_table_path,
-                  "measured discretization-error table for the server (default "
-                  "DIR/discretization_error.csv)");
+  cli.add_option("--element", elements,
+                 "smoothed-tet | anp-tet | linear-tet, repeatable: the element axis (every "
+                 "mesh's element per run; default: the scenes' material.element)")
+      ->check(neurosim::cli::one_of({"smoothed-tet", "anp-tet", "linear-tet"}));
+  cli.add_option("--press", press_filter, "presses to run: 5, 10, 20, L10 (default all)")
+      ->check(neurosim::cli::one_of({"5", "10", "20", "L10"}));
+  cli.add_flag("--exact-only", exact_only, "leave out the ITERATIVE coupling runs");
+  cli.add_flag("--finest-only", finest_only,
+               "only the finest mesh, no C3D10 and no CalculiX: the tier table's runs");
+  cli.add_option("--max-hold", max_hold_s,
+                 "hold the tool at its last pose up to S seconds longer until the force has "
+                 "settled (moved at most 0.1 % over 20 steps; default 0: the recording's 0.3 s)")
+      ->check(neurosim::cli::range(0.0, 600.0));
+  cli.add_option("--tier-update-steps", tier_update_steps,
+                 "Newton steps per NONLINEAR equilibrium update (SimulationOptions::"
+                 "tier_update_steps; 0: each update converges; default: the server's)")
+      ->check(neurosim::cli::range(0, 1000));
+  cli.add_flag("--trace", trace, "per-step tool force of every run in DIR/traces/*.csv");
+  cli.add_option("--brain-scene", brain_scene,
+                 "the brain's finest mesh: this scene (a neurosim-model brain_artery of another "
+                 "cell size; default scenes/brain_artery.scene)");
+  cli.add_option("--table", table_path,
+                 "measured force-error table for the server (default DIR/force_error.csv)");
+  cli.add_option("--disc-table", disc_table_path,
+                 "measured discretization-error table for the server (default "
+                 "DIR/discretization_error.csv)");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   try {
     const fs::path out(out_dir);

@@ -350,87 +350,87 @@ int main(int argc, char** argv) {
   double refine_radius_mm = 3.0, refine_grading = 0.25;
   neurosim::cli::Parser p("contact_convergence_bench",
                           "The same press on the brain at several cell sizes: force convergence.");
-  p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
-  p->add_option("--models", dir, "folder of the built scenes (as scale_bench)")->capture_default_str();
-  p->add_option("--x", x_mm, "press line x, unit mm")->capture_default_str();
+  p.add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
+  p.add_option("--models", dir, "folder of the built scenes (as scale_bench)")->capture_default_str();
+  p.add_option("--x", x_mm, "press line x, unit mm")->capture_default_str();
   std::vector<double> line_depths_mm;
-  p->add_option("--depth", line_depths_mm, "the line's press depths, unit mm (repeat; default 0.5 to 3 by 0.5)")
+  p.add_option("--depth", line_depths_mm, "the line's press depths, unit mm (repeat; default 0.5 to 3 by 0.5)")
       ->check(neurosim::cli::finite());
-  p->add_option("--y", y_mm, "press line y, unit mm")->capture_default_str();
-  p->add_option("--element", element, "every mesh's element (default: the scene's)");
-  p->add_flag("--slide", slide, "also the 40 mm slide at 1 and 2 mm (|F| / depth spread)");
-  p->add_flag("--csv", csv, "CSV instead of the table");
-  p->add_option("--geometry-iterations", geometry_iterations,
-                "SimulationOptions::contact_geometry_iterations (default: the library's)");
-  p->add_option("--slide-trace", trace_path, "CSV of every slide step (cell, depth, y, |F|, rows, ...)");
-  p->add_option("--smooth-normals", smooth_normals,
-                "SimulationOptions::contact_smooth_normals, 0 or 1 (default: the library's)");
-  p->add_option("--near-field", near_field,
-                "SimulationOptions::contact_near_field, 0 or 1 (default: the library's)");
-  p->add_option("--shaft-near-field", shaft_near_field,
-                "SimulationOptions::contact_shaft_near_field, 0 or 1 (default: the library's)");
-  p->add_flag("--cube", cube,
-              "with --slide: also the cube's slide (scenes/cube_cylinder.scene, its tier and probe, "
-              "40 mm along x across the top face from (30, 50) mm)");
-  p->add_option("--slide-path", slide_path_kind,
-                "normal: the tip d along the highest triangle's normal, the axis along it (the former "
-                "ctest's slide); closest: the axis fixed, the tip where its distance to the closest surface point "
-                "is r - d (the gap depth d at every sample)")
-      ->check(CLI::IsMember({"normal", "closest"}))
+  p.add_option("--y", y_mm, "press line y, unit mm")->capture_default_str();
+  p.add_option("--element", element, "every mesh's element (default: the scene's)");
+  p.add_flag("--slide", slide, "also the 40 mm slide at 1 and 2 mm (|F| / depth spread)");
+  p.add_flag("--csv", csv, "CSV instead of the table");
+  p.add_option("--geometry-iterations", geometry_iterations,
+               "SimulationOptions::contact_geometry_iterations (default: the library's)");
+  p.add_option("--slide-trace", trace_path, "CSV of every slide step (cell, depth, y, |F|, rows, ...)");
+  p.add_option("--smooth-normals", smooth_normals,
+               "SimulationOptions::contact_smooth_normals, 0 or 1 (default: the library's)");
+  p.add_option("--near-field", near_field,
+               "SimulationOptions::contact_near_field, 0 or 1 (default: the library's)");
+  p.add_option("--shaft-near-field", shaft_near_field,
+               "SimulationOptions::contact_shaft_near_field, 0 or 1 (default: the library's)");
+  p.add_flag("--cube", cube,
+             "with --slide: also the cube's slide (scenes/cube_cylinder.scene, its tier and probe, "
+             "40 mm along x across the top face from (30, 50) mm)");
+  p.add_option("--slide-path", slide_path_kind,
+               "normal: the tip d along the highest triangle's normal, the axis along it (the former "
+               "ctest's slide); closest: the axis fixed, the tip where its distance to the closest surface point "
+               "is r - d (the gap depth d at every sample)")
+      ->check(neurosim::cli::one_of({"normal", "closest"}))
       ->capture_default_str();
-  p->add_option("--slide-axis", slide_axis_kind,
-                "with --slide-path closest: the fixed axis, start-normal (the outward normal of the "
-                "highest triangle at the slide's start) or vertical (+z)")
-      ->check(CLI::IsMember({"start-normal", "vertical"}))
+  p.add_option("--slide-axis", slide_axis_kind,
+               "with --slide-path closest: the fixed axis, start-normal (the outward normal of the "
+               "highest triangle at the slide's start) or vertical (+z)")
+      ->check(neurosim::cli::one_of({"start-normal", "vertical"}))
       ->capture_default_str();
-  p->add_flag("--no-shaft", no_shaft, "the probe without its shaft (shaft length 0): the tip's own contact");
-  p->add_option("--contact-spread", contact_spread,
-                "SimulationOptions::contact_spread (default: the library's)");
-  p->add_option("--points", points,
-                "the press at this many fixed points of the dorsal surface instead of the one line (1, 2, 3 mm "
-                "along each mesh's normal at its closest point to the same world point): per mesh the mean and "
-                "spread of |F| and of the differences, the fitted order")
+  p.add_flag("--no-shaft", no_shaft, "the probe without its shaft (shaft length 0): the tip's own contact");
+  p.add_option("--contact-spread", contact_spread,
+               "SimulationOptions::contact_spread (default: the library's)");
+  p.add_option("--points", points,
+               "the press at this many fixed points of the dorsal surface instead of the one line (1, 2, 3 mm "
+               "along each mesh's normal at its closest point to the same world point): per mesh the mean and "
+               "spread of |F| and of the differences, the fitted order")
       ->capture_default_str();
-  p->add_option("--seed", seed, "with --points: the points' seed")->capture_default_str();
-  p->add_option("--spacing", spacing_mm, "with --points: the least distance between two points, unit mm")
+  p.add_option("--seed", seed, "with --points: the points' seed")->capture_default_str();
+  p.add_option("--spacing", spacing_mm, "with --points: the least distance between two points, unit mm")
       ->capture_default_str();
-  p->add_option("--split", splits,
-                "with --points: every mesh also split 1 -> 8 this many times (repeat: 0, 1, 2; the brain alone): "
-                "the same surface, finer cells")
-      ->check(CLI::Range(0, 4));
-  p->add_option("--max-rows", max_rows,
-                "SimulationOptions::max_contact_nodes_per_tool (default: the library's; the 1 mm cells' patch "
-                "of a 3 mm press holds more rows than its 32)");
-  p->add_option("--region", region_mm,
-                "with --points: each point pressed on its own sub-model, the brain's tetrahedra with centroid "
-                "within this distance of the point (sub_model.hpp: the face-connected piece, every cut face's "
-                "node clamped), cut on the unsplit mesh and then split: the refinement below the whole brain's "
-                "reach, unit mm (0: the whole brain)")
+  p.add_option("--split", splits,
+               "with --points: every mesh also split 1 -> 8 this many times (repeat: 0, 1, 2; the brain alone): "
+               "the same surface, finer cells")
+      ->check(neurosim::cli::range(0, 4));
+  p.add_option("--max-rows", max_rows,
+               "SimulationOptions::max_contact_nodes_per_tool (default: the library's; the 1 mm cells' patch "
+               "of a 3 mm press holds more rows than its 32)");
+  p.add_option("--region", region_mm,
+               "with --points: each point pressed on its own sub-model, the brain's tetrahedra with centroid "
+               "within this distance of the point (sub_model.hpp: the face-connected piece, every cut face's "
+               "node clamped), cut on the unsplit mesh and then split: the refinement below the whole brain's "
+               "reach, unit mm (0: the whole brain)")
       ->capture_default_str();
-  p->add_option("--patch", patch_mm,
-                "with --points: the press axis is the area-weighted normal of the surface triangles within this "
-                "distance of the closest point, unit mm")
+  p.add_option("--patch", patch_mm,
+               "with --points: the press axis is the area-weighted normal of the surface triangles within this "
+               "distance of the closest point, unit mm")
       ->capture_default_str();
-  p->add_flag("--brain-only", brain_only, "the brain without the artery (as --split runs it)");
-  p->add_option("--bootstrap", bootstrap, "with --points: bootstrap draws of the points for the order's spread")
+  p.add_flag("--brain-only", brain_only, "the brain without the artery (as --split runs it)");
+  p.add_option("--bootstrap", bootstrap, "with --points: bootstrap draws of the points for the order's spread")
       ->capture_default_str();
-  p->add_option("--points-csv", points_csv, "with --points: every press as CSV (mesh, point, surface point, normal, depth, |F|, rows)");
-  p->add_option("--lcp-iterations", lcp_iterations,
-                "SimulationOptions::lcp_max_iterations (default: the library's; a patch of 1000 rows needs more pivots)");
-  p->add_option("--refine-cell", refine_cells,
-                "the line's press on one brain (--cell-size, default 7) refined to this cell size around the press "
-                "point, unit mm (repeat; coarse to fine)")
+  p.add_option("--points-csv", points_csv, "with --points: every press as CSV (mesh, point, surface point, normal, depth, |F|, rows)");
+  p.add_option("--lcp-iterations", lcp_iterations,
+               "SimulationOptions::lcp_max_iterations (default: the library's; a patch of 1000 rows needs more pivots)");
+  p.add_option("--refine-cell", refine_cells,
+               "the line's press on one brain (--cell-size, default 7) refined to this cell size around the press "
+               "point, unit mm (repeat; coarse to fine)")
       ->check(neurosim::cli::finite());
-  p->add_option("--refine-radius", refine_radius_mm, "with --refine-cell: radius of the finest cells, unit mm")
+  p.add_option("--refine-radius", refine_radius_mm, "with --refine-cell: radius of the finest cells, unit mm")
       ->check(neurosim::cli::finite())
       ->capture_default_str();
-  p->add_option("--refine-grading", refine_grading,
-                "with --refine-cell: growth of the cells beyond --refine-radius, mm per mm")
+  p.add_option("--refine-grading", refine_grading,
+               "with --refine-cell: growth of the cells beyond --refine-radius, mm per mm")
       ->check(neurosim::cli::finite())
       ->capture_default_str();
-  p->add_option("--cache-dir", cache_dir,
-                "SimulationOptions::compliance_cache_dir (the host's factor and boundary operator on disk: a second "
-                "run of a mesh skips its factorization)");
+  p.add_option("--cache-dir", cache_dir,
+               "SimulationOptions::compliance_cache_dir (the host's factor and boundary operator on disk: a second "
+               "run of a mesh skips its factorization)");
   if (auto rc = p.parse(argc, argv)) return *rc;
   double far_cell_mm = 0.0;      // with --refine-cell: the brain's cell size away from the press
   double refine_centre_mm[3]{};  // the press point on the unrefined brain, image mm

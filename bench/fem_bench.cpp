@@ -113,8 +113,8 @@ Row run(const Case& c) {
 int main(int argc, char** argv) {
   bool csv = false, quick = false;
   neurosim::cli::Parser cli("fem_bench", "Assembly, factorization and solve times of the FEM.");
-  cli->add_flag("--csv", csv, "print CSV");
-  cli->add_flag("--quick", quick, "small cases only");
+  cli.add_flag("--csv", csv, "print CSV");
+  cli.add_flag("--quick", quick, "small cases only");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   std::vector<Case> cases;
   // Structured cubes (0.1 m, n^3 cells x 6 Kuhn tetrahedra), up to 16^3 x 6 = 24576 tetrahedra.

@@ -121,13 +121,13 @@ int main(int argc, char** argv) {
     neurosim::cli::Parser cli("fusion_bench",
                               "The new boundary S' on the paper's Table 3 pairs (and a brain-sized "
                               "pair), fast path vs brute force.");
-    cli->add_flag("--csv", csv, "print CSV");
-    cli->add_option("--min-vertices", min_vertices, "smallest cube (vertices)");
-    cli->add_option("--max-vertices", max_vertices, "largest cube (vertices)");
-    cli->add_option("--repeats", repeats, "runs per row (at least 1)")->capture_default_str();
-    cli->add_flag("--no-brain", no_brain, "no brain-sized row");
-    cli->add_flag("--no-brute", no_brute, "no brute-force reference (profiling the fast path)");
-    cli->add_option("--table", table, "the paper's Table 3 as CSV")->capture_default_str();
+    cli.add_flag("--csv", csv, "print CSV");
+    cli.add_option("--min-vertices", min_vertices, "smallest cube (vertices)");
+    cli.add_option("--max-vertices", max_vertices, "largest cube (vertices)");
+    cli.add_option("--repeats", repeats, "runs per row (at least 1)")->capture_default_str();
+    cli.add_flag("--no-brain", no_brain, "no brain-sized row");
+    cli.add_flag("--no-brute", no_brute, "no brute-force reference (profiling the fast path)");
+    cli.add_option("--table", table, "the paper's Table 3 as CSV")->capture_default_str();
     if (auto rc = cli.parse(argc, argv)) return *rc;
     brain = !no_brain;
     brute = !no_brute;

@@ -55,23 +55,22 @@ int main(int argc, char** argv) {
   std::array<double, 3> origin{}, up{};
   neurosim::cli::Parser cli("haptic_bench",
                             "The 1 kHz haptic loop against the fake or the real server.");
-  cli->add_option("--seconds", seconds, "seconds per mode")
+  cli.add_option("--seconds", seconds, "seconds per mode")
       ->check(neurosim::cli::positive())
       ->capture_default_str();
-  cli->add_option("--modes", modes, "comma-separated: normal, fifo")->capture_default_str();
-  cli->add_option("--server", server, "neurosim-server to run (default: a fake server thread)");
-  cli->add_option("--scene", scene, "scene for --server");
-  cli->add_option("--device", spec, "device SPEC")->capture_default_str();
-  auto* origin_opt =
-      neurosim::cli::add_triple(cli.app(), "--origin", origin, "as neurosim-haptic");
-  auto* up_opt = neurosim::cli::add_triple(cli.app(), "--up", up, "as neurosim-haptic");
-  cli->add_flag("--csv", csv, "print CSV");
+  cli.add_option("--modes", modes, "comma-separated: normal, fifo")->capture_default_str();
+  cli.add_option("--server", server, "neurosim-server to run (default: a fake server thread)");
+  cli.add_option("--scene", scene, "scene for --server");
+  cli.add_option("--device", spec, "device SPEC")->capture_default_str();
+  auto* origin_opt = cli.add_triple("--origin", origin, "as neurosim-haptic");
+  auto* up_opt = cli.add_triple("--up", up, "as neurosim-haptic");
+  cli.add_flag("--csv", csv, "print CSV");
   std::string spins = "0,50";
   int load = 0;
-  cli->add_option("--spin-us", spins, "comma-separated spin times to compare, unit us")
+  cli.add_option("--spin-us", spins, "comma-separated spin times to compare, unit us")
       ->capture_default_str();
-  cli->add_option("--load", load, "busy threads beside the loop (CPU starvation)")
-      ->check(CLI::Range(0, 64))
+  cli.add_option("--load", load, "busy threads beside the loop (CPU starvation)")
+      ->check(neurosim::cli::range(0, 64))
       ->capture_default_str();
   cli.check([&] {
     if (!server.empty() && scene.empty())

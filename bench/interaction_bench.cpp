@@ -356,33 +356,34 @@ int main(int argc, char** argv) {
   std::string dump;
   neurosim::cli::Parser cli("interaction_bench",
                             "Per-step contact solve: exact vs iterative coupling, sliding.");
-  cli->add_flag("--csv", csv, "print CSV");
-  cli->add_option("--steps", steps, "steps per scenario")->capture_default_str();
-  cli->add_option("--sliding-steps", sliding_steps, "steps of the sliding rows (default: --steps)");
-  cli->add_flag("--quick", quick, "small cases only");
-  cli->add_option("--residual-csv", residual_csv, "write the iterative residuals as CSV");
-  cli->add_option("--only", only, "one scenario by name");
-  cli->add_flag("--no-sliding-ref", no_sliding_ref, "no sliding reference solve");
-  cli->add_flag("--brain-contact", brain, "brain_artery press and 10 s slide (contact rows)");
+  cli.add_flag("--csv", csv, "print CSV");
+  cli.add_option("--steps", steps, "steps per scenario")->capture_default_str();
+  cli.add_option("--sliding-steps", sliding_steps, "steps of the sliding rows (default: --steps)");
+  cli.add_flag("--quick", quick, "small cases only");
+  cli.add_option("--residual-csv", residual_csv, "write the iterative residuals as CSV");
+  cli.add_option("--only", only, "one scenario by name");
+  cli.add_flag("--no-sliding-ref", no_sliding_ref, "no sliding reference solve");
+  cli.add_flag("--brain-contact", brain, "brain_artery press and 10 s slide (contact rows)");
   bool four = false;
-  cli->add_flag("--four-probes", four,
-                "cube_cylinder, four probes in the +x face: LCP warm start against cold start");
-  cli->add_flag("--smooth-contact", smooth_contact,
-                "with --brain-contact: SimulationOptions contact_spread 1 (or --contact-spread), "
-                "contact_smooth_normals, contact_near_field");
+  cli.add_flag("--four-probes", four,
+               "cube_cylinder, four probes in the +x face: LCP warm start against cold start");
+  cli.add_flag("--smooth-contact", smooth_contact,
+               "with --brain-contact: SimulationOptions contact_spread 1 (or --contact-spread), "
+               "contact_smooth_normals, contact_near_field");
   bool barycentric_contact = false;
-  cli->add_flag("--barycentric-contact", barycentric_contact,
-                "contact_spread 0, no smooth normals, no near field (every scenario)");
-  cli->add_option("--contact-spread", contact_spread,
-                  "with --brain-contact: SimulationOptions::contact_spread (default: the library's)");
-  cli->add_option("--dump", dump,
-                  "write every step's answer of the deterministic paths (%a: force, K, rows, LCP "
-                  "iterations, nodes) to this file, to compare two builds bit for bit");
+  cli.add_flag("--barycentric-contact", barycentric_contact,
+               "contact_spread 0, no smooth normals, no near field (every scenario)");
+  cli.add_option(
+      "--contact-spread", contact_spread,
+      "with --brain-contact: SimulationOptions::contact_spread (default: the library's)");
+  cli.add_option("--dump", dump,
+                 "write every step's answer of the deterministic paths (%a: force, K, rows, LCP "
+                 "iterations, nodes) to this file, to compare two builds bit for bit");
   std::string step_csv_path;
-  cli->add_option("--step-csv", step_csv_path,
-                  "write one line per timed step (case, step, wall_us, cpu_us, rows, lcps, pivots, "
-                  "warm_taken, columns_computed, columns_not_ready) to this file: which steps make "
-                  "the tail");
+  cli.add_option("--step-csv", step_csv_path,
+                 "write one line per timed step (case, step, wall_us, cpu_us, rows, lcps, pivots, "
+                 "warm_taken, columns_computed, columns_not_ready) to this file: which steps make "
+                 "the tail");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   if (!step_csv_path.empty()) {
     step_csv = std::fopen(step_csv_path.c_str(), "w");

@@ -231,41 +231,41 @@ int main(int argc, char** argv) {
   std::string scene = o.scene.string(), server = o.server.string();
   neurosim::cli::Parser cli("latency_bench",
                             "ToolState to ContactModel latency over DDS on loopback.");
-  cli->add_option("--stations", o.stations, "stations 1..8")
+  cli.add_option("--stations", o.stations, "stations 1..8")
       ->check(neurosim::cli::in_range(1, 8))
       ->capture_default_str();
-  cli->add_option("--seconds", o.seconds, "measured seconds")
+  cli.add_option("--seconds", o.seconds, "measured seconds")
       ->check(neurosim::cli::positive())
       ->capture_default_str();
-  cli->add_option("--warmup", o.warmup_s, "warm-up seconds")
+  cli.add_option("--warmup", o.warmup_s, "warm-up seconds")
       ->check(neurosim::cli::finite())
       ->capture_default_str();
-  cli->add_option("--scene", scene, "scene file")->capture_default_str();
-  cli->add_option("--server", server, "neurosim-server executable")->capture_default_str();
-  cli->add_flag("--csv", o.csv, "print CSV");
-  cli->add_flag("--viewer", o.viewer,
-                "also subscribe to Deformation (full-field solves run)");
+  cli.add_option("--scene", scene, "scene file")->capture_default_str();
+  cli.add_option("--server", server, "neurosim-server executable")->capture_default_str();
+  cli.add_flag("--csv", o.csv, "print CSV");
+  cli.add_flag("--viewer", o.viewer, "also subscribe to Deformation (full-field solves run)");
   int load = 0;
-  cli->add_option("--load", load, "busy threads beside the measured processes")
+  cli.add_option("--load", load, "busy threads beside the measured processes")
       ->check(neurosim::cli::in_range(0, 64))
       ->capture_default_str();
   double report_every_s = 0;
-  cli->add_option("--report-every", report_every_s,
-                  "soak: one row per this many seconds, unit s (0: none)")
+  cli.add_option("--report-every", report_every_s,
+                 "soak: one row per this many seconds, unit s (0: none)")
       ->check(neurosim::cli::non_negative())
       ->capture_default_str();
   std::string modes_text = "event";
-  cli->add_option("--step-modes", modes_text,
-                  "comma-separated server step modes to compare side by side (event, clock)")
+  cli.add_option("--step-modes", modes_text,
+                 "comma-separated server step modes to compare side by side (event, clock)")
       ->capture_default_str();
   std::string contact_text = "default";
-  cli->add_option("--contact", contact_text,
-                  "comma-separated contact configurations to compare side by side: default, or "
-                  "barycentric, spread=X, smooth-normals=on|off, near-field=on|off joined by '+' "
-                  "(neurosim-server's contact switches; the server refuses contradictions)")
+  cli.add_option("--contact", contact_text,
+                 "comma-separated contact configurations to compare side by side: default, or "
+                 "barycentric, spread=X, smooth-normals=on|off, near-field=on|off joined by '+' "
+                 "(neurosim-server's contact switches; the server refuses contradictions)")
       ->capture_default_str();
   int repeat = 1;
-  cli->add_option("--repeat", repeat, "run the whole list of configurations this many times, interleaved")
+  cli.add_option("--repeat", repeat,
+                 "run the whole list of configurations this many times, interleaved")
       ->check(neurosim::cli::in_range(1, 100))
       ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;

@@ -19,7 +19,7 @@ using neurosim::mesh::Vec3;
 int main(int argc, char** argv) {
   bool csv = false;
   neurosim::cli::Parser cli("meshgen_bench", "Mesh generation of the paper's cube/cylinder pairs.");
-  cli->add_flag("--csv", csv, "print CSV");
+  cli.add_flag("--csv", csv, "print CSV");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   std::vector<int> cube_sizes;
   std::ifstream table(std::string(NEUROSIM_SOURCE_DIR) + "/bench/data/paper_table3.csv");

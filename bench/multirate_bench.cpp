@@ -83,15 +83,15 @@ int main(int argc, char** argv) {
   std::vector<int> update_steps{0};
   neurosim::cli::Parser cli("multirate_bench",
                             "Real-time contact step and multirate error of each elasticity tier.");
-  cli->add_flag("--csv", csv, "CSV only");
-  cli->add_option("--only", only, "one scene by name (cube_cylinder, brain_artery)");
-  cli->add_option("--tier", tiers, "tiers to run")->capture_default_str();
-  cli->add_option("--seconds", seconds, "paced run length (ramp half, hold half), s")
-      ->check(CLI::Range(0.2, 600.0))
+  cli.add_flag("--csv", csv, "CSV only");
+  cli.add_option("--only", only, "one scene by name (cube_cylinder, brain_artery)");
+  cli.add_option("--tier", tiers, "tiers to run")->capture_default_str();
+  cli.add_option("--seconds", seconds, "paced run length (ramp half, hold half), s")
+      ->check(neurosim::cli::range(0.2, 600.0))
       ->capture_default_str();
-  cli->add_option("--update-steps", update_steps,
-                  "Newton steps per equilibrium update (SimulationOptions::tier_update_steps; "
-                  "0: each update converges); several values run side by side")
+  cli.add_option("--update-steps", update_steps,
+                 "Newton steps per equilibrium update (SimulationOptions::tier_update_steps; "
+                 "0: each update converges); several values run side by side")
       ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;
   const std::string dir = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/";

@@ -55,14 +55,14 @@ int main(int argc, char** argv) {
   std::string element;
   bool csv = false;
   cli::Parser p("ordering_bench", "The brain's host factor per fill-reducing ordering.");
-  p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat)");
-  p->add_option("--ordering", orderings,
-                "cholmod, amd, metis, nesdis, node-metis (repeat; default: all; the first is the "
-                "reference of max_rel_diff)");
-  p->add_option("--models", dir, "folder of the built scenes")->capture_default_str();
-  p->add_option("--element", element,
-                "every mesh on this element instead of the scene's (the stencil sets the fill)");
-  p->add_flag("--csv", csv, "CSV only");
+  p.add_option("--cell-size", cells, "brain cell size, unit mm (repeat)");
+  p.add_option("--ordering", orderings,
+               "cholmod, amd, metis, nesdis, node-metis (repeat; default: all; the first is the "
+               "reference of max_rel_diff)");
+  p.add_option("--models", dir, "folder of the built scenes")->capture_default_str();
+  p.add_option("--element", element,
+               "every mesh on this element instead of the scene's (the stencil sets the fill)");
+  p.add_flag("--csv", csv, "CSV only");
   if (auto rc = p.parse(argc, argv)) return *rc;
   if (cells.empty()) cells = {7.0};
   if (orderings.empty()) orderings = {"cholmod", "amd", "metis", "nesdis", "node-metis"};

@@ -123,19 +123,21 @@ int main(int argc, char** argv) {
   neurosim::cli::Parser cli("press_refinement_bench",
                             "The coarse brain's patch press in C3D10 (ccx), smoothed-tet and "
                             "linear-tet, NONLINEAR and LINEAR, on the mesh and its 1 -> 8 splits.");
-  cli->add_option("--out", out_dir, "output folder (models, ccx decks, press_refinement.csv)")
+  cli.add_option("--out", out_dir, "output folder (models, ccx decks, press_refinement.csv)")
       ->required();
-  cli->add_option("--cell-size", cell_mm, "neurosim-model --cell-size, unit mm")->capture_default_str();
-  cli->add_option("--depth", depth_mm, "press depth, unit mm")->capture_default_str();
-  cli->add_option("--region", region_mm,
-                  "sub-model radius around the top node, unit mm (0: the whole brain)")
+  cli.add_option("--cell-size", cell_mm, "neurosim-model --cell-size, unit mm")
       ->capture_default_str();
-  cli->add_option("--splits", splits, "1 -> 8 splits: meshes 0..N")->check(CLI::Range(0, 3))
+  cli.add_option("--depth", depth_mm, "press depth, unit mm")->capture_default_str();
+  cli.add_option("--region", region_mm,
+                 "sub-model radius around the top node, unit mm (0: the whole brain)")
       ->capture_default_str();
-  cli->add_option("--c3d10-splits", c3d10_splits, "C3D10 on meshes 0..N only (default: all)");
-  cli->add_option("--increments", increments, "ccx NLGEOM equal increments")->capture_default_str();
-  cli->add_option("--nu", nus, "Poisson ratio, repeatable (default 0.49)");
-  cli->add_flag("--no-linear", skip_linear, "NONLINEAR only");
+  cli.add_option("--splits", splits, "1 -> 8 splits: meshes 0..N")
+      ->check(neurosim::cli::range(0, 3))
+      ->capture_default_str();
+  cli.add_option("--c3d10-splits", c3d10_splits, "C3D10 on meshes 0..N only (default: all)");
+  cli.add_option("--increments", increments, "ccx NLGEOM equal increments")->capture_default_str();
+  cli.add_option("--nu", nus, "Poisson ratio, repeatable (default 0.49)");
+  cli.add_flag("--no-linear", skip_linear, "NONLINEAR only");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   if (nus.empty()) nus.push_back(0.49);
   if (c3d10_splits < 0) c3d10_splits = splits;

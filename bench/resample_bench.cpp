@@ -75,20 +75,20 @@ int main(int argc, char** argv) {
   std::string scene_path = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/brain_artery.scene";
   neurosim::cli::Parser cli("resample_bench",
                             "The MRI resampled through the deformed brain/artery model.");
-  cli->add_flag("--csv", csv, "print only the table");
-  cli->add_option("--frames", frames, "frames of the push (at least 1)")->capture_default_str();
-  cli->add_option("--volume-runs", volume_runs, "volume runs (at least 1)")->capture_default_str();
-  cli->add_option("--scene", scene_path, "scene file")->capture_default_str();
-  cli->add_option("--sigma-mm", sigma_mm, "bump width S, unit mm")
+  cli.add_flag("--csv", csv, "print only the table");
+  cli.add_option("--frames", frames, "frames of the push (at least 1)")->capture_default_str();
+  cli.add_option("--volume-runs", volume_runs, "volume runs (at least 1)")->capture_default_str();
+  cli.add_option("--scene", scene_path, "scene file")->capture_default_str();
+  cli.add_option("--sigma-mm", sigma_mm, "bump width S, unit mm")
       ->check(neurosim::cli::positive())
       ->capture_default_str();
-  cli->add_option("--step-mm", step_mm, "push per frame D, unit mm")
+  cli.add_option("--step-mm", step_mm, "push per frame D, unit mm")
       ->check(neurosim::cli::positive())
       ->capture_default_str();
-  cli->add_option("--push-mm", push_mm, "deepest push A, unit mm")
+  cli.add_option("--push-mm", push_mm, "deepest push A, unit mm")
       ->check(neurosim::cli::positive())
       ->capture_default_str();
-  cli->add_option("--cell-factor", options.grid_cell_factor, "search grid cell factor")
+  cli.add_option("--cell-factor", options.grid_cell_factor, "search grid cell factor")
       ->check(neurosim::cli::finite())
       ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;

@@ -35,10 +35,11 @@ int main(int argc, char** argv) {
   ni::ToolProxyOptions proxy_options;
   std::string scene_path = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/brain_skull.scene";
   cli::Parser cli("rigid_bench", "Step cost of the rigid obstacles (tool proxy) next to the contact step.");
-  cli->add_flag("--csv", csv, "CSV output");
-  cli->add_option("--steps", steps, "steps per path")->check(CLI::PositiveNumber);
-  cli->add_option("--reach", proxy_options.reach_m, "ToolProxyOptions::reach_m, m")->check(CLI::PositiveNumber);
-  cli->add_option("--scene", scene_path, "scene with a rigid mesh and an opening");
+  cli.add_flag("--csv", csv, "CSV output");
+  cli.add_option("--steps", steps, "steps per path")->check(cli::positive_number());
+  cli.add_option("--reach", proxy_options.reach_m, "ToolProxyOptions::reach_m, m")
+      ->check(cli::positive_number());
+  cli.add_option("--scene", scene_path, "scene with a rigid mesh and an opening");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   try {
     const neurosim::scene::Model model = neurosim::scene::load_model(scene_path);

@@ -104,38 +104,39 @@ int main(int argc, char** argv) {
   int nonlinear_inline = 0;
   std::string column_solves = "worker";
   neurosim::cli::Parser p("scale_bench", "The brain/artery scene at several cell sizes.");
-  p->add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
-  p->add_option("--models", dir, "folder of the built scenes")->capture_default_str();
-  p->add_option("--seconds", seconds, "slide duration, unit s")->capture_default_str();
-  p->add_option("--speed", speed, "slide speed, unit m/s")->capture_default_str();
-  p->add_option("--field-frames", field_frames,
-                "viewer frames of the slide (30 Hz from its start) whose fields are replayed")
+  p.add_option("--cell-size", cells, "brain cell size, unit mm (repeat; coarse to fine)");
+  p.add_option("--models", dir, "folder of the built scenes")->capture_default_str();
+  p.add_option("--seconds", seconds, "slide duration, unit s")->capture_default_str();
+  p.add_option("--speed", speed, "slide speed, unit m/s")->capture_default_str();
+  p.add_option("--field-frames", field_frames,
+               "viewer frames of the slide (30 Hz from its start) whose fields are replayed")
       ->capture_default_str();
-  p->add_option("--nonlinear-seconds", nonlinear_seconds,
-                "NONLINEAR press this long after its first update, unit s (0: not measured); "
-                "nonlinear_update_hz = the mean rate over the press's updates after the first "
-                "(their count / their summed time)")
+  p.add_option("--nonlinear-seconds", nonlinear_seconds,
+               "NONLINEAR press this long after its first update, unit s (0: not measured); "
+               "nonlinear_update_hz = the mean rate over the press's updates after the first "
+               "(their count / their summed time)")
       ->capture_default_str();
-  p->add_option("--nonlinear-max-s", nonlinear_max_s,
-                "NONLINEAR press at most this long in all (waiting for a first update included), unit s")
+  p.add_option(
+       "--nonlinear-max-s", nonlinear_max_s,
+       "NONLINEAR press at most this long in all (waiting for a first update included), unit s")
       ->capture_default_str();
-  p->add_option("--first-reach-max-s", first_reach_max_s,
-                "wait at most this long for the worker to solve the first pose's reach before the "
-                "timed slide starts anyway (the rows without columns take the fallback and count in "
-                "columns_not_ready), unit s")
-      ->check(CLI::NonNegativeNumber)
+  p.add_option("--first-reach-max-s", first_reach_max_s,
+               "wait at most this long for the worker to solve the first pose's reach before the "
+               "timed slide starts anyway (the rows without columns take the fallback and count in "
+               "columns_not_ready), unit s")
+      ->check(neurosim::cli::non_negative_number())
       ->capture_default_str();
-  p->add_option("--nonlinear-inline", nonlinear_inline,
-                "NONLINEAR updates inline (SimulationOptions::tier_worker_thread = false, no column "
-                "worker: deterministic), one per step at the slide's first pose: their times on "
-                "stderr (0: not run)")
-      ->check(CLI::NonNegativeNumber)
+  p.add_option("--nonlinear-inline", nonlinear_inline,
+               "NONLINEAR updates inline (SimulationOptions::tier_worker_thread = false, no column "
+               "worker: deterministic), one per step at the slide's first pose: their times on "
+               "stderr (0: not run)")
+      ->check(neurosim::cli::non_negative_number())
       ->capture_default_str();
-  p->add_flag("--csv", csv, "CSV only (the default adds comments on stderr)");
-  p->add_option("--column-solves", column_solves,
-                "worker: compliance columns solved ahead of the tool (the live server); step: "
-                "first touches solved inside the step (the old way)")
-      ->check(CLI::IsMember({"worker", "step"}))
+  p.add_flag("--csv", csv, "CSV only (the default adds comments on stderr)");
+  p.add_option("--column-solves", column_solves,
+               "worker: compliance columns solved ahead of the tool (the live server); step: "
+               "first touches solved inside the step (the old way)")
+      ->check(neurosim::cli::one_of({"worker", "step"}))
       ->capture_default_str();
   if (auto rc = p.parse(argc, argv)) return *rc;
   if (cells.empty()) cells = {7.0};

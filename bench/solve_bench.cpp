@@ -110,14 +110,14 @@ int main(int argc, char** argv) {
   neurosim::cli::Parser p("solve_bench",
                           "neurosim-solve --tier nonlinear against CalculiX on one thread, the "
                           "scene's press scaled to each depth.");
-  p->add_option("--scene", scene_path, "scene with one prescribed displacement")
+  p.add_option("--scene", scene_path, "scene with one prescribed displacement")
       ->capture_default_str();
-  p->add_option("--mesh", mesh_id, "the mesh solved (alone, --uncoupled)")->capture_default_str();
-  p->add_option("--press-mm", depths_mm, "press depths, unit mm (default 10 and 20)");
-  p->add_option("--increments", increments, "initial equal load increments of both solvers")
+  p.add_option("--mesh", mesh_id, "the mesh solved (alone, --uncoupled)")->capture_default_str();
+  p.add_option("--press-mm", depths_mm, "press depths, unit mm (default 10 and 20)");
+  p.add_option("--increments", increments, "initial equal load increments of both solvers")
       ->capture_default_str();
-  p->add_option("--work", work, "work folder")->capture_default_str();
-  p->add_flag("--csv", csv, "CSV instead of a table");
+  p.add_option("--work", work, "work folder")->capture_default_str();
+  p.add_flag("--csv", csv, "CSV instead of a table");
   if (auto rc = p.parse(argc, argv)) return *rc;
   if (depths_mm.empty()) depths_mm = {10.0, 20.0};
   try {

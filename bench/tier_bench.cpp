@@ -37,12 +37,12 @@ int main(int argc, char** argv) {
   // 0.1 N Newton converges quadratically (bench/RESULTS.md, "The locking-free elements").
   std::vector<std::string> elements{"linear-tet", "anp-tet"};
   cli::Parser cli("tier_bench", "Static-equilibrium cost of each elasticity tier (host meshes).");
-  cli->add_flag("--csv", csv, "CSV output");
-  cli->add_option("--scene", scenes, "scene file(s)");
-  cli->add_option("--force", force_n, "tool-like force on the topmost surface node, N")
-      ->check(CLI::PositiveNumber);
-  cli->add_option("--element", elements, "elements to run")
-      ->check(CLI::IsMember({"linear-tet", "anp-tet", "smoothed-tet"}))
+  cli.add_flag("--csv", csv, "CSV output");
+  cli.add_option("--scene", scenes, "scene file(s)");
+  cli.add_option("--force", force_n, "tool-like force on the topmost surface node, N")
+      ->check(cli::positive_number());
+  cli.add_option("--element", elements, "elements to run")
+      ->check(cli::one_of({"linear-tet", "anp-tet", "smoothed-tet"}))
       ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;
   try {

@@ -122,12 +122,12 @@ int main(int argc, char** argv) {
   std::string size = "960x720";
   neurosim::cli::Parser cli("viewer_bench",
                             "neurosim-viewer's frame rates offscreen (run under xvfb-run -a).");
-  cli->add_option("--scene", scene, "scene file")->capture_default_str();
-  cli->add_option("--frames", frames, "frames per case (> 0)")
+  cli.add_option("--scene", scene, "scene file")->capture_default_str();
+  cli.add_option("--frames", frames, "frames per case (> 0)")
       ->check(neurosim::cli::in_range(1, 1e9))
       ->capture_default_str();
-  cli->add_option("--size", size, "frame size WxH (at least 64x64)")->capture_default_str();
-  cli->add_flag("--csv", csv, "print CSV");
+  cli.add_option("--size", size, "frame size WxH (at least 64x64)")->capture_default_str();
+  cli.add_flag("--csv", csv, "print CSV");
   cli.check([&] {
     char x = 0;
     char rest = 0;

@@ -189,29 +189,30 @@ int main(int argc, char** argv) {
   int rounds = 3;
   neurosim::cli::Parser cli("viscoelastic_bench",
                             "Contact step cost with and without viscoelastic terms (bundled brain).");
-  cli->add_flag("--csv", csv, "CSV only");
-  cli->add_option("--seconds", seconds, "recorded time of one round, s")
-      ->check(CLI::Range(0.5, 600.0))
+  cli.add_flag("--csv", csv, "CSV only");
+  cli.add_option("--seconds", seconds, "recorded time of one round, s")
+      ->check(neurosim::cli::range(0.5, 600.0))
       ->capture_default_str();
-  cli->add_option("--rounds", rounds, "rounds per scene (alternating)")
-      ->check(CLI::Range(1, 100))
+  cli.add_option("--rounds", rounds, "rounds per scene (alternating)")
+      ->check(neurosim::cli::range(1, 100))
       ->capture_default_str();
   std::string hold_csv;
   double hold_s = 10.0;
-  cli->add_option("--hold-csv", hold_csv, "write the held press's relaxation to this CSV instead");
+  cli.add_option("--hold-csv", hold_csv, "write the held press's relaxation to this CSV instead");
   bool rest_rows = false;
-  cli->add_flag("--rest-rows", rest_rows,
-                "with --hold-csv: rows on the rest surface (one LCP per step, no row search)");
-  cli->add_option("--hold", hold_s, "with --hold-csv: seconds held")
-      ->check(CLI::Range(0.0, 600.0))
+  cli.add_flag("--rest-rows", rest_rows,
+               "with --hold-csv: rows on the rest surface (one LCP per step, no row search)");
+  cli.add_option("--hold", hold_s, "with --hold-csv: seconds held")
+      ->check(neurosim::cli::range(0.0, 600.0))
       ->capture_default_str();
   bool nonlinear = false;
-  cli->add_flag("--nonlinear-hold", nonlinear,
-                "the held press in the NONLINEAR tier (quasi-linear viscoelasticity), elastic and "
-                "viscoelastic: forces and update times");
+  cli.add_flag("--nonlinear-hold", nonlinear,
+               "the held press in the NONLINEAR tier (quasi-linear viscoelasticity), elastic and "
+               "viscoelastic: forces and update times");
   double sample_ms = 10.0;
-  cli->add_option("--sample-ms", sample_ms, "with --nonlinear-hold: ms between samples (one update each)")
-      ->check(CLI::Range(1.0, 100.0))
+  cli.add_option("--sample-ms", sample_ms,
+                 "with --nonlinear-hold: ms between samples (one update each)")
+      ->check(neurosim::cli::range(1.0, 100.0))
       ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;
   const std::string dir = std::string(NEUROSIM_SOURCE_DIR) + "/scenes/";

@@ -270,10 +270,10 @@ int main(int argc, char** argv) {
   neurosim::cli::Parser cli("web_bench",
                             "Web observer: bytes per frame, frames/s to 1 and 10 "
                             "WebSocket clients, Deformation-to-WebSocket latency.");
-  cli->add_option("--seconds", seconds, "measurement per case, unit s")
+  cli.add_option("--seconds", seconds, "measurement per case, unit s")
       ->check(neurosim::cli::positive())
       ->capture_default_str();
-  cli->add_flag("--csv", csv, "CSV instead of a table");
+  cli.add_flag("--csv", csv, "CSV instead of a table");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   if (std::getenv("CYCLONEDDS_URI") == nullptr) {
     std::cerr << "web_bench: set CYCLONEDDS_URI (deploy/cyclonedds/loopback.xml)\n";

@@ -63,56 +63,55 @@ int main(int argc, char** argv) {
   std::array<double, 3> origin{}, up{};
   nh::LoopConfig cfg;
   neurosim::cli::Parser cli("neurosim-haptic", "One haptic station: the 1 kHz force loop.");
-  cli->add_option("--station", station, "station id")->required();
-  cli->add_option("--device", spec, "device SPEC (below)")->required();
-  cli->add_option("--duration", duration, "stop after S seconds (default 0: until a signal)")
+  cli.add_option("--station", station, "station id")->required();
+  cli.add_option("--device", spec, "device SPEC (below)")->required();
+  cli.add_option("--duration", duration, "stop after S seconds (default 0: until a signal)")
       ->check(neurosim::cli::non_negative());
-  cli->add_option("--summary", summary_file, "write the loop summary as JSON");
-  cli->add_option("--record", record_file, "record the session");
-  cli->add_option("--scene", scene_file, "scene file (haptics factors, scene name)");
-  cli->add_option("--tool", tool, "tool id")->capture_default_str();
-  auto* origin_opt = neurosim::cli::add_triple(cli.app(), "--origin", origin,
-                                               "where device z = 0 is in the scene, unit m");
-  auto* up_opt =
-      neurosim::cli::add_triple(cli.app(), "--up", up, "the surface's outward normal there");
+  cli.add_option("--summary", summary_file, "write the loop summary as JSON");
+  cli.add_option("--record", record_file, "record the session");
+  cli.add_option("--scene", scene_file, "scene file (haptics factors, scene name)");
+  cli.add_option("--tool", tool, "tool id")->capture_default_str();
+  auto* origin_opt =
+      cli.add_triple("--origin", origin, "where device z = 0 is in the scene, unit m");
+  auto* up_opt = cli.add_triple("--up", up, "the surface's outward normal there");
   bool at_opening = false;
-  cli->add_flag("--at-opening", at_opening,
-                "origin: the centre of the scene's craniotomy (its first rigid mesh opening, on "
-                "the brain surface), up: its axis out of the head (needs --scene; for "
-                "script:approach)")
+  cli.add_flag("--at-opening", at_opening,
+               "origin: the centre of the scene's craniotomy (its first rigid mesh opening, on "
+               "the brain surface), up: its axis out of the head (needs --scene; for "
+               "script:approach)")
       ->excludes(origin_opt)
       ->excludes(up_opt);
-  cli->add_option("--label", label, "recording label");
-  cli->add_flag("--no-server", no_server, "run without DDS (no force from a server)");
+  cli.add_option("--label", label, "recording label");
+  cli.add_flag("--no-server", no_server, "run without DDS (no force from a server)");
   auto* no_rt_opt =
-      cli->add_flag("--no-rt", no_rt, "no SCHED_FIFO for the loop and the DDS threads");
+      cli.add_flag("--no-rt", no_rt, "no SCHED_FIFO for the loop and the DDS threads");
   // The client's threads in one place: loop, publisher (ToolState), receiver (ContactModel).
   neurosim::common::ThreadPlan threads;
   threads.threads = {{"loop", "nh-loop", 80, {}},
                      {"publisher", "nh-publish", 70, {}},
                      {"receiver", "nh-receive", 60, {}}};
   std::string rt_priority, rt_cpus;
-  cli->add_option("--rt-priority", rt_priority,
-                  "thread priorities, ROLE=P,... (roles loop, publisher, receiver; P 1..99 "
-                  "SCHED_FIFO, 0 normal; default " +
-                      threads.priorities_text() + ")")
+  cli.add_option("--rt-priority", rt_priority,
+                 "thread priorities, ROLE=P,... (roles loop, publisher, receiver; P 1..99 "
+                 "SCHED_FIFO, 0 normal; default " +
+                     threads.priorities_text() + ")")
       ->excludes(no_rt_opt);
-  cli->add_option("--rt-cpus", rt_cpus,
-                  "CPU sets, ROLE=CPUS,... (CPUS: numbers and ranges joined by '+'; default any)");
-  cli->add_option("--spin-us", cfg.spin_us,
-                  "spin on the clock this long before each tick, unit us (0: off, for laptops on "
-                  "battery)")
-      ->check(CLI::Range(0.0, 900.0))
+  cli.add_option("--rt-cpus", rt_cpus,
+                 "CPU sets, ROLE=CPUS,... (CPUS: numbers and ranges joined by '+'; default any)");
+  cli.add_option("--spin-us", cfg.spin_us,
+                 "spin on the clock this long before each tick, unit us (0: off, for laptops on "
+                 "battery)")
+      ->check(neurosim::cli::range(0.0, 900.0))
       ->capture_default_str();
-  cli->add_option("--wait-server", wait_server, "wait this long for a server, unit s")
+  cli.add_option("--wait-server", wait_server, "wait this long for a server, unit s")
       ->check(neurosim::cli::finite())
       ->capture_default_str();
-  cli->add_option("--topic-prefix", topic_prefix,
-                  "prepended to every topic name, as neurosim-server's");
-  cli->add_option("--trace", trace_file,
-                  "every tick as CSV: time, position, force, model age, gain, rigid wall, and "
-                  "the loop clock (clock_s: a late tick shows there, t_s is the nominal k T)");
-  cli->footer(kSpecHelp);
+  cli.add_option("--topic-prefix", topic_prefix,
+                 "prepended to every topic name, as neurosim-server's");
+  cli.add_option("--trace", trace_file,
+                 "every tick as CSV: time, position, force, model age, gain, rigid wall, and "
+                 "the loop clock (clock_s: a late tick shows there, t_s is the nominal k T)");
+  cli.footer(kSpecHelp);
   if (auto rc = cli.parse(argc, argv)) return *rc;
   if (origin_opt->count() > 0)
     cfg.workspace_origin_m = Eigen::Vector3d(origin[0], origin[1], origin[2]);

@@ -40,36 +40,36 @@ WebOptions parse_options(int argc, const char* const* argv, bool& help) {
   cli::Parser p("neurosim-web",
                 "Read-only web observer: joins the simulation over DDS and serves a page that "
                 "shows it to a browser (HTTP and WebSocket).");
-  p->add_option("--listen", listen,
-                "ADDRESS:PORT to listen on, the only address opened (port 0: any free one)")
+  p.add_option("--listen", listen,
+               "ADDRESS:PORT to listen on, the only address opened (port 0: any free one)")
       ->capture_default_str();
-  auto* tok = p->add_option("--token", token,
-                            "access token (at least 16 of A-Z a-z 0-9 - . _ ~); clients give it "
-                            "as ?token= or Authorization: Bearer");
+  auto* tok = p.add_option("--token", token,
+                           "access token (at least 16 of A-Z a-z 0-9 - . _ ~); clients give it "
+                           "as ?token= or Authorization: Bearer");
   auto* tok_file =
-      p->add_option("--token-file", token_file, "read the access token from the first line of F");
+      p.add_option("--token-file", token_file, "read the access token from the first line of F");
   tok->excludes(tok_file);
-  p->add_option("--max-clients", max_clients, "serve at most N browsers at once; more are refused")
+  p.add_option("--max-clients", max_clients, "serve at most N browsers at once; more are refused")
       ->check(cli::in_range(1, 256))
       ->capture_default_str();
-  p->add_option("--write-timeout", o.bridge.http.write_timeout_s,
-                "drop a browser whose socket takes nothing for S seconds")
+  p.add_option("--write-timeout", o.bridge.http.write_timeout_s,
+               "drop a browser whose socket takes nothing for S seconds")
       ->check(cli::in_range(0.1, 600))
       ->capture_default_str();
-  p->add_option("--ping-period", o.bridge.http.ping_period_s,
-                "ping a silent browser every S seconds; five unanswered pings drop it")
+  p.add_option("--ping-period", o.bridge.http.ping_period_s,
+               "ping a silent browser every S seconds; five unanswered pings drop it")
       ->check(cli::in_range(0.1, 600))
       ->capture_default_str();
-  p->add_option("--page-dir", o.bridge.page_dir, "the bundled page (index.html, app.js, style.css)")
+  p.add_option("--page-dir", o.bridge.page_dir, "the bundled page (index.html, app.js, style.css)")
       ->capture_default_str();
-  p->add_option("--duration", o.duration_s, "stop after S seconds (default: until a signal)")
+  p.add_option("--duration", o.duration_s, "stop after S seconds (default: until a signal)")
       ->check(cli::positive());
-  p->add_option("--domain", o.bridge.dds.domain,
-                "DDS domain id (default: the CYCLONEDDS_URI configuration's)")
+  p.add_option("--domain", o.bridge.dds.domain,
+               "DDS domain id (default: the CYCLONEDDS_URI configuration's)")
       ->check(cli::in_range(0, 230));
-  p->add_option("--topic-prefix", o.bridge.dds.topic_prefix,
-                "prepend P to every topic name (as neurosim-server --topic-prefix)");
-  p->footer(
+  p.add_option("--topic-prefix", o.bridge.dds.topic_prefix,
+               "prepend P to every topic name (as neurosim-server --topic-prefix)");
+  p.footer(
       "CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs). Serve it\n"
       "beyond this machine through a TLS reverse proxy (web/README.md).");
   p.check([&] {

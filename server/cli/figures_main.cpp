@@ -58,15 +58,15 @@ int main(int argc, char** argv) {
   std::string out_dir = out.string();
   neurosim::cli::Parser cli("neurosim-figures",
                             "The paper's Figures 10, 13 and 14 on the cube/cylinder scene.");
-  cli->add_option("--scene", scene_path, "scene file")->capture_default_str();
-  cli->add_option("--out", out_dir, "output folder")->capture_default_str();
-  cli->add_option("--max-depth", max_depth, "deepest push, unit m")
+  cli.add_option("--scene", scene_path, "scene file")->capture_default_str();
+  cli.add_option("--out", out_dir, "output folder")->capture_default_str();
+  cli.add_option("--max-depth", max_depth, "deepest push, unit m")
       ->check(neurosim::cli::positive())
       ->capture_default_str();
-  cli->add_option("--frames", frames, "push frames (>= 1)")
+  cli.add_option("--frames", frames, "push frames (>= 1)")
       ->check(neurosim::cli::in_range(1, 1e9))
       ->capture_default_str();
-  cli->add_option("--tip-radius", tip_radius, "tool tip radius, unit m (0: the scene's)")
+  cli.add_option("--tip-radius", tip_radius, "tool tip radius, unit m (0: the scene's)")
       ->check(neurosim::cli::finite())
       ->capture_default_str();
   if (auto rc = cli.parse(argc, argv)) return *rc;

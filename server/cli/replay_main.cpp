@@ -222,35 +222,36 @@ int run(const Options& opt) {
 int main(int argc, char** argv) {
   Options opt;
   neurosim::cli::Parser cli("neurosim-replay", kDescription);
-  cli->add_option("--scene", opt.scene_path, "scene file")->required();
-  cli->add_option("--recording", opt.recordings, "recording file (one per station; repeat)")
+  cli.add_option("--scene", opt.scene_path, "scene file")->required();
+  cli.add_option("--recording", opt.recordings, "recording file (one per station; repeat)")
       ->required()
       ->take_all();
-  cli->add_option("--tier", opt.tier, "linear | nonlinear (default: the scene's)");
-  cli->add_option("--element", opt.element,
-                  "smoothed-tet | anp-tet | linear-tet: every mesh's element (default: the scene's material.element)");
-  cli->add_option("--out", opt.out_dir, "output folder DIR")->required();
-  cli->add_option("--every", opt.every, "write a displacement frame every N steps (default 10)")
-      ->check(CLI::Range(1, 1000000000));
-  cli->add_option("--max-rate", opt.max_rate_hz,
-                  "step at most HZ times per second of recording (samples in between are "
-                  "skipped; default 0: every sample time)")
-      ->check(CLI::Range(0.0, 1e9));
-  cli->add_flag("--skip-rejected", opt.skip_rejected,
-                "replay without the samples the live server's filter would reject (NaN, tip "
-                "outside the scene's workspace, jumps faster than the tool, ...; counted on "
-                "stderr); without it such a sample is an error (exit 1)");
-  cli->add_option("--contact-max-rows", opt.max_rows,
-                  "a tool's deepest contact rows kept, as neurosim-server's (default: the "
-                  "library's, 32; a patch of cells much finer than the tip has more)")
-      ->check(CLI::Range(1, 100000));
-  cli->add_option("--lcp-max-iterations", opt.lcp_max_iterations,
-                  "the contact LCP's pivots, as neurosim-server's (default: the library's, 200)")
-      ->check(CLI::Range(1, 1000000));
-  cli->add_option("--cache-dir", opt.cache_dir,
-                  "disk cache of the hosts' factors and boundary operators, keyed by their "
-                  "content, as neurosim-server's: a second replay of the same scene reads them "
-                  "instead of factoring; the answers are the same bit for bit (default: none)");
+  cli.add_option("--tier", opt.tier, "linear | nonlinear (default: the scene's)");
+  cli.add_option("--element", opt.element,
+                 "smoothed-tet | anp-tet | linear-tet: every mesh's element (default: the scene's "
+                 "material.element)");
+  cli.add_option("--out", opt.out_dir, "output folder DIR")->required();
+  cli.add_option("--every", opt.every, "write a displacement frame every N steps (default 10)")
+      ->check(neurosim::cli::range(1, 1000000000));
+  cli.add_option("--max-rate", opt.max_rate_hz,
+                 "step at most HZ times per second of recording (samples in between are "
+                 "skipped; default 0: every sample time)")
+      ->check(neurosim::cli::range(0.0, 1e9));
+  cli.add_flag("--skip-rejected", opt.skip_rejected,
+               "replay without the samples the live server's filter would reject (NaN, tip "
+               "outside the scene's workspace, jumps faster than the tool, ...; counted on "
+               "stderr); without it such a sample is an error (exit 1)");
+  cli.add_option("--contact-max-rows", opt.max_rows,
+                 "a tool's deepest contact rows kept, as neurosim-server's (default: the "
+                 "library's, 32; a patch of cells much finer than the tip has more)")
+      ->check(neurosim::cli::range(1, 100000));
+  cli.add_option("--lcp-max-iterations", opt.lcp_max_iterations,
+                 "the contact LCP's pivots, as neurosim-server's (default: the library's, 200)")
+      ->check(neurosim::cli::range(1, 1000000));
+  cli.add_option("--cache-dir", opt.cache_dir,
+                 "disk cache of the hosts' factors and boundary operators, keyed by their "
+                 "content, as neurosim-server's: a second replay of the same scene reads them "
+                 "instead of factoring; the answers are the same bit for bit (default: none)");
   cli.check([&] {
     if (!opt.tier.empty() && !neurosim::fem::parse_tier(opt.tier)) {
       throw neurosim::cli::UsageError("--tier " + opt.tier +
@@ -265,7 +266,7 @@ int main(int argc, char** argv) {
                                       neurosim::fem::element_names());
     }
   });
-  cli->footer(kFooter);
+  cli.footer(kFooter);
   if (auto rc = cli.parse(argc, argv)) return *rc;
   try {
     return run(opt);

@@ -691,25 +691,26 @@ int run(const RunOptions& opt) {
 int main(int argc, char** argv) {
   RunOptions opt;
   neurosim::cli::Parser cli("neurosim-solve", kDescription);
-  cli->add_option("--scene", opt.scene_path, "scene file")->required();
-  cli->add_option("--out", opt.out_dir, "output folder DIR")->required();
-  cli->add_option("--mesh", opt.only_mesh, "the mesh copied to the top of DIR");
-  cli->add_option("--tier", opt.tier, "linear | nonlinear (default: the scene's)")
-      ->check(CLI::IsMember({"linear", "corotational", "nonlinear"}, CLI::ignore_case));
-  cli->add_option("--element", opt.element,
-                  "smoothed-tet | anp-tet | linear-tet: every mesh's element (default: the scene's material.element)")
-      ->check(CLI::IsMember({"smoothed-tet", "anp-tet", "linear-tet"}));
-  cli->add_option("--increments", opt.increments,
-                  "initial load increments of the corotational / nonlinear solve (0: automatic)")
-      ->check(CLI::Range(0, 100000));
-  cli->add_flag("--uncoupled", opt.uncoupled, "every mesh on its own");
-  cli->add_option("--load-timeout", opt.load_timeout_s,
-                  "give up (exit 1, naming the scene) when loading the scene (reading or "
-                  "generating its meshes) takes longer than S seconds; 0: no limit")
+  cli.add_option("--scene", opt.scene_path, "scene file")->required();
+  cli.add_option("--out", opt.out_dir, "output folder DIR")->required();
+  cli.add_option("--mesh", opt.only_mesh, "the mesh copied to the top of DIR");
+  cli.add_option("--tier", opt.tier, "linear | nonlinear (default: the scene's)")
+      ->check(neurosim::cli::one_of_ignore_case({"linear", "corotational", "nonlinear"}));
+  cli.add_option("--element", opt.element,
+                 "smoothed-tet | anp-tet | linear-tet: every mesh's element (default: the scene's "
+                 "material.element)")
+      ->check(neurosim::cli::one_of({"smoothed-tet", "anp-tet", "linear-tet"}));
+  cli.add_option("--increments", opt.increments,
+                 "initial load increments of the corotational / nonlinear solve (0: automatic)")
+      ->check(neurosim::cli::range(0, 100000));
+  cli.add_flag("--uncoupled", opt.uncoupled, "every mesh on its own");
+  cli.add_option("--load-timeout", opt.load_timeout_s,
+                 "give up (exit 1, naming the scene) when loading the scene (reading or "
+                 "generating its meshes) takes longer than S seconds; 0: no limit")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1e6));
-  cli->add_flag("--quiet", opt.quiet, "less output");
-  cli->footer(kFooter);
+      ->check(neurosim::cli::range(0.0, 1e6));
+  cli.add_flag("--quiet", opt.quiet, "less output");
+  cli.footer(kFooter);
   if (auto rc = cli.parse(argc, argv)) return *rc;
   // One thread means one: CHOLMOD's OpenMP regions follow OMP_NUM_THREADS (the solves run on
   // this thread).

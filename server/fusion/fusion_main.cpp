@@ -69,19 +69,19 @@ int main(int argc, char** argv) {
   cli::Parser p("neurosim-fusion",
                 "The new boundary S' of a host mesh around an embedded one: writes "
                 "PREFIX_host.vtu, PREFIX_embedded_surface.vtu, PREFIX_new_boundary.vtu.");
-  p->add_flag("--figure11", figure11, "paper Figure 11: cubes of 195 and 1521 vertices");
-  p->add_option("--cube-vertices", cube_vertices,
-                "one cube/cylinder pair of N cube vertices (Figure 8c placement; repeatable)")
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
-  p->add_flag("--brain-like", brain_like, "brain-sized stand-in pair (fusion_bench's row)");
-  p->add_flag("--save-meshes", save_meshes,
-              "generated pairs: also write them as Medit .mesh (PREFIX_host.mesh, ...)");
-  p->add_option("--host", host_path, "host mesh file");
-  p->add_option("--embedded", embedded_path, "embedded mesh file");
-  p->add_option("--unit-m", unit_m, "mesh file unit, in m")
+  p.add_flag("--figure11", figure11, "paper Figure 11: cubes of 195 and 1521 vertices");
+  p.add_option("--cube-vertices", cube_vertices,
+               "one cube/cylinder pair of N cube vertices (Figure 8c placement; repeatable)")
+      ->take_all();
+  p.add_flag("--brain-like", brain_like, "brain-sized stand-in pair (fusion_bench's row)");
+  p.add_flag("--save-meshes", save_meshes,
+             "generated pairs: also write them as Medit .mesh (PREFIX_host.mesh, ...)");
+  p.add_option("--host", host_path, "host mesh file");
+  p.add_option("--embedded", embedded_path, "embedded mesh file");
+  p.add_option("--unit-m", unit_m, "mesh file unit, in m")
       ->check(cli::positive())
       ->capture_default_str();
-  p->add_option("--out", out, "output folder")->capture_default_str();
+  p.add_option("--out", out, "output folder")->capture_default_str();
   if (auto rc = p.parse(argc, argv)) return *rc;
   std::vector<int> cubes;
   if (figure11) cubes = {195, 1521};

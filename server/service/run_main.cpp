@@ -63,14 +63,14 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
   cli::Parser p("neurosim-server",
                 "The simulation service: steps the scene and serves haptic stations and viewers "
                 "over DDS.");
-  p->add_option("--scene", opt.scene_path, "scene file (protobuf text, idl/scene.proto)")
+  p.add_option("--scene", opt.scene_path, "scene file (protobuf text, idl/scene.proto)")
       ->required();
   // Checked with fem::parse_tier (the spelling neurosim-solve --tier takes, any case), so an
   // unknown tier is a usage error (exit 2) before the scene is even read.
-  p->add_option("--tier", tier_text,
-                "elasticity tier: linear | nonlinear (default: the scene's "
-                "effects.tier)")
-      ->check(CLI::Validator(
+  p.add_option("--tier", tier_text,
+               "elasticity tier: linear | nonlinear (default: the scene's "
+               "effects.tier)")
+      ->check(cli::Check(
           [](std::string& value) -> std::string {
             const auto tier = fem::parse_tier(value);
             if (tier && fem::tier_served(*tier)) return {};
@@ -78,121 +78,125 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
             return "unknown elasticity tier '" + value + "' (expected linear or nonlinear)";
           },
           "linear|nonlinear"));
-  p->add_option("--element", element_text,
-                "element: smoothed-tet | anp-tet | linear-tet (default: the scene's material.element)")
-      ->check(CLI::Validator(
+  p.add_option(
+       "--element", element_text,
+       "element: smoothed-tet | anp-tet | linear-tet (default: the scene's material.element)")
+      ->check(cli::Check(
           [](std::string& value) -> std::string {
             if (fem::parse_element(value)) return {};
             return "unknown element '" + value + "' (expected " + fem::element_names() + ")";
           },
           "smoothed-tet|anp-tet|linear-tet"));
-  p->add_option("--duration", duration_s,
-                "stop after S seconds of serving (default: run until SIGINT/SIGTERM)")
+  p.add_option("--duration", duration_s,
+               "stop after S seconds of serving (default: run until SIGINT/SIGTERM)")
       ->check(cli::positive());
   double load_timeout_s = 900;
-  p->add_option("--load-timeout", load_timeout_s,
-                "give up (exit 1, naming the phase) when loading the scene and building the "
-                "simulation take longer than S seconds; 0: no limit")
+  p.add_option("--load-timeout", load_timeout_s,
+               "give up (exit 1, naming the phase) when loading the scene and building the "
+               "simulation take longer than S seconds; 0: no limit")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1e6));
-  p->add_option("--domain", opt.domain,
-                "DDS domain id (default: the CYCLONEDDS_URI configuration's)")
+      ->check(cli::range(0.0, 1e6));
+  p.add_option("--domain", opt.domain,
+               "DDS domain id (default: the CYCLONEDDS_URI configuration's)")
       ->check(cli::in_range(0, 230));
-  p->add_option("--server-id", opt.server_id, "SimStatus key")->capture_default_str();
-  p->add_option("--topic-prefix", opt.topic_prefix,
-                "prepend P to every topic name (test isolation)");
+  p.add_option("--server-id", opt.server_id, "SimStatus key")->capture_default_str();
+  p.add_option("--topic-prefix", opt.topic_prefix,
+               "prepend P to every topic name (test isolation)");
   std::string accuracy_table = NEUROSIM_DEFAULT_ACCURACY_TABLE;
   bool accuracy_table_given = false;
-  p->add_option_function<std::string>(
-       "--accuracy-table",
-       [&](const std::string& v) {
-         accuracy_table = v;
-         accuracy_table_given = true;
-       },
-       "the tiers' measured force error against strain (accuracy_bench's table; 'none': no "
-       "estimate). Default: " NEUROSIM_DEFAULT_ACCURACY_TABLE " when it exists");
+  p.add_option_function<std::string>(
+      "--accuracy-table",
+      [&](const std::string& v) {
+        accuracy_table = v;
+        accuracy_table_given = true;
+      },
+      "the tiers' measured force error against strain (accuracy_bench's table; 'none': no "
+      "estimate). Default: " NEUROSIM_DEFAULT_ACCURACY_TABLE " when it exists");
   std::string disc_table = NEUROSIM_DEFAULT_DISCRETIZATION_TABLE;
   bool disc_table_given = false;
-  p->add_option_function<std::string>(
-       "--discretization-table",
-       [&](const std::string& v) {
-         disc_table = v;
-         disc_table_given = true;
-       },
-       "the hosts' measured discretization error against the converged answer (CalculiX C3D10, "
-       "accuracy_bench's table; 'none': unknown). Default: " NEUROSIM_DEFAULT_DISCRETIZATION_TABLE
-       " when it exists");
-  p->add_option("--station-idle-timeout", opt.station_idle_timeout_s,
-                "a station that sends no ToolState for S seconds loses its slot (and its writer "
-                "its binding to the station id)")
+  p.add_option_function<std::string>(
+      "--discretization-table",
+      [&](const std::string& v) {
+        disc_table = v;
+        disc_table_given = true;
+      },
+      "the hosts' measured discretization error against the converged answer (CalculiX C3D10, "
+      "accuracy_bench's table; 'none': unknown). Default: " NEUROSIM_DEFAULT_DISCRETIZATION_TABLE
+      " when it exists");
+  p.add_option("--station-idle-timeout", opt.station_idle_timeout_s,
+               "a station that sends no ToolState for S seconds loses its slot (and its writer "
+               "its binding to the station id)")
       ->capture_default_str()
-      ->check(CLI::Range(0.05, 3600.0));
-  p->add_option("--max-stations-per-participant", opt.max_stations_per_participant,
-                "stations one DDS participant may hold at once")
+      ->check(cli::range(0.05, 3600.0));
+  p.add_option("--max-stations-per-participant", opt.max_stations_per_participant,
+               "stations one DDS participant may hold at once")
       ->capture_default_str()
-      ->check(CLI::Range(1, 64));
-  p->add_option("--workspace-margin", opt.workspace_margin_m,
-                "tool tips further than M metres outside the scene's bounding box are rejected")
+      ->check(cli::range(1, 64));
+  p.add_option("--workspace-margin", opt.workspace_margin_m,
+               "tool tips further than M metres outside the scene's bounding box are rejected")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 100.0));
-  p->add_option("--log-lines-per-second", opt.log_lines_per_second,
-                "log lines per second per cause (joins, refusals, each rejection cause); the rest "
-                "is summarised")
+      ->check(cli::range(0.0, 100.0));
+  p.add_option("--log-lines-per-second", opt.log_lines_per_second,
+               "log lines per second per cause (joins, refusals, each rejection cause); the rest "
+               "is summarised")
       ->capture_default_str()
-      ->check(CLI::Range(1, 1000));
+      ->check(cli::range(1, 1000));
   std::string step_mode = "event", rt_priority, rt_cpus;
-  p->add_option("--step-mode", step_mode,
-                "event: a step when a ToolState arrives (at most --max-step-rate-factor x the "
-                "scene rate; one period after the last step when none does); clock: one step per "
-                "period on the free-running clock")
-      ->check(CLI::IsMember({"event", "clock"}))
+  p.add_option("--step-mode", step_mode,
+               "event: a step when a ToolState arrives (at most --max-step-rate-factor x the "
+               "scene rate; one period after the last step when none does); clock: one step per "
+               "period on the free-running clock")
+      ->check(cli::one_of({"event", "clock"}))
       ->capture_default_str();
-  p->add_option("--max-step-rate-factor", opt.max_step_rate_factor,
-                "event step mode: at most this many times rates.step_hz")
+  p.add_option("--max-step-rate-factor", opt.max_step_rate_factor,
+               "event step mode: at most this many times rates.step_hz")
       ->capture_default_str()
-      ->check(CLI::Range(1.0, 100.0));
-  p->add_option("--rt-priority", rt_priority,
-                "thread priorities, ROLE=P,... (roles step, dds, field; P 1..99 SCHED_FIFO, 0 "
-                "normal; default " + opt.threads.priorities_text() + "); refused priorities are logged, "
-                "the server runs anyway");
-  p->add_option("--cache-dir", opt.cache_dir,
-                "disk cache of the hosts' factors and boundary operators, keyed by their "
-                "content: a second start of the same scene reads them instead of factoring "
-                "(default: none)");
-  p->add_option("--rt-cpus", rt_cpus,
-                "CPU sets, ROLE=CPUS,... (CPUS: numbers and ranges joined by '+', e.g. "
-                "step=1,dds=0,field=0-1; default: any CPU)");
-  p->add_flag_function(
+      ->check(cli::range(1.0, 100.0));
+  p.add_option("--rt-priority", rt_priority,
+               "thread priorities, ROLE=P,... (roles step, dds, field; P 1..99 SCHED_FIFO, 0 "
+               "normal; default " +
+                   opt.threads.priorities_text() +
+                   "); refused priorities are logged, "
+                   "the server runs anyway");
+  p.add_option("--cache-dir", opt.cache_dir,
+               "disk cache of the hosts' factors and boundary operators, keyed by their "
+               "content: a second start of the same scene reads them instead of factoring "
+               "(default: none)");
+  p.add_option("--rt-cpus", rt_cpus,
+               "CPU sets, ROLE=CPUS,... (CPUS: numbers and ranges joined by '+', e.g. "
+               "step=1,dds=0,field=0-1; default: any CPU)");
+  p.add_flag_function(
       "--barycentric-contact", [&](std::int64_t) { opt.contact.barycentric = true; },
       "contact rows without the spread: contact spread 0, no smooth normals, no near field "
       "(as interaction_bench --barycentric-contact); default: the library's contact options");
-  p->add_option_function<double>(
+  p.add_option_function<double>(
        "--contact-spread", [&](const double& v) { opt.contact.spread = v; },
        "SimulationOptions::contact_spread, [0, 4] (0 needs --contact-near-field off); default: "
        "the library's")
-      ->check(CLI::Range(0.0, 4.0));
-  p->add_option_function<std::string>(
-       "--contact-smooth-normals", [&](const std::string& v) { opt.contact.smooth_normals = v == "on"; },
+      ->check(cli::range(0.0, 4.0));
+  p.add_option_function<std::string>(
+       "--contact-smooth-normals",
+       [&](const std::string& v) { opt.contact.smooth_normals = v == "on"; },
        "SimulationOptions::contact_smooth_normals, on|off; default: the library's")
-      ->check(CLI::IsMember({"on", "off"}));
-  p->add_option_function<std::string>(
+      ->check(cli::one_of({"on", "off"}));
+  p.add_option_function<std::string>(
        "--contact-near-field", [&](const std::string& v) { opt.contact.near_field = v == "on"; },
        "SimulationOptions::contact_near_field, on|off (on needs a contact spread > 0); default: "
        "the library's")
-      ->check(CLI::IsMember({"on", "off"}));
-  p->add_option_function<int>(
+      ->check(cli::one_of({"on", "off"}));
+  p.add_option_function<int>(
        "--contact-max-rows", [&](const int& v) { opt.contact.max_rows = v; },
        "SimulationOptions::max_contact_nodes_per_tool, [1, 100000]: a tool's deepest rows kept "
        "(a patch of cells much finer than the tip needs more; the rest are counted in "
        "SimStatus.steps_with_rows_dropped); default: the library's")
-      ->check(CLI::Range(1, 100000));
-  p->add_option_function<int>(
+      ->check(cli::range(1, 100000));
+  p.add_option_function<int>(
        "--lcp-max-iterations", [&](const int& v) { opt.contact.lcp_max_iterations = v; },
        "SimulationOptions::lcp_max_iterations, [1, 1000000]: the contact LCP's pivots (about one "
        "per active row; a step that runs out keeps the last good answer, counted in "
        "SimStatus.steps_not_converged); default: the library's")
-      ->check(CLI::Range(1, 1000000));
-  p->footer("CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs).");
+      ->check(cli::range(1, 1000000));
+  p.footer("CYCLONEDDS_URI must be set (deploy/cyclonedds/loopback.xml for local runs).");
   if (auto rc = p.parse(argc, argv)) return *rc;
   opt.step_mode = step_mode == "clock" ? StepMode::kClock : StepMode::kEvent;
   try {

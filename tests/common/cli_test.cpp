@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <sstream>
+#include <string>
+#include <utility>
 #include <vector>
 
 namespace cli = neurosim::cli;
@@ -27,11 +29,11 @@ struct Options {
 Outcome run(std::vector<const char*> args, Options& o) {
   args.insert(args.begin(), "prog");
   cli::Parser p("prog", "A test program.");
-  p->add_option("--duration", o.duration, "seconds")->check(cli::positive());
-  p->add_option("--domain", o.domain, "domain")->check(cli::in_range(0, 230));
-  p->add_option("--name", o.name, "name");
-  cli::add_triple(p.app(), "--origin", o.origin, "point");
-  p->add_flag("--flag", o.flag, "a flag");
+  p.add_option("--duration", o.duration, "seconds")->check(cli::positive());
+  p.add_option("--domain", o.domain, "domain")->check(cli::in_range(0, 230));
+  p.add_option("--name", o.name, "name");
+  p.add_triple("--origin", o.origin, "point");
+  p.add_flag("--flag", o.flag, "a flag");
   p.check([&] {
     if (o.flag && o.name == "x") throw cli::UsageError("--flag needs --name");
   });
@@ -102,7 +104,7 @@ TEST(common_cli, UsageErrorsExitTwoInOneStyle) {
 TEST(common_cli, ParseOrThrowForLibraryParsers) {
   double d = 1;
   cli::Parser p("prog");
-  p->add_option("--d", d)->check(cli::non_negative());
+  p.add_option("--d", d)->check(cli::non_negative());
   const char* ok[] = {"prog", "--d", "0"};
   EXPECT_TRUE(p.parse_or_throw(3, ok));
   EXPECT_EQ(d, 0.0);
@@ -116,4 +118,46 @@ TEST(common_cli, ParseOrThrowForLibraryParsers) {
   EXPECT_EQ(cli::parse_triple("--o", "1,2,3")[1], 2.0);
   EXPECT_THROW(cli::parse_triple("--o", "1,,3"), cli::UsageError);
   EXPECT_THROW(cli::parse_triple("--o", "1,2,inf"), cli::UsageError);
+}
+
+// The CLI11 pieces behind the header: its checks, option functions, repeated options.
+TEST(common_cli, ChecksAndOptionFunctionsBehindTheHeader) {
+  const auto parse = [](cli::Parser& p, std::vector<const char*> args) {
+    args.insert(args.begin(), "prog");
+    std::ostringstream out, err;
+    const auto rc = p.parse(static_cast<int>(args.size()), args.data(), out, err);
+    return std::make_pair(rc, out.str() + err.str());
+  };
+  std::string mode, size;
+  int every = 1;
+  std::vector<std::string> files;
+  cli::Parser p("prog");
+  p.add_option("--mode", mode)->check(cli::one_of({"event", "clock"}));
+  p.add_option("--every", every)->check(cli::range(1, 10))->capture_default_str();
+  p.add_option("--file", files)->take_all();
+  p.add_option_function<std::string>("--size", [&](const std::string& v) {
+    if (v.find('x') == std::string::npos) throw cli::UsageError("--size: expected WxH");
+    size = v;
+  });
+  const auto help = parse(p, {"--help"});
+  EXPECT_EQ(help.first, 0);
+  EXPECT_NE(help.second.find("INT in [1 - 10]"), std::string::npos) << help.second;
+  EXPECT_NE(help.second.find("{event,clock}"), std::string::npos) << help.second;
+  const auto good =
+      parse(p, {"--mode", "clock", "--every", "3", "--file", "a", "--file", "b", "--size", "4x3"});
+  EXPECT_FALSE(good.first.has_value()) << good.second;
+  EXPECT_EQ(mode, "clock");
+  EXPECT_EQ(every, 3);
+  EXPECT_EQ(files, (std::vector<std::string>{"a", "b"}));
+  EXPECT_EQ(size, "4x3");
+  EXPECT_EQ(p.count("--file"), 2u);
+  for (const auto& [args, message] :
+       std::vector<std::pair<std::vector<const char*>, std::string>>{
+           {{"--mode", "fast"}, "fast not in {event,clock}"},
+           {{"--every", "11"}, "--every: Value 11 not in range 1 to 10"},
+           {{"--size", "43"}, "prog: --size: expected WxH\n"}}) {
+    const auto bad = parse(p, args);
+    EXPECT_EQ(bad.first, cli::kUsageError) << message;
+    EXPECT_NE(bad.second.find(message), std::string::npos) << bad.second;
+  }
 }

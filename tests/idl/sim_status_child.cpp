@@ -13,7 +13,7 @@ int main(int argc, char** argv) {
   std::string topic;
   neurosim::cli::Parser cli("wire_test_sim_status_child",
                             "Publishes SimStatus \"child\" every 100 ms for at most 20 s.");
-  cli->add_option("topic", topic, "topic name TOPIC")->required();
+  cli.add_option("topic", topic, "topic name TOPIC")->required();
   if (auto rc = cli.parse(argc, argv)) return *rc;
   try {
     ns::Participant pp;

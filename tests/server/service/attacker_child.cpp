@@ -47,12 +47,14 @@ int main(int argc, char** argv) {
   double safe[3] = {0, 0, 0};
   int flood = 20000;
   cli::Parser p("service_test_attacker", "Sends hostile ToolState samples for about 6 s.");
-  p->add_option("domain", domain, "DDS domain id")->required()->check(cli::in_range(0, 230));
-  p->add_option("legit", legit, "the legitimate station's id")->required();
-  p->add_option("x", safe[0], "safe X, unit m")->required()->check(cli::finite());
-  p->add_option("y", safe[1], "safe Y, unit m")->required()->check(cli::finite());
-  p->add_option("z", safe[2], "safe Z, unit m")->required()->check(cli::finite());
-  p->add_option("flood", flood, "distinct ids of the flood")->required()->check(cli::in_range(0, 1000000));
+  p.add_option("domain", domain, "DDS domain id")->required()->check(cli::in_range(0, 230));
+  p.add_option("legit", legit, "the legitimate station's id")->required();
+  p.add_option("x", safe[0], "safe X, unit m")->required()->check(cli::finite());
+  p.add_option("y", safe[1], "safe Y, unit m")->required()->check(cli::finite());
+  p.add_option("z", safe[2], "safe Z, unit m")->required()->check(cli::finite());
+  p.add_option("flood", flood, "distinct ids of the flood")
+      ->required()
+      ->check(cli::in_range(0, 1000000));
   if (auto rc = p.parse(argc, argv)) return *rc;
   try {
     wire::ParticipantOptions o;

@@ -16,11 +16,11 @@ int main(int argc, char** argv) {
   std::string station;
   double position[3] = {0, 0, 0};
   cli::Parser p("service_test_station", "Writes ToolState at 1 kHz for at most 30 s.");
-  p->add_option("domain", domain, "DDS domain id DOMAIN")->required()->check(cli::in_range(0, 230));
-  p->add_option("station", station, "station id STATION")->required();
-  p->add_option("x", position[0], "tool tip X, unit m")->required()->check(cli::finite());
-  p->add_option("y", position[1], "tool tip Y, unit m")->required()->check(cli::finite());
-  p->add_option("z", position[2], "tool tip Z, unit m")->required()->check(cli::finite());
+  p.add_option("domain", domain, "DDS domain id DOMAIN")->required()->check(cli::in_range(0, 230));
+  p.add_option("station", station, "station id STATION")->required();
+  p.add_option("x", position[0], "tool tip X, unit m")->required()->check(cli::finite());
+  p.add_option("y", position[1], "tool tip Y, unit m")->required()->check(cli::finite());
+  p.add_option("z", position[2], "tool tip Z, unit m")->required()->check(cli::finite());
   if (auto rc = p.parse(argc, argv)) return *rc;
   try {
     wire::ParticipantOptions o;
