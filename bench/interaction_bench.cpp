@@ -9,7 +9,9 @@
 // default LCP path, inverse of the sliding block at load) and `sliding_ref` (the reference path,
 // factor of the active rows), unless --no-sliding-ref.
 // --brain-contact: scenes/brain_artery.scene as it is (TIE, LINEAR, the 2 mm probe): a press
-// breathing 0.6-1.4 mm deep on a 4 mm circle (after 200 warm-up steps), and a 10 s slide at
+// breathing 0.6-1.4 mm deep on a 4 mm circle (after 200 warm-up steps; the axis the normal of
+// the triangle under the tip, `brain_press`, then the same tip path with the axis held at the
+// circle centre's normal, `brain_press_held_axis`), and a 10 s slide at
 // 20 mm/s, 1 mm deep, over fresh surface (five 36 mm lines 5 mm apart joined by 4 mm moves),
 // paced at 1 kHz by the clock, twice side by side: `brain_slide_step_solves` (the old way: a
 // first touch's compliance columns solved inside the step) and `brain_slide_worker`
@@ -104,7 +106,8 @@ struct RunTimes {
 // tool the force, the stiffness K, the validity radius and the loaded nodes.
 FILE* dump_file = nullptr;
 // --step-csv FILE: one line per timed step (case, step, wall and thread CPU time, rows, LCPs,
-// pivots, warm starts taken, columns computed / not ready): which steps make the tail.
+// pivots, warm starts taken, columns computed / not ready, candidate triangles tested): which
+// steps make the tail.
 FILE* step_csv = nullptr;
 void dump_step(const char* name, std::size_t k, const std::vector<ni::ToolContact>& contacts,
                const ni::StepStats& stats) {
@@ -149,10 +152,10 @@ RunTimes run_poses(ni::Simulation& sim, const std::vector<ni::ToolPose>& poses, 
     r.not_ready += stats.columns_not_ready;
     if (dump_name) dump_step(dump_name, r.us.size() - 1, contacts, stats);
     if (step_csv && dump_name)
-      std::fprintf(step_csv, "%s,%zu,%.2f,%.2f,%d,%d,%d,%d,%d,%d\n", dump_name, r.us.size() - 1,
-                   r.us.back(), r.cpu_us.back(), stats.contact_rows, stats.geometry_iterations,
-                   stats.lcp_pivots, stats.lcp_warm_taken, stats.columns_computed,
-                   stats.columns_not_ready);
+      std::fprintf(step_csv, "%s,%zu,%.2f,%.2f,%d,%d,%d,%d,%d,%d,%d\n", dump_name,
+                   r.us.size() - 1, r.us.back(), r.cpu_us.back(), stats.contact_rows,
+                   stats.geometry_iterations, stats.lcp_pivots, stats.lcp_warm_taken,
+                   stats.columns_computed, stats.columns_not_ready, stats.candidate_tests);
     if (!(contacts[0].force_n.norm() > 0.0)) {
       if (r.zero_force < 8) r.zero_force_at.push_back(r.us.size() - 1);
       ++r.zero_force;
@@ -190,6 +193,35 @@ int brain_contact(int steps, const ni::SimulationOptions& contact) {
   }
   run_poses(*sim, warm, false, "brain_press_warm");
   const RunTimes tp = run_poses(*sim, press, false, "brain_press");
+  // The press's axis is the normal of the triangle under the tip, and the tip is offset along
+  // it: both jump where the tip crosses an edge onto a differently inclined triangle (the 150 mm
+  // shaft's end by centimetres, the tip by up to a millimetre), which no hand does in a
+  // millisecond. The same circle and depths with the tool translated by the hand, its axis held
+  // (the normal at the circle's centre, the tip offset along it) is the press without jumps.
+  double turn = 0.0, jump = 0.0;
+  for (std::size_t k = 1; k < press.size(); ++k) {
+    turn = std::max(turn, std::acos(std::clamp(press[k].axis.dot(press[k - 1].axis), -1.0, 1.0)));
+    jump = std::max(jump, (press[k].tip_m - press[k - 1].tip_m).norm());
+  }
+  std::fprintf(stderr,
+               "brain_press: in a step the axis turns by up to %.1f degrees, the tip moves by up "
+               "to %.3f mm\n",
+               turn * 180.0 / M_PI, 1e3 * jump);
+  const auto centre = ni::top_of_surface(mesh, 0.060, 0.100);
+  if (!centre) {
+    std::cerr << "brain-contact: the press's centre is off the surface\n";
+    return 1;
+  }
+  for (int k = 0; k < 200 + steps; ++k) {
+    const double a = 2.0 * M_PI * k / 200.0, b = 2.0 * M_PI * k / 50.0;
+    const auto on =
+        ni::top_of_surface(mesh, 0.060 + 0.004 * std::cos(a), 0.100 + 0.004 * std::sin(a));
+    auto& pose = k < 200 ? warm[k] : press[k - 200];
+    pose.tip_m = on->point_m + (r - 0.001 * (1.0 + 0.4 * std::sin(b))) * centre->normal;
+    pose.axis = centre->normal;
+  }
+  run_poses(*sim, warm, false, "brain_press_held_axis_warm");
+  const RunTimes th = run_poses(*sim, press, false, "brain_press_held_axis");
   // Slide: 10 s at 20 mm/s (1 mm per 50 steps), 1 mm deep, over surface the press never touched.
   std::vector<ni::ToolPose> slide;
   const double step_m = 0.020 / 1000.0;
@@ -244,6 +276,7 @@ int brain_contact(int steps, const ni::SimulationOptions& contact) {
     std::cout << line;
   };
   print("brain_press", tp);
+  print("brain_press_held_axis", th);
   print("brain_slide_step_solves", ts);
   print("brain_slide_worker", tw);
   // Where a slide step had no force: its index and tip (unit mm), to stderr.
@@ -382,8 +415,8 @@ int main(int argc, char** argv) {
   std::string step_csv_path;
   cli.add_option("--step-csv", step_csv_path,
                  "write one line per timed step (case, step, wall_us, cpu_us, rows, lcps, pivots, "
-                 "warm_taken, columns_computed, columns_not_ready) to this file: which steps make "
-                 "the tail");
+                 "warm_taken, columns_computed, columns_not_ready, candidate_tests) to this "
+                 "file: which steps make the tail");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   if (!step_csv_path.empty()) {
     step_csv = std::fopen(step_csv_path.c_str(), "w");
@@ -393,7 +426,7 @@ int main(int argc, char** argv) {
     }
     std::fprintf(step_csv,
                  "case,step,wall_us,cpu_us,rows,lcps,pivots,warm_taken,columns_computed,"
-                 "columns_not_ready\n");
+                 "columns_not_ready,candidate_tests\n");
   }
   if (!dump.empty()) {
     dump_file = std::fopen(dump.c_str(), "w");

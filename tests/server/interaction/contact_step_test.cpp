@@ -1077,6 +1077,59 @@ TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
   EXPECT_GE(touching, 15);  // the comparisons are of contacts, not of empty answers
 }
 
+// The reusable candidate list made ahead of need (contact_step.cpp, prefetch_candidates): a tip
+// with a tilted shaft translated steadily over the generated block's face (0.1 mm per step, the
+// list holding for a quarter of a mean edge) tests the next list's candidates a share per step,
+// so no step after the first tests more than a third of what the first (made whole) tested; a
+// tool that jumps 5 mm every 30 steps leaves its lists (the prefetched one too) at once, and the
+// step after each jump makes its list whole again (more tests than any step of the steady walk).
+// Either way the answer at every 5th pose is a fresh State's at that pose, to the bit.
+TEST(interaction_contact_step, CandidateListsMadeAheadSpreadTheirTestsOverSteps) {
+  Block b = probe_block(0.004);
+  SimulationOptions o = all_columns();
+  const auto model = build_model(block_scene(b), o);
+  int steady_most = 0;
+  for (const bool jumping : {false, true}) {
+    const std::string walk = jumping ? "jumping walk" : "steady walk";
+    auto walked = Simulation::from_model(model);
+    std::vector<ToolContact> c, fresh_c;
+    StepStats st;
+    int first = 0, most = 0, testing_steps = 0, touching = 0;
+    std::vector<int> at_jumps;
+    for (int k = 0; k < 150; ++k) {
+      ToolPose p;
+      const double z = 0.02 + 2e-5 * k + (jumping ? 0.005 * (k / 30) : 0.0);
+      p.tip_m = Vec3(b.edge_m + b.tip_radius_m - 0.003, 0.02 + 1e-4 * k, z);
+      p.axis = Vec3(1.0, 0.3, 0.4).normalized();
+      walked->step({p}, c, st);
+      ASSERT_TRUE(st.converged) << walk << " step " << k;
+      if (k == 0) first = st.candidate_tests;
+      else most = std::max(most, st.candidate_tests);
+      if (k > 0 && st.candidate_tests > 0) ++testing_steps;
+      if (k > 0 && k % 30 == 0) at_jumps.push_back(st.candidate_tests);
+      if (k % 5 != 0) continue;
+      auto fresh = Simulation::from_model(model);
+      fresh->step({p}, fresh_c, st);
+      if (c[0].in_contact) ++touching;
+      expect_same_answer(c[0], fresh_c[0], walk + " step " + std::to_string(k));
+    }
+    std::printf("%s: the first list tested %d candidates, later steps at most %d (%d steps "
+                "testing)",
+                walk.c_str(), first, most, testing_steps);
+    for (int n : at_jumps) std::printf(", %d after a jump", n);
+    std::printf("\n");
+    EXPECT_GT(first, 30) << walk;
+    EXPECT_EQ(touching, 30) << walk;  // the comparisons are of contacts
+    if (!jumping) {
+      steady_most = most;
+      EXPECT_LE(3 * most, first) << walk;
+      EXPECT_GE(testing_steps, 20) << walk;
+    } else {
+      for (int n : at_jumps) EXPECT_GT(n, steady_most) << walk;  // made whole again
+    }
+  }
+}
+
 // Four probes held in the generated block's face x = L with their shafts lying along it, one
 // probe's pose new per step (a server stepping on each station's pose: the other three rows
 // repeat, the moving probe's radial rows change their normals): the Delassus entries and the
