@@ -107,7 +107,7 @@ void check_load_memory(double vertices, const std::string& what, const std::stri
 }  // namespace
 
 LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
-                     const std::string& source) {
+                     const std::string& source, GeneratedMeshes* generated_meshes) {
   const std::string what = source + ": mesh \"" + entry.id() + "\"";
   LoadedMesh out;
   out.id = entry.id();
@@ -177,13 +177,15 @@ LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
                                : std::string("cell_size_m")),
                       options.target_vertices > 0 ? "give fewer target_vertices"
                                                   : "give a larger cell_size_m");
+    const auto generate = [&] {
+      return g.has_box()
+                 ? mesh::generate_box(to_vec3(g.box().min_m()), to_vec3(g.box().max_m()), options)
+                 : mesh::generate_cylinder(to_vec3(g.cylinder().base_center_m()),
+                                           to_vec3(g.cylinder().axis_m()), r, options);
+    };
     mesh::GeneratedMesh generated;
     try {
-      generated =
-          g.has_box()
-              ? mesh::generate_box(to_vec3(g.box().min_m()), to_vec3(g.box().max_m()), options)
-              : mesh::generate_cylinder(to_vec3(g.cylinder().base_center_m()),
-                                        to_vec3(g.cylinder().axis_m()), r, options);
+      generated = generated_meshes != nullptr ? generated_meshes->get(g, generate) : generate();
     } catch (const std::invalid_argument& e) {
       throw std::runtime_error(what + ": generate: " + e.what());
     } catch (const std::bad_alloc&) {
@@ -365,7 +367,7 @@ CouplingDef compile_coupling(const Scene& scene, const Model& model, int c,
 
 }  // namespace
 
-Model compile(const Scene& scene, const std::string& source) {
+Model compile(const Scene& scene, const std::string& source, GeneratedMeshes* generated_meshes) {
   validate_scene(scene, source);
   Model model;
   static_cast<Settings&>(model) = read_settings(scene, source);
@@ -375,7 +377,7 @@ Model compile(const Scene& scene, const std::string& source) {
       model.rigid.push_back(load_rigid(scene.meshes(i), dir, source));
       continue;
     }
-    model.meshes.push_back(load_mesh(scene.meshes(i), dir, source));
+    model.meshes.push_back(load_mesh(scene.meshes(i), dir, source, generated_meshes));
     std::string w = size_warning(scene.meshes(i), model.meshes.back(), source);
     if (!w.empty()) model.warnings.push_back(std::move(w));
   }

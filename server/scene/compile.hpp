@@ -4,6 +4,7 @@
 #pragma once
 
 #include "server/model/model.hpp"
+#include "server/scene/generated_meshes.hpp"
 #include "server/scene/scene.hpp"
 
 #include <filesystem>
@@ -14,14 +15,17 @@ namespace neurosim::scene {
 
 // Throws std::runtime_error naming the scene file, the field and the element on bad input
 // ("x.scene: couplings[0] (brain / artery): the host must have the lower priority").
-Model compile(const Scene& scene, const std::string& source);
+// generated_meshes: where generated meshes are kept and taken from (none: each is generated).
+Model compile(const Scene& scene, const std::string& source,
+              GeneratedMeshes* generated_meshes = nullptr);
 // read_scene + compile.
 Model load_model(const std::filesystem::path& path);
 
 // Builds one mesh entry: reads the file (relative paths are relative to scene_dir) or runs
-// the generator, then resolves the fixed regions. `source` is the scene file for messages.
+// the generator (or takes its mesh from generated_meshes, if given), then resolves the fixed
+// regions. `source` is the scene file for messages.
 LoadedMesh load_mesh(const Mesh& entry, const std::filesystem::path& scene_dir,
-                     const std::string& source);
+                     const std::string& source, GeneratedMeshes* generated_meshes = nullptr);
 
 // A rigid mesh entry: the Medit surface read (relative to scene_dir), checked closed and
 // outward (errors name the file and the mesh), openings resolved (axis normalised).

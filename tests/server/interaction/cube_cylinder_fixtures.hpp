@@ -3,6 +3,8 @@
 // exposure tests and the tie's CalculiX comparison.
 #pragma once
 
+#include "server/scene/compile.hpp"
+#include "server/scene/generated_meshes.hpp"
 #include "server/scene/scene.hpp"
 #include "test_support.hpp"
 
@@ -27,6 +29,15 @@ inline scene::Scene cube_cylinder_at(double z_m, bool tools) {
     s.mutable_effects()->set_tool_contact(false);
   }
   return s;
+}
+
+// scene::compile with the generated meshes kept for the whole process: the variants a test
+// compiles (tier, coupling, materials, cylinder height) mesh each generate block once; a kept
+// mesh is the one the generator makes again (scene_generated_meshes_test).
+inline scene::Model compile_kept(const scene::Scene& s,
+                                 const std::filesystem::path& path = cube_cylinder_path()) {
+  static scene::GeneratedMeshes kept;
+  return scene::compile(s, path.string(), &kept);
 }
 
 }  // namespace neurosim::interaction::testing

@@ -30,8 +30,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <initializer_list>
+#include <cstring>
+#include <deque>
 #include <functional>
+#include <initializer_list>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -118,9 +121,9 @@ TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefusedWhereNotBuilt
     scene::Scene s = cube_cylinder(0.105, true);
     add_kernel(s, {"cube", "cylinder"}, {{0.3, 1.0}});
     s.mutable_effects()->set_tier(scene::Effects::LINEAR);
-    EXPECT_EQ(build_error(scene::compile(s, path.string())), "");
+    EXPECT_EQ(build_error(testing::compile_kept(s, path)), "");
     s.mutable_effects()->set_tier(scene::Effects::NONLINEAR);
-    EXPECT_EQ(build_error(scene::compile(s, path.string())), "");
+    EXPECT_EQ(build_error(testing::compile_kept(s, path)), "");
   }
   {
     scene::Scene s = cube_cylinder(0.105, true);
@@ -128,7 +131,7 @@ TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefusedWhereNotBuilt
     for (int variant = 0; variant < 2; ++variant) {
       if (variant == 0) s.mutable_couplings(0)->set_kind(scene::Coupling::SLIDING);
       else s.mutable_couplings(0)->set_method(scene::Coupling::ITERATIVE);
-      const std::string what = build_error(scene::compile(s, path.string()));
+      const std::string what = build_error(testing::compile_kept(s, path));
       ASSERT_FALSE(what.empty()) << "NONLINEAR variant " << variant << " was accepted";
       EXPECT_NE(what.find(variant == 0 ? "SLIDING" : "ITERATIVE"), std::string::npos) << what;
       s = cube_cylinder(0.105, true);
@@ -139,7 +142,7 @@ TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefusedWhereNotBuilt
     // SLIDING in LINEAR: built (contact slots on the exposed part, B's own columns).
     scene::Scene s = cube_cylinder(0.105, true);
     s.mutable_couplings(0)->set_kind(scene::Coupling::SLIDING);
-    const scene::Model model = scene::compile(s, path.string());
+    const scene::Model model = testing::compile_kept(s, path);
     EXPECT_EQ(build_error(model), "");
     // The rows iterated on the deformed surface are not built with it (the deformed positions
     // would need the sliding forces' displacement of B): refused, naming scene, mesh and option.
@@ -157,7 +160,7 @@ TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefusedWhereNotBuilt
         << what;
     // Relaxing tissue with SLIDING (the sliding forces have no history): refused.
     add_kernel(s, {"cube", "cylinder"}, {{0.3, 1.0}});
-    what = build_error(scene::compile(s, path.string()));
+    what = build_error(testing::compile_kept(s, path));
     ASSERT_FALSE(what.empty()) << "SLIDING with viscoelastic terms accepted";
     std::printf("refused as expected: %s\n", what.c_str());
     EXPECT_NE(what.find(path.string()), std::string::npos) << what;
@@ -170,21 +173,21 @@ TEST(interaction_simulation_exposure, CylinderOutOfTheCubeIsRefusedWhereNotBuilt
     // ITERATIVE (the paper's baseline) exists in the LINEAR tier only: built there.
     scene::Scene s = cube_cylinder(0.105, true);
     s.mutable_couplings(0)->set_method(scene::Coupling::ITERATIVE);
-    EXPECT_EQ(build_error(scene::compile(s, path.string())), "");
+    EXPECT_EQ(build_error(testing::compile_kept(s, path)), "");
   }
   // LINEAR and NONLINEAR with TIE (the scene's own coupling): build, with contact slots on the
   // exposed part.
-  EXPECT_EQ(build_error(scene::compile(cube_cylinder(0.105, true), path.string())), "");
+  EXPECT_EQ(build_error(testing::compile_kept(cube_cylinder(0.105, true), path)), "");
   {
     scene::Scene s = cube_cylinder(0.105, true);
     s.mutable_effects()->set_tier(scene::Effects::NONLINEAR);
-    EXPECT_EQ(build_error(scene::compile(s, path.string())), "");
+    EXPECT_EQ(build_error(testing::compile_kept(s, path)), "");
   }
 
   // Without tools nothing touches the exposed part: the same geometry builds, and only the
   // cylinder's surface nodes inside the cube (z <= 0.1 m + the tolerance) are tied.
   scene::Scene s = cube_cylinder(0.105, false);
-  const scene::Model model = scene::compile(s, path.string());
+  const scene::Model model = testing::compile_kept(s, path);
   EXPECT_EQ(build_error(model), "");
   const auto sim = Simulation::build(model);
   const int cube = scene::find_mesh(s, "cube"), cylinder = scene::find_mesh(s, "cylinder");
@@ -232,7 +235,7 @@ TEST(interaction_simulation_exposure, EnclosedCylinderLeavesOnlyTheCubesOuterFac
   // so every contact node lies on the cube's outer faces and every free node there is one.
   const auto path = neurosim::testing::source_dir() / "scenes" / "cube_cylinder.scene";
   const scene::Scene s = cube_cylinder(0.05, true);
-  const auto sim = Simulation::build(scene::compile(s, path.string()));
+  const auto sim = Simulation::build(testing::compile_kept(s, path));
   const int cube = scene::find_mesh(s, "cube");
   const CoupledBody& body = *sim->body_of(cube);
   ASSERT_FALSE(body.covered_faces().empty());
@@ -262,7 +265,7 @@ TEST(interaction_simulation_exposure, RingAroundAnExitingCylinderStaysContactabl
   // also those with a node on S' (a rule by node would drop the ring around the exit).
   const auto path = neurosim::testing::source_dir() / "scenes" / "cube_cylinder.scene";
   const scene::Scene s = cube_cylinder(0.105, false);
-  const auto sim = Simulation::build(scene::compile(s, path.string()));
+  const auto sim = Simulation::build(testing::compile_kept(s, path));
   const int cube = scene::find_mesh(s, "cube");
   const CoupledBody& body = *sim->body_of(cube);
   const auto& host = body.host();
@@ -313,6 +316,35 @@ TEST(interaction_simulation_exposure, RingAroundAnExitingCylinderStaysContactabl
   }
 }
 
+// The sparse LU of a KKT matrix solved here, kept for the process with its matrix: a test that
+// solves the same system again (another load, another depth or LCP path giving the same rows and
+// active set) factors it once. Found only by the same matrix bit for bit (size, pattern, values);
+// SparseLU is deterministic, so a kept factor solves as a fresh one would. The last two kept.
+using KktLu = Eigen::SparseLU<Eigen::SparseMatrix<double>>;
+const KktLu& kkt_lu(Eigen::SparseMatrix<double> kkt, const char* what) {
+  struct Kept {
+    Eigen::SparseMatrix<double> matrix;
+    std::unique_ptr<KktLu> lu;
+  };
+  static std::deque<Kept> kept;
+  kkt.makeCompressed();
+  const auto same = [&](const Eigen::SparseMatrix<double>& m) {
+    const auto bytes = [](const auto* p, Eigen::Index n) { return sizeof(*p) * static_cast<std::size_t>(n); };
+    return m.rows() == kkt.rows() && m.cols() == kkt.cols() && m.nonZeros() == kkt.nonZeros() &&
+           std::memcmp(m.outerIndexPtr(), kkt.outerIndexPtr(), bytes(m.outerIndexPtr(), m.cols() + 1)) == 0 &&
+           std::memcmp(m.innerIndexPtr(), kkt.innerIndexPtr(), bytes(m.innerIndexPtr(), m.nonZeros())) == 0 &&
+           std::memcmp(m.valuePtr(), kkt.valuePtr(), bytes(m.valuePtr(), m.nonZeros())) == 0;
+  };
+  for (const Kept& k : kept)
+    if (same(k.matrix)) return *k.lu;
+  auto lu = std::make_unique<KktLu>();
+  lu->compute(kkt);
+  if (lu->info() != Eigen::Success) throw std::runtime_error(std::string(what) + ": LU failed");
+  kept.push_back({std::move(kkt), std::move(lu)});
+  if (kept.size() > 2) kept.pop_front();
+  return *kept.back().lu;
+}
+
 // The monolithic tied system of the cube (A) and the cylinder (B) under assembly: unknowns A's
 // 3 N_A dofs, B's 3 N_B, then one Lagrange multiplier per constraint row (scaled to the
 // stiffness): the fixed nodes of both meshes and the tie (u_B,k - sum w_a u_A,a = 0), plus any
@@ -355,10 +387,7 @@ struct TiedKkt {
     Eigen::VectorXd rhs(row);
     rhs.head(n) = f;
     for (std::size_t k = 0; k < g.size(); ++k) rhs[n + static_cast<int>(k)] = g[k];
-    Eigen::SparseLU<Eigen::SparseMatrix<double>> lu;
-    lu.compute(kkt);
-    if (lu.info() != Eigen::Success) throw std::runtime_error("TiedKkt: LU failed");
-    return lu.solve(rhs);
+    return kkt_lu(std::move(kkt), "TiedKkt").solve(rhs);
   }
   const int na3, n;
   int row;
@@ -397,7 +426,7 @@ std::unique_ptr<RaisedPress> raised_press(
   p->scene = cube_cylinder(0.105, true);
   p->scene.mutable_effects()->set_tier(tier);
   if (edit) edit(p->scene);
-  p->model = scene::compile(p->scene, path.string());
+  p->model = testing::compile_kept(p->scene, path);
   p->sim = Simulation::build(p->model, options);
   p->cube = scene::find_mesh(p->scene, "cube");
   p->cylinder = scene::find_mesh(p->scene, "cylinder");
@@ -867,10 +896,7 @@ SlidingKktAnswer solve_sliding_kkt(const mesh::TetMesh& a, const fem::Material& 
     kkt.setFromTriplets(t.begin(), t.end());
     Eigen::VectorXd rhs = Eigen::VectorXd::Zero(rows);
     for (std::size_t k = 0; k < rhs_rows.size(); ++k) rhs[n + static_cast<int>(k)] = rhs_rows[k];
-    Eigen::SparseLU<Eigen::SparseMatrix<double>> lu;
-    lu.compute(kkt);
-    if (lu.info() != Eigen::Success) throw std::runtime_error("sliding KKT: LU failed");
-    const Eigen::VectorXd x = lu.solve(rhs);
+    const Eigen::VectorXd x = kkt_lu(std::move(kkt), "sliding KKT").solve(rhs);
     out.u_a = x.head(na3);
     out.u_b = x.segment(na3, nb3);
     out.lambda = Eigen::VectorXd::Zero(np);
