@@ -3,6 +3,7 @@
 
 #include "server/interaction/simulation.hpp"
 #include "server/scene/compile.hpp"
+#include "server/scene/generated_meshes.hpp"
 
 #include <memory>
 #include <sstream>
@@ -69,8 +70,12 @@ inline std::string scene_text(const SceneSpec& s) {
   return o.str();
 }
 
+// The generated meshes are kept for the whole process: the scenes a test builds (coupled or not,
+// TIE or SLIDING, other moduli) mesh each generate block once; a kept mesh is the one the
+// generator makes again (scene_generated_meshes_test).
 inline scene::Model make_scene(const SceneSpec& s) {
-  return scene::compile(scene::parse_scene(scene_text(s), "test.scene"), "test.scene");
+  static scene::GeneratedMeshes kept;
+  return scene::compile(scene::parse_scene(scene_text(s), "test.scene"), "test.scene", &kept);
 }
 
 // Tool tip on the cube's right face (x = 0.1) at (y, z) = (0.05, 0.05), pushed `depth_m` in -x.
