@@ -659,7 +659,7 @@ bool CoupledBody::slide_contact_forces(int slide, const std::vector<int>& slots,
   if (sl == nullptr || !exposed_slide_slots_) return false;
   const ExposedPart part{contact_nodes_, num_host_contact_, contact_slide_, slide,
                          exposed_slides_[static_cast<std::size_t>(slide)].offset,
-                         sl->geometry().num_vertices()};
+                         static_cast<int>(sl->geometry().num_vertices())};
   return part_contact_forces(part, slots, forces_n, forces_b);
 }
 
@@ -670,7 +670,7 @@ bool CoupledBody::tie_contact_forces(int tie, const std::vector<int>& slots,
       tie_offset_[tie] < 0)
     return false;
   const ExposedPart part{contact_nodes_, num_host_contact_, contact_tie_, tie, tie_offset_[tie],
-                         ties_[tie].geometry().num_vertices()};
+                         static_cast<int>(ties_[tie].geometry().num_vertices())};
   return part_contact_forces(part, slots, forces_n, forces_b);
 }
 
