@@ -331,12 +331,15 @@ void CoupledBody::finalize() {
 }
 
 void CoupledBody::coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x,
-                                        fem::SolveWorkspace* ws) const {
+                                        fem::SolveWorkspace* ws,
+                                        IterativeReport* iterations) const {
   const auto solve = [&](const Eigen::MatrixXd& rhs, Eigen::MatrixXd& out) {
     if (ws != nullptr) solver_->solve_reduced(rhs, out, *ws);
     else solver_->solve_reduced(rhs, out);
   };
-  const auto apply = [&](const Eigen::MatrixXd& v, Eigen::MatrixXd& gv) { apply_coupling(v, gv); };
+  const auto apply = [&](const Eigen::MatrixXd& v, Eigen::MatrixXd& gv) {
+    apply_coupling(v, gv, iterations);
+  };
   woodbury_solve(solver_->reduced_index(), boundary_nodes_, static_cast<int>(op_.l_bb.rows()),
                  solve, apply, b, x);
 }
@@ -490,14 +493,7 @@ void CoupledBody::solve_contact_columns(const std::vector<int>& slots, Eigen::Ma
       x.setZero(nf, 3 * n);
       return;
     }
-    const auto solve = [&](const Eigen::MatrixXd& b, Eigen::MatrixXd& out) {
-      if (ws != nullptr) solver_->solve_reduced(b, out, *ws);
-      else solver_->solve_reduced(b, out);
-    };
-    const auto apply = [&](const Eigen::MatrixXd& v, Eigen::MatrixXd& gv) {
-      apply_coupling(v, gv, iterations);
-    };
-    woodbury_solve(reduced, boundary_nodes_, m3, solve, apply, rhs, x);
+    coupled_solve_reduced(rhs, x, ws, iterations);
     return;
   }
   Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nf, 3 * n), lb, glb;

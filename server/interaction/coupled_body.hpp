@@ -258,9 +258,11 @@ class CoupledBody {
   std::vector<HostSlidingRow> sliding_rows_;  // added before finalize, then moved to sliding_
   std::vector<std::array<int, 3>> covered_faces_;  // sorted triples, sorted at finalize
   SlidingOperator sliding_;
-  // X = coupled L B for free-dof right-hand sides (ties by Woodbury: two solves).
+  // X = coupled L B for free-dof right-hand sides (ties by Woodbury: two solves; the ITERATIVE
+  // baseline's iterations counted in `iterations`, if given).
   void coupled_solve_reduced(const Eigen::MatrixXd& b, Eigen::MatrixXd& x,
-                             fem::SolveWorkspace* ws = nullptr) const;
+                             fem::SolveWorkspace* ws = nullptr,
+                             IterativeReport* iterations = nullptr) const;
   CoupledBodyTiming timing_;
   bool finalized_{false};
   fem::Material material_;
