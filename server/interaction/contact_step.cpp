@@ -142,18 +142,6 @@ constexpr int kLoadedNodes = 256;
 // The reusable candidate list (State::reusable_candidates) holds for a tool moved by up to this
 // many mean surface edges (tip and shaft end): a hand moves the tool by far less per step.
 constexpr double kCandidateReuse = 0.25;
-// The next reusable list (State::prefetch_candidates) is started once the tool has moved this
-// share of the reuse distance, and tests at least this many candidates per step: a rebuild's
-// cost spread over the steps before it is due instead of falling on one step.
-constexpr double kPrefetchAt = 0.1;
-constexpr std::size_t kPrefetchPerStep = 16;
-// ... and is done within this share of the steps the tool would take to leave the kept list.
-constexpr double kPrefetchWithin = 0.75;
-// The next list's pose: where the tool is once it moved on this share of the reuse distance at
-// its last step's velocity (the rest of the reuse distance is room for a course that bends).
-constexpr double kPrefetchAhead = 0.8;
-// The reusable lists' tests take a tool moved by the reuse distance, with room for rounding.
-constexpr double reuse_width(double reuse_m) { return reuse_m * (1.0 + 1e-6); }
 // The reusable list's search verdicts (State::search_verdicts) hold for a tool moved by up to
 // this many tip radii (tip and shaft end): small against the parts' reach, so they reject nearly
 // what the plane tests at the pose itself reject.
@@ -417,8 +405,6 @@ void State::reserve_workspace(const Model& m, int tools) {
     sc.nodes.reserve(2 * triangles);
     sc.rest_hits.reserve(hits_.capacity());
     sc.reusable.reserve(triangles);
-    sc.next.found.reserve(2 * triangles);
-    sc.next.reusable.reserve(triangles);
   }
   tool_rows_.reserve(std::min<std::size_t>(4 * triangles, 4 * 4096));
   tool_order_.reserve(tool_rows_.capacity());
@@ -652,14 +638,9 @@ void State::rest_candidate_list(const Model& m, int body, int tool_index, const 
   bool keep = sc.list_valid;  // the last list of the reusable candidates and verdicts
   if (!sc.reuse_valid || sc.reuse_tool != tool_index || sc.reuse_slack_m != slack ||
       (p0 - sc.reuse_p0).norm() > reuse_m || (p1 - sc.reuse_p1).norm() > reuse_m) {
-    if (!adopt_prefetched(m, body, tool_index, p0, p1, slack, reuse_m, sc))
-      reusable_candidates(m, body, tool_index, p0, p1, slack, reuse_m, sc);
+    reusable_candidates(m, body, tool_index, p0, p1, slack, reuse_m, sc);
     keep = false;
-  } else {
-    prefetch_candidates(m, body, tool_index, p0, p1, slack, reuse_m, sc);
   }
-  sc.last_p0 = p0;
-  sc.last_p1 = p1;
   const double search_m = kSearchReuse * shape.tip_radius_m;
   if (!sc.search_valid || sc.search_m != search_m || (p0 - sc.search_p0).norm() > search_m ||
       (p1 - sc.search_p1).norm() > search_m) {
@@ -791,12 +772,43 @@ void State::full_candidate_list(const Model& m, int body, int tool_index, const 
 // so the minimum is the full list's. Allocates nothing (reserved).
 void State::reusable_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
                                 const Vec3& p1, double slack, double reuse_m, StepCandidates& sc) {
+  const BodyModel& b = m.bodies_[body];
+  const ToolShape& shape = m.tools_[tool_index];
+  const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
+  const double w = reuse_m * (1.0 + 1e-6);  // the moved pose, with room for rounding
   auto& found = sc.triangles;  // scratch (reserved: two queries' worth); the caller refills it
-  reusable_query(m, body, tool_index, p0, p1, slack, reuse_m, found);
+  found.clear();
+  // The tip's box and the shaft's box near its axis, each triangle once, in rank order, less
+  // those whose rest bounding sphere is beyond every test below: reusable_parts' sphere-capsule
+  // tests (may_reach_triangle: centroid within radius + hypot(reach, back) of the tip's centre
+  // or the axis, widened by 1e-6) and the flat bound (radius + back of the tip's centre, within
+  // the first), the tip's centre being on the axis; 1e-9 more for the rounding of the distances.
+  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
+  auto reach_and_back = [&](double radius) {
+    const double reach = radius + margin + w;
+    return std::hypot(reach, std::max(reach, b.behind_reach_m + w));
+  };
+  const double near = has_shaft ? std::max(reach_and_back(shape.tip_radius_m),
+                                           reach_and_back(shape.shaft_radius_m))
+                                : reach_and_back(shape.tip_radius_m);
+  const double tip_box = shape.tip_radius_m + slack + w;
+  const double reach = shape.shaft_radius_m + slack + w;
+  const Vec3& end = has_shaft ? p1 : p0;
+  b.surface.query_tool(p0 - Vec3::Constant(tip_box), p0 + Vec3::Constant(tip_box), has_shaft,
+                       p0.cwiseMin(p1) - Vec3::Constant(reach),
+                       p0.cwiseMax(p1) + Vec3::Constant(reach), p0, end, near,
+                       near * (1.0 + 1e-9), found);
   sc.reusable.clear();
-  reusable_tests(m,
-                 {body, &m.tools_[tool_index], p0, p1, reuse_width(reuse_m), &found, &sc.reusable},
-                 0, found.size());
+  candidate_tests_ += static_cast<int>(found.size());
+  for (const int rank : found) {
+    const int t = b.surface.ranked_triangle(rank);
+    bool flat = false;  // within reach of flat_distance (the smooth tip's)
+    const int parts = reusable_parts(m, body, t, shape, p0, p1, w, flat);
+    if (parts != 0 || flat)
+      sc.reusable.push_back(
+          {t, rank, static_cast<std::uint8_t>(parts), b.surface.query_cell(t)});
+  }
+  // (in rank order: the grid's, as query_tool lists them)
   sc.reuse_valid = true;
   sc.reuse_tool = tool_index;
   sc.reuse_slack_m = slack;
@@ -804,127 +816,6 @@ void State::reusable_candidates(const Model& m, int body, int tool_index, const 
   sc.reuse_p1 = p1;
   sc.search_valid = false;
   sc.list_valid = false;  // (its triangles were the scratch above)
-  sc.next.started = false;
-}
-
-// reusable_candidates' grid query: the tip's box and the shaft's box near its axis, each
-// triangle once, in rank order, less those whose rest bounding sphere is beyond every test of
-// reusable_tests: reusable_parts' sphere-capsule tests (may_reach_triangle: centroid within
-// radius + hypot(reach, back) of the tip's centre or the axis, widened by 1e-6) and the flat bound
-// (radius + back of the tip's centre, within the first), the tip's centre being on the axis;
-// 1e-9 more for the rounding of the distances. Ranks into found. Allocates nothing (reserved).
-void State::reusable_query(const Model& m, int body, int tool_index, const Vec3& p0, const Vec3& p1,
-                           double slack, double reuse_m, std::vector<int>& found) const {
-  const BodyModel& b = m.bodies_[body];
-  const ToolShape& shape = m.tools_[tool_index];
-  const bool has_shaft = shape.shaft_radius_m > 0.0 && shape.shaft_length_m > 0.0;
-  const double w = reuse_width(reuse_m);
-  found.clear();
-  const double margin = m.options_.candidate_margin * shape.tip_radius_m;
-  auto reach_and_back = [&](double radius) {
-    const double reach = radius + margin + w;
-    return std::hypot(reach, std::max(reach, b.behind_reach_m + w));
-  };
-  const double near =
-      has_shaft ? std::max(reach_and_back(shape.tip_radius_m), reach_and_back(shape.shaft_radius_m))
-                : reach_and_back(shape.tip_radius_m);
-  const double tip_box = shape.tip_radius_m + slack + w;
-  const double reach = shape.shaft_radius_m + slack + w;
-  const Vec3& end = has_shaft ? p1 : p0;
-  b.surface.query_tool(p0 - Vec3::Constant(tip_box), p0 + Vec3::Constant(tip_box), has_shaft,
-                       p0.cwiseMin(p1) - Vec3::Constant(reach),
-                       p0.cwiseMax(p1) + Vec3::Constant(reach), p0, end, near, near * (1.0 + 1e-9),
-                       found);
-}
-
-// reusable_candidates' tests of the job's candidates [from, to): each with a part that can have a
-// hit (reusable_parts) or within the smooth tip's flat bound is appended, in the candidates'
-// (rank) order, with its parts and grid cell.
-void State::reusable_tests(const Model& m, const ReusableTests& job, std::size_t from,
-                           std::size_t to) {
-  const BodyModel& b = m.bodies_[job.body];
-  candidate_tests_ += static_cast<int>(to - from);
-  for (std::size_t k = from; k < to; ++k) {
-    const int rank = (*job.found)[k];
-    const int t = b.surface.ranked_triangle(rank);
-    bool flat = false;  // within reach of flat_distance (the smooth tip's)
-    const int parts = reusable_parts(m, job.body, t, *job.shape, job.p0, job.p1, job.w, flat);
-    if (parts != 0 || flat)
-      job.out->push_back({t, rank, static_cast<std::uint8_t>(parts), b.surface.query_cell(t)});
-  }
-}
-
-// Phase "candidate triangles" on the rest surface, ahead of need: while the reusable list holds,
-// the next one (StepCandidates::Prefetch) is started once the tip or the shaft end has moved
-// kPrefetchAt of the reuse distance from the list's pose, for the pose the tool reaches after
-// moving kPrefetchAhead of the reuse distance on at its last step's velocity (tip and shaft end
-// each at its own; the faster one moves that far): its grid query in that step, then its
-// candidates tested within kPrefetchWithin of the steps the tool would take to leave the kept
-// list at its last step's speed (at least kPrefetchPerStep a step). Started again when the tool
-// is farther than the reuse distance from its pose (it could not be adopted), or the tool or
-// slack changed. A held tool (no speed) starts none.
-void State::prefetch_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
-                                const Vec3& p1, double slack, double reuse_m,
-                                StepCandidates& sc) {
-  auto& nx = sc.next;
-  if (nx.started && (nx.tool != tool_index || nx.slack_m != slack ||
-                     (p0 - nx.p0).norm() > reuse_m || (p1 - nx.p1).norm() > reuse_m))
-    nx.started = false;
-  const double moved = std::max((p0 - sc.reuse_p0).norm(), (p1 - sc.reuse_p1).norm());
-  if (!nx.started) {
-    const Vec3 v0 = p0 - sc.last_p0, v1 = p1 - sc.last_p1;
-    const double speed = std::max(v0.norm(), v1.norm());
-    if (!(moved > kPrefetchAt * reuse_m) || !(speed > 0.0)) return;
-    const double ahead = kPrefetchAhead * reuse_m / speed;  // steps
-    nx.started = true;
-    nx.tool = tool_index;
-    nx.slack_m = slack;
-    nx.p0 = p0 + ahead * v0;
-    nx.p1 = p1 + ahead * v1;
-    nx.done = 0;
-    nx.reusable.clear();
-    reusable_query(m, body, tool_index, nx.p0, nx.p1, slack, reuse_m, nx.found);
-    return;  // (the query is this step's share)
-  }
-  const std::size_t left = nx.found.size() - nx.done;
-  if (left == 0) return;
-  // Done within kPrefetchWithin of the steps the tool would take to the list's edge at its last
-  // step's speed.
-  const double speed = std::max((p0 - sc.last_p0).norm(), (p1 - sc.last_p1).norm());
-  const double steps = speed > 0.0 ? kPrefetchWithin * (reuse_m - moved) / speed : 1.0;
-  const std::size_t share =
-      std::max(kPrefetchPerStep, static_cast<std::size_t>(std::ceil(
-                                     static_cast<double>(left) / std::max(1.0, steps))));
-  const std::size_t to = nx.done + std::min(left, share);
-  reusable_tests(m, {body, &m.tools_[tool_index], nx.p0, nx.p1, reuse_width(reuse_m), &nx.found,
-                     &nx.reusable},
-                 nx.done, to);
-  nx.done = to;
-}
-
-// Phase "candidate triangles" on the rest surface, a list that no longer holds: the prefetched
-// one (prefetch_candidates) replaces it if it holds for this pose (the same tool and slack, the
-// tip and shaft end within the reuse distance of its pose), its untested candidates tested now;
-// the list is then reusable_candidates' for that pose. False (nothing changed) if it does not.
-bool State::adopt_prefetched(const Model& m, int body, int tool_index, const Vec3& p0,
-                             const Vec3& p1, double slack, double reuse_m, StepCandidates& sc) {
-  auto& nx = sc.next;
-  if (!nx.started || nx.tool != tool_index || nx.slack_m != slack ||
-      (p0 - nx.p0).norm() > reuse_m || (p1 - nx.p1).norm() > reuse_m)
-    return false;
-  reusable_tests(
-      m, {body, &m.tools_[tool_index], nx.p0, nx.p1, reuse_width(reuse_m), &nx.found, &nx.reusable},
-      nx.done, nx.found.size());
-  sc.reusable.swap(nx.reusable);
-  nx.started = false;
-  sc.reuse_valid = true;
-  sc.reuse_tool = tool_index;
-  sc.reuse_slack_m = slack;
-  sc.reuse_p0 = nx.p0;
-  sc.reuse_p1 = nx.p1;
-  sc.search_valid = false;
-  sc.list_valid = false;
-  return true;
 }
 
 // reusable_candidates, one triangle t: the parts of a tool at p0-p1 moved by at most w (unit m)

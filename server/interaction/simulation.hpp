@@ -112,10 +112,9 @@ struct StepStats {
   // all bodies (the field displacements() returns): large compression; the answer stays finite.
   // 0 in LINEAR (small strain: no deformed configuration to invert).
   int inverted_elements{0};
-  // Rest-surface candidate triangles tested in this step for the tool's reusable candidate lists
-  // (contact_step.cpp: a list made whole where the one made ahead cannot take over, else a part
-  // of the next one): the candidate search's share of the step, spread over the steps before a
-  // list is due when the tool moves steadily.
+  // Rest-surface candidate triangles tested in this step for the tools' reusable candidate lists
+  // (contact_step.cpp, reusable_candidates: made again once a tool moved a quarter of a mean
+  // edge): the candidate search's share of the step, 0 in most steps.
   int candidate_tests{0};
 };
 

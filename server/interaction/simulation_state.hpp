@@ -303,15 +303,6 @@ class State {
   struct StepCandidates;
   void reusable_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
                            const Vec3& p1, double slack, double reuse_m, StepCandidates& sc);
-  void reusable_query(const Model& m, int body, int tool_index, const Vec3& p0, const Vec3& p1,
-                      double slack, double reuse_m, std::vector<int>& found) const;
-  struct ReusableTests;
-  void reusable_tests(const Model& m, const ReusableTests& job, std::size_t from,
-                      std::size_t to);
-  void prefetch_candidates(const Model& m, int body, int tool_index, const Vec3& p0,
-                           const Vec3& p1, double slack, double reuse_m, StepCandidates& sc);
-  bool adopt_prefetched(const Model& m, int body, int tool_index, const Vec3& p0, const Vec3& p1,
-                        double slack, double reuse_m, StepCandidates& sc);
   int reusable_parts(const Model& m, int body, int t, const ToolShape& shape, const Vec3& p0,
                      const Vec3& p1, double w, bool& flat) const;
   void rest_candidate_list(const Model& m, int body, int tool_index, const Vec3& p0,
@@ -542,34 +533,9 @@ class State {
     int reuse_tool{-1};
     double reuse_slack_m{0.0};
     Vec3 reuse_p0{Vec3::Zero()}, reuse_p1{Vec3::Zero()};
-    Vec3 last_p0{Vec3::Zero()}, last_p1{Vec3::Zero()};  // the last pose listed, unit m
     bool search_valid{false};  // Reusable::search holds for search_p0 / search_p1
     double search_m{0.0};
     Vec3 search_p0{Vec3::Zero()}, search_p1{Vec3::Zero()};
-    // The next reusable list, made ahead of need a part per step (contact_step.cpp,
-    // prefetch_candidates): the same list reusable_candidates makes for a tool within reuse of
-    // p0 / p1 (unit m), its first `done` candidates of `found` (grid ranks, query_tool's order)
-    // tested so far.
-    struct Prefetch {
-      bool started{false};
-      int tool{-1};
-      double slack_m{0.0};
-      Vec3 p0{Vec3::Zero()}, p1{Vec3::Zero()};
-      std::vector<int> found;
-      std::size_t done{0};
-      std::vector<Reusable> reusable;
-    };
-    Prefetch next;
-  };
-  // One body's and tool's reusable candidate tests (State::reusable_tests): the tool at p0-p1
-  // moved by at most w (unit m), candidates by grid rank, the reusable ones appended to out.
-  struct ReusableTests {
-    int body{-1};
-    const ToolShape* shape{nullptr};
-    Vec3 p0{Vec3::Zero()}, p1{Vec3::Zero()};
-    double w{0.0};
-    const std::vector<int>* found{nullptr};
-    std::vector<StepCandidates::Reusable>* out{nullptr};
   };
   std::vector<StepCandidates> step_candidates_;
   int candidate_tests_{0};  // of this step (StepStats::candidate_tests)

@@ -1043,11 +1043,12 @@ SimulationOptions all_columns() {
 // (the step keeps its candidate triangles while the tool moves little, and a node's normal sums
 // its triangles' in the list's order: the kept list must give the fresh search's order). A tip
 // with a tilted shaft walks over the generated block's face and its edge (the candidates found
-// again every few steps), at times deeper than its radius; at every 7th pose a fresh State
-// steps that pose alone: the same force, stiffness, nodes and validity radius, to the bit. All compliance columns are made with the
-// State (the columns a walk solves in blocks may differ from a fresh State's at round-off). The
-// block's faces are flat (their triangles' normals sum exactly in any order): this checks which
-// triangles are searched, not their order (checked on the brain's curved surface, RESULTS).
+// again every few steps, StepStats::candidate_tests), at times deeper than its radius; at every
+// 7th pose a fresh State steps that pose alone: the same force, stiffness, nodes and validity
+// radius, to the bit. All compliance columns are made with the State (the columns a walk solves
+// in blocks may differ from a fresh State's at round-off). The block's faces are flat (their
+// triangles' normals sum exactly in any order): this checks which triangles are searched, not
+// their order (checked on the brain's curved surface, RESULTS).
 TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
   Block b = probe_block(0.004);
   SimulationOptions o = all_columns();
@@ -1055,7 +1056,7 @@ TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
   auto walked = Simulation::from_model(model);
   std::vector<ToolContact> c, fresh_c;
   StepStats st;
-  int compared = 0, touching = 0;
+  int compared = 0, touching = 0, listing = 0;
   for (int k = 0; k < 120; ++k) {
     // Across the face x = L towards its edge with the top (z = L), 0.2 mm per step, 2-6 mm deep
     // (the tip's centre up to 2 mm behind the face: node and edge rows along their triangles'
@@ -1066,6 +1067,10 @@ TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
     p.axis = Vec3(1.0, 0.3, 0.4).normalized();
     walked->step({p}, c, st);
     ASSERT_TRUE(st.converged) << "step " << k;
+    if (k == 0) {
+      EXPECT_GT(st.candidate_tests, 0);  // the first list is made
+    }
+    if (st.candidate_tests > 0) ++listing;
     if (k % 7 != 0) continue;
     auto fresh = Simulation::from_model(model);
     fresh->step({p}, fresh_c, st);
@@ -1075,59 +1080,10 @@ TEST(interaction_contact_step, AnswerAtAPoseDoesNotDependOnTheStepsBefore) {
   }
   EXPECT_EQ(compared, 18);
   EXPECT_GE(touching, 15);  // the comparisons are of contacts, not of empty answers
-}
-
-// The reusable candidate list made ahead of need (contact_step.cpp, prefetch_candidates): a tip
-// with a tilted shaft translated steadily over the generated block's face (0.1 mm per step, the
-// list holding for a quarter of a mean edge) tests the next list's candidates a share per step,
-// so no step after the first tests more than a third of what the first (made whole) tested; a
-// tool that jumps 5 mm every 30 steps leaves its lists (the prefetched one too) at once, and the
-// step after each jump makes its list whole again (more tests than any step of the steady walk).
-// Either way the answer at every 5th pose is a fresh State's at that pose, to the bit.
-TEST(interaction_contact_step, CandidateListsMadeAheadSpreadTheirTestsOverSteps) {
-  Block b = probe_block(0.004);
-  SimulationOptions o = all_columns();
-  const auto model = build_model(block_scene(b), o);
-  int steady_most = 0;
-  for (const bool jumping : {false, true}) {
-    const std::string walk = jumping ? "jumping walk" : "steady walk";
-    auto walked = Simulation::from_model(model);
-    std::vector<ToolContact> c, fresh_c;
-    StepStats st;
-    int first = 0, most = 0, testing_steps = 0, touching = 0;
-    std::vector<int> at_jumps;
-    for (int k = 0; k < 150; ++k) {
-      ToolPose p;
-      const double z = 0.02 + 2e-5 * k + (jumping ? 0.005 * (k / 30) : 0.0);
-      p.tip_m = Vec3(b.edge_m + b.tip_radius_m - 0.003, 0.02 + 1e-4 * k, z);
-      p.axis = Vec3(1.0, 0.3, 0.4).normalized();
-      walked->step({p}, c, st);
-      ASSERT_TRUE(st.converged) << walk << " step " << k;
-      if (k == 0) first = st.candidate_tests;
-      else most = std::max(most, st.candidate_tests);
-      if (k > 0 && st.candidate_tests > 0) ++testing_steps;
-      if (k > 0 && k % 30 == 0) at_jumps.push_back(st.candidate_tests);
-      if (k % 5 != 0) continue;
-      auto fresh = Simulation::from_model(model);
-      fresh->step({p}, fresh_c, st);
-      if (c[0].in_contact) ++touching;
-      expect_same_answer(c[0], fresh_c[0], walk + " step " + std::to_string(k));
-    }
-    std::printf("%s: the first list tested %d candidates, later steps at most %d (%d steps "
-                "testing)",
-                walk.c_str(), first, most, testing_steps);
-    for (int n : at_jumps) std::printf(", %d after a jump", n);
-    std::printf("\n");
-    EXPECT_GT(first, 30) << walk;
-    EXPECT_EQ(touching, 30) << walk;  // the comparisons are of contacts
-    if (!jumping) {
-      steady_most = most;
-      EXPECT_LE(3 * most, first) << walk;
-      EXPECT_GE(testing_steps, 20) << walk;
-    } else {
-      for (int n : at_jumps) EXPECT_GT(n, steady_most) << walk;  // made whole again
-    }
-  }
+  // The list is made again every few steps (0.2 mm per step against a quarter of a 10 mm edge),
+  // kept in between (StepStats::candidate_tests 0).
+  EXPECT_GE(listing, 3);
+  EXPECT_LE(listing, 40);
 }
 
 // Four probes held in the generated block's face x = L with their shafts lying along it, one
