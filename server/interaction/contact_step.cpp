@@ -1,9 +1,13 @@
-// The contact step in named phases (MuJoCo's mj_step habit): pose checks, candidate triangles,
-// rows, compliance columns, Delassus operator, LCP, forces, answer per tool, tier post.
+// The contact step in named phases (MuJoCo's mj_step habit; State::step, solve_held_poses): pose
+// (checks, each station's proxy), history (a relaxing body's step time and history forces),
+// candidate triangles, rows, compliance columns, Delassus operator, near field, LCP, forces,
+// answer per tool, relaxation, the normals' turn in K (normal_turn), tier post.
 //
 // Rows: a tool part (the tip sphere, the shaft capsule) against the contactable triangles of each
-// body, on the surface deformed by the last good answer (rest + latest displacement at the
-// triangle's nodes). Each triangle near the part gives its closest point; the rows are
+// body, found on the rest surface once per step (SimulationOptions::contact_geometry_iterations
+// = 1; LINEAR only may iterate on the surface its answer deformed; the multirate tiers add their
+// latest equilibrium's offset to the depths). Each triangle near the part gives its closest
+// point; the rows are
 //   - a node row for every triangle vertex inside the part (+ margin): the node against a rigid
 //     sphere or capsule (CalculiX's node-to-surface contact with the tool as master), so a tip
 //     wider than the triangles feels a patch; its normal the part's where the node, moved along
@@ -12,10 +16,14 @@
 //     the same from the point as their latest equilibrium carried it along the mean normal,
 //     depth to that point, carried_row_geometry; their shaft: radial within 60 degrees of the
 //     mean normal, else the mean normal);
-//   - a face row where a triangle's closest point is inside it (normal: the triangle's);
+//   - a face row where a triangle's closest point is inside it (normal: the triangle's); with
+//     contact_smooth_normals the tip's face rows come from the centre projected along the
+//     interpolated node normals (one row where triangles share the projection), no edge rows;
 //   - an edge row where every contactable triangle of the edge reports that edge (the distance
 //     has a local minimum there; otherwise a neighbouring face row already holds it);
-// merged by feature (a vertex seen by its 3-7 triangles, an edge by its two: one row each).
+// merged by feature (a vertex seen by its 3-8 triangles, an edge by its two: one row each), and
+// two tools on one feature or nearly one constraint share one row (merge_tool_row). With
+// contact_spread a row's load is spread over the nodes around its point (spread_row).
 // A face row and the node rows of its vertices are nearly dependent when the normals agree, so
 // the Delassus operator gets a small compliance in series per row (W_ii (1 + eps),
 // SimulationOptions::contact_row_compliance): W stays positive definite and the LCP solution
@@ -583,8 +591,8 @@ const mesh::Vec3& State::position(const Model& m, int body, int slot) {
   return bs.position_m[slot];
 }
 
-// Phase "candidate triangles": of one body near one tool (rest grid, widened by the largest
-// displacement of the last good answer), each listed once. Found once per step and tool: the
+// Phase "candidate triangles": of one body near one tool (rest grid, widened by the larger of
+// the surface's largest displacement in this geometry and behind_reach_m), each listed once. Found once per step and tool: the
 // later geometries of the step reuse the list unless their displacement needs a wider one.
 // On the rest surface (no force on the body: LINEAR's one geometry per step) the list is made
 // from reusable candidates (reusable_candidates), found again only when the tool moved farther.

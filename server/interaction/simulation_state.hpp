@@ -245,8 +245,8 @@ class State {
   // The compliance columns of every contactable node when options.precompute_contact_columns,
   // and, with sliding rows, the step workspace and the inverse of their constant block.
   explicit State(const Model& m);
-  // The step (contact_step.cpp): pose, candidates, rows, columns, Delassus, LCP, forces, answer
-  // per tool, tier post.
+  // The step (contact_step.cpp): pose, history, candidates, rows, columns, Delassus, near field,
+  // LCP, forces, answer per tool, relaxation, normals' turn, tier post.
   // time_s: the step's time (the poses' sample time, unit s); only a viscoelastic body uses it
   // (the time since the last converged step; an earlier time counts as none passed).
   void step(const Model& m, const std::vector<ToolPose>& poses, double time_s,
