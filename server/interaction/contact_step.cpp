@@ -1961,8 +1961,6 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
     triangle_features(m, bi, tool, pose, axis);
     merge_features(m, bi, tool, shape, pose.tip_m, axis);
   }
-  near_field_of_tool(m, shape);
-  near_field_of_shaft(m, shape, axis);
   // Rows within the margin enter the LCP inactive (caught if the deformation pushes them in).
   // The deepest first, sorted by index (a Row holds kSpreadNodes nodes: moving the rows through
   // the heap cost more than finding them); `deeper` is a total order on one tool's rows, so the
@@ -1975,23 +1973,30 @@ void State::rows_of_tool(const Model& m, int tool, const ToolPose& pose, const V
   const std::size_t limit = static_cast<std::size_t>(m.options_.max_contact_nodes_per_tool);
   std::sort(tool_order_.begin(), tool_order_.end(),
             [&](int a, int b) { return deeper(tool_rows_[a], tool_rows_[b]); });
+  // The kept rows' indices move to the front of tool_order_ (in their order).
   std::size_t kept = 0, k = 0;
   for (; k < tool_order_.size() && kept < limit; ++k) {
     Row& r = tool_rows_[tool_order_[k]];
     last_spread_ = nullptr;
     if (!spread_row(m, r)) continue;
-    ++kept;
-    if (rest_geometry_) {
-      memo.rows.push_back(r);  // (reserved: the limit)
-      if (last_spread_) copy_spread(memo.spreads.emplace_back(), *last_spread_);
-    }
-    merge_tool_row(r);
+    r.kept = true;
+    tool_order_[kept++] = tool_order_[k];
+    if (rest_geometry_ && last_spread_) copy_spread(memo.spreads.emplace_back(), *last_spread_);
   }
   // Touching rows past the limit are left out: counted (StepStats::contact_rows_dropped), never
   // silently. Rows within the margin only (inactive candidates) are not.
   int dropped = 0;
   for (; k < tool_order_.size(); ++k)
     if (tool_rows_[tool_order_[k]].depth_m > 0.0) ++dropped;
+  // The near fields at the deepest kept rows, with the spread radius their spread ended with (a
+  // spread that found no triangle leaves the row on its triangle's nodes, rho 0: no near field).
+  near_field_of_tool(m, shape);
+  near_field_of_shaft(m, shape, axis);
+  for (std::size_t i = 0; i < kept; ++i) {
+    const Row& r = tool_rows_[tool_order_[i]];
+    if (rest_geometry_) memo.rows.push_back(r);  // (reserved: the limit)
+    merge_tool_row(r);
+  }
   geometry_rows_dropped_ += dropped;
   if (rest_geometry_) {
     memo.dropped = dropped;
@@ -2189,7 +2194,7 @@ void State::near_field_of_tool(const Model& m, const ToolShape& shape) {
     bool any = false;
     Row* deepest = nullptr;
     for (Row& r : tool_rows_) {
-      if (r.shaft || r.body != body) continue;
+      if (r.shaft || r.body != body || !r.kept) continue;
       any = true;
       if (!(r.depth_m > depth)) continue;
       depth = r.depth_m;
@@ -2244,7 +2249,8 @@ void State::near_field_of_shaft(const Model& m, const ToolShape& shape, const Ve
     if (bodies_[body].near_field_history) continue;
     Row* deepest = nullptr;
     for (Row& r : tool_rows_)
-      if (r.shaft && r.body == body && (deepest == nullptr || r.depth_m > deepest->depth_m))
+      if (r.shaft && r.body == body && r.kept &&
+          (deepest == nullptr || r.depth_m > deepest->depth_m))
         deepest = &r;
     if (deepest == nullptr || !(deepest->depth_m > 0.0)) continue;
     const fem::Material& mat = near_field_material(m, body, deepest);

@@ -88,6 +88,10 @@ struct Row {
   // the tip's rows on this body (contact_step.cpp, near_field), unit m/N; on a shaft row the
   // shaft's, shared by the shaft's rows (contact_shaft_near_field, near_field_of_shaft).
   double near_field_m_per_n{0.0};
+  // The row is one of its tool's kept rows (rows_of_tool: within the per-tool limit, its spread
+  // made, not on fixed nodes only): the near field is taken at the deepest kept row, with the
+  // spread radius its spread ended with.
+  bool kept{false};
   // The part's deepest row on this body (the depth the near field is taken at): d c / d depth
   // (unit 1/N; 0 where the near field is constant), for the tangent stiffness (answer).
   bool near_field_deepest{false};
