@@ -62,7 +62,7 @@ struct StationAdmissionDef {
   WriterLimits writers{};                   // the table of ToolState writers (station_identity.hpp)
   Workspace workspace{};                    // scene bounding box + margin
   double max_future_s{1.0};                 // unit s
-  double max_station_rate_hz{2000.0};       // samples per second per station (burst 20)
+  double max_station_rate_hz{2000.0};       // samples per second per station (burst ToolFilterDef::rate_burst, 200)
   std::vector<std::string> tool_ids;        // scene tools, in order
   std::vector<double> tool_max_speed_m_per_s;  // per scene tool, unit m/s
   int log_lines_per_second{5};              // per cause
