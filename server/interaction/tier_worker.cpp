@@ -4,6 +4,8 @@
 
 #include "common/clock.hpp"
 
+#include <pthread.h>
+
 #include <algorithm>
 #include <cmath>
 #include <chrono>
@@ -214,6 +216,7 @@ bool TierWorker::post(const std::vector<TierLoad>& loads) {
 }
 
 void TierWorker::run() {
+  pthread_setname_np(pthread_self(), "ns-tier");  // ps -L, top -H, perf (the column worker's habit)
   // Each update factors a tangent: with OMP_NUM_THREADS=1, CHOLMOD's parallel regions run on
   // this thread alone (cholmod_threads.hpp), as on neurosim-solve's.
   fem::cholmod_threads_follow_omp_num_threads();
