@@ -282,6 +282,7 @@ int threads_of_this_process() {
 // With OMP_NUM_THREADS=1 the worker thread's Newton updates (CHOLMOD factorizations of the
 // tangent) start no OpenMP thread: the process gains the worker's own thread and nothing more.
 // The same update on a thread without the call does start some (the check is not vacuous).
+// The worker's own thread is named ns-tier.
 TEST(interaction_tier_worker, WorkerStartsNoCholmodThreadsWhenOmpNumThreadsIsOne) {
   const char* env = std::getenv("OMP_NUM_THREADS");
   if (!env || std::string(env) != "1") GTEST_SKIP() << "needs OMP_NUM_THREADS=1 (deploy/test sets it)";
@@ -319,6 +320,11 @@ TEST(interaction_tier_worker, WorkerStartsNoCholmodThreadsWhenOmpNumThreadsIsOne
     const int during = threads_of_this_process();
     EXPECT_GE(during, before + 1);
     EXPECT_LE(during, before + 2) << "the tier worker started threads";
+    // The worker's thread has its name (ps -L, top -H, perf): ns-tier.
+    int named = 0;
+    for (const auto& task : std::filesystem::directory_iterator("/proc/self/task"))
+      named += neurosim::testing::slurp(task.path() / "comm").rfind("ns-tier", 0) == 0;
+    EXPECT_EQ(named, 1) << "the tier worker's thread is not named ns-tier";
   }
   int other_before = 0, other_after = 0;
   std::thread other([&] {
