@@ -151,8 +151,16 @@ struct EquilibriumSolver::Impl {
   bool refactor_carried{false};
   // Records a step's contraction; returns the window's geometric mean, or 0 (no verdict) while
   // the window holds only one step that decreased the residual: a call's first step is a plain
-  // chord step, the Anderson steps after it often contract much better.
-  double rate_push(double contraction) {
+  // chord step, the Anderson steps after it often contract much better. The call's first step
+  // with an earlier factor (first_chord) that increased the residual by less than
+  // kFirstChordGrowth (accepted on the potential: after the load moved, at strain ~1 the chord
+  // step from the old tangent may double it) is not recorded: the Anderson steps after it judge
+  // the factor (counting it in their window made nearly every such call refactorize). A larger
+  // growth is a verdict at once (without the bound an update of the lateral stroke failed and
+  // fell back to the incremental solve from rest).
+  static constexpr double kFirstChordGrowth = 2.0;
+  double rate_push(double contraction, bool first_chord) {
+    if (first_chord && !(contraction < 1.0) && contraction < kFirstChordGrowth) return 0.0;
     rate_log[static_cast<std::size_t>(rate_head)] = std::log(std::max(contraction, 1e-300));
     rate_head = (rate_head + 1) % kRateWindow;
     rate_count = std::min(rate_count + 1, kRateWindow);
@@ -932,7 +940,11 @@ struct EquilibriumSolver::Impl {
       refactor = !opt.reuse_factorization || alpha < 1.0 || budget;
       if (!refactor) {
         const double target = opt.tolerance * force_scale(fext);
-        refactor = rate_push(r_trial / rnorm) > refactor_rate(opt, r_trial, target, it);
+        // A call that step_limit cuts before two more steps would get no verdict on its
+        // factor at all: its first chord step still counts (the server's 2-step updates).
+        const bool first_chord = it == 0 && !fresh && (opt.step_limit <= 0 || opt.step_limit > 2);
+        refactor = rate_push(r_trial / rnorm, first_chord) >
+                   refactor_rate(opt, r_trial, target, it);
       }
       // Background: the tangent at the new u is factorized on another thread while the next
       // steps go on with the old factor (a step it cannot take waits for it, above).

@@ -102,7 +102,9 @@ struct NewtonOptions {
   // reassembled and refactorized at the current u (a full Newton step with line search) only
   // when there is no factor yet, when a step with the old one finds no decrease, when the steps
   // with the current factor contract max |r_free| too slowly (their geometric mean over the last
-  // two or three steps above refactor_contraction, or above the rate at which the chord steps
+  // two or three steps (a call's first chord step that increased it less than twofold does not
+  // count when step_limit leaves the Anderson steps after it room to judge: 0 or > 2) above
+  // refactor_contraction, or above the rate at which the chord steps
   // left to the tolerance would cost more than a factorization: the factorization's cost in
   // back-substitutions from its flop count, about 70 on the 5 mm smoothed-tet brain), when the
   // last step needed a line-search halving, and at every iteration after the first
