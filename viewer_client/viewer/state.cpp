@@ -232,6 +232,7 @@ bool ViewerState::ingest_deformation(const neurosim_Deformation& d) {
     const std::uint64_t frame = d.frame;
     set_displacements(m->id, scratch_);  // checks finiteness; copies
     m->frame = frame;
+    m->server_step = d.server_step;
     ++counters_.deformations;
     return true;
   } catch (const std::invalid_argument& e) {

@@ -38,6 +38,7 @@ struct MeshState {
   double image_unit_m = 1.0;  // image physical units to m
   std::vector<float> u_m;     // 3 per vertex, unit m (zeros until a frame)
   std::uint64_t frame = 0;    // Deformation frame of u_m
+  std::uint64_t server_step = 0;  // the server step u_m belongs to (Deformation.server_step)
   bool has_deformation = false;
   std::uint64_t u_version = 0;       // bumped whenever u_m changes
   float max_displacement_m = 0;      // max |u| of u_m, unit m
