@@ -1,5 +1,5 @@
 // press_refinement_bench: the coarse brain's patch press (FemBrainPress's problem: the Colin27
-// brain of `neurosim-model --cell-size C`, the surface nodes within 12 mm of the topmost node
+// brain of `neurosim-model --cell-size C`, the surface nodes within 12 mm (--patch-radius) of the topmost node
 // held and pressed straight down) solved by CalculiX C3D10 (a node at the middle of every edge)
 // and by smoothed-tet and linear-tet on the same mesh, in NONLINEAR (neo-Hookean as
 // fem::write_calculix_input: C10 = E / (4 (1 + nu)), D1 = 6 (1 - 2 nu) / E; ccx NLGEOM, equal
@@ -16,7 +16,12 @@
 // fixed as in the scene.
 //
 // Prints per mesh, nu and model: each element's patch force and its ratio to C3D10 on the same
-// mesh and on the finest mesh C3D10 ran on; writes DIR/press_refinement.csv.
+// mesh and on the finest mesh C3D10 ran on; writes DIR/press_refinement.csv. With three or more
+// meshes, the converged answer: Richardson extrapolation of each element's three finest forces
+// (F(h) = F* + C h^p, h halved per split: observed order p = log2((F0 - F1) / (F1 - F2)),
+// F* = F2 - (F1 - F2) / (2^p - 1)), refused (printed as nan, with the reason) when the
+// differences change sign or the order is below 0.3 (no asymptotic range); and every force
+// against C3D10's extrapolated limit. Writes DIR/press_refinement_limits.csv.
 // `press_refinement_bench --out DIR --region 40 --splits 1 --depth 10 --nu 0.49`.
 #include "c3d10_press.hpp"
 #include "common/cli.hpp"
@@ -48,7 +53,7 @@ using Vec3 = Eigen::Vector3d;
 
 namespace {
 
-constexpr double kPatchRadiusM = 0.012;  // FemBrainPress's patch: within 12 mm of the top node
+constexpr double kPatchRadiusMm = 12.0;  // FemBrainPress's patch: within 12 mm of the top node
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -116,10 +121,10 @@ struct Result {
 
 int main(int argc, char** argv) {
   std::string out_dir;
-  double cell_mm = 10.0, depth_mm = 10.0, region_mm = 0.0;
+  double cell_mm = 10.0, depth_mm = 10.0, region_mm = 0.0, patch_mm = kPatchRadiusMm;
   int splits = 1, c3d10_splits = -1, increments = 10;
   std::vector<double> nus;
-  bool skip_linear = false;
+  bool skip_linear = false, skip_nonlinear = false;
   neurosim::cli::Parser cli("press_refinement_bench",
                             "The coarse brain's patch press in C3D10 (ccx), smoothed-tet and "
                             "linear-tet, NONLINEAR and LINEAR, on the mesh and its 1 -> 8 splits.");
@@ -128,6 +133,10 @@ int main(int argc, char** argv) {
   cli.add_option("--cell-size", cell_mm, "neurosim-model --cell-size, unit mm")
       ->capture_default_str();
   cli.add_option("--depth", depth_mm, "press depth, unit mm")->capture_default_str();
+  cli.add_option("--patch-radius", patch_mm,
+                 "the held patch: surface nodes within this distance of the top node, unit mm")
+      ->check(neurosim::cli::range(1.0, 80.0))
+      ->capture_default_str();
   cli.add_option("--region", region_mm,
                  "sub-model radius around the top node, unit mm (0: the whole brain)")
       ->capture_default_str();
@@ -138,7 +147,12 @@ int main(int argc, char** argv) {
   cli.add_option("--increments", increments, "ccx NLGEOM equal increments")->capture_default_str();
   cli.add_option("--nu", nus, "Poisson ratio, repeatable (default 0.49)");
   cli.add_flag("--no-linear", skip_linear, "NONLINEAR only");
+  cli.add_flag("--no-nonlinear", skip_nonlinear, "LINEAR only");
   if (auto rc = cli.parse(argc, argv)) return *rc;
+  if (skip_linear && skip_nonlinear) {
+    std::fprintf(stderr, "press_refinement_bench: error: --no-linear and --no-nonlinear leave nothing to run\n");
+    return 2;
+  }
   if (nus.empty()) nus.push_back(0.49);
   if (c3d10_splits < 0) c3d10_splits = splits;
   try {
@@ -169,13 +183,14 @@ int main(int argc, char** argv) {
     std::vector<neurosim::mesh::Tri> cut_faces;
     const bool region = region_mm > 0.0;
     if (region) cut_faces = neurosim::bench::cut_region(brain, top_x, region_mm * 1e-3);
-    // The patch on the first mesh: FemBrainPress's (surface nodes within 12 mm of the top).
+    // The patch on the first mesh: the surface nodes within --patch-radius of the top
+    // (FemBrainPress's: 12 mm).
     std::vector<char> in_patch(brain.mesh.num_vertices(), 0);
     {
       const int top = top_of(brain.mesh);
       const Vec3 t = brain.mesh.vertices()[static_cast<std::size_t>(top)];
       for (int v : brain.mesh.surface_vertices())
-        if ((brain.mesh.vertices()[static_cast<std::size_t>(v)] - t).norm() < kPatchRadiusM)
+        if ((brain.mesh.vertices()[static_cast<std::size_t>(v)] - t).norm() < patch_mm * 1e-3)
           in_patch[static_cast<std::size_t>(v)] = 1;
       for (int v : brain.fixed_nodes)
         if (in_patch[static_cast<std::size_t>(v)])
@@ -235,6 +250,7 @@ int main(int argc, char** argv) {
         mat.poisson_ratio = nu;
         for (bool nonlinear : {true, false}) {
           if (!nonlinear && skip_linear) continue;
+          if (nonlinear && skip_nonlinear) continue;
           const std::string mname = nonlinear ? "NONLINEAR" : "LINEAR";
           auto add = [&](const std::string& el, double f, double sec) {
             results.push_back({s, nu, mname, el, f, sec});
@@ -269,15 +285,89 @@ int main(int argc, char** argv) {
       return std::nan("");
     };
     const int finest_c3d10 = std::min(c3d10_splits, splits);
-    std::printf("# press %.3g mm on the %.3g mm brain%s, patch within 12 mm of the top node\n",
+    std::printf("# press %.3g mm on the %.3g mm brain%s, patch within %.3g mm of the top node\n",
                 depth_mm, cell_mm,
-                region ? (", sub-model within " + std::to_string(region_mm) + " mm, cut clamped").c_str() : "");
+                region ? (", sub-model within " + std::to_string(region_mm) + " mm, cut clamped").c_str() : "",
+                patch_mm);
     std::printf("split,nu,model,element,force_n,over_c3d10_same_mesh,over_c3d10_split_%d\n", finest_c3d10);
     for (const auto& r : results) {
       const double same = find(r.split, r.nu, r.model, "C3D10");
       const double fine = find(finest_c3d10, r.nu, r.model, "C3D10");
       std::printf("%d,%.2f,%s,%s,%.6g,%.4f,%.4f\n", r.split, r.nu, r.model.c_str(),
                   r.element.c_str(), r.force_n, r.force_n / same, r.force_n / fine);
+    }
+    // The converged answer: each element's three finest meshes extrapolated (Richardson).
+    if (splits >= 2) {
+      struct Limit {
+        double order{std::nan("")}, force_n{std::nan("")};
+        std::string why;
+      };
+      auto richardson = [](double f0, double f1, double f2) {
+        Limit l;
+        const double d01 = f0 - f1, d12 = f1 - f2;
+        if (!std::isfinite(f0) || !std::isfinite(f1) || !std::isfinite(f2)) {
+          l.why = "a mesh missing";
+        } else if (d12 == 0.0 || d01 / d12 <= 0.0) {
+          l.why = "the differences change sign";
+        } else {
+          l.order = std::log2(d01 / d12);
+          if (l.order < 0.3) {
+            l.why = "order below 0.3";
+          } else {
+            l.force_n = f2 - d12 / (std::exp2(l.order) - 1.0);
+          }
+        }
+        return l;
+      };
+      // An element's three finest meshes (C3D10 may stop before ours: --c3d10-splits).
+      auto limit_of = [&](double nu, const std::string& mname, const std::string& el,
+                          int* finest) {
+        int top = splits;
+        while (top >= 0 && !std::isfinite(find(top, nu, mname, el))) --top;
+        *finest = top;
+        if (top < 2) {
+          Limit l;
+          l.why = "fewer than three meshes";
+          return l;
+        }
+        return richardson(find(top - 2, nu, mname, el), find(top - 1, nu, mname, el),
+                          find(top, nu, mname, el));
+      };
+      std::ofstream lcsv(out / "press_refinement_limits.csv");
+      lcsv << "nu,model,element,finest_split,f_finest_minus_2,f_finest_minus_1,f_finest,order,"
+              "limit_n,reason\n";
+      std::printf("\n# Richardson limits, each from its element's three finest meshes (h halved "
+                  "per split)\n");
+      std::printf("nu,model,element,finest_split,order,limit_n,limit_over_c3d10_limit,reason\n");
+      std::vector<std::string> model_names;
+      if (!skip_nonlinear) model_names.push_back("NONLINEAR");
+      if (!skip_linear) model_names.push_back("LINEAR");
+      const std::vector<std::string> elements = {"C3D10", "smoothed-tet", "linear-tet"};
+      for (double nu : nus) {
+        for (const auto& mname : model_names) {
+          int c_top = 0;
+          const Limit c = limit_of(nu, mname, "C3D10", &c_top);
+          for (const auto& el : elements) {
+            int top = 0;
+            const Limit l = limit_of(nu, mname, el, &top);
+            char line[320];
+            std::snprintf(line, sizeof line, "%.2f,%s,%s,%d,%.6g,%.6g,%.6g,%.3f,%.6g,%s", nu,
+                          mname.c_str(), el.c_str(), top, find(top - 2, nu, mname, el),
+                          find(top - 1, nu, mname, el), find(top, nu, mname, el), l.order,
+                          l.force_n, l.why.c_str());
+            lcsv << line << '\n';
+            std::printf("%.2f,%s,%s,%d,%.3f,%.6g,%.4f,%s\n", nu, mname.c_str(), el.c_str(), top,
+                        l.order, l.force_n, l.force_n / c.force_n, l.why.c_str());
+          }
+          // Every mesh's force against C3D10's limit (the converged answer).
+          for (int sp = 0; sp <= splits; ++sp)
+            for (const auto& el : elements)
+              if (std::isfinite(find(sp, nu, mname, el)))
+                std::printf("  split %d %s %s: %.6g N = %.4f of C3D10's limit\n", sp,
+                            mname.c_str(), el.c_str(), find(sp, nu, mname, el),
+                            find(sp, nu, mname, el) / c.force_n);
+        }
+      }
     }
     return 0;
   } catch (const std::exception& e) {
