@@ -34,12 +34,18 @@
 namespace neurosim::fem {
 namespace {
 
-TEST(FemBrainPress, SmoothedTetWithinTenPercentOfC3d10) {
-  const auto dir = neurosim::testing::temp_dir("brain_press_model");
+// The coarse Colin27 brain (neurosim-model --cell-size 10) written to dir/brain_press.scene, its
+// log to dir/model.log; the command's status (0: built).
+int build_coarse_brain(const std::filesystem::path& dir) {
   const std::string cmd = (neurosim::testing::bin_dir() / "neurosim-model").string() +
                           " --cell-size 10 --name brain_press --out-dir " + dir.string() + " > " +
                           (dir / "model.log").string() + " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << neurosim::testing::slurp(dir / "model.log");
+  return std::system(cmd.c_str());
+}
+
+TEST(FemBrainPress, SmoothedTetWithinTenPercentOfC3d10) {
+  const auto dir = neurosim::testing::temp_dir("brain_press_model");
+  ASSERT_EQ(build_coarse_brain(dir), 0) << neurosim::testing::slurp(dir / "model.log");
   const scene::Model model = scene::load_model(dir / "brain_press.scene");
   const scene::LoadedMesh& brain = model.meshes.front();
   const mesh::TetMesh& m = brain.mesh;
@@ -112,10 +118,7 @@ TEST(FemBrainPress, SmoothedTetWithinTenPercentOfC3d10) {
 // at nu 0.45 (bench/RESULTS.md, "The brain press's converged answer").
 TEST(FemBrainPress, SmoothedTetWithinFivePercentOfTheRefinedC3d10) {
   const auto dir = neurosim::testing::temp_dir("brain_press_refined");
-  const std::string cmd = (neurosim::testing::bin_dir() / "neurosim-model").string() +
-                          " --cell-size 10 --name brain_press --out-dir " + dir.string() + " > " +
-                          (dir / "model.log").string() + " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << neurosim::testing::slurp(dir / "model.log");
+  ASSERT_EQ(build_coarse_brain(dir), 0) << neurosim::testing::slurp(dir / "model.log");
   const scene::Model model = scene::load_model(dir / "brain_press.scene");
   scene::LoadedMesh brain = model.meshes.front();
   int top = brain.mesh.surface_vertices().front();
