@@ -66,6 +66,22 @@ inline QuadraticTets quadratic_tets(const mesh::TetMesh& m) {
   return q;
 }
 
+// A sub-model's clamp in C3D10 (sub_model.hpp): the clamped corners and the mid-nodes of the cut
+// faces' edges only (not of other edges between two clamped corners: the cut's rim on the
+// surface, edges through the inside), so the clamp is exactly the cut surface.
+inline std::vector<int> clamp_of_faces(const QuadraticTets& q, const std::vector<int>& corners,
+                                       const std::vector<mesh::Tri>& faces) {
+  std::vector<char> f(q.nodes.size(), 0);
+  for (int v : corners) f[static_cast<std::size_t>(v)] = 1;
+  for (const auto& tri : faces)
+    for (int k = 0; k < 3; ++k)
+      f[static_cast<std::size_t>(q.mid.at(std::minmax(tri[k], tri[(k + 1) % 3])))] = 1;
+  std::vector<int> out;
+  for (std::size_t v = 0; v < f.size(); ++v)
+    if (f[v]) out.push_back(static_cast<int>(v));
+  return out;
+}
+
 // The deck's *NODE (NSET NALL) and *ELEMENT (C3D10, ELSET EALL) blocks, 1-based ids; and a node
 // set (ten ids a line).
 inline void write_c3d10_mesh(std::ostream& out, const QuadraticTets& q) {

@@ -229,13 +229,12 @@ int main(int argc, char** argv) {
       if (s > 0) {
         // The patch follows the split: a midpoint is in it when both ends of its edge are.
         const neurosim::bench::SplitMesh probe = neurosim::bench::split_tets(brain.mesh);
-        std::vector<char> next(probe.mesh.num_vertices(), 0);
-        std::copy(in_patch.begin(), in_patch.end(), next.begin());
-        const std::size_t n = brain.mesh.num_vertices();
-        for (std::size_t k = 0; k < probe.edge_ends.size(); ++k)
-          next[n + k] = in_patch[static_cast<std::size_t>(probe.edge_ends[k][0])] &&
-                        in_patch[static_cast<std::size_t>(probe.edge_ends[k][1])];
-        in_patch = std::move(next);
+        std::vector<int> old_patch;
+        for (std::size_t v = 0; v < in_patch.size(); ++v)
+          if (in_patch[v]) old_patch.push_back(static_cast<int>(v));
+        in_patch.assign(probe.mesh.num_vertices(), 0);
+        for (int v : neurosim::bench::split_node_set(probe, old_patch))
+          in_patch[static_cast<std::size_t>(v)] = 1;
         if (region) neurosim::bench::split_region(brain, cut_faces);
         else neurosim::bench::split_loaded_mesh(brain);
       }
@@ -252,13 +251,7 @@ int main(int argc, char** argv) {
         lv.c3d10_nodes = q.nodes.size();
         patch_q = q.with_mid(patch);
         if (region) {  // exactly the cut faces clamped (their edges' mid-nodes, no other edge)
-          std::vector<char> f(q.nodes.size(), 0);
-          for (int v : brain.fixed_nodes) f[static_cast<std::size_t>(v)] = 1;
-          for (const auto& tri : cut_faces)
-            for (int k = 0; k < 3; ++k)
-              f[static_cast<std::size_t>(q.mid.at(std::minmax(tri[k], tri[(k + 1) % 3])))] = 1;
-          for (std::size_t v = 0; v < f.size(); ++v)
-            if (f[v]) fixed_q.push_back(static_cast<int>(v));
+          fixed_q = neurosim::bench::clamp_of_faces(q, brain.fixed_nodes, cut_faces);
         } else {
           fixed_q = q.with_mid(brain.fixed_nodes);
         }

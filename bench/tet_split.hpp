@@ -26,6 +26,21 @@ struct SplitMesh {
   std::vector<int> parent_tet;  // per new tetrahedron: the tetrahedron it came from
 };
 
+// A node set carried onto the split mesh: its nodes and the midpoint of every edge between two
+// of them (a held patch stays the same surface), in ascending order of the split mesh's ids.
+inline std::vector<int> split_node_set(const SplitMesh& s, const std::vector<int>& nodes) {
+  const std::size_t n = s.mesh.num_vertices() - s.edge_ends.size();
+  std::vector<char> in(n, 0);
+  for (int v : nodes) in[static_cast<std::size_t>(v)] = 1;
+  std::vector<int> out;
+  for (std::size_t v = 0; v < n; ++v)
+    if (in[v]) out.push_back(static_cast<int>(v));
+  for (std::size_t k = 0; k < s.edge_ends.size(); ++k)
+    if (in[static_cast<std::size_t>(s.edge_ends[k][0])] && in[static_cast<std::size_t>(s.edge_ends[k][1])])
+      out.push_back(static_cast<int>(n + k));
+  return out;
+}
+
 inline SplitMesh split_tets(const mesh::TetMesh& in) {
   std::vector<mesh::Vec3> x = in.vertices();
   std::unordered_map<std::uint64_t, int> edge_node;

@@ -141,14 +141,9 @@ TEST(FemBrainPress, SmoothedTetWithinFivePercentOfTheRefinedC3d10) {
   };
   const std::vector<int> patch0 = patch_of(coarse);
   ASSERT_GE(patch0.size(), 3u);
-  std::vector<char> in0(coarse.mesh.num_vertices(), 0);
-  for (int v : patch0) in0[v] = 1;
   const neurosim::bench::SplitMesh split = neurosim::bench::split_tets(coarse.mesh);
   ASSERT_EQ(split.mesh.num_vertices(), fine.mesh.num_vertices());
-  std::vector<int> patch1 = patch0;
-  for (std::size_t k = 0; k < split.edge_ends.size(); ++k)
-    if (in0[split.edge_ends[k][0]] && in0[split.edge_ends[k][1]])
-      patch1.push_back(static_cast<int>(coarse.mesh.num_vertices() + k));
+  const std::vector<int> patch1 = neurosim::bench::split_node_set(split, patch0);
   const Eigen::Vector3d press(0.0, 0.0, -0.002);
   auto patch_force = [](const Eigen::VectorXd& reaction_n, const std::vector<int>& nodes) {
     double f = 0.0;
@@ -160,13 +155,7 @@ TEST(FemBrainPress, SmoothedTetWithinFivePercentOfTheRefinedC3d10) {
   auto c3d10 = [&](const scene::LoadedMesh& m, const std::vector<mesh::Tri>& cut,
                    const std::vector<int>& patch, const Material& mat, const std::string& tag) {
     const testing::QuadraticMesh q = testing::quadratic(m.mesh);
-    std::vector<char> f(q.nodes.size(), 0);
-    for (int v : m.fixed_nodes) f[v] = 1;
-    for (const auto& tri : cut)
-      for (int k = 0; k < 3; ++k) f[q.mid.at(std::minmax(tri[k], tri[(k + 1) % 3]))] = 1;
-    std::vector<int> fixed_q;
-    for (std::size_t v = 0; v < f.size(); ++v)
-      if (f[v]) fixed_q.push_back(static_cast<int>(v));
+    const std::vector<int> fixed_q = neurosim::bench::clamp_of_faces(q, m.fixed_nodes, cut);
     const std::vector<int> patch_q = q.with_mid(patch);
     const CalculixResult r = testing::solve_c3d10(
         tag, q, mat, fixed_q, Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(q.nodes.size())),
