@@ -224,7 +224,7 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
       for (int j = 0; j < 3; ++j)
         for (int l = 0; l < 3; ++l)
           for (int i = 0; i < 3; ++i) c(i + 3 * j, i + 3 * l) += sh(l, j);
-      if (project_psd || eval.clamped) project_to_psd(c);
+      if (project_psd) project_to_psd(c);
     } else if (!nodal_) {
       stress_tangent(tier_, law, f, project_psd, c, &eval);
     } else {
@@ -246,7 +246,7 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
           volumetric_hessian(tier_, f, d2theta);
           c += ws.pressure_pa[e] * d2theta;
         }
-        if (project_psd || eval.clamped) project_to_psd(c);
+        if (project_psd) project_to_psd(c);
       }
     }
     if (!smoothed_) note(report, f, eval);

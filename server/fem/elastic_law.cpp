@@ -408,7 +408,12 @@ void stress_tangent(Tier tier, const LawConstants& c, const Mat3& h, bool projec
         tangent_columns([&](const Mat3& df) { return nh_dstress(c, point, df); }, dp_df);
       } else {
         // Nearly collapsed element (rare): central differences of the clamped stress, which
-        // is C0 in F; only the Newton direction depends on it, and it is projected below.
+        // is C0 in F; only the Newton direction depends on it. Not projected here: projecting
+        // one element's tangent makes Newton converge only linearly (a 10 mm press of the brain
+        // at 5 mm cells in smoothed-tet stalled at a contraction of 0.9 per full Newton step with
+        // one clamped cell: FemBrainPress.NonlinearCrushedCellsKeepNewtonSuperlinear); the solver
+        // projects the whole tangent when this one is not positive definite or gives no descent
+        // (project_psd).
         const double step = 1e-7 * (1.0 + h.norm());
         tangent_columns(
             [&](const Mat3& df) {
@@ -418,7 +423,6 @@ void stress_tangent(Tier tier, const LawConstants& c, const Mat3& h, bool projec
                   .eval();
             },
             dp_df);
-        project_psd = true;
       }
       break;
     }

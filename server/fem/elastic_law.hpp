@@ -65,7 +65,8 @@ double energy_density(Tier tier, const LawConstants& c, const Eigen::Matrix3d& h
 Eigen::Matrix3d first_piola(Tier tier, const LawConstants& c, const Eigen::Matrix3d& h,
                             LawEvaluation* eval = nullptr);
 // dP/dF at F = I + H (9x9, unit Pa), symmetric. project_psd: clip negative eigenvalues to zero (a descent
-// direction for Newton far from equilibrium); clamped neo-Hookean elements are always projected.
+// direction for Newton far from equilibrium). A clamped neo-Hookean element's tangent (central
+// differences of its C1 energy's stress) is projected only with project_psd.
 void stress_tangent(Tier tier, const LawConstants& c, const Eigen::Matrix3d& h, bool project_psd,
                     StressTangent& dp_df, LawEvaluation* eval = nullptr);
 

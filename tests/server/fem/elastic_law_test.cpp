@@ -157,9 +157,26 @@ TEST(FemElasticLaw, InvertedElementGetsFiniteRestoringStress) {
       EXPECT_LT(p.cwiseProduct(towards_rest).sum(), 0.0) << tier_name(tier);
       if (tier == Tier::kNonlinear) {
         EXPECT_TRUE(eval.clamped);
-        // Clamped tangent is projected: positive semidefinite.
-        const Eigen::SelfAdjointEigenSolver<StressTangent> eig(t);
+        // The clamped tangent is symmetric; projected (project_psd, the solver's fallback when
+        // the exact tangent is not positive definite) it is positive semidefinite.
+        EXPECT_LT((t - t.transpose()).cwiseAbs().maxCoeff(), 1e-6 * t.cwiseAbs().maxCoeff());
+        StressTangent tp;
+        stress_tangent(tier, c, H(f), true, tp);
+        const Eigen::SelfAdjointEigenSolver<StressTangent> eig(tp);
         EXPECT_GE(eig.eigenvalues().minCoeff(), -1e-9 * eig.eigenvalues().maxCoeff());
+        // Unprojected, it is the derivative of the clamped stress (central differences).
+        const double step = 1e-6;
+        for (int col = 0; col < 9; ++col) {
+          Eigen::Matrix3d df = Eigen::Matrix3d::Zero();
+          df(col % 3, col / 3) = 1.0;
+          const Eigen::Matrix3d dp =
+              (first_piola(tier, c, H(f + step * df)) - first_piola(tier, c, H(f - step * df))) /
+              (2.0 * step);
+          for (int row = 0; row < 9; ++row) {
+            EXPECT_NEAR(t(row, col), dp(row % 3, row / 3), 1e-4 * t.cwiseAbs().maxCoeff())
+                << "row " << row << " col " << col;
+          }
+        }
       }
     }
   }
