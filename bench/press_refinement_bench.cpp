@@ -148,7 +148,7 @@ int main(int argc, char** argv) {
   double cell_mm = 10.0, depth_mm = 10.0, region_mm = 0.0, patch_mm = kPatchRadiusMm;
   int splits = 1, c3d10_splits = -1, increments = 10;
   std::vector<double> nus;
-  bool skip_linear = false, skip_nonlinear = false;
+  bool skip_linear = false, skip_nonlinear = false, keep_pinned = false;
   neurosim::cli::Parser cli("press_refinement_bench",
                             "The coarse brain's patch press in C3D10 (ccx), smoothed-tet and "
                             "linear-tet, NONLINEAR and LINEAR, on the mesh and its 1 -> 8 splits.");
@@ -172,6 +172,9 @@ int main(int argc, char** argv) {
   cli.add_option("--nu", nus, "Poisson ratio, repeatable (default 0.49)");
   cli.add_flag("--no-linear", skip_linear, "NONLINEAR only");
   cli.add_flag("--no-nonlinear", skip_nonlinear, "LINEAR only");
+  cli.add_flag("--keep-pinned", keep_pinned,
+               "--region: a fixed node of the mesh inside the region stays fixed (the bundled brain's "
+               "pinned fragment near the top, --cell-size 5); refused without");
   if (auto rc = cli.parse(argc, argv)) return *rc;
   if (skip_linear && skip_nonlinear) {
     std::fprintf(stderr, "press_refinement_bench: error: --no-linear and --no-nonlinear leave nothing to run\n");
@@ -206,19 +209,20 @@ int main(int argc, char** argv) {
     const Vec3 top_x = brain.mesh.vertices()[static_cast<std::size_t>(top_of(brain.mesh))];
     std::vector<neurosim::mesh::Tri> cut_faces;
     const bool region = region_mm > 0.0;
-    if (region) cut_faces = neurosim::bench::cut_region(brain, top_x, region_mm * 1e-3);
+    if (region) cut_faces = neurosim::bench::cut_region(brain, top_x, region_mm * 1e-3, keep_pinned);
     // The patch on the first mesh: the surface nodes within --patch-radius of the top
     // (FemBrainPress's: 12 mm).
-    std::vector<char> in_patch(brain.mesh.num_vertices(), 0);
+    std::vector<int> patch;  // ascending, as split_node_set keeps it
     {
-      const int top = top_of(brain.mesh);
-      const Vec3 t = brain.mesh.vertices()[static_cast<std::size_t>(top)];
+      std::vector<char> in_patch(brain.mesh.num_vertices(), 0);
       for (int v : brain.mesh.surface_vertices())
-        if ((brain.mesh.vertices()[static_cast<std::size_t>(v)] - t).norm() < patch_mm * 1e-3)
+        if ((brain.mesh.vertices()[static_cast<std::size_t>(v)] - top_x).norm() < patch_mm * 1e-3)
           in_patch[static_cast<std::size_t>(v)] = 1;
       for (int v : brain.fixed_nodes)
         if (in_patch[static_cast<std::size_t>(v)])
           throw std::runtime_error("the patch holds a clamped node: a larger --region");
+      for (std::size_t v = 0; v < in_patch.size(); ++v)
+        if (in_patch[v]) patch.push_back(static_cast<int>(v));
     }
 
     std::ofstream csv(out / "press_refinement.csv");
@@ -228,20 +232,11 @@ int main(int argc, char** argv) {
     for (int s = 0; s <= splits; ++s) {
       if (s > 0) {
         // The patch follows the split: a midpoint is in it when both ends of its edge are.
-        const neurosim::bench::SplitMesh probe = neurosim::bench::split_tets(brain.mesh);
-        std::vector<int> old_patch;
-        for (std::size_t v = 0; v < in_patch.size(); ++v)
-          if (in_patch[v]) old_patch.push_back(static_cast<int>(v));
-        in_patch.assign(probe.mesh.num_vertices(), 0);
-        for (int v : neurosim::bench::split_node_set(probe, old_patch))
-          in_patch[static_cast<std::size_t>(v)] = 1;
+        patch = neurosim::bench::split_node_set(neurosim::bench::split_tets(brain.mesh), patch);
         if (region) neurosim::bench::split_region(brain, cut_faces);
         else neurosim::bench::split_loaded_mesh(brain);
       }
       const auto& m = brain.mesh;
-      std::vector<int> patch;
-      for (std::size_t v = 0; v < in_patch.size(); ++v)
-        if (in_patch[v]) patch.push_back(static_cast<int>(v));
       Level lv{s, m.num_vertices(), m.num_tets(), patch.size(), 0};
       const bool ccx = s <= c3d10_splits;
       Quadratic q;

@@ -25,10 +25,14 @@ namespace neurosim::bench {
 // Cuts m in place to its tetrahedra with centroid within radius_m of centre_m (the
 // face-connected piece of them around the tetrahedron whose centroid is nearest centre_m).
 // Nodes on a cut face (a face whose neighbour across it was dropped) are the fixed nodes; a
-// region holding a fixed node of the mesh (the brain's clamped base) is refused; the tetrahedra
-// keep their labels and materials.
-// Returns the cut faces (the clamp: split_region keeps exactly these clamped).
-inline std::vector<mesh::Tri> cut_region(scene::LoadedMesh& m, const mesh::Vec3& centre_m, double radius_m) {
+// region holding a fixed node of the mesh (the brain's clamped base) is refused unless
+// keep_pinned, when such a node stays fixed (the bundled brain pins the nodes of a fragment that
+// carving around the artery cuts off, one of them 16 mm from the top); the tetrahedra keep their
+// labels and materials.
+// Returns the cut faces (the clamp: split_region keeps exactly these clamped, and the pinned
+// nodes).
+inline std::vector<mesh::Tri> cut_region(scene::LoadedMesh& m, const mesh::Vec3& centre_m, double radius_m,
+                                         bool keep_pinned = false) {
   const auto& x = m.mesh.vertices();
   const auto& tets = m.mesh.tets();
   const auto& nb = m.mesh.neighbours();
@@ -90,9 +94,10 @@ inline std::vector<mesh::Tri> cut_region(scene::LoadedMesh& m, const mesh::Vec3&
   }
   std::vector<int> fixed_nodes;
   for (std::size_t v = 0; v < x.size(); ++v) {
-    if (id[v] >= 0 && fixed[v] && !cut[v])
-      throw std::invalid_argument("cut_region: the region holds a clamped node of the mesh");
-    if (id[v] >= 0 && cut[v]) fixed_nodes.push_back(id[v]);
+    if (id[v] >= 0 && fixed[v] && !cut[v] && !keep_pinned)
+      throw std::invalid_argument("cut_region: the region holds a clamped node of the mesh (mesh node " +
+                                  std::to_string(v) + ")");
+    if (id[v] >= 0 && (cut[v] || fixed[v])) fixed_nodes.push_back(id[v]);
   }
   for (auto& f : cut_faces)
     for (int& v : f) v = id[v];

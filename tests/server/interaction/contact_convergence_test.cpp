@@ -435,6 +435,17 @@ TEST(interaction_contact_convergence, RegionCutClampsExactlyItsCutFaces) {
   whole.mesh = testing::graded_block(xs, zs);
   whole.fixed_nodes = {0};
   EXPECT_THROW(bench::cut_region(whole, whole.mesh.vertices()[0], radius), std::invalid_argument);
+  // keep_pinned: the mesh's clamped node inside the region stays fixed, through the splits.
+  const Vec3 pinned_x = whole.mesh.vertices()[0];
+  std::vector<mesh::Tri> whole_cut = bench::cut_region(whole, pinned_x, radius, true);
+  auto pinned_fixed = [&]() {
+    for (int v : whole.fixed_nodes)
+      if ((whole.mesh.vertices()[static_cast<std::size_t>(v)] - pinned_x).norm() < 1e-15) return true;
+    return false;
+  };
+  EXPECT_TRUE(pinned_fixed());
+  bench::split_region(whole, whole_cut);
+  EXPECT_TRUE(pinned_fixed());
 }
 
 }  // namespace
