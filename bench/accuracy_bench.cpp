@@ -838,9 +838,10 @@ int main(int argc, char** argv) {
     {
       std::ofstream t(disc_table_path);
       if (!t) throw std::runtime_error(disc_table_path + ": cannot write");
-      t << "# Discretization error (element + mesh) of each scene's host mesh against the\n"
-           "# converged answer, CalculiX C3D10 on the finest mesh of the scene's series, in\n"
-           "# accuracy_bench's small-strain patch press (docs/accuracy.md). Read by\n"
+      t << "# Discretization error (element + mesh) of each scene's host mesh against\n"
+           "# CalculiX C3D10 on the finest mesh of the scene's series (not the converged answer\n"
+           "# where that mesh is coarse: press_refinement_bench --disc-table extrapolates nested\n"
+           "# refinements), in accuracy_bench's small-strain patch press (docs/accuracy.md). Read by\n"
            "# neurosim-server for SimStatus.discretization_error_estimate: the row of the host's\n"
            "# element, nu, vertex and tetrahedron counts, none: unknown.\n"
            "scene,element,poisson_ratio,host_vertices,host_tetrahedra,discretization_error\n";

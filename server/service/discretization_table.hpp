@@ -1,8 +1,10 @@
-// The discretization error (element + mesh) of a host mesh against the converged answer,
-// CalculiX C3D10 on the finest mesh of the scene's series (share/accuracy/discretization_error.csv,
-// written by accuracy_bench's patch press): the part of SimStatus's total error estimate the
-// tier table (accuracy_table.hpp, the tier against NONLINEAR on the same mesh and element)
-// leaves out. Looked up once at set-up for the host that runs; no row: unknown, never a guess.
+// The discretization error (element + mesh) of a host mesh against the converged answer
+// (share/accuracy/discretization_error.csv: the brain's rows by press_refinement_bench, a patch
+// press on nested refinements of the mesh extrapolated to the continuum; the cube's by
+// accuracy_bench, against CalculiX C3D10 on the series' finest mesh): the part of SimStatus's
+// total error estimate the tier table (accuracy_table.hpp, the tier against NONLINEAR on the same
+// mesh and element) leaves out. Looked up once at set-up for the host that runs; no row: unknown,
+// never a guess.
 #pragma once
 
 #include "server/fem/element.hpp"
@@ -23,7 +25,7 @@ class DiscretizationTable {
     double poisson_ratio{0.0};      // the host's nu, dimensionless
     std::size_t host_vertices{0};
     std::size_t host_tetrahedra{0};
-    double discretization_error{0.0};  // fraction vs C3D10 on the finest mesh (0.08 = 8 %)
+    double discretization_error{0.0};  // fraction vs the converged answer (0.08 = 8 %)
   };
 
   // CSV with '#' comment lines and the header
