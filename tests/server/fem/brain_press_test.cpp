@@ -44,6 +44,22 @@ int build_coarse_brain(const std::filesystem::path& dir) {
   return std::system(cmd.c_str());
 }
 
+// The position of the mesh's topmost surface node (largest z), unit m.
+Eigen::Vector3d top_of(const mesh::TetMesh& m) {
+  int top = m.surface_vertices().front();
+  for (int v : m.surface_vertices())
+    if (m.vertices()[v].z() > m.vertices()[top].z()) top = v;
+  return m.vertices()[top];
+}
+
+// The pressed patch: the surface nodes within 12 mm of top_x.
+std::vector<int> patch_at(const mesh::TetMesh& m, const Eigen::Vector3d& top_x) {
+  std::vector<int> patch;
+  for (int v : m.surface_vertices())
+    if ((m.vertices()[v] - top_x).norm() < 0.012) patch.push_back(v);
+  return patch;
+}
+
 TEST(FemBrainPress, SmoothedTetWithinTenPercentOfC3d10) {
   const auto dir = neurosim::testing::temp_dir("brain_press_model");
   ASSERT_EQ(build_coarse_brain(dir), 0) << neurosim::testing::slurp(dir / "model.log");
@@ -53,12 +69,7 @@ TEST(FemBrainPress, SmoothedTetWithinTenPercentOfC3d10) {
   // The bundled brain's E (3 kPa); nu and the element set per case below.
   EXPECT_DOUBLE_EQ(brain.material.youngs_modulus_pa, 3000.0);
 
-  int top = m.surface_vertices().front();
-  for (int v : m.surface_vertices())
-    if (m.vertices()[v].z() > m.vertices()[top].z()) top = v;
-  std::vector<int> patch;
-  for (int v : m.surface_vertices())
-    if ((m.vertices()[v] - m.vertices()[top]).norm() < 0.012) patch.push_back(v);
+  const std::vector<int> patch = patch_at(m, top_of(m));
   ASSERT_GE(patch.size(), 3u);
   const Eigen::Vector3d press(0.0, 0.0, -0.002);
   Eigen::VectorXd values(3 * static_cast<Eigen::Index>(patch.size()));
@@ -122,10 +133,7 @@ TEST(FemBrainPress, SmoothedTetWithinFivePercentOfTheRefinedC3d10) {
   ASSERT_EQ(build_coarse_brain(dir), 0) << neurosim::testing::slurp(dir / "model.log");
   const scene::Model model = scene::load_model(dir / "brain_press.scene");
   scene::LoadedMesh brain = model.meshes.front();
-  int top = brain.mesh.surface_vertices().front();
-  for (int v : brain.mesh.surface_vertices())
-    if (brain.mesh.vertices()[v].z() > brain.mesh.vertices()[top].z()) top = v;
-  const Eigen::Vector3d top_x = brain.mesh.vertices()[top];
+  const Eigen::Vector3d top_x = top_of(brain.mesh);
   std::vector<mesh::Tri> cut_faces = neurosim::bench::cut_region(brain, top_x, 0.060);
   const scene::LoadedMesh coarse = brain;
   const std::vector<mesh::Tri> cut0 = cut_faces;  // split_region replaces them by their children
@@ -134,13 +142,7 @@ TEST(FemBrainPress, SmoothedTetWithinFivePercentOfTheRefinedC3d10) {
 
   // The patch: the coarse surface nodes within 12 mm of the top; on the split mesh those and the
   // midpoints of the edges between two of them (the same held surface).
-  auto patch_of = [&](const scene::LoadedMesh& m) {
-    std::vector<int> patch;
-    for (int v : m.mesh.surface_vertices())
-      if ((m.mesh.vertices()[v] - top_x).norm() < 0.012) patch.push_back(v);
-    return patch;
-  };
-  const std::vector<int> patch0 = patch_of(coarse);
+  const std::vector<int> patch0 = patch_at(coarse.mesh, top_x);
   ASSERT_GE(patch0.size(), 3u);
   const neurosim::bench::SplitMesh split = neurosim::bench::split_tets(coarse.mesh);
   ASSERT_EQ(split.mesh.num_vertices(), fine.mesh.num_vertices());
@@ -212,16 +214,10 @@ TEST(FemBrainPress, NonlinearCrushedCellsKeepNewtonSuperlinear) {
   ASSERT_EQ(build_coarse_brain(dir), 0) << neurosim::testing::slurp(dir / "model.log");
   const scene::Model model = scene::load_model(dir / "brain_press.scene");
   scene::LoadedMesh brain = model.meshes.front();
-  int top = brain.mesh.surface_vertices().front();
-  for (int v : brain.mesh.surface_vertices())
-    if (brain.mesh.vertices()[v].z() > brain.mesh.vertices()[top].z()) top = v;
-  const Eigen::Vector3d top_x = brain.mesh.vertices()[top];
+  const Eigen::Vector3d top_x = top_of(brain.mesh);
   std::vector<mesh::Tri> cut_faces = neurosim::bench::cut_region(brain, top_x, 0.040);
-  std::vector<int> patch0;
-  for (int v : brain.mesh.surface_vertices())
-    if ((brain.mesh.vertices()[v] - top_x).norm() < 0.012) patch0.push_back(v);
-  const std::vector<int> patch =
-      neurosim::bench::split_node_set(neurosim::bench::split_tets(brain.mesh), patch0);
+  const std::vector<int> patch = neurosim::bench::split_node_set(
+      neurosim::bench::split_tets(brain.mesh), patch_at(brain.mesh, top_x));
   neurosim::bench::split_region(brain, cut_faces);  // exactly the cut faces stay clamped
   const mesh::TetMesh& m = brain.mesh;
   const std::vector<int>& fixed = brain.fixed_nodes;
