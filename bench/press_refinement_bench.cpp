@@ -21,7 +21,10 @@
 // (F(h) = F* + C h^p, h halved per split: observed order p = log2((F0 - F1) / (F1 - F2)),
 // F* = F2 - (F1 - F2) / (2^p - 1)), refused (printed as nan, with the reason) when the
 // differences change sign or the order is below 0.3 (no asymptotic range); and every force
-// against C3D10's extrapolated limit. Writes DIR/press_refinement_limits.csv.
+// against C3D10's extrapolated limit. Writes DIR/press_refinement_limits.csv. --disc-table FILE:
+// the unsplit mesh's LINEAR discretization error against the converged answer (C3D10's limit, or
+// smoothed-tet's when C3D10 ran on fewer than three meshes), keyed by the whole scene mesh: the
+// brain's rows of share/accuracy/discretization_error.csv.
 // `press_refinement_bench --out DIR --region 40 --splits 1 --depth 10 --nu 0.49`.
 #include "c3d10_press.hpp"
 #include "common/cli.hpp"
