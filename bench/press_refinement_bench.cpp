@@ -189,6 +189,11 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "press_refinement_bench: error: --no-linear and --no-nonlinear leave nothing to run\n");
     return 2;
   }
+  if (keep_pinned && region_mm <= 0.0) {
+    std::fprintf(stderr, "press_refinement_bench: error: --keep-pinned needs --region (the whole "
+                         "brain keeps every fixed node anyway)\n");
+    return 2;
+  }
   if (!disc_table.empty() && (skip_linear || splits < 2)) {
     std::fprintf(stderr, "press_refinement_bench: error: --disc-table needs the LINEAR press on "
                          "three meshes (--splits 2 or more, no --no-linear)\n");
