@@ -17,29 +17,38 @@
 // |u - u_ref| (u interpolated in the run's mesh) / RMS |u_ref|; max_strain = largest principal
 // Green-Lagrange strain of the run's fields. These three are errors against our own answer.
 //
-// Against the outside answer (columns after max_strain; needs `ccx`, else they print nan):
-// discretization_error = the error of the run's element on the run's mesh in a small-strain
-// patch press against CalculiX C3D10 (quadratic tetrahedra, mid-edge nodes added) on the finest
-// mesh: the host alone, its fixed nodes as in the scene, the surface nodes within the patch
-// radius of the press point (brain 12 mm, cube 20 mm on the face) held and moved 2 mm
-// along -up, linear elastic (the element's LINEAR StaticSolver); |F - F_c3d10| / F_c3d10 with F
-// the patch force. C3D10 on the finest mesh is the best outside answer here, not the continuum
-// limit (DIR/converged.csv lists C3D10 on every mesh, so its own mesh trend is visible).
+// Against the converged answer (columns after max_strain): discretization_error = the error of
+// the run's element on the run's mesh in a small-strain patch press against the converged
+// (continuum) answer of that press: the surface nodes within the patch radius of the press point
+// (brain 12 mm, cube 20 mm on the face) held and moved 2 mm along -up, linear elastic (the
+// element's LINEAR StaticSolver), |F - F*| / F* with F the patch force. F* comes from
+// --converged-table (default share/accuracy/discretization_error.csv, the server's table: the
+// brain's rows by press_refinement_bench) when it has the row of the run's host (element, nu,
+// vertex and tetrahedron counts); else it is computed here: the host's sub-model within
+// region_m of the press point (sub_model.hpp, the cut faces clamped; the brain 60 mm, the cube
+// whole), smoothed-tet on it and on
+// its two nested 1 -> 8 splits (tet_split.hpp, the patch and the clamp kept), Richardson
+// extrapolation (richardson.hpp) to F*; with ccx, CalculiX C3D10 on the unsplit and once-split
+// sub-model as the outside check of F* (DIR/converged.csv: every level's force and its ratio to
+// F*). discretization_reference says which ("table" or "splits"; "none" and nan: not computed,
+// the finest split would exceed 600000 tetrahedra, as the cube's finest mesh whole does).
 // model_error = |f - f_nl| / |f_nl| with f_nl the NONLINEAR tier's force on the same mesh, element
 // and press (the tier's error; 0 for NONLINEAR, which is the model). total_error =
 // discretization_error + model_error (the two parts may also cancel).
+// --nu X (repeatable): the hosts' Poisson ratio axis (every run once per value; default the
+// scenes' own).
 // The cube is also compared with CalculiX (NLGEOM, neo-Hookean, C3D4 on the same mesh, against
 // the tiers with linear-tet, the element C3D4 is, whatever --element says): the
 // tool's footprint prescribed to the press depth, DIR/calculix.csv.
 //
 // Writes DIR/accuracy.csv (the table printed), DIR/converged.csv, DIR/calculix.csv,
-// DIR/pareto.png (total error against step time, log-log, one colour per element and tier, the
-// Pareto front drawn), and the two measured tables the server reads for its live estimate
+// DIR/pareto.png (total error against the converged answer, against step time and against the
+// tier's update rate, log-log, one colour per element and tier, the Pareto front drawn), and the two measured tables the server reads for its live estimate
 // (SimStatus expected_force_error, discretization_error_estimate, total_error_estimate): the
 // tier's error (--table, default DIR/force_error.csv: finest mesh, exact coupling, every
 // element, with the element and the host's nu) and the discretization error (--disc-table,
-// default DIR/discretization_error.csv: every element and mesh, keyed by the host's element, nu,
-// vertex and tetrahedron counts). The committed ones are in share/accuracy/.
+// default DIR/discretization_error.csv: the rows computed here by splits, keyed by the host's
+// element, nu, vertex and tetrahedron counts). The committed ones are in share/accuracy/.
 //
 // A run's force has settled when it moved at most 0.1 % (kSettledSpread) over the last 20 steps
 // (kSettleSteps); the tier table takes only rows whose run and NONLINEAR reference settled.
@@ -50,12 +59,13 @@
 // another cell size) instead of the bundled one.
 //
 // --finest-only: only the finest mesh of each scene (the bundled one for the brain), no C3D10
-// patch press (no discretization rows, those columns nan) and no CalculiX comparison: the runs
-// the tier table takes (its rows are the finest mesh's), at a fraction of the time.
+// and no CalculiX comparison (the discretization part still from the table or the splits): the
+// runs the tier table takes (its rows are the finest mesh's), at a fraction of the time.
 #include "c3d10_press.hpp"
 #include "common/cli.hpp"
 #include "common/stats.hpp"
 #include "idl/wire/recording_io.hpp"
+#include "richardson.hpp"
 #include "server/cli/replay.hpp"
 #include "server/fem/calculix.hpp"
 #include "server/fem/element.hpp"
@@ -65,6 +75,8 @@
 #include "server/interaction/simulation.hpp"
 #include "server/scene/compile.hpp"
 #include "server/scene/scene.hpp"
+#include "server/service/discretization_table.hpp"
+#include "sub_model.hpp"
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
@@ -80,6 +92,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -122,6 +135,9 @@ struct SceneCase {
   // the plane through it normal to `up` when `flat_face`), unit m.
   double patch_radius_m{0.0};
   bool flat_face{false};
+  // The converged answer's sub-model: the tetrahedra with centroid within this distance of
+  // `origin` (sub_model.hpp), unit m; 0: the whole host, its fixed nodes as in the scene.
+  double region_m{0.0};
   std::vector<Resolution> resolutions;  // coarse to fine
 };
 
@@ -473,22 +489,135 @@ double element_patch_force(const SceneCase& sc, const neurosim::scene::LoadedMes
   return f;
 }
 
-// The same press solved by CalculiX with C3D10 (a node added at the middle of every edge; the
-// fixed and pressed sets take the mid-nodes of their edges), linear elastic, unit N.
-double c3d10_patch_force(const SceneCase& sc, const neurosim::scene::LoadedMesh& host,
-                         const std::vector<int>& patch, const fs::path& dir,
-                         const std::string& job) {
+// Every material of `m` at Poisson ratio nu (the patch press and the --nu axis).
+void set_poisson_ratio(neurosim::scene::LoadedMesh& m, double nu) {
+  m.material.poisson_ratio = nu;
+  for (auto& mat : m.materials.materials) mat.poisson_ratio = nu;
+  for (auto& t : m.tissues) t.material.poisson_ratio = nu;
+}
+
+// One mesh's discretization error per element against the converged answer of the patch press.
+struct Discretization {
+  std::string reference;  // "table" (--converged-table's row), "splits" or "none" (too large)
+  std::map<std::string, double> error;  // element name -> |F - F*| / F*
+};
+
+constexpr int kConvergedSplits = 2;  // three nested meshes: the fewest Richardson takes
+// C3D10 on a level of at most this many tetrahedra (ccx on one thread: about 5 min at 100k).
+constexpr std::size_t kC3d10MaxTets = 120000;
+// The finest split solved, at most (smoothed-tet's factor: 13 GB at 540k tetrahedra; the cube's
+// finest mesh split twice, 1.16M, ran out of memory): beyond, no converged answer computed.
+constexpr std::size_t kSplitMaxTets = 600000;
+
+// The converged answer computed (see the file's header): the sub-model of `host` within
+// sc.region_m of the press point (the whole host when 0), smoothed-tet on it and on its kConvergedSplits nested splits
+// extrapolated (Richardson), each element of `elements` on the unsplit sub-model against F*; with
+// ccx, C3D10 on every level up to kC3d10MaxTets. F* is C3D10's limit when C3D10 ran on all three
+// levels with an asymptotic range, else smoothed-tet's (press_refinement_bench's rule); both
+// limits are printed. One converged.csv row per level and element (error_vs_limit = F / F* - 1,
+// signed) and per limit (split "limit"). Throws when neither has an asymptotic range; reference
+// "none" and no errors when the finest split would exceed kSplitMaxTets.
+Discretization converged_by_splits(const SceneCase& sc, neurosim::scene::LoadedMesh host,
+                                   const std::vector<std::string>& elements, bool ccx,
+                                   const fs::path& dir, const std::string& label,
+                                   std::ostream& conv_csv) {
   if (host.tissue_with_other_material() != nullptr)
     throw std::runtime_error(sc.name + ": host tissue '" + host.tissue_with_other_material()->name +
-                             "' has its own material: the C3D10 check takes one material");
-  const auto q = neurosim::bench::quadratic_tets(host.mesh);
-  const std::vector<int> fixed_q = q.with_mid(host.fixed_nodes), patch_q = q.with_mid(patch);
-  const auto r = neurosim::bench::run_c3d10_press(dir, job, "accuracy_bench patch press", q,
-                                                  host.material, fixed_q, patch_q,
-                                                  -kPatchPressM * sc.up);
-  double f = 0.0;
-  for (int v : patch_q) f -= r.reaction_n.segment<3>(3 * v).dot(sc.up);
-  return f;
+                             "' has its own material: the patch press takes one material");
+  const bool region = sc.region_m > 0.0;
+  std::vector<neurosim::mesh::Tri> cut_faces;
+  if (region) cut_faces = neurosim::bench::cut_region(host, sc.origin, sc.region_m, /*keep_pinned=*/true);
+  if (host.mesh.num_tets() << (3 * kConvergedSplits) > kSplitMaxTets) {
+    std::fprintf(stderr, "  converged: %s %s: NOT computed: its finest split would have %zu "
+                         "tetrahedra, over the %zu this bench solves (discretization_error nan; "
+                         "--converged-table may have its row)\n",
+                 sc.name.c_str(), label.c_str(), host.mesh.num_tets() << (3 * kConvergedSplits),
+                 kSplitMaxTets);
+    return Discretization{"none", {}};
+  }
+  std::vector<int> patch = patch_nodes(sc, host.mesh, label);
+  for (int v : host.fixed_nodes)
+    if (std::binary_search(patch.begin(), patch.end(), v))
+      throw std::runtime_error(sc.name + " " + label + ": the patch holds a clamped node of the "
+                               "sub-model (region_m too small)");
+  struct Force {
+    int split;
+    std::size_t tets, patch_nodes;
+    std::string element;
+    double force_n, solve_s;
+  };
+  std::vector<Force> forces;
+  auto seconds_since = [](std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+  std::vector<std::string> level0 = elements;
+  if (std::find(level0.begin(), level0.end(), "smoothed-tet") == level0.end())
+    level0.push_back("smoothed-tet");
+  for (int sp = 0; sp <= kConvergedSplits; ++sp) {
+    if (sp > 0) {
+      patch = neurosim::bench::split_node_set(neurosim::bench::split_tets(host.mesh), patch);
+      if (region) neurosim::bench::split_region(host, cut_faces);
+      else neurosim::bench::split_loaded_mesh(host);
+    }
+    for (const auto& el : sp == 0 ? level0 : std::vector<std::string>{"smoothed-tet"}) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const double f = element_patch_force(sc, host, *neurosim::fem::parse_element(el), patch);
+      forces.push_back({sp, host.mesh.num_tets(), patch.size(), el, f, seconds_since(t0)});
+    }
+    if (ccx && host.mesh.num_tets() <= kC3d10MaxTets) {
+      const auto q = neurosim::bench::quadratic_tets(host.mesh);
+      const auto fixed_q = region ? neurosim::bench::clamp_of_faces(q, host.fixed_nodes, cut_faces)
+                                  : q.with_mid(host.fixed_nodes);
+      const auto patch_q = q.with_mid(patch);
+      const auto t0 = std::chrono::steady_clock::now();
+      const auto r = neurosim::bench::run_c3d10_press(
+          dir, sc.name + "_" + label + "_s" + std::to_string(sp), "accuracy_bench patch press", q,
+          host.material, fixed_q, patch_q, -kPatchPressM * sc.up);
+      double f = 0.0;
+      for (int v : patch_q) f -= r.reaction_n.segment<3>(3 * v).dot(sc.up);
+      forces.push_back({sp, host.mesh.num_tets(), patch.size(), "C3D10", f, seconds_since(t0)});
+    }
+  }
+  auto limit_of = [&](const std::string& el) {
+    std::vector<double> f;
+    for (const auto& x : forces)
+      if (x.element == el) f.push_back(x.force_n);
+    return f.size() == 3 ? neurosim::bench::richardson(f[0], f[1], f[2])
+                         : neurosim::bench::Limit{NAN, NAN, "C3D10 on fewer than three levels"};
+  };
+  const neurosim::bench::Limit st = limit_of("smoothed-tet"), c3 = limit_of("C3D10");
+  const bool by_c3d10 = std::isfinite(c3.force_n);
+  const double f_star = by_c3d10 ? c3.force_n : st.force_n;
+  if (!std::isfinite(f_star))
+    throw std::runtime_error(sc.name + " " + label + ": no converged answer from the splits ("
+                             "smoothed-tet: " + st.why + "; C3D10: " + c3.why + ")");
+  std::fprintf(stderr,
+               "  converged: %s %s nu %.3g: F* = %.6g N, %s (C3D10's limit %.6g N order %.2f%s%s; "
+               "smoothed-tet's %.6g N order %.2f%s%s)\n",
+               sc.name.c_str(), label.c_str(), host.material.poisson_ratio, f_star,
+               by_c3d10 ? "C3D10's limit" : "smoothed-tet's limit", c3.force_n, c3.order,
+               c3.why.empty() ? "" : ": ", c3.why.c_str(), st.force_n, st.order,
+               st.why.empty() ? "" : ": ", st.why.c_str());
+  for (const auto& [el, l] : {std::make_pair(std::string("C3D10"), c3),
+                              std::make_pair(std::string("smoothed-tet"), st)})
+    if (std::isfinite(l.force_n))
+      forces.push_back({-1, 0, 0, el + " limit", l.force_n, 0.0});
+  Discretization d;
+  d.reference = "splits";
+  for (const auto& f : forces) {
+    char line[320];
+    std::snprintf(line, sizeof line, "%s,%s,%.6g,splits,%s,%zu,%zu,%s,%.6g,%.4g,%.1f",
+                  sc.name.c_str(), label.c_str(), host.material.poisson_ratio,
+                  f.split < 0 ? "limit" : std::to_string(f.split).c_str(), f.tets, f.patch_nodes,
+                  f.element.c_str(), f.force_n, f.force_n / f_star - 1.0, f.solve_s);
+    conv_csv << line << '\n';
+    std::fprintf(stderr, "  converged: %s\n", line);
+    if (f.split == 0 && f.element != "C3D10" &&
+        std::find(elements.begin(), elements.end(), f.element) != elements.end())
+      d.error[f.element] = std::abs(f.force_n / f_star - 1.0);
+  }
+  conv_csv.flush();
+  return d;
 }
 
 bool have_program(const char* name) {
@@ -505,12 +634,15 @@ int main(int argc, char** argv) {
   double max_hold_s = 0.0;
   int tier_update_steps = -1;
   std::string out_dir, table_path, disc_table_path, brain_scene;
+  std::string converged_table = std::string(NEUROSIM_SOURCE_DIR) +
+                                "/share/accuracy/discretization_error.csv";
   std::vector<std::string> elements, press_filter;
+  std::vector<double> nus;
   std::vector<std::string> scenes{"cube_cylinder", "brain_artery"};
   neurosim::cli::Parser cli("accuracy_bench",
                             "What accuracy costs in time: tiers x resolutions x coupling over "
                             "recorded presses, errors against the finest nonlinear run and, split "
-                            "into discretization and model, against CalculiX C3D10.");
+                            "into discretization and model, against the converged answer.");
   cli.add_flag("--csv", csv, "print only the CSV table");
   cli.add_option("--out", out_dir, "output folder DIR (accuracy.csv, calculix.csv, pareto.png)")
       ->required();
@@ -520,6 +652,14 @@ int main(int argc, char** argv) {
                  "smoothed-tet | anp-tet | linear-tet, repeatable: the element axis (every "
                  "mesh's element per run; default: the scenes' material.element)")
       ->check(neurosim::cli::one_of({"smoothed-tet", "anp-tet", "linear-tet"}));
+  cli.add_option("--nu", nus,
+                 "the hosts' Poisson ratio, repeatable: the nu axis (default: the scenes' own)")
+      ->check(neurosim::cli::in_range(0.0, 0.4999));
+  cli.add_option("--converged-table", converged_table,
+                 "discretization errors against the converged answer taken by host (element, nu, "
+                 "mesh) where it has the row; the others computed by nested splits; none: "
+                 "compute every one")
+      ->capture_default_str();
   cli.add_option("--press", press_filter, "presses to run: 5, 10, 20, L10 (default all)")
       ->check(neurosim::cli::one_of({"5", "10", "20", "L10"}));
   cli.add_flag("--exact-only", exact_only, "leave out the ITERATIVE coupling runs");
@@ -569,6 +709,7 @@ int main(int argc, char** argv) {
         sc.tip_radius_m = 0.010;
         sc.patch_radius_m = 0.020;  // 3 or more face nodes on the coarse mesh
         sc.flat_face = true;
+        sc.region_m = 0.0;  // the whole cube: a 35 mm cut clamps a 20 mm patch too near
         for (double f : {0.5, 1.0, 2.0})
           if (!finest_only || f == 2.0) sc.resolutions.push_back({"", cube_at(path, f), 0});
       } else if (name == "brain_artery") {
@@ -578,10 +719,12 @@ int main(int argc, char** argv) {
         sc.side = sc.up.cross(Vec3::UnitZ()).normalized();
         sc.tip_radius_m = 0.006;
         sc.patch_radius_m = 0.012;
+        sc.region_m = 0.060;  // press_refinement_bench's sub-model size
         const fs::path models = out / "models";
         if (!finest_only) {
           sc.resolutions.push_back({"", brain_at(11.0, models), 0});
           sc.resolutions.push_back({"", brain_at(9.0, models), 0});
+          sc.resolutions.push_back({"", brain_at(7.0, models), 0});
         }
         sc.resolutions.push_back(
             {"", neurosim::scene::load_model(brain_scene.empty() ? src + "/scenes/brain_artery.scene"
@@ -601,7 +744,7 @@ int main(int argc, char** argv) {
     const char* header =
         "scene,tier,resolution,coupling,iterations,press_mm,step_p50_us,step_p99_us,update_hz,"
         "disp_rel_error,force_rel_error,max_strain,element,discretization_error,model_error,"
-        "total_error";
+        "total_error,poisson_ratio,discretization_reference";
     std::ofstream table_csv(out / "accuracy.csv");
     table_csv << header << '\n';
     std::printf("%s\n", header);
@@ -615,76 +758,83 @@ int main(int argc, char** argv) {
       std::string element;
       double disc_err, model_err, total_err;
       double nu;  // the host's Poisson ratio
+      std::string disc_ref;  // "table", "splits" (Discretization::reference) or "none"
       // The run's force and (other tiers) NONLINEAR's on the same mesh settled by the end of the
       // hold (kSettledSpread); the tier table takes only such rows.
       bool settled;
     };
     const bool ccx = !finest_only && have_program("ccx");
     if (finest_only)
-      std::fprintf(stderr, "accuracy_bench: --finest-only: no C3D10 and no CalculiX: "
-                           "discretization_error and total_error print nan\n");
+      std::fprintf(stderr, "accuracy_bench: --finest-only: no C3D10 and no CalculiX\n");
     else if (!ccx)
-      std::fprintf(stderr, "accuracy_bench: note: ccx (calculix-ccx) not installed: "
-                           "discretization_error and total_error print nan\n");
+      std::fprintf(stderr, "accuracy_bench: note: ccx (calculix-ccx) not installed: no C3D10 "
+                           "check of the converged answer\n");
+    std::optional<neurosim::service::DiscretizationTable> conv_table;
+    if (converged_table != "none") {
+      conv_table = neurosim::service::DiscretizationTable::read(converged_table);
+      std::fprintf(stderr, "accuracy_bench: discretization errors from %s where it has the host's "
+                           "row, the others by nested splits\n", converged_table.c_str());
+    }
     std::ofstream conv_csv(out / "converged.csv");
-    conv_csv << "scene,resolution,element,patch_nodes,patch_force_n,rel_error_vs_c3d10_finest,"
-                "solve_s\n";
+    conv_csv << "scene,resolution,poisson_ratio,reference,split,tets,patch_nodes,element,"
+                "patch_force_n,error_vs_limit,solve_s\n";
     std::vector<Row> rows;
-    std::vector<std::string> disc_rows;  // the server's discretization table
+    std::vector<std::string> disc_rows;  // the server's discretization table (splits rows)
     using neurosim::fem::Tier;
-    for (const auto& sc : cases) {
+    for (auto& sc : cases) {
       std::vector<std::string> recordings;
       for (const auto& p : presses) recordings.push_back(write_press(sc, p, out / "recordings"));
       std::vector<std::string> scene_elements = elements;
       if (scene_elements.empty())
         scene_elements.push_back(
             neurosim::fem::element_name(sc.resolutions.back().model.meshes.at(0).material.element));
-      // The discretization check: C3D10 on every mesh, each element on every mesh, against
-      // C3D10 on the finest.
-      std::map<std::pair<std::string, int>, double> disc;  // (element, resolution index)
-      if (ccx) {
-        std::vector<double> f_c3d10(sc.resolutions.size());
-        std::vector<std::vector<int>> patches(sc.resolutions.size());
-        for (std::size_t ri = sc.resolutions.size(); ri-- > 0;) {
-          const auto& res = sc.resolutions[ri];
-          const auto& host = res.model.meshes.at(0);
-          patches[ri] = patch_nodes(sc, host.mesh, res.label);
-          const auto t0 = std::chrono::steady_clock::now();
-          f_c3d10[ri] = c3d10_patch_force(sc, host, patches[ri], out / "c3d10",
-                                          sc.name + "_" + res.label);
-          const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-          char line[256];
-          std::snprintf(line, sizeof line, "%s,%d,C3D10,%zu,%.6g,%.4g,%.1f", sc.name.c_str(),
-                        res.host_vertices, patches[ri].size(), f_c3d10[ri],
-                        std::abs(f_c3d10[ri] - f_c3d10.back()) / f_c3d10.back(), dt);
-          conv_csv << line << '\n';
-          std::fprintf(stderr, "  converged: %s\n", line);
-        }
+      std::vector<double> scene_nus = nus;
+      if (scene_nus.empty())
+        scene_nus.push_back(sc.resolutions.back().model.meshes.at(0).material.poisson_ratio);
+      const std::vector<Resolution> as_given = sc.resolutions;
+      for (const double nu : scene_nus) {
+      for (std::size_t ri = 0; ri < sc.resolutions.size(); ++ri) {
+        sc.resolutions[ri].model = as_given[ri].model;
+        set_poisson_ratio(sc.resolutions[ri].model.meshes.at(0), nu);
+      }
+      // The discretization part: each element on each mesh against the converged answer.
+      std::map<std::pair<std::string, int>, Discretization> disc;  // (element, resolution)
+      for (std::size_t ri = 0; ri < sc.resolutions.size(); ++ri) {
+        const auto& res = sc.resolutions[ri];
+        const auto& host = res.model.meshes.at(0);
+        Discretization d;
+        d.reference = "table";
         for (const auto& el_name : scene_elements) {
-          const auto el = *neurosim::fem::parse_element(el_name);
-          for (std::size_t ri = 0; ri < sc.resolutions.size(); ++ri) {
-            const auto& res = sc.resolutions[ri];
-            const auto t0 = std::chrono::steady_clock::now();
-            const double f = element_patch_force(sc, res.model.meshes.at(0), el, patches[ri]);
-            const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-            const double e = std::abs(f - f_c3d10.back()) / f_c3d10.back();
-            disc[{el_name, static_cast<int>(ri)}] = e;
-            {
-              const auto& host = res.model.meshes.at(0);
-              char drow[256];
-              std::snprintf(drow, sizeof drow, "%s,%s,%.6g,%zu,%zu,%.4g", sc.name.c_str(),
-                            el_name.c_str(), host.material.poisson_ratio, host.mesh.num_vertices(),
-                            host.mesh.num_tets(), e);
-              disc_rows.emplace_back(drow);
-            }
-            char line[256];
-            std::snprintf(line, sizeof line, "%s,%d,%s,%zu,%.6g,%.4g,%.1f", sc.name.c_str(),
-                          res.host_vertices, el_name.c_str(), patches[ri].size(), f, e, dt);
-            conv_csv << line << '\n';
-            std::fprintf(stderr, "  converged: %s\n", line);
+          const auto row = conv_table ? conv_table->find(*neurosim::fem::parse_element(el_name), nu,
+                                                         host.mesh.num_vertices(),
+                                                         host.mesh.num_tets())
+                                      : std::nullopt;
+          if (!row) {
+            d.error.clear();
+            break;
           }
+          d.error[el_name] = row->discretization_error;
+          char line[256];
+          std::snprintf(line, sizeof line, "%s,%s,%.6g,table,,%zu,,%s,,%.4g,", sc.name.c_str(),
+                        res.label.c_str(), nu, host.mesh.num_tets(), el_name.c_str(),
+                        row->discretization_error);
+          conv_csv << line << '\n';
         }
-        conv_csv.flush();
+        if (d.error.empty()) {
+          d = converged_by_splits(sc, host, scene_elements, ccx, out / "c3d10", res.label,
+                                  conv_csv);
+          for (const auto& [el_name, e] : d.error) {
+            char drow[256];
+            std::snprintf(drow, sizeof drow, "%s,%s,%.6g,%zu,%zu,%.4g", sc.name.c_str(),
+                          el_name.c_str(), nu, host.mesh.num_vertices(), host.mesh.num_tets(), e);
+            disc_rows.emplace_back(drow);
+          }
+        } else {
+          std::fprintf(stderr, "  converged: %s %s nu %.3g: from %s\n", sc.name.c_str(),
+                       res.label.c_str(), nu, converged_table.c_str());
+        }
+        for (const auto& el_name : scene_elements)
+          disc[{el_name, static_cast<int>(ri)}] = d;
       }
       for (const auto& el_name : scene_elements) {
       const auto element = *neurosim::fem::parse_element(el_name);
@@ -703,9 +853,10 @@ int main(int argc, char** argv) {
         std::vector<Config> configs{{Tier::kNonlinear, 0}, {Tier::kLinear, 0}};
         if (!res.model.couplings.empty() && !exact_only)
           for (int it : {1, 3, 10, 30}) configs.push_back({Tier::kLinear, it});
-        const auto d_it = disc.find({el_name, ri});
+        const Discretization& dz = disc.at({el_name, ri});
+        const auto dz_el = dz.error.find(el_name);
         const double disc_err =
-            d_it != disc.end() ? d_it->second : std::numeric_limits<double>::quiet_NaN();
+            dz_el != dz.error.end() ? dz_el->second : std::numeric_limits<double>::quiet_NaN();
         std::vector<Vec3> nl_force(presses.size(), Vec3::Zero());  // NONLINEAR, this mesh
         std::vector<char> nl_settled(presses.size(), 0);
         for (const auto& cfg : configs) {
@@ -734,6 +885,7 @@ int main(int argc, char** argv) {
               ro.trace = (out / "traces" /
                           (sc.name + "_" + el_name + "_" + neurosim::fem::tier_name(cfg.tier) + "_" +
                            std::to_string(res.host_vertices) + "_" +
+                           (nus.empty() ? std::string() : "nu" + std::to_string(nu).substr(0, 5) + "_") +
                            (cfg.iterations ? "it" + std::to_string(cfg.iterations) : "exact") +
                            "_" + presses[pi].label + ".csv"))
                              .string();
@@ -768,15 +920,16 @@ int main(int argc, char** argv) {
                     presses[pi].label, neurosim::common::percentile(r.step_us, 0.5),
                     neurosim::common::percentile(r.step_us, 0.99),
                     update_hz, de, fe, r.max_strain, el_name, disc_err, me, disc_err + me,
-                    res.model.meshes.at(0).material.poisson_ratio,
+                    res.model.meshes.at(0).material.poisson_ratio, dz.reference,
                     r.unsettled <= kSettledSpread && nl_settled[pi] != 0};
             char line[512];
             std::snprintf(line, sizeof line,
-                          "%s,%s,%d,%s,%d,%s,%.1f,%.1f,%.1f,%.4g,%.4g,%.4g,%s,%.4g,%.4g,%.4g",
+                          "%s,%s,%d,%s,%d,%s,%.1f,%.1f,%.1f,%.4g,%.4g,%.4g,%s,%.4g,%.4g,%.4g,%.6g,%s",
                           row.scene.c_str(), row.tier.c_str(), row.resolution, row.coupling.c_str(),
                           row.iterations, row.press.c_str(), row.p50, row.p99, row.update_hz,
                           row.disp_err, row.force_err, row.strain, row.element.c_str(),
-                          row.disc_err, row.model_err, row.total_err);
+                          row.disc_err, row.model_err, row.total_err, row.nu,
+                          row.disc_ref.c_str());
             std::printf("%s\n", line);
             std::fflush(stdout);
             table_csv << line << '\n';
@@ -800,6 +953,8 @@ int main(int argc, char** argv) {
         }
       }
       }  // element
+      }  // nu
+      sc.resolutions = as_given;
     }
     table_csv.close();
     conv_csv.close();
@@ -834,16 +989,18 @@ int main(int argc, char** argv) {
         t << line;
       }
     }
-    // The discretization table the server reads (only with ccx: no outside answer, no rows).
+    // The discretization table the server reads: the rows computed here (the --converged-table
+    // rows taken are that table's already).
     {
       std::ofstream t(disc_table_path);
       if (!t) throw std::runtime_error(disc_table_path + ": cannot write");
-      t << "# Discretization error (element + mesh) of each scene's host mesh against\n"
-           "# CalculiX C3D10 on the finest mesh of the scene's series (not the converged answer\n"
-           "# where that mesh is coarse: press_refinement_bench --disc-table extrapolates nested\n"
-           "# refinements), in accuracy_bench's small-strain patch press (docs/accuracy.md). Read by\n"
-           "# neurosim-server for SimStatus.discretization_error_estimate: the row of the host's\n"
-           "# element, nu, vertex and tetrahedron counts, none: unknown.\n"
+      t << "# Discretization error (element + mesh) of each scene's host mesh against the\n"
+           "# converged answer: accuracy_bench's small-strain patch press on the host's sub-model\n"
+           "# around the press point (the whole cube), against the Richardson limit of it and two\n"
+           "# nested 1 -> 8 splits (C3D10's where ccx ran on all three, else smoothed-tet's;\n"
+           "# docs/accuracy.md). Read by neurosim-server for\n"
+           "# SimStatus.discretization_error_estimate: the row of the host's element, nu, vertex and\n"
+           "# tetrahedron counts, none: unknown.\n"
            "scene,element,poisson_ratio,host_vertices,host_tetrahedra,discretization_error\n";
       for (const auto& line : disc_rows) t << line << '\n';
     }
@@ -868,62 +1025,114 @@ int main(int argc, char** argv) {
                            "comparison\n");
     }
 
-    // pareto.png: total error (discretization against C3D10 + the tier's) against step p99, one
-    // colour per element and tier, the front over all runs. Without ccx the total is unknown:
-    // force_rel_error (against our own reference) is plotted and the axis says so.
+    // pareto.png: total error (discretization against the converged answer + the tier's), left
+    // against the contact step's p99, right against the tier's update rate (tiers that update:
+    // LINEAR has no update), one series per element, tier and nu, the front per nu (a tissue
+    // has one nu: fronts across two would mix two problems).
     {
       const fs::path data = out / "pareto.dat";
       std::ofstream d(data);
-      auto y_of = [&](const Row& r) { return ccx ? r.total_err : r.force_err; };
-      std::vector<std::pair<std::string, std::string>> blocks;  // (element, tier)
-      for (const auto& r : rows)
-        if (std::find(blocks.begin(), blocks.end(), std::make_pair(r.element, r.tier)) ==
-            blocks.end())
-          blocks.emplace_back(r.element, r.tier);
-      for (const auto& [el, tier] : blocks) {
-        d << "# " << el << " " << tier << "\n";
+      auto plotted = [](const Row& r) { return std::isfinite(r.total_err) && r.total_err > 0.0; };
+      struct Block {
+        std::string element, tier;
+        double nu;
+        bool operator==(const Block& o) const {
+          return element == o.element && tier == o.tier && nu == o.nu;
+        }
+      };
+      std::vector<Block> blocks;
+      std::vector<double> block_nus;
+      for (const auto& r : rows) {
+        if (std::find(blocks.begin(), blocks.end(), Block{r.element, r.tier, r.nu}) == blocks.end())
+          blocks.push_back({r.element, r.tier, r.nu});
+        if (std::find(block_nus.begin(), block_nus.end(), r.nu) == block_nus.end())
+          block_nus.push_back(r.nu);
+      }
+      auto nu_text = [](double nu) {
+        char t[32];
+        std::snprintf(t, sizeof t, "nu %.3g", nu);
+        return std::string(t);
+      };
+      for (const auto& b : blocks) {
+        d << "# " << b.element << " " << b.tier << " " << nu_text(b.nu)
+          << ": step_p99_us total_error update_hz\n";
         int n = 0;
         for (const auto& r : rows)
-          if (r.element == el && r.tier == tier && std::isfinite(y_of(r)) && y_of(r) > 0.0) {
-            d << r.p99 << ' ' << y_of(r) << '\n';
+          if (Block{r.element, r.tier, r.nu} == b && plotted(r)) {
+            d << r.p99 << ' ' << r.total_err << ' ' << (r.update_hz > 0.0 ? r.update_hz : NAN)
+              << '\n';
             ++n;
           }
-        if (n == 0) d << "NaN NaN\n";  // keeps the block (gnuplot index)
+        if (n == 0) d << "NaN NaN NaN\n";  // keeps the block (gnuplot index)
         d << "\n\n";
       }
-      std::vector<std::pair<double, double>> pts;
-      for (const auto& r : rows)
-        if (std::isfinite(y_of(r)) && y_of(r) > 0.0) pts.emplace_back(r.p99, y_of(r));
-      std::sort(pts.begin(), pts.end());
-      d << "# pareto front\n";
-      double best = 1e300;
-      for (const auto& p : pts)
-        if (p.second < best) {
-          best = p.second;
-          d << p.first << ' ' << p.second << '\n';
-        }
-      if (pts.empty()) d << "NaN NaN\n";
+      // The fronts per nu: the least error at no more step time; at no lower update rate.
+      auto front = [&](bool by_rate, double nu) {
+        std::vector<std::pair<double, double>> pts;
+        for (const auto& r : rows)
+          if (r.nu == nu && plotted(r) && (!by_rate || r.update_hz > 0.0))
+            pts.emplace_back(by_rate ? -r.update_hz : r.p99, r.total_err);
+        std::sort(pts.begin(), pts.end());
+        d << "# pareto front " << nu_text(nu) << (by_rate ? " (update rate)" : " (step time)")
+          << "\n";
+        double best = 1e300;
+        for (const auto& p : pts)
+          if (p.second < best) {
+            best = p.second;
+            d << (by_rate ? -p.first : p.first) << ' ' << p.second << '\n';
+          }
+        if (pts.empty()) d << "NaN NaN\n";
+        d << "\n\n";
+      };
+      for (double nu : block_nus) front(false, nu);
+      for (double nu : block_nus) front(true, nu);
       d.close();
       if (have_program("gnuplot")) {
         const fs::path script = out / "pareto.gp";
         std::ofstream g(script);
-        g << "set terminal png size 900,600\nset termoption noenhanced\nset output '"
-          << (out / "pareto.png").string()
-          << "'\nset logscale xy\nset xlabel 'contact step p99, without the tier update (us)'\n"
-             "set yrange [1e-3:10]\n"
-             "set ylabel '"
-          << (ccx ? "total force error: element+mesh vs C3D10 (finest) + tier"
-                  : "force error against the finest nonlinear run (no ccx)")
-          << "'\nset title 'What accuracy costs in time (accuracy_bench; errors > 10 off scale)'\n"
-             "set key top right\n"
-             "set grid\nplot ";
         const char* colours[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"};
-        for (std::size_t k = 0; k < blocks.size(); ++k)
-          g << "'" << data.string() << "' index " << k << " with points pt " << 5 + 2 * (k % 4)
-            << " lc rgb '" << colours[k % 6] << "' title '" << blocks[k].first << " "
-            << blocks[k].second << "', ";
-        g << "'" << data.string() << "' index " << blocks.size()
-          << " with steps lw 2 lc rgb 'black' title 'Pareto front'\n";
+        auto series = [&](const char* columns) {
+          for (std::size_t k = 0; k < blocks.size(); ++k) {
+            // One colour per element and tier, filled points for the first nu, open for others.
+            std::vector<std::pair<std::string, std::string>> pairs;  // (element, tier), in order
+            for (const auto& b : blocks)
+              if (std::find(pairs.begin(), pairs.end(), std::make_pair(b.element, b.tier)) ==
+                  pairs.end())
+                pairs.emplace_back(b.element, b.tier);
+            const std::size_t c = static_cast<std::size_t>(
+                std::find(pairs.begin(), pairs.end(),
+                          std::make_pair(blocks[k].element, blocks[k].tier)) -
+                pairs.begin());
+            const std::size_t nu_index = static_cast<std::size_t>(
+                std::find(block_nus.begin(), block_nus.end(), blocks[k].nu) - block_nus.begin());
+            g << "'" << data.string() << "' index " << k << " using " << columns
+              << " with points pt " << (nu_index == 0 ? 5 + 2 * (c % 4) : 4 + 2 * (c % 4))
+              << " ps 1.3 lc rgb '" << colours[c % 6] << "' title '" << blocks[k].element << " "
+              << blocks[k].tier << " " << nu_text(blocks[k].nu) << "', ";
+          }
+        };
+        auto fronts = [&](std::size_t first, const char* style) {
+          for (std::size_t i = 0; i < block_nus.size(); ++i)
+            g << (i ? ", " : "") << "'" << data.string() << "' index " << first + i << " with "
+              << style << " lw 2 dt " << i + 1 << " lc rgb '" << (i % 2 ? "#888888" : "black")
+              << "' title 'Pareto front "
+              << nu_text(block_nus[i]) << "'";
+          g << "\n";
+        };
+        g << "set terminal png size 1500,700\nset termoption noenhanced\nset output '"
+          << (out / "pareto.png").string()
+          << "'\nset multiplot layout 1,2 title 'What accuracy costs in time (accuracy_bench): "
+             "total force error against the converged answer = element+mesh + tier; errors > 10 "
+             "off scale'\nset logscale xy\nset yrange [1e-2:10]\nset grid\n"
+             "set key top right font ',9'\n"
+             "set ylabel 'total force error vs the converged answer'\n"
+             "set xlabel 'contact step p99, without the tier update (us)'\nplot ";
+        series("1:2");
+        fronts(blocks.size(), "steps");
+        g << "set xlabel 'tier update rate (Hz; LINEAR has no update)'\nplot ";
+        series("3:2");
+        fronts(blocks.size() + block_nus.size(), "fsteps");
+        g << "unset multiplot\n";
         g.close();
         if (std::system(("gnuplot '" + script.string() + "'").c_str()) != 0)
           throw std::runtime_error("gnuplot failed on " + script.string());

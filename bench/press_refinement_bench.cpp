@@ -31,6 +31,7 @@
 #include "server/fem/calculix.hpp"
 #include "server/fem/equilibrium_solver.hpp"
 #include "server/fem/static_solver.hpp"
+#include "richardson.hpp"
 #include "server/scene/compile.hpp"
 #include "sub_model.hpp"
 #include "tet_split.hpp"
@@ -108,29 +109,8 @@ double element_force(const neurosim::mesh::TetMesh& m, fem::Material mat, fem::E
   return patch_force(s.reaction_n, patch);
 }
 
-// A Richardson limit: the observed order and the extrapolated force (unit N), or NaN and why.
-struct Limit {
-  double order{std::nan("")}, force_n{std::nan("")};
-  std::string why;
-};
-
-// F(h) = F* + C h^p from the forces on three nested meshes (h halved each time, f2 the finest):
-// p = log2((f0 - f1) / (f1 - f2)), F* = f2 - (f1 - f2) / (2^p - 1). Refused when a force is
-// missing, the differences vanish or change sign, or p < 0.3 (no asymptotic range).
-Limit richardson(double f0, double f1, double f2) {
-  Limit l;
-  const double d01 = f0 - f1, d12 = f1 - f2;
-  if (!std::isfinite(f0) || !std::isfinite(f1) || !std::isfinite(f2)) {
-    l.why = "a mesh missing";
-  } else if (d12 == 0.0 || d01 / d12 <= 0.0) {
-    l.why = "the differences vanish or change sign";
-  } else {
-    l.order = std::log2(d01 / d12);
-    if (l.order < 0.3) l.why = "order below 0.3";
-    else l.force_n = f2 - d12 / (std::exp2(l.order) - 1.0);
-  }
-  return l;
-}
+using neurosim::bench::Limit;
+using neurosim::bench::richardson;
 
 struct Level {
   int split{0};

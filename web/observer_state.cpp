@@ -293,7 +293,7 @@ bool ObserverState::ingest_status(const neurosim_SimStatus& st) {
                    {"max_strain", std::isfinite(st.max_strain) ? st.max_strain : -1.0},
                    {"expected_force_error",
                     std::isfinite(st.expected_force_error) ? st.expected_force_error : -1.0},
-                   // Against the converged answer (C3D10 on the finest mesh), -1: unknown.
+                   // Against the converged answer (nested refinements extrapolated), -1: unknown.
                    {"discretization_error_estimate", std::isfinite(st.discretization_error_estimate)
                                                          ? st.discretization_error_estimate
                                                          : -1.0},

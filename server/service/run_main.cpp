@@ -120,8 +120,9 @@ int run_main(int argc, char** argv, const SimulationFactory& factory) {
         disc_table = v;
         disc_table_given = true;
       },
-      "the hosts' measured discretization error against the converged answer (CalculiX C3D10, "
-      "accuracy_bench's table; 'none': unknown). Default: " NEUROSIM_DEFAULT_DISCRETIZATION_TABLE
+      "the hosts' measured discretization error against the converged answer (nested "
+      "refinements extrapolated: press_refinement_bench's and accuracy_bench's table; 'none': "
+      "unknown). Default: " NEUROSIM_DEFAULT_DISCRETIZATION_TABLE
       " when it exists");
   p.add_option("--station-idle-timeout", opt.station_idle_timeout_s,
                "a station that sends no ToolState for S seconds loses its slot (and its writer "

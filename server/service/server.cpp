@@ -147,7 +147,7 @@ struct Server::Impl {
   std::vector<std::string> tool_ids;
   Workspace workspace;                 // scene bounding box + opt.workspace_margin_m
   std::optional<AccuracyTable> accuracy;
-  double discretization_error{-1.0};  // host vs converged C3D10 (fraction), -1: unknown
+  double discretization_error{-1.0};  // host vs converged answer (fraction), -1: unknown
   std::string host_element;
   double host_poisson_ratio{0.0};
 
@@ -294,7 +294,7 @@ void Server::Impl::configure() {
   host_poisson_ratio = host_material.poisson_ratio;
   {
     std::ostringstream d;
-    d << "error vs converged C3D10: host '" << mesh_info.at(0).id << "' (" << host_element
+    d << "error vs converged answer: host '" << mesh_info.at(0).id << "' (" << host_element
       << ", nu " << host_poisson_ratio << ", " << host_vertices << " vertices, "
       << host_tetrahedra << " tetrahedra as loaded): ";
     if (opt.discretization_table.empty()) {

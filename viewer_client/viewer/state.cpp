@@ -349,7 +349,7 @@ std::string percent(double fraction) {
 std::string error_text(const ServerStatusView& st) {
   if (!st.received) return {};
   std::ostringstream os;
-  os << "error vs converged C3D10 "
+  os << "error vs converged answer "
      << (st.total_error_estimate >= 0 ? percent(st.total_error_estimate) : std::string("unknown"))
      << " (mesh + element "
      << (st.discretization_error_estimate >= 0 ? percent(st.discretization_error_estimate)

@@ -64,14 +64,14 @@ struct ServerStatusView {
   double step_rate_measured_hz = 0; // unit Hz
   double max_strain = -1;            // largest strain in the fields (0.14 = 14 %); -1: not measured
   double expected_force_error = -1;  // the tier's expected force error there (fraction); -1: unknown
-  // Against the converged answer (CalculiX C3D10, finest mesh): the host's mesh + element part
+  // Against the converged answer (nested refinements extrapolated): the host's mesh + element part
   // and the total (that + the tier's), fractions; -1: unknown.
   double discretization_error_estimate = -1;
   double total_error_estimate = -1;
 };
 
-// The expected tool-force error against the converged answer (CalculiX C3D10 on the finest mesh)
-// and its two parts, as the overlay shows it: "error vs converged C3D10 ~17 % (mesh + element
+// The expected tool-force error against the converged answer (nested refinements extrapolated)
+// and its two parts, as the overlay shows it: "error vs converged answer ~17 % (mesh + element
 // ~8 %, tier ~9 %)"; a part the server does not know says "unknown" (no table row for the
 // element and mesh that run), the tier's "not measured" before a strain is, and the total is
 // then "unknown". "" before the first SimStatus.

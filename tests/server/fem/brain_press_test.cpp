@@ -15,7 +15,9 @@
 // 10 % of C3D10 on the same mesh and at most a quarter of linear-tet's error; 5 %
 // against C3D10 on this mesh is not met (it would take a stiffer element than the refined
 // answer supports). The second test compares against C3D10 one split finer on the press's
-// sub-model (the converged direction).
+// sub-model (the converged direction). Last, the Richardson extrapolation the benches take the
+// converged answer from (bench/richardson.hpp), on known power laws.
+#include "bench/richardson.hpp"
 #include "bench/sub_model.hpp"
 #include "bench/tet_split.hpp"
 #include "c3d10_reference.hpp"
@@ -255,6 +257,24 @@ TEST(FemBrainPress, NonlinearCrushedCellsKeepNewtonSuperlinear) {
   const std::size_t n = res.size();
   EXPECT_LT(res[n - 1] / res[n - 2], 0.1) << what;
   std::filesystem::remove_all(dir);
+}
+
+// F(h) = F* + C h^p sampled at h, h/2, h/4 gives back F* and p (p = 1, 1.5, 2; from above and
+// from below); forces that stop falling, turn, or fall at order < 0.3 have no limit, and say why.
+TEST(Richardson, RecoversAPowerLawAndRefusesNoAsymptoticRange) {
+  for (const double p : {1.0, 1.5, 2.0})
+    for (const double c : {0.4, -0.2}) {
+      auto f = [&](double h) { return 0.15 + c * std::pow(h, p); };
+      const bench::Limit l = bench::richardson(f(1.0), f(0.5), f(0.25));
+      EXPECT_NEAR(l.order, p, 1e-12) << "p " << p << " C " << c;
+      EXPECT_NEAR(l.force_n, 0.15, 1e-14) << "p " << p << " C " << c;
+      EXPECT_TRUE(l.why.empty());
+    }
+  EXPECT_EQ(bench::richardson(0.2, 0.18, 0.18).why, "the differences vanish or change sign");
+  EXPECT_EQ(bench::richardson(0.2, 0.18, 0.19).why, "the differences vanish or change sign");
+  EXPECT_EQ(bench::richardson(0.2, 0.18, 0.1615).why, "order below 0.3");  // p = 0.2
+  EXPECT_EQ(bench::richardson(0.2, std::nan(""), 0.1).why, "a mesh missing");
+  EXPECT_TRUE(std::isnan(bench::richardson(0.2, 0.18, 0.18).force_n));
 }
 
 }  // namespace

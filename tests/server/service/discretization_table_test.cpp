@@ -89,5 +89,25 @@ TEST(DiscretizationTable, TheBundledBrainHasItsRowAndAnotherElementIsUnknown) {
   }
 }
 
+// The other bundled scenes' hosts as they load have their rows too: the viscoelastic brain
+// (linear-tet at nu 0.45 on the bundled mesh: locking, tens of %) and the cube (linear-tet at
+// nu 0.4, 1798 vertices); each against the converged answer, so above zero.
+TEST(DiscretizationTable, TheViscoelasticBrainAndTheCubeHaveTheirRows) {
+  const DiscretizationTable t = DiscretizationTable::read(
+      neurosim::testing::source_dir() / "share/accuracy/discretization_error.csv");
+  for (const char* name : {"brain_viscoelastic", "cube_cylinder"}) {
+    const scene::Model model = scene::load_model(neurosim::testing::source_dir() / "scenes" /
+                                                 (std::string(name) + ".scene"));
+    const auto& host = model.meshes.at(0);
+    const auto row = t.find(host.material.element, host.material.poisson_ratio,
+                            host.mesh.num_vertices(), host.mesh.num_tets());
+    ASSERT_TRUE(row) << name << ": no row for " << fem::element_name(host.material.element)
+                     << ", nu " << host.material.poisson_ratio << ", "
+                     << host.mesh.num_vertices() << " vertices";
+    EXPECT_GT(row->discretization_error, 0.05) << name;
+    EXPECT_LT(row->discretization_error, 1.0) << name;
+  }
+}
+
 }  // namespace
 }  // namespace neurosim::service

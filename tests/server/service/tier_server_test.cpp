@@ -8,7 +8,7 @@
 // principal strain, expected_force_error the value the accuracy table given with
 // --accuracy-table gives at that strain (a test table: error = 20 x strain), and since that is
 // above the scene's bound (effects.max_expected_force_error) the server warns once. Against
-// the converged answer (CalculiX C3D10): discretization_error_estimate is the committed
+// the converged answer (nested refinements extrapolated): discretization_error_estimate is the committed
 // share/accuracy/discretization_error.csv's row for the host (the bundled and the 7 mm brain must
 // have one: smoothed-tet, nu 0.49) and total_error_estimate that + expected_force_error; a host on an
 // element the table has no row for says -1 (unknown) in both, and the log says so.
@@ -203,7 +203,7 @@ void press_and_hold(const Press& press, const char* tier) {
       // viewer's first field on the brain was not out after 8 s once at load ~7.
       60);
   std::printf("%s %s: max strain %.6g (server) vs %.6g (in process), expected force error %.6g, "
-              "vs converged C3D10: discretization %.6g, total %.6g\n",
+              "vs converged answer: discretization %.6g, total %.6g\n",
               press.scene, tier, status_strain, strain, status_error, status_disc, status_total);
   EXPECT_TRUE(measured) << "SimStatus max_strain " << status_strain << ", in process " << strain;
   EXPECT_NEAR(status_error, std::min(20.0, 20.0 * status_strain), 1e-12 * status_error);

@@ -228,17 +228,17 @@ TEST(ViewerState, TotalErrorAgainstTheConvergedAnswerIsShown) {
   EXPECT_EQ(s.server_status().discretization_error_estimate, 0.056);
   EXPECT_EQ(s.server_status().total_error_estimate, 0.146);
   EXPECT_EQ(nv::error_text(s.server_status()),
-            "error vs converged C3D10 ~15 % (mesh + element ~6 %, tier ~9 %)");
+            "error vs converged answer ~15 % (mesh + element ~6 %, tier ~9 %)");
   st->discretization_error_estimate = -1.0;
   st->total_error_estimate = -1.0;
   EXPECT_TRUE(s.ingest_status(*st)) << "unknown is a change";
   EXPECT_EQ(nv::error_text(s.server_status()),
-            "error vs converged C3D10 unknown (mesh + element unknown, tier ~9 %)");
+            "error vs converged answer unknown (mesh + element unknown, tier ~9 %)");
   st->max_strain = -1.0;
   st->expected_force_error = -1.0;
   EXPECT_TRUE(s.ingest_status(*st));
   EXPECT_EQ(nv::error_text(s.server_status()),
-            "error vs converged C3D10 unknown (mesh + element unknown, tier not measured)");
+            "error vs converged answer unknown (mesh + element unknown, tier not measured)");
   st->total_error_estimate = std::numeric_limits<double>::infinity();
   EXPECT_FALSE(s.ingest_status(*st)) << "not finite: malformed";
 }

@@ -47,10 +47,10 @@ export class StatusPanel {
       rows.push(['step time', `p50 ${fmt(s.step_time_p50_us, 0)}, p99 ${fmt(s.step_time_p99_us, 0, 'µs')}`]);
       rows.push(['deformation', `${fmt(status.bridge.deformation_hz, 1)} / ${fmt(s.viewer_rate_hz, 0, 'Hz')}`]);
       // Accuracy at the strain reached (-1: not measured / unknown): the total against the
-      // converged answer (CalculiX C3D10, finest mesh) and its parts, mesh + element and tier.
+      // converged answer (nested refinements extrapolated) and its parts, mesh + element and tier.
       if (s.max_strain >= 0) rows.push(['max strain', fmt(100 * s.max_strain, 1, '%')]);
       const pct = (v) => (v >= 0 ? `~${fmt(100 * v, 1, '%')}` : 'unknown');
-      rows.push(['error vs converged C3D10', `${pct(s.total_error_estimate)} (mesh + element ` +
+      rows.push(['error vs converged answer', `${pct(s.total_error_estimate)} (mesh + element ` +
         `${pct(s.discretization_error_estimate)}, tier ${s.max_strain >= 0
           ? pct(s.expected_force_error) : 'not measured'})`]);
       rows.push(['effects', s.effects || '–']);
