@@ -26,12 +26,12 @@
 // brain's rows by press_refinement_bench) when it has the row of the run's host (element, nu,
 // vertex and tetrahedron counts); else it is computed here: the host's sub-model within
 // region_m of the press point (sub_model.hpp, the cut faces clamped; the brain 60 mm, the cube
-// whole), smoothed-tet on it and on
-// its two nested 1 -> 8 splits (tet_split.hpp, the patch and the clamp kept), Richardson
-// extrapolation (richardson.hpp) to F*; with ccx, CalculiX C3D10 on the unsplit and once-split
-// sub-model as the outside check of F* (DIR/converged.csv: every level's force and its ratio to
-// F*). discretization_reference says which ("table" or "splits"; "none" and nan: not computed,
-// the finest split would exceed 600000 tetrahedra, as the cube's finest mesh whole does).
+// whole), smoothed-tet on it and on its two nested 1 -> 8 splits (tet_split.hpp, the patch and
+// the clamp kept), Richardson extrapolation (richardson.hpp) to F*; with ccx, CalculiX C3D10 on
+// every level of at most 120000 tetrahedra as the outside check, and its limit is F* when it ran
+// on all three (DIR/converged.csv: every level's force, both limits, each against F*).
+// discretization_reference says which ("table" or "splits"; "none" and nan: not computed, the
+// finest split would exceed 600000 tetrahedra, as the cube's finest mesh whole does).
 // model_error = |f - f_nl| / |f_nl| with f_nl the NONLINEAR tier's force on the same mesh, element
 // and press (the tier's error; 0 for NONLINEAR, which is the model). total_error =
 // discretization_error + model_error (the two parts may also cancel).
@@ -43,12 +43,13 @@
 //
 // Writes DIR/accuracy.csv (the table printed), DIR/converged.csv, DIR/calculix.csv,
 // DIR/pareto.png (total error against the converged answer, against step time and against the
-// tier's update rate, log-log, one colour per element and tier, the Pareto front drawn), and the two measured tables the server reads for its live estimate
-// (SimStatus expected_force_error, discretization_error_estimate, total_error_estimate): the
-// tier's error (--table, default DIR/force_error.csv: finest mesh, exact coupling, every
-// element, with the element and the host's nu) and the discretization error (--disc-table,
-// default DIR/discretization_error.csv: the rows computed here by splits, keyed by the host's
-// element, nu, vertex and tetrahedron counts). The committed ones are in share/accuracy/.
+// tier's update rate, log-log, one series per element, tier and nu, a Pareto front per nu), and
+// the two measured tables the server reads for its live estimate (SimStatus
+// expected_force_error, discretization_error_estimate, total_error_estimate): the tier's error
+// (--table, default DIR/force_error.csv: finest mesh, exact coupling, every element, with the
+// element and the host's nu) and the discretization error (--disc-table, default
+// DIR/discretization_error.csv: the rows computed here by splits, keyed by the host's element,
+// nu, vertex and tetrahedron counts). The committed ones are in share/accuracy/.
 //
 // A run's force has settled when it moved at most 0.1 % (kSettledSpread) over the last 20 steps
 // (kSettleSteps); the tier table takes only rows whose run and NONLINEAR reference settled.
@@ -510,13 +511,14 @@ constexpr std::size_t kC3d10MaxTets = 120000;
 constexpr std::size_t kSplitMaxTets = 600000;
 
 // The converged answer computed (see the file's header): the sub-model of `host` within
-// sc.region_m of the press point (the whole host when 0), smoothed-tet on it and on its kConvergedSplits nested splits
-// extrapolated (Richardson), each element of `elements` on the unsplit sub-model against F*; with
-// ccx, C3D10 on every level up to kC3d10MaxTets. F* is C3D10's limit when C3D10 ran on all three
-// levels with an asymptotic range, else smoothed-tet's (press_refinement_bench's rule); both
-// limits are printed. One converged.csv row per level and element (error_vs_limit = F / F* - 1,
-// signed) and per limit (split "limit"). Throws when neither has an asymptotic range; reference
-// "none" and no errors when the finest split would exceed kSplitMaxTets.
+// sc.region_m of the press point (the whole host when 0), smoothed-tet on it and on its
+// kConvergedSplits nested splits extrapolated (Richardson), each element of `elements` on the
+// unsplit sub-model against F*; with ccx, C3D10 on every level up to kC3d10MaxTets. F* is
+// C3D10's limit when C3D10 ran on all three levels with an asymptotic range, else smoothed-tet's
+// (press_refinement_bench's rule); both limits are printed. One converged.csv row per level and
+// element (error_vs_limit = F / F* - 1, signed) and per limit (split "limit"). Throws when
+// neither has an asymptotic range; reference "none" and no errors when the finest split would
+// exceed kSplitMaxTets.
 Discretization converged_by_splits(const SceneCase& sc, neurosim::scene::LoadedMesh host,
                                    const std::vector<std::string>& elements, bool ccx,
                                    const fs::path& dir, const std::string& label,
@@ -526,7 +528,8 @@ Discretization converged_by_splits(const SceneCase& sc, neurosim::scene::LoadedM
                              "' has its own material: the patch press takes one material");
   const bool region = sc.region_m > 0.0;
   std::vector<neurosim::mesh::Tri> cut_faces;
-  if (region) cut_faces = neurosim::bench::cut_region(host, sc.origin, sc.region_m, /*keep_pinned=*/true);
+  if (region)
+    cut_faces = neurosim::bench::cut_region(host, sc.origin, sc.region_m, /*keep_pinned=*/true);
   if (host.mesh.num_tets() << (3 * kConvergedSplits) > kSplitMaxTets) {
     std::fprintf(stderr, "  converged: %s %s: NOT computed: its finest split would have %zu "
                          "tetrahedra, over the %zu this bench solves (discretization_error nan; "
@@ -539,7 +542,7 @@ Discretization converged_by_splits(const SceneCase& sc, neurosim::scene::LoadedM
   for (int v : host.fixed_nodes)
     if (std::binary_search(patch.begin(), patch.end(), v))
       throw std::runtime_error(sc.name + " " + label + ": the patch holds a clamped node of the "
-                               "sub-model (region_m too small)");
+                               "sub-model or the scene (a larger region_m)");
   struct Force {
     int split;
     std::size_t tets, patch_nodes;
@@ -885,7 +888,8 @@ int main(int argc, char** argv) {
               ro.trace = (out / "traces" /
                           (sc.name + "_" + el_name + "_" + neurosim::fem::tier_name(cfg.tier) + "_" +
                            std::to_string(res.host_vertices) + "_" +
-                           (nus.empty() ? std::string() : "nu" + std::to_string(nu).substr(0, 5) + "_") +
+                           (nus.empty() ? std::string()
+                                        : "nu" + std::to_string(nu).substr(0, 5) + "_") +
                            (cfg.iterations ? "it" + std::to_string(cfg.iterations) : "exact") +
                            "_" + presses[pi].label + ".csv"))
                              .string();
