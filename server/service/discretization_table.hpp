@@ -1,7 +1,7 @@
 // The discretization error (element + mesh) of a host mesh against the converged answer
 // (share/accuracy/discretization_error.csv: the brain's rows by press_refinement_bench, a patch
 // press on nested refinements of the mesh extrapolated to the continuum; the cube's by
-// accuracy_bench, the same on a sub-model around its press point): the part of SimStatus's
+// accuracy_bench, the same on the whole cube's patch press): the part of SimStatus's
 // total error estimate the tier table (accuracy_table.hpp, the tier against NONLINEAR on the same
 // mesh and element) leaves out. Looked up once at set-up for the host that runs; no row: unknown,
 // never a guess.
