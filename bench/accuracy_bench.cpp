@@ -589,8 +589,8 @@ Discretization converged_by_splits(const SceneCase& sc, neurosim::scene::LoadedM
                          : neurosim::bench::Limit{NAN, NAN, "C3D10 on fewer than three levels"};
   };
   const neurosim::bench::Limit st = limit_of("smoothed-tet"), c3 = limit_of("C3D10");
-  const bool by_c3d10 = std::isfinite(c3.force_n);
-  const double f_star = by_c3d10 ? c3.force_n : st.force_n;
+  const neurosim::bench::ConvergedAnswer answer = neurosim::bench::converged_answer(c3, st);
+  const double f_star = answer.force_n;
   if (!std::isfinite(f_star))
     throw std::runtime_error(sc.name + " " + label + ": no converged answer from the splits ("
                              "smoothed-tet: " + st.why + "; C3D10: " + c3.why + ")");
@@ -598,7 +598,7 @@ Discretization converged_by_splits(const SceneCase& sc, neurosim::scene::LoadedM
                "  converged: %s %s nu %.3g: F* = %.6g N, %s (C3D10's limit %.6g N order %.2f%s%s; "
                "smoothed-tet's %.6g N order %.2f%s%s)\n",
                sc.name.c_str(), label.c_str(), host.material.poisson_ratio, f_star,
-               by_c3d10 ? "C3D10's limit" : "smoothed-tet's limit", c3.force_n, c3.order,
+               answer.by, c3.force_n, c3.order,
                c3.why.empty() ? "" : ": ", c3.why.c_str(), st.force_n, st.order,
                st.why.empty() ? "" : ": ", st.why.c_str());
   for (const auto& [el, l] : {std::make_pair(std::string("C3D10"), c3),
@@ -801,7 +801,7 @@ int main(int argc, char** argv) {
         set_poisson_ratio(sc.resolutions[ri].model.meshes.at(0), nu);
       }
       // The discretization part: each element on each mesh against the converged answer.
-      std::map<std::pair<std::string, int>, Discretization> disc;  // (element, resolution)
+      std::vector<Discretization> disc(sc.resolutions.size());  // per resolution
       for (std::size_t ri = 0; ri < sc.resolutions.size(); ++ri) {
         const auto& res = sc.resolutions[ri];
         const auto& host = res.model.meshes.at(0);
@@ -840,8 +840,7 @@ int main(int argc, char** argv) {
           std::fprintf(stderr, "  converged: %s %s nu %.3g: from %s\n", sc.name.c_str(),
                        res.label.c_str(), nu, converged_table.c_str());
         }
-        for (const auto& el_name : scene_elements)
-          disc[{el_name, static_cast<int>(ri)}] = d;
+        disc[ri] = std::move(d);
       }
       for (const auto& el_name : scene_elements) {
       const auto element = *neurosim::fem::parse_element(el_name);
@@ -860,7 +859,7 @@ int main(int argc, char** argv) {
         std::vector<Config> configs{{Tier::kNonlinear, 0}, {Tier::kLinear, 0}};
         if (!res.model.couplings.empty() && !exact_only)
           for (int it : {1, 3, 10, 30}) configs.push_back({Tier::kLinear, it});
-        const Discretization& dz = disc.at({el_name, ri});
+        const Discretization& dz = disc[static_cast<std::size_t>(ri)];
         const auto dz_el = dz.error.find(el_name);
         const double disc_err =
             dz_el != dz.error.end() ? dz_el->second : std::numeric_limits<double>::quiet_NaN();
@@ -1099,14 +1098,14 @@ int main(int argc, char** argv) {
         const fs::path script = out / "pareto.gp";
         std::ofstream g(script);
         const char* colours[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"};
+        // One colour per element and tier, filled points for the first nu, open for others.
+        std::vector<std::pair<std::string, std::string>> pairs;  // (element, tier), in order
+        for (const auto& b : blocks)
+          if (std::find(pairs.begin(), pairs.end(), std::make_pair(b.element, b.tier)) ==
+              pairs.end())
+            pairs.emplace_back(b.element, b.tier);
         auto series = [&](const char* columns) {
           for (std::size_t k = 0; k < blocks.size(); ++k) {
-            // One colour per element and tier, filled points for the first nu, open for others.
-            std::vector<std::pair<std::string, std::string>> pairs;  // (element, tier), in order
-            for (const auto& b : blocks)
-              if (std::find(pairs.begin(), pairs.end(), std::make_pair(b.element, b.tier)) ==
-                  pairs.end())
-                pairs.emplace_back(b.element, b.tier);
             const std::size_t c = static_cast<std::size_t>(
                 std::find(pairs.begin(), pairs.end(),
                           std::make_pair(blocks[k].element, blocks[k].tier)) -

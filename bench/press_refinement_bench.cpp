@@ -28,10 +28,10 @@
 // `press_refinement_bench --out DIR --region 40 --splits 1 --depth 10 --nu 0.49`.
 #include "c3d10_press.hpp"
 #include "common/cli.hpp"
+#include "richardson.hpp"
 #include "server/fem/calculix.hpp"
 #include "server/fem/equilibrium_solver.hpp"
 #include "server/fem/static_solver.hpp"
-#include "richardson.hpp"
 #include "server/scene/compile.hpp"
 #include "sub_model.hpp"
 #include "tet_split.hpp"
@@ -340,12 +340,10 @@ int main(int argc, char** argv) {
         for (const auto& mname : model_names) {
           int c_top = 0, s_top = 0;
           const Limit c = limit_of(nu, mname, "C3D10", &c_top);
-          // The converged answer: C3D10's limit; with C3D10 on fewer than three meshes,
-          // smoothed-tet's (where both ran, on the coarse brain's press, they met within 1 %).
           const Limit st = limit_of(nu, mname, "smoothed-tet", &s_top);
-          const bool by_c3d10 = std::isfinite(c.force_n);
-          const double converged = by_c3d10 ? c.force_n : st.force_n;
-          const char* converged_by = by_c3d10 ? "C3D10's limit" : "smoothed-tet's limit";
+          const neurosim::bench::ConvergedAnswer answer = neurosim::bench::converged_answer(c, st);
+          const double converged = answer.force_n;
+          const char* converged_by = answer.by;
           for (const auto& el : elements) {
             int top = 0;
             const Limit l = limit_of(nu, mname, el, &top);

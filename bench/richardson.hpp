@@ -33,4 +33,17 @@ inline Limit richardson(double f0, double f1, double f2) {
   return l;
 }
 
+// The converged answer from two elements' limits on the same nested meshes: C3D10's when it
+// has one (it ran on all three levels with an asymptotic range), else smoothed-tet's (where both
+// had one they met within 2 %); force_n NaN when neither has.
+struct ConvergedAnswer {
+  double force_n{std::nan("")};
+  const char* by{"no limit"};
+};
+inline ConvergedAnswer converged_answer(const Limit& c3d10, const Limit& smoothed_tet) {
+  if (std::isfinite(c3d10.force_n)) return {c3d10.force_n, "C3D10's limit"};
+  if (std::isfinite(smoothed_tet.force_n)) return {smoothed_tet.force_n, "smoothed-tet's limit"};
+  return {};
+}
+
 }  // namespace neurosim::bench

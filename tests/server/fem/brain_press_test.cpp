@@ -275,6 +275,15 @@ TEST(Richardson, RecoversAPowerLawAndRefusesNoAsymptoticRange) {
   EXPECT_EQ(bench::richardson(0.2, 0.18, 0.1615).why, "order below 0.3");  // p = 0.2
   EXPECT_EQ(bench::richardson(0.2, std::nan(""), 0.1).why, "a mesh missing");
   EXPECT_TRUE(std::isnan(bench::richardson(0.2, 0.18, 0.18).force_n));
+  // The converged answer: C3D10's limit when it has one, else smoothed-tet's, else none.
+  const bench::Limit c3 = bench::richardson(0.2, 0.17, 0.16);
+  const bench::Limit st = bench::richardson(0.19, 0.165, 0.155);
+  const bench::Limit none = bench::richardson(0.2, 0.18, 0.18);
+  EXPECT_EQ(bench::converged_answer(c3, st).force_n, c3.force_n);
+  EXPECT_STREQ(bench::converged_answer(c3, st).by, "C3D10's limit");
+  EXPECT_EQ(bench::converged_answer(none, st).force_n, st.force_n);
+  EXPECT_STREQ(bench::converged_answer(none, st).by, "smoothed-tet's limit");
+  EXPECT_TRUE(std::isnan(bench::converged_answer(none, none).force_n));
 }
 
 }  // namespace
