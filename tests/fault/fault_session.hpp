@@ -144,13 +144,15 @@ class Station {
 inline double force_outlived_ms(const std::vector<nh::TickTrace>& tr, std::size_t from) {
   std::uint64_t last_seq = 0;
   std::int64_t last_ref = 0;
-  for (std::size_t i = from > 300 ? from - 300 : 0; i < tr.size(); ++i) {
+  // The whole trace: a server starved by load may send nothing for the 300 ticks before the kill
+  // (a window that short once left no model in it, and the epoch as the reference).
+  for (std::size_t i = 0; i < tr.size(); ++i) {
     if (tr[i].model_sequence > last_seq && tr[i].force_n.norm() > 0) {
       last_seq = tr[i].model_sequence;
       last_ref = tr[i].now_ns - static_cast<std::int64_t>(std::llround(tr[i].model_age_s * 1e9));
     }
     if (i > from && tr[i].force_n.norm() == 0)
-      return 1e-6 * static_cast<double>(tr[i - 1].now_ns - last_ref);
+      return last_seq > 0 ? 1e-6 * static_cast<double>(tr[i - 1].now_ns - last_ref) : -1;
   }
   return -1;
 }
