@@ -314,7 +314,7 @@ RunResult run_press(const std::shared_ptr<const ni::Model>& model, const neurosi
   if (!opt.trace.empty()) {
     trace.open(opt.trace);
     if (!trace) throw std::runtime_error(opt.trace + ": cannot write");
-    trace << "step,time_s,fx_n,fy_n,fz_n,force_n,tier_updated,tier_update_us,inverted_elements\n";
+    trace << "step,time_s,fx_n,fy_n,fz_n,force_n,tier_updated,tier_update_us,inverted_elements,barrier_elements\n";
     trace.precision(9);
   }
   std::vector<Vec3> forces;  // every step's
@@ -333,7 +333,8 @@ RunResult run_press(const std::shared_ptr<const ni::Model>& model, const neurosi
     if (trace)
       trace << index << ',' << t << ',' << r.force_n.x() << ',' << r.force_n.y() << ','
             << r.force_n.z() << ',' << r.force_n.norm() << ',' << (st.tier_updated ? 1 : 0) << ','
-            << st.tier_update_us << ',' << st.inverted_elements << std::endl;  // watchable
+            << st.tier_update_us << ',' << st.inverted_elements << ','
+            << st.barrier_elements << std::endl;  // watchable
   };
   // The largest |f - f_end| / |f_end| over the last kSettleSteps steps.
   auto spread = [&] {

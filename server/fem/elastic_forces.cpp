@@ -44,6 +44,7 @@ ElasticForces::ElasticForces(const mesh::TetMesh& mesh, const MaterialMap& mater
   for (const Material& m : materials.materials) {
     const LawConstants c = LawConstants::of(m);
     laws_.push_back(element_ == Element::kLinearTet ? c : c.deviatoric());
+    if (smoothed_ && tier_ == Tier::kNonlinear) barriers_.push_back(ElementBarrier::of(c));
   }
   const auto& x = mesh.vertices();
   gradients_.resize(tets_.size());
@@ -114,8 +115,16 @@ double ElasticForces::energy(const Eigen::VectorXd& u_m, ElasticForcesReport* re
                                 smoothed_->displacement_gradient(c, u_m), &eval);
       if (report && eval.clamped) ++report->clamped_elements;
     }
-    if (report) {
-      for (std::size_t e = 0; e < tets_.size(); ++e) note(report, displacement_gradient(e, u_m), {});
+    for (std::size_t e = 0; e < tets_.size(); ++e) {
+      const Eigen::Matrix3d h = displacement_gradient(e, u_m);
+      if (!barriers_.empty()) {
+        const ElementBarrier& b = barriers_[law_index_[e]];
+        if (b.active(h)) {
+          e_total += volume_m3_[e] * b.energy_density(h);
+          if (report) ++report->barrier_elements;
+        }
+      }
+      note(report, h, {});
     }
   } else {
     const ViscousStep* v = workspace ? workspace->viscous : nullptr;
@@ -159,7 +168,17 @@ void ElasticForces::internal_force(const Eigen::VectorXd& u_m, Eigen::VectorXd& 
       // smoothed-tet: the element carries only its average nodal pressure (its gradient only
       // for the report: nodal_state took what the pressure needs).
       p = ws.pressure_pa[e] * ws.element[e].gradient;
-      if (report) note(report, displacement_gradient(e, u_m), eval);
+      if (report || !barriers_.empty()) {
+        const Eigen::Matrix3d h = displacement_gradient(e, u_m);
+        if (!barriers_.empty()) {
+          const ElementBarrier& b = barriers_[law_index_[e]];
+          if (b.active(h)) {
+            p += b.stress(h);
+            if (report) ++report->barrier_elements;
+          }
+        }
+        note(report, h, eval);
+      }
       const double v = volume_m3_[e];
       const auto& t = tets_[e];
       for (int a = 0; a < 4; ++a)
@@ -237,6 +256,13 @@ void ElasticForces::tangent(const Eigen::VectorXd& u_m, bool project_psd, Sparse
         if (tier_ == Tier::kLinear) continue;
         volumetric_hessian(tier_, f, d2theta);
         c = ws.pressure_pa[e] * d2theta;
+        if (!barriers_.empty()) {
+          const ElementBarrier& bar = barriers_[law_index_[e]];
+          if (bar.active(f)) {
+            bar.add_tangent(f, c);
+            if (report) ++report->barrier_elements;
+          }
+        }
         if (project_psd) project_to_psd(c);
       } else {
         // anp-tet: deviatoric tangent plus the nodal pressure's pbar d2theta, projected as a

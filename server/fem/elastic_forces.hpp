@@ -14,6 +14,7 @@
 
 #include "server/fem/assembly.hpp"
 #include "server/fem/elastic_law.hpp"
+#include "server/fem/element_barrier.hpp"
 #include "server/fem/material.hpp"
 #include "server/fem/nodal_pressure.hpp"
 #include "server/fem/quasi_linear_viscoelastic.hpp"
@@ -31,6 +32,7 @@ namespace neurosim::fem {
 struct ElasticForcesReport {
   int clamped_elements{0};   // NONLINEAR: elements evaluated at clamped stretches
   int inverted_elements{0};  // det F <= 0
+  int barrier_elements{0};   // smoothed-tet in NONLINEAR: elements the barrier holds
   // Largest principal Green-Lagrange strain magnitude over the elements (dimensionless).
   double max_strain{0.0};
 };
@@ -70,6 +72,11 @@ class ElasticForces {
   Eigen::Matrix3d elastic_second_piola(std::size_t tet, const Eigen::VectorXd& u_m) const;
 
   // Total strain energy sum_e V_e W(F_e), unit J.
+  // smoothed-tet in NONLINEAR: whether the element barrier acts on tetrahedron e at its
+  // displacement gradient h (false for every other element and tier).
+  bool barrier_holds(std::size_t e, const Eigen::Matrix3d& h) const {
+    return !barriers_.empty() && barriers_[law_index_[e]].active(h);
+  }
   double energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report = nullptr,
                 Workspace* workspace = nullptr) const;
   // Internal nodal forces dE/du (3N, unit N): the forces the body needs applied to hold u.
@@ -93,6 +100,9 @@ class ElasticForces {
   double total_volume_m3_{0.0};
   std::vector<int> law_index_;  // per tet: index into laws_
   std::vector<LawConstants> laws_;  // anp-tet: their deviatoric parts
+  // smoothed-tet in NONLINEAR: the element barrier per material (element_barrier.hpp); else
+  // empty.
+  std::vector<ElementBarrier> barriers_;
   StiffnessAssembler assembler_;
   std::unique_ptr<const NodalPressure> nodal_;      // anp-tet, smoothed-tet
   std::unique_ptr<const SmoothedStrain> smoothed_;  // smoothed-tet only

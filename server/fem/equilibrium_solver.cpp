@@ -235,6 +235,7 @@ struct EquilibriumSolver::Impl {
       if (report) {
         report->clamped_elements += r.clamped_elements;
         report->inverted_elements += r.inverted_elements;
+        report->barrier_elements += r.barrier_elements;
         report->max_strain = std::max(report->max_strain, r.max_strain);
       }
     }

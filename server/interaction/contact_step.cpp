@@ -568,10 +568,13 @@ void State::begin_step(const Model& m, int tools, StepStats& stats) {
   stats.tier_updated = false;
   stats.tier_update_us = 0.0;
   stats.inverted_elements = 0;
+  stats.barrier_elements = 0;
   if (tier_) {
     tier_->begin_step();
-    for (std::size_t bi = 0; bi < bodies_.size(); ++bi)
+    for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
       stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
+      stats.barrier_elements += tier_->linearization(static_cast<int>(bi)).barrier_elements;
+    }
   }
   rows_.clear();
 }
@@ -3616,8 +3619,11 @@ void State::tier_post(StepStats& stats) {
   if (stats.tier_updated) {
     stats.tier_update_us = std::chrono::duration<double, std::micro>(Clock::now() - u0).count();
     stats.inverted_elements = 0;  // of the equilibrium just made
-    for (std::size_t bi = 0; bi < bodies_.size(); ++bi)
+    stats.barrier_elements = 0;
+    for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
       stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
+      stats.barrier_elements += tier_->linearization(static_cast<int>(bi)).barrier_elements;
+    }
   }
 }
 

@@ -112,6 +112,9 @@ struct StepStats {
   // all bodies (the field displacements() returns): large compression; the answer stays finite.
   // 0 in LINEAR (small strain: no deformed configuration to invert).
   int inverted_elements{0};
+  // smoothed-tet in NONLINEAR: elements the element barrier holds in the same equilibrium
+  // (fem/element_barrier.hpp: crushed below J = 0.25 or stretched beyond I1 = 6); 0 otherwise.
+  int barrier_elements{0};
   // Rest-surface candidate triangles tested in this step for the tools' reusable candidate lists
   // (contact_step.cpp, reusable_candidates: made again once a tool moved a quarter of a mean
   // edge): the candidate search's share of the step, 0 in most steps.

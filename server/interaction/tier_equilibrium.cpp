@@ -120,6 +120,7 @@ void TierEquilibrium::rest(TierLinearization& out) const {
   out.load.forces_n.clear();
   out.iterations = 0;
   out.inverted_elements = 0;
+  out.barrier_elements = 0;
   out.converged = true;
   out.residual_n = 0.0;
   out.count = 0;
@@ -151,8 +152,9 @@ void TierEquilibrium::rotations() {
   }
 }
 
-int TierEquilibrium::inverted_elements() {
-  int inverted = 0;
+void TierEquilibrium::count_elements(int& inverted, int& barrier) {
+  inverted = 0;
+  barrier = 0;
   for (int b = 0; b <= static_cast<int>(body_->ties().size()); ++b) {
     const fem::ElasticForces& forces = solver_->body_forces(b);
     Eigen::VectorXd& u_mesh = u_body_[static_cast<std::size_t>(b)];
@@ -160,9 +162,9 @@ int TierEquilibrium::inverted_elements() {
     for (std::size_t t = 0; t < forces.num_tets(); ++t) {
       const Eigen::Matrix3d h = forces.displacement_gradient(t, u_mesh);
       if ((Eigen::Matrix3d::Identity() + h).determinant() <= 0.0) ++inverted;
+      if (forces.barrier_holds(t, h)) ++barrier;
     }
   }
-  return inverted;
 }
 
 bool TierEquilibrium::relaxing_at(double time_s) const {
@@ -273,7 +275,7 @@ void TierEquilibrium::update(const TierLoad& load, TierLinearization& out) {
   out.iterations = iterations;
   out.converged = converged;
   out.residual_n = residual_n;
-  out.inverted_elements = inverted_elements();
+  count_elements(out.inverted_elements, out.barrier_elements);
   out.count = ++count_;
 }
 

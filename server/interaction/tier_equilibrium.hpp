@@ -74,6 +74,9 @@ struct TierLinearization {
   TierLoad load;             // the forces u_m is the equilibrium of
   int iterations{0};         // Newton iterations of the update (0 at rest)
   int inverted_elements{0};  // elements of the body with det F <= 0 in u_m
+  // smoothed-tet in NONLINEAR: elements of the body the element barrier holds in u_m
+  // (fem/element_barrier.hpp; 0 for the other elements and tiers).
+  int barrier_elements{0};
   // The update met the Newton tolerance (false: cut short by NewtonOptions::step_limit; the
   // worker continues it even when the forces no longer change).
   bool converged{true};
@@ -195,7 +198,8 @@ class TierEquilibrium {
   bool timed_{false};
   // R per contact slot from u_ (each slot's mesh: its tetrahedra around the slot's node).
   void rotations();
-  int inverted_elements();  // in u_, every mesh of the body
+  // Elements inverted and held by the element barrier in u_, every mesh of the body.
+  void count_elements(int& inverted, int& barrier);
 };
 
 }  // namespace neurosim::interaction

@@ -202,15 +202,17 @@ TEST(FemBrainPress, SmoothedTetWithinFivePercentOfTheRefinedC3d10) {
 
 // A crushed cell does not slow Newton down: the press's 40 mm sub-model split once (961 nodes,
 // 3808 tetrahedra, 15 pressed nodes), pressed 10 mm in NONLINEAR at nu 0.49 in smoothed-tet. The
-// patch's edge crushes the cells beside it: at the answer a principal stretch is below
-// kMinStretch (the clamped neo-Hookean energy) and some tetrahedra are inverted (measured: 1
-// clamped, 7 inverted, patch force 0.9317 N; linear-tet, stiffer, crushes none, 3.134 N). A clamped
-// element's tangent is the central difference of its C1 stress, not projected on its own: with
-// the projection this solve contracted about 0.9 per full Newton step from load factor 0.98 on
-// and no increment converged in 40 iterations (here at most 16 iterations per increment and 4
-// cutbacks, so that failure is an exception within seconds, not a solve that creeps on in tiny
-// increments). Checked: the solve converges, some elements are clamped, the last increment
-// converges superlinearly.
+// patch's edge crushes the tetrahedra beside it: without the element barrier
+// (element_barrier.hpp) some were inverted and one clamped at the answer (measured: 1 clamped,
+// 7 inverted, patch force 0.9317 N); with it, the tetrahedra it holds (crushed below J = 0.25)
+// carry its stiff cubic energy and none inverts (measured: 1.0126 N, 0 clamped, 0 inverted;
+// linear-tet, stiffer, crushes none, 3.134 N). The barrier's tangent is exact, the clamped
+// element's the central difference of its C1 stress (not projected on its own: with the
+// projection this solve contracted about 0.9 per full Newton step from load factor 0.98 on
+// and no increment converged in 40 iterations). At most 16 iterations per increment and 4
+// cutbacks, so a failure is an exception within seconds, not a solve that creeps on in tiny
+// increments. Checked: the solve converges, the barrier holds some tetrahedra and none is
+// inverted, the last increment converges superlinearly.
 TEST(FemBrainPress, NonlinearCrushedCellsKeepNewtonSuperlinear) {
   const auto dir = neurosim::testing::temp_dir("brain_press_crushed");
   ASSERT_EQ(build_coarse_brain(dir), 0) << neurosim::testing::slurp(dir / "model.log");
@@ -245,12 +247,14 @@ TEST(FemBrainPress, NonlinearCrushedCellsKeepNewtonSuperlinear) {
   double force = 0.0;
   for (int v : patch) force -= r.reaction_n[3 * v + 2];
   const std::vector<double>& res = r.increments.back().residual_n;
-  std::printf("%s: patch force %.6f N, %zu increments, %d clamped, %d inverted elements; last "
-              "increment:", what.c_str(), force, r.increments.size(), r.elements.clamped_elements,
-              r.elements.inverted_elements);
+  std::printf("%s: patch force %.6f N, %zu increments, %d clamped, %d inverted elements, %d held "
+              "by the element barrier; last increment:", what.c_str(), force, r.increments.size(),
+              r.elements.clamped_elements, r.elements.inverted_elements,
+              r.elements.barrier_elements);
   for (double x : res) std::printf(" %.2e", x);
   std::printf(" N\n");
-  EXPECT_GT(r.elements.clamped_elements, 0) << what;
+  EXPECT_GT(r.elements.barrier_elements, 0) << what;
+  EXPECT_EQ(r.elements.inverted_elements, 0) << what;
   ASSERT_GE(res.size(), 3u) << what;
   EXPECT_LE(res.back(), 1e-10 * r.force_scale_n) << what;
   EXPECT_LE(res.size(), 16u) << what;

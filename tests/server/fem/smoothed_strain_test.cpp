@@ -1,7 +1,8 @@
 // The selective smoothed tetrahedron's smoothing cells (smoothed_strain.hpp) and its NONLINEAR
 // tier under large local deformation: the cells tile the volume and reproduce an affine field;
 // the tangent is the derivative of the internal forces (central differences) at a point-loaded
-// equilibrium where tetrahedra under the load are inverted; Newton converges quadratically on a
+// equilibrium the element barrier holds and beyond it where tetrahedra under the load are
+// inverted; Newton converges quadratically on a
 // pressed patch and under a point load (iterations per increment, residual contraction), with
 // the exact (not the projected) tangent.
 #include "server/fem/smoothed_strain.hpp"
@@ -101,34 +102,18 @@ TEST(FemSmoothedStrain, CellsTileTheVolumeAndReproduceAnAffineField) {
   EXPECT_LT(worst, 1e-13);
 }
 
-// The point-loaded block at nu = 0.49: 0.45 N on the top centre node sinks it 26 mm into the
-// 60 mm block, with tetrahedra under it inverted (the smoothing cells are not). The tangent
-// there is the derivative of the forces (every dof of the loaded node and its neighbours, and
-// the shared check's dofs), and Newton reached it quadratically.
-TEST(FemSmoothedStrain, NonlinearTangentIsTheForceDerivativeWithInvertedElements) {
-  const Block b;
-  const int top = b.top_centre();
-  const MaterialMap mats = MaterialMap::uniform(smoothed(0.49));
-  EquilibriumSolver solver({&b.mesh, mats, Tier::kNonlinear, b.fixed, {}, {}});
-  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(b.mesh.num_vertices()));
-  f[3 * top + 2] = -0.45;
-  const EquilibriumResult r = solver.solve(f);
-  print_increments("point load 0.45 N", r);
-  std::printf("point load 0.45 N: top node %.2f mm down, %d inverted tetrahedra\n",
-              -1e3 * r.displacement_m[3 * top + 2], r.elements.inverted_elements);
-  EXPECT_GT(r.elements.inverted_elements, 0);
-  expect_quadratic(r, "point load");
-
-  const ElasticForces& forces = solver.forces();
-  const Eigen::VectorXd& u = r.displacement_m;
+// The tangent is the derivative of the forces (every dof of the loaded node and its neighbours,
+// and the shared check's dofs) at u.
+void expect_tangent_is_derivative_near(const ElasticForces& forces, const Eigen::VectorXd& u,
+                                       int node, const std::string& what) {
   SparseMatrix k;
   forces.tangent(u, false, k);
   const Eigen::MatrixXd kd(k);
-  EXPECT_LT((kd - kd.transpose()).cwiseAbs().maxCoeff(), 1e-12 * kd.cwiseAbs().maxCoeff());
-  testing::expect_tangent_is_force_derivative(forces, u, kd, "NONLINEAR, point-loaded");
+  EXPECT_LT((kd - kd.transpose()).cwiseAbs().maxCoeff(), 1e-12 * kd.cwiseAbs().maxCoeff()) << what;
+  testing::expect_tangent_is_force_derivative(forces, u, kd, "NONLINEAR, " + what);
   // The loaded node's neighbourhood (its nonzero column entries): where the elements invert.
   std::vector<int> near;
-  for (SparseMatrix::InnerIterator it(k, 3 * top + 2); it; ++it) near.push_back(static_cast<int>(it.row()));
+  for (SparseMatrix::InnerIterator it(k, 3 * node + 2); it; ++it) near.push_back(static_cast<int>(it.row()));
   const double h = 1e-8;
   double worst = 0.0;
   for (int dof : near) {
@@ -141,9 +126,46 @@ TEST(FemSmoothedStrain, NonlinearTangentIsTheForceDerivativeWithInvertedElements
     worst = std::max(worst, (fd - kd.col(dof)).cwiseAbs().maxCoeff() /
                                 kd.col(dof).cwiseAbs().maxCoeff());
   }
-  std::printf("tangent vs central differences, %zu dofs around the loaded node: worst %.2e\n",
-              near.size(), worst);
-  EXPECT_LT(worst, 1e-6);
+  std::printf("%s: tangent vs central differences, %zu dofs around the loaded node: worst %.2e\n",
+              what.c_str(), near.size(), worst);
+  EXPECT_LT(worst, 1e-6) << what;
+}
+
+// The point-loaded block at nu = 0.49: 0.45 N on the top centre node sinks it about 20 mm into
+// the 60 mm block. The element barrier (element_barrier.hpp) holds the tetrahedra under it
+// (without it they inverted and the node sank 26 mm): at the equilibrium it is active and
+// nothing is inverted, and Newton reached it quadratically. The tangent is the derivative of
+// the forces there and at the same field 1.6 times deeper, where tetrahedra under the node are
+// inverted (the barrier's cofactor terms through J < 0; the smoothing cells are not inverted).
+TEST(FemSmoothedStrain, NonlinearTangentIsTheForceDerivativeWithInvertedElements) {
+  const Block b;
+  const int top = b.top_centre();
+  const MaterialMap mats = MaterialMap::uniform(smoothed(0.49));
+  EquilibriumSolver solver({&b.mesh, mats, Tier::kNonlinear, b.fixed, {}, {}});
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(b.mesh.num_vertices()));
+  f[3 * top + 2] = -0.45;
+  const EquilibriumResult r = solver.solve(f);
+  print_increments("point load 0.45 N", r);
+  const ElasticForces& forces = solver.forces();
+  const Eigen::VectorXd& u = r.displacement_m;
+  ElasticForcesReport at_rest_load;
+  forces.energy(u, &at_rest_load);
+  std::printf("point load 0.45 N: top node %.2f mm down, %d inverted, %d held by the barrier\n",
+              -1e3 * u[3 * top + 2], at_rest_load.inverted_elements, at_rest_load.barrier_elements);
+  EXPECT_EQ(at_rest_load.inverted_elements, 0);
+  EXPECT_GT(at_rest_load.barrier_elements, 0);
+  EXPECT_GT(-u[3 * top + 2], 0.015);
+  EXPECT_LT(-u[3 * top + 2], 0.025);
+  expect_quadratic(r, "point load");
+  expect_tangent_is_derivative_near(forces, u, top, "point-loaded equilibrium");
+
+  const Eigen::VectorXd deeper = 1.6 * u;
+  ElasticForcesReport over;
+  forces.energy(deeper, &over);
+  std::printf("1.6 x deeper: top node %.2f mm down, %d inverted, %d held by the barrier\n",
+              -1e3 * deeper[3 * top + 2], over.inverted_elements, over.barrier_elements);
+  EXPECT_GT(over.inverted_elements, 0);
+  expect_tangent_is_derivative_near(forces, deeper, top, "1.6 x deeper, inverted");
 }
 
 // A 20 x 20 mm patch on top pressed 8 mm (the bundled brain's press depths), nu = 0.49 and
