@@ -11,10 +11,11 @@
 // is C2, zero (with its gradient and Hessian) while J >= J_min and I1 <= I1_max, and defined
 // through inversion (both terms are polynomials of F). k = kStiffnessShare mu of the element's
 // material (unit Pa). Thresholds: J_min = 0.25 (a tetrahedron of nearly incompressible tissue
-// at a quarter of its volume), I1_max = 6 (a uniaxial stretch of 2.35, Green strain 2.3; a
-// simple shear of 1.73): linear-tet and anp-tet under the same 20 mm press stay below both
-// (largest strain 0.62 / 0.86, nothing inverted). LINEAR has no barrier (its energy is
-// quadratic: nothing to collapse into). Units: psi in J/m^3 (Pa), its gradient dpsi/dF in Pa.
+// at a quarter of its volume), I1_max = 6 (a volume-preserving uniaxial stretch of 2.26, Green
+// strain 2.06; a simple shear of 1.73): linear-tet and anp-tet under the 7 mm brain's 20 mm press
+// stay below both (largest strain 0.62 / 0.86, nothing inverted). LINEAR has no barrier (its
+// energy is quadratic: nothing to collapse into). Units: psi in J/m^3 (Pa), its gradient dpsi/dF
+// in Pa.
 #pragma once
 
 #include "server/fem/elastic_law.hpp"
