@@ -115,7 +115,9 @@ double ElasticForces::energy(const Eigen::VectorXd& u_m, ElasticForcesReport* re
                                 smoothed_->displacement_gradient(c, u_m), &eval);
       if (report && eval.clamped) ++report->clamped_elements;
     }
-    for (std::size_t e = 0; e < tets_.size(); ++e) {
+    // Per tetrahedron: the element barrier's energy (NONLINEAR) and the report.
+    const bool per_tet = report || !barriers_.empty();
+    for (std::size_t e = 0; per_tet && e < tets_.size(); ++e) {
       const Eigen::Matrix3d h = displacement_gradient(e, u_m);
       if (!barriers_.empty()) {
         const ElementBarrier& b = barriers_[law_index_[e]];

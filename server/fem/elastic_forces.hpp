@@ -71,12 +71,13 @@ class ElasticForces {
   // (symmetrized; linear-tet), unit Pa: what a relaxing mesh's internal variables integrate.
   Eigen::Matrix3d elastic_second_piola(std::size_t tet, const Eigen::VectorXd& u_m) const;
 
-  // Total strain energy sum_e V_e W(F_e), unit J.
   // smoothed-tet in NONLINEAR: whether the element barrier acts on tetrahedron e at its
   // displacement gradient h (false for every other element and tier).
   bool barrier_holds(std::size_t e, const Eigen::Matrix3d& h) const {
     return !barriers_.empty() && barriers_[law_index_[e]].active(h);
   }
+  // Total strain energy sum_e V_e W(F_e), unit J (smoothed-tet in NONLINEAR: with the element
+  // barrier's).
   double energy(const Eigen::VectorXd& u_m, ElasticForcesReport* report = nullptr,
                 Workspace* workspace = nullptr) const;
   // Internal nodal forces dE/du (3N, unit N): the forces the body needs applied to hold u.
