@@ -48,6 +48,18 @@ namespace {
 using common::Clock;
 using common::seconds_since;
 
+// The elements the tier's newest equilibrium holds inverted and under smoothed-tet's element
+// barrier, over its bodies.
+void count_tier_elements(const TierWorker& tier, std::size_t bodies, StepStats& stats) {
+  stats.inverted_elements = 0;
+  stats.barrier_elements = 0;
+  for (std::size_t bi = 0; bi < bodies; ++bi) {
+    const TierLinearization& lin = tier.linearization(static_cast<int>(bi));
+    stats.inverted_elements += lin.inverted_elements;
+    stats.barrier_elements += lin.barrier_elements;
+  }
+}
+
 constexpr std::uint64_t kShaftBit = std::uint64_t{1} << 62;
 // Feature keys sort vertices, then edges, then faces; the shaft's after the tip's.
 std::uint64_t feature_key(bool shaft, TriangleFeature f, std::uint64_t a, std::uint64_t b) {
@@ -571,10 +583,7 @@ void State::begin_step(const Model& m, int tools, StepStats& stats) {
   stats.barrier_elements = 0;
   if (tier_) {
     tier_->begin_step();
-    for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
-      stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
-      stats.barrier_elements += tier_->linearization(static_cast<int>(bi)).barrier_elements;
-    }
+    count_tier_elements(*tier_, bodies_.size(), stats);
   }
   rows_.clear();
 }
@@ -3618,12 +3627,7 @@ void State::tier_post(StepStats& stats) {
   stats.tier_updated = tier_->post(tier_loads_);
   if (stats.tier_updated) {
     stats.tier_update_us = std::chrono::duration<double, std::micro>(Clock::now() - u0).count();
-    stats.inverted_elements = 0;  // of the equilibrium just made
-    stats.barrier_elements = 0;
-    for (std::size_t bi = 0; bi < bodies_.size(); ++bi) {
-      stats.inverted_elements += tier_->linearization(static_cast<int>(bi)).inverted_elements;
-      stats.barrier_elements += tier_->linearization(static_cast<int>(bi)).barrier_elements;
-    }
+    count_tier_elements(*tier_, bodies_.size(), stats);  // of the equilibrium just made
   }
 }
 
